@@ -1,0 +1,14 @@
+/* log — one line per event on stderr (journald adds the time). Thread-safe: each line is
+ * written with a single write(2). The threshold is process-wide state set once by main. */
+#ifndef CLIPMAP_LOG_H
+#define CLIPMAP_LOG_H
+
+enum log_level { LOG_DEFAULT = 0, LOG_ERROR, LOG_WARN, LOG_INFO, LOG_DEBUG };
+
+/* Lines above `level` are dropped. Call from main before threads start. */
+void log_set_level(enum log_level level);
+/* Parses "error", "warn", "info", "debug"; returns 0 or -EINVAL. */
+int log_parse_level(const char *s, enum log_level *out);
+void log_msg(enum log_level level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+
+#endif

@@ -1,0 +1,55 @@
+/* planet — a planet file (INI, conf/planets/) loaded into a graph of nodes and published
+ * layers. Loading checks everything a user can get wrong (unknown keys and node types,
+ * unknown or missing inputs, cycles, type mismatches, bad values) and reports the first error
+ * as "file:line: key: message".
+ *
+ * File layout:
+ *   [planet]        name, description, body = wgs84 | sphere | custom, radius, flattening,
+ *                   tile_size (power of two, 64..1024), max_level
+ *   [node NAME]     type = <node type>, its input slots naming other nodes, its parameters
+ *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
+ *
+ * Ownership: planet_load returns an owned planet; planet_destroy frees it and its nodes.
+ * A loaded planet is immutable and may be shared by any number of threads.
+ */
+#ifndef CLIPMAP_PLANET_H
+#define CLIPMAP_PLANET_H
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "node.h"
+
+struct geo_body;
+
+struct planet_layer {
+	char *name;
+	struct node *node; /* borrowed from the planet */
+	enum pix_type type;
+};
+
+struct planet {
+	char *name;
+	char *description;
+	char *path; /* the planet file */
+	char *dir;  /* its directory: relative data paths resolve against it */
+	double a, f;
+	struct geo_body *body;
+	uint32_t tile_size;
+	int max_level; /* finest ly; lx ≤ max_level + 1 */
+	struct node **nodes; /* topological order: every node after its inputs */
+	size_t nnodes;
+	struct planet_layer *layers;
+	size_t nlayers;
+	struct ini_file *ini; /* kept: node parameters borrow strings from it */
+};
+
+/* Loads and checks a planet file. Returns 0 or -errno with err filled. */
+int planet_load(const char *path, struct planet **out, char err[256]);
+void planet_destroy(struct planet *p);
+struct node *planet_find_node(const struct planet *p, const char *name);
+const struct planet_layer *planet_find_layer(const struct planet *p, const char *name);
+/* Writes the graph as Graphviz dot. Returns 0 or -errno. */
+int planet_write_dot(const struct planet *p, FILE *f);
+
+#endif

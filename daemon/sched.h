@@ -1,0 +1,83 @@
+/* sched — the manager thread and the worker pool (seed 003 §6).
+ *
+ * Requesters (sessions, `clipmapctl render`, prefetch jobs) each own a sched_req and give it
+ * ordered want lists; each list replaces the previous one. The manager resolves dependencies
+ * depth-first through the graph, merges duplicates with queued and running work, orders
+ * ready work by class (visible, prefetch, bulk), then level (coarse first), then the order in
+ * which it was wanted, and cancels queued work no requester wants any more. Workers (lower OS
+ * priority) generate with no lock held, publish into the cache, and hand completion back to
+ * the manager, which tells every requester that still wants the tile.
+ *
+ * Threads: all functions are thread-safe except where noted. Ready callbacks run on the
+ * manager thread with no scheduler lock held; they must be quick and must not call back into
+ * the scheduler for the same request (queue work elsewhere, e.g. write an eventfd).
+ * Lock order: sched queue lock → cache lock (the manager never holds both while generating).
+ */
+#ifndef CLIPMAP_SCHED_H
+#define CLIPMAP_SCHED_H
+#include <stddef.h>
+#include <stdint.h>
+
+#include "cache.h"
+#include "node.h"
+
+enum sched_class {
+	SCHED_NONE = 0,
+	SCHED_VISIBLE,	/* what a viewer shows now */
+	SCHED_PREFETCH, /* the ring around and the path ahead */
+	SCHED_BULK,	/* operator prefetch jobs */
+	SCHED_NCLASS
+};
+
+struct want {
+	struct node *node; /* borrowed: must outlive the request's interest in it */
+	struct tile_key key; /* key.node must equal node->hash */
+	enum sched_class cls;
+};
+
+/* Called once per wanted key when its tile is ready (t borrowed: tile_ref it to keep it) or
+ * its generation failed (t NULL, err < 0). Runs on the manager thread. A key is reported
+ * again only if a later want list asks for it again. */
+typedef void (*sched_ready_fn)(void *ud, const struct want *w, struct tile *t, int err);
+
+struct sched_desc {
+	struct cache *cache; /* borrowed; required */
+	int workers;	     /* 0: one per online CPU */
+	int worker_nice;     /* added niceness for workers; 0: default (+5); <0: unchanged */
+};
+
+struct sched_stats {
+	uint64_t queued[SCHED_NCLASS]; /* ready jobs waiting for a worker, per class */
+	uint64_t waiting;	       /* jobs waiting for their inputs */
+	uint64_t running;	       /* workers busy */
+	uint64_t generated;	       /* tiles generated since start */
+	uint64_t merged;	       /* wants that joined existing work instead of adding a job */
+	uint64_t cancelled;	       /* queued jobs dropped because nobody wanted them */
+	uint64_t failed;	       /* generations that returned an error */
+	int workers;
+};
+
+struct sched;
+struct sched_req;
+
+/* Starts the manager and the workers. Returns NULL only on ENOMEM (thread start failures
+ * abort with a message: the daemon cannot run without them). */
+struct sched *sched_create(const struct sched_desc *d);
+/* Cancels everything, joins all threads, frees. Requests must be destroyed first. */
+void sched_destroy(struct sched *s);
+
+struct sched_req *sched_req_create(struct sched *s, sched_ready_fn fn, void *ud);
+/* Replaces the request's want list (copied); n = 0 cancels everything it wanted. Cached tiles
+ * are reported at once (from the manager thread). Returns 0 or -errno. */
+int sched_req_want(struct sched_req *r, const struct want *w, size_t n);
+/* Stops the request: after this returns, its callback is never called again. */
+void sched_req_destroy(struct sched_req *r);
+
+/* Blocking convenience for offline use and tests: generates (or finds) every wanted tile and
+ * stores an owned reference in out[i] (NULL where generation failed). Returns 0 if all
+ * succeeded, else the first error. */
+int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **out);
+
+void sched_get_stats(struct sched *s, struct sched_stats *out);
+
+#endif
