@@ -9,6 +9,10 @@
 #define GEO_WGS84_A 6378137.0
 #define GEO_WGS84_F (1.0 / 298.257223563)
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 struct geo_body;
 
 /* Creates a body with equatorial radius a > 0 and flattening 0 ≤ f < 1. Returns 0 or -EINVAL
@@ -33,4 +37,7 @@ void geo_inverse(const struct geo_body *b, double lat1, double lon1, double lat2
 void geo_direct(const struct geo_body *b, double lat1, double lon1, double azi1, double s12,
 		double *lat2, double *lon2);
 
+#ifdef __cplusplus
+}
+#endif
 #endif
