@@ -20,10 +20,8 @@ static int constant_create(struct node *n, struct node_parse *p)
 	bool has_h = ini_find(p->sec, "height") != NULL;
 	struct ini_entry *ce = ini_find(p->sec, "color");
 	bool has_c = ce != NULL;
-	/* The INI reader takes " #..." as a comment, so "color = #102030" arrives empty. */
 	if (ce && ce->value[0] == '\0')
-		return np_error(p, "color", "empty (a '#' after a space starts a comment: write "
-				"\"color=#rrggbb\" or \"color = r,g,b\")");
+		return np_error(p, "color", "empty: write \"color = #rrggbb\" or \"color = r,g,b\"");
 	if (has_h && has_c)
 		return np_error(p, "color", "a constant is either a height or a color, not both");
 	if (!has_h && !has_c)

@@ -71,17 +71,19 @@ static void comments(void **state)
 				      "# hash comment\n"
 				      "   ; indented comment\n"
 				      "a = 1 ; trailing comment\n"
-				      "b = 2\t# trailing hash comment\n"
+				      "b = 2\t; trailing comment after a tab\n"
+				      "col = #102030\n"
 				      "c = x;y#z\n"
 				      "url = http://example.com/#frag\n"
 				      "[t] ; comment after a header\n"
 				      "d = 4\n");
 	assert_int_equal(f->n, 2);
 	const struct ini_section *s = &f->sections[0];
-	assert_int_equal(s->n, 4);
+	assert_int_equal(s->n, 5);
 	assert_string_equal(value(s, "a"), "1");
 	assert_string_equal(value(s, "b"), "2");
-	/* ';' and '#' only start a comment at the line start or after whitespace. */
+	/* '#' inside a line is data (colours); ';' only comments after whitespace. */
+	assert_string_equal(value(s, "col"), "#102030");
 	assert_string_equal(value(s, "c"), "x;y#z");
 	assert_string_equal(value(s, "url"), "http://example.com/#frag");
 	assert_string_equal(f->sections[1].name, "t");
