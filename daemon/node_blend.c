@@ -22,6 +22,7 @@ static const char *const blend_modes[] = { "over", "mask", "add", "multiply", NU
 struct blend {
 	int mode;
 	float opacity, weight;
+	uint32_t kb[256]; /* over, colour, no mask: b's weight in 1/65536 by b's alpha */
 };
 
 enum { SLOT_A, SLOT_B, SLOT_MASK };
@@ -46,7 +47,11 @@ static int blend_create(struct node *n, struct node_parse *p)
 	if (mode == BLEND_MULTIPLY && ta != PIX_COLOR)
 		return np_error(p, "mode", "multiply works on colours, not %s", pix_type_name(ta));
 	struct blend *b = xmalloc(sizeof *b);
-	*b = (struct blend){ mode, (float)opacity, (float)weight };
+	b->mode = mode;
+	b->opacity = (float)opacity;
+	b->weight = (float)weight;
+	for (int a = 0; a < 256; a++)
+		b->kb[a] = (uint32_t)(a * b->opacity * (65536.0f / 255) + 0.5f);
 	n->impl = b;
 	n->out = ta;
 	return 0;
@@ -89,6 +94,40 @@ static void blend_heights(const struct blend *bl, const float *a, const float *b
 	}
 }
 
+/* b over a, straight alpha, b's alpha scaled by w. */
+static inline void over_general(const uint8_t *x, const uint8_t *y, float w, uint8_t *d)
+{
+	float ab = y[3] * (w * (1.0f / 255)), aa = x[3] * (1.0f / 255);
+	float ao = ab + aa * (1 - ab);
+	if (ao <= 0) {
+		d[0] = d[1] = d[2] = d[3] = 0;
+		return;
+	}
+	float ka = aa * (1 - ab) / ao, kb = ab / ao;
+	for (int c = 0; c < 3; c++)
+		d[c] = u8(x[c] * ka + y[c] * kb);
+	d[3] = u8(ao * 255);
+}
+
+/* over on colours without a mask: the opaque-base fast path with b's weight from a table. */
+static void over_color(const struct blend *bl, const uint8_t *a, const uint8_t *b, uint8_t *o,
+		       size_t count)
+{
+	for (size_t i = 0; i < count; i++) {
+		const uint8_t *x = a + 4 * i, *y = b + 4 * i;
+		uint8_t *d = o + 4 * i;
+		if (x[3] != 255) {
+			over_general(x, y, bl->opacity, d);
+			continue;
+		}
+		uint32_t kb = bl->kb[y[3]], ka = 65536 - kb;
+		d[0] = (uint8_t)((x[0] * ka + y[0] * kb + 32768) >> 16);
+		d[1] = (uint8_t)((x[1] * ka + y[1] * kb + 32768) >> 16);
+		d[2] = (uint8_t)((x[2] * ka + y[2] * kb + 32768) >> 16);
+		d[3] = 255;
+	}
+}
+
 /* Colour (RGBA8) and normal (RG8: ch = 2) texels. */
 static void blend_bytes(const struct blend *bl, const uint8_t *a, const uint8_t *b,
 			const float *mask, uint8_t *o, size_t count, int ch)
@@ -97,17 +136,16 @@ static void blend_bytes(const struct blend *bl, const uint8_t *a, const uint8_t 
 		const uint8_t *x = a + ch * i, *y = b + ch * i;
 		uint8_t *d = o + ch * i;
 		float w = weight_at(mask, i, bl->opacity);
-		if (bl->mode == BLEND_OVER && ch == 4) {
-			float ab = y[3] * (w * (1.0f / 255)), aa = x[3] * (1.0f / 255);
-			float ao = ab + aa * (1 - ab);
-			if (ao <= 0) {
-				d[0] = d[1] = d[2] = d[3] = 0;
-				continue;
-			}
-			float ka = aa * (1 - ab) / ao, kb = ab / ao;
+		if (bl->mode == BLEND_OVER && ch == 4 && x[3] == 255) {
+			/* opaque base (the usual case): a lerp in 16-bit fixed point, no division */
+			uint32_t kb = mask ? (uint32_t)(y[3] * w * (65536.0f / 255) + 0.5f)
+					   : bl->kb[y[3]];
+			uint32_t ka = 65536 - kb;
 			for (int c = 0; c < 3; c++)
-				d[c] = u8(x[c] * ka + y[c] * kb);
-			d[3] = u8(ao * 255);
+				d[c] = (uint8_t)((x[c] * ka + y[c] * kb + 32768) >> 16);
+			d[3] = 255;
+		} else if (bl->mode == BLEND_OVER && ch == 4) {
+			over_general(x, y, w, d);
 		} else if (bl->mode == BLEND_MULTIPLY) {
 			for (int c = 0; c < 3; c++) {
 				float prod = x[c] * (float)y[c] * (1.0f / 255);
@@ -137,6 +175,8 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 	size_t count = (size_t)out->size * out->size;
 	if (out->type == PIX_HEIGHT)
 		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
+	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && !mask)
+		over_color(bl, in[0]->data, in[1]->data, out->data, count);
 	else
 		blend_bytes(bl, in[0]->data, in[1]->data, mask, out->data, count,
 			    (int)pix_bytes(out->type));

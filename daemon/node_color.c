@@ -13,6 +13,9 @@
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "pixel_nodes.h"
 #include "xalloc.h"
@@ -25,7 +28,9 @@ struct color_filter {
 	uint32_t alpha_mask; /* the alpha byte of a texel read as uint32 */
 	bool lut_identity;
 	bool matrix;
-	int32_t m[9]; /* row-major RGB→RGB, Q12 */
+	/* RGBA→RGBA, Q12, as madd coefficients for two texels: row c is (m[c][0..3]) twice;
+	 * the alpha row is (0, 0, 0, 1). |entries| ≤ 7 (saturation ≤ 4), so they fit int16. */
+	int16_t m[4][8];
 };
 
 static double clamp01(double x)
@@ -104,8 +109,11 @@ static int color_create(struct node *n, struct node_parse *p)
 		double m[9];
 		hue_sat_matrix(h, sat, m);
 		f->matrix = true;
-		for (int i = 0; i < 9; i++)
-			f->m[i] = (int32_t)lrint(m[i] * (1 << MAT_SHIFT));
+		for (int r = 0; r < 4; r++)
+			for (int c = 0; c < 8; c++) {
+				double v = r < 3 ? (c % 4 < 3 ? m[r * 3 + c % 4] : 0) : c % 4 == 3;
+				f->m[r][c] = (int16_t)lrint(v * (1 << MAT_SHIFT));
+			}
 	}
 	n->impl = f;
 	n->out = PIX_COLOR;
@@ -117,14 +125,65 @@ static void color_destroy(struct node *n)
 	free(n->impl);
 }
 
-static inline uint8_t mat_row(const int32_t *m, int r, int g, int b)
+static inline uint8_t mat_row(const int16_t *m, int r, int g, int b, int a)
 {
-	int32_t v = m[0] * r + m[1] * g + m[2] * b + (1 << (MAT_SHIFT - 1));
-	if (v <= 0)
-		return 0;
-	v >>= MAT_SHIFT;
+	int32_t v = m[0] * r + m[1] * g + m[2] * b + m[3] * a + (1 << (MAT_SHIFT - 1));
+	v = v < 0 ? 0 : v >> MAT_SHIFT;
 	return (uint8_t)(v > 255 ? 255 : v);
 }
+
+/* The matrix on texels [from, count), one at a time. May run in place. */
+static void matrix_scalar(const int16_t m[4][8], const uint8_t *src, uint8_t *dst, size_t from,
+			  size_t count)
+{
+	for (size_t i = from; i < count; i++) {
+		int r = src[4 * i], g = src[4 * i + 1], b = src[4 * i + 2], a = src[4 * i + 3];
+		dst[4 * i] = mat_row(m[0], r, g, b, a);
+		dst[4 * i + 1] = mat_row(m[1], r, g, b, a);
+		dst[4 * i + 2] = mat_row(m[2], r, g, b, a);
+		dst[4 * i + 3] = mat_row(m[3], r, g, b, a);
+	}
+}
+
+#ifdef __SSE2__
+/* Two texels as int16 (r0 g0 b0 a0 r1 g1 b1 a1) → the same layout, transformed: one madd
+ * per output channel gives pair sums that two rounds of interleaving add up. Identical to
+ * matrix_scalar (floor shift, then packus clamps to 0..255). */
+static inline __m128i matrix2(__m128i v, const __m128i c[4])
+{
+	__m128i r = _mm_madd_epi16(v, c[0]), g = _mm_madd_epi16(v, c[1]);
+	__m128i b = _mm_madd_epi16(v, c[2]), a = _mm_madd_epi16(v, c[3]);
+	__m128i rg0 = _mm_unpacklo_epi32(r, g), rg1 = _mm_unpackhi_epi32(r, g);
+	__m128i ba0 = _mm_unpacklo_epi32(b, a), ba1 = _mm_unpackhi_epi32(b, a);
+	__m128i rg = _mm_add_epi32(_mm_unpacklo_epi64(rg0, rg1), _mm_unpackhi_epi64(rg0, rg1));
+	__m128i ba = _mm_add_epi32(_mm_unpacklo_epi64(ba0, ba1), _mm_unpackhi_epi64(ba0, ba1));
+	const __m128i half = _mm_set1_epi32(1 << (MAT_SHIFT - 1));
+	__m128i t0 = _mm_srai_epi32(_mm_add_epi32(_mm_unpacklo_epi64(rg, ba), half), MAT_SHIFT);
+	__m128i t1 = _mm_srai_epi32(_mm_add_epi32(_mm_unpackhi_epi64(rg, ba), half), MAT_SHIFT);
+	return _mm_packs_epi32(t0, t1);
+}
+
+static void matrix_run(const int16_t m[4][8], const uint8_t *src, uint8_t *dst, size_t count)
+{
+	__m128i c[4];
+	for (int r = 0; r < 4; r++)
+		c[r] = _mm_loadu_si128((const __m128i *)(const void *)m[r]);
+	const __m128i zero = _mm_setzero_si128();
+	size_t i = 0;
+	for (; i + 4 <= count; i += 4) {
+		__m128i x = _mm_loadu_si128((const __m128i *)(const void *)(src + 4 * i));
+		__m128i lo = matrix2(_mm_unpacklo_epi8(x, zero), c);
+		__m128i hi = matrix2(_mm_unpackhi_epi8(x, zero), c);
+		_mm_storeu_si128((__m128i *)(void *)(dst + 4 * i), _mm_packus_epi16(lo, hi));
+	}
+	matrix_scalar(m, src, dst, i, count);
+}
+#else
+static void matrix_run(const int16_t m[4][8], const uint8_t *src, uint8_t *dst, size_t count)
+{
+	matrix_scalar(m, src, dst, 0, count);
+}
+#endif
 
 static int color_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			  struct tile *const *in, int nin, struct tile *out)
@@ -153,17 +212,8 @@ static int color_generate(const struct node *n, struct gen_ctx *g, const struct 
 		}
 		src = dst; /* the matrix, if any, works in place on the filtered texels */
 	}
-	if (f->matrix) {
-		const int32_t *m = f->m;
-		for (size_t i = 0; i < count; i++) {
-			int r = src[4 * i], gr = src[4 * i + 1], b = src[4 * i + 2];
-			uint8_t a = src[4 * i + 3];
-			dst[4 * i] = mat_row(m, r, gr, b);
-			dst[4 * i + 1] = mat_row(m + 3, r, gr, b);
-			dst[4 * i + 2] = mat_row(m + 6, r, gr, b);
-			dst[4 * i + 3] = a;
-		}
-	}
+	if (f->matrix)
+		matrix_run(f->m, src, dst, count);
 	return 0;
 }
 

@@ -14,6 +14,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "pixel_nodes.h"
 #include "xalloc.h"
@@ -29,11 +32,11 @@ static const char default_stops[] =
 
 struct ramp {
 	int nstops;
-	float h[RAMP_MAX_STOPS];	 /* stop heights + sea level */
-	float c[RAMP_MAX_STOPS][3];	 /* stop colours */
-	float slope[RAMP_MAX_STOPS][3]; /* colour per metre from stop s to s + 1 */
+	float h[RAMP_MAX_STOPS + 1];	     /* stop heights + sea level, then +∞ */
+	float c[RAMP_MAX_STOPS][4];	     /* stop colours, alpha 255 */
+	float slope[RAMP_MAX_STOPS][4];     /* colour per metre from stop s to s + 1; 0 at the end */
 	float inv_bin;			 /* bins per metre */
-	uint8_t bin_seg[RAMP_BINS];	 /* a segment at or before every height in the bin */
+	uint8_t bin_seg[RAMP_BINS];	 /* the segment where the bin starts */
 };
 
 /* Parses one "height r g b" item of [s, e). Returns 0 or -EINVAL. */
@@ -99,6 +102,7 @@ static int parse_stops(struct node_parse *p, const char *text, double sea, struc
 		r->h[r->nstops] = h;
 		for (int i = 0; i < 3; i++)
 			r->c[r->nstops][i] = (float)v[i + 1];
+		r->c[r->nstops][3] = 255;
 		r->nstops++;
 		if (!*e)
 			break;
@@ -121,6 +125,7 @@ static int ramp_create(struct node *n, struct node_parse *p)
 		return rc;
 	}
 	int last = r->nstops - 1;
+	r->h[r->nstops] = INFINITY;
 	for (int s = 0; s < last; s++)
 		for (int i = 0; i < 3; i++)
 			r->slope[s][i] = (r->c[s + 1][i] - r->c[s][i]) / (r->h[s + 1] - r->h[s]);
@@ -132,9 +137,7 @@ static int ramp_create(struct node *n, struct node_parse *p)
 			double start = r->h[0] + b * (span / RAMP_BINS);
 			while (seg + 1 < last && r->h[seg + 1] <= start)
 				seg++;
-			/* one back: rounding of (h - h0)·inv_bin may put a height just below the
-			 * bin's exact start into it */
-			r->bin_seg[b] = (uint8_t)(seg > 0 ? seg - 1 : 0);
+			r->bin_seg[b] = (uint8_t)seg;
 		}
 	}
 	n->impl = r;
@@ -147,13 +150,25 @@ static void ramp_destroy(struct node *n)
 	free(n->impl);
 }
 
+/* d = c + t·slope, rounded (c + t·slope ∈ [0, 255]). */
+#ifdef __SSE2__
 static inline void put(uint8_t *d, const float *c, const float *sl, float t)
 {
-	d[0] = (uint8_t)(int)(c[0] + t * sl[0] + 0.5f);
-	d[1] = (uint8_t)(int)(c[1] + t * sl[1] + 0.5f);
-	d[2] = (uint8_t)(int)(c[2] + t * sl[2] + 0.5f);
-	d[3] = 255;
+	__m128 v = _mm_add_ps(_mm_add_ps(_mm_loadu_ps(c), _mm_mul_ps(_mm_set1_ps(t),
+								      _mm_loadu_ps(sl))),
+			      _mm_set1_ps(0.5f));
+	__m128i q = _mm_cvttps_epi32(v);
+	q = _mm_packus_epi16(_mm_packs_epi32(q, q), q);
+	uint32_t w = (uint32_t)_mm_cvtsi128_si32(q);
+	memcpy(d, &w, 4);
 }
+#else
+static inline void put(uint8_t *d, const float *c, const float *sl, float t)
+{
+	for (int i = 0; i < 4; i++)
+		d[i] = (uint8_t)(int)(c[i] + t * sl[i] + 0.5f);
+}
+#endif
 
 static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			 struct tile *const *in, int nin, struct tile *out)
@@ -166,25 +181,24 @@ static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct t
 	size_t count = (size_t)out->size * out->size;
 	const float *src = tile_f32(in[0]);
 	uint8_t *dst = out->data;
-	const int last = r->nstops - 1;
-	const float h0 = r->h[0], hl = r->h[last], inv = r->inv_bin;
-	static const float zero[3] = { 0, 0, 0 };
+	const float h0 = r->h[0], hl = r->h[r->nstops - 1], inv = r->inv_bin;
 	for (size_t i = 0; i < count; i++) {
 		float h = src[i];
 		uint8_t *d = dst + 4 * i;
-		if (h > h0 && h < hl) {
-			int b = (int)((h - h0) * inv);
-			int s = r->bin_seg[b < RAMP_BINS ? b : RAMP_BINS - 1];
-			while (h >= r->h[s + 1])
-				s++;
-			put(d, r->c[s], r->slope[s], h - r->h[s]);
-		} else if (h <= h0) {
-			put(d, r->c[0], zero, 0);
-		} else if (h >= hl) {
-			put(d, r->c[last], zero, 0);
-		} else {
+		if (h != h) {
 			memset(d, 0, 4); /* NaN: no data */
+			continue;
 		}
+		/* clamped to the ends, where the last stop's segment has slope 0 and h[last + 1]
+		 * = +∞ ends the search */
+		h = h < h0 ? h0 : h > hl ? hl : h;
+		int b = (int)((h - h0) * inv);
+		int s = r->bin_seg[b < RAMP_BINS ? b : RAMP_BINS - 1];
+		while (h >= r->h[s + 1]) /* the bin holds a stop */
+			s++;
+		while (h < r->h[s]) /* rounding put h just below the bin's start */
+			s--;
+		put(d, r->c[s], r->slope[s], h - r->h[s]);
 	}
 	return 0;
 }

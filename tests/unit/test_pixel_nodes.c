@@ -185,6 +185,95 @@ static void color_hue_saturation(void **state)
 	assert_in_range(o[1], 126, 130);
 }
 
+static uint32_t rng(uint32_t *st)
+{
+	*st ^= *st << 13;
+	*st ^= *st >> 17;
+	*st ^= *st << 5;
+	return *st;
+}
+
+/* Varied texels (every lane of a vector path differs) against the documented formulas in
+ * double precision: levels → contrast → gamma, then rotation about the grey axis and
+ * saturation about Rec. 601 luma. */
+static void color_reference(void **state)
+{
+	(void)state;
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_color_filter, &input_color, NULL, NULL,
+			      "in_black = 10\nin_white = 240\ncontrast = 1.2\ngamma = 1.4\n"
+			      "hue = 40\nsaturation = 1.5"), 0);
+	struct tile *a = tile_create(&key0, PIX_COLOR, T);
+	uint32_t seed = 99;
+	for (int i = 0; i < 4 * N; i++)
+		a->data[i] = (uint8_t)rng(&seed);
+	struct tile *o = run1(&tn, a, NULL, NULL);
+	double th = 40 * M_PI / 180, c = cos(th), sn = sin(th) / sqrt(3.0), k = (1 - c) / 3;
+	const double rot[3][3] = { { c + k, k - sn, k + sn }, { k + sn, c + k, k - sn },
+				   { k - sn, k + sn, c + k } };
+	const double luma[3] = { 0.299, 0.587, 0.114 };
+	for (int i = 0; i < N; i++) {
+		double v[3], w[3];
+		for (int ch = 0; ch < 3; ch++) {
+			double x = (a->data[4 * i + ch] - 10) / 230.0;
+			x = x < 0 ? 0 : x > 1 ? 1 : x;
+			x = (x - 0.5) * 1.2 + 0.5;
+			x = x < 0 ? 0 : x > 1 ? 1 : x;
+			v[ch] = round(pow(x, 1 / 1.4) * 255);
+		}
+		for (int r = 0; r < 3; r++)
+			w[r] = rot[r][0] * v[0] + rot[r][1] * v[1] + rot[r][2] * v[2];
+		double y = luma[0] * w[0] + luma[1] * w[1] + luma[2] * w[2];
+		for (int ch = 0; ch < 3; ch++) {
+			double want = y + 1.5 * (w[ch] - y);
+			want = want < 0 ? 0 : want > 255 ? 255 : want;
+			int got = o->data[4 * i + ch];
+			if (fabs(got - want) > 1.0)
+				fail_msg("texel %d channel %d: %d, want %.2f", i, ch, got, want);
+		}
+		assert_int_equal(o->data[4 * i + 3], a->data[4 * i + 3]);
+	}
+	tile_unref(a);
+	tile_unref(o);
+	unmake(&tn);
+}
+
+/* Random heights against linear interpolation in double. */
+static void ramp_reference(void **state)
+{
+	(void)state;
+	static const double st[][4] = { { -500, 10, 20, 200 }, { -1, 0, 250, 250 },
+					 { 0, 30, 160, 20 }, { 40, 90, 100, 50 },
+					 { 3000, 255, 255, 255 } };
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_ramp, &input_height, NULL, NULL,
+			      "stops = -500 10 20 200, -1 0 250 250, 0 30 160 20, 40 90 100 50, "
+			      "3000 255 255 255"), 0);
+	struct tile *a = height_tile(0);
+	uint32_t seed = 7;
+	for (int i = 0; i < N; i++)
+		tile_f32(a)[i] = (float)((int)(rng(&seed) % 400000) - 100000) / 100.0f;
+	struct tile *o = run1(&tn, a, NULL, NULL);
+	for (int i = 0; i < N; i++) {
+		double h = tile_f32(a)[i];
+		int s = 0;
+		while (s < 3 && h >= st[s + 1][0])
+			s++;
+		double t = (h - st[s][0]) / (st[s + 1][0] - st[s][0]);
+		t = t < 0 ? 0 : t > 1 ? 1 : t;
+		for (int ch = 0; ch < 3; ch++) {
+			double want = st[s][ch + 1] + t * (st[s + 1][ch + 1] - st[s][ch + 1]);
+			int got = o->data[4 * i + ch];
+			if (fabs(got - want) > 0.51)
+				fail_msg("height %.2f channel %d: %d, want %.2f", h, ch, got, want);
+		}
+		assert_int_equal(o->data[4 * i + 3], 255);
+	}
+	tile_unref(a);
+	tile_unref(o);
+	unmake(&tn);
+}
+
 static void color_errors(void **state)
 {
 	(void)state;
@@ -435,6 +524,35 @@ static void blend_colors(void **state)
 	assert_memory_equal(o, ((const uint8_t[]){ 100, 100, 25, 200 }), 4);
 }
 
+static void blend_masked_and_normals(void **state)
+{
+	(void)state;
+	uint8_t o[4];
+	const float quarter = 0.25f;
+	/* over with a mask scales b's alpha: 100 + (200 − 100)·(255/255)·0.25 = 125 */
+	blend_c("", (const uint8_t[]){ 100, 100, 100, 255 }, (const uint8_t[]){ 200, 0, 20, 255 },
+		&quarter, o);
+	assert_memory_equal(o, ((const uint8_t[]){ 125, 75, 80, 255 }), 4);
+	/* normals blend as a lerp of both components */
+	struct node n1 = { .name = "n1", .out = PIX_NORMAL, .hash = 21 };
+	struct node n2 = { .name = "n2", .out = PIX_NORMAL, .hash = 22 };
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_blend, &n1, &n2, NULL, "opacity = 0.5"), 0);
+	assert_int_equal(tn.n.out, PIX_NORMAL);
+	struct tile *ta = tile_create(&key0, PIX_NORMAL, T), *tb = tile_create(&key0, PIX_NORMAL, T);
+	memset(ta->data, 100, ta->nbytes);
+	memset(tb->data, 200, tb->nbytes);
+	tb->data[1] = 0;
+	struct tile *out = run1(&tn, ta, tb, NULL);
+	assert_int_equal(out->data[0], 150);
+	assert_int_equal(out->data[1], 50);
+	assert_int_equal(out->data[2 * N - 1], 150);
+	tile_unref(ta);
+	tile_unref(tb);
+	tile_unref(out);
+	unmake(&tn);
+}
+
 static void blend_errors(void **state)
 {
 	(void)state;
@@ -495,6 +613,8 @@ int main(void)
 		cmocka_unit_test(ramp_default),	     cmocka_unit_test(ramp_errors),
 		cmocka_unit_test(blend_heights),     cmocka_unit_test(blend_colors),
 		cmocka_unit_test(blend_errors),	     cmocka_unit_test(hashes_differ),
+		cmocka_unit_test(color_reference),   cmocka_unit_test(ramp_reference),
+		cmocka_unit_test(blend_masked_and_normals),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
 }
