@@ -1,0 +1,620 @@
+/* Tests of the per-texel node types: color_filter, height_filter, ramp, blend. Nodes are built
+ * from INI snippets exactly as the planet loader would (node_init), their inputs are bare
+ * nodes with a type and a hash, and generate() runs on hand-filled tiles. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ini.h"
+#include "node.h"
+#include "pixel_nodes.h"
+#include "tile.h"
+
+#define T 16
+#define N (T * T)
+
+struct tnode {
+	struct node n;
+	struct ini_file *ini;
+	char err[256];
+};
+
+static struct node input_color = { .name = "photo", .out = PIX_COLOR, .hash = 11 };
+static struct node input_height = { .name = "dem", .out = PIX_HEIGHT, .hash = 12 };
+static struct node input_height2 = { .name = "detail", .out = PIX_HEIGHT, .hash = 13 };
+static struct node input_color2 = { .name = "overlay", .out = PIX_COLOR, .hash = 14 };
+
+/* Builds a node of type t from "key = value" lines; returns node_init's result. */
+static int make(struct tnode *tn, const struct node_type *t, struct node *in0, struct node *in1,
+		struct node *in2, const char *params)
+{
+	char text[1024];
+	snprintf(text, sizeof text, "[node x]\n%s\n", params);
+	memset(tn, 0, sizeof *tn);
+	assert_int_equal(ini_parse("test.ini", text, strlen(text), &tn->ini, tn->err), 0);
+	tn->n.name = "x";
+	tn->n.in[0] = in0;
+	tn->n.in[1] = in1;
+	tn->n.in[2] = in2;
+	return node_init(&tn->n, t, "test.ini", &tn->ini->sections[0], tn->err);
+}
+
+static void unmake(struct tnode *tn)
+{
+	node_fini(&tn->n);
+	ini_free(tn->ini);
+}
+
+static const struct tile_key key0 = { .node = 1, .lx = 3, .ly = 2, .x = 1, .y = 1 };
+
+static struct tile *run1(struct tnode *tn, struct tile *in0, struct tile *in1, struct tile *in2)
+{
+	struct tile *in[3] = { in0, in1, in2 };
+	int nin = in2 ? 3 : in1 ? 2 : 1;
+	struct tile *out = tile_create(&key0, tn->n.out, T);
+	struct gen_ctx g = { 0 };
+	assert_int_equal(tn->n.type->generate(&tn->n, &g, &key0, in, nin, out), 0);
+	gen_ctx_fini(&g);
+	return out;
+}
+
+static struct tile *color_tile(const uint8_t px[4])
+{
+	struct tile *t = tile_create(&key0, PIX_COLOR, T);
+	for (int i = 0; i < N; i++)
+		memcpy(t->data + 4 * i, px, 4);
+	return t;
+}
+
+static struct tile *height_tile(float v)
+{
+	struct tile *t = tile_create(&key0, PIX_HEIGHT, T);
+	for (int i = 0; i < N; i++)
+		tile_f32(t)[i] = v;
+	return t;
+}
+
+/* The filtered colour of one texel value (every texel of the tile holds it). */
+static void filter1(const char *params, const uint8_t in[4], uint8_t out[4])
+{
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_color_filter, &input_color, NULL, NULL, params), 0);
+	struct tile *a = color_tile(in), *o = run1(&tn, a, NULL, NULL);
+	memcpy(out, o->data + 4 * 37, 4);
+	assert_memory_equal(o->data, o->data + 4 * (N - 1), 4);
+	tile_unref(a);
+	tile_unref(o);
+	unmake(&tn);
+}
+
+static void color_identity(void **state)
+{
+	(void)state;
+	const char *ids[] = { "", "brightness = 0\ncontrast = 1\ngamma = 1\nhue = 0\nsaturation = 1",
+			      "in_black = 0\nin_white = 255\nout_black = 0\nout_white = 255",
+			      "hue = 360" };
+	for (size_t c = 0; c < sizeof ids / sizeof *ids; c++) {
+		struct tnode tn;
+		assert_int_equal(make(&tn, &node_type_color_filter, &input_color, NULL, NULL, ids[c]),
+				 0);
+		struct tile *a = tile_create(&key0, PIX_COLOR, T);
+		for (int i = 0; i < 4 * N; i++)
+			a->data[i] = (uint8_t)(i * 7 + i / 5);
+		struct tile *o = run1(&tn, a, NULL, NULL);
+		assert_memory_equal(o->data, a->data, 4 * N);
+		tile_unref(a);
+		tile_unref(o);
+		unmake(&tn);
+	}
+}
+
+static void color_gamma_levels(void **state)
+{
+	(void)state;
+	uint8_t o[4];
+	/* 255 · (128/255)^(1/2.2) = 186.4; alpha untouched */
+	filter1("gamma = 2.2", (const uint8_t[]){ 128, 0, 255, 77 }, o);
+	assert_int_equal(o[0], 186);
+	assert_int_equal(o[1], 0);
+	assert_int_equal(o[2], 255);
+	assert_int_equal(o[3], 77);
+	/* input levels 50..200: 50 → 0, 100 → 85, 200 → 255 */
+	filter1("in_black = 50\nin_white = 200", (const uint8_t[]){ 50, 100, 200, 3 }, o);
+	assert_int_equal(o[0], 0);
+	assert_int_equal(o[1], 85);
+	assert_int_equal(o[2], 255);
+	assert_int_equal(o[3], 3);
+	filter1("in_black = 50\nin_white = 200", (const uint8_t[]){ 10, 230, 125, 0 }, o);
+	assert_int_equal(o[0], 0);
+	assert_int_equal(o[1], 255);
+	/* output levels 20..220 */
+	filter1("out_black = 20\nout_white = 220", (const uint8_t[]){ 0, 255, 51, 9 }, o);
+	assert_int_equal(o[0], 20);
+	assert_int_equal(o[1], 220);
+	assert_int_equal(o[2], 60);
+	/* brightness adds 0.2·255 = 51 */
+	filter1("brightness = 0.2", (const uint8_t[]){ 100, 0, 250, 9 }, o);
+	assert_int_equal(o[0], 151);
+	assert_int_equal(o[1], 51);
+	assert_int_equal(o[2], 255);
+	/* contrast 1.5 about mid-grey: v → 1.5·v − 63.75 */
+	filter1("contrast = 1.5", (const uint8_t[]){ 100, 200, 20, 9 }, o);
+	assert_int_equal(o[0], 86);
+	assert_int_equal(o[1], 236);
+	assert_int_equal(o[2], 0);
+}
+
+static void color_hue_saturation(void **state)
+{
+	(void)state;
+	uint8_t o[4];
+	filter1("hue = 120", (const uint8_t[]){ 255, 0, 0, 200 }, o);
+	assert_in_range(o[0], 0, 2);
+	assert_in_range(o[1], 253, 255);
+	assert_in_range(o[2], 0, 2);
+	assert_int_equal(o[3], 200);
+	filter1("hue = -120", (const uint8_t[]){ 255, 0, 0, 200 }, o);
+	assert_in_range(o[0], 0, 2);
+	assert_in_range(o[1], 0, 2);
+	assert_in_range(o[2], 253, 255);
+	/* a grey stays grey under any rotation */
+	filter1("hue = 77", (const uint8_t[]){ 90, 90, 90, 1 }, o);
+	assert_in_range(o[0], 89, 91);
+	assert_in_range(o[1], 89, 91);
+	assert_in_range(o[2], 89, 91);
+	/* saturation 0: grey at the Rec. 601 luma, 0.299·200 + 0.587·50 + 0.114·100 = 100.55 */
+	filter1("saturation = 0", (const uint8_t[]){ 200, 50, 100, 5 }, o);
+	assert_in_range(o[0], 100, 101);
+	assert_int_equal(o[1], o[0]);
+	assert_int_equal(o[2], o[0]);
+	assert_int_equal(o[3], 5);
+	/* saturation 2 pushes channels away from grey */
+	filter1("saturation = 2", (const uint8_t[]){ 120, 100, 100, 5 }, o);
+	assert_true(o[0] > 130 && o[1] < 100 && o[2] < 100);
+	/* table and matrix together: levels first, then the rotation */
+	filter1("in_white = 128\nhue = 120", (const uint8_t[]){ 64, 0, 0, 5 }, o);
+	assert_in_range(o[0], 0, 2);
+	assert_in_range(o[1], 126, 130);
+}
+
+static uint32_t rng(uint32_t *st)
+{
+	*st ^= *st << 13;
+	*st ^= *st >> 17;
+	*st ^= *st << 5;
+	return *st;
+}
+
+/* Varied texels (every lane of a vector path differs) against the documented formulas in
+ * double precision: levels → contrast → gamma, then rotation about the grey axis and
+ * saturation about Rec. 601 luma. */
+static void color_reference(void **state)
+{
+	(void)state;
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_color_filter, &input_color, NULL, NULL,
+			      "in_black = 10\nin_white = 240\ncontrast = 1.2\ngamma = 1.4\n"
+			      "hue = 40\nsaturation = 1.5"), 0);
+	struct tile *a = tile_create(&key0, PIX_COLOR, T);
+	uint32_t seed = 99;
+	for (int i = 0; i < 4 * N; i++)
+		a->data[i] = (uint8_t)rng(&seed);
+	struct tile *o = run1(&tn, a, NULL, NULL);
+	double th = 40 * M_PI / 180, c = cos(th), sn = sin(th) / sqrt(3.0), k = (1 - c) / 3;
+	const double rot[3][3] = { { c + k, k - sn, k + sn }, { k + sn, c + k, k - sn },
+				   { k - sn, k + sn, c + k } };
+	const double luma[3] = { 0.299, 0.587, 0.114 };
+	for (int i = 0; i < N; i++) {
+		double v[3], w[3];
+		for (int ch = 0; ch < 3; ch++) {
+			double x = (a->data[4 * i + ch] - 10) / 230.0;
+			x = x < 0 ? 0 : x > 1 ? 1 : x;
+			x = (x - 0.5) * 1.2 + 0.5;
+			x = x < 0 ? 0 : x > 1 ? 1 : x;
+			v[ch] = round(pow(x, 1 / 1.4) * 255);
+		}
+		for (int r = 0; r < 3; r++)
+			w[r] = rot[r][0] * v[0] + rot[r][1] * v[1] + rot[r][2] * v[2];
+		double y = luma[0] * w[0] + luma[1] * w[1] + luma[2] * w[2];
+		for (int ch = 0; ch < 3; ch++) {
+			double want = y + 1.5 * (w[ch] - y);
+			want = want < 0 ? 0 : want > 255 ? 255 : want;
+			int got = o->data[4 * i + ch];
+			if (fabs(got - want) > 1.0)
+				fail_msg("texel %d channel %d: %d, want %.2f", i, ch, got, want);
+		}
+		assert_int_equal(o->data[4 * i + 3], a->data[4 * i + 3]);
+	}
+	tile_unref(a);
+	tile_unref(o);
+	unmake(&tn);
+}
+
+/* Random heights against linear interpolation in double. */
+static void ramp_reference(void **state)
+{
+	(void)state;
+	static const double st[][4] = { { -500, 10, 20, 200 }, { -1, 0, 250, 250 },
+					 { 0, 30, 160, 20 }, { 40, 90, 100, 50 },
+					 { 3000, 255, 255, 255 } };
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_ramp, &input_height, NULL, NULL,
+			      "stops = -500 10 20 200, -1 0 250 250, 0 30 160 20, 40 90 100 50, "
+			      "3000 255 255 255"), 0);
+	struct tile *a = height_tile(0);
+	uint32_t seed = 7;
+	for (int i = 0; i < N; i++)
+		tile_f32(a)[i] = (float)((int)(rng(&seed) % 400000) - 100000) / 100.0f;
+	struct tile *o = run1(&tn, a, NULL, NULL);
+	for (int i = 0; i < N; i++) {
+		double h = tile_f32(a)[i];
+		int s = 0;
+		while (s < 3 && h >= st[s + 1][0])
+			s++;
+		double t = (h - st[s][0]) / (st[s + 1][0] - st[s][0]);
+		t = t < 0 ? 0 : t > 1 ? 1 : t;
+		for (int ch = 0; ch < 3; ch++) {
+			double want = st[s][ch + 1] + t * (st[s + 1][ch + 1] - st[s][ch + 1]);
+			int got = o->data[4 * i + ch];
+			if (fabs(got - want) > 0.51)
+				fail_msg("height %.2f channel %d: %d, want %.2f", h, ch, got, want);
+		}
+		assert_int_equal(o->data[4 * i + 3], 255);
+	}
+	tile_unref(a);
+	tile_unref(o);
+	unmake(&tn);
+}
+
+static void color_errors(void **state)
+{
+	(void)state;
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_color_filter, &input_color, NULL, NULL,
+			      "in_black = 200\nin_white = 100"), -EINVAL);
+	assert_non_null(strstr(tn.err, "test.ini:3: in_white:"));
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_color_filter, &input_color, NULL, NULL,
+			      "gamma = 0"), -EINVAL);
+	assert_non_null(strstr(tn.err, "gamma"));
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_color_filter, &input_height, NULL, NULL, ""),
+			 -EINVAL);
+	assert_non_null(strstr(tn.err, "input"));
+	unmake(&tn);
+}
+
+static void height_filter(void **state)
+{
+	(void)state;
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_height_filter, &input_height, NULL, NULL,
+			      "scale = 2\noffset = 10\nmin = 0\nmax = 100"), 0);
+	struct tile *a = tile_create(&key0, PIX_HEIGHT, T);
+	float *h = tile_f32(a);
+	for (int i = 0; i < N; i++)
+		h[i] = (float)(i % 80) - 20;
+	h[5] = NAN;
+	struct tile *o = run1(&tn, a, NULL, NULL);
+	const float *r = tile_f32(o);
+	for (int i = 0; i < N; i++) {
+		if (i == 5) {
+			assert_true(isnan(r[i]));
+			continue;
+		}
+		float want = h[i] * 2 + 10;
+		want = want < 0 ? 0 : want > 100 ? 100 : want;
+		assert_true(r[i] == want);
+	}
+	tile_unref(o);
+	unmake(&tn);
+
+	/* defaults: unchanged, no clamp even far out */
+	assert_int_equal(make(&tn, &node_type_height_filter, &input_height, NULL, NULL, ""), 0);
+	h[7] = -11000.0f;
+	h[8] = 1e7f;
+	o = run1(&tn, a, NULL, NULL);
+	assert_memory_equal(o->data, a->data, 4 * N);
+	tile_unref(o);
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_height_filter, &input_height, NULL, NULL,
+			      "min = 5\nmax = 1"), -EINVAL);
+	assert_non_null(strstr(tn.err, "max"));
+	unmake(&tn);
+	tile_unref(a);
+}
+
+/* Runs a ramp over heights hs[0..n) and returns the colours (4 per height). */
+static void ramp_run(const char *params, const float *hs, int n, uint8_t *out)
+{
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_ramp, &input_height, NULL, NULL, params), 0);
+	assert_int_equal(tn.n.out, PIX_COLOR);
+	struct tile *a = height_tile(0);
+	memcpy(tile_f32(a), hs, (size_t)n * sizeof *hs);
+	struct tile *o = run1(&tn, a, NULL, NULL);
+	memcpy(out, o->data, (size_t)n * 4);
+	tile_unref(a);
+	tile_unref(o);
+	unmake(&tn);
+}
+
+static void ramp_stops(void **state)
+{
+	(void)state;
+	const char *p = "stops = 0 0 0 0, 100 200 100 50, 300 0 255 255";
+	const float hs[] = { 0, 100, 300, 50, 250, -10, 1000, NAN, 99.999f, 100.001f };
+	uint8_t o[10][4];
+	ramp_run(p, hs, 10, &o[0][0]);
+	static const uint8_t want[10][4] = {
+		{ 0, 0, 0, 255 },	 { 200, 100, 50, 255 },	 { 0, 255, 255, 255 },
+		{ 100, 50, 25, 255 },	 { 50, 216, 204, 255 },	 { 0, 0, 0, 255 },
+		{ 0, 255, 255, 255 },	 { 0, 0, 0, 0 },	 { 200, 100, 50, 255 },
+		{ 200, 100, 50, 255 },
+	};
+	for (int i = 0; i < 10; i++) {
+		for (int c = 0; c < 4; c++) {
+			if (o[i][c] != want[i][c])
+				fail_msg("height %g: channel %d is %d, want %d", (double)hs[i], c,
+					 o[i][c], want[i][c]);
+		}
+	}
+	/* sea_level shifts every stop */
+	const float hs2[] = { 1100, 1000, 1050 };
+	ramp_run("sea_level = 1000\nstops = 0 0 0 0, 100 200 100 50, 300 0 255 255", hs2, 3,
+		 &o[0][0]);
+	assert_memory_equal(o[0], want[1], 4);
+	assert_memory_equal(o[1], want[0], 4);
+	assert_memory_equal(o[2], want[3], 4);
+	/* many close stops: every height lands in its own segment */
+	char many[1024] = "stops = ";
+	for (int s = 0; s < 40; s++) {
+		size_t l = strlen(many);
+		snprintf(many + l, sizeof many - l, "%s%d %d %d %d", s ? ", " : "", s * s,
+			 s * 6, 255 - s * 6, s % 2 * 255);
+	}
+	float hm[40];
+	for (int s = 0; s < 40; s++)
+		hm[s] = (float)(s * s);
+	uint8_t om[40][4];
+	ramp_run(many, hm, 40, &om[0][0]);
+	for (int s = 0; s < 40; s++) {
+		assert_int_equal(om[s][0], s * 6);
+		assert_int_equal(om[s][1], 255 - s * 6);
+		assert_int_equal(om[s][2], s % 2 * 255);
+	}
+}
+
+static void ramp_default(void **state)
+{
+	(void)state;
+	const float hs[] = { -5000, -20, 100, 1200, 6000 };
+	uint8_t o[5][4];
+	ramp_run("", hs, 5, &o[0][0]);
+	assert_true(o[0][2] > o[0][0] + 50 && o[0][2] > o[0][1] + 30); /* deep blue */
+	assert_true(o[1][2] > 180 && o[1][1] > 150);			 /* shallow cyan */
+	assert_true(o[2][1] > o[2][0] && o[2][1] > o[2][2]);		 /* green */
+	assert_true(o[3][0] > o[3][2] + 30);				 /* tan/brown */
+	assert_true(o[4][0] > 240 && o[4][1] > 240 && o[4][2] > 240);	 /* snow */
+	/* sea_level raises the coast: at 100 m under a 200 m sea it is water */
+	ramp_run("sea_level = 200", hs + 2, 1, &o[0][0]);
+	assert_true(o[0][2] > o[0][0] + 50);
+}
+
+static void ramp_errors(void **state)
+{
+	(void)state;
+	static const struct {
+		const char *stops, *want;
+	} cases[] = {
+		{ "0 0 0, 100 1 2 3", "stops: item 1 \"0 0 0\": expected \"height r g b\"" },
+		{ "0 1 2 3, 0 4 5 6", "stops: item 2 \"0 4 5 6\": height 0 is not above" },
+		{ "0 1 2 3, 10 4 5 6, 5 1 1 1", "item 3 \"5 1 1 1\"" },
+		{ "0 1 2 300", "item 1 \"0 1 2 300\": colour 300 is outside 0..255" },
+		{ "0 1 2 3, sea 1 2 3", "item 2 \"sea 1 2 3\"" },
+		{ "0 1 2 3,", "item 2 \"\"" },
+		{ "0 1 2 3 4", "item 1 \"0 1 2 3 4\"" },
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+		struct tnode tn;
+		char params[256];
+		snprintf(params, sizeof params, "stops = %s", cases[i].stops);
+		assert_int_equal(make(&tn, &node_type_ramp, &input_height, NULL, NULL, params),
+				 -EINVAL);
+		if (!strstr(tn.err, cases[i].want))
+			fail_msg("stops \"%s\": error \"%s\" lacks \"%s\"", cases[i].stops, tn.err,
+				 cases[i].want);
+		assert_non_null(strstr(tn.err, "test.ini:2:"));
+		unmake(&tn);
+	}
+}
+
+static float blend_h(const char *params, float a, float b, const float *mask)
+{
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2,
+			      mask ? &input_height2 : NULL, params), 0);
+	assert_int_equal(tn.n.out, PIX_HEIGHT);
+	struct tile *ta = height_tile(a), *tb = height_tile(b), *tm = mask ? height_tile(*mask)
+									     : NULL;
+	struct tile *o = run1(&tn, ta, tb, tm);
+	float r = tile_f32(o)[N / 2];
+	tile_unref(ta);
+	tile_unref(tb);
+	tile_unref(tm);
+	tile_unref(o);
+	unmake(&tn);
+	return r;
+}
+
+static void blend_c(const char *params, const uint8_t a[4], const uint8_t b[4], const float *mask,
+		    uint8_t out[4])
+{
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_blend, &input_color, &input_color2,
+			      mask ? &input_height : NULL, params), 0);
+	assert_int_equal(tn.n.out, PIX_COLOR);
+	struct tile *ta = color_tile(a), *tb = color_tile(b), *tm = mask ? height_tile(*mask) : NULL;
+	struct tile *o = run1(&tn, ta, tb, tm);
+	memcpy(out, o->data + 4 * (N / 2), 4);
+	tile_unref(ta);
+	tile_unref(tb);
+	tile_unref(tm);
+	tile_unref(o);
+	unmake(&tn);
+}
+
+static void blend_heights(void **state)
+{
+	(void)state;
+	const float half = 0.5f, neg = -1, big = 2, nan = NAN;
+	assert_float_equal(blend_h("", 100, 200, NULL), 200, 0);
+	assert_float_equal(blend_h("opacity = 0.25", 100, 200, NULL), 125, 1e-4);
+	assert_float_equal(blend_h("opacity = 0.25", 100, NAN, NULL), 100, 0);
+	assert_float_equal(blend_h("opacity = 0.25", NAN, 200, NULL), 200, 0);
+	assert_float_equal(blend_h("mode = mask", 100, 200, &half), 150, 1e-4);
+	assert_float_equal(blend_h("mode = mask\nopacity = 0.5", 100, 200, &half), 125, 1e-4);
+	assert_float_equal(blend_h("mode = mask", 100, 200, &neg), 100, 0);
+	assert_float_equal(blend_h("mode = mask", 100, 200, &big), 200, 0);
+	assert_float_equal(blend_h("mode = mask", 100, 200, &nan), 100, 0);
+	assert_float_equal(blend_h("mode = add", 100, 200, NULL), 300, 0);
+	assert_float_equal(blend_h("mode = add\nweight = -0.5", 100, 200, NULL), 0, 0);
+	assert_float_equal(blend_h("mode = add\nweight = 0.5", 100, 200, &half), 150, 1e-4);
+}
+
+static void blend_colors(void **state)
+{
+	(void)state;
+	uint8_t o[4];
+	const float half = 0.5f;
+	/* b (half transparent red) over opaque grey: 100·(1 − 128/255) + 200·128/255 = 150.2 */
+	blend_c("", (const uint8_t[]){ 100, 100, 100, 255 }, (const uint8_t[]){ 200, 0, 0, 128 },
+		NULL, o);
+	assert_memory_equal(o, ((const uint8_t[]){ 150, 50, 50, 255 }), 4);
+	/* over a transparent a: b's colour, b's alpha × opacity */
+	blend_c("opacity = 0.5", (const uint8_t[]){ 9, 9, 9, 0 },
+		(const uint8_t[]){ 200, 40, 60, 200 }, NULL, o);
+	assert_memory_equal(o, ((const uint8_t[]){ 200, 40, 60, 100 }), 4);
+	/* both half transparent: alpha = 0.5 + 0.5·0.5 */
+	blend_c("", (const uint8_t[]){ 0, 0, 0, 128 }, (const uint8_t[]){ 255, 255, 255, 128 }, NULL,
+		o);
+	assert_in_range(o[3], 191, 192);
+	assert_in_range(o[0], 169, 171); /* 255 · 0.502 / 0.752 */
+	/* nothing at all stays transparent */
+	blend_c("", (const uint8_t[]){ 1, 2, 3, 0 }, (const uint8_t[]){ 4, 5, 6, 0 }, NULL, o);
+	assert_int_equal(o[3], 0);
+	/* mask: lerp of every channel, b's alpha ignored */
+	blend_c("mode = mask", (const uint8_t[]){ 100, 0, 50, 255 },
+		(const uint8_t[]){ 200, 100, 51, 0 }, &half, o);
+	assert_memory_equal(o, ((const uint8_t[]){ 150, 50, 51, 128 }), 4);
+	/* multiply: a·b/255, a's alpha */
+	blend_c("mode = multiply", (const uint8_t[]){ 200, 100, 50, 200 },
+		(const uint8_t[]){ 128, 255, 0, 10 }, NULL, o);
+	assert_memory_equal(o, ((const uint8_t[]){ 100, 100, 0, 200 }), 4);
+	blend_c("mode = multiply\nopacity = 0.5", (const uint8_t[]){ 200, 100, 50, 200 },
+		(const uint8_t[]){ 0, 255, 0, 10 }, NULL, o);
+	assert_memory_equal(o, ((const uint8_t[]){ 100, 100, 25, 200 }), 4);
+}
+
+static void blend_masked_and_normals(void **state)
+{
+	(void)state;
+	uint8_t o[4];
+	const float quarter = 0.25f;
+	/* over with a mask scales b's alpha: 100 + (200 − 100)·(255/255)·0.25 = 125 */
+	blend_c("", (const uint8_t[]){ 100, 100, 100, 255 }, (const uint8_t[]){ 200, 0, 20, 255 },
+		&quarter, o);
+	assert_memory_equal(o, ((const uint8_t[]){ 125, 75, 80, 255 }), 4);
+	/* normals blend as a lerp of both components */
+	struct node n1 = { .name = "n1", .out = PIX_NORMAL, .hash = 21 };
+	struct node n2 = { .name = "n2", .out = PIX_NORMAL, .hash = 22 };
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_blend, &n1, &n2, NULL, "opacity = 0.5"), 0);
+	assert_int_equal(tn.n.out, PIX_NORMAL);
+	struct tile *ta = tile_create(&key0, PIX_NORMAL, T), *tb = tile_create(&key0, PIX_NORMAL, T);
+	memset(ta->data, 100, ta->nbytes);
+	memset(tb->data, 200, tb->nbytes);
+	tb->data[1] = 0;
+	struct tile *out = run1(&tn, ta, tb, NULL);
+	assert_int_equal(out->data[0], 150);
+	assert_int_equal(out->data[1], 50);
+	assert_int_equal(out->data[2 * N - 1], 150);
+	tile_unref(ta);
+	tile_unref(tb);
+	tile_unref(out);
+	unmake(&tn);
+}
+
+static void blend_errors(void **state)
+{
+	(void)state;
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_color, NULL, ""),
+			 -EINVAL);
+	if (!strstr(tn.err, "test.ini:1: b:") || !strstr(tn.err, "\"photo\" gives color"))
+		fail_msg("unexpected error \"%s\"", tn.err);
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_blend, &input_color, &input_color2, NULL,
+			      "mode = add"), -EINVAL);
+	assert_non_null(strstr(tn.err, "test.ini:2: mode: add works on heights"));
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2, NULL,
+			      "mode = multiply"), -EINVAL);
+	assert_non_null(strstr(tn.err, "mode: multiply works on colours"));
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2, NULL,
+			      "mode = mask"), -EINVAL);
+	assert_non_null(strstr(tn.err, "mode: mode mask needs input \"mask\""));
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2, NULL,
+			      "mode = screen"), -EINVAL);
+	assert_non_null(strstr(tn.err, "not one of: over, mask, add, multiply"));
+	unmake(&tn);
+	assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2, &input_color,
+			      ""), -EINVAL);
+	assert_non_null(strstr(tn.err, "mask"));
+	unmake(&tn);
+}
+
+/* Parameters feed the content hash: a different value names different tiles. */
+static void hashes_differ(void **state)
+{
+	(void)state;
+	struct tnode a, b, c;
+	assert_int_equal(make(&a, &node_type_color_filter, &input_color, NULL, NULL, "gamma = 2"),
+			 0);
+	assert_int_equal(make(&b, &node_type_color_filter, &input_color, NULL, NULL, "gamma = 2.1"),
+			 0);
+	assert_int_equal(make(&c, &node_type_ramp, &input_height, NULL, NULL, "sea_level = 1"), 0);
+	assert_true(a.n.hash != b.n.hash);
+	uint64_t h = c.n.hash;
+	unmake(&c);
+	assert_int_equal(make(&c, &node_type_ramp, &input_height, NULL, NULL, "sea_level = 2"), 0);
+	assert_true(c.n.hash != h);
+	unmake(&a);
+	unmake(&b);
+	unmake(&c);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(color_identity),    cmocka_unit_test(color_gamma_levels),
+		cmocka_unit_test(color_hue_saturation), cmocka_unit_test(color_errors),
+		cmocka_unit_test(height_filter),     cmocka_unit_test(ramp_stops),
+		cmocka_unit_test(ramp_default),	     cmocka_unit_test(ramp_errors),
+		cmocka_unit_test(blend_heights),     cmocka_unit_test(blend_colors),
+		cmocka_unit_test(blend_errors),	     cmocka_unit_test(hashes_differ),
+		cmocka_unit_test(color_reference),   cmocka_unit_test(ramp_reference),
+		cmocka_unit_test(blend_masked_and_normals),
+	};
+	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
+}
