@@ -79,5 +79,8 @@ void sched_req_destroy(struct sched_req *r);
 int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **out);
 
 void sched_get_stats(struct sched *s, struct sched_stats *out);
+/* 0, or the first -errno a worker got lowering its priority (setpriority refusals for lack of
+ * privilege, EPERM/EACCES, are not errors: the worker just runs at the default priority). */
+int sched_worker_nice_error(struct sched *s);
 
 #endif
