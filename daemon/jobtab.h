@@ -64,7 +64,6 @@ struct job {
 	/* Queue (under the queue mutex). */
 	struct job_prio qprio;
 	ptrdiff_t heap_idx; /* -1 when not in the heap */
-	bool running;
 
 	/* Worker → manager, published through the inbox mutex. */
 	struct tile *result; /* owned reference, NULL on error */

@@ -470,7 +470,6 @@ static void *worker_main(void *arg)
 			break;
 		struct job *j = jobheap_pop(&s->heap);
 		s->queued[j->qprio.cls]--;
-		j->running = true;
 		s->running++;
 		unlock(&s->q_mu);
 
