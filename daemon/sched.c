@@ -1,6 +1,6 @@
 /* sched — see sched.h. Design note:
  *
- * Locks (never nested, except where the manager holds q_mu and calls nothing that locks):
+ * Locks (never nested; none is held across generation, callbacks or a cache call):
  *   in_mu  the manager's inbox: pending want lists, destroy requests, finished jobs, stop.
  *          Requesters and workers only post under it and never wait on generation.
  *   q_mu   the ready heap, per-class queued counts, running count, worker stop flag.
