@@ -70,14 +70,20 @@ struct sched_req *sched_req_create(struct sched *s, sched_ready_fn fn, void *ud)
 /* Replaces the request's want list (copied); n = 0 cancels everything it wanted. Cached tiles
  * are reported at once (from the manager thread). Returns 0 or -errno. */
 int sched_req_want(struct sched_req *r, const struct want *w, size_t n);
-/* Stops the request: after this returns, its callback is never called again. */
+/* Stops the request: after this returns, its callback is never called again. From another
+ * thread it waits while a callback for r is running; from inside a callback (for another
+ * request) it returns at once and r's pending callbacks are dropped. */
 void sched_req_destroy(struct sched_req *r);
 
 /* Blocking convenience for offline use and tests: generates (or finds) every wanted tile and
  * stores an owned reference in out[i] (NULL where generation failed). Returns 0 if all
- * succeeded, else the first error. */
+ * succeeded, else the first error (in list order). Never call it from a ready callback: it
+ * waits for the manager thread that runs callbacks. */
 int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **out);
 
 void sched_get_stats(struct sched *s, struct sched_stats *out);
+/* 0, or the first -errno a worker got lowering its priority (setpriority refusals for lack of
+ * privilege, EPERM/EACCES, are not errors: the worker just runs at the default priority). */
+int sched_worker_nice_error(struct sched *s);
 
 #endif

@@ -1,0 +1,330 @@
+/* Tile cache tests: hit/miss accounting, the byte budget, pruning by distance to the foci's
+ * quads (the quad and its ring survive, far tiles go first), LRU order without foci,
+ * reference counting across eviction, invalidation by node, and concurrent use. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <pthread.h>
+#include <string.h>
+
+#include "cache.h"
+#include "grid.h"
+#include "tile.h"
+
+#define T 16 /* texels: 1 KiB per height tile */
+#define TILE_BYTES ((size_t)T * T * 4)
+
+static struct tile_key key(uint64_t node, int lx, int ly, uint32_t x, uint32_t y)
+{
+	struct tile_key k = { .node = node, .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
+	return k;
+}
+
+/* A tile whose texels all hold a value derived from its key, so readers can check it. */
+static float key_value(const struct tile_key *k)
+{
+	return (float)(k->node * 1000003u % 4096 + k->x * 64 + k->y + k->lx * 7 + k->ly * 11);
+}
+
+static struct tile *make_tile(const struct tile_key *k)
+{
+	struct tile *t = tile_create(k, PIX_HEIGHT, T);
+	float v = key_value(k);
+	for (int i = 0; i < T * T; i++)
+		tile_f32(t)[i] = v;
+	return t;
+}
+
+static void insert_new(struct cache *c, const struct tile_key *k)
+{
+	struct tile *t = make_tile(k);
+	cache_insert(c, t);
+	tile_unref(t);
+}
+
+static void hit_miss(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(0);
+	struct tile_key a = key(1, 1, 0, 0, 0), b = key(1, 1, 0, 1, 0), other = key(2, 1, 0, 0, 0);
+	insert_new(c, &a);
+	insert_new(c, &b);
+	insert_new(c, &a); /* already cached: the old tile stays, no second insert */
+	struct tile *t = cache_lookup(c, &a);
+	assert_non_null(t);
+	assert_true(grid_key_equal(&t->key, &a));
+	assert_true(tile_f32(t)[5] == key_value(&a));
+	tile_unref(t);
+	assert_null(cache_lookup(c, &other));
+	assert_true(cache_contains(c, &b));
+	assert_false(cache_contains(c, &other));
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.hits, 1);
+	assert_int_equal(st.misses, 1);
+	assert_int_equal(st.inserts, 2);
+	assert_int_equal(st.tiles, 2);
+	assert_int_equal(st.bytes, 2 * TILE_BYTES);
+	assert_int_equal(st.evictions, 0);
+	cache_destroy(c);
+}
+
+static void budget_respected(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(10 * TILE_BYTES);
+	struct cache_stats st;
+	for (uint32_t i = 0; i < 200; i++) {
+		struct tile_key k = key(1, 8, 7, i, i % 128);
+		insert_new(c, &k);
+		cache_stats(c, &st);
+		assert_true(st.bytes <= 10 * TILE_BYTES);
+	}
+	cache_stats(c, &st);
+	assert_int_equal(st.inserts, 200);
+	assert_int_equal(st.evictions + st.tiles, 200);
+	assert_true(st.tiles >= 9); /* pruned to 90 %, not emptied */
+	cache_destroy(c);
+}
+
+static void lru_without_foci(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(10 * TILE_BYTES);
+	struct tile_key k[11];
+	for (uint32_t i = 0; i < 11; i++)
+		k[i] = key(1, 4, 3, i, 0);
+	for (int i = 0; i < 10; i++)
+		insert_new(c, &k[i]);
+	/* Use 0..4 again: 5 and 6 become the least recently used. */
+	for (int i = 0; i < 5; i++)
+		tile_unref(cache_lookup(c, &k[i]));
+	insert_new(c, &k[10]); /* 11 tiles > 10: prune to 9 */
+	for (int i = 0; i < 11; i++)
+		assert_int_equal(cache_contains(c, &k[i]), i != 5 && i != 6);
+	cache_destroy(c);
+}
+
+/* Keys within Chebyshev distance ≤ 1 of the focus's quad at level (lx, ly). */
+static bool in_ring(int lx, int ly, double lon, double lat, const struct tile_key *k)
+{
+	struct grid_quad q;
+	grid_quad(lx, ly, T, lon, lat, &q);
+	return grid_quad_distance(&q, k) <= 1;
+}
+
+static void prune_keeps_quad_and_ring(void **state)
+{
+	(void)state;
+	const double lon = 37.3, lat = -21.7;
+	struct cache *c = cache_create(0);
+	struct cache_focus f = { lon, lat };
+	cache_set_foci(c, &f, 1, T);
+	/* Two levels, 32×16 and 64×32 tiles. Quad and ring tiles are inserted first, so the
+	 * least recently used are exactly the ones distance must protect. */
+	const int lv[2][2] = { { 5, 4 }, { 6, 5 } };
+	size_t total = 0, ring = 0;
+	for (int pass = 0; pass < 2; pass++)
+		for (int l = 0; l < 2; l++)
+			for (uint32_t y = 0; y < grid_tiles_y(lv[l][1]); y++)
+				for (uint32_t x = 0; x < grid_tiles_x(lv[l][0]); x++) {
+					struct tile_key k = key(9, lv[l][0], lv[l][1], x, y);
+					bool r = in_ring(lv[l][0], lv[l][1], lon, lat, &k);
+					if (r != (pass == 0))
+						continue;
+					insert_new(c, &k);
+					total++;
+					ring += r;
+				}
+	assert_true(ring >= 2 * 9 && ring <= 2 * 16);
+	size_t keep = ring + 40;
+	cache_prune(c, keep * TILE_BYTES);
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, keep);
+	assert_int_equal(st.evictions, total - keep);
+	/* Every quad/ring tile stayed; every surviving tile is at most as far as every evicted. */
+	uint32_t max_kept = 0, min_evicted = UINT32_MAX;
+	for (int l = 0; l < 2; l++) {
+		struct grid_quad q;
+		grid_quad(lv[l][0], lv[l][1], T, lon, lat, &q);
+		for (uint32_t y = 0; y < grid_tiles_y(lv[l][1]); y++)
+			for (uint32_t x = 0; x < grid_tiles_x(lv[l][0]); x++) {
+				struct tile_key k = key(9, lv[l][0], lv[l][1], x, y);
+				uint32_t d = grid_quad_distance(&q, &k);
+				bool has = cache_contains(c, &k);
+				if (d <= 1)
+					assert_true(has);
+				if (has && d > max_kept)
+					max_kept = d;
+				if (!has && d < min_evicted)
+					min_evicted = d;
+			}
+	}
+	assert_true(max_kept <= min_evicted);
+	assert_true(max_kept >= 2); /* 40 non-ring tiles: the next ring out */
+	/* Squeezing below the quads' size finally takes ring tiles, the ring before the quad. */
+	cache_prune(c, 8 * TILE_BYTES);
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, 8);
+	for (int l = 0; l < 2; l++) {
+		struct grid_quad q;
+		grid_quad(lv[l][0], lv[l][1], T, lon, lat, &q);
+		struct tile_key qt[4];
+		int n = grid_quad_tiles(&q, 9, qt);
+		for (int i = 0; i < n; i++)
+			assert_true(cache_contains(c, &qt[i]));
+	}
+	cache_destroy(c);
+}
+
+static void budget_prune_uses_foci(void **state)
+{
+	(void)state;
+	const double lon = -120.0, lat = 45.0;
+	struct cache *c = cache_create(40 * TILE_BYTES) /* 36 after a prune ≥ 2 rings of 16 */;
+	struct cache_focus f[2] = { { lon, lat }, { 100.0, -10.0 } };
+	cache_set_foci(c, f, 2, T);
+	const int lx = 5, ly = 4;
+	for (int pass = 0; pass < 2; pass++)
+		for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+			for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
+				struct tile_key k = key(3, lx, ly, x, y);
+				bool r = in_ring(lx, ly, f[0].lon, f[0].lat, &k) ||
+					 in_ring(lx, ly, f[1].lon, f[1].lat, &k);
+				if (r == (pass == 0))
+					insert_new(c, &k);
+			}
+	for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+		for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
+			struct tile_key k = key(3, lx, ly, x, y);
+			if (in_ring(lx, ly, f[0].lon, f[0].lat, &k) ||
+			    in_ring(lx, ly, f[1].lon, f[1].lat, &k))
+				assert_true(cache_contains(c, &k));
+		}
+	cache_destroy(c);
+}
+
+static void evicted_tile_stays_readable(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(0);
+	struct tile_key k = key(5, 3, 2, 4, 1);
+	struct tile *mine = make_tile(&k);
+	cache_insert(c, mine);
+	struct tile *held = cache_lookup(c, &k);
+	cache_prune(c, 0);
+	assert_false(cache_contains(c, &k));
+	/* Both the creator's and the lookup's references still read the data (ASan checks). */
+	assert_true(tile_f32(held)[T * T - 1] == key_value(&k));
+	tile_unref(held);
+	assert_true(tile_f32(mine)[0] == key_value(&k));
+	tile_unref(mine);
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.evictions, 1);
+	assert_int_equal(st.bytes, 0);
+	cache_destroy(c);
+}
+
+static int count_node(void *ud, const struct tile *t)
+{
+	size_t *n = ud;
+	if (t->key.node == 7)
+		n[0]++;
+	else
+		n[1]++;
+	return 0;
+}
+
+static void drop_node_and_foreach(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(0);
+	for (uint32_t i = 0; i < 20; i++) {
+		struct tile_key k = key(i % 2 ? 7 : 8, 6, 5, i, 3);
+		insert_new(c, &k);
+	}
+	size_t n[2] = { 0, 0 };
+	cache_foreach(c, count_node, n);
+	assert_int_equal(n[0], 10);
+	assert_int_equal(n[1], 10);
+	assert_int_equal(cache_drop_node(c, 7), 10);
+	n[0] = n[1] = 0;
+	cache_foreach(c, count_node, n);
+	assert_int_equal(n[0], 0);
+	assert_int_equal(n[1], 10);
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, 10);
+	assert_int_equal(st.bytes, 10 * TILE_BYTES);
+	cache_destroy(c);
+}
+
+struct worker_arg {
+	struct cache *c;
+	unsigned seed;
+	int bad;
+};
+
+static void *hammer(void *p)
+{
+	struct worker_arg *a = p;
+	uint64_t s = a->seed * 2654435761u + 1;
+	for (int i = 0; i < 4000; i++) {
+		s = s * 6364136223846793005u + 1442695040888963407u;
+		struct tile_key k = key(1 + (s >> 60) % 3, 7, 6, (uint32_t)(s >> 33) % 128,
+					(uint32_t)(s >> 20) % 64);
+		if ((s >> 10) % 3 == 0) {
+			insert_new(a->c, &k);
+		} else {
+			struct tile *t = cache_lookup(a->c, &k);
+			if (t && (!grid_key_equal(&t->key, &k) || tile_f32(t)[17] != key_value(&k)))
+				a->bad++;
+			tile_unref(t);
+		}
+	}
+	return NULL;
+}
+
+static void concurrent(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(300 * TILE_BYTES);
+	struct cache_focus f = { 10.0, 20.0 };
+	cache_set_foci(c, &f, 1, T);
+	pthread_t th[8];
+	struct worker_arg a[8];
+	for (int i = 0; i < 8; i++) {
+		a[i] = (struct worker_arg){ c, (unsigned)i + 1, 0 };
+		assert_int_equal(pthread_create(&th[i], NULL, hammer, &a[i]), 0);
+	}
+	for (int i = 0; i < 8; i++) {
+		assert_int_equal(pthread_join(th[i], NULL), 0);
+		assert_int_equal(a[i].bad, 0);
+	}
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_true(st.bytes <= 300 * TILE_BYTES);
+	assert_int_equal(st.hits + st.misses + st.inserts > 0, 1);
+	assert_int_equal(st.inserts, st.tiles + st.evictions);
+	cache_destroy(c);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(hit_miss),
+		cmocka_unit_test(budget_respected),
+		cmocka_unit_test(lru_without_foci),
+		cmocka_unit_test(prune_keeps_quad_and_ring),
+		cmocka_unit_test(budget_prune_uses_foci),
+		cmocka_unit_test(evicted_tile_stays_readable),
+		cmocka_unit_test(drop_node_and_foreach),
+		cmocka_unit_test(concurrent),
+	};
+	return cmocka_run_group_tests_name("cache", tests, NULL, NULL);
+}
