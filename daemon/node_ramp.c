@@ -3,6 +3,11 @@
  * stops and clamped beyond the ends; `sea_level` shifts every stop up. NaN heights (no data)
  * become transparent black. Without `stops` a default Earth-like ramp is used.
  *
+ * Optional polar and high-altitude snow: `snow_equator` and `snow_pole` (metres) set a snow line
+ * that falls from the equator to the poles as cos²(latitude); `snow_blend` (metres, default
+ * 400) is the fade above it; `sea_ice_latitude` (degrees) whitens everything poleward of it;
+ * `snow_color` (default #f2f5fa).
+ *
  * Speed: a table of bins over [first stop, last stop] gives a lower bound on each height's
  * segment, so a texel costs a table load, (almost always) one comparison and three FMAs;
  * colours at stop heights come out exact.
@@ -10,6 +15,7 @@
  */
 #include <errno.h>
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -23,6 +29,8 @@
 
 #define RAMP_MAX_STOPS 64
 #define RAMP_BINS 2048
+/* "not set" for snow_equator: above any real snow line, so the default is no snow */
+#define NAN_DEFAULT 1e9
 
 /* Deep ocean → shallow cyan below sea level; green lowlands → tan → brown → grey rock → snow. */
 static const char default_stops[] =
@@ -37,6 +45,11 @@ struct ramp {
 	float slope[RAMP_MAX_STOPS][4];     /* colour per metre from stop s to s + 1; 0 at the end */
 	float inv_bin;			 /* bins per metre */
 	uint8_t bin_seg[RAMP_BINS];	 /* the segment where the bin starts */
+	/* Snow line by latitude (off when snow_equator is NaN): land above
+	 * snow_pole + (snow_equator − snow_pole)·cos²(lat) fades to snow over snow_blend metres;
+	 * beyond ±sea_ice_latitude everything is ice. */
+	double snow_equator, snow_pole, snow_blend, sea_ice_latitude;
+	float snow[4];
 };
 
 /* Parses one "height r g b" item of [s, e). Returns 0 or -EINVAL. */
@@ -116,14 +129,22 @@ static int ramp_create(struct node *n, struct node_parse *p)
 	const char *stops;
 	double sea;
 	int rc;
-	if ((rc = np_double(p, "sea_level", 0, -1e5, 1e5, &sea)) ||
-	    (rc = np_string(p, "stops", default_stops, &stops)))
-		return rc;
+	static const uint8_t snow_def[4] = { 242, 245, 250, 255 };
+	uint8_t snow[4];
 	struct ramp *r = xcalloc(1, sizeof *r);
-	if ((rc = parse_stops(p, stops, sea, r))) {
+	if ((rc = np_double(p, "sea_level", 0, -1e5, 1e5, &sea)) ||
+	    (rc = np_string(p, "stops", default_stops, &stops)) ||
+	    (rc = np_double(p, "snow_equator", NAN_DEFAULT, -1e5, 1e5, &r->snow_equator)) ||
+	    (rc = np_double(p, "snow_pole", 0, -1e5, 1e5, &r->snow_pole)) ||
+	    (rc = np_double(p, "snow_blend", 400, 1, 1e5, &r->snow_blend)) ||
+	    (rc = np_double(p, "sea_ice_latitude", 91, 0, 91, &r->sea_ice_latitude)) ||
+	    (rc = np_color(p, "snow_color", snow_def, snow)) ||
+	    (rc = parse_stops(p, stops, sea, r))) {
 		free(r);
 		return rc;
 	}
+	for (int i = 0; i < 4; i++)
+		r->snow[i] = snow[i];
 	int last = r->nstops - 1;
 	r->h[r->nstops] = INFINITY;
 	for (int s = 0; s < last; s++)
@@ -170,11 +191,31 @@ static inline void put(uint8_t *d, const float *c, const float *sl, float t)
 }
 #endif
 
+/* Fades a row towards snow above its latitude's snow line (and all of it past the sea-ice
+ * latitude). */
+static void snow_row(const struct ramp *r, double lat, const float *h, uint8_t *d, uint32_t T)
+{
+	double c = cos(lat * M_PI / 180.0);
+	double line = r->snow_pole + (r->snow_equator - r->snow_pole) * c * c;
+	bool ice = fabs(lat) >= r->sea_ice_latitude;
+	float inv = (float)(1.0 / r->snow_blend);
+	for (uint32_t i = 0; i < T; i++) {
+		float t = ice ? 1.0f : (h[i] - (float)line) * inv;
+		if (!(t > 0))
+			continue;
+		if (t > 1)
+			t = 1;
+		for (int ch = 0; ch < 3; ch++) {
+			float v = d[4 * i + ch] + (r->snow[ch] - d[4 * i + ch]) * t;
+			d[4 * i + ch] = (uint8_t)(v + 0.5f);
+		}
+	}
+}
+
 static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			 struct tile *const *in, int nin, struct tile *out)
 {
 	(void)g;
-	(void)k;
 	const struct ramp *r = n->impl;
 	if (nin < 1 || in[0]->type != PIX_HEIGHT || in[0]->size != out->size)
 		return -EINVAL;
@@ -199,6 +240,14 @@ static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct t
 		while (h < r->h[s]) /* rounding put h just below the bin's start */
 			s--;
 		put(d, r->c[s], r->slope[s], h - r->h[s]);
+	}
+	if (r->snow_equator < NAN_DEFAULT || r->sea_ice_latitude <= 90) {
+		uint32_t T = out->size;
+		for (uint32_t j = 0; j < T; j++) {
+			double lon, lat;
+			grid_texel_center(k, T, 0, j, &lon, &lat);
+			snow_row(r, lat, src + (size_t)j * T, dst + (size_t)j * T * 4, T);
+		}
 	}
 	return 0;
 }
