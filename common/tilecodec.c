@@ -80,9 +80,9 @@ enum tfilter tilecodec_default_filter(enum tile_format f)
 	case TFMT_F32:
 		return TFILTER_GRAD;
 	case TFMT_RGBA8:
-		return TFILTER_GRAD;
+		return TFILTER_DELTA;
 	case TFMT_RG8:
-		return TFILTER_PLANES;
+		return TFILTER_DELTA;
 	default:
 		return TFILTER_NONE;
 	}
