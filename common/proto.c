@@ -133,7 +133,7 @@ ssize_t proto_frame_check(const void *buf, size_t len, struct proto_hdr *h, size
 {
 	const uint8_t *p = buf;
 	size_t nm = len < 4 ? len : 4;
-	if (memcmp(p, PROTO_MAGIC, nm) != 0) {
+	if (nm && memcmp(p, PROTO_MAGIC, nm) != 0) {
 		seterr(err, "bad magic: not a clipmap protocol stream");
 		return PROTO_ERR_MAGIC;
 	}
