@@ -1,0 +1,537 @@
+/* proto_write — the writing half of the protocol module (proto.h): output buffers, message
+ * encoders and the pure session helpers (state table, limits, rate bucket). Split from
+ * proto.c only to keep each file readable; the decoder there is the single statement of
+ * what is valid, and every encoder checks its output with it before returning.
+ *
+ * Thread-safety: reentrant; a pbuf has one owner. Ownership: see proto.h.
+ */
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "proto.h"
+#include "xalloc.h"
+
+static void seterr(char *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void seterr(char *err, const char *fmt, ...)
+{
+	if (!err)
+		return;
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(err, 256, fmt, ap);
+	va_end(ap);
+}
+
+/* ---- pbuf ------------------------------------------------------------------------------- */
+
+void pbuf_init(struct pbuf *b)
+{
+	*b = (struct pbuf){ 0 };
+}
+
+void pbuf_init_fixed(struct pbuf *b, void *mem, size_t cap)
+{
+	*b = (struct pbuf){ .data = mem, .cap = cap, .fixed = true };
+}
+
+void pbuf_fini(struct pbuf *b)
+{
+	if (!b->fixed)
+		free(b->data);
+	*b = (struct pbuf){ 0 };
+}
+
+int pbuf_reserve(struct pbuf *b, size_t n)
+{
+	if (b->cap - b->len >= n)
+		return 0;
+	if (b->fixed)
+		return -ENOSPC;
+	size_t cap = b->cap ? b->cap : 256;
+	while (cap - b->len < n)
+		cap *= 2;
+	b->data = xrealloc(b->data, cap);
+	b->cap = cap;
+	return 0;
+}
+
+int pbuf_append(struct pbuf *b, const void *p, size_t n)
+{
+	int rc = pbuf_reserve(b, n);
+	if (rc)
+		return rc;
+	if (n)
+		memcpy(b->data + b->len, p, n);
+	b->len += n;
+	return 0;
+}
+
+void pbuf_consume(struct pbuf *b, size_t n)
+{
+	if (n >= b->len) {
+		b->len = 0;
+		return;
+	}
+	memmove(b->data, b->data + n, b->len - n);
+	b->len -= n;
+}
+
+/* ---- writer ----------------------------------------------------------------------------- */
+
+struct wr {
+	struct pbuf *b;
+	int err; /* sticky: -ENOSPC or -EINVAL */
+	char *errbuf;
+};
+
+static void put(struct wr *w, const void *p, size_t n)
+{
+	if (!w->err && pbuf_append(w->b, p, n)) {
+		w->err = -ENOSPC;
+		seterr(w->errbuf, "output buffer full");
+	}
+}
+
+static void w8(struct wr *w, uint8_t v)
+{
+	put(w, &v, 1);
+}
+
+static void w16(struct wr *w, uint16_t v)
+{
+	uint8_t b[2] = { (uint8_t)v, (uint8_t)(v >> 8) };
+	put(w, b, 2);
+}
+
+static void w32(struct wr *w, uint32_t v)
+{
+	uint8_t b[4] = { (uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16), (uint8_t)(v >> 24) };
+	put(w, b, 4);
+}
+
+static void w64(struct wr *w, uint64_t v)
+{
+	w32(w, (uint32_t)v);
+	w32(w, (uint32_t)(v >> 32));
+}
+
+static void wf64(struct wr *w, double d)
+{
+	uint64_t u;
+	memcpy(&u, &d, sizeof(u));
+	w64(w, u);
+}
+
+static void wbytes(struct wr *w, const void *p, size_t n, const char *what)
+{
+	if (n > UINT16_MAX) {
+		if (!w->err)
+			seterr(w->errbuf, "%s of %zu bytes is too long", what, n);
+		w->err = w->err ? w->err : -EINVAL;
+		return;
+	}
+	w16(w, (uint16_t)n);
+	put(w, p, n);
+}
+
+static void wstr(struct wr *w, const char *s, const char *what)
+{
+	wbytes(w, s ? s : "", s ? strlen(s) : 0, what);
+}
+
+static bool wcount(struct wr *w, size_t count, size_t cap, const char *what)
+{
+	if (count <= cap)
+		return true;
+	if (!w->err) {
+		seterr(w->errbuf, "%zu %s exceed the cap of %zu", count, what, cap);
+		w->err = PROTO_ERR_LIMIT;
+	}
+	return false;
+}
+
+static void enc_planet(struct wr *w, const struct proto_planet *p)
+{
+	wstr(w, p->name, "planet name");
+	wstr(w, p->description, "description");
+	wf64(w, p->a);
+	wf64(w, p->f);
+	w32(w, p->tile_size);
+	w8(w, p->max_level);
+	w16(w, p->nlayers);
+	if (!wcount(w, p->nlayers, PROTO_MAX_LAYERS, "layers"))
+		return;
+	for (uint16_t i = 0; i < p->nlayers; i++) {
+		wstr(w, p->layers[i].name, "layer name");
+		w8(w, p->layers[i].format);
+		w64(w, p->layers[i].node);
+	}
+}
+
+static void enc_tile_head(struct wr *w, const struct proto_tile *t)
+{
+	w32(w, t->seq);
+	w32(w, t->planet_id);
+	w8(w, t->layer);
+	w8(w, t->key.lx);
+	w8(w, t->key.ly);
+	w8(w, t->enc.format);
+	w8(w, t->enc.codec);
+	w8(w, t->enc.filter);
+	w16(w, (uint16_t)t->enc.size);
+	w32(w, t->key.x);
+	w32(w, t->key.y);
+	w64(w, t->key.node);
+	w32(w, t->enc.raw_len);
+	w64(w, t->enc.checksum);
+}
+
+static void enc_body(struct wr *w, const struct proto_msg *m)
+{
+	switch (m->type) {
+	case PROTO_HELLO: {
+		const struct proto_hello *h = &m->hello;
+		w8(w, h->ver_min);
+		w8(w, h->ver_max);
+		w32(w, h->codecs);
+		wbytes(w, h->token, h->token_len, "token");
+		wstr(w, h->name, "client name");
+		break;
+	}
+	case PROTO_HELLO_OK: {
+		const struct proto_hello_ok *h = &m->hello_ok;
+		w8(w, h->version);
+		w32(w, h->codecs);
+		w64(w, h->session);
+		w32(w, h->limits.max_want);
+		w32(w, h->limits.max_rate);
+		w64(w, h->limits.max_pending);
+		w32(w, h->limits.max_frame);
+		wstr(w, h->name, "server name");
+		break;
+	}
+	case PROTO_BYE:
+		break;
+	case PROTO_ERROR:
+		w16(w, m->error.code);
+		w16(w, m->error.ref_type);
+		w32(w, m->error.ref_id);
+		wstr(w, m->error.message, "message");
+		break;
+	case PROTO_LIST_PLANETS:
+	case PROTO_STATS_REQ:
+	case PROTO_PREFETCH_CANCEL:
+		w32(w, m->list_planets.req); /* the same struct proto_req in all three */
+		break;
+	case PROTO_PLANETS:
+		w32(w, m->planets.req);
+		w16(w, m->planets.count);
+		if (wcount(w, m->planets.count, PROTO_MAX_PLANETS, "planets"))
+			for (uint16_t i = 0; i < m->planets.count; i++)
+				enc_planet(w, &m->planets.planets[i]);
+		break;
+	case PROTO_OPEN:
+		w32(w, m->open.req);
+		wstr(w, m->open.name, "planet name");
+		break;
+	case PROTO_OPENED:
+		w32(w, m->opened.req);
+		w32(w, m->opened.planet_id);
+		enc_planet(w, &m->opened.planet);
+		break;
+	case PROTO_WANT: {
+		const struct proto_want *q = &m->want;
+		w32(w, q->planet_id);
+		w32(w, q->seq);
+		wf64(w, q->lon);
+		wf64(w, q->lat);
+		wf64(w, q->alt);
+		for (int i = 0; i < 3; i++)
+			wf64(w, q->vel[i]);
+		w32(w, q->count);
+		if (!wcount(w, q->count, PROTO_MAX_WANT, "want entries"))
+			break;
+		for (uint32_t i = 0; i < q->count; i++) {
+			const struct proto_want_entry *e = &q->entries[i];
+			uint8_t b[12] = { e->layer, e->cls, e->lx, e->ly };
+			for (int k = 0; k < 4; k++) {
+				b[4 + k] = (uint8_t)(e->x >> 8 * k);
+				b[8 + k] = (uint8_t)(e->y >> 8 * k);
+			}
+			put(w, b, sizeof(b));
+		}
+		break;
+	}
+	case PROTO_TILE:
+		if (m->tile.payload_len && !m->tile.payload) {
+			seterr(w->errbuf, "TILE without its payload");
+			w->err = -EINVAL;
+			break;
+		}
+		enc_tile_head(w, &m->tile);
+		put(w, m->tile.payload, m->tile.payload_len);
+		break;
+	case PROTO_TILE_FAIL: {
+		const struct proto_tile_fail *t = &m->tile_fail;
+		w32(w, t->seq);
+		w32(w, t->planet_id);
+		w8(w, t->layer);
+		w8(w, t->key.lx);
+		w8(w, t->key.ly);
+		w32(w, t->key.x);
+		w32(w, t->key.y);
+		w64(w, t->key.node);
+		w16(w, t->code);
+		wstr(w, t->message, "message");
+		break;
+	}
+	case PROTO_STATS:
+		w32(w, m->stats.req);
+		w16(w, m->stats.count);
+		if (!wcount(w, m->stats.count, PROTO_MAX_STATS, "stats"))
+			break;
+		for (uint16_t i = 0; i < m->stats.count; i++) {
+			const struct proto_stat *s = &m->stats.items[i];
+			wstr(w, s->key, "stat key");
+			w8(w, s->kind);
+			if (s->kind == PROTO_STAT_U64)
+				w64(w, s->u);
+			else if (s->kind == PROTO_STAT_F64)
+				wf64(w, s->f);
+			else if (s->kind == PROTO_STAT_STR)
+				wstr(w, s->s, "stat value");
+		}
+		break;
+	case PROTO_CACHE_LS: {
+		const struct proto_cache_ls *c = &m->cache_ls;
+		w32(w, c->req);
+		w8(w, c->filter);
+		wstr(w, c->planet, "planet");
+		w8(w, c->lx);
+		w8(w, c->ly);
+		wf64(w, c->lon);
+		wf64(w, c->lat);
+		wf64(w, c->radius_m);
+		w32(w, c->limit);
+		break;
+	}
+	case PROTO_CACHE_ENTRIES: {
+		const struct proto_cache_entries *c = &m->cache_entries;
+		w32(w, c->req);
+		w8(w, c->more);
+		w64(w, c->total);
+		w32(w, c->count);
+		if (!wcount(w, c->count, PROTO_MAX_CACHE_ENTRIES, "cache entries"))
+			break;
+		for (uint32_t i = 0; i < c->count; i++) {
+			const struct proto_cache_entry *e = &c->entries[i];
+			w64(w, e->key.node);
+			w8(w, e->key.lx);
+			w8(w, e->key.ly);
+			w8(w, e->format);
+			w8(w, e->tier);
+			w32(w, e->key.x);
+			w32(w, e->key.y);
+			w32(w, e->bytes);
+			w32(w, e->age_s);
+		}
+		break;
+	}
+	case PROTO_PREFETCH: {
+		const struct proto_prefetch *p = &m->prefetch;
+		w32(w, p->id);
+		wstr(w, p->planet, "planet");
+		w64(w, p->layers);
+		w8(w, p->shape);
+		w8(w, p->lmin);
+		w8(w, p->lmax);
+		if (p->shape == PROTO_SHAPE_BBOX) {
+			wf64(w, p->bbox.west);
+			wf64(w, p->bbox.south);
+			wf64(w, p->bbox.east);
+			wf64(w, p->bbox.north);
+		} else if (p->shape == PROTO_SHAPE_PATH) {
+			wf64(w, p->width_m);
+			w32(w, p->npoints);
+			if (!wcount(w, p->npoints, PROTO_MAX_PATH, "path points"))
+				break;
+			for (uint32_t i = 0; i < p->npoints; i++) {
+				wf64(w, p->points[i].lon);
+				wf64(w, p->points[i].lat);
+			}
+		}
+		break;
+	}
+	case PROTO_PREFETCH_PROGRESS: {
+		const struct proto_prefetch_progress *p = &m->prefetch_progress;
+		w32(w, p->id);
+		w8(w, p->state);
+		w64(w, p->done);
+		w64(w, p->total);
+		wf64(w, p->rate);
+		break;
+	}
+	}
+}
+
+static void put_header(struct wr *w, uint16_t type, uint32_t length)
+{
+	put(w, PROTO_MAGIC, 4);
+	w8(w, PROTO_VERSION);
+	w8(w, 0);
+	w16(w, type);
+	w32(w, length);
+}
+
+ssize_t proto_encode(struct pbuf *b, const struct proto_msg *m, char err[256])
+{
+	const char *name = proto_type_name(m->type);
+	if (!name) {
+		seterr(err, "unknown message type %u", m->type);
+		return -EINVAL;
+	}
+	size_t start = b->len;
+	struct wr w = { .b = b, .errbuf = err };
+	put_header(&w, m->type, 0);
+	enc_body(&w, m);
+	if (w.err)
+		goto fail;
+	size_t length = b->len - start - PROTO_HDR;
+	if (length > proto_type_cap(m->type)) {
+		seterr(err, "%s of %zu bytes exceeds its cap of %u", name, length,
+		       proto_type_cap(m->type));
+		w.err = -EMSGSIZE;
+		goto fail;
+	}
+	for (int k = 0; k < 4; k++)
+		b->data[start + 8 + k] = (uint8_t)(length >> 8 * k);
+	struct proto_msg check;
+	int rc = proto_decode_payload(m->type, b->data + start + PROTO_HDR, length, &check, err);
+	proto_msg_fini(&check);
+	if (rc) {
+		w.err = rc == PROTO_ERR_LIMIT ? -E2BIG : -EINVAL;
+		goto fail;
+	}
+	return (ssize_t)(b->len - start);
+fail:
+	b->len = start;
+	return w.err;
+}
+
+ssize_t proto_encode_tile_head(struct pbuf *b, const struct proto_tile *t, char err[256])
+{
+	int rc = proto_tile_check(t, err);
+	if (rc)
+		return rc;
+	size_t start = b->len;
+	struct wr w = { .b = b, .errbuf = err };
+	put_header(&w, PROTO_TILE, 44 + t->payload_len);
+	enc_tile_head(&w, t);
+	if (w.err) {
+		b->len = start;
+		return w.err;
+	}
+	return (ssize_t)(b->len - start);
+}
+
+/* ---- session helpers -------------------------------------------------------------------- */
+
+static bool from_client(uint16_t type)
+{
+	switch (type) {
+	case PROTO_HELLO: case PROTO_BYE: case PROTO_ERROR: case PROTO_LIST_PLANETS:
+	case PROTO_OPEN: case PROTO_WANT: case PROTO_STATS_REQ: case PROTO_CACHE_LS:
+	case PROTO_PREFETCH: case PROTO_PREFETCH_CANCEL:
+		return true;
+	default:
+		return false;
+	}
+}
+
+static bool from_server(uint16_t type)
+{
+	switch (type) {
+	case PROTO_HELLO_OK: case PROTO_BYE: case PROTO_ERROR: case PROTO_PLANETS:
+	case PROTO_OPENED: case PROTO_TILE: case PROTO_TILE_FAIL: case PROTO_STATS:
+	case PROTO_CACHE_ENTRIES: case PROTO_PREFETCH_PROGRESS:
+		return true;
+	default:
+		return false;
+	}
+}
+
+int proto_check_state(enum proto_state st, bool server, uint16_t type, char err[256])
+{
+	const char *name = proto_type_name(type);
+	const char *peer = server ? "server" : "client";
+	if (!name) {
+		seterr(err, "unknown message type %u", type);
+		return PROTO_ERR_TYPE;
+	}
+	if (server ? !from_server(type) : !from_client(type)) {
+		seterr(err, "a %s does not send %s", peer, name);
+		return PROTO_ERR_STATE;
+	}
+	bool handshake = type == PROTO_HELLO || type == PROTO_HELLO_OK;
+	bool ok;
+	switch (st) {
+	case PROTO_ST_HANDSHAKE:
+		ok = handshake || type == PROTO_BYE || (server && type == PROTO_ERROR);
+		break;
+	case PROTO_ST_READY:
+		ok = !handshake;
+		break;
+	default:
+		ok = false;
+		break;
+	}
+	if (!ok) {
+		seterr(err, "%s from the %s is not allowed %s", name, peer,
+		       st == PROTO_ST_HANDSHAKE ? "before the handshake"
+		       : st == PROTO_ST_READY ? "after the handshake"
+					      : "after BYE");
+		return PROTO_ERR_STATE;
+	}
+	return 0;
+}
+
+int proto_check_limits(const struct proto_limits *l, const struct proto_msg *m,
+		       size_t frame_len, char err[256])
+{
+	if (l->max_frame && frame_len > l->max_frame) {
+		seterr(err, "%s of %zu bytes exceeds this session's frame limit of %u bytes",
+		       proto_type_name(m->type), frame_len, l->max_frame);
+		return -E2BIG;
+	}
+	if (m->type == PROTO_WANT && l->max_want && m->want.count > l->max_want) {
+		seterr(err, "want-set of %u entries exceeds this session's limit of %u",
+		       m->want.count, l->max_want);
+		return -E2BIG;
+	}
+	return 0;
+}
+
+bool proto_rate_take(struct proto_rate *r, uint64_t now_ns, uint32_t rate, uint32_t burst)
+{
+	if (rate == 0)
+		return true;
+	if (burst == 0)
+		burst = rate;
+	if (!r->started) {
+		r->started = true;
+		r->tokens = burst;
+		r->last_ns = now_ns;
+	}
+	if (now_ns > r->last_ns) {
+		r->tokens += (double)(now_ns - r->last_ns) * 1e-9 * rate;
+		if (r->tokens > burst)
+			r->tokens = burst;
+		r->last_ns = now_ns;
+	}
+	if (r->tokens < 1.0)
+		return false;
+	r->tokens -= 1.0;
+	return true;
+}

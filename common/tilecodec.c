@@ -1,0 +1,446 @@
+/* tilecodec — tile payload coding: pre-filter + lz4/zstd + XXH3 checksum. See tilecodec.h.
+ *
+ * Design note: filters work on "components": for f32 the float's bit pattern mapped to an
+ * order-preserving u32 (so a smooth surface gives small integer differences on both sides of
+ * zero), for rgba8/rg8 each byte channel. The residual of each component is written as its
+ * little-endian bytes into byte planes (plane k = byte k of every texel), which puts the
+ * near-constant high bytes of height residuals next to each other for the entropy coder.
+ */
+#include "tilecodec.h"
+
+#include <errno.h>
+#include <limits.h>
+#include <lz4.h>
+#include <stdarg.h>
+#include <stdbool.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <xxhash.h>
+#include <zstd.h>
+
+#include "xalloc.h"
+
+struct tilecodec {
+	unsigned char *scratch;
+	size_t scratch_cap;
+	ZSTD_CCtx *cctx;
+	ZSTD_DCtx *dctx;
+};
+
+static const char *const format_names[TFMT_COUNT] = { NULL, "f32", "rgba8", "rg8" };
+static const unsigned char format_bytes[TFMT_COUNT] = { 0, 4, 4, 2 };
+static const char *const codec_names[TCODEC_COUNT] = { "none", "lz4", "zstd" };
+static const char *const filter_names[TFILTER_COUNT] = { "none", "planes", "delta", "grad",
+							 "xor" };
+
+static void seterr(char *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void seterr(char *err, const char *fmt, ...)
+{
+	if (!err)
+		return;
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(err, 256, fmt, ap);
+	va_end(ap);
+}
+
+size_t tilecodec_texel_bytes(enum tile_format f)
+{
+	return (unsigned)f < TFMT_COUNT ? format_bytes[f] : 0;
+}
+
+const char *tilecodec_format_name(enum tile_format f)
+{
+	return (unsigned)f < TFMT_COUNT ? format_names[f] : NULL;
+}
+
+const char *tilecodec_codec_name(enum tcodec c)
+{
+	return (unsigned)c < TCODEC_COUNT ? codec_names[c] : NULL;
+}
+
+const char *tilecodec_filter_name(enum tfilter f)
+{
+	return (unsigned)f < TFILTER_COUNT ? filter_names[f] : NULL;
+}
+
+int tilecodec_codec_parse(const char *s)
+{
+	for (int c = 0; c < TCODEC_COUNT; c++)
+		if (s && strcmp(s, codec_names[c]) == 0)
+			return c;
+	return -EINVAL;
+}
+
+enum tfilter tilecodec_default_filter(enum tile_format f)
+{
+	/* Measured by tests/bench/bench_codec.c (see docs/PROTOCOL.md). */
+	switch (f) {
+	case TFMT_F32:
+		return TFILTER_GRAD;
+	case TFMT_RGBA8:
+		return TFILTER_DELTA;
+	case TFMT_RG8:
+		return TFILTER_DELTA;
+	default:
+		return TFILTER_NONE;
+	}
+}
+
+uint64_t tilecodec_checksum(const void *p, size_t n)
+{
+	return XXH3_64bits(p, n);
+}
+
+static bool pow2_size(uint32_t t)
+{
+	return t >= 1 && t <= TILECODEC_MAX_SIZE && (t & (t - 1)) == 0;
+}
+
+int tilecodec_hdr_check(const struct tilecodec_hdr *h, char err[256])
+{
+	if (h->format == TFMT_NONE || h->format >= TFMT_COUNT) {
+		seterr(err, "unknown tile format %u", h->format);
+		return -EINVAL;
+	}
+	if (h->codec >= TCODEC_COUNT) {
+		seterr(err, "unknown tile codec %u", h->codec);
+		return -EINVAL;
+	}
+	if (h->filter >= TFILTER_COUNT) {
+		seterr(err, "unknown tile filter %u", h->filter);
+		return -EINVAL;
+	}
+	if (!pow2_size(h->size)) {
+		seterr(err, "tile size %u is not a power of two in [1, %u]", h->size,
+		       TILECODEC_MAX_SIZE);
+		return -EINVAL;
+	}
+	size_t raw = (size_t)h->size * h->size * format_bytes[h->format];
+	if (h->raw_len != raw) {
+		seterr(err, "raw length %u does not match a %u×%u %s tile (%zu bytes)", h->raw_len,
+		       h->size, h->size, format_names[h->format], raw);
+		return -EINVAL;
+	}
+	return 0;
+}
+
+size_t tilecodec_bound(enum tcodec c, size_t raw_len)
+{
+	switch (c) {
+	case TCODEC_NONE:
+		return raw_len;
+	case TCODEC_LZ4:
+		return raw_len > LZ4_MAX_INPUT_SIZE ? 0 : (size_t)LZ4_compressBound((int)raw_len);
+	case TCODEC_ZSTD:
+		return ZSTD_compressBound(raw_len);
+	default:
+		return 0;
+	}
+}
+
+struct tilecodec *tilecodec_create(void)
+{
+	struct tilecodec *tc = xcalloc(1, sizeof(*tc));
+	tc->cctx = ZSTD_createCCtx();
+	tc->dctx = ZSTD_createDCtx();
+	if (!tc->cctx || !tc->dctx) {
+		fprintf(stderr, "clipmap: out of memory creating zstd contexts\n");
+		abort();
+	}
+	return tc;
+}
+
+void tilecodec_destroy(struct tilecodec *tc)
+{
+	if (!tc)
+		return;
+	ZSTD_freeCCtx(tc->cctx);
+	ZSTD_freeDCtx(tc->dctx);
+	free(tc->scratch);
+	free(tc);
+}
+
+static unsigned char *scratch(struct tilecodec *tc, size_t n)
+{
+	if (tc->scratch_cap < n) {
+		free(tc->scratch);
+		tc->scratch = xmalloc(n);
+		tc->scratch_cap = n;
+	}
+	return tc->scratch;
+}
+
+/* ---- filters ---------------------------------------------------------------------------- */
+
+static inline uint32_t ld32(const unsigned char *p)
+{
+	return (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24;
+}
+
+static inline void st32(unsigned char *p, uint32_t v)
+{
+	p[0] = (unsigned char)v;
+	p[1] = (unsigned char)(v >> 8);
+	p[2] = (unsigned char)(v >> 16);
+	p[3] = (unsigned char)(v >> 24);
+}
+
+/* Float bits ↔ an unsigned integer with the same order as the floats. */
+static inline uint32_t f2o(uint32_t b) { return (b & 0x80000000u) ? ~b : (b | 0x80000000u); }
+static inline uint32_t o2f(uint32_t o) { return (o & 0x80000000u) ? (o & 0x7fffffffu) : ~o; }
+
+static inline uint32_t zz32(uint32_t d) { return (d << 1) ^ (0u - (d >> 31)); }
+static inline uint32_t unzz32(uint32_t z) { return (z >> 1) ^ (0u - (z & 1)); }
+static inline uint8_t zz8(uint8_t d) { return (uint8_t)((d << 1) ^ (0u - (d >> 7))); }
+static inline uint8_t unzz8(uint8_t z) { return (uint8_t)((z >> 1) ^ (0u - (z & 1))); }
+
+/* Prediction of component at (x, y) from already-known neighbours l (left), u (up), ul. */
+static inline uint32_t predict(enum tfilter f, uint32_t x, uint32_t y, uint32_t l, uint32_t u,
+			       uint32_t ul)
+{
+	if (x == 0)
+		return y == 0 ? 0 : u;
+	if (y == 0 || f != TFILTER_GRAD)
+		return l;
+	return l + u - ul;
+}
+
+/* f32: component = ordered bits; residual r written into 4 byte planes. */
+static void filter_f32(uint32_t T, enum tfilter f, const unsigned char *in, unsigned char *out)
+{
+	size_t n = (size_t)T * T;
+	for (uint32_t y = 0; y < T; y++) {
+		for (uint32_t x = 0; x < T; x++) {
+			size_t i = (size_t)y * T + x;
+			uint32_t r, v = ld32(in + 4 * i);
+			if (f != TFILTER_PLANES) {
+				v = f2o(v);
+				uint32_t l = x ? f2o(ld32(in + 4 * (i - 1))) : 0;
+				uint32_t u = y ? f2o(ld32(in + 4 * (i - T))) : 0;
+				uint32_t ul = x && y ? f2o(ld32(in + 4 * (i - T - 1))) : 0;
+				uint32_t p = predict(f, x, y, l, u, ul);
+				r = f == TFILTER_XOR ? v ^ p : zz32(v - p);
+			} else {
+				r = v;
+			}
+			out[i] = (unsigned char)r;
+			out[n + i] = (unsigned char)(r >> 8);
+			out[2 * n + i] = (unsigned char)(r >> 16);
+			out[3 * n + i] = (unsigned char)(r >> 24);
+		}
+	}
+}
+
+static void unfilter_f32(uint32_t T, enum tfilter f, const unsigned char *in, unsigned char *out)
+{
+	size_t n = (size_t)T * T;
+	for (uint32_t y = 0; y < T; y++) {
+		for (uint32_t x = 0; x < T; x++) {
+			size_t i = (size_t)y * T + x;
+			uint32_t r = (uint32_t)in[i] | (uint32_t)in[n + i] << 8 |
+				     (uint32_t)in[2 * n + i] << 16 | (uint32_t)in[3 * n + i] << 24;
+			if (f != TFILTER_PLANES) {
+				uint32_t l = x ? f2o(ld32(out + 4 * (i - 1))) : 0;
+				uint32_t u = y ? f2o(ld32(out + 4 * (i - T))) : 0;
+				uint32_t ul = x && y ? f2o(ld32(out + 4 * (i - T - 1))) : 0;
+				uint32_t p = predict(f, x, y, l, u, ul);
+				r = o2f(f == TFILTER_XOR ? r ^ p : unzz32(r) + p);
+			}
+			st32(out + 4 * i, r);
+		}
+	}
+}
+
+/* Byte channels (rgba8: 4, rg8: 2): plane c = channel c. */
+static inline __attribute__((always_inline)) void filter_u8(uint32_t T, unsigned nc, enum tfilter f, const unsigned char *in,
+		      unsigned char *out)
+{
+	size_t n = (size_t)T * T;
+	for (uint32_t y = 0; y < T; y++) {
+		for (uint32_t x = 0; x < T; x++) {
+			size_t i = (size_t)y * T + x;
+			for (unsigned c = 0; c < nc; c++) {
+				uint8_t v = in[nc * i + c], r = v;
+				if (f != TFILTER_PLANES) {
+					uint32_t l = x ? in[nc * (i - 1) + c] : 0;
+					uint32_t u = y ? in[nc * (i - T) + c] : 0;
+					uint32_t ul = x && y ? in[nc * (i - T - 1) + c] : 0;
+					uint8_t p = (uint8_t)predict(f, x, y, l, u, ul);
+					r = f == TFILTER_XOR ? (uint8_t)(v ^ p) : zz8((uint8_t)(v - p));
+				}
+				out[c * n + i] = r;
+			}
+		}
+	}
+}
+
+static inline __attribute__((always_inline)) void unfilter_u8(uint32_t T, unsigned nc, enum tfilter f, const unsigned char *in,
+			unsigned char *out)
+{
+	size_t n = (size_t)T * T;
+	for (uint32_t y = 0; y < T; y++) {
+		for (uint32_t x = 0; x < T; x++) {
+			size_t i = (size_t)y * T + x;
+			for (unsigned c = 0; c < nc; c++) {
+				uint8_t r = in[c * n + i];
+				if (f != TFILTER_PLANES) {
+					uint32_t l = x ? out[nc * (i - 1) + c] : 0;
+					uint32_t u = y ? out[nc * (i - T) + c] : 0;
+					uint32_t ul = x && y ? out[nc * (i - T - 1) + c] : 0;
+					uint8_t p = (uint8_t)predict(f, x, y, l, u, ul);
+					r = f == TFILTER_XOR ? (uint8_t)(r ^ p) : (uint8_t)(unzz8(r) + p);
+				}
+				out[nc * i + c] = r;
+			}
+		}
+	}
+}
+
+static int filter_args(enum tile_format format, uint32_t size, enum tfilter filter)
+{
+	if (format == TFMT_NONE || (unsigned)format >= TFMT_COUNT || !pow2_size(size) ||
+	    (unsigned)filter >= TFILTER_COUNT)
+		return -EINVAL;
+	return 0;
+}
+
+int tilecodec_filter(enum tile_format format, uint32_t size, enum tfilter filter,
+		     const void *texels, void *filtered)
+{
+	int rc = filter_args(format, size, filter);
+	if (rc)
+		return rc;
+	if (filter == TFILTER_NONE)
+		memcpy(filtered, texels, (size_t)size * size * format_bytes[format]);
+	else if (format == TFMT_F32)
+		filter_f32(size, filter, texels, filtered);
+	else if (format == TFMT_RGBA8)
+		filter_u8(size, 4, filter, texels, filtered);
+	else
+		filter_u8(size, 2, filter, texels, filtered);
+	return 0;
+}
+
+int tilecodec_unfilter(enum tile_format format, uint32_t size, enum tfilter filter,
+		       const void *filtered, void *texels)
+{
+	int rc = filter_args(format, size, filter);
+	if (rc)
+		return rc;
+	if (filter == TFILTER_NONE)
+		memcpy(texels, filtered, (size_t)size * size * format_bytes[format]);
+	else if (format == TFMT_F32)
+		unfilter_f32(size, filter, filtered, texels);
+	else if (format == TFMT_RGBA8)
+		unfilter_u8(size, 4, filter, filtered, texels);
+	else
+		unfilter_u8(size, 2, filter, filtered, texels);
+	return 0;
+}
+
+/* ---- codec ------------------------------------------------------------------------------ */
+
+/* Compresses src into out; returns bytes, or 0 when it does not fit (caller falls back). */
+static size_t compress(struct tilecodec *tc, enum tcodec codec, int level, const void *src,
+		       size_t n, void *out, size_t cap)
+{
+	if (codec == TCODEC_LZ4) {
+		int cap_i = cap > (size_t)INT_MAX ? INT_MAX : (int)cap;
+		int r = LZ4_compress_fast(src, out, (int)n, cap_i, level > 0 ? level : 1);
+		return r > 0 ? (size_t)r : 0;
+	}
+	size_t r = ZSTD_compressCCtx(tc->cctx, out, cap, src, n, level > 0 ? level : 1);
+	return ZSTD_isError(r) ? 0 : r;
+}
+
+ssize_t tilecodec_encode(struct tilecodec *tc, enum tile_format format, uint32_t size,
+			 enum tcodec codec, enum tfilter filter, int level, const void *texels,
+			 struct tilecodec_hdr *h, void *out, size_t cap)
+{
+	if (filter_args(format, size, filter) || (unsigned)codec >= TCODEC_COUNT)
+		return -EINVAL;
+	size_t raw = (size_t)size * size * format_bytes[format];
+	if (cap < tilecodec_bound(codec, raw))
+		return -ENOSPC;
+	*h = (struct tilecodec_hdr){ .format = (uint8_t)format, .size = size,
+				     .raw_len = (uint32_t)raw,
+				     .checksum = XXH3_64bits(texels, raw) };
+	if (codec == TCODEC_NONE) {
+		h->filter = (uint8_t)filter;
+		tilecodec_filter(format, size, filter, texels, out);
+		return (ssize_t)raw;
+	}
+	const void *src = texels;
+	if (filter != TFILTER_NONE) {
+		unsigned char *s = scratch(tc, raw);
+		tilecodec_filter(format, size, filter, texels, s);
+		src = s;
+	}
+	size_t n = compress(tc, codec, level, src, raw, out, cap);
+	if (n == 0 || n >= raw) {
+		/* Compression did not pay: send the texels as they are. */
+		memcpy(out, texels, raw);
+		return (ssize_t)raw;
+	}
+	h->codec = (uint8_t)codec;
+	h->filter = (uint8_t)filter;
+	return (ssize_t)n;
+}
+
+int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const void *payload,
+		     size_t n, void *texels, size_t cap, char err[256])
+{
+	int rc = tilecodec_hdr_check(h, err);
+	if (rc)
+		return rc;
+	size_t raw = h->raw_len;
+	if (cap < raw) {
+		seterr(err, "output buffer of %zu bytes is smaller than the tile (%zu)", cap, raw);
+		return -EINVAL;
+	}
+	void *dst = h->filter == TFILTER_NONE ? texels : scratch(tc, raw);
+	switch (h->codec) {
+	case TCODEC_NONE:
+		if (n != raw) {
+			seterr(err, "raw payload of %zu bytes, expected %zu", n, raw);
+			return -EBADMSG;
+		}
+		if (h->filter == TFILTER_NONE)
+			memcpy(texels, payload, raw);
+		else
+			dst = (void *)(uintptr_t)payload;
+		break;
+	case TCODEC_LZ4: {
+		if (n > (size_t)LZ4_MAX_INPUT_SIZE) {
+			seterr(err, "lz4 payload of %zu bytes is too large", n);
+			return -EBADMSG;
+		}
+		int r = LZ4_decompress_safe(payload, dst, (int)n, (int)raw);
+		if (r < 0 || (size_t)r != raw) {
+			seterr(err, "corrupt lz4 payload (%d of %zu bytes)", r, raw);
+			return -EBADMSG;
+		}
+		break;
+	}
+	case TCODEC_ZSTD: {
+		size_t r = ZSTD_decompressDCtx(tc->dctx, dst, raw, payload, n);
+		if (ZSTD_isError(r) || r != raw) {
+			seterr(err, "corrupt zstd payload (%s)",
+			       ZSTD_isError(r) ? ZSTD_getErrorName(r) : "wrong length");
+			return -EBADMSG;
+		}
+		break;
+	}
+	}
+	if (h->filter != TFILTER_NONE)
+		tilecodec_unfilter(h->format, h->size, h->filter, dst, texels);
+	uint64_t sum = XXH3_64bits(texels, raw);
+	if (sum != h->checksum) {
+		seterr(err, "tile checksum mismatch: %016llx, expected %016llx",
+		       (unsigned long long)sum, (unsigned long long)h->checksum);
+		return -EILSEQ;
+	}
+	return 0;
+}

@@ -1,0 +1,196 @@
+/* bench_codec — tile payload coding: compression ratio and encode/decode speed per layer type
+ * (f32 heights, RGBA8 colour, RG8 normals; 256² each, synthesized to look like terrain), per
+ * pre-filter and codec. One line per figure; speeds are MB/s of raw texels, one thread.
+ * Also times the frame codec for a WANT of 1024 entries and a TILE head.
+ */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "proto.h"
+#include "tilecodec.h"
+#include "xalloc.h"
+
+#define T 256
+
+static double now_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static uint32_t hash2(int x, int y, uint32_t seed)
+{
+	uint32_t h = (uint32_t)x * 0x8da6b343u ^ (uint32_t)y * 0xd8163841u ^ seed * 0xcb1ab31fu;
+	h ^= h >> 13;
+	h *= 0x85ebca6bu;
+	h ^= h >> 16;
+	return h;
+}
+
+/* Value noise with smoothstep interpolation, in [-1, 1]. */
+static double vnoise(double x, double y, uint32_t seed)
+{
+	int xi = (int)floor(x), yi = (int)floor(y);
+	double fx = x - xi, fy = y - yi;
+	double sx = fx * fx * (3 - 2 * fx), sy = fy * fy * (3 - 2 * fy);
+	double v00 = hash2(xi, yi, seed) / 2147483648.0 - 1;
+	double v10 = hash2(xi + 1, yi, seed) / 2147483648.0 - 1;
+	double v01 = hash2(xi, yi + 1, seed) / 2147483648.0 - 1;
+	double v11 = hash2(xi + 1, yi + 1, seed) / 2147483648.0 - 1;
+	double a = v00 + (v10 - v00) * sx, b = v01 + (v11 - v01) * sx;
+	return a + (b - a) * sy;
+}
+
+/* Heights in metres: a regional slope plus 8 octaves of fBm, like a mid-level terrain tile. */
+static void make_heights(float *h)
+{
+	for (int y = 0; y < T; y++)
+		for (int x = 0; x < T; x++) {
+			double s = 0, amp = 600, f = 1.0 / 64;
+			for (int o = 0; o < 8; o++, amp *= 0.5, f *= 2)
+				s += amp * vnoise(x * f, y * f, (uint32_t)o);
+			h[y * T + x] = (float)(1200 + 2.0 * x - 1.5 * y + s);
+		}
+}
+
+static uint8_t clamp8(double v)
+{
+	return (uint8_t)(v < 0 ? 0 : v > 255 ? 255 : lround(v));
+}
+
+/* Colour from height through a ramp, lit by the slope, with ±1 LSB of noise. */
+static void make_color(const float *h, uint8_t *c)
+{
+	for (int y = 0; y < T; y++)
+		for (int x = 0; x < T; x++) {
+			int i = y * T + x;
+			double t = (h[i] - 200) / 2500;
+			t = t < 0 ? 0 : t > 1 ? 1 : t;
+			double dx = h[y * T + (x + 1 < T ? x + 1 : x)] - h[i];
+			double shade = 1 - 0.02 * dx;
+			int n = (int)(hash2(x, y, 99) % 3) - 1;
+			c[4 * i + 0] = clamp8((60 + 140 * t) * shade + n);
+			c[4 * i + 1] = clamp8((110 + 60 * t) * shade + n);
+			c[4 * i + 2] = clamp8((50 + 150 * t * t) * shade + n);
+			c[4 * i + 3] = 255;
+		}
+}
+
+/* RG8 normals from the heights (30 m texels), as daemon/tile.h defines them. */
+static void make_normals(const float *h, uint8_t *n)
+{
+	for (int y = 0; y < T; y++)
+		for (int x = 0; x < T; x++) {
+			int xl = x ? x - 1 : x, xr = x + 1 < T ? x + 1 : x;
+			int yu = y ? y - 1 : y, yd = y + 1 < T ? y + 1 : y;
+			double dzdx = (h[y * T + xr] - h[y * T + xl]) / (30.0 * (xr - xl));
+			double dzdy = (h[yu * T + x] - h[yd * T + x]) / (30.0 * (yd - yu));
+			double len = sqrt(dzdx * dzdx + dzdy * dzdy + 1);
+			n[2 * (y * T + x) + 0] = clamp8((-dzdx / len + 1) * 127.5);
+			n[2 * (y * T + x) + 1] = clamp8((-dzdy / len + 1) * 127.5);
+		}
+}
+
+static void bench_one(struct tilecodec *tc, const char *layer, enum tile_format fmt,
+		      const void *texels, enum tfilter filt, enum tcodec codec, int level)
+{
+	size_t raw = (size_t)T * T * tilecodec_texel_bytes(fmt);
+	size_t cap = tilecodec_bound(codec, raw);
+	unsigned char *out = xmalloc(cap), *back = xmalloc(raw);
+	struct tilecodec_hdr h;
+	ssize_t n = 0;
+	int reps = 0;
+	double t0 = now_s(), t1;
+	do {
+		n = tilecodec_encode(tc, fmt, T, codec, filt, level, texels, &h, out, cap);
+		reps++;
+	} while ((t1 = now_s()) - t0 < 0.15);
+	double enc = raw * reps / (t1 - t0) / 1e6;
+	int dreps = 0, rc = 0;
+	t0 = now_s();
+	do {
+		rc |= tilecodec_decode(tc, &h, out, (size_t)n, back, raw, NULL);
+		dreps++;
+	} while ((t1 = now_s()) - t0 < 0.15);
+	double dec = raw * dreps / (t1 - t0) / 1e6;
+	char cname[16];
+	snprintf(cname, sizeof(cname), "%s%s", tilecodec_codec_name(codec),
+		 codec == TCODEC_ZSTD ? (level == 3 ? "-3" : "-1") : "");
+	printf("codec/%s T=%d %s+%s: ratio %.3f, encode %.0f MB/s, decode %.0f MB/s%s%s\n", layer,
+	       T, tilecodec_filter_name(filt), cname, (double)raw / (double)n, enc, dec,
+	       n > 0 && h.codec == TCODEC_NONE && codec != TCODEC_NONE ? " (sent raw: did not pay)"
+								      : "",
+	       rc || memcmp(back, texels, raw) ? " ROUND TRIP FAILED" : "");
+	free(out);
+	free(back);
+}
+
+static void bench_frames(void)
+{
+	struct proto_want_entry *e = xcalloc(1024, sizeof(*e));
+	for (int i = 0; i < 1024; i++)
+		e[i] = (struct proto_want_entry){ .layer = (uint8_t)(i % 3), .cls = 1, .lx = 12,
+						  .ly = 11, .x = (uint32_t)i, .y = (uint32_t)i };
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = 1, .seq = 7, .count = 1024, .entries = e } };
+	struct pbuf b;
+	pbuf_init(&b);
+	int reps = 0;
+	double t0 = now_s(), t1;
+	do {
+		b.len = 0;
+		if (proto_encode(&b, &m, NULL) < 0)
+			abort();
+		reps++;
+	} while ((t1 = now_s()) - t0 < 0.2);
+	printf("proto/encode WANT 1024 entries: %.1f us/message\n", (t1 - t0) / reps * 1e6);
+	reps = 0;
+	t0 = now_s();
+	do {
+		struct proto_msg d;
+		size_t need;
+		if (proto_decode(b.data, b.len, &d, &need, NULL) <= 0)
+			abort();
+		proto_msg_fini(&d);
+		reps++;
+	} while ((t1 = now_s()) - t0 < 0.2);
+	printf("proto/decode WANT 1024 entries: %.1f us/message\n", (t1 - t0) / reps * 1e6);
+	pbuf_fini(&b);
+	free(e);
+}
+
+int main(void)
+{
+	float *h = xmalloc(sizeof(float) * T * T);
+	uint8_t *c = xmalloc(4 * T * T), *n = xmalloc(2 * T * T);
+	make_heights(h);
+	make_color(h, c);
+	make_normals(h, n);
+	struct tilecodec *tc = tilecodec_create();
+	const struct {
+		const char *name;
+		enum tile_format fmt;
+		const void *data;
+	} layers[] = { { "height", TFMT_F32, h }, { "color", TFMT_RGBA8, c },
+		       { "normal", TFMT_RG8, n } };
+	for (size_t l = 0; l < 3; l++) {
+		bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, TFILTER_NONE,
+			  TCODEC_NONE, 0);
+		for (int f = 0; f < TFILTER_COUNT; f++) {
+			bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, f, TCODEC_LZ4, 0);
+			bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, f, TCODEC_ZSTD, 1);
+			bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, f, TCODEC_ZSTD, 3);
+		}
+	}
+	bench_frames();
+	tilecodec_destroy(tc);
+	free(h);
+	free(c);
+	free(n);
+	return 0;
+}
