@@ -183,6 +183,7 @@ int write_impl(const char *path, int width, int height, int channels, enum img_t
 		return rc;
 	std::string tmp = std::string(path) + ".tmp";
 	ImageSpec spec(width, height, channels, to_desc(type));
+	spec.attribute("oiio:UnassociatedAlpha", 1); // pixels are straight alpha: store as given
 	if (tile > 0) {
 		spec.tile_width = spec.tile_height = tile;
 		spec.attribute("compression", "zip");
@@ -250,6 +251,7 @@ extern "C" struct img_cache *img_cache_create(size_t max_mb)
 		ic->attribute("autotile", 0); // untiled images: one tile (PNG/JPEG decode serially)
 		ic->attribute("max_open_files", 100);
 		ic->attribute("failure_retries", 0);
+		ic->attribute("unassociatedalpha", 1); // tiles are straight alpha: keep files' own
 		img_cache *c = new img_cache;
 		c->ic = ic;
 		return c;
@@ -393,7 +395,9 @@ extern "C" int img_read(const char *path, enum img_type type, void **pixels,
 {
 	*pixels = nullptr;
 	try {
-		std::unique_ptr<ImageInput> in = ImageInput::open(path);
+		ImageSpec config;
+		config.attribute("oiio:UnassociatedAlpha", 1);
+		std::unique_ptr<ImageInput> in = ImageInput::open(path, &config);
 		if (!in) {
 			set_err(err, "%s: %s", path, OIIO::geterror());
 			return missing_or(path, -EIO);

@@ -202,10 +202,13 @@ static int file_create(struct node *nd, struct node_parse *p)
 {
 	struct file_impl *f = xcalloc(1, sizeof *f);
 	nd->impl = f; /* node_init calls destroy on failure */
-	const char *path;
-	int rc = np_string(p, "path", NULL, &path);
-	if (rc)
-		return rc;
+	/* Not np_string: the hash takes the resolved path, so "a.tif" and "/dir/a.tif" name
+	 * the same tiles. */
+	struct ini_entry *pe = ini_find(p->sec, "path");
+	const char *path = pe ? pe->value : NULL;
+	int rc;
+	if (pe)
+		pe->used = true;
 	if (!path || !path[0])
 		return np_error(p, "path", "missing: the image file to read");
 	f->path = resolve_path(nd->planet, path);
@@ -214,6 +217,7 @@ static int file_create(struct node *nd, struct node_parse *p)
 		return np_error(p, "path", "cannot open %s: %s", f->path, strerror(errno));
 	int64_t stamp[3] = { (int64_t)st.st_size, (int64_t)st.st_mtim.tv_sec,
 			     (int64_t)st.st_mtim.tv_nsec };
+	np_hash_bytes(p, "path", 5);
 	np_hash_bytes(p, f->path, strlen(f->path) + 1);
 	np_hash_bytes(p, stamp, sizeof stamp);
 
