@@ -15,9 +15,9 @@ PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 OPT     ?= -O2 -g
 WARN    := -Wall -Wextra -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wformat=2 -Wvla \
            -fno-common -Werror
-CFLAGS  += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -MMD -MP -Icommon -Idaemon -Iclient \
+CFLAGS  += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -MMD -MP -iquote common -iquote daemon -iquote client \
            $(SAN)
-CXXFLAGS += -std=c++17 $(OPT) -Wall -Wextra -Werror -fPIC -pthread -MMD -MP -Icommon $(SAN) \
+CXXFLAGS += -std=c++17 $(OPT) -Wall -Wextra -Werror -fPIC -pthread -MMD -MP -iquote common $(SAN) \
            $(filter-out -I/usr/include,$(PKG_CFLAGS))
 LDFLAGS += -pthread $(SAN)
 LDLIBS  += $(PKG_LIBS) -lcmocka -lstdc++ -lm

@@ -20,11 +20,17 @@ static char *trim(char *s, char *end)
 	return s;
 }
 
-/* Cuts a comment: ';' or '#' at the start or after whitespace. */
+/* Cuts a comment: a line starting with ';' or '#', or ';' after whitespace. '#' inside a line
+ * is data, so colours can be written "#rrggbb". */
 static char *strip_comment(char *s, char *end)
 {
-	for (char *p = s; p < end; p++)
-		if ((*p == ';' || *p == '#') && (p == s || isspace((unsigned char)p[-1])))
+	char *p = s;
+	while (p < end && isspace((unsigned char)*p))
+		p++;
+	if (p < end && (*p == ';' || *p == '#'))
+		return p;
+	for (; p < end; p++)
+		if (*p == ';' && isspace((unsigned char)p[-1]))
 			return p;
 	return end;
 }

@@ -1,6 +1,7 @@
 /* ini — a small INI reader that keeps line numbers, so every config error can name
- * file:line: key. Syntax: "[section name]" headers, "key = value" lines, ';' or '#' starts a
- * comment at the start of a line or after whitespace, surrounding whitespace trimmed.
+ * file:line: key. Syntax: "[section name]" headers, "key = value" lines; a line starting with
+ * ';' or '#' is a comment, and so is the rest of a line from a ';' that follows whitespace
+ * ('#' inside a line is data: colours are "#rrggbb"); surrounding whitespace is trimmed.
  * Keys outside any section belong to a section named "" (line 0).
  *
  * Ownership: ini_load/ini_parse return an owned struct ini_file freed with ini_free; all

@@ -1,0 +1,40 @@
+/* render — offline evaluation of a planet: one tile or a whole level assembled into a picture,
+ * through the same cache and scheduler the daemon uses (`clipmapctl render`).
+ * Not thread-safe per object; creates its own scheduler threads. Library code: never logs,
+ * reports through err[256]; progress goes to an optional callback.
+ */
+#ifndef CLIPMAP_RENDER_H
+#define CLIPMAP_RENDER_H
+#include <stddef.h>
+#include <stdint.h>
+
+#include "planet.h"
+
+struct render_opts {
+	int workers;	  /* 0: one per CPU */
+	size_t cache_mb;  /* 0: 1024 */
+	int shade;	  /* colour pictures: multiply by a hillshade from the "normal" layer */
+	void (*progress)(void *ud, size_t done, size_t total);
+	void *ud;
+};
+
+/* An assembled picture in memory (owned; free with render_image_free). */
+struct render_image {
+	int width, height, channels; /* channels: 1 (heights, f32) or 4 (RGBA8) or 3 (normals) */
+	int is_float;
+	void *pixels; /* rows north → south */
+	double hmin, hmax; /* heights: the range found */
+};
+
+/* Renders tile (lx, ly, x, y) of `layer`, or, when whole_level, every tile of level
+ * (lx, ly) side by side. Returns 0 or -errno with err filled. */
+int render_layer(const struct planet *p, const char *layer, int lx, int ly, uint32_t x, uint32_t y,
+		 int whole_level, const struct render_opts *o, struct render_image *out,
+		 char err[256]);
+/* Writes the picture by the file's extension: heights as .tif/.tiff/.exr (float) or .png
+ * (16-bit, min..max mapped to 0..65535 — *scale_note tells how); colour and normals as .png.
+ * Returns 0 or -errno with err filled. */
+int render_write(const struct render_image *im, const char *path, char note[256], char err[256]);
+void render_image_free(struct render_image *im);
+
+#endif

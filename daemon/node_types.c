@@ -1,0 +1,28 @@
+/* node_types — the built-in registry: a static const table, looked up by name. */
+#include "node_types.h"
+
+#include <stddef.h>
+#include <string.h>
+
+static const struct node_type *const all_types[] = {
+	&node_type_constant,
+	NULL,
+};
+
+const struct node_type *node_types_find_in(const struct node_type *const *types, const char *name)
+{
+	for (size_t i = 0; types[i]; i++)
+		if (strcmp(types[i]->name, name) == 0)
+			return types[i];
+	return NULL;
+}
+
+const struct node_type *node_type_find(const char *name)
+{
+	return node_types_find_in(all_types, name);
+}
+
+const struct node_type *const *node_types_all(void)
+{
+	return all_types;
+}

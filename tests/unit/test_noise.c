@@ -1,0 +1,595 @@
+/* Tests for the noise synthesis (noise.h) and the `noise` node: ISA paths give the same bits,
+ * the tile kernel matches the double-precision oracle, no seams (tiles, antimeridian, poles),
+ * no pole pinch, precision at the finest levels of an Earth-size body, band limiting by level,
+ * seeds, detail over an input, and parameter errors.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "ini.h"
+#include "node.h"
+#include "noise.h"
+#include "planet.h"
+#include "tile.h"
+#include "xalloc.h"
+
+#define EARTH_A 6378137.0
+
+static struct noise_params params(enum noise_kind kind, int octaves, double wavelength)
+{
+	return (struct noise_params){ .seed = 42, .kind = kind, .octaves = octaves,
+				      .wavelength = wavelength, .lacunarity = 2.0, .gain = 0.5,
+				      .ridge_offset = 1.0, .ridge_gain = 2.0, .radius = EARTH_A };
+}
+
+/* Owned T·T floats of tile k. */
+static float *gen(const struct noise *nz, struct tile_key k, uint32_t T, enum noise_isa isa,
+		  int *noct)
+{
+	void *scratch = xaligned_alloc(64, noise_scratch_size(T));
+	float *out = xaligned_alloc(64, (size_t)T * T * sizeof *out);
+	int rc = noise_tile(nz, &k, T, isa, scratch, out);
+	free(scratch);
+	assert_true(rc >= 0);
+	if (noct)
+		*noct = rc;
+	return out;
+}
+
+static struct tile_key key(int lx, int ly, uint32_t x, uint32_t y)
+{
+	return (struct tile_key){ .lx = (uint8_t)lx, .ly = (uint8_t)ly, .x = x, .y = y };
+}
+
+/* ---- ISA paths ---- */
+
+static void isa_paths_identical(void **state)
+{
+	(void)state;
+	const struct tile_key keys[] = {
+		key(1, 0, 0, 0),		   /* level 0: half the planet, both poles */
+		key(1, 0, 1, 0),
+		key(5, 4, 0, 0),		   /* north pole, antimeridian (west) */
+		key(5, 4, 31, 15),		   /* south pole, antimeridian (east) */
+		key(3, 10, 7, 300),		   /* anisotropic */
+		key(13, 12, 4000, 1234),	   /* mid level */
+		key(21, 20, (1u << 21) - 1, 5000), /* fine, antimeridian */
+		key(29, 28, 123456789, 98765432),  /* finest (texel 0.3 mm) */
+	};
+	for (int kind = 0; kind < 2; kind++) {
+		struct noise nz;
+		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 24, 4e6);
+		assert_int_equal(noise_init(&nz, &p), 0);
+		for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
+			uint32_t T = i == 5 ? 256 : 64;
+			float *ref = gen(&nz, keys[i], T, NOISE_ISA_SCALAR, NULL);
+			for (enum noise_isa isa = NOISE_ISA_AVX2; isa <= NOISE_ISA_AVX512; isa++) {
+				if (!noise_isa_supported(isa)) {
+					if (kind == 0 && i == 0)
+						printf("noise: %s path skipped: CPU lacks it\n",
+						       noise_isa_name(isa));
+					continue;
+				}
+				float *v = gen(&nz, keys[i], T, isa, NULL);
+				size_t diff = 0;
+				for (size_t t = 0; t < (size_t)T * T; t++)
+					diff += memcmp(&v[t], &ref[t], sizeof *v) != 0;
+				if (diff)
+					printf("%s kind %d key %zu: %zu texels differ from scalar\n",
+					       noise_isa_name(isa), kind, i, diff);
+				assert_int_equal(diff, 0);
+				free(v);
+			}
+			free(ref);
+		}
+	}
+}
+
+/* The tile kernel (float, relative to a per-tile origin) agrees with the double oracle at
+ * every level, including the finest with large octave frequencies. */
+static void matches_double_oracle(void **state)
+{
+	(void)state;
+	const struct tile_key keys[] = { key(1, 0, 1, 0), key(5, 4, 31, 0), key(17, 16, 70000, 30000),
+					 key(29, 28, 536870911, 100000000) };
+	for (int kind = 0; kind < 2; kind++) {
+		struct noise nz;
+		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 24, 4e6);
+		p.lacunarity = 2.5;
+		assert_int_equal(noise_init(&nz, &p), 0);
+		for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
+			uint32_t T = 64;
+			float *v = gen(&nz, keys[i], T, NOISE_ISA_AUTO, NULL);
+			double worst = 0;
+			for (uint32_t j = 0; j < T; j += 7)
+				for (uint32_t c = 0; c < T; c += 5) {
+					double lon, lat;
+					grid_texel_center(&keys[i], T, c, j, &lon, &lat);
+					double r = noise_point(&nz, lon, lat, keys[i].ly, T);
+					worst = fmax(worst, fabs(r - v[j * T + c]));
+				}
+			if (worst > 2e-5)
+				printf("kind %d key %zu: worst error %g\n", kind, i, worst);
+			assert_true(worst <= 2e-5);
+			free(v);
+		}
+	}
+}
+
+/* ---- seams ---- */
+
+/* East-west neighbours a (west) and b (east): in each row the step across the border is no
+ * larger than the noise's slope over one texel there, taken as the largest step of the three
+ * texel pairs on either side, with a margin of 2 (the finest octaves are near the Nyquist limit
+ * and ridged noise has creases, so steps vary a lot from texel to texel). Returns the number
+ * of rows that violate it. */
+static int seam_violations(const float *a, const float *b, uint32_t T)
+{
+	int bad = 0;
+	for (uint32_t j = 0; j < T; j++) {
+		const float *ra = a + (size_t)j * T, *rb = b + (size_t)j * T;
+		double slope = 0;
+		for (uint32_t i = 0; i < 3; i++)
+			slope = fmax(slope, fmax(fabs(ra[T - 1 - i] - ra[T - 2 - i]),
+						 fabs(rb[i + 1] - rb[i])));
+		bad += fabs(ra[T - 1] - rb[0]) > 2.0 * slope + 1e-6;
+	}
+	return bad;
+}
+
+/* 6 octaves from 512 texels down to 16 texels at level ly: detail that float heights can
+ * resolve at any level, with octave frequencies as large as the level needs. */
+static struct noise level_noise(enum noise_kind kind, int ly, uint32_t T)
+{
+	struct noise nz;
+	struct noise_params p = params(kind, 6, 512 * noise_texel_size(EARTH_A, ly, T));
+	p.gain = 0.7;
+	assert_int_equal(noise_init(&nz, &p), 0);
+	return nz;
+}
+
+/* Both edge columns of an east-west pair equal the double oracle: the field is as continuous
+ * across the border as it is anywhere. */
+static void edges_match_oracle(const struct noise *nz, struct tile_key wk, const float *a,
+			       struct tile_key ek, const float *b, uint32_t T)
+{
+	double worst = 0;
+	for (uint32_t j = 0; j < T; j++) {
+		double lon, lat;
+		grid_texel_center(&wk, T, T - 1, j, &lon, &lat);
+		worst = fmax(worst, fabs(noise_point(nz, lon, lat, wk.ly, T) - a[j * T + T - 1]));
+		grid_texel_center(&ek, T, 0, j, &lon, &lat);
+		worst = fmax(worst, fabs(noise_point(nz, lon, lat, ek.ly, T) - b[j * T]));
+	}
+	assert_true(worst <= 2e-5);
+}
+
+static void seamless_east_west(void **state)
+{
+	(void)state;
+	const uint32_t T = 64;
+	const int levels[] = { 0, 6, 16, 24, 28 };
+	for (size_t l = 0; l < sizeof levels / sizeof *levels; l++) {
+		int ly = levels[l], lx = ly + 1;
+		for (int kind = 0; kind < 2; kind++) {
+			struct noise nz = level_noise(kind ? NOISE_RIDGED : NOISE_FBM, ly, T);
+			uint32_t last = (1u << lx) - 1, y = (1u << ly) / 3;
+			struct tile_key ka = key(lx, ly, 5 % (last + 1), y);
+			struct tile_key kb = key(lx, ly, 6 % (last + 1), y);
+			struct tile_key ke = key(lx, ly, last, y), kw = key(lx, ly, 0, y);
+			float *a = gen(&nz, ka, T, NOISE_ISA_AUTO, NULL);
+			float *b = gen(&nz, kb, T, NOISE_ISA_AUTO, NULL);
+			float *e = gen(&nz, ke, T, NOISE_ISA_AUTO, NULL);
+			float *w = gen(&nz, kw, T, NOISE_ISA_AUTO, NULL);
+			edges_match_oracle(&nz, ka, a, kb, b, T);
+			edges_match_oracle(&nz, ke, e, kw, w, T);
+			if (ly > 0) {
+				assert_int_equal(seam_violations(a, b, T), 0);
+				/* The check can fail: tiles that are not neighbours violate it. */
+				assert_true(seam_violations(b, a, T) > (int)T / 4);
+			}
+			assert_int_equal(seam_violations(e, w, T), 0); /* across the antimeridian */
+			free(a);
+			free(b);
+			free(e);
+			free(w);
+		}
+	}
+}
+
+/* Row 0 of tile x and row 0 of tile x + n/2 are one texel apart across the north pole (and
+ * the last rows across the south pole). */
+static void seamless_across_poles(void **state)
+{
+	(void)state;
+	const uint32_t T = 64;
+	const int levels[] = { 3, 12, 22, 28 };
+	for (size_t l = 0; l < sizeof levels / sizeof *levels; l++) {
+		int ly = levels[l], lx = ly + 1;
+		struct noise nz = level_noise(l % 2 ? NOISE_RIDGED : NOISE_FBM, ly, T);
+		uint32_t n = 1u << lx, ys = (1u << ly) - 1;
+		for (int south = 0; south < 2; south++) {
+			uint32_t y = south ? ys : 0, r0 = south ? T - 1 : 0, r1 = south ? T - 2 : 1;
+			float *a = gen(&nz, key(lx, ly, 3, y), T, NOISE_ISA_AUTO, NULL);
+			float *b = gen(&nz, key(lx, ly, 3 + n / 2, y), T, NOISE_ISA_AUTO, NULL);
+			int bad = 0;
+			for (uint32_t i = 0; i < T; i++) {
+				double slope = fmax(fabs(a[r0 * T + i] - a[r1 * T + i]),
+						    fabs(b[r0 * T + i] - b[r1 * T + i]));
+				bad += fabs(a[r0 * T + i] - b[r0 * T + i]) > 2.0 * slope + 1e-6;
+			}
+			assert_int_equal(bad, 0);
+			free(a);
+			free(b);
+		}
+	}
+}
+
+/* At the row nearest a pole all tiles of the level meet in (nearly) one point: values along
+ * the row barely change, far less than from row 0 to row 1. */
+static void no_pole_pinch(void **state)
+{
+	(void)state;
+	struct noise nz;
+	struct noise_params p = params(NOISE_FBM, 8, 2e6);
+	assert_int_equal(noise_init(&nz, &p), 0);
+	const uint32_t T = 64;
+	const int ly = 4, lx = 5;
+	double lo = 1e9, hi = -1e9, along = 0, across = 0;
+	for (uint32_t x = 0; x < (1u << lx); x++) {
+		float *a = gen(&nz, key(lx, ly, x, 0), T, NOISE_ISA_AUTO, NULL);
+		for (uint32_t i = 0; i < T; i++) {
+			lo = fmin(lo, a[i]);
+			hi = fmax(hi, a[i]);
+			across = fmax(across, fabs(a[T + i] - a[i]));
+			if (i + 1 < T)
+				along = fmax(along, fabs(a[i + 1] - a[i]));
+		}
+		free(a);
+	}
+	assert_true(across > 1e-4);
+	assert_true(along <= 0.1 * across);
+	assert_true(hi - lo <= 2.0 * across);
+}
+
+/* ---- precision ---- */
+
+struct smooth {
+	int zeros;		  /* adjacent texels with exactly the same value */
+	double max_d1, max_d2;	  /* largest first and second differences */
+};
+
+static struct smooth row_smoothness(const float *v, uint32_t n)
+{
+	struct smooth s = { 0 };
+	for (uint32_t i = 0; i + 1 < n; i++) {
+		double d1 = (double)v[i + 1] - v[i];
+		s.zeros += d1 == 0;
+		s.max_d1 = fmax(s.max_d1, fabs(d1));
+		if (i + 2 < n)
+			s.max_d2 = fmax(s.max_d2, fabs((double)v[i + 2] - 2.0 * v[i + 1] + v[i]));
+	}
+	return s;
+}
+
+/* A 64-texel wavelength at levels whose texels are 1.2 m .. 0.3 mm on Earth: adjacent texels
+ * differ smoothly. A naive evaluation (float unit-sphere coordinates) staircases there. */
+static void precise_at_fine_levels(void **state)
+{
+	(void)state;
+	const uint32_t T = 256;
+	const int levels[] = { 16, 20, 24, 28 };
+	for (size_t l = 0; l < 4; l++) {
+		int ly = levels[l], lx = ly + 1;
+		double s = noise_texel_size(EARTH_A, ly, T);
+		struct noise nz;
+		struct noise_params p = params(NOISE_FBM, 1, 64 * s);
+		assert_int_equal(noise_init(&nz, &p), 0);
+		/* A tile near lon 10°, lat 45°. */
+		uint32_t x = (uint32_t)((10.0 + 180.0) / 360.0 * ldexp(1, lx));
+		uint32_t y = (uint32_t)((90.0 - 45.0) / 180.0 * ldexp(1, ly));
+		struct tile_key k = key(lx, ly, x, y);
+		float *v = gen(&nz, k, T, NOISE_ISA_AUTO, NULL);
+		struct smooth sm = row_smoothness(v + (size_t)(T / 2) * T, T);
+		if (sm.zeros > 2 || sm.max_d2 > 0.25 * sm.max_d1)
+			printf("ly %d: %d zero steps, d1 %g d2 %g\n", ly, sm.zeros, sm.max_d1,
+			       sm.max_d2);
+		assert_true(sm.max_d1 > 1e-3);
+		assert_true(sm.zeros <= 2);
+		assert_true(sm.max_d2 <= 0.25 * sm.max_d1);
+
+		if (ly == 24) { /* the same field evaluated naively quantises: the test can fail */
+			float naive[256];
+			const struct noise_octave *o = &nz.oct[0];
+			for (uint32_t i = 0; i < T; i++) {
+				double lon, lat;
+				grid_texel_center(&k, T, i, T / 2, &lon, &lat);
+				lon *= M_PI / 180, lat *= M_PI / 180;
+				float px = (float)(cos(lat) * cos(lon)), py = (float)(cos(lat) * sin(lon));
+				float pz = (float)sin(lat), f = (float)o->freq;
+				naive[i] = (float)noise_simplex_ref(px * f, py * f, pz * f, o->seed);
+			}
+			struct smooth ns = row_smoothness(naive, T);
+			assert_true(ns.zeros > 50 || ns.max_d2 > 0.5 * ns.max_d1);
+		}
+		free(v);
+	}
+}
+
+/* ---- band limiting ---- */
+
+static void coarse_tiles_evaluate_fewer_octaves(void **state)
+{
+	(void)state;
+	struct noise nz;
+	struct noise_params p = params(NOISE_FBM, 8, 4e6);
+	assert_int_equal(noise_init(&nz, &p), 0);
+	const uint32_t T = 64;
+	int prev = 0;
+	for (int ly = 0; ly <= 6; ly++) {
+		double s = noise_texel_size(EARTH_A, ly, T);
+		int expect = 0;
+		for (int k = 0; k < 8; k++)
+			expect += 4e6 / pow(2, k) > 2 * s;
+		int got;
+		free(gen(&nz, key(ly + 1, ly, 0, 0), T, NOISE_ISA_AUTO, &got));
+		assert_int_equal(got, expect);
+		assert_true(got >= prev);
+		prev = got;
+	}
+	int got;
+	free(gen(&nz, key(1, 0, 0, 0), T, NOISE_ISA_AUTO, &got));
+	assert_true(got < 8);
+	assert_true(noise_band_weight(100, 50) == 0.0 && noise_band_weight(200, 50) == 1.0);
+	assert_true(noise_band_weight(150, 50) > 0.0 && noise_band_weight(150, 50) < 1.0);
+}
+
+/* A parent texel ≈ the mean of the 2×2 child texels under it; the difference is bounded by
+ * the octaves whose band weight changes between the levels. */
+static void parent_approximates_children(void **state)
+{
+	(void)state;
+	const uint32_t T = 64;
+	for (int kind = 0; kind < 2; kind++) {
+		struct noise nz;
+		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 8, 4e6);
+		assert_int_equal(noise_init(&nz, &p), 0);
+		struct tile_key pk = key(4, 3, 5, 2), ck[4];
+		assert_int_equal(grid_children(&pk, 1, 1, ck), 4);
+		float *par = gen(&nz, pk, T, NOISE_ISA_AUTO, NULL), *ch[4];
+		for (int c = 0; c < 4; c++)
+			ch[c] = gen(&nz, ck[c], T, NOISE_ISA_AUTO, NULL);
+		double sp = noise_texel_size(EARTH_A, 3, T), sc = sp / 2, bound2 = 0;
+		for (int k = 0; k < 8; k++) {
+			double dw = noise_band_weight(nz.oct[k].lambda, sc) -
+				    noise_band_weight(nz.oct[k].lambda, sp);
+			bound2 += dw * nz.oct[k].amp * dw * nz.oct[k].amp;
+		}
+		double err2 = 0, var = 0, mean = 0;
+		for (uint32_t j = 0; j < T; j++)
+			for (uint32_t i = 0; i < T; i++) {
+				const float *c = ch[(j >= T / 2) * 2 + (i >= T / 2)];
+				uint32_t ci = (i % (T / 2)) * 2, cj = (j % (T / 2)) * 2;
+				double avg = (c[cj * T + ci] + c[cj * T + ci + 1] +
+					      c[(cj + 1) * T + ci] + c[(cj + 1) * T + ci + 1]) / 4;
+				double d = par[j * T + i] - avg;
+				err2 += d * d;
+				mean += par[j * T + i];
+				var += (double)par[j * T + i] * par[j * T + i];
+			}
+		double rms = sqrt(err2 / (T * T));
+		mean /= T * T;
+		double sd = sqrt(var / (T * T) - mean * mean);
+		printf("%s: parent vs 2x2 children rms %.5f, fade bound %.5f, field sd %.4f\n",
+		       kind ? "ridged" : "fbm", rms, sqrt(bound2), sd);
+		assert_true(bound2 > 0);
+		assert_true(rms <= sqrt(bound2));
+		assert_true(rms <= 0.1 * sd);
+		free(par);
+		for (int c = 0; c < 4; c++)
+			free(ch[c]);
+	}
+}
+
+/* ---- the node ---- */
+
+struct fixture {
+	struct ini_file *ini;
+	struct planet pl;
+	struct node n;
+	char err[256];
+};
+
+static int make_node(struct fixture *f, const char *text, struct node *input)
+{
+	memset(f, 0, sizeof *f);
+	f->pl.a = EARTH_A;
+	f->pl.tile_size = 64;
+	f->pl.max_level = 30;
+	if (ini_parse("test.ini", text, strlen(text), &f->ini, f->err))
+		return -1;
+	struct ini_section *sec = &f->ini->sections[0];
+	ini_find(sec, "type")->used = true;
+	struct ini_entry *in = ini_find(sec, "input");
+	if (in)
+		in->used = true;
+	f->n.name = "n";
+	f->n.planet = &f->pl;
+	f->n.in[0] = input;
+	return node_init(&f->n, &node_type_noise, "test.ini", sec, f->err);
+}
+
+static void free_node(struct fixture *f)
+{
+	node_fini(&f->n);
+	ini_free(f->ini);
+}
+
+static struct tile *node_tile(const struct node *n, struct tile_key k, struct tile *input)
+{
+	struct gen_ctx g = { 0 };
+	k.node = n->hash;
+	struct tile *t = tile_create(&k, PIX_HEIGHT, 64);
+	struct tile *in[1] = { input };
+	assert_int_equal(n->type->generate(n, &g, &k, in, input ? 1 : 0, t), 0);
+	gen_ctx_fini(&g);
+	return t;
+}
+
+static void node_deterministic_and_in_range(void **state)
+{
+	(void)state;
+	const char *kinds[] = { "fbm", "ridged" };
+	for (int kind = 0; kind < 2; kind++) {
+		char text[200];
+		snprintf(text, sizeof text, "[node n]\ntype = noise\nkind = %s\namplitude = 500\n"
+			 "offset = 100\nseed = 9\n", kinds[kind]);
+		struct fixture f;
+		assert_int_equal(make_node(&f, text, NULL), 0);
+		assert_int_equal(f.n.out, PIX_HEIGHT);
+		double lo = 1e9, hi = -1e9, sum = 0;
+		size_t cnt = 0;
+		for (uint32_t x = 0; x < 8; x++) {
+			struct tile_key k = key(4, 3, (x * 5 + 1) % 16, x);
+			struct tile *a = node_tile(&f.n, k, NULL), *b = node_tile(&f.n, k, NULL);
+			assert_memory_equal(a->data, b->data, a->nbytes);
+			const float *v = tile_f32(a);
+			for (size_t i = 0; i < 64 * 64; i++) {
+				double u = (v[i] - 100.0) / 500.0;
+				lo = fmin(lo, u);
+				hi = fmax(hi, u);
+				sum += u;
+				cnt++;
+			}
+			tile_unref(a);
+			tile_unref(b);
+		}
+		printf("%s: range [%.3f, %.3f], mean %.3f\n", kinds[kind], lo, hi, sum / cnt);
+		assert_true(lo >= -1.3 && hi <= 1.3);
+		assert_true(hi - lo >= 0.5);
+		assert_true(fabs(sum / cnt) < 0.35);
+		free_node(&f);
+	}
+}
+
+static void seeds_differ(void **state)
+{
+	(void)state;
+	struct fixture f1, f2;
+	assert_int_equal(make_node(&f1, "[node n]\ntype = noise\nseed = 1\n", NULL), 0);
+	assert_int_equal(make_node(&f2, "[node n]\ntype = noise\nseed = 2\n", NULL), 0);
+	assert_true(f1.n.hash != f2.n.hash);
+	struct tile_key k = key(6, 5, 10, 10);
+	struct tile *a = node_tile(&f1.n, k, NULL), *b = node_tile(&f2.n, k, NULL);
+	size_t differ = 0;
+	for (size_t i = 0; i < 64 * 64; i++)
+		differ += fabsf(tile_f32(a)[i] - tile_f32(b)[i]) > 1.0f;
+	assert_true(differ > 64 * 64 * 9 / 10);
+	tile_unref(a);
+	tile_unref(b);
+	free_node(&f1);
+	free_node(&f2);
+}
+
+/* With an input: output = input + the octaves at or below max_wavelength (detail only). */
+static void detail_over_input(void **state)
+{
+	(void)state;
+	struct node in = { .name = "h", .out = PIX_HEIGHT, .hash = 1234 };
+	struct fixture fd, fn, ff;
+	const char *cfg = "[node n]\ntype = noise\ninput = h\noctaves = 12\nmax_wavelength = 40000\n";
+	assert_int_equal(make_node(&fd, cfg, &in), 0);
+	assert_int_equal(make_node(&fn, "[node n]\ntype = noise\noctaves = 12\n"
+				   "max_wavelength = 40000\n", NULL), 0);
+	assert_int_equal(make_node(&ff, "[node n]\ntype = noise\noctaves = 12\n", NULL), 0);
+	struct tile_key k = key(12, 11, 1000, 700);
+	struct node_dep deps[NODE_MAX_DEPS];
+	k.node = fd.n.hash;
+	assert_int_equal(node_default_deps(&fd.n, &k, deps), 1);
+	assert_ptr_equal(deps[0].node, &in);
+	struct tile *src = tile_create(&k, PIX_HEIGHT, 64);
+	for (size_t i = 0; i < 64 * 64; i++)
+		tile_f32(src)[i] = 500.0f + (float)(i % 64);
+	struct tile *d = node_tile(&fd.n, k, src), *n = node_tile(&fn.n, k, NULL);
+	struct tile *full = node_tile(&ff.n, k, NULL);
+	double dmax = 0, fmax_ = 0;
+	for (size_t i = 0; i < 64 * 64; i++) {
+		float detail = tile_f32(d)[i] - tile_f32(src)[i];
+		assert_true(fabsf(detail - tile_f32(n)[i]) <= 1e-3f);
+		dmax = fmax(dmax, fabs(detail));
+		fmax_ = fmax(fmax_, fabs(tile_f32(full)[i]));
+	}
+	/* Octaves 7.. only (λ ≤ 40 km): a few metres, far below the full field. */
+	assert_true(dmax > 0.01);
+	assert_true(dmax < 0.1 * fmax_);
+	tile_unref(src);
+	tile_unref(d);
+	tile_unref(n);
+	tile_unref(full);
+	free_node(&fd);
+	free_node(&fn);
+	free_node(&ff);
+}
+
+static void parameter_errors(void **state)
+{
+	(void)state;
+	static const struct {
+		const char *text, *msg;
+	} cases[] = {
+		{ "[node n]\ntype = noise\noctaves = 99\n", "test.ini:3: octaves: " },
+		{ "[node n]\ntype = noise\nkind = perlin\n", "test.ini:3: kind: " },
+		{ "[node n]\ntype = noise\n\nlacunarity = 5\n", "test.ini:4: lacunarity: " },
+		{ "[node n]\ntype = noise\ngain = 2\n", "test.ini:3: gain: " },
+		{ "[node n]\ntype = noise\nseed = x\n", "test.ini:3: seed: " },
+		{ "[node n]\ntype = noise\noctave = 3\n", "test.ini:3: octave: unknown key" },
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+		struct fixture f;
+		assert_int_equal(make_node(&f, cases[i].text, NULL), -EINVAL);
+		if (strncmp(f.err, cases[i].msg, strlen(cases[i].msg)) != 0)
+			printf("got \"%s\", want \"%s...\"\n", f.err, cases[i].msg);
+		assert_true(strncmp(f.err, cases[i].msg, strlen(cases[i].msg)) == 0);
+		free_node(&f);
+	}
+	struct noise nz;
+	struct noise_params p = params(NOISE_FBM, 0, 4e6);
+	assert_int_equal(noise_init(&nz, &p), -EINVAL);
+	p = params(NOISE_FBM, 8, 4e6);
+	assert_int_equal(noise_init(&nz, &p), 0);
+	float out[16 * 16];
+	void *scratch = xaligned_alloc(64, noise_scratch_size(16));
+	struct tile_key bad = key(3, 1, 0, 0); /* lx > ly + 1 */
+	assert_int_equal(noise_tile(&nz, &bad, 16, NOISE_ISA_AUTO, scratch, out), -EINVAL);
+	struct tile_key ok = key(2, 1, 0, 0);
+	assert_int_equal(noise_tile(&nz, &ok, 24, NOISE_ISA_AUTO, scratch, out), -EINVAL);
+	free(scratch);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(isa_paths_identical),
+		cmocka_unit_test(matches_double_oracle),
+		cmocka_unit_test(seamless_east_west),
+		cmocka_unit_test(seamless_across_poles),
+		cmocka_unit_test(no_pole_pinch),
+		cmocka_unit_test(precise_at_fine_levels),
+		cmocka_unit_test(coarse_tiles_evaluate_fewer_octaves),
+		cmocka_unit_test(parent_approximates_children),
+		cmocka_unit_test(node_deterministic_and_in_range),
+		cmocka_unit_test(seeds_differ),
+		cmocka_unit_test(detail_over_input),
+		cmocka_unit_test(parameter_errors),
+	};
+	return cmocka_run_group_tests_name("noise", tests, NULL, NULL);
+}
