@@ -40,7 +40,7 @@
  * the fill otherwise — so a coastline neither grows nor shrinks by a texel.
  * Colour is filtered as straight (not premultiplied) RGBA.
  */
-#include "node_file.h"
+#include "node_types.h"
 
 #include <errno.h>
 #include <math.h>

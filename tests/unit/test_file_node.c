@@ -10,16 +10,16 @@
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <threads.h> /* not pthread.h: daemon/sched.h shadows <sched.h> under -Idaemon */
 #include <unistd.h>
 
 #include "img.h"
 #include "ini.h"
 #include "node.h"
-#include "node_file.h"
+#include "node_types.h"
 #include "planet.h"
 #include "tile.h"
 
@@ -460,7 +460,8 @@ static void bad_params(void **state)
 	write_fn("ok.tif", 16, 8, -180, -90, 180, 90);
 	FILE *fp = fopen(tpath("corrupt.png"), "wb");
 	assert_non_null(fp);
-	fputs("\x89PNG\r\n\x1a\n garbage garbage garbage", fp);
+	/* Not a truncated one: OIIO 2.4 leaks a string when libpng longjmps out of a short read. */
+	fputs("\x89PNG\r\n\x1a\n this is not a png at all", fp);
 	assert_int_equal(fclose(fp), 0);
 	static const struct {
 		const char *text, *want, *also;
@@ -533,7 +534,7 @@ struct job {
 	const float *want[8];
 };
 
-static int job_main(void *arg)
+static void *job_main(void *arg)
 {
 	struct job *jb = arg;
 	for (int it = 0; it < 3; it++) {
@@ -546,7 +547,7 @@ static int job_main(void *arg)
 			tile_unref(t);
 		}
 	}
-	return 0;
+	return NULL;
 }
 
 /* Two workers generating from one node at once get what one worker gets. */
@@ -563,13 +564,13 @@ static void concurrent_generate(void **state)
 		ref[x] = gen(&f, 3, 2, x, 1, 32);
 		jobs[0].want[x] = jobs[1].want[x] = tile_f32(ref[x]);
 	}
-	thrd_t th[2];
+	pthread_t th[2];
 	for (int i = 0; i < 2; i++) {
 		jobs[i].f = &f;
-		assert_int_equal(thrd_create(&th[i], job_main, &jobs[i]), thrd_success);
+		assert_int_equal(pthread_create(&th[i], NULL, job_main, &jobs[i]), 0);
 	}
 	for (int i = 0; i < 2; i++) {
-		assert_int_equal(thrd_join(th[i], NULL), thrd_success);
+		assert_int_equal(pthread_join(th[i], NULL), 0);
 		assert_int_equal(jobs[i].bad, 0);
 		gen_ctx_fini(&jobs[i].g);
 	}

@@ -9,7 +9,7 @@
 
 #include <errno.h>
 #include <math.h>
-#include <threads.h> /* not pthread.h: daemon/sched.h shadows <sched.h> under -Idaemon */
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -248,7 +248,7 @@ struct reader {
 	int bad;
 };
 
-static int reader_main(void *arg)
+static void *reader_main(void *arg)
 {
 	struct reader *r = arg;
 	char err[256];
@@ -264,7 +264,7 @@ static int reader_main(void *arg)
 				if (v[j * 16 + i] != (uint16_t)((x + i) * 256 + y + j))
 					r->bad++;
 	}
-	return 0;
+	return NULL;
 }
 
 static void concurrent_reads(void **state)
@@ -280,11 +280,11 @@ static void concurrent_reads(void **state)
 	assert_int_equal(img_write_tiled(p, w, h, 1, IMG_U16, px, 32, false, err), 0);
 	struct img_cache *c = img_cache_create(1); /* small: forces eviction */
 	struct reader r[3] = { { c, p, 0 }, { c, p, 0 }, { c, p, 0 } };
-	thrd_t th[3];
+	pthread_t th[3];
 	for (int i = 0; i < 3; i++)
-		assert_int_equal(thrd_create(&th[i], reader_main, &r[i]), thrd_success);
+		assert_int_equal(pthread_create(&th[i], NULL, reader_main, &r[i]), 0);
 	for (int i = 0; i < 3; i++) {
-		assert_int_equal(thrd_join(th[i], NULL), thrd_success);
+		assert_int_equal(pthread_join(th[i], NULL), 0);
 		assert_int_equal(r[i].bad, 0);
 	}
 	img_cache_destroy(c);
