@@ -9,6 +9,7 @@
 #include <OpenImageIO/imagecache.h>
 #include <OpenImageIO/imageio.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -223,6 +224,55 @@ int write_impl(const char *path, int width, int height, int channels, enum img_t
 	return publish(tmp, path, err);
 }
 
+// Copies [x0, x1) × [y0, y1), channels [chb, che), straight out of the cached tiles when they
+// hold `td` pixels already: get_pixels' general conversion path runs at about half of memcpy
+// speed, this at nearly all of it. Returns true when done; false when not applicable (a
+// conversion, a missing tile, an unexpected layout) — the caller then uses get_pixels, which
+// also produces any error message.
+bool read_from_tiles(ImageCache *ic, ustring name, int m, int x0, int x1, int y0, int y1, int chb,
+		     int che, TypeDesc td, char *dst, size_t ystride)
+{
+	const ImageSpec *spec = ic->imagespec(name, 0, m);
+	if (!spec || spec->depth != 1 || x0 < spec->x || x1 > spec->x + spec->width ||
+	    y0 < spec->y || y1 > spec->y + spec->height || che > spec->nchannels)
+		return false;
+	int tw = spec->tile_width > 0 ? spec->tile_width : spec->width;
+	int th = spec->tile_height > 0 ? spec->tile_height : spec->height;
+	size_t bytes = td.size(), outpx = (size_t)(che - chb) * bytes;
+	for (int ty = y0 - (y0 - spec->y) % th; ty < y1; ty += th) {
+		for (int tx = x0 - (x0 - spec->x) % tw; tx < x1; tx += tw) {
+			ImageCache::Tile *t = ic->get_tile(name, 0, m, tx, ty, 0);
+			if (!t)
+				return false;
+			TypeDesc fmt;
+			const char *p = (const char *)ic->tile_pixels(t, fmt);
+			ROI roi = ic->tile_roi(t);
+			if (!p || fmt != td || roi.xbegin != tx || roi.ybegin != ty ||
+			    roi.width() != tw || roi.height() != th || roi.chbegin != 0 ||
+			    roi.chend < che) {
+				ic->release_tile(t);
+				return false;
+			}
+			size_t spx = (size_t)roi.nchannels() * bytes;
+			int xa = std::max(x0, tx), xb = std::min(x1, tx + tw);
+			int ya = std::max(y0, ty), yb = std::min(y1, ty + th);
+			for (int y = ya; y < yb; y++) {
+				const char *src = p + ((size_t)(y - ty) * tw + (size_t)(xa - tx)) * spx +
+						  (size_t)chb * bytes;
+				char *d = dst + (size_t)(y - y0) * ystride + (size_t)(xa - x0) * outpx;
+				if (outpx == spx) {
+					std::memcpy(d, src, (size_t)(xb - xa) * spx);
+				} else {
+					for (int i = 0; i < xb - xa; i++)
+						std::memcpy(d + i * outpx, src + i * spx, outpx);
+				}
+			}
+			ic->release_tile(t);
+		}
+	}
+	return true;
+}
+
 } // namespace
 
 extern "C" size_t img_type_bytes(enum img_type t)
@@ -333,9 +383,14 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 		return -EINVAL;
 	}
 	try {
-		stride_t xs = (stride_t)(img_type_bytes(type) * (size_t)(chend - chbegin));
-		stride_t ys = dst_stride ? (stride_t)dst_stride : AutoStride;
-		if (!c->ic->get_pixels(ustring(path), 0, miplevel, x0, x1, y0, y1, 0, 1, chbegin,
+		size_t px = img_type_bytes(type) * (size_t)(chend - chbegin);
+		size_t row = dst_stride ? dst_stride : px * (size_t)(x1 - x0);
+		ustring name(path);
+		if (read_from_tiles(c->ic, name, miplevel, x0, x1, y0, y1, chbegin, chend, td,
+				    (char *)dst, row))
+			return 0;
+		stride_t xs = (stride_t)px, ys = (stride_t)row;
+		if (!c->ic->get_pixels(name, 0, miplevel, x0, x1, y0, y1, 0, 1, chbegin,
 				       chend, td, dst, xs, ys, AutoStride, chbegin, chend)) {
 			set_err(err, "%s: %s", path, c->ic->geterror());
 			return missing_or(path, -EIO);

@@ -268,7 +268,7 @@ struct axis {
 	float *w;
 	uint8_t *in; /* texel centre inside the bounds */
 	int64_t lo, hi;	 /* source pixels the buffer holds (unwrapped when wrapping) */
-	bool any, aligned; /* some texel inside; n == 1, all inside, texel i = source lo + i */
+	bool any, all; /* some / every texel inside */
 };
 
 static int subtaps(double r)
@@ -284,14 +284,14 @@ static void axis_build(struct axis *a, const double *c, uint32_t T, double r, in
 {
 	int n = a->n, K = a->K;
 	int64_t lo = INT64_MAX, hi = INT64_MIN;
-	bool aligned = n == 1;
 	a->any = false;
+	a->all = true;
 	for (uint32_t i = 0; i < T; i++) {
 		int32_t *ix = a->idx + (size_t)i * K;
 		float *w = a->w + (size_t)i * K;
 		a->in[i] = !isnan(c[i]);
 		if (!a->in[i]) {
-			aligned = false;
+			a->all = false;
 			continue;
 		}
 		for (int t = 0; t < n; t++) {
@@ -314,18 +314,11 @@ static void axis_build(struct axis *a, const double *c, uint32_t T, double r, in
 			w[2 * t + 1] = (float)(fr / n);
 			lo = i0 < lo ? i0 : lo;
 			hi = i1 + 1 > hi ? i1 + 1 : hi;
-			if (fr != 0)
-				aligned = false;
 		}
-		/* Aligned: every texel inside, texel i on source pixel (texel 0's) + i. */
-		if (aligned && i > 0 && ix[0] != a->idx[0] + (int32_t)i)
-			aligned = false;
 		a->any = true;
 	}
-	if (!a->any) {
+	if (!a->any)
 		lo = hi = 0;
-		aligned = false;
-	}
 	for (uint32_t i = 0; i < T; i++) {
 		for (int k = 0; k < K; k++) {
 			size_t q = (size_t)i * K + k;
@@ -339,7 +332,37 @@ static void axis_build(struct axis *a, const double *c, uint32_t T, double r, in
 	}
 	a->lo = lo;
 	a->hi = hi;
-	a->aligned = aligned;
+}
+
+/* Texel column i's centre in pixel units of a level wm wide (NAN: outside the bounds). With
+ * wrapping, coordinates run on from texel 0's (base = its offset east of the west bound) past
+ * the image's east edge: read_region wraps them. */
+static double col_coord(const struct file_impl *f, const struct geo_rect *r, double dlon, int wm,
+			double base, uint32_t i)
+{
+	double span = f->east - f->west;
+	if (f->wrap)
+		return (base + (i + 0.5) * dlon) * (wm / span);
+	double d = fmod(r->west + (i + 0.5) * dlon - f->west, 360.0);
+	if (d < 0)
+		d += 360.0;
+	return d <= span ? d * (wm / span) : NAN;
+}
+
+/* Whether texels map 1:1 onto source pixels along an axis: spacing exactly one pixel, texel
+ * 0's centre on a pixel centre, all T texels inside [0, size) (or wrapping). *lo = the pixel
+ * under texel 0 (unwrapped). */
+static bool aligned_axis(double c0, double r, uint32_t T, int size, bool wrap, int64_t *lo)
+{
+	if (isnan(c0) || fabs(r - 1) > 1e-9)
+		return false;
+	double s0 = c0 - 0.5, i0 = nearbyint(s0);
+	if (fabs(s0 - i0) > 1e-6)
+		return false;
+	if (!wrap && (i0 < 0 || i0 + T > size))
+		return false;
+	*lo = (int64_t)i0;
+	return true;
 }
 
 static int pick_level(const struct file_impl *f, double dlon, double dlat)
@@ -419,12 +442,60 @@ static bool to_float(const struct file_impl *f, const void *raw, float *dst, flo
 	return missing;
 }
 
+/* Explicit 4-wide vectors (GCC/clang vector extensions, SSE2 baseline): gcc -O2 leaves
+ * these loops scalar (its very-cheap cost model will not add an epilogue). */
+typedef float v4f __attribute__((vector_size(16)));
+typedef int32_t v4i __attribute__((vector_size(16)));
+typedef uint16_t v4u16 __attribute__((vector_size(8)));
+
+static inline v4f ld4(const float *p)
+{
+	v4f v;
+	memcpy(&v, p, sizeof v);
+	return v;
+}
+
+static inline void st4(float *p, v4f v)
+{
+	memcpy(p, &v, sizeof v);
+}
+
 static bool has_nan(const float *v, size_t n)
 {
-	bool any = false;
-	for (size_t i = 0; i < n; i++)
+	/* Four independent accumulators: one would make a loop-carried chain. */
+	v4i a0 = { 0, 0, 0, 0 }, a1 = a0, a2 = a0, a3 = a0;
+	size_t i = 0;
+	for (; i + 16 <= n; i += 16) {
+		v4f x0 = ld4(v + i), x1 = ld4(v + i + 4), x2 = ld4(v + i + 8), x3 = ld4(v + i + 12);
+		a0 |= x0 != x0;
+		a1 |= x1 != x1;
+		a2 |= x2 != x2;
+		a3 |= x3 != x3;
+	}
+	v4i acc = (a0 | a1) | (a2 | a3);
+	bool any = (acc[0] | acc[1] | acc[2] | acc[3]) != 0;
+	for (; i < n; i++)
 		any |= v[i] != v[i];
 	return any;
+}
+
+/* dst[i] = (Σ_q w[q]·src[q][i])·sc + off for i < n: the vertical pass. */
+static void wsum(float *dst, const float *const *src, const float *w, int K, size_t n, float sc,
+		 float off)
+{
+	size_t i = 0;
+	for (; i + 4 <= n; i += 4) {
+		v4f acc = ld4(src[0] + i) * w[0];
+		for (int q = 1; q < K; q++)
+			acc += ld4(src[q] + i) * w[q];
+		st4(dst + i, acc * sc + off);
+	}
+	for (; i < n; i++) {
+		float acc = src[0][i] * w[0];
+		for (int q = 1; q < K; q++)
+			acc += src[q][i] * w[q];
+		dst[i] = acc * sc + off;
+	}
 }
 
 static uint8_t to_u8(float v)
@@ -489,7 +560,13 @@ static void copy_aligned(const struct file_impl *f, const void *raw, struct tile
 	float ndv = f->nodata;
 	if (f->rtype == IMG_U16 && !nd) {
 		const uint16_t *s = raw;
-		for (size_t i = 0; i < n; i++)
+		size_t i = 0;
+		for (; i + 4 <= n; i += 4) {
+			v4u16 u;
+			memcpy(&u, s + i, sizeof u);
+			st4(o + i, __builtin_convertvector(u, v4f) * sc + off);
+		}
+		for (; i < n; i++)
 			o[i] = (float)s[i] * sc + off;
 		return;
 	}
@@ -520,6 +597,33 @@ static void copy_aligned(const struct file_impl *f, const void *raw, struct tile
 		}
 		bool bad = v != v || (nd && v == ndv);
 		o[i] = bad ? fill : v * sc + off;
+	}
+}
+
+/* The horizontal pass for one channel and plain bilinear taps (the common case): 4 source
+ * rows per table entry fetched, so the gather's index and weight loads are shared. */
+static void hpass_bilinear(const float *restrict sv, size_t bw, size_t bh,
+			   const int32_t *restrict idx, const float *restrict w, uint32_t T,
+			   float *restrict tmp)
+{
+	size_t y = 0;
+	for (; y + 4 <= bh; y += 4) {
+		const float *s0 = sv + y * bw, *s1 = s0 + bw, *s2 = s1 + bw, *s3 = s2 + bw;
+		float *t0 = tmp + y * T, *t1 = t0 + T, *t2 = t1 + T, *t3 = t2 + T;
+		for (uint32_t i = 0; i < T; i++) {
+			int32_t a = idx[2 * i], b = idx[2 * i + 1];
+			float wa = w[2 * i], wb = w[2 * i + 1];
+			t0[i] = wa * s0[a] + wb * s0[b];
+			t1[i] = wa * s1[a] + wb * s1[b];
+			t2[i] = wa * s2[a] + wb * s2[b];
+			t3[i] = wa * s3[a] + wb * s3[b];
+		}
+	}
+	for (; y < bh; y++) {
+		const float *s0 = sv + y * bw;
+		float *t0 = tmp + y * T;
+		for (uint32_t i = 0; i < T; i++)
+			t0[i] = w[2 * i] * s0[idx[2 * i]] + w[2 * i + 1] * s0[idx[2 * i + 1]];
 	}
 }
 
@@ -589,39 +693,26 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 	sp += s_tmpm;
 	float *row = (float *)(void *)sp;
 
-	/* Texel centres in source pixel units. */
+	/* Texel centres in source pixel units: texel 0 first, the rest once the 1:1 test has
+	 * failed. */
 	double base = 0;
 	if (f->wrap) {
 		base = fmod(r.west - f->west, 360.0);
 		if (base < 0)
 			base += 360.0;
 	}
-	for (uint32_t i = 0; i < T; i++) {
-		if (f->wrap) {
-			cx[i] = (base + (i + 0.5) * dlon) * (wm / spanx);
-			continue;
-		}
-		double d = fmod(r.west + (i + 0.5) * dlon - f->west, 360.0);
-		if (d < 0)
-			d += 360.0;
-		cx[i] = d <= spanx ? d * (wm / spanx) : NAN;
-	}
+	cx[0] = col_coord(f, &r, dlon, wm, base, 0);
 	for (uint32_t j = 0; j < T; j++) {
 		double lat = r.north - (j + 0.5) * dlat;
 		cy[j] = lat >= f->south && lat <= f->north ? (f->north - lat) * (hm / spany) : NAN;
 	}
-	axis_build(&ax, cx, T, rx, wm, f->wrap);
-	axis_build(&ay, cy, T, ry, hm, false);
-	if (!ax.any || !ay.any) {
-		fill_tile(f, out);
-		return 0;
-	}
-	size_t bw = (size_t)(ax.hi - ax.lo), bh = (size_t)(ay.hi - ay.lo);
-	if (bw > bwmax || bh > bhmax)
-		return -EFAULT; /* a bound above is wrong: never read past the scratch */
 
-	if (ax.aligned && ay.aligned) {
-		/* 1:1: one read, no filtering; straight into the tile when no conversion. */
+	if (aligned_axis(cx[0], rx, T, wm, f->wrap, &ax.lo) &&
+	    aligned_axis(cy[0], ry, T, hm, false, &ay.lo)) {
+		/* 1:1 on a level: one read, no tables, no filtering; straight into the tile
+		 * when there is nothing to convert. */
+		ax.hi = ax.lo + T;
+		ay.hi = ay.lo + T;
 		bool direct = (f->kind == KIND_HEIGHT && f->rtype == IMG_F32 && !f->has_nodata) ||
 			      (f->kind == KIND_COLOR && C == 4);
 		void *dst = direct ? (void *)out->data : raw;
@@ -631,6 +722,17 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 			copy_aligned(f, dst, out);
 		return 0;
 	}
+	for (uint32_t i = 1; i < T; i++)
+		cx[i] = col_coord(f, &r, dlon, wm, base, i);
+	axis_build(&ax, cx, T, rx, wm, f->wrap);
+	axis_build(&ay, cy, T, ry, hm, false);
+	if (!ax.any || !ay.any) {
+		fill_tile(f, out);
+		return 0;
+	}
+	size_t bw = (size_t)(ax.hi - ax.lo), bh = (size_t)(ay.hi - ay.lo);
+	if (bw > bwmax || bh > bhmax)
+		return -EFAULT; /* a bound above is wrong: never read past the scratch */
 
 	if (read_region(f, m, &ax, &ay, raw, bw * C * tsz))
 		return -EIO;
@@ -647,7 +749,12 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 
 	/* Horizontal pass: every source row → T texel columns. */
 	int Kx = ax.K, Ky = ay.K;
-	for (size_t y = 0; y < bh; y++) {
+	size_t y0 = 0;
+	if (C == 1 && Kx == 2 && !missing) {
+		hpass_bilinear(sv, bw, bh, ax.idx, ax.w, T, tmp);
+		y0 = bh;
+	}
+	for (size_t y = y0; y < bh; y++) {
 		const float *s = sv + y * bw * C;
 		float *t = tmp + y * T * C;
 		if (C == 1 && Kx == 2) {
@@ -699,18 +806,19 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 		}
 		const int32_t *iy = ay.idx + (size_t)j * Ky;
 		const float *wy = ay.w + (size_t)j * Ky;
-		const float *t0 = tmp + (size_t)iy[0] * TC;
-		float w0 = wy[0];
-		for (size_t i = 0; i < TC; i++)
-			row[i] = w0 * t0[i];
-		for (int q = 1; q < Ky; q++) {
-			const float *tq = tmp + (size_t)iy[q] * TC;
-			float wq = wy[q];
-			if (wq == 0)
-				continue;
-			for (size_t i = 0; i < TC; i++)
-				row[i] += wq * tq[i];
+		const float *rows[2 * FILE_MAX_SUBTAPS];
+		for (int q = 0; q < Ky; q++)
+			rows[q] = tmp + (size_t)iy[q] * TC;
+		if (f->kind == KIND_HEIGHT && !missing) {
+			/* Straight into the tile; columns outside the bounds patched after. */
+			float *o = tile_f32(out) + (size_t)j * T;
+			wsum(o, rows, wy, Ky, T, f->scale, f->offset);
+			if (!ax.all)
+				for (uint32_t i = 0; i < T; i++)
+					o[i] = ax.in[i] ? o[i] : f->fill_h;
+			continue;
 		}
+		wsum(row, rows, wy, Ky, TC, 1, 0);
 		if (f->kind == KIND_COLOR) {
 			uint8_t *o = out->data + (size_t)j * T * 4;
 			for (uint32_t i = 0; i < T; i++) {
@@ -721,22 +829,15 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 			}
 			continue;
 		}
+		/* Heights with missing samples: renormalise by the valid weight. */
+		const float *mrows[2 * FILE_MAX_SUBTAPS];
+		for (int q = 0; q < Ky; q++)
+			mrows[q] = tmpm + (size_t)iy[q] * T;
+		wsum(rowm, mrows, wy, Ky, T, 1, 0);
 		float *o = tile_f32(out) + (size_t)j * T;
 		float sc = f->scale, off = f->offset, fill = f->fill_h;
-		if (missing) {
-			for (uint32_t i = 0; i < T; i++)
-				rowm[i] = 0;
-			for (int q = 0; q < Ky; q++) {
-				const float *tq = tmpm + (size_t)iy[q] * T;
-				for (uint32_t i = 0; i < T; i++)
-					rowm[i] += wy[q] * tq[i];
-			}
-			for (uint32_t i = 0; i < T; i++)
-				o[i] = ax.in[i] && rowm[i] >= 0.5f ? row[i] / rowm[i] * sc + off : fill;
-		} else {
-			for (uint32_t i = 0; i < T; i++)
-				o[i] = ax.in[i] ? row[i] * sc + off : fill;
-		}
+		for (uint32_t i = 0; i < T; i++)
+			o[i] = ax.in[i] && rowm[i] >= 0.5f ? row[i] / rowm[i] * sc + off : fill;
 	}
 	return 0;
 }

@@ -218,6 +218,41 @@ static void cache_regions_and_mips(void **state)
 	free(px);
 }
 
+/* Odd sizes: partial edge tiles, channel subsets, an untiled file (one whole-image tile). */
+static void cache_edge_tiles(void **state)
+{
+	(void)state;
+	char err[256] = "";
+	int w = 100, h = 70;
+	uint8_t *px = malloc((size_t)w * h * 3);
+	for (int i = 0; i < w * h * 3; i++)
+		px[i] = (uint8_t)(i * 31 + i / 300);
+	const char *p = tpath("edge.tif"), *q = tpath("edge.png");
+	assert_int_equal(img_write_tiled(p, w, h, 3, IMG_U8, px, 32, false, err), 0);
+	assert_int_equal(img_write(q, w, h, 3, IMG_U8, px, err), 0);
+	struct img_cache *c = img_cache_create(16);
+	uint8_t *out = malloc((size_t)w * h * 3);
+	for (int f = 0; f < 2; f++) {
+		const char *path = f ? q : p;
+		memset(out, 0, (size_t)w * h * 3);
+		assert_int_equal(img_cache_read(c, path, 0, 0, w, 0, h, 0, 3, IMG_U8, out, 0, err), 0);
+		assert_memory_equal(out, px, (size_t)w * h * 3);
+		/* [61, 100) × [30, 70), channels 1..2, rows 100 bytes apart */
+		memset(out, 0, (size_t)w * h * 3);
+		assert_int_equal(img_cache_read(c, path, 0, 61, 100, 30, 70, 1, 3, IMG_U8, out, 100,
+						err),
+				 0);
+		for (int y = 0; y < 40; y++)
+			for (int x = 0; x < 39; x++)
+				for (int ch = 0; ch < 2; ch++)
+					assert_int_equal(out[y * 100 + x * 2 + ch],
+							 px[((30 + y) * w + 61 + x) * 3 + 1 + ch]);
+	}
+	free(out);
+	free(px);
+	img_cache_destroy(c);
+}
+
 /* An untiled, unmipped PNG gets automip levels. */
 static void automip_png(void **state)
 {
@@ -301,6 +336,7 @@ int main(void)
 		cmocka_unit_test(bad_writes),
 		cmocka_unit_test(missing_and_corrupt),
 		cmocka_unit_test(cache_regions_and_mips),
+		cmocka_unit_test(cache_edge_tiles),
 		cmocka_unit_test(automip_png),
 		cmocka_unit_test(concurrent_reads),
 	};
