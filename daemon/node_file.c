@@ -32,7 +32,9 @@
  * wider axis is still up to 8× finer at level m: there n = ceil(r) bilinear sub-taps spread
  * across the texel average it (a box of bilinears), and m rises until n ≤ 8. When the tile
  * maps 1:1 onto the pixels of a level, the read is a plain copy (straight into the tile for
- * float heights with scale 1, offset 0).
+ * float heights with scale 1, offset 0). Known limit of the floor() choice: for 1 < r < 2,
+ * content at the source's Nyquist frequency still aliases (a 0/250 1-pixel checkerboard at
+ * r = 1.5 gives texels of about 94..156 instead of 125); from r = 2 on it averages out.
  *
  * Missing data. A texel whose centre is outside the bounds gets the fill. Inside, nodata
  * (and NaN) samples get weight 0 and the others are renormalised: the texel keeps the
@@ -55,6 +57,7 @@
 
 #define FILE_MAX_LEVELS 32
 #define FILE_MAX_SUBTAPS 8
+#define FILE_MAX_REGION ((size_t)1 << 26) /* source pixels one tile may read */
 
 enum file_kind { KIND_HEIGHT, KIND_COLOR };
 
@@ -656,6 +659,8 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 		bwmax = (size_t)wm;
 	if (bhmax > (size_t)hm)
 		bhmax = (size_t)hm;
+	if (bwmax * bhmax > FILE_MAX_REGION)
+		return -EFBIG; /* only a file with a truncated MIP pyramid, at a very coarse level */
 	int C = f->nch;
 	bool maskable = f->has_nodata || f->rtype == IMG_F32;
 	size_t tsz = img_type_bytes(f->rtype);
