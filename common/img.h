@@ -1,0 +1,87 @@
+/* img — the C interface to OpenImageIO (img.cpp is the only C++ that touches it): a region
+ * reader over a private OIIO::ImageCache, and whole-image read/write for tools and tests.
+ *
+ * Threads: an img_cache may be used by any number of threads at once (OIIO's cache is
+ * thread-safe and its error messages are per thread); img_write/img_read are reentrant.
+ * No C++ exception ever crosses into C: every failure becomes -errno plus a message in err.
+ * Paths are UTF-8 file names; err is an optional 256-byte buffer (NULL: no message).
+ */
+#ifndef CLIPMAP_IMG_H
+#define CLIPMAP_IMG_H
+#include <stdbool.h>
+#include <stddef.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* A pixel channel type. Integer types keep their stored integer values (no normalisation)
+ * when read as themselves; converting between types goes through OIIO, which normalises
+ * integers to [0, 1] (unsigned) or [-1, 1] (signed) as floats. */
+enum img_type {
+	IMG_NONE = 0,
+	IMG_U8,
+	IMG_U16,
+	IMG_I16,
+	IMG_F32,
+};
+
+size_t img_type_bytes(enum img_type t); /* 1, 2, 2, 4; 0 for IMG_NONE */
+
+struct img_info {
+	int width, height; /* of MIP level 0 */
+	int channels;
+	/* The type that holds the file's values exactly: U8, U16, I16 as stored; F32 for half,
+	 * float and double (double loses precision); IMG_NONE for other integer types (read
+	 * those as F32: normalised). */
+	enum img_type type;
+	char format[16]; /* the stored type's name as OIIO spells it: "uint8", "half", ... */
+	int mip_levels;	 /* levels readable through an img_cache (file's own, or automip) */
+	bool tiled;
+	int tile_width, tile_height; /* 0 when untiled */
+};
+
+/* An OIIO::ImageCache of its own (not the process-wide shared one) holding at most max_mb
+ * MiB of pixels, with automip on (untiled, unmipped files get virtual MIP levels, each a 2×2
+ * box of the one above). Returns an owned cache, NULL only when OIIO cannot create one. */
+struct img_cache *img_cache_create(size_t max_mb);
+/* Frees the cache and closes its files; NULL is a no-op. */
+void img_cache_destroy(struct img_cache *c);
+
+/* Describes the image at path. Returns 0, or -ENOENT (no such file) / -EIO (unreadable or
+ * not an image) with err = OIIO's message. */
+int img_cache_info(struct img_cache *c, const char *path, struct img_info *out, char err[256]);
+/* Size of MIP level `miplevel`. Returns 0 or -EINVAL (no such level) / -EIO. */
+int img_cache_level_size(struct img_cache *c, const char *path, int miplevel, int *width,
+			 int *height, char err[256]);
+
+/* Reads pixels [x0, x1) × [y0, y1) (row y0 first, inside the level's data window), channels
+ * [chbegin, chend), converted to `type`, into dst (borrowed), rows dst_stride bytes apart
+ * (0: packed). Returns 0, -EINVAL (bad region or channels) or -EIO with err filled. */
+int img_cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1, int y0,
+		   int y1, int chbegin, int chend, enum img_type type, void *dst, size_t dst_stride,
+		   char err[256]);
+/* Forgets everything cached about path (e.g. after it changed on disk). */
+void img_cache_invalidate(struct img_cache *c, const char *path);
+
+/* Writes a width × height image of `channels` interleaved channels of `type` (rows north/top
+ * first, packed), in the format chosen by the extension: .png (u8/u16), .tif/.tiff
+ * (u8/u16/i16/f32), .exr (f32, stored as float). Writes path.tmp then renames it over path.
+ * Returns 0, -EINVAL (unsupported extension/type combination) or -EIO with err filled. */
+int img_write(const char *path, int width, int height, int channels, enum img_type type,
+	      const void *pixels, char err[256]);
+/* Like img_write but a tiled TIFF (tile × tile pixels, zip) with, when mip is true, a full
+ * box-filtered MIP pyramid: the layout that reads fastest through an img_cache. */
+int img_write_tiled(const char *path, int width, int height, int channels, enum img_type type,
+		    const void *pixels, int tile, bool mip, char err[256]);
+
+/* Reads the whole first image of path, all channels, converted to `type` (IMG_NONE: the
+ * file's own img_info.type). *pixels is returned owned (free() it); info may be NULL.
+ * Returns 0, -ENOENT or -EIO with err filled. */
+int img_read(const char *path, enum img_type type, void **pixels, struct img_info *info,
+	     char err[256]);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
