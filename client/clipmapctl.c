@@ -17,8 +17,10 @@ static void usage(FILE *f)
 {
 	fputs("usage:\n"
 	      "  clipmapctl render PLANET LAYER LX LY X Y -o FILE   one tile\n"
-	      "  clipmapctl render PLANET LAYER --level L [--world] -o FILE\n"
+	      "  clipmapctl render PLANET LAYER --level L --world -o FILE\n"
 	      "                                                     a whole level (lx = L+1, ly = L)\n"
+	      "  clipmapctl render PLANET LAYER --level L --at LAT,LON [--tiles N] -o FILE\n"
+	      "                                                     N×N tiles around a place (N = 3)\n"
 	      "      options: --workers N  --cache-mb N  --shade (colour × hillshade)  --quiet\n"
 	      "      heights: .tif/.tiff/.exr (float metres) or .png (16-bit, scale printed);\n"
 	      "      colour and normals: .png\n"
@@ -74,11 +76,14 @@ static int cmd_render(int argc, char **argv)
 		{ "workers", required_argument, NULL, 'j' }, { "cache-mb", required_argument, NULL, 'c' },
 		{ "shade", no_argument, NULL, 's' },	    { "quiet", no_argument, NULL, 'q' },
 		{ "output", required_argument, NULL, 'o' }, { "help", no_argument, NULL, 'h' },
+		{ "at", required_argument, NULL, 'a' },	    { "tiles", required_argument, NULL, 't' },
 		{ 0, 0, 0, 0 },
 	};
 	const char *outpath = NULL;
 	long level = -1;
-	int world = 0, quiet = 0;
+	int world = 0, quiet = 0, at = 0;
+	double lat = 0, lon = 0;
+	uint32_t ntiles = 3;
 	struct render_opts ro = { 0 };
 	int c;
 	optind = 1;
@@ -92,6 +97,27 @@ static int cmd_render(int argc, char **argv)
 			level = v;
 			break;
 		case 'w': world = 1; break;
+		case 'a': {
+			char *end;
+			lat = strtod(optarg, &end);
+			if (*end == ',')
+				lon = strtod(end + 1, &end);
+			if (*end || end == optarg || lat < -90 || lat > 90 || lon < -180 || lon > 180) {
+				fprintf(stderr, "clipmapctl render: --at wants LAT,LON in degrees "
+					"(-90..90, -180..180), got \"%s\"\n", optarg);
+				return 2;
+			}
+			at = 1;
+			break;
+		}
+		case 't':
+			if (parse_u32(optarg, "--tiles", 64, &v) || v == 0) {
+				if (v == 0)
+					fprintf(stderr, "clipmapctl render: --tiles must be at least 1\n");
+				return 2;
+			}
+			ntiles = v;
+			break;
 		case 'j':
 			if (parse_u32(optarg, "--workers", 256, &v))
 				return 2;
@@ -115,18 +141,28 @@ static int cmd_render(int argc, char **argv)
 		return 2;
 	}
 	uint32_t lx, ly, x = 0, y = 0;
+	struct render_region rg;
 	if (level >= 0) {
 		if (npos != 2) {
 			fprintf(stderr, "clipmapctl render: with --level give PLANET LAYER only\n");
 			return 2;
 		}
-		if (!world) {
-			fprintf(stderr, "clipmapctl render: --level renders a whole level: add --world\n");
+		if (world == at) {
+			fprintf(stderr, "clipmapctl render: --level needs --world (the whole level) or "
+				"--at LAT,LON (tiles around a place)\n");
 			return 2;
 		}
 		lx = (uint32_t)level + 1;
 		ly = (uint32_t)level;
+		if (world)
+			render_region_level((int)lx, (int)ly, &rg);
+		else
+			render_region_around((int)lx, (int)ly, lat, lon, ntiles, &rg);
 	} else {
+		if (world || at) {
+			fprintf(stderr, "clipmapctl render: --world and --at go with --level\n");
+			return 2;
+		}
 		if (npos != 6) {
 			usage(stderr);
 			return 2;
@@ -135,6 +171,8 @@ static int cmd_render(int argc, char **argv)
 		    parse_u32(pos[3], "LY", GRID_MAX_LEVEL, &ly) ||
 		    parse_u32(pos[4], "X", 0x7fffffff, &x) || parse_u32(pos[5], "Y", 0x7fffffff, &y))
 			return 2;
+		rg = (struct render_region){ .lx = (int)lx, .ly = (int)ly, .x = x, .y = y, .cols = 1,
+					     .rows = 1 };
 	}
 	struct planet *p;
 	int rc = load(pos[0], &p);
@@ -148,7 +186,7 @@ static int cmd_render(int argc, char **argv)
 	}
 	struct render_image im;
 	char err[256], note[256];
-	rc = render_layer(p, pos[1], (int)lx, (int)ly, x, y, level >= 0, &ro, &im, err);
+	rc = render_layer(p, pos[1], &rg, &ro, &im, err);
 	if (rc) {
 		fprintf(stderr, "clipmapctl render: %s\n", err);
 		planet_destroy(p);

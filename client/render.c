@@ -24,16 +24,25 @@ static const struct planet_layer *normal_layer(const struct planet *p)
 	return NULL;
 }
 
-/* Multiplies colour by a hillshade: sun from the north-west, 40° up. Flat ground keeps its
- * colour; slopes facing the sun brighten, the others darken. */
+/* Multiplies colour by a hillshade, as maps do: sun from the north-west 35° up, slopes
+ * exaggerated 3× (a map's z-factor). Flat ground keeps its colour; slopes facing the sun
+ * brighten, the others darken. */
 static void shade_tile(unsigned char *rgba, const unsigned char *rg, size_t n)
 {
-	const double el = 40.0 * M_PI / 180.0;
+	const double el = 35.0 * M_PI / 180.0, zf = 3.0;
 	const double lx = -cos(el) * M_SQRT1_2, ly = cos(el) * M_SQRT1_2, lz = sin(el);
 	for (size_t i = 0; i < n; i++) {
 		double e = rg[2 * i] / 127.5 - 1.0, no = rg[2 * i + 1] / 127.5 - 1.0;
 		double up2 = 1.0 - e * e - no * no;
 		double up = up2 > 0 ? sqrt(up2) : 0.0;
+		/* scale the slope (e/up, no/up) by zf and renormalise */
+		double se = e * zf, sn = no * zf;
+		double len = sqrt(se * se + sn * sn + up * up);
+		if (len > 0) {
+			e = se / len;
+			no = sn / len;
+			up = up / len;
+		}
 		double f = (e * lx + no * ly + up * lz) / lz;
 		f = 0.35 + 0.65 * f;
 		if (f < 0.25)
@@ -91,10 +100,37 @@ static void blit(struct render_image *im, const struct tile *t, const struct til
 	free(tmp);
 }
 
-int render_layer(const struct planet *p, const char *layer, int lx, int ly, uint32_t x, uint32_t y,
-		 int whole_level, const struct render_opts *o, struct render_image *out,
-		 char err[256])
+void render_region_level(int lx, int ly, struct render_region *r)
 {
+	*r = (struct render_region){ .lx = lx, .ly = ly, .cols = grid_tiles_x(lx),
+				     .rows = grid_tiles_y(ly) };
+}
+
+void render_region_around(int lx, int ly, double lat, double lon, uint32_t n,
+			  struct render_region *r)
+{
+	uint32_t nx = grid_tiles_x(lx), ny = grid_tiles_y(ly);
+	if (n > ny)
+		n = ny;
+	int64_t cx = (int64_t)floor(grid_lon_to_u(lx, 1, lon));
+	int64_t cy = (int64_t)floor(grid_lat_to_v(ly, 1, lat));
+	int64_t y0 = cy - (int64_t)(n - 1) / 2;
+	if (y0 < 0)
+		y0 = 0;
+	if (y0 + n > ny)
+		y0 = ny - n;
+	r->lx = lx;
+	r->ly = ly;
+	r->x = grid_wrap_x(lx, cx - (int64_t)(n - 1) / 2);
+	r->y = (uint32_t)y0;
+	r->cols = n < nx ? n : nx;
+	r->rows = n;
+}
+
+int render_layer(const struct planet *p, const char *layer, const struct render_region *rg,
+		 const struct render_opts *o, struct render_image *out, char err[256])
+{
+	int lx = rg->lx, ly = rg->ly;
 	memset(out, 0, sizeof *out);
 	const struct planet_layer *L = planet_find_layer(p, layer);
 	if (!L) {
@@ -112,10 +148,11 @@ int render_layer(const struct planet *p, const char *layer, int lx, int ly, uint
 		return -EINVAL;
 	}
 	uint32_t T = p->tile_size;
-	uint32_t cols = whole_level ? grid_tiles_x(lx) : 1, rows = whole_level ? grid_tiles_y(ly) : 1;
-	if (!whole_level && (x >= grid_tiles_x(lx) || y >= grid_tiles_y(ly))) {
-		snprintf(err, 256, "tile (%u, %u) is outside level (%d, %d): x < %u, y < %u", x, y, lx,
-			 ly, grid_tiles_x(lx), grid_tiles_y(ly));
+	uint32_t cols = rg->cols, rows = rg->rows;
+	if (rg->x >= grid_tiles_x(lx) || rg->y >= grid_tiles_y(ly) || rows == 0 || cols == 0 ||
+	    cols > grid_tiles_x(lx) || rg->y + rows > grid_tiles_y(ly)) {
+		snprintf(err, 256, "tiles (%u, %u) + %ux%u are outside level (%d, %d): x < %u, y < %u",
+			 rg->x, rg->y, cols, rows, lx, ly, grid_tiles_x(lx), grid_tiles_y(ly));
 		return -EINVAL;
 	}
 	if ((uint64_t)cols * T > MAX_PIXELS_WIDE) {
@@ -148,8 +185,8 @@ int render_layer(const struct planet *p, const char *layer, int lx, int ly, uint
 		for (size_t i = 0; i < n; i++) {
 			size_t idx = done + i;
 			struct tile_key k = { .node = L->node->hash, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
-			k.x = whole_level ? (uint32_t)(idx % cols) : x;
-			k.y = whole_level ? (uint32_t)(idx / cols) : y;
+			k.x = grid_wrap_x(lx, (int64_t)rg->x + (int64_t)(idx % cols));
+			k.y = rg->y + (uint32_t)(idx / cols);
 			w[i] = (struct want){ .node = L->node, .key = k, .cls = SCHED_VISIBLE };
 			if (NL) {
 				w[n + i] = w[i];
@@ -165,7 +202,7 @@ int render_layer(const struct planet *p, const char *layer, int lx, int ly, uint
 		} else {
 			for (size_t i = 0; i < n; i++)
 				blit(out, tiles[i], NL ? tiles[n + i] : NULL,
-				     whole_level ? w[i].key.x : 0, whole_level ? w[i].key.y : 0);
+				     (uint32_t)((done + i) % cols), (uint32_t)((done + i) / cols));
 		}
 		for (size_t i = 0; i < nw; i++)
 			tile_unref(tiles[i]);

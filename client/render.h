@@ -26,11 +26,23 @@ struct render_image {
 	double hmin, hmax; /* heights: the range found */
 };
 
-/* Renders tile (lx, ly, x, y) of `layer`, or, when whole_level, every tile of level
- * (lx, ly) side by side. Returns 0 or -errno with err filled. */
-int render_layer(const struct planet *p, const char *layer, int lx, int ly, uint32_t x, uint32_t y,
-		 int whole_level, const struct render_opts *o, struct render_image *out,
-		 char err[256]);
+/* A block of tiles at one level: cols × rows tiles from (x, y); x wraps around the
+ * antimeridian, rows must stay inside the level. */
+struct render_region {
+	int lx, ly;
+	uint32_t x, y, cols, rows;
+};
+
+/* The whole level (lx, ly). */
+void render_region_level(int lx, int ly, struct render_region *r);
+/* n × n tiles of level (lx, ly) centred on the tile holding (lat, lon), clamped at the poles. */
+void render_region_around(int lx, int ly, double lat, double lon, uint32_t n,
+			  struct render_region *r);
+
+/* Renders the region of `layer` into one picture, tiles side by side. Returns 0 or -errno
+ * with err filled. */
+int render_layer(const struct planet *p, const char *layer, const struct render_region *rg,
+		 const struct render_opts *o, struct render_image *out, char err[256]);
 /* Writes the picture by the file's extension: heights as .tif/.tiff/.exr (float) or .png
  * (16-bit, min..max mapped to 0..65535 — *scale_note tells how); colour and normals as .png.
  * Returns 0 or -errno with err filled. */

@@ -5,7 +5,8 @@
  *
  * Optional polar and high-altitude snow: `snow_equator` and `snow_pole` (metres) set a snow line
  * that falls from the equator to the poles as cos²(latitude); `snow_blend` (metres, default
- * 400) is the fade above it; `sea_ice_latitude` (degrees) whitens everything poleward of it;
+ * 400) is the fade above it; `sea_ice_latitude` (degrees) freezes the sea poleward of it,
+ * shallow water first and deep water 8° further;
  * `snow_color` (default #f2f5fa).
  *
  * Speed: a table of bins over [first stop, last stop] gives a lower bound on each height's
@@ -15,7 +16,6 @@
  */
 #include <errno.h>
 #include <math.h>
-#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -197,10 +197,15 @@ static void snow_row(const struct ramp *r, double lat, const float *h, uint8_t *
 {
 	double c = cos(lat * M_PI / 180.0);
 	double line = r->snow_pole + (r->snow_equator - r->snow_pole) * c * c;
-	bool ice = fabs(lat) >= r->sea_ice_latitude;
+	/* Sea ice: starts at sea_ice_latitude over shallow water and reaches deep water 8° later,
+	 * so its edge follows the sea floor instead of a parallel. */
+	float ice = (float)((fabs(lat) - r->sea_ice_latitude) / 8.0);
 	float inv = (float)(1.0 / r->snow_blend);
 	for (uint32_t i = 0; i < T; i++) {
-		float t = ice ? 1.0f : (h[i] - (float)line) * inv;
+		float t = (h[i] - (float)line) * inv;
+		float ti = ice + (h[i] < 0 ? h[i] / 6000.0f : 0.0f);
+		if (r->sea_ice_latitude <= 90 && ti > t)
+			t = ti * 4.0f;
 		if (!(t > 0))
 			continue;
 		if (t > 1)
