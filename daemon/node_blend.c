@@ -12,7 +12,7 @@
 #include <stdint.h>
 #include <stdlib.h>
 
-#include "pixel_nodes.h"
+#include "node_types.h"
 #include "xalloc.h"
 
 enum blend_mode { BLEND_OVER, BLEND_MASK, BLEND_ADD, BLEND_MULTIPLY };

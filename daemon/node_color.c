@@ -17,7 +17,7 @@
 #include <emmintrin.h>
 #endif
 
-#include "pixel_nodes.h"
+#include "node_types.h"
 #include "xalloc.h"
 
 #define MAT_SHIFT 12

@@ -6,7 +6,7 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "pixel_nodes.h"
+#include "node_types.h"
 #include "xalloc.h"
 
 struct height_filter {

@@ -24,6 +24,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "node_types.h"
 #include "noise.h"
 #include "planet.h"
 #include "xalloc.h"

@@ -19,7 +19,7 @@
 #endif
 
 #include "geo.h"
-#include "pixel_nodes.h"
+#include "node_types.h"
 #include "planet.h"
 #include "xalloc.h"
 

@@ -24,7 +24,7 @@
 #include <emmintrin.h>
 #endif
 
-#include "pixel_nodes.h"
+#include "node_types.h"
 #include "xalloc.h"
 
 #define RAMP_MAX_STOPS 64

@@ -1,23 +1,36 @@
-/* node_types — the registry of node types a planet file can name (`type = ...`), and the
- * loader entry point that resolves types against a caller-given registry (tests and tools that
- * add their own types). Each type lives in its own daemon/node_<name>.c.
+/* node_types — the registry of node types a planet file can name (`type = ...`). Each type
+ * lives in its own daemon/node_<name>.c.
  *
  * Everything here is static const data or pure lookups: thread-safe.
  */
 #ifndef CLIPMAP_NODE_TYPES_H
 #define CLIPMAP_NODE_TYPES_H
 #include "node.h"
-#include "planet.h"
 
-extern const struct node_type node_type_constant, node_type_noise, node_type_color_filter,
-	node_type_height_filter, node_type_ramp, node_type_blend, node_type_normal, node_type_file;
+/* `constant`: a height (metres) or a colour everywhere. */
+extern const struct node_type node_type_constant;
+/* `noise`: seeded fBm / ridged simplex noise on the sphere, a height source or detail added
+ * to an optional input height (node_noise.c lists the parameters). */
+extern const struct node_type node_type_noise;
+/* `color_filter`: input (color) → color. levels, brightness, contrast, gamma (one LUT),
+ * then hue rotation and saturation (a 3×3 matrix) when not identity; alpha passes. */
+extern const struct node_type node_type_color_filter;
+/* `height_filter`: input (height) → height: clamp(in · scale + offset, min, max). */
+extern const struct node_type node_type_height_filter;
+/* `ramp`: input (height) → color: hypsometric tint from `stops`, shifted by `sea_level`,
+ * with an optional snow line by latitude and sea ice. */
+extern const struct node_type node_type_ramp;
+/* `blend`: a, b (same type), optional mask (height, 0..1) → a's type; mode = over | mask |
+ * add | multiply, opacity, weight. */
+extern const struct node_type node_type_blend;
+/* `normal`: input (height) → normal (RG8), metric spacing from the body's ellipsoid, seamless
+ * across tile borders, the antimeridian and the poles; `exaggeration`. */
+extern const struct node_type node_type_normal;
+/* `file`: an equirectangular raster (global or within `bounds`) read through OpenImageIO,
+ * resampled bilinearly, filtered from MIP levels when coarser than the file. */
+extern const struct node_type node_type_file;
 
 /* The type named `name` in the NULL-terminated list `types`, or NULL (borrowed). */
 const struct node_type *node_types_find_in(const struct node_type *const *types, const char *name);
-
-/* planet_load, resolving node types in `types` (NULL-terminated, borrowed; must outlive the
- * planet) instead of node_types_all(). Returns 0 or -errno with err filled. */
-int planet_load_types(const char *path, const struct node_type *const *types, struct planet **out,
-		      char err[256]);
 
 #endif

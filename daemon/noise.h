@@ -96,9 +96,6 @@ int noise_isa_supported(enum noise_isa isa); /* 1 or 0; AUTO → 1 */
 enum noise_isa noise_isa_best(void);
 const char *noise_isa_name(enum noise_isa isa); /* "scalar", "avx2", "avx512", "auto" */
 
-/* The `noise` node type (moves to node_types.h at merge). */
-extern const struct node_type node_type_noise;
-
 /* ---- internal: per-ISA row kernels (noise.c, noise_avx2.c, noise_avx512.c) ---- */
 
 /* One octave over a row: out[i] = simplex(d[i]·f + c) for the lattice origin folded into

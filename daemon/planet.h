@@ -46,6 +46,10 @@ struct planet {
 
 /* Loads and checks a planet file. Returns 0 or -errno with err filled. */
 int planet_load(const char *path, struct planet **out, char err[256]);
+/* planet_load, resolving node types in `types` (NULL-terminated, borrowed; must outlive the
+ * planet) instead of node_types_all() — for tests and tools that add their own types. */
+int planet_load_types(const char *path, const struct node_type *const *types, struct planet **out,
+		      char err[256]);
 void planet_destroy(struct planet *p);
 struct node *planet_find_node(const struct planet *p, const char *name);
 const struct planet_layer *planet_find_layer(const struct planet *p, const char *name);

@@ -13,6 +13,7 @@
 
 #include "ini.h"
 #include "node.h"
+#include "node_types.h"
 #include "noise.h"
 #include "planet.h"
 #include "tile.h"

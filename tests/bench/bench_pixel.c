@@ -12,7 +12,7 @@
 #include "geo.h"
 #include "ini.h"
 #include "node.h"
-#include "pixel_nodes.h"
+#include "node_types.h"
 #include "planet.h"
 #include "tile.h"
 

@@ -15,7 +15,7 @@
 
 #include "ini.h"
 #include "node.h"
-#include "pixel_nodes.h"
+#include "node_types.h"
 #include "tile.h"
 
 #define T 16
