@@ -180,7 +180,7 @@ static int cmd_render(int argc, char **argv)
 		return rc;
 	struct timespec t0;
 	clock_gettime(CLOCK_MONOTONIC, &t0);
-	if (!quiet && level >= 0) {
+	if (!quiet && level >= 0 && isatty(STDERR_FILENO)) {
 		ro.progress = progress;
 		ro.ud = &t0;
 	}

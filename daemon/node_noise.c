@@ -118,7 +118,7 @@ const struct node_type node_type_noise = {
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
 	       "max_wavelength m), band-limited per level; optional input height gets the "
 	       "octaves with wavelength <= max_wavelength added",
-	.version = 1,
+	.version = 2, /* 2: per-octave rotation */
 	.slots = slots,
 	.nslots = 1,
 	.create = noise_create,

@@ -230,6 +230,31 @@ static void ridged_means(struct noise *nz, int k0)
 		nz->oct[k].mean = sum[k] / N;
 }
 
+/* A rotation from three hashed uniforms (Shoemake's uniform random quaternion). */
+static void octave_rotation(uint32_t seed, double r[3][3])
+{
+	double u1 = mix32(seed ^ 0x1b873593u) / 4294967296.0;
+	double u2 = mix32(seed ^ 0xcc9e2d51u) / 4294967296.0 * 2 * M_PI;
+	double u3 = mix32(seed ^ 0xe6546b64u) / 4294967296.0 * 2 * M_PI;
+	double a = sqrt(1 - u1), b = sqrt(u1);
+	double w = a * sin(u2), x = a * cos(u2), y = b * sin(u3), z = b * cos(u3);
+	r[0][0] = 1 - 2 * (y * y + z * z);
+	r[0][1] = 2 * (x * y - z * w);
+	r[0][2] = 2 * (x * z + y * w);
+	r[1][0] = 2 * (x * y + z * w);
+	r[1][1] = 1 - 2 * (x * x + z * z);
+	r[1][2] = 2 * (y * z - x * w);
+	r[2][0] = 2 * (x * z - y * w);
+	r[2][1] = 2 * (y * z + x * w);
+	r[2][2] = 1 - 2 * (x * x + y * y);
+}
+
+static void rotate(const double r[3][3], const double v[3], double out[3])
+{
+	for (int a = 0; a < 3; a++)
+		out[a] = r[a][0] * v[0] + r[a][1] * v[1] + r[a][2] * v[2];
+}
+
 static bool included(const struct noise *nz, int k)
 {
 	return !(nz->p.max_wavelength > 0 && nz->oct[k].lambda > nz->p.max_wavelength * (1 + 1e-9));
@@ -253,6 +278,7 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 		o->freq = (double)(float)(p->radius / o->lambda);
 		o->amp = pow(p->gain, k) / total * (p->kind == NOISE_RIDGED ? 2.0 : 1.0);
 		o->seed = mix32(p->seed ^ mix32((uint32_t)k * 0x9e3779b9u + 0x632be5abu));
+		octave_rotation(o->seed, o->rot);
 	}
 	if (p->kind == NOISE_RIDGED) {
 		int k0 = 0;
@@ -283,7 +309,7 @@ static int active_octaves(const struct noise *nz, int ly, uint32_t T, int idx[],
 
 size_t noise_scratch_size(uint32_t T)
 {
-	return (size_t)T * (2 * sizeof(double) + 5 * sizeof(float)) + 64;
+	return (size_t)T * (2 * sizeof(double) + 8 * sizeof(float)) + 64;
 }
 
 static noise_row_fn *kernel_for(enum noise_isa isa)
@@ -309,11 +335,13 @@ static void unit_vector(double lon_deg, double lat_deg, double v[3])
 	v[2] = sin(lat);
 }
 
-/* The octave's lattice origin and texel-independent offset for a tile centred at pc. */
-static void octave_row(const struct noise_octave *oc, const double pc[3], struct noise_row *r)
+/* The octave's lattice origin and texel-independent offset for a tile centred at pc (in the
+ * octave's rotated frame). */
+static void octave_row(const struct noise_octave *oc, const double pc0[3], struct noise_row *r)
 {
-	double q[3], O[3];
+	double q[3], O[3], pc[3];
 	int64_t I0[3];
+	rotate(oc->rot, pc0, pc);
 	for (int a = 0; a < 3; a++)
 		q[a] = pc[a] * oc->freq;
 	double sk = (q[0] + q[1] + q[2]) * (1.0 / 3.0);
@@ -343,6 +371,28 @@ static inline v4f load4(const float *p)
 	v4f v;
 	memcpy(&v, p, sizeof v);
 	return v;
+}
+
+/* (rx, ry, rz) = R·(dx, dy, dz) for a row: the texel offsets in the octave's frame. Plain
+ * multiplies and adds in a fixed order (no FMA contraction in this file), so every ISA sees
+ * the same bits. */
+static void rotate_row(const float r[9], const float *dx, const float *dy, const float *dz,
+		       float *rx, float *ry, float *rz, uint32_t T)
+{
+	const v4f r0 = { r[0], r[0], r[0], r[0] }, r1 = { r[1], r[1], r[1], r[1] },
+		  r2 = { r[2], r[2], r[2], r[2] }, r3 = { r[3], r[3], r[3], r[3] },
+		  r4 = { r[4], r[4], r[4], r[4] }, r5 = { r[5], r[5], r[5], r[5] },
+		  r6 = { r[6], r[6], r[6], r[6] }, r7 = { r[7], r[7], r[7], r[7] },
+		  r8 = { r[8], r[8], r[8], r[8] };
+	for (uint32_t i = 0; i < T; i += 4) {
+		v4f x = load4(dx + i), y = load4(dy + i), z = load4(dz + i);
+		v4f a = (r0 * x + r1 * y) + r2 * z;
+		v4f b = (r3 * x + r4 * y) + r5 * z;
+		v4f c = (r6 * x + r7 * y) + r8 * z;
+		memcpy(rx + i, &a, sizeof a);
+		memcpy(ry + i, &b, sizeof b);
+		memcpy(rz + i, &c, sizeof c);
+	}
 }
 
 static void acc_fbm(float *row, const float *nb, float a, uint32_t T)
@@ -393,6 +443,7 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 
 	double *ccos = scratch, *csin = ccos + T;
 	float *dx = (float *)(csin + T), *dy = dx + T, *dz = dy + T, *nb = dz + T, *wt = nb + T;
+	float *rx = wt + T, *ry = rx + T, *rz = ry + T;
 	if (m == 0) {
 		memset(out, 0, (size_t)T * T * sizeof *out);
 		return 0;
@@ -401,9 +452,11 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 	unit_vector(grid_u_to_lon(k->lx, T, (double)k->x * T + T / 2),
 		    grid_v_to_lat(k->ly, T, (double)k->y * T + T / 2), pc);
 	struct noise_row rows[NOISE_MAX_OCTAVES];
-	float amp[NOISE_MAX_OCTAVES], mean[NOISE_MAX_OCTAVES];
+	float amp[NOISE_MAX_OCTAVES], mean[NOISE_MAX_OCTAVES], rot[NOISE_MAX_OCTAVES][9];
 	for (int o = 0; o < m; o++) {
 		octave_row(&nz->oct[idx[o]], pc, &rows[o]);
+		for (int a = 0; a < 9; a++)
+			rot[o][a] = (float)nz->oct[idx[o]].rot[a / 3][a % 3];
 		amp[o] = (float)(nz->oct[idx[o]].amp * w[o]);
 		mean[o] = (float)nz->oct[idx[o]].mean;
 	}
@@ -431,7 +484,8 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 		float *row = out + (size_t)j * T;
 		memset(row, 0, T * sizeof *row);
 		for (int o = 0; o < m; o++) {
-			row_fn(&rows[o], dx, dy, dz, nb, T);
+			rotate_row(rot[o], dx, dy, dz, rx, ry, rz, T);
+			row_fn(&rows[o], rx, ry, rz, nb, T);
 			if (nz->p.kind == NOISE_FBM)
 				acc_fbm(row, nb, amp[o], T);
 			else
@@ -446,10 +500,11 @@ double noise_point(const struct noise *nz, double lon, double lat, int ly, uint3
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
 	int m = active_octaves(nz, ly, T, idx, w);
-	double p[3], sum = 0, wt = 1;
-	unit_vector(lon, lat, p);
+	double p0[3], p[3], sum = 0, wt = 1;
+	unit_vector(lon, lat, p0);
 	for (int o = 0; o < m; o++) {
 		const struct noise_octave *oc = &nz->oct[idx[o]];
+		rotate(oc->rot, p0, p);
 		double n = noise_simplex_ref(p[0] * oc->freq, p[1] * oc->freq, p[2] * oc->freq,
 					     oc->seed);
 		double a = oc->amp * w[o];

@@ -57,6 +57,9 @@ struct noise_octave {
 	double amp;    /* normalised amplitude of this octave */
 	double mean;   /* ridged: expected weighted signal, subtracted so the sum is centred */
 	uint32_t seed; /* hash seed of this octave */
+	double rot[3][3]; /* this octave's rotation of the sphere: octaves whose lattices nest
+			   * (lacunarity 2) would otherwise line their creases up into long straight
+			   * features along the lattice planes */
 };
 
 struct noise {
