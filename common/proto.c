@@ -16,6 +16,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "errbuf.h"
 #include "xalloc.h"
 
 struct type_info {
@@ -56,16 +57,6 @@ static const char *const code_names[PROTO_E_COUNT] = {
 
 #define TILE_HEAD 44 /* TILE fields before the payload */
 
-static void seterr(char *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void seterr(char *err, const char *fmt, ...)
-{
-	if (!err)
-		return;
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(err, 256, fmt, ap);
-	va_end(ap);
-}
 
 static const struct type_info *type_info(uint16_t type)
 {
@@ -134,15 +125,15 @@ ssize_t proto_frame_check(const void *buf, size_t len, struct proto_hdr *h, size
 	const uint8_t *p = buf;
 	size_t nm = len < 4 ? len : 4;
 	if (nm && memcmp(p, PROTO_MAGIC, nm) != 0) {
-		seterr(err, "bad magic: not a clipmap protocol stream");
+		err_set(err, "bad magic: not a clipmap protocol stream");
 		return PROTO_ERR_MAGIC;
 	}
 	if (len > 4 && p[4] != PROTO_VERSION) {
-		seterr(err, "frame version %u, this side speaks %u", p[4], PROTO_VERSION);
+		err_set(err, "frame version %u, this side speaks %u", p[4], PROTO_VERSION);
 		return PROTO_ERR_VERSION;
 	}
 	if (len > 5 && p[5] != 0) {
-		seterr(err, "frame flags 0x%02x: none are defined", p[5]);
+		err_set(err, "frame flags 0x%02x: none are defined", p[5]);
 		return PROTO_ERR_FIELD;
 	}
 	const struct type_info *ti = NULL;
@@ -150,7 +141,7 @@ ssize_t proto_frame_check(const void *buf, size_t len, struct proto_hdr *h, size
 		uint16_t type = (uint16_t)(p[6] | p[7] << 8);
 		ti = type_info(type);
 		if (!ti) {
-			seterr(err, "unknown message type %u", type);
+			err_set(err, "unknown message type %u", type);
 			return PROTO_ERR_TYPE;
 		}
 	}
@@ -161,7 +152,7 @@ ssize_t proto_frame_check(const void *buf, size_t len, struct proto_hdr *h, size
 	}
 	uint32_t length = get32(p + 8);
 	if (length > ti->cap) {
-		seterr(err, "%s of %u bytes exceeds its cap of %u", ti->name, length, ti->cap);
+		err_set(err, "%s of %u bytes exceeds its cap of %u", ti->name, length, ti->cap);
 		return PROTO_ERR_TOOBIG;
 	}
 	if (h)
@@ -541,19 +532,19 @@ int proto_tile_check(const struct proto_tile *t, char err[256])
 	if (rc)
 		return rc;
 	if (!grid_key_valid(&t->key)) {
-		seterr(err, "tile key %u/%u/%u/%u outside the grid", t->key.lx, t->key.ly,
+		err_set(err, "tile key %u/%u/%u/%u outside the grid", t->key.lx, t->key.ly,
 		       t->key.x, t->key.y);
 		return -EINVAL;
 	}
 	if (t->layer >= PROTO_MAX_LAYERS) {
-		seterr(err, "layer %u", t->layer);
+		err_set(err, "layer %u", t->layer);
 		return -EINVAL;
 	}
 	if (t->enc.codec == TCODEC_NONE
 		    ? t->payload_len != t->enc.raw_len
 		    : t->payload_len == 0 ||
 			      t->payload_len > tilecodec_bound(t->enc.codec, t->enc.raw_len)) {
-		seterr(err, "payload of %u bytes impossible for %s of %u bytes", t->payload_len,
+		err_set(err, "payload of %u bytes impossible for %s of %u bytes", t->payload_len,
 		       tilecodec_codec_name(t->enc.codec), t->enc.raw_len);
 		return -EINVAL;
 	}
@@ -715,7 +706,7 @@ int proto_decode_payload(uint16_t type, const void *payload, size_t len, struct 
 	const struct type_info *ti = type_info(type);
 	memset(m, 0, sizeof(*m));
 	if (!ti) {
-		seterr(err, "unknown message type %u", type);
+		err_set(err, "unknown message type %u", type);
 		return PROTO_ERR_TYPE;
 	}
 	struct rd r = { .p = payload, .n = len, .errbuf = err, .msg = ti->name, .m = m };

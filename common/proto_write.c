@@ -11,18 +11,9 @@
 #include <string.h>
 
 #include "proto.h"
+#include "errbuf.h"
 #include "xalloc.h"
 
-static void seterr(char *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void seterr(char *err, const char *fmt, ...)
-{
-	if (!err)
-		return;
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(err, 256, fmt, ap);
-	va_end(ap);
-}
 
 /* ---- pbuf ------------------------------------------------------------------------------- */
 
@@ -90,7 +81,7 @@ static void put(struct wr *w, const void *p, size_t n)
 {
 	if (!w->err && pbuf_append(w->b, p, n)) {
 		w->err = -ENOSPC;
-		seterr(w->errbuf, "output buffer full");
+		err_set(w->errbuf, "output buffer full");
 	}
 }
 
@@ -128,7 +119,7 @@ static void wbytes(struct wr *w, const void *p, size_t n, const char *what)
 {
 	if (n > UINT16_MAX) {
 		if (!w->err)
-			seterr(w->errbuf, "%s of %zu bytes is too long", what, n);
+			err_set(w->errbuf, "%s of %zu bytes is too long", what, n);
 		w->err = w->err ? w->err : -EINVAL;
 		return;
 	}
@@ -146,7 +137,7 @@ static bool wcount(struct wr *w, size_t count, size_t cap, const char *what)
 	if (count <= cap)
 		return true;
 	if (!w->err) {
-		seterr(w->errbuf, "%zu %s exceed the cap of %zu", count, what, cap);
+		err_set(w->errbuf, "%zu %s exceed the cap of %zu", count, what, cap);
 		w->err = PROTO_ERR_LIMIT;
 	}
 	return false;
@@ -266,7 +257,7 @@ static void enc_body(struct wr *w, const struct proto_msg *m)
 	}
 	case PROTO_TILE:
 		if (m->tile.payload_len && !m->tile.payload) {
-			seterr(w->errbuf, "TILE without its payload");
+			err_set(w->errbuf, "TILE without its payload");
 			w->err = -EINVAL;
 			break;
 		}
@@ -389,7 +380,7 @@ ssize_t proto_encode(struct pbuf *b, const struct proto_msg *m, char err[256])
 {
 	const char *name = proto_type_name(m->type);
 	if (!name) {
-		seterr(err, "unknown message type %u", m->type);
+		err_set(err, "unknown message type %u", m->type);
 		return -EINVAL;
 	}
 	size_t start = b->len;
@@ -400,7 +391,7 @@ ssize_t proto_encode(struct pbuf *b, const struct proto_msg *m, char err[256])
 		goto fail;
 	size_t length = b->len - start - PROTO_HDR;
 	if (length > proto_type_cap(m->type)) {
-		seterr(err, "%s of %zu bytes exceeds its cap of %u", name, length,
+		err_set(err, "%s of %zu bytes exceeds its cap of %u", name, length,
 		       proto_type_cap(m->type));
 		w.err = -EMSGSIZE;
 		goto fail;
@@ -467,11 +458,11 @@ int proto_check_state(enum proto_state st, bool server, uint16_t type, char err[
 	const char *name = proto_type_name(type);
 	const char *peer = server ? "server" : "client";
 	if (!name) {
-		seterr(err, "unknown message type %u", type);
+		err_set(err, "unknown message type %u", type);
 		return PROTO_ERR_TYPE;
 	}
 	if (server ? !from_server(type) : !from_client(type)) {
-		seterr(err, "a %s does not send %s", peer, name);
+		err_set(err, "a %s does not send %s", peer, name);
 		return PROTO_ERR_STATE;
 	}
 	bool handshake = type == PROTO_HELLO || type == PROTO_HELLO_OK;
@@ -488,7 +479,7 @@ int proto_check_state(enum proto_state st, bool server, uint16_t type, char err[
 		break;
 	}
 	if (!ok) {
-		seterr(err, "%s from the %s is not allowed %s", name, peer,
+		err_set(err, "%s from the %s is not allowed %s", name, peer,
 		       st == PROTO_ST_HANDSHAKE ? "before the handshake"
 		       : st == PROTO_ST_READY ? "after the handshake"
 					      : "after BYE");
@@ -501,12 +492,12 @@ int proto_check_limits(const struct proto_limits *l, const struct proto_msg *m,
 		       size_t frame_len, char err[256])
 {
 	if (l->max_frame && frame_len > l->max_frame) {
-		seterr(err, "%s of %zu bytes exceeds this session's frame limit of %u bytes",
+		err_set(err, "%s of %zu bytes exceeds this session's frame limit of %u bytes",
 		       proto_type_name(m->type), frame_len, l->max_frame);
 		return -E2BIG;
 	}
 	if (m->type == PROTO_WANT && l->max_want && m->want.count > l->max_want) {
-		seterr(err, "want-set of %u entries exceeds this session's limit of %u",
+		err_set(err, "want-set of %u entries exceeds this session's limit of %u",
 		       m->want.count, l->max_want);
 		return -E2BIG;
 	}

@@ -19,6 +19,7 @@
 #include <xxhash.h>
 #include <zstd.h>
 
+#include "errbuf.h"
 #include "xalloc.h"
 
 struct tilecodec {
@@ -34,16 +35,6 @@ static const char *const codec_names[TCODEC_COUNT] = { "none", "lz4", "zstd" };
 static const char *const filter_names[TFILTER_COUNT] = { "none", "planes", "delta", "grad",
 							 "xor" };
 
-static void seterr(char *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
-static void seterr(char *err, const char *fmt, ...)
-{
-	if (!err)
-		return;
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(err, 256, fmt, ap);
-	va_end(ap);
-}
 
 size_t tilecodec_texel_bytes(enum tile_format f)
 {
@@ -101,25 +92,25 @@ static bool pow2_size(uint32_t t)
 int tilecodec_hdr_check(const struct tilecodec_hdr *h, char err[256])
 {
 	if (h->format == TFMT_NONE || h->format >= TFMT_COUNT) {
-		seterr(err, "unknown tile format %u", h->format);
+		err_set(err, "unknown tile format %u", h->format);
 		return -EINVAL;
 	}
 	if (h->codec >= TCODEC_COUNT) {
-		seterr(err, "unknown tile codec %u", h->codec);
+		err_set(err, "unknown tile codec %u", h->codec);
 		return -EINVAL;
 	}
 	if (h->filter >= TFILTER_COUNT) {
-		seterr(err, "unknown tile filter %u", h->filter);
+		err_set(err, "unknown tile filter %u", h->filter);
 		return -EINVAL;
 	}
 	if (!pow2_size(h->size)) {
-		seterr(err, "tile size %u is not a power of two in [1, %u]", h->size,
+		err_set(err, "tile size %u is not a power of two in [1, %u]", h->size,
 		       TILECODEC_MAX_SIZE);
 		return -EINVAL;
 	}
 	size_t raw = (size_t)h->size * h->size * format_bytes[h->format];
 	if (h->raw_len != raw) {
-		seterr(err, "raw length %u does not match a %u×%u %s tile (%zu bytes)", h->raw_len,
+		err_set(err, "raw length %u does not match a %u×%u %s tile (%zu bytes)", h->raw_len,
 		       h->size, h->size, format_names[h->format], raw);
 		return -EINVAL;
 	}
@@ -397,14 +388,14 @@ int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const 
 		return rc;
 	size_t raw = h->raw_len;
 	if (cap < raw) {
-		seterr(err, "output buffer of %zu bytes is smaller than the tile (%zu)", cap, raw);
+		err_set(err, "output buffer of %zu bytes is smaller than the tile (%zu)", cap, raw);
 		return -EINVAL;
 	}
 	void *dst = h->filter == TFILTER_NONE ? texels : scratch(tc, raw);
 	switch (h->codec) {
 	case TCODEC_NONE:
 		if (n != raw) {
-			seterr(err, "raw payload of %zu bytes, expected %zu", n, raw);
+			err_set(err, "raw payload of %zu bytes, expected %zu", n, raw);
 			return -EBADMSG;
 		}
 		if (h->filter == TFILTER_NONE)
@@ -414,12 +405,12 @@ int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const 
 		break;
 	case TCODEC_LZ4: {
 		if (n > (size_t)LZ4_MAX_INPUT_SIZE) {
-			seterr(err, "lz4 payload of %zu bytes is too large", n);
+			err_set(err, "lz4 payload of %zu bytes is too large", n);
 			return -EBADMSG;
 		}
 		int r = LZ4_decompress_safe(payload, dst, (int)n, (int)raw);
 		if (r < 0 || (size_t)r != raw) {
-			seterr(err, "corrupt lz4 payload (%d of %zu bytes)", r, raw);
+			err_set(err, "corrupt lz4 payload (%d of %zu bytes)", r, raw);
 			return -EBADMSG;
 		}
 		break;
@@ -427,7 +418,7 @@ int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const 
 	case TCODEC_ZSTD: {
 		size_t r = ZSTD_decompressDCtx(tc->dctx, dst, raw, payload, n);
 		if (ZSTD_isError(r) || r != raw) {
-			seterr(err, "corrupt zstd payload (%s)",
+			err_set(err, "corrupt zstd payload (%s)",
 			       ZSTD_isError(r) ? ZSTD_getErrorName(r) : "wrong length");
 			return -EBADMSG;
 		}
@@ -438,7 +429,7 @@ int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const 
 		tilecodec_unfilter(h->format, h->size, h->filter, dst, texels);
 	uint64_t sum = XXH3_64bits(texels, raw);
 	if (sum != h->checksum) {
-		seterr(err, "tile checksum mismatch: %016llx, expected %016llx",
+		err_set(err, "tile checksum mismatch: %016llx, expected %016llx",
 		       (unsigned long long)sum, (unsigned long long)h->checksum);
 		return -EILSEQ;
 	}
