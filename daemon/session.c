@@ -687,9 +687,17 @@ static void on_stats(struct session *s, uint32_t req)
 	stat_u(&b, "errors.sent", srv->errors_sent);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
-	uint64_t njobs = 0;
-	for (struct session *t = srv->sessions; t; t = t->next)
+	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0;
+	for (struct session *t = srv->sessions; t; t = t->next) {
 		njobs += t->njobs;
+		uint64_t p = session_pending_bytes(t);
+		pend += p;
+		pend_max = p > pend_max ? p : pend_max;
+		ready += t->nheap;
+	}
+	stat_u(&b, "sessions.pending_bytes", pend);
+	stat_u(&b, "sessions.pending_bytes.max", pend_max);
+	stat_u(&b, "sessions.ready_tiles", ready);
 	stat_u(&b, "prefetch.jobs", njobs);
 	for (size_t i = 0; i < srv->planets->n; i++) {
 		const struct planet *p = srv->planets->planets[i];
@@ -1017,9 +1025,10 @@ static void process_input(struct session *s)
 		if (r > 0)
 			r = proto_decode(s->in.data, s->in.len, &m, &need, err);
 		if (r < 0) {
-			uint16_t code = proto_code_from_err((int)r);
-			if (r == PROTO_ERR_STATE)
-				code = PROTO_E_STATE;
+			/* Malformed is `protocol` whatever the class, except a bad version. */
+			uint16_t code = r == PROTO_ERR_VERSION ? PROTO_E_VERSION
+					: r == PROTO_ERR_STATE ? PROTO_E_STATE
+							       : PROTO_E_PROTOCOL;
 			send_error(s, code, s->in.len >= PROTO_HDR ? h.type : 0, 0, "%s", err);
 			begin_close(s);
 			return;
