@@ -391,9 +391,11 @@ static void test_tiles_match_inprocess(void **state)
 		const struct proto_tile *t = &c->m.tile;
 		assert_int_equal(t->seq, 1);
 		assert_int_equal(t->planet_id, pid);
-		/* Coarse before fine within a layer (a colour tile waits for its height input, so
-		 * a finer height tile may be generated meanwhile). */
-		assert_true(t->key.ly >= last_ly[t->layer]);
+		/* Coarse before fine for the height layer, whose tiles have no inputs. (A colour
+		 * tile waits for its height input, and a worker may take a finer job before the
+		 * manager queues the coarser dependent, so colour order is not strict.) */
+		if (t->layer == 0)
+			assert_true(t->key.ly >= last_ly[0]);
 		last_ly[t->layer] = t->key.ly;
 		assert_int_equal(t->enc.codec, TCODEC_NONE); /* Unix socket: raw */
 		uint8_t *px = tile_texels(c);
