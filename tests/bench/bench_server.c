@@ -1,0 +1,304 @@
+/* bench_server — clipmapd over loopback TCP: round trip of a cached quad (4 tiles of 256²
+ * RGBA8: WANT sent → 4th TILE decoded), p50/p99; cached-tile throughput to 1 and to 50
+ * sessions. Starts build/clipmapd (next to this binary) on a temporary config.
+ */
+#include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "proto.h"
+#include "tilecodec.h"
+
+static const char planet[] =
+	"[planet]\nname = b\nbody = sphere\nradius = 1000000\ntile_size = 256\nmax_level = 12\n"
+	"[node base]\ntype = noise\nseed = 3\noctaves = 2\nwavelength = 300000\namplitude = 500\n"
+	"[node tint]\ntype = ramp\ninput = base\nstops = -500 0 0 255, 500 255 255 255\n"
+	"[layer color]\nnode = tint\nformat = rgba8\n";
+
+static uint64_t now_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
+
+static void die(const char *what)
+{
+	fprintf(stderr, "bench_server: %s\n", what);
+	exit(1);
+}
+
+static void write_file(const char *path, const char *text)
+{
+	FILE *f = fopen(path, "w");
+	if (!f || fputs(text, f) < 0 || fclose(f))
+		die(path);
+}
+
+struct cl {
+	int fd;
+	struct pbuf in;
+	struct tilecodec *tc;
+	uint8_t *px;
+};
+
+static struct cl *cl_tcp(int port)
+{
+	struct cl *c = calloc(1, sizeof *c);
+	c->fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons((uint16_t)port),
+				  .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+	if (connect(c->fd, (struct sockaddr *)&sa, sizeof sa))
+		die("connect");
+	int one = 1;
+	setsockopt(c->fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+	pbuf_init(&c->in);
+	c->tc = tilecodec_create();
+	c->px = malloc(256 * 256 * 4);
+	return c;
+}
+
+static void cl_send(struct cl *c, const struct proto_msg *m)
+{
+	struct pbuf b;
+	pbuf_init(&b);
+	if (proto_encode(&b, m, NULL) < 0 || send(c->fd, b.data, b.len, MSG_NOSIGNAL) != (ssize_t)b.len)
+		die("send");
+	pbuf_fini(&b);
+}
+
+/* Reads until one whole message is decoded; returns its type (TILEs are decoded and checked). */
+static uint16_t cl_next(struct cl *c)
+{
+	for (;;) {
+		struct proto_msg m = { 0 };
+		size_t need;
+		ssize_t r = proto_decode(c->in.data, c->in.len, &m, &need, NULL);
+		if (r < 0)
+			die("bad frame");
+		if (r > 0) {
+			uint16_t t = m.type;
+			if (t == PROTO_TILE &&
+			    tilecodec_decode(c->tc, &m.tile.enc, m.tile.payload, m.tile.payload_len, c->px,
+					     256 * 256 * 4, NULL))
+				die("tile decode");
+			if (t == PROTO_ERROR)
+				die(m.error.message);
+			proto_msg_fini(&m);
+			pbuf_consume(&c->in, (size_t)r);
+			return t;
+		}
+		pbuf_reserve(&c->in, 1 << 20);
+		ssize_t n = recv(c->fd, c->in.data + c->in.len, 1 << 20, 0);
+		if (n <= 0)
+			die("recv");
+		c->in.len += (size_t)n;
+	}
+}
+
+static void cl_until(struct cl *c, uint16_t type)
+{
+	while (cl_next(c) != type) {
+	}
+}
+
+static uint32_t cl_open(struct cl *c)
+{
+	struct proto_msg h = { .type = PROTO_HELLO, .hello = { .ver_min = 1, .ver_max = 1,
+							       .name = "bench" } };
+	cl_send(c, &h);
+	cl_until(c, PROTO_HELLO_OK);
+	struct proto_msg o = { .type = PROTO_OPEN, .open = { .req = 1, .name = "b" } };
+	cl_send(c, &o);
+	cl_until(c, PROTO_OPENED);
+	return 1;
+}
+
+static void want(struct cl *c, uint32_t seq, const struct proto_want_entry *e, uint32_t n)
+{
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = 1, .seq = seq, .count = n, .entries = e } };
+	cl_send(c, &m);
+}
+
+static uint32_t set(struct proto_want_entry *e, int ly, uint32_t x0, uint32_t y0, uint32_t w,
+		    uint32_t h)
+{
+	uint32_t n = 0;
+	for (uint32_t y = y0; y < y0 + h; y++)
+		for (uint32_t x = x0; x < x0 + w; x++)
+			e[n++] = (struct proto_want_entry){ .layer = 0, .cls = 1, .lx = (uint8_t)(ly + 1),
+							    .ly = (uint8_t)ly, .x = x, .y = y };
+	return n;
+}
+
+static int cmp_u64(const void *a, const void *b)
+{
+	uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+	return x < y ? -1 : x > y;
+}
+
+int main(void)
+{
+	signal(SIGPIPE, SIG_IGN);
+	char dir[] = "/tmp/clipmapd-bench-XXXXXX";
+	if (!mkdtemp(dir))
+		die("mkdtemp");
+	char p[512], conf[PATH_MAX], logp[PATH_MAX];
+	snprintf(p, sizeof p, "%s/planets", dir);
+	mkdir(p, 0700);
+	snprintf(p, sizeof p, "%s/planets/b.ini", dir);
+	write_file(p, planet);
+	snprintf(conf, sizeof conf, "%s/d.conf", dir);
+	snprintf(logp, sizeof logp, "%s/log", dir);
+	char exe[PATH_MAX];
+	ssize_t l = readlink("/proc/self/exe", exe, sizeof exe - 20);
+	if (l <= 0)
+		die("readlink");
+	exe[l] = 0;
+	strcpy(strrchr(exe, '/'), "/../clipmapd");
+	write_file(conf, "[listen]\nunix =\ntcp = 127.0.0.1:0\n[engine]\nplanets = planets\n"
+			 "cache_mb = 1024\n[session]\nmax_rate = 0\nmax_pending_kb = 16384\n");
+	pid_t pid = fork();
+	if (pid == 0) {
+		int fd = open(logp, O_WRONLY | O_CREAT | O_TRUNC, 0600);
+		dup2(fd, 2);
+		execl(exe, exe, "-c", conf, (char *)NULL);
+		_exit(127);
+	}
+	int port = 0;
+	for (int i = 0; i < 1000 && !port; i++) {
+		usleep(10000);
+		FILE *f = fopen(logp, "r");
+		char line[512];
+		while (f && fgets(line, sizeof line, f)) {
+			char *t = strstr(line, "listening on tcp:127.0.0.1:");
+			if (t)
+				port = atoi(t + strlen("listening on tcp:127.0.0.1:"));
+		}
+		if (f)
+			fclose(f);
+	}
+	if (!port)
+		die("daemon did not start");
+
+	/* Round trip of a cached quad: alternate between two quads so each WANT asks for 4 tiles. */
+	struct cl *c = cl_tcp(port);
+	cl_open(c);
+	struct proto_want_entry qa[4], qb[4];
+	set(qa, 5, 10, 10, 2, 2);
+	set(qb, 5, 20, 10, 2, 2);
+	uint32_t seq = 0;
+	for (int i = 0; i < 2; i++) { /* warm the cache */
+		want(c, ++seq, i ? qb : qa, 4);
+		for (int k = 0; k < 4; k++)
+			cl_until(c, PROTO_TILE);
+	}
+	enum { N = 2000 };
+	static uint64_t lat[N];
+	for (int i = 0; i < N; i++) {
+		uint64_t t0 = now_ns();
+		want(c, ++seq, i & 1 ? qb : qa, 4);
+		for (int k = 0; k < 4; k++)
+			cl_until(c, PROTO_TILE);
+		lat[i] = now_ns() - t0;
+	}
+	qsort(lat, N, sizeof lat[0], cmp_u64);
+	printf("server/cached quad 4x256² rgba8 loopback tcp round trip: p50 %.3f ms, p99 %.3f ms\n",
+	       lat[N / 2] * 1e-6, lat[N * 99 / 100] * 1e-6);
+
+	/* Throughput to one session: 512 cached tiles, alternating two sets. */
+	static struct proto_want_entry big[2][512];
+	set(big[0], 7, 0, 10, 32, 16);
+	set(big[1], 7, 64, 10, 32, 16);
+	for (int i = 0; i < 2; i++) {
+		want(c, ++seq, big[i], 512);
+		for (int k = 0; k < 512; k++)
+			cl_until(c, PROTO_TILE);
+	}
+	uint64_t t0 = now_ns();
+	int rounds = 6;
+	for (int r = 0; r < rounds; r++) {
+		want(c, ++seq, big[r & 1], 512);
+		for (int k = 0; k < 512; k++)
+			cl_until(c, PROTO_TILE);
+	}
+	double dt = (now_ns() - t0) * 1e-9;
+	printf("server/cached tiles 256² rgba8 to 1 session: %.0f tiles/s (%.2f GB/s)\n",
+	       rounds * 512 / dt, rounds * 512 * 262144.0 / dt * 1e-9);
+
+	/* 50 sessions, each 64 cached tiles per round out of the same 512. */
+	enum { NS = 50 };
+	struct cl *s[NS];
+	for (int i = 0; i < NS; i++) {
+		s[i] = cl_tcp(port);
+		cl_open(s[i]);
+	}
+	t0 = now_ns();
+	uint64_t tiles = 0;
+	for (int r = 0; r < 4; r++) {
+		for (int i = 0; i < NS; i++)
+			want(s[i], (uint32_t)r + 1, big[r & 1] + (i * 8) % 448, 64);
+		int left[NS];
+		for (int i = 0; i < NS; i++)
+			left[i] = 64;
+		int busy = NS;
+		while (busy) {
+			struct pollfd pf[NS];
+			for (int i = 0; i < NS; i++)
+				pf[i] = (struct pollfd){ .fd = left[i] ? s[i]->fd : -1, .events = POLLIN };
+			if (poll(pf, NS, 10000) <= 0)
+				die("poll timeout");
+			for (int i = 0; i < NS; i++) {
+				if (!(pf[i].revents & POLLIN))
+					continue;
+				/* one recv worth, then decode whatever is complete */
+				pbuf_reserve(&s[i]->in, 1 << 20);
+				ssize_t n = recv(s[i]->fd, s[i]->in.data + s[i]->in.len, 1 << 20, 0);
+				if (n <= 0)
+					die("recv");
+				s[i]->in.len += (size_t)n;
+				for (;;) {
+					struct proto_msg m = { 0 };
+					size_t need;
+					ssize_t rr = proto_decode(s[i]->in.data, s[i]->in.len, &m, &need, NULL);
+					if (rr < 0)
+						die("bad frame");
+					if (rr == 0)
+						break;
+					if (m.type == PROTO_TILE) {
+						tiles++;
+						if (--left[i] == 0)
+							busy--;
+					}
+					proto_msg_fini(&m);
+					pbuf_consume(&s[i]->in, (size_t)rr);
+				}
+			}
+		}
+	}
+	dt = (now_ns() - t0) * 1e-9;
+	printf("server/cached tiles 256² rgba8 to 50 sessions: %.0f tiles/s (%.2f GB/s)\n",
+	       tiles / dt, tiles * 262144.0 / dt * 1e-9);
+
+	kill(pid, SIGTERM);
+	int st;
+	waitpid(pid, &st, 0);
+	char cmd[128];
+	snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+	if (system(cmd) != 0)
+		return 1;
+	return WIFEXITED(st) && WEXITSTATUS(st) == 0 ? 0 : 1;
+}

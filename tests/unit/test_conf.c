@@ -1,0 +1,124 @@
+/* test_conf — clipmapd.conf parsing: defaults, every key of the shipped file, relative paths,
+ * and the errors a user gets (file:line: key: message) for bad values, unknown keys and
+ * sections, and a non-loopback listener without a token. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <string.h>
+
+#include "conf.h"
+
+static void parse_fails(const char *text, const char *expect)
+{
+	struct conf c;
+	char err[256] = "";
+	int rc = conf_parse("/etc/x/d.conf", text, strlen(text), &c, err);
+	if (rc == 0 || !strstr(err, expect))
+		fail_msg("expected error containing \"%s\", got rc=%d \"%s\"", expect, rc, err);
+}
+
+static void test_defaults(void **state)
+{
+	(void)state;
+	struct conf c;
+	char err[256];
+	assert_int_equal(conf_parse("/etc/x/d.conf", "", 0, &c, err), 0);
+	assert_string_equal(c.unix_path, "/run/clipmapd/clipmapd.sock");
+	assert_int_equal(c.ntcp, 1);
+	assert_string_equal(c.tcp[0], "127.0.0.1:7878");
+	assert_null(c.token_file);
+	assert_int_equal(c.cache_bytes, (size_t)1024 << 20);
+	assert_int_equal(c.max_want, 4096);
+	assert_int_equal(c.log_level, LOG_INFO);
+	conf_fini(&c);
+}
+
+static void test_shipped_file(void **state)
+{
+	(void)state;
+	struct conf c;
+	char err[256] = "";
+	int rc = conf_load("conf/clipmapd.conf", &c, err);
+	if (rc)
+		fail_msg("%s", err);
+	assert_string_equal(c.planets_dir, "/etc/clipmap/planets");
+	assert_int_equal(c.max_pending, (uint64_t)8192 << 10);
+	conf_fini(&c);
+}
+
+static void test_values(void **state)
+{
+	(void)state;
+	const char *t = "[listen]\nunix =\ntcp = 127.0.0.1:0, [::1]:9000, 10.0.0.1:7878\n"
+			"token_file = secret\nrequire_token = tcp\nunix_mode = 0600\n"
+			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\n"
+			"[session]\nmax_pending_kb = 128\nmax_rate = 0\ncompress = never\n"
+			"[log]\nlevel = debug\n";
+	struct conf c;
+	char err[256] = "";
+	int rc = conf_parse("/etc/x/d.conf", t, strlen(t), &c, err);
+	if (rc)
+		fail_msg("%s", err);
+	assert_null(c.unix_path);
+	assert_int_equal(c.ntcp, 3);
+	assert_string_equal(c.tcp[1], "[::1]:9000");
+	assert_string_equal(c.token_file, "/etc/x/secret");
+	assert_string_equal(c.planets_dir, "/etc/x/p");
+	assert_int_equal(c.require_token, CONF_TOKEN_TCP);
+	assert_int_equal(c.unix_mode, 0600);
+	assert_int_equal(c.workers, 3);
+	assert_int_equal(c.cache_bytes, (size_t)64 << 20);
+	assert_int_equal(c.max_pending, 128u << 10);
+	assert_int_equal(c.compress, CONF_COMPRESS_NEVER);
+	assert_int_equal(c.log_level, LOG_DEBUG);
+	conf_fini(&c);
+}
+
+static void test_errors(void **state)
+{
+	(void)state;
+	parse_fails("[listen]\nport = 1\n", "/etc/x/d.conf:2: port: unknown key in [listen]");
+	parse_fails("[server]\n", "/etc/x/d.conf:1: unknown section [server]");
+	parse_fails("[engine]\nworkers = lots\n", "d.conf:2: workers: \"lots\": expected an integer");
+	parse_fails("[engine]\ncache_mb = 1\n", "d.conf:2: cache_mb:");
+	parse_fails("\n[listen]\ntcp = localhost\n", "d.conf:3: tcp: \"localhost\" is not host:port");
+	parse_fails("[listen]\ntcp = 1.2.3.4:99999\n", "is not host:port");
+	parse_fails("[listen]\ntcp = 0.0.0.0:7878\n",
+		    "d.conf:2: tcp: listener 0.0.0.0:7878 requires a token: set token_file");
+	parse_fails("[listen]\nrequire_token = tcp\n", "requires a token");
+	parse_fails("[listen]\nrequire_token = maybe\n", "d.conf:2: require_token: \"maybe\"");
+	parse_fails("[log]\nlevel = loud\n", "d.conf:2: level:");
+	parse_fails("[listen]\nunix =\ntcp =\n", "no listener");
+	parse_fails("[session]\nmax_want = 5000\n", "max_want");
+	parse_fails("[session]\nmax_frame_kb = 8\n", "d.conf:2: max_frame_kb:");
+	parse_fails("[listen]\nunix_mode = rw\n", "unix_mode");
+	struct conf c;
+	char err[256] = "";
+	assert_true(conf_load("/nonexistent/clipmapd.conf", &c, err) < 0);
+	assert_non_null(strstr(err, "/nonexistent/clipmapd.conf"));
+}
+
+static void test_loopback(void **state)
+{
+	(void)state;
+	assert_true(conf_addr_is_loopback("127.0.0.1:1"));
+	assert_true(conf_addr_is_loopback("127.9.9.9:1"));
+	assert_true(conf_addr_is_loopback("[::1]:1"));
+	assert_true(conf_addr_is_loopback("localhost:1"));
+	assert_false(conf_addr_is_loopback("0.0.0.0:1"));
+	assert_false(conf_addr_is_loopback("[::]:1"));
+	assert_false(conf_addr_is_loopback("192.168.1.1:1"));
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_defaults), cmocka_unit_test(test_shipped_file),
+		cmocka_unit_test(test_values),	 cmocka_unit_test(test_errors),
+		cmocka_unit_test(test_loopback),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
