@@ -560,6 +560,11 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 	o.planet = argv[optind];
 	o.points = pts;
 
+	struct net_conn *conn;
+	if (connect_or_complain(t, &conn)) {
+		free(pts);
+		return 1;
+	}
 	/* Ctrl-C arrives as a readable signalfd: no work in any handler. */
 	sigset_t set;
 	sigemptyset(&set);
@@ -570,12 +575,7 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 		sfd = signalfd(-1, &set, SFD_CLOEXEC);
 	if (sfd < 0) {
 		fprintf(stderr, "clipmapctl prefetch: signalfd: %s\n", strerror(errno));
-		free(pts);
-		return 1;
-	}
-	struct net_conn *conn;
-	if (connect_or_complain(t, &conn)) {
-		close(sfd);
+		net_close(conn);
 		free(pts);
 		return 1;
 	}

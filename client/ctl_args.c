@@ -11,6 +11,16 @@
 
 #include "xalloc.h"
 
+void ctl_errf(char *err, const char *fmt, ...)
+{
+	if (err) {
+		va_list ap;
+		va_start(ap, fmt);
+		vsnprintf(err, 256, fmt, ap);
+		va_end(ap);
+	}
+}
+
 __attribute__((format(printf, 2, 3))) static int bad(char *err, const char *fmt, ...)
 {
 	if (err) {
@@ -174,11 +184,7 @@ int ctl_find_layer(const struct proto_planet *p, const char *s, char err[256])
 		size_t l = strlen(names);
 		snprintf(names + l, sizeof names - l, "%s%s", i ? ", " : "", p->layers[i].name);
 	}
-	if (err) {
-		int r = snprintf(err, 256, "planet %.64s has no layer \"%.64s\" (layers: %s)",
-				 p->name, s, names);
-		(void)r;
-	}
+	bad(err, "planet %s has no layer \"%s\" (layers: %s)", p->name, s, names);
 	return -ENOENT;
 }
 

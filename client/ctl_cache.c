@@ -127,7 +127,7 @@ int ctl_cache_ls(struct net_conn *c, const struct ctl_cache_opts *o, int timeout
 		if (rc)
 			break;
 		if (m.cache_entries.req != req) {
-			snprintf(err, 256, "%s: CACHE_ENTRIES for request %u, expected %u",
+			ctl_errf(err, "%s: CACHE_ENTRIES for request %u, expected %u",
 				 net_peer(c), m.cache_entries.req, req);
 			rc = -EPROTO;
 			proto_msg_fini(&m);
@@ -148,7 +148,7 @@ int ctl_cache_ls(struct net_conn *c, const struct ctl_cache_opts *o, int timeout
 	if (rc == 0) {
 		rc = ctl_cache_print(all, n, total, &op.opened.planet, o->json, out);
 		if (rc)
-			snprintf(err, 256, "writing the listing: %s", strerror(-rc));
+			ctl_errf(err, "writing the listing: %s", strerror(-rc));
 	}
 	free(all);
 	proto_msg_fini(&op);

@@ -81,12 +81,12 @@ static int handle(struct run *r, const struct proto_msg *m, char err[256])
 	case PROTO_JOB_DONE: show(r, true); return 1;
 	case PROTO_JOB_CANCELLED:
 		show(r, true);
-		snprintf(err, 256, "%s: the prefetch job was cancelled by the daemon",
+		ctl_errf(err, "%s: the prefetch job was cancelled by the daemon",
 			 net_peer(r->c));
 		return -EIO;
 	case PROTO_JOB_FAILED:
 		show(r, true);
-		snprintf(err, 256, "%s: the prefetch job failed after %llu of %llu tiles",
+		ctl_errf(err, "%s: the prefetch job failed after %llu of %llu tiles",
 			 net_peer(r->c), (unsigned long long)r->last.done,
 			 (unsigned long long)r->last.total);
 		/* an ERROR with the reason should follow; take it if it comes at once */
@@ -131,7 +131,7 @@ static int cancel(struct run *r, char err[256])
 				break;
 		}
 	}
-	snprintf(err, 256, "prefetch interrupted after %llu of %llu tiles",
+	ctl_errf(err, "prefetch interrupted after %llu of %llu tiles",
 		 (unsigned long long)r->last.done, (unsigned long long)r->last.total);
 	return -ECANCELED;
 }
@@ -148,7 +148,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	uint64_t mask = 0;
 	rc = ctl_parse_layers(o->layers, &op.opened.planet, &mask, err);
 	if (rc == 0 && o->lmax > op.opened.planet.max_level) {
-		snprintf(err, 256, "--levels %u-%u: planet %.64s has levels 0-%u", o->lmin, o->lmax,
+		ctl_errf(err, "--levels %u-%u: planet %.64s has levels 0-%u", o->lmin, o->lmax,
 			 o->planet, op.opened.planet.max_level);
 		rc = -EINVAL;
 	}
@@ -193,7 +193,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		int np = ui->stop_fd >= 0 ? 2 : 1;
 		int left = (int)((last_msg + stall / 1000.0 - now_s()) * 1000);
 		if (left <= 0) {
-			snprintf(err, 256, "%s: no progress from the daemon for %d s", net_peer(c),
+			ctl_errf(err, "%s: no progress from the daemon for %d s", net_peer(c),
 				 stall / 1000);
 			rc = -ETIMEDOUT;
 			break;
@@ -201,7 +201,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		int pr = poll(p, (nfds_t)np, left < 1000 ? left : 1000);
 		if (pr < 0 && errno != EINTR) {
 			rc = -errno;
-			snprintf(err, 256, "poll: %s", strerror(errno));
+			ctl_errf(err, "poll: %s", strerror(errno));
 			break;
 		}
 		if (pr > 0 && np == 2 && (p[1].revents & POLLIN)) {

@@ -270,7 +270,7 @@ int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, cha
 		return rc;
 	rc = ctl_status_print(&m.stats, net_peer(c), json, out);
 	if (rc)
-		snprintf(err, 256, "writing the status: %s", strerror(-rc));
+		ctl_errf(err, "writing the status: %s", strerror(-rc));
 	proto_msg_fini(&m);
 	return rc;
 }

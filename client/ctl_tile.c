@@ -78,7 +78,7 @@ int ctl_tile_fetch(struct net_conn *c, const struct ctl_tile_req *r, int timeout
 	}
 	if (!grid_level_valid(r->lx, r->ly) || r->ly > p->max_level ||
 	    r->x >= grid_tiles_x(r->lx) || r->y >= grid_tiles_y(r->ly)) {
-		snprintf(err, 256, "tile (%u, %u, %u, %u) is not in planet %.64s: need "
+		ctl_errf(err, "tile (%u, %u, %u, %u) is not in planet %.64s: need "
 			 "0 <= ly <= %u, 0 <= lx <= ly + 1, x < 2^lx, y < 2^ly", r->lx, r->ly,
 			 r->x, r->y, p->name, p->max_level);
 		proto_msg_fini(&op);
@@ -113,7 +113,7 @@ int ctl_tile_fetch(struct net_conn *c, const struct ctl_tile_req *r, int timeout
 		if (m.type == PROTO_TILE_FAIL && m.tile_fail.planet_id == pid &&
 		    same_key(&m.tile_fail.key, m.tile_fail.layer, r, (uint8_t)layer)) {
 			const char *cn = proto_code_name(m.tile_fail.code);
-			snprintf(err, 256, "%s: cannot make %.32s tile (%u, %u, %u, %u) of %.64s: "
+			ctl_errf(err, "%s: cannot make %.32s tile (%u, %u, %u, %u) of %.64s: "
 				 "%s: %.120s", net_peer(c), r->layer, r->lx, r->ly, r->x, r->y,
 				 r->planet, cn ? cn : "internal",
 				 m.tile_fail.message ? m.tile_fail.message : "");
@@ -126,7 +126,7 @@ int ctl_tile_fetch(struct net_conn *c, const struct ctl_tile_req *r, int timeout
 			void *tex = xmalloc(m.tile.enc.raw_len ? m.tile.enc.raw_len : 1);
 			rc = net_tile_decode(c, &m.tile, tex, m.tile.enc.raw_len, err);
 			if (rc == 0 && ctl_tile_image(m.tile.enc.format, T, tex, out)) {
-				snprintf(err, 256, "%s: tile in unknown format %u", net_peer(c),
+				ctl_errf(err, "%s: tile in unknown format %u", net_peer(c),
 					 m.tile.enc.format);
 				rc = -EPROTO;
 			}

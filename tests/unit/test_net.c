@@ -15,7 +15,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <signal.h>
 #include <sys/socket.h>
+#include <sys/wait.h>
 #include <sys/un.h>
 #include <time.h>
 #include <unistd.h>
@@ -48,6 +50,7 @@ struct srv {
 	struct proto_prefetch seen_pf;
 	uint64_t seen_layers;
 	bool seen_cancel;
+	pid_t kill_pid; /* > 0: script_prefetch_sigint sends it SIGINT */
 };
 
 static int srv_recv(struct srv *s, struct proto_msg *m)
@@ -701,6 +704,133 @@ static void prefetch_bad_levels(void **state)
 	assert_int_equal(srv_join(&s), 0);
 }
 
+
+/* ---- the clipmapctl program ---------------------------------------------------------------- */
+
+/* build/clipmapctl next to build/tests/test_net, or NULL when it was not built. */
+static const char *ctl_path(char *buf, size_t n)
+{
+	ssize_t l = readlink("/proc/self/exe", buf, n - 1);
+	if (l <= 0)
+		return NULL;
+	buf[l] = '\0';
+	for (int i = 0; i < 2; i++) {
+		char *sl = strrchr(buf, '/');
+		if (!sl)
+			return NULL;
+		*sl = '\0';
+	}
+	if (strlen(buf) + 12 >= n)
+		return NULL;
+	strcat(buf, "/clipmapctl");
+	return access(buf, X_OK) == 0 ? buf : NULL;
+}
+
+/* Starts argv with stdout and stderr into one pipe (*out_fd). */
+static pid_t spawn(char *const argv[], int *out_fd)
+{
+	int p[2];
+	assert_int_equal(pipe(p), 0);
+	pid_t pid = fork();
+	assert_true(pid >= 0);
+	if (pid == 0) {
+		dup2(p[1], 1);
+		dup2(p[1], 2);
+		close(p[0]);
+		close(p[1]);
+		execv(argv[0], argv);
+		_exit(127);
+	}
+	close(p[1]);
+	*out_fd = p[0];
+	return pid;
+}
+
+static int finish(pid_t pid, int fd, char *out, size_t n)
+{
+	size_t len = 0;
+	ssize_t r;
+	while ((r = read(fd, out + len, n - 1 - len)) > 0)
+		len += (size_t)r;
+	out[len] = '\0';
+	close(fd);
+	int st;
+	assert_int_equal(waitpid(pid, &st, 0), pid);
+	return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+}
+
+static int script_prefetch_sigint(struct srv *s)
+{
+	if (srv_handshake(s) || open_reply(s))
+		return -1;
+	struct proto_msg m = { 0 };
+	if (srv_recv(s, &m) || m.type != PROTO_PREFETCH) {
+		proto_msg_fini(&m);
+		return -2;
+	}
+	uint32_t id = m.prefetch.id;
+	proto_msg_fini(&m);
+	if (progress(s, id, PROTO_JOB_RUNNING, 3, 1000))
+		return -3;
+	/* the client blocked SIGINT into its signalfd before it sent PREFETCH */
+	kill(s->kill_pid, SIGINT);
+	if (srv_recv(s, &m) || m.type != PROTO_PREFETCH_CANCEL || m.prefetch_cancel.req != id) {
+		proto_msg_fini(&m);
+		return -4;
+	}
+	s->seen_cancel = true;
+	proto_msg_fini(&m);
+	return progress(s, id, PROTO_JOB_CANCELLED, 4, 1000) ? -5 : srv_drain(s);
+}
+
+/* Exit codes and messages of the real program: no daemon → 1 with the hint; bad arguments
+ * → 2; Ctrl-C during a prefetch → PREFETCH_CANCEL, then 130. */
+static void cli_exit_codes(void **state)
+{
+	(void)state;
+	char exe[512], out[4096];
+	if (!ctl_path(exe, sizeof exe))
+		skip(); /* build/clipmapctl not built (make all builds it) */
+	int fd;
+	char *a1[] = { exe, "-s", "/nonexistent/clipmapd.sock", "status", NULL };
+	pid_t pid = spawn(a1, &fd);
+	int rc = finish(pid, fd, out, sizeof out);
+	assert_int_equal(rc, 1);
+	assert_non_null(strstr(out, "cannot connect to /nonexistent/clipmapd.sock: No such file "
+				    "or directory \xe2\x80\x94 is clipmapd running? (-s SOCKET)"));
+	char *a2[] = { exe, "prefetch", "earth", "--bbox", "1,2,3", "--levels", "0-3", NULL };
+	pid = spawn(a2, &fd);
+	rc = finish(pid, fd, out, sizeof out);
+	assert_int_equal(rc, 2);
+	assert_non_null(strstr(out, "--bbox wants W,S,E,N"));
+
+	char dir[] = "/tmp/test_net_XXXXXX";
+	assert_non_null(mkdtemp(dir));
+	char sock[64];
+	snprintf(sock, sizeof sock, "%s/d.sock", dir);
+	int l = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	struct sockaddr_un a = { .sun_family = AF_UNIX };
+	snprintf(a.sun_path, sizeof a.sun_path, "%s", sock);
+	assert_int_equal(bind(l, (struct sockaddr *)&a, sizeof a), 0);
+	assert_int_equal(listen(l, 4), 0);
+	char *a3[] = { exe, "-s", sock, "prefetch", "testplanet", "--bbox", "0,0,1,1",
+		       "--levels", "0-2", NULL };
+	struct srv s = { .listen_fd = l, .script = script_prefetch_sigint };
+	pbuf_init(&s.rb);
+	pid = spawn(a3, &fd);
+	s.kill_pid = pid;
+	assert_int_equal(pthread_create(&s.th, NULL, srv_main, &s), 0);
+	rc = finish(pid, fd, out, sizeof out);
+	assert_int_equal(srv_join(&s), 0);
+	assert_true(s.seen_cancel);
+	assert_int_equal(rc, 130);
+	assert_non_null(strstr(out, "prefetch: 3/1000 tiles"));
+	assert_non_null(strstr(out, "interrupted after 4 of 1000 tiles"));
+	close(l);
+	unlink(sock);
+	rmdir(dir);
+}
+
 /* ---- parsers and formatters ----------------------------------------------------------------- */
 
 static void parse_bbox_path_levels(void **state)
@@ -895,6 +1025,7 @@ int main(void)
 		cmocka_unit_test(prefetch_done),
 		cmocka_unit_test(prefetch_interrupted),
 		cmocka_unit_test(prefetch_bad_levels),
+		cmocka_unit_test(cli_exit_codes),
 		cmocka_unit_test(parse_bbox_path_levels),
 		cmocka_unit_test(progress_line),
 		cmocka_unit_test(status_table_and_json),
