@@ -43,8 +43,11 @@ static void fmt_f64(double v, char *out, size_t n)
 static void fmt_value(const struct proto_stat *s, char *out, size_t n)
 {
 	const char *k = s->key;
-	bool dur = strcmp(k, "uptime") == 0 || ends_with(k, "uptime_s") || ends_with(k, ".uptime");
-	bool bytes = ends_with(k, "bytes") || ends_with(k, "budget") || ends_with(k, ".capacity");
+	bool dur = strcmp(k, "uptime") == 0 || strcmp(k, "uptime_s") == 0 || ends_with(k, ".uptime") ||
+		   ends_with(k, ".uptime_s");
+	bool bytes = strcmp(k, "bytes") == 0 || strncmp(k, "bytes.", 6) == 0 ||
+		     ends_with(k, ".bytes") || strstr(k, ".bytes.") || ends_with(k, "_bytes") ||
+		     ends_with(k, ".budget");
 	if (s->kind == PROTO_STAT_STR) {
 		snprintf(out, n, "%s", s->s ? s->s : "");
 	} else if (s->kind == PROTO_STAT_U64) {

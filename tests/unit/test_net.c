@@ -179,7 +179,7 @@ static const struct proto_planet test_planet = { .name = "testplanet", .descript
 						 .layers = test_layers };
 
 static const struct proto_stat test_stats[] = {
-	{ .key = "uptime", .kind = PROTO_STAT_U64, .u = 3723 },
+	{ .key = "uptime_s", .kind = PROTO_STAT_F64, .f = 3723.2 },
 	{ .key = "sessions", .kind = PROTO_STAT_U64, .u = 3 },
 	{ .key = "version", .kind = PROTO_STAT_STR, .s = "clipmapd 0.1 \"dev\"" },
 	{ .key = "sched.queued.visible", .kind = PROTO_STAT_U64, .u = 2 },
@@ -189,10 +189,11 @@ static const struct proto_stat test_stats[] = {
 	{ .key = "cache.hits", .kind = PROTO_STAT_U64, .u = 15 },
 	{ .key = "cache.misses", .kind = PROTO_STAT_U64, .u = 5 },
 	{ .key = "cache.evictions", .kind = PROTO_STAT_U64, .u = 7 },
-	{ .key = "node.terrain.generated", .kind = PROTO_STAT_U64, .u = 1234 },
-	{ .key = "node.terrain.mean_ms", .kind = PROTO_STAT_F64, .f = 3.25 },
-	{ .key = "node.colour.generated", .kind = PROTO_STAT_U64, .u = 99 },
-	{ .key = "node.colour.mean_ms", .kind = PROTO_STAT_F64, .f = 0.5 },
+	{ .key = "bytes.sent", .kind = PROTO_STAT_U64, .u = UINT64_C(5) << 30 },
+	{ .key = "node.earth.terrain.generated", .kind = PROTO_STAT_U64, .u = 1234 },
+	{ .key = "node.earth.terrain.mean_ms", .kind = PROTO_STAT_F64, .f = 3.25 },
+	{ .key = "node.earth.colour.generated", .kind = PROTO_STAT_U64, .u = 99 },
+	{ .key = "node.earth.colour.mean_ms", .kind = PROTO_STAT_F64, .f = 0.5 },
 };
 
 static int reply_stats(struct srv *s)
@@ -205,7 +206,7 @@ static int reply_stats(struct srv *s)
 	uint32_t req = m.stats_req.req;
 	proto_msg_fini(&m);
 	struct proto_msg st = { .type = PROTO_STATS,
-				.stats = { .req = req, .count = 14, .items = test_stats } };
+				.stats = { .req = req, .count = 15, .items = test_stats } };
 	return srv_send(s, &st);
 }
 
@@ -266,7 +267,7 @@ static void handshake_token_bytewise(void **state)
 	assert_int_equal(ctl_status_run(c, true, 5000, f, err), 0);
 	fclose(f);
 	/* the whole STATS decoded from single bytes */
-	assert_non_null(strstr(buf, "\"node.colour.mean_ms\": 0.5,"));
+	assert_non_null(strstr(buf, "\"node.earth.colour.mean_ms\": 0.5,"));
 	free(buf);
 	net_close(c);
 	assert_int_equal(srv_join(&s), 0);
@@ -353,7 +354,7 @@ static int script_eof_mid_frame(struct srv *s)
 	struct pbuf b;
 	pbuf_init(&b);
 	struct proto_msg st = { .type = PROTO_STATS,
-				.stats = { .req = 1, .count = 14, .items = test_stats } };
+				.stats = { .req = 1, .count = 15, .items = test_stats } };
 	proto_encode(&b, &st, NULL);
 	int rc = srv_write(s, b.data, b.len / 2); /* then close */
 	pbuf_fini(&b);
@@ -922,7 +923,7 @@ static void progress_line(void **state)
 static void status_table_and_json(void **state)
 {
 	(void)state;
-	struct proto_stats st = { .req = 1, .count = 14, .items = test_stats };
+	struct proto_stats st = { .req = 1, .count = 15, .items = test_stats };
 	FILE *f;
 	size_t n;
 	char *buf;
@@ -930,7 +931,8 @@ static void status_table_and_json(void **state)
 	assert_int_equal(ctl_status_print(&st, "/run/x.sock", false, f), 0);
 	fclose(f);
 	assert_non_null(strstr(buf, "clipmapd at /run/x.sock\n"));
-	assert_non_null(strstr(buf, "  uptime                  1h02m03s\n"));
+	assert_non_null(strstr(buf, "  uptime_s                1h02m03s\n"));
+	assert_non_null(strstr(buf, "bytes\n  sent                    5368709120   (5.0 GiB)\n"));
 	assert_non_null(strstr(buf, "  sessions                3\n"));
 	assert_non_null(strstr(buf, "sched\n  queued.visible          2\n"));
 	assert_non_null(strstr(buf, "  bytes                   3145728      (3.0 MiB)\n"));
@@ -938,17 +940,17 @@ static void status_table_and_json(void **state)
 	assert_non_null(strstr(buf, "  misses                  5\n  hit ratio               75.0 %\n"));
 	/* the node table: one row per node, columns aligned under their headers */
 	assert_non_null(strstr(buf, "nodes                      generated     mean_ms\n"));
-	assert_non_null(strstr(buf, "  terrain                       1234       3.250\n"));
-	assert_non_null(strstr(buf, "  colour                          99       0.500\n"));
+	assert_non_null(strstr(buf, "  earth.terrain                 1234       3.250\n"));
+	assert_non_null(strstr(buf, "  earth.colour                    99       0.500\n"));
 	free(buf);
 
 	f = capture(&buf, &n);
 	assert_int_equal(ctl_status_print(&st, NULL, true, f), 0);
 	fclose(f);
 	assert_int_equal(buf[0], '{');
-	assert_non_null(strstr(buf, "\"uptime\": 3723,"));
+	assert_non_null(strstr(buf, "\"uptime_s\": 3723.1999999999998,"));
 	assert_non_null(strstr(buf, "\"version\": \"clipmapd 0.1 \\\"dev\\\"\","));
-	assert_non_null(strstr(buf, "\"node.terrain.mean_ms\": 3.25,"));
+	assert_non_null(strstr(buf, "\"node.earth.terrain.mean_ms\": 3.25,"));
 	assert_non_null(strstr(buf, "\"cache.hit_ratio\": 0.75\n}\n"));
 	free(buf);
 }
