@@ -1,0 +1,207 @@
+/* clipmapd — the daemon's main: arguments, configuration, the planet set, signals through a
+ * signalfd watched by the event loop (SIGTERM/SIGINT: graceful stop; SIGHUP: reload the
+ * planet files), and systemd notification (READY, RELOADING, STOPPING, WATCHDOG).
+ * Exit status: 0 after a clean stop, 1 on a runtime failure, 2 on bad usage or configuration.
+ */
+#include <errno.h>
+#include <fcntl.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/signalfd.h>
+#include <systemd/sd-daemon.h>
+#include <unistd.h>
+
+#include "cache.h"
+#include "conf.h"
+#include "log.h"
+#include "planets.h"
+#include "sched.h"
+#include "server.h"
+
+#define DEFAULT_CONF "/etc/clipmap/clipmapd.conf"
+
+struct daemon {
+	struct conf conf;
+	struct server *srv;
+	int sigfd;
+	uint64_t generation;
+	uint64_t watchdog_usec, last_watchdog_ns;
+};
+
+static void usage(FILE *f)
+{
+	fprintf(f, "usage: clipmapd [-c FILE] [--check-config]\n"
+		   "  -c, --config FILE   configuration (default " DEFAULT_CONF ")\n"
+		   "      --check-config  validate the configuration and the planet files, then exit\n"
+		   "  -h, --help          this text\n");
+}
+
+static void reload(struct daemon *d)
+{
+	sd_notify(0, "RELOADING=1\nSTATUS=reloading planets");
+	char err[256];
+	struct planet_set *ps = NULL;
+	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, &ps, err);
+	if (rc) {
+		log_msg(LOG_ERROR, "reload failed, keeping the loaded planets: %s", err);
+	} else {
+		size_t nodes = 0, kept = 0;
+		const struct planet_set *old = d->srv->planets;
+		for (size_t i = 0; i < ps->n; i++)
+			for (size_t j = 0; j < ps->planets[i]->nnodes; j++) {
+				nodes++;
+				kept += planet_set_has_node(old, ps->planets[i]->nodes[j]->hash);
+			}
+		server_set_planets(d->srv, ps);
+		log_msg(LOG_INFO, "reloaded %zu planets from %s: %zu of %zu nodes unchanged", ps->n,
+			d->conf.planets_dir, kept, nodes);
+	}
+	sd_notify(0, "READY=1\nSTATUS=serving");
+}
+
+static void on_signal(void *ud)
+{
+	struct daemon *d = ud;
+	struct signalfd_siginfo si;
+	while (read(d->sigfd, &si, sizeof si) == (ssize_t)sizeof si) {
+		if (si.ssi_signo == SIGHUP) {
+			log_msg(LOG_INFO, "SIGHUP: reloading planets");
+			reload(d);
+		} else {
+			log_msg(LOG_INFO, "%s: stopping", strsignal((int)si.ssi_signo));
+			sd_notify(0, "STOPPING=1\nSTATUS=stopping");
+			server_stop(d->srv);
+		}
+	}
+}
+
+static void on_tick(void *ud)
+{
+	struct daemon *d = ud;
+	if (!d->watchdog_usec)
+		return;
+	uint64_t now = server_now_ns();
+	if (now - d->last_watchdog_ns >= d->watchdog_usec * 1000 / 2) {
+		sd_notify(0, "WATCHDOG=1");
+		d->last_watchdog_ns = now;
+	}
+}
+
+static int check_token(const struct conf *c, char err[256])
+{
+	if (!c->token_file)
+		return 0;
+	int fd = open(c->token_file, O_RDONLY | O_CLOEXEC);
+	if (fd < 0) {
+		snprintf(err, 256, "%s: token_file %s: %s", c->path, c->token_file, strerror(errno));
+		return -EINVAL;
+	}
+	char b[8];
+	ssize_t n = read(fd, b, sizeof b);
+	close(fd);
+	if (n <= 0 || (n == 1 && b[0] == '\n')) {
+		snprintf(err, 256, "%s: token_file %s is empty or unreadable", c->path, c->token_file);
+		return -EINVAL;
+	}
+	return 0;
+}
+
+int main(int argc, char **argv)
+{
+	const char *cfg = DEFAULT_CONF;
+	int check = 0;
+	for (int i = 1; i < argc; i++) {
+		if ((!strcmp(argv[i], "-c") || !strcmp(argv[i], "--config")) && i + 1 < argc) {
+			cfg = argv[++i];
+		} else if (!strncmp(argv[i], "--config=", 9)) {
+			cfg = argv[i] + 9;
+		} else if (!strcmp(argv[i], "--check-config")) {
+			check = 1;
+		} else if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
+			usage(stdout);
+			return 0;
+		} else {
+			fprintf(stderr, "clipmapd: unknown argument \"%s\"\n", argv[i]);
+			usage(stderr);
+			return 2;
+		}
+	}
+
+	struct daemon d = { .sigfd = -1 };
+	char err[256];
+	if (conf_load(cfg, &d.conf, err)) {
+		fprintf(stderr, "clipmapd: %s\n", err);
+		return 2;
+	}
+	log_set_level(d.conf.log_level);
+	struct planet_set *ps = NULL;
+	if (planet_set_load(d.conf.planets_dir, ++d.generation, &ps, err) ||
+	    check_token(&d.conf, err)) {
+		fprintf(stderr, "clipmapd: %s\n", err);
+		planet_set_unref(ps);
+		conf_fini(&d.conf);
+		return 2;
+	}
+	if (check) {
+		printf("%s: OK (%zu planets in %s)\n", cfg, ps->n, d.conf.planets_dir);
+		planet_set_unref(ps);
+		conf_fini(&d.conf);
+		return 0;
+	}
+
+	sigset_t mask;
+	sigemptyset(&mask);
+	sigaddset(&mask, SIGTERM);
+	sigaddset(&mask, SIGINT);
+	sigaddset(&mask, SIGHUP);
+	signal(SIGPIPE, SIG_IGN);
+	if (pthread_sigmask(SIG_BLOCK, &mask, NULL) ||
+	    (d.sigfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC)) < 0) {
+		fprintf(stderr, "clipmapd: signalfd: %s\n", strerror(errno));
+		return 1;
+	}
+
+	/* Threads start after the mask is set, so they inherit it and signals reach the fd. */
+	struct cache *cache = cache_create(d.conf.cache_bytes);
+	struct sched *sched = sched_create(&(struct sched_desc){
+		.cache = cache, .workers = d.conf.workers, .worker_nice = d.conf.worker_nice });
+	int rc = server_create(&d.conf, sched, cache, ps, &d.srv, err);
+	if (rc) {
+		log_msg(LOG_ERROR, "%s", err);
+		planet_set_unref(ps);
+		sched_destroy(sched);
+		cache_destroy(cache);
+		conf_fini(&d.conf);
+		return rc == -EINVAL ? 2 : 1;
+	}
+	if ((rc = server_watch_fd(d.srv, d.sigfd, on_signal, &d))) {
+		log_msg(LOG_ERROR, "signalfd: %s", strerror(-rc));
+		return 1;
+	}
+	if (sd_watchdog_enabled(0, &d.watchdog_usec) <= 0)
+		d.watchdog_usec = 0;
+	server_set_tick(d.srv, on_tick, &d);
+	const struct listener *ls;
+	size_t nls = server_listeners(d.srv, &ls);
+	for (size_t i = 0; i < nls; i++)
+		log_msg(LOG_INFO, "listening on %s%s%s", ls[i].name,
+			ls[i].need_token ? " (token required)" : "",
+			ls[i].compress ? " (compressed tiles)" : "");
+	struct sched_stats ss;
+	sched_get_stats(sched, &ss);
+	log_msg(LOG_INFO, "clipmapd ready: %zu planets, %d workers, cache %zu MiB",
+		d.srv->planets->n, ss.workers, d.conf.cache_bytes >> 20);
+	sd_notify(0, "READY=1\nSTATUS=serving");
+
+	rc = server_run(d.srv);
+	sd_notify(0, "STOPPING=1");
+	server_destroy(d.srv);
+	sched_destroy(sched);
+	cache_destroy(cache);
+	close(d.sigfd);
+	conf_fini(&d.conf);
+	log_msg(LOG_INFO, "clipmapd stopped");
+	return rc ? 1 : 0;
+}

@@ -1,0 +1,67 @@
+/* conf — clipmapd.conf (INI): listeners, token, engine sizing, planets directory, per-session
+ * limits and the log level. Every key has a default (a zeroed file is a valid config) and is
+ * documented in conf/clipmapd.conf. Loading refuses unknown sections and keys and reports the
+ * first error as "file:line: key: message". Relative paths resolve against the config file's
+ * directory.
+ *
+ * Ownership: conf_load fills a caller-owned struct conf whose strings it owns; conf_fini frees
+ * them. Not thread-safe while loading; read-only afterwards.
+ */
+#ifndef CLIPMAP_CONF_H
+#define CLIPMAP_CONF_H
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "log.h"
+
+enum conf_token_policy {
+	CONF_TOKEN_AUTO = 0, /* non-loopback TCP listeners require the token */
+	CONF_TOKEN_TCP,	     /* every TCP listener requires it */
+	CONF_TOKEN_ALL,	     /* every listener, the Unix socket too */
+};
+
+enum conf_compress {
+	CONF_COMPRESS_AUTO = 0, /* zstd-1 on non-loopback TCP when the client decodes it */
+	CONF_COMPRESS_NEVER,
+	CONF_COMPRESS_ALWAYS, /* zstd-1 (else lz4) on every listener when the client decodes it */
+};
+
+#define CONF_MAX_TCP 8
+
+struct conf {
+	char *path; /* the file read, for messages */
+	/* [listen] */
+	char *unix_path; /* NULL: no Unix socket */
+	unsigned unix_mode;
+	char *tcp[CONF_MAX_TCP]; /* "host:port" (IPv6 as "[addr]:port"); port 0: ephemeral */
+	int ntcp;
+	char *token_file;   /* NULL: no token (then no listener may require one) */
+	enum conf_token_policy require_token;
+	int max_sessions;
+	/* [engine] */
+	char *planets_dir;
+	int workers;	 /* 0: one per CPU */
+	int worker_nice; /* niceness added to workers */
+	size_t cache_bytes;
+	/* [session] */
+	uint32_t max_want, max_rate, max_frame, max_jobs;
+	uint64_t max_pending;
+	enum conf_compress compress;
+	/* [log] */
+	enum log_level log_level;
+};
+
+/* Reads and checks a config file into c (zeroed by the call). Returns 0 or -errno with err
+ * filled ("file:line: key: message"); on error c holds nothing to free. */
+int conf_load(const char *path, struct conf *c, char err[256]);
+/* The same from text (path used in messages and to resolve relative paths). */
+int conf_parse(const char *path, const char *text, size_t len, struct conf *c, char err[256]);
+void conf_fini(struct conf *c);
+/* Whether "host:port" names a loopback address (127.0.0.0/8, ::1, "localhost"). */
+bool conf_addr_is_loopback(const char *hostport);
+/* Splits "host:port" / "[v6]:port" into host (owned by the caller's buffer) and port.
+ * Returns 0 or -EINVAL. */
+int conf_split_hostport(const char *s, char *host, size_t hostcap, char *port, size_t portcap);
+
+#endif

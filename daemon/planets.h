@@ -1,0 +1,34 @@
+/* planets — the set of planets a daemon serves: every *.ini in the planets directory, loaded
+ * as one immutable, reference-counted snapshot. SIGHUP loads a new snapshot; sessions keep a
+ * reference to the one they opened planets from, so nodes they want stay alive until they let
+ * go. Unchanged nodes keep their content hash, so their cached tiles stay valid across reloads.
+ *
+ * Threads: a snapshot is immutable; refcounts are atomic. Ownership: planet_set_load returns
+ * one owned reference; planet_set_ref adds one; planet_set_unref frees at zero.
+ */
+#ifndef CLIPMAP_PLANETS_H
+#define CLIPMAP_PLANETS_H
+#include <stdatomic.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "planet.h"
+
+struct planet_set {
+	atomic_int refs;
+	uint64_t generation; /* increases with every load in this process */
+	struct planet **planets; /* sorted by name; owned */
+	size_t n;
+};
+
+/* Loads every "*.ini" in dir (sorted by file name). Returns 0 or -errno with err filled
+ * ("file:line: key: message" for the first bad file; duplicate planet names are an error). */
+int planet_set_load(const char *dir, uint64_t generation, struct planet_set **out, char err[256]);
+struct planet_set *planet_set_ref(struct planet_set *s);
+void planet_set_unref(struct planet_set *s); /* NULL is a no-op */
+/* The planet named name, or NULL (borrowed from the set). */
+struct planet *planet_set_find(const struct planet_set *s, const char *name);
+/* Whether any node of the set has content hash h. */
+int planet_set_has_node(const struct planet_set *s, uint64_t h);
+
+#endif
