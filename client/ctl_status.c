@@ -83,6 +83,18 @@ static const struct proto_stat *find(const struct proto_stats *st, const char *k
 	return NULL;
 }
 
+/* Whether some key other than a node's starts with "name.". */
+static bool has_section(const struct proto_stats *st, const char *name)
+{
+	size_t n = strlen(name);
+	for (uint16_t i = 0; i < st->count; i++) {
+		const char *k = st->items[i].key;
+		if (strncmp(k, name, n) == 0 && k[n] == '.' && !is_node_key(k))
+			return true;
+	}
+	return false;
+}
+
 static void json_str(FILE *out, const char *s)
 {
 	fputc('"', out);
@@ -213,6 +225,9 @@ int ctl_status_print(const struct proto_stats *st, const char *peer, bool json, 
 		if (dot) {
 			snprintf(r->section, sizeof r->section, "%.*s", (int)(dot - s->key), s->key);
 			snprintf(r->label, sizeof r->label, "%s", dot + 1);
+		} else if (has_section(st, s->key)) {
+			/* "sessions" with "sessions.total": the value heads its section */
+			snprintf(r->section, sizeof r->section, "%s", s->key);
 		} else {
 			snprintf(r->label, sizeof r->label, "%s", s->key);
 		}
@@ -248,10 +263,18 @@ int ctl_status_print(const struct proto_stats *st, const char *peer, bool json, 
 			labelw = (int)strlen(rows[i].label) + 2;
 	fprintf(out, "clipmapd%s%s\n", peer ? " at " : "", peer ? peer : "");
 	for (size_t j = 0; j < ns; j++) {
-		if (secs[j][0])
-			fprintf(out, "%s\n", secs[j]);
+		if (secs[j][0]) {
+			const char *head = "";
+			for (size_t i = 0; i < nr; i++)
+				if (!rows[i].label[0] && strcmp(rows[i].section, secs[j]) == 0)
+					head = rows[i].value;
+			if (head[0])
+				fprintf(out, "%-*s  %s\n", labelw, secs[j], head);
+			else
+				fprintf(out, "%s\n", secs[j]);
+		}
 		for (size_t i = 0; i < nr; i++)
-			if (strcmp(rows[i].section, secs[j]) == 0)
+			if (rows[i].label[0] && strcmp(rows[i].section, secs[j]) == 0)
 				fprintf(out, "  %-*s  %s\n", labelw - 2, rows[i].label, rows[i].value);
 	}
 	if (have_nodes)

@@ -181,6 +181,7 @@ static const struct proto_planet test_planet = { .name = "testplanet", .descript
 static const struct proto_stat test_stats[] = {
 	{ .key = "uptime_s", .kind = PROTO_STAT_F64, .f = 3723.2 },
 	{ .key = "sessions", .kind = PROTO_STAT_U64, .u = 3 },
+	{ .key = "sessions.total", .kind = PROTO_STAT_U64, .u = 17 },
 	{ .key = "version", .kind = PROTO_STAT_STR, .s = "clipmapd 0.1 \"dev\"" },
 	{ .key = "sched.queued.visible", .kind = PROTO_STAT_U64, .u = 2 },
 	{ .key = "sched.queued.bulk", .kind = PROTO_STAT_U64, .u = 350 },
@@ -206,7 +207,7 @@ static int reply_stats(struct srv *s)
 	uint32_t req = m.stats_req.req;
 	proto_msg_fini(&m);
 	struct proto_msg st = { .type = PROTO_STATS,
-				.stats = { .req = req, .count = 15, .items = test_stats } };
+				.stats = { .req = req, .count = 16, .items = test_stats } };
 	return srv_send(s, &st);
 }
 
@@ -354,7 +355,7 @@ static int script_eof_mid_frame(struct srv *s)
 	struct pbuf b;
 	pbuf_init(&b);
 	struct proto_msg st = { .type = PROTO_STATS,
-				.stats = { .req = 1, .count = 15, .items = test_stats } };
+				.stats = { .req = 1, .count = 16, .items = test_stats } };
 	proto_encode(&b, &st, NULL);
 	int rc = srv_write(s, b.data, b.len / 2); /* then close */
 	pbuf_fini(&b);
@@ -923,7 +924,7 @@ static void progress_line(void **state)
 static void status_table_and_json(void **state)
 {
 	(void)state;
-	struct proto_stats st = { .req = 1, .count = 15, .items = test_stats };
+	struct proto_stats st = { .req = 1, .count = 16, .items = test_stats };
 	FILE *f;
 	size_t n;
 	char *buf;
@@ -933,7 +934,8 @@ static void status_table_and_json(void **state)
 	assert_non_null(strstr(buf, "clipmapd at /run/x.sock\n"));
 	assert_non_null(strstr(buf, "  uptime_s                1h02m03s\n"));
 	assert_non_null(strstr(buf, "bytes\n  sent                    5368709120   (5.0 GiB)\n"));
-	assert_non_null(strstr(buf, "  sessions                3\n"));
+	/* "sessions" heads the section of "sessions.total" */
+	assert_non_null(strstr(buf, "sessions                  3\n  total                   17\n"));
 	assert_non_null(strstr(buf, "sched\n  queued.visible          2\n"));
 	assert_non_null(strstr(buf, "  bytes                   3145728      (3.0 MiB)\n"));
 	/* the hit ratio right after misses: 15 / 20 */
