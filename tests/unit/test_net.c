@@ -16,6 +16,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <signal.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
 #include <sys/un.h>
@@ -285,6 +287,43 @@ static void handshake_token_bytewise(void **state)
 	assert_non_null(strstr(err, "is clipmapd running? (-s SOCKET)"));
 	unlink(tokf);
 	rmdir(dir);
+}
+
+
+/* HOST:PORT over TCP (loopback, an ephemeral port); malformed and refused addresses. */
+static void tcp_hostport(void **state)
+{
+	(void)state;
+	int l = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	struct sockaddr_in a = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+	assert_int_equal(bind(l, (struct sockaddr *)&a, sizeof a), 0);
+	socklen_t al = sizeof a;
+	assert_int_equal(getsockname(l, (struct sockaddr *)&a, &al), 0);
+	assert_int_equal(listen(l, 4), 0);
+	char hp[64];
+	snprintf(hp, sizeof hp, "127.0.0.1:%u", ntohs(a.sin_port));
+	struct srv s = { .listen_fd = l, .script = script_stats_bytewise };
+	pbuf_init(&s.rb);
+	assert_int_equal(pthread_create(&s.th, NULL, srv_main, &s), 0);
+	struct net_opts o = { .hostport = hp, .socket_path = "/unused" };
+	struct net_conn *c;
+	char err[256];
+	assert_int_equal(net_connect(&o, &c, err), 0);
+	assert_string_equal(net_peer(c), hp);
+	FILE *f = fopen("/dev/null", "w");
+	assert_int_equal(ctl_status_run(c, false, 5000, f, err), 0);
+	fclose(f);
+	net_close(c);
+	assert_int_equal(srv_join(&s), 0);
+	close(l); /* now nobody listens there */
+	assert_int_equal(net_connect(&o, &c, err), -ECONNREFUSED);
+	assert_non_null(strstr(err, hp));
+	struct ctl_target t = { .hostport = hp };
+	assert_int_equal(ctl_connect(&t, &c, err), -ECONNREFUSED);
+	assert_non_null(strstr(err, "(-H HOST:PORT)"));
+	o.hostport = "no-port-here";
+	assert_int_equal(net_connect(&o, &c, err), -EINVAL);
+	assert_non_null(strstr(err, "want HOST:PORT"));
 }
 
 static int script_wrong_token(struct srv *s)
@@ -1020,6 +1059,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(handshake_token_bytewise),
+		cmocka_unit_test(tcp_hostport),
 		cmocka_unit_test(handshake_refused),
 		cmocka_unit_test(server_error_message),
 		cmocka_unit_test(eof_mid_frame),
