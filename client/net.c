@@ -1,0 +1,535 @@
+/* net — see net.h. Reads go into one growable buffer that proto_decode looks at until a frame
+ * is whole; a decoded frame is consumed at the start of the next net_recv, because a TILE's
+ * payload points into it. Deadlines are absolute (CLOCK_MONOTONIC) so EINTR and partial
+ * reads never stretch a timeout.
+ */
+#include "net.h"
+
+#include <errno.h>
+#include <fcntl.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <poll.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "xalloc.h"
+
+#define READ_CHUNK 65536
+
+struct net_conn {
+	int fd;
+	int timeout_ms;
+	char peer[272];
+	struct pbuf rd;	     /* bytes received, not yet consumed */
+	size_t consume;	     /* size of the frame returned last (consumed on the next recv) */
+	struct proto_hello_ok hello;
+	char server_name[PROTO_MAX_NAME + 1];
+	uint32_t next_req;
+	struct tilecodec *tc; /* created on first tile */
+};
+
+/* vsnprintf through a function so messages that name long peers may be cut at 255 bytes
+ * (gcc's -Wformat-truncation would refuse each direct snprintf). err may be NULL. */
+__attribute__((format(printf, 2, 3))) static void seterr(char *err, const char *fmt, ...)
+{
+	if (!err)
+		return;
+	va_list ap;
+	va_start(ap, fmt);
+	vsnprintf(err, 256, fmt, ap);
+	va_end(ap);
+}
+
+static int64_t now_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+}
+
+/* Milliseconds left until deadline (-1: no deadline), never negative. */
+static int left_ms(int64_t deadline)
+{
+	if (deadline < 0)
+		return -1;
+	int64_t l = deadline - now_ms();
+	return l < 0 ? 0 : l > 0x7fffffff ? 0x7fffffff : (int)l;
+}
+
+static int64_t deadline_of(int timeout_ms)
+{
+	return timeout_ms < 0 ? -1 : now_ms() + timeout_ms;
+}
+
+/* Waits for events on fd until deadline. Returns 1 ready, 0 timed out, -errno. */
+static int wait_fd(int fd, short ev, int64_t deadline)
+{
+	for (;;) {
+		struct pollfd p = { .fd = fd, .events = ev };
+		int r = poll(&p, 1, left_ms(deadline));
+		if (r > 0)
+			return 1;
+		if (r == 0)
+			return 0;
+		if (errno != EINTR)
+			return -errno;
+	}
+}
+
+int net_code_errno(uint16_t code)
+{
+	switch (code) {
+	case PROTO_E_NOT_FOUND: return ENOENT;
+	case PROTO_E_AUTH: return EACCES;
+	case PROTO_E_VERSION: return EPROTONOSUPPORT;
+	case PROTO_E_LIMIT: return E2BIG;
+	case PROTO_E_INVALID: return EINVAL;
+	case PROTO_E_UNAVAILABLE: return EIO;
+	case PROTO_E_BUSY: return EBUSY;
+	case PROTO_E_SHUTDOWN: return ESHUTDOWN;
+	case PROTO_E_PROTOCOL:
+	case PROTO_E_STATE: return EPROTO;
+	default: return EREMOTEIO;
+	}
+}
+
+void net_error_text(const struct net_conn *c, const struct proto_error *e, char err[256])
+{
+	const char *name = proto_code_name(e->code);
+	seterr(err, "%s: %s: %s", c->peer, name ? name : "internal",
+		 e->message && e->message[0] ? e->message : "(no message)");
+}
+
+int net_token_load(const char *file, uint8_t buf[PROTO_MAX_TOKEN], uint16_t *len, char err[256])
+{
+	size_t n = 0;
+	*len = 0;
+	if (file) {
+		FILE *f = fopen(file, "rb");
+		if (!f) {
+			int e = errno;
+			seterr(err, "token file %s: %s", file, strerror(e));
+			return -e;
+		}
+		uint8_t tmp[PROTO_MAX_TOKEN + 2];
+		n = fread(tmp, 1, sizeof tmp, f);
+		int bad = ferror(f);
+		fclose(f);
+		if (bad) {
+			seterr(err, "token file %s: read error", file);
+			return -EIO;
+		}
+		while (n && (tmp[n - 1] == '\n' || tmp[n - 1] == '\r' || tmp[n - 1] == ' ' ||
+			     tmp[n - 1] == '\t'))
+			n--;
+		if (n > PROTO_MAX_TOKEN) {
+			seterr(err, "token file %s: longer than %d bytes", file,
+				 PROTO_MAX_TOKEN);
+			return -E2BIG;
+		}
+		memcpy(buf, tmp, n);
+	} else {
+		const char *s = getenv("CLIPMAP_TOKEN");
+		if (s) {
+			n = strlen(s);
+			while (n && (s[n - 1] == '\n' || s[n - 1] == ' '))
+				n--;
+			if (n > PROTO_MAX_TOKEN) {
+				seterr(err, "$CLIPMAP_TOKEN is longer than %d bytes",
+					 PROTO_MAX_TOKEN);
+				return -E2BIG;
+			}
+			memcpy(buf, s, n);
+		}
+	}
+	*len = (uint16_t)n;
+	return 0;
+}
+
+/* Writes all of p[0 .. n) before deadline. */
+static int write_all(struct net_conn *c, const uint8_t *p, size_t n, int64_t deadline,
+		     char err[256])
+{
+	while (n) {
+		ssize_t w = send(c->fd, p, n, MSG_NOSIGNAL);
+		if (w > 0) {
+			p += w;
+			n -= (size_t)w;
+			continue;
+		}
+		if (w < 0 && errno == EINTR)
+			continue;
+		if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
+			int r = wait_fd(c->fd, POLLOUT, deadline);
+			if (r == 0) {
+				seterr(err, "%s: timed out sending", c->peer);
+				return -ETIMEDOUT;
+			}
+			if (r < 0) {
+				seterr(err, "%s: poll: %s", c->peer, strerror(-r));
+				return r;
+			}
+			continue;
+		}
+		int e = w < 0 ? errno : EPIPE;
+		seterr(err, "%s: sending: %s", c->peer, strerror(e));
+		return -e;
+	}
+	return 0;
+}
+
+int net_send(struct net_conn *c, const struct proto_msg *m, char err[256])
+{
+	struct pbuf b;
+	char e2[256];
+	pbuf_init(&b);
+	ssize_t n = proto_encode(&b, m, e2);
+	if (n < 0) {
+		const char *t = proto_type_name(m->type);
+		seterr(err, "cannot encode %s for %s: %s", t ? t : "message", c->peer, e2);
+		pbuf_fini(&b);
+		return (int)n;
+	}
+	int rc = write_all(c, b.data, b.len, deadline_of(c->timeout_ms), err);
+	pbuf_fini(&b);
+	return rc;
+}
+
+int net_recv(struct net_conn *c, struct proto_msg *m, int timeout_ms, char err[256])
+{
+	if (c->consume) {
+		pbuf_consume(&c->rd, c->consume);
+		c->consume = 0;
+	}
+	int64_t deadline = deadline_of(timeout_ms);
+	for (;;) {
+		size_t need = 0;
+		char e2[256];
+		ssize_t r = proto_decode(c->rd.data, c->rd.len, m, &need, e2);
+		if (r > 0) {
+			c->consume = (size_t)r;
+			return 0;
+		}
+		if (r < 0) {
+			seterr(err, "%s: bad message from server: %s", c->peer, e2);
+			return (int)r;
+		}
+		size_t want = need > READ_CHUNK ? need : READ_CHUNK;
+		pbuf_reserve(&c->rd, want);
+		ssize_t n = recv(c->fd, c->rd.data + c->rd.len, c->rd.cap - c->rd.len, MSG_DONTWAIT);
+		if (n > 0) {
+			c->rd.len += (size_t)n;
+			continue;
+		}
+		if (n == 0) {
+			if (c->rd.len)
+				seterr(err, "%s: connection closed by the server in the middle "
+					 "of a message (%zu bytes of it received)", c->peer, c->rd.len);
+			else
+				seterr(err, "%s: connection closed by the server", c->peer);
+			return -ECONNRESET;
+		}
+		if (errno == EINTR)
+			continue;
+		if (errno != EAGAIN && errno != EWOULDBLOCK) {
+			int e = errno;
+			seterr(err, "%s: receiving: %s", c->peer, strerror(e));
+			return -e;
+		}
+		if (timeout_ms == 0) {
+			seterr(err, "%s: no complete message yet", c->peer);
+			return -EAGAIN;
+		}
+		int w = wait_fd(c->fd, POLLIN, deadline);
+		if (w == 0) {
+			seterr(err, "%s: no answer from the server within %.1f s", c->peer,
+				 timeout_ms / 1000.0);
+			return -ETIMEDOUT;
+		}
+		if (w < 0) {
+			seterr(err, "%s: poll: %s", c->peer, strerror(-w));
+			return w;
+		}
+	}
+}
+
+int net_expect(struct net_conn *c, uint16_t type, struct proto_msg *m, int timeout_ms,
+	       void (*skip_fn)(void *ud, const struct proto_msg *m), void *ud, char err[256])
+{
+	int64_t deadline = deadline_of(timeout_ms);
+	for (;;) {
+		int rc = net_recv(c, m, deadline < 0 ? -1 : left_ms(deadline), err);
+		if (rc == -EAGAIN) { /* timeout_ms was 0 or the deadline passed */
+			seterr(err, "%s: no answer from the server within %.1f s", c->peer,
+				 timeout_ms / 1000.0);
+			return -ETIMEDOUT;
+		}
+		if (rc)
+			return rc;
+		if (m->type == type)
+			return 0;
+		if (m->type == PROTO_ERROR) {
+			net_error_text(c, &m->error, err);
+			rc = -net_code_errno(m->error.code);
+			proto_msg_fini(m);
+			return rc;
+		}
+		if (m->type == PROTO_TILE || m->type == PROTO_TILE_FAIL ||
+		    m->type == PROTO_PREFETCH_PROGRESS) {
+			if (skip_fn)
+				skip_fn(ud, m);
+			proto_msg_fini(m);
+			continue;
+		}
+		if (m->type == PROTO_BYE) {
+			seterr(err, "%s: the server ended the session", c->peer);
+			proto_msg_fini(m);
+			return -ECONNRESET;
+		}
+		const char *got = proto_type_name(m->type), *exp = proto_type_name(type);
+		seterr(err, "%s: expected %s, got %s", c->peer, exp ? exp : "?",
+			 got ? got : "?");
+		proto_msg_fini(m);
+		return -EPROTO;
+	}
+}
+
+static int handshake(struct net_conn *c, const struct net_opts *o, char err[256])
+{
+	uint8_t tok[PROTO_MAX_TOKEN];
+	uint16_t toklen = 0;
+	int rc = net_token_load(o->token_file, tok, &toklen, err);
+	if (rc)
+		return rc;
+	uint32_t codecs = o->codecs ? o->codecs : TCODEC_ALL_MASK;
+	struct proto_msg h = { .type = PROTO_HELLO,
+			       .hello = { .ver_min = PROTO_VERSION, .ver_max = PROTO_VERSION,
+					  .codecs = codecs, .token = tok, .token_len = toklen,
+					  .name = o->name ? o->name : "clipmap-client/1" } };
+	rc = net_send(c, &h, err);
+	if (rc)
+		return rc;
+	struct proto_msg m = { 0 };
+	rc = net_recv(c, &m, c->timeout_ms, err);
+	if (rc)
+		return rc;
+	if (m.type == PROTO_ERROR) {
+		const char *name = proto_code_name(m.error.code);
+		seterr(err, "%s refused the connection: %s: %s", c->peer,
+			 name ? name : "internal", m.error.message ? m.error.message : "");
+		rc = -net_code_errno(m.error.code);
+	} else if (m.type != PROTO_HELLO_OK) {
+		const char *t = proto_type_name(m.type);
+		seterr(err, "%s: expected HELLO_OK, got %s", c->peer, t ? t : "?");
+		rc = -EPROTO;
+	} else if (m.hello_ok.version != PROTO_VERSION || (m.hello_ok.codecs & ~codecs)) {
+		seterr(err, "%s: server chose version %u and codecs 0x%x, we offered %u and "
+			 "0x%x", c->peer, m.hello_ok.version, m.hello_ok.codecs, PROTO_VERSION, codecs);
+		rc = -EPROTO;
+	} else {
+		c->hello = m.hello_ok;
+		snprintf(c->server_name, sizeof c->server_name, "%s",
+			 m.hello_ok.name ? m.hello_ok.name : "");
+		c->hello.name = c->server_name;
+	}
+	proto_msg_fini(&m);
+	return rc;
+}
+
+int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct net_conn **out,
+		   char err[256])
+{
+	*out = NULL;
+	struct net_conn *c = xcalloc(1, sizeof *c);
+	c->fd = fd;
+	c->timeout_ms = o->timeout_ms ? o->timeout_ms : NET_DEFAULT_TIMEOUT_MS;
+	snprintf(c->peer, sizeof c->peer, "%s", peer ? peer : "server");
+	pbuf_init(&c->rd);
+	int rc = handshake(c, o, err);
+	if (rc) {
+		pbuf_fini(&c->rd);
+		close(c->fd);
+		free(c);
+		return rc;
+	}
+	*out = c;
+	return 0;
+}
+
+static int connect_unix(const char *path, int64_t deadline, int *fd, char err[256])
+{
+	struct sockaddr_un a = { .sun_family = AF_UNIX };
+	if (strlen(path) >= sizeof a.sun_path) {
+		seterr(err, "cannot connect to %s: socket path longer than %zu bytes", path,
+			 sizeof a.sun_path - 1);
+		return -ENAMETOOLONG;
+	}
+	memcpy(a.sun_path, path, strlen(path) + 1);
+	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	if (s < 0) {
+		int e = errno;
+		seterr(err, "cannot connect to %s: socket: %s", path, strerror(e));
+		return -e;
+	}
+	(void)deadline; /* a Unix connect does not wait for the peer */
+	while (connect(s, (struct sockaddr *)&a, sizeof a) < 0) {
+		if (errno == EINTR)
+			continue;
+		int e = errno;
+		seterr(err, "cannot connect to %s: %s", path, strerror(e));
+		close(s);
+		return -e;
+	}
+	*fd = s;
+	return 0;
+}
+
+/* Splits "host:port" / "[v6]:port". Returns 0 or -EINVAL. */
+static int split_hostport(const char *hp, char *host, size_t hn, char *port, size_t pn)
+{
+	const char *colon;
+	const char *h0 = hp;
+	size_t hl;
+	if (hp[0] == '[') {
+		const char *rb = strchr(hp, ']');
+		if (!rb || rb[1] != ':')
+			return -EINVAL;
+		h0 = hp + 1;
+		hl = (size_t)(rb - h0);
+		colon = rb + 1;
+	} else {
+		colon = strrchr(hp, ':');
+		if (!colon)
+			return -EINVAL;
+		hl = (size_t)(colon - hp);
+	}
+	if (hl == 0 || hl >= hn || !colon[1] || strlen(colon + 1) >= pn)
+		return -EINVAL;
+	memcpy(host, h0, hl);
+	host[hl] = '\0';
+	strcpy(port, colon + 1);
+	return 0;
+}
+
+static int connect_tcp(const char *hp, int64_t deadline, int *fd, char err[256])
+{
+	char host[256], port[32];
+	if (split_hostport(hp, host, sizeof host, port, sizeof port)) {
+		seterr(err, "cannot connect to %s: want HOST:PORT or [ADDR]:PORT", hp);
+		return -EINVAL;
+	}
+	struct addrinfo hints = { .ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM };
+	struct addrinfo *res = NULL;
+	int g = getaddrinfo(host, port, &hints, &res);
+	if (g) {
+		seterr(err, "cannot connect to %s: %s", hp, gai_strerror(g));
+		return g == EAI_SYSTEM ? -errno : g == EAI_NONAME ? -ENOENT : -EHOSTUNREACH;
+	}
+	int rc = -ECONNREFUSED;
+	for (struct addrinfo *ai = res; ai; ai = ai->ai_next) {
+		int s = socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK,
+			       ai->ai_protocol);
+		if (s < 0) {
+			rc = -errno;
+			continue;
+		}
+		int r = connect(s, ai->ai_addr, ai->ai_addrlen);
+		if (r < 0 && (errno == EINPROGRESS || errno == EINTR)) {
+			int w = wait_fd(s, POLLOUT, deadline);
+			if (w == 0) {
+				rc = -ETIMEDOUT;
+			} else if (w < 0) {
+				rc = w;
+			} else {
+				int soerr = 0;
+				socklen_t sl = sizeof soerr;
+				if (getsockopt(s, SOL_SOCKET, SO_ERROR, &soerr, &sl) < 0)
+					soerr = errno;
+				rc = soerr ? -soerr : 0;
+			}
+		} else {
+			rc = r < 0 ? -errno : 0;
+		}
+		if (rc == 0) {
+			int fl = fcntl(s, F_GETFL);
+			int one = 1;
+			if (fl < 0 || fcntl(s, F_SETFL, fl & ~O_NONBLOCK) < 0 ||
+			    setsockopt(s, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one) < 0) {
+				rc = -errno;
+				close(s);
+				continue;
+			}
+			*fd = s;
+			break;
+		}
+		close(s);
+	}
+	freeaddrinfo(res);
+	if (rc)
+		seterr(err, "cannot connect to %s: %s", hp, strerror(-rc));
+	return rc;
+}
+
+int net_connect(const struct net_opts *o, struct net_conn **out, char err[256])
+{
+	*out = NULL;
+	int t = o->timeout_ms ? o->timeout_ms : NET_DEFAULT_TIMEOUT_MS;
+	int64_t deadline = deadline_of(t);
+	int fd = -1, rc;
+	const char *peer;
+	if (o->hostport) {
+		peer = o->hostport;
+		rc = connect_tcp(o->hostport, deadline, &fd, err);
+	} else if (o->socket_path) {
+		peer = o->socket_path;
+		rc = connect_unix(o->socket_path, deadline, &fd, err);
+	} else {
+		seterr(err, "no socket path or HOST:PORT to connect to");
+		return -EINVAL;
+	}
+	if (rc)
+		return rc;
+	return net_connect_fd(fd, peer, o, out, err);
+}
+
+void net_close(struct net_conn *c)
+{
+	if (!c)
+		return;
+	struct pbuf b;
+	pbuf_init(&b);
+	struct proto_msg bye = { .type = PROTO_BYE };
+	if (proto_encode(&b, &bye, NULL) > 0)
+		(void)send(c->fd, b.data, b.len, MSG_NOSIGNAL | MSG_DONTWAIT);
+	pbuf_fini(&b);
+	close(c->fd);
+	pbuf_fini(&c->rd);
+	tilecodec_destroy(c->tc);
+	free(c);
+}
+
+int net_fd(const struct net_conn *c) { return c->fd; }
+const char *net_peer(const struct net_conn *c) { return c->peer; }
+const struct proto_hello_ok *net_hello(const struct net_conn *c) { return &c->hello; }
+uint32_t net_next_req(struct net_conn *c) { return ++c->next_req; }
+
+int net_tile_decode(struct net_conn *c, const struct proto_tile *t, void *texels, size_t cap,
+		    char err[256])
+{
+	if (!c->tc)
+		c->tc = tilecodec_create();
+	char e2[256];
+	int rc = tilecodec_decode(c->tc, &t->enc, t->payload, t->payload_len, texels, cap, e2);
+	if (rc)
+		seterr(err, "%s: tile (%u, %u, %u, %u) of layer %u: %s", c->peer,
+			 t->key.lx, t->key.ly, t->key.x, t->key.y, t->layer, e2);
+	return rc;
+}
