@@ -11,6 +11,7 @@
 #include <errno.h>
 #include <stdlib.h>
 
+#include "planet.h"
 #include "xalloc.h"
 
 bool job_prio_less(const struct job_prio *a, const struct job_prio *b)
@@ -103,6 +104,7 @@ static void free_job(struct job *j)
 	tile_unref(j->result);
 	free(j->dependents);
 	free(j->wanters);
+	planet_unref(j->node->planet);
 	free(j);
 }
 
@@ -136,6 +138,7 @@ struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct 
 	struct job *j = xcalloc(1, sizeof *j);
 	j->key = *key;
 	j->node = node;
+	planet_ref(node->planet); /* the planet outlives every job on its nodes */
 	j->seq = g->seq++;
 	j->heap_idx = -1;
 	jobmap_insert(&g->map, j);

@@ -528,6 +528,7 @@ int planet_load_types(const char *path, const struct node_type *const *types, st
 	if (rc)
 		return rc;
 	struct planet *p = xcalloc(1, sizeof *p);
+	atomic_init(&p->refs, 1);
 	p->ini = ini;
 	p->path = xstrdup(path);
 	const char *slash = strrchr(path, '/');
@@ -570,10 +571,30 @@ int planet_load(const char *path, struct planet **out, char err[256])
 	return planet_load_types(path, node_types_all(), out, err);
 }
 
+void planet_ref(const struct planet *p)
+{
+	struct planet *m = (struct planet *)p; /* only the atomic count changes */
+	if (m && atomic_load_explicit(&m->refs, memory_order_relaxed) > 0)
+		atomic_fetch_add_explicit(&m->refs, 1, memory_order_relaxed);
+}
+
+static void planet_free(struct planet *p);
+
+void planet_unref(const struct planet *p)
+{
+	struct planet *m = (struct planet *)p;
+	if (m && atomic_load_explicit(&m->refs, memory_order_relaxed) > 0 &&
+	    atomic_fetch_sub_explicit(&m->refs, 1, memory_order_acq_rel) == 1)
+		planet_free(m);
+}
+
 void planet_destroy(struct planet *p)
 {
-	if (!p)
-		return;
+	planet_unref(p);
+}
+
+static void planet_free(struct planet *p)
+{
 	/* Users before their inputs: a type's destroy may still look at its inputs. */
 	for (size_t i = p->nnodes; i-- > 0;) {
 		struct node *n = p->nodes[i];

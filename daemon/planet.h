@@ -9,12 +9,14 @@
  *   [node NAME]     type = <node type>, its input slots naming other nodes, its parameters
  *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
  *
- * Ownership: planet_load returns an owned planet; planet_destroy frees it and its nodes.
- * A loaded planet is immutable and may be shared by any number of threads.
+ * Ownership: planet_load returns a reference-counted planet; planet_destroy drops the
+ * caller's reference and the last one frees it and its nodes. A loaded planet is immutable
+ * (but for its reference count) and may be shared by any number of threads.
  */
 #ifndef CLIPMAP_PLANET_H
 #define CLIPMAP_PLANET_H
 #include <stddef.h>
+#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 
@@ -29,6 +31,10 @@ struct planet_layer {
 };
 
 struct planet {
+	/* References: planet_load gives the caller one; the scheduler holds one per job on the
+	 * planet's nodes, so a planet dropped while workers still generate from it lives until
+	 * they finish. 0 marks a caller-owned planet (tests fill one by hand): never freed. */
+	atomic_int refs;
 	char *name;
 	char *description;
 	char *path; /* the planet file */
@@ -50,7 +56,12 @@ int planet_load(const char *path, struct planet **out, char err[256]);
  * planet) instead of node_types_all() — for tests and tools that add their own types. */
 int planet_load_types(const char *path, const struct node_type *const *types, struct planet **out,
 		      char err[256]);
+/* Drops the caller's reference (NULL is a no-op); frees at the last. */
 void planet_destroy(struct planet *p);
+/* Another reference (for the scheduler); no-op for NULL or caller-owned planets. */
+void planet_ref(const struct planet *p);
+/* Drops a reference taken with planet_ref. */
+void planet_unref(const struct planet *p);
 struct node *planet_find_node(const struct planet *p, const char *name);
 const struct planet_layer *planet_find_layer(const struct planet *p, const char *name);
 /* Writes the graph as Graphviz dot. Returns 0 or -errno. */

@@ -795,7 +795,13 @@ static void test_sigterm(void **state)
 	int st = 0;
 	assert_int_equal(waitpid(D.pid, &st, 0), D.pid);
 	D.pid = 0;
-	assert_true(WIFEXITED(st));
+	if (!WIFEXITED(st)) {
+		char *l = read_log();
+		size_t len = l ? strlen(l) : 0;
+		fprintf(stderr, "clipmapd log (end):\n%s\n", l ? l + (len > 3000 ? len - 3000 : 0) : "");
+		free(l);
+		fail_msg("clipmapd did not exit: signal %d", WTERMSIG(st));
+	}
 	assert_int_equal(WEXITSTATUS(st), 0);
 	cl_free(a);
 	cl_free(b);
