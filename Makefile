@@ -3,12 +3,13 @@
 #   make check      install deps, build, run every test
 #   make asan/tsan  the same suite under sanitizers (build-asan/, build-tsan/)
 #   make bench      benchmarks that print figures
-#   make deps       install the Debian packages the project needs
+#   make deps       install the Debian packages the project needs (and prepare data/)
+#   make data       install the planet data packages and import them into data/
 
 BUILD   ?= build
 CC      ?= cc
 CXX     ?= g++
-PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd
+PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -42,7 +43,7 @@ BENCH_SRC    := $(wildcard tests/bench/bench_*.c)
 BENCH_BIN    := $(BENCH_SRC:tests/bench/%.c=$(BUILD)/tests/%)
 PROGS        := $(foreach m,$(MAINS),$(if $(wildcard $(m)),$(BUILD)/$(notdir $(basename $(m)))))
 
-.PHONY: all check test asan tsan bench deps clean demo
+.PHONY: all check test asan tsan bench deps clean demo data
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 
@@ -76,6 +77,10 @@ $(BUILD)/tests/bench_%: $(BUILD)/tests/bench/bench_%.o $(LIB)
 
 deps:
 	@sh scripts/deps.sh
+
+# Planet data (Debian packages) imported into data/ (gitignored); deps runs it too.
+data:
+	@BUILD=$(BUILD) sh scripts/data.sh
 
 check: deps
 	@$(MAKE) --no-print-directory all

@@ -19,6 +19,7 @@
 #include "ctl_prefetch.h"
 #include "ctl_status.h"
 #include "ctl_tile.h"
+#include "import_cli.h"
 #include "planet.h"
 #include "planet_path.h"
 #include "render.h"
@@ -47,6 +48,8 @@ static void usage(FILE *f)
 	      "      colour and normals: .png\n"
 	      "  clipmapctl graph PLANET                            the node graph as Graphviz dot\n"
 	      "  clipmapctl layers PLANET                           layers, nodes and hashes\n"
+	      "  clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N]\n"
+	      "                     any GDAL raster -> tiled, mipmapped TIFF with its bounds\n"
 	      "PLANET is a planet file or a name in $CLIPMAP_PLANETS or conf/planets/.\n",
 	      f);
 }
@@ -634,6 +637,8 @@ int main(int argc, char **argv)
 		return cmd_graph(argc - 1, argv + 1);
 	if (strcmp(cmd, "layers") == 0)
 		return cmd_layers(argc - 1, argv + 1);
+	if (strcmp(cmd, "import") == 0)
+		return import_cli(argc - 1, argv + 1);
 	if (strcmp(cmd, "help") == 0 || strcmp(cmd, "--help") == 0 || strcmp(cmd, "-h") == 0) {
 		usage(stdout);
 		return 0;

@@ -170,7 +170,7 @@ int publish(const std::string &tmp, const char *path, char *err)
 }
 
 int write_impl(const char *path, int width, int height, int channels, enum img_type type,
-	       const void *pixels, int tile, bool mip, char *err)
+	       const void *pixels, int tile, bool mip, const char *desc, char *err)
 {
 	if (width <= 0 || height <= 0 || channels <= 0 || !pixels) {
 		if (err)
@@ -188,7 +188,14 @@ int write_impl(const char *path, int width, int height, int channels, enum img_t
 	if (tile > 0) {
 		spec.tile_width = spec.tile_height = tile;
 		spec.attribute("compression", "zip");
+		// Classic TIFF offsets are 32-bit: a pyramid (4/3 of the base) near 4 GiB
+		// uncompressed needs BigTIFF (zip may not shrink noise-like data).
+		double bytes = (double)width * height * channels * (double)img_type_bytes(type);
+		if (bytes * (mip ? 4.0 / 3.0 : 1.0) > 3.5e9)
+			spec.attribute("tiff:bigtiff", 1);
 	}
+	if (desc)
+		spec.attribute("ImageDescription", desc);
 	if (fmt == std::string("openexr"))
 		spec.attribute("compression", "zip");
 	if (mip) {
@@ -416,7 +423,7 @@ extern "C" int img_write(const char *path, int width, int height, int channels,
 			 enum img_type type, const void *pixels, char err[256])
 {
 	try {
-		return write_impl(path, width, height, channels, type, pixels, 0, false, err);
+		return write_impl(path, width, height, channels, type, pixels, 0, false, nullptr, err);
 	} catch (const std::bad_alloc &) {
 		oom();
 	} catch (const std::exception &e) {
@@ -436,7 +443,53 @@ extern "C" int img_write_tiled(const char *path, int width, int height, int chan
 		return -EINVAL;
 	}
 	try {
-		return write_impl(path, width, height, channels, type, pixels, tile, mip, err);
+		return write_impl(path, width, height, channels, type, pixels, tile, mip, nullptr, err);
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (const std::exception &e) {
+		set_err(err, "%s: %s", path, e.what());
+		return -EIO;
+	}
+}
+
+extern "C" int img_write_tiled_desc(const char *path, int width, int height, int channels,
+				    enum img_type type, const void *pixels, int tile, bool mip,
+				    const char *description, char err[256])
+{
+	if (tile <= 0 || tile % 16) {
+		if (err)
+			snprintf(err, 256, "%s: tile size %d is not a positive multiple of 16",
+				 path, tile);
+		return -EINVAL;
+	}
+	try {
+		return write_impl(path, width, height, channels, type, pixels, tile, mip,
+				  description, err);
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (const std::exception &e) {
+		set_err(err, "%s: %s", path, e.what());
+		return -EIO;
+	}
+}
+
+extern "C" int img_cache_description(struct img_cache *c, const char *path, char *buf, size_t n,
+				     char err[256])
+{
+	if (n)
+		buf[0] = 0;
+	try {
+		ImageSpec spec;
+		if (!c->ic->get_imagespec(ustring(path), spec, 0, 0, false)) {
+			set_err(err, "%s: %s", path, c->ic->geterror());
+			return missing_or(path, -EIO);
+		}
+		std::string d = spec.get_string_attribute("ImageDescription");
+		if (d.empty())
+			return -ENODATA;
+		if (n)
+			snprintf(buf, n, "%s", d.c_str());
+		return 0;
 	} catch (const std::bad_alloc &) {
 		oom();
 	} catch (const std::exception &e) {

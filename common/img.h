@@ -75,6 +75,16 @@ int img_write(const char *path, int width, int height, int channels, enum img_ty
 int img_write_tiled(const char *path, int width, int height, int channels, enum img_type type,
 		    const void *pixels, int tile, bool mip, char err[256]);
 
+/* img_write_tiled plus `description` (NULL: none), stored as the TIFF ImageDescription, and
+ * BigTIFF chosen automatically when the pyramid's uncompressed size nears 4 GiB. */
+int img_write_tiled_desc(const char *path, int width, int height, int channels, enum img_type type,
+			 const void *pixels, int tile, bool mip, const char *description,
+			 char err[256]);
+/* Copies the image's ImageDescription (TIFF) into buf (n bytes, NUL-terminated, truncated).
+ * Returns 0, -ENODATA (the file has none) or -ENOENT / -EIO with err filled. */
+int img_cache_description(struct img_cache *c, const char *path, char *buf, size_t n,
+			  char err[256]);
+
 /* Reads the whole first image of path, all channels, converted to `type` (IMG_NONE: the
  * file's own img_info.type). *pixels is returned owned (free() it); info may be NULL.
  * Returns 0, -ENOENT or -EIO with err filled. */

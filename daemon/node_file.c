@@ -6,12 +6,15 @@
  * Parameters ([node NAME] with type = file):
  *   path      the image (relative paths resolve against the planet file's directory)
  *   kind      height | color: PIX_HEIGHT or PIX_COLOR output (default height)
- *   bounds    W,S,E,N in degrees covered by the image (default -180,-90,180,90). Row 0 is the
- *             north edge, column 0 the west edge; pixels are areas with centres at +0.5.
+ *   bounds    W,S,E,N in degrees covered by the image (default: the bounds `clipmapctl import`
+ *             recorded in the file, else -180,-90,180,90). Row 0 is the north edge, column 0
+ *             the west edge; pixels are areas with centres at +0.5. S and N may reach half
+ *             a pixel past the poles (pixel-is-point grids with rows centred on the poles).
  *   channel   (height) the channel holding heights (default 0)
  *   scale, offset  (height) height = raw·scale + offset; raw is the stored value, integers
  *             unnormalised (int16 metres: scale 1; uint16 in 0.1 m: scale 0.1)
- *   nodata    (height) a raw value meaning "no data"; NaN in float files always is
+ *   nodata    (height) a raw value meaning "no data" (default: one recorded by import); NaN
+ *             in float files always is
  *   fill      height in metres (default 0) or colour (default 0,0,0,0) outside the bounds and
  *             where data is missing
  *   lon_wrap  true | false: bilinear wraps across the east/west edges (default true when the
@@ -132,22 +135,47 @@ static int parse_cache_mb(struct node_parse *p, long *out)
 	return 0;
 }
 
+/* What `clipmapctl import` records in the ImageDescription (client/import.h):
+ * "clipmap:bounds=W,S,E,N" and optionally "clipmap:nodata=V". Returns how many were found
+ * (bit 0: bounds, bit 1: nodata). */
+static int file_desc(struct file_impl *f, double b[4], double *nodata)
+{
+	char d[512];
+	int found = 0;
+	if (img_cache_description(f->cache, f->path, d, sizeof d, NULL))
+		return 0;
+	const char *s = strstr(d, "clipmap:bounds=");
+	if (s && sscanf(s, "clipmap:bounds=%lf,%lf,%lf,%lf", &b[0], &b[1], &b[2], &b[3]) == 4)
+		found |= 1;
+	s = strstr(d, "clipmap:nodata=");
+	if (s && sscanf(s, "clipmap:nodata=%lf", nodata) == 1)
+		found |= 2;
+	return found;
+}
+
 static int parse_bounds(struct node_parse *p, struct file_impl *f)
 {
-	double b[4];
+	double b[4], nd;
 	int nb, rc = np_doubles(p, "bounds", b, 4, &nb);
 	if (rc)
 		return rc;
 	if (nb == 0) {
-		b[0] = -180, b[1] = -90, b[2] = 180, b[3] = 90;
+		if (!(file_desc(f, b, &nd) & 1))
+			b[0] = -180, b[1] = -90, b[2] = 180, b[3] = 90;
 	} else if (nb != 4) {
 		return np_error(p, "bounds", "expected 4 numbers W,S,E,N (degrees), got %d", nb);
 	}
-	if (!(b[0] < b[2] && b[2] - b[0] <= 360 && b[0] >= -360 && b[2] <= 360))
+	/* A pixel-is-point global grid (ETOPO5: 2161 rows centred from pole to pole) reaches
+	 * half a pixel past each pole; allow that much (and never more than a degree). */
+	double py = b[3] > b[1] ? 0.5 * (b[3] - b[1]) / f->info.height * (1 + 1e-9) : 0;
+	py = py < 1 ? py : 0;
+	if (!(b[0] < b[2] && b[2] - b[0] <= 360 + 1e-9 && b[0] >= -360 && b[2] <= 360))
 		return np_error(p, "bounds", "need -360 <= W < E <= 360 and E - W <= 360, got W=%g E=%g",
 				b[0], b[2]);
-	if (!(b[1] < b[3] && b[1] >= -90 && b[3] <= 90))
+	if (!(b[1] < b[3] && b[1] >= -90 - py && b[3] <= 90 + py))
 		return np_error(p, "bounds", "need -90 <= S < N <= 90, got S=%g N=%g", b[1], b[3]);
+	if (fabs(b[2] - b[0] - 360) < 1e-9)
+		b[2] = b[0] + 360; /* "global" below compares exactly */
 	f->west = b[0], f->south = b[1], f->east = b[2], f->north = b[3];
 	return 0;
 }
@@ -174,11 +202,15 @@ static int parse_height(struct node_parse *p, struct file_impl *f)
 	if ((rc = np_double(p, "offset", 0, -1e30, 1e30, &v)))
 		return rc;
 	f->offset = (float)v;
+	double b[4], fnd;
 	if (ini_find(p->sec, "nodata")) {
 		if ((rc = np_double(p, "nodata", 0, -1e30, 1e30, &v)))
 			return rc;
 		f->has_nodata = true;
 		f->nodata = (float)v;
+	} else if (file_desc(f, b, &fnd) & 2) {
+		f->has_nodata = true; /* recorded by clipmapctl import; the file's mtime is hashed */
+		f->nodata = (float)fnd;
 	}
 	if ((rc = np_double(p, "fill", 0, -1e30, 1e30, &v)))
 		return rc;
@@ -251,7 +283,7 @@ static int file_create(struct node *nd, struct node_parse *p)
 	nd->out = kind == KIND_COLOR ? PIX_COLOR : PIX_HEIGHT;
 	if ((rc = parse_bounds(p, f)))
 		return rc;
-	bool global = f->east - f->west == 360;
+	bool global = f->east - f->west == 360; /* exact: parse_bounds snaps near-360 spans */
 	int wrap;
 	if ((rc = np_enum(p, "lon_wrap", bool_names, global ? 1 : 0, &wrap)))
 		return rc;

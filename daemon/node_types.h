@@ -29,6 +29,9 @@ extern const struct node_type node_type_normal;
 /* `file`: an equirectangular raster (global or within `bounds`) read through OpenImageIO,
  * resampled bilinearly, filtered from MIP levels when coarser than the file. */
 extern const struct node_type node_type_file;
+/* `craters`: seeded, size-distributed impact craters on the sphere, a height source or added
+ * to an optional input height; band-limited per level (node_craters.c lists the parameters). */
+extern const struct node_type node_type_craters;
 
 /* The type named `name` in the NULL-terminated list `types`, or NULL (borrowed). */
 const struct node_type *node_types_find_in(const struct node_type *const *types, const char *name);

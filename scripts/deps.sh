@@ -1,9 +1,10 @@
 #!/bin/sh
-# Installs the Debian packages clipmap needs (idempotent). As root it uses apt-get; otherwise
-# it prints the exact command to run and fails.
+# Installs the Debian packages clipmap needs (idempotent), then the planet data
+# (scripts/data.sh: its packages and the imports into data/). As root it uses apt-get;
+# otherwise it prints the exact command to run and fails.
 set -eu
 PKGS="build-essential pkg-config libopenimageio-dev openimageio-tools libgeographiclib-dev
-libcmocka-dev libxxhash-dev libzstd-dev liblz4-dev libsystemd-dev systemd clang"
+libcmocka-dev libxxhash-dev libzstd-dev liblz4-dev libsystemd-dev systemd clang libgdal-dev"
 missing=""
 for p in $PKGS; do
 	st=$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)
@@ -12,7 +13,9 @@ for p in $PKGS; do
 	*) missing="$missing $p" ;;
 	esac
 done
-[ -z "$missing" ] && exit 0
+if [ -z "$missing" ]; then
+	exec sh "$(dirname "$0")/data.sh"
+fi
 cmd="apt-get install -y --no-install-recommends$missing"
 if [ "$(id -u)" -ne 0 ]; then
 	echo "make deps: missing Debian packages:$missing" >&2
@@ -24,3 +27,4 @@ export DEBIAN_FRONTEND=noninteractive
 apt-get update -qq
 # shellcheck disable=SC2086
 apt-get install -y -qq --no-install-recommends $missing >/dev/null
+exec sh "$(dirname "$0")/data.sh"

@@ -1,0 +1,177 @@
+/* test_earth — conf/planets/earth.ini on the installed data (`make data`, run by make deps):
+ * heights at named places (the Mariana Trench area, Tibet, the Dead Sea, the open Pacific)
+ * against ETOPO5 read independently from the source NetCDF with GDAL (bilinear at the same
+ * point), at the data's resolution (no detail octaves: within 1 m) and finer (detail added:
+ * within its amplitude); the colour of the Sahara, the Amazon and Antarctica in plausible
+ * ranges. Tiles go through render_layer: the same cache and scheduler the daemon uses. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <gdal/cpl_error.h>
+#include <gdal/gdal.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "planet.h"
+#include "render.h"
+
+#define PLANET "conf/planets/earth.ini"
+#define ETOPO "/usr/share/ferret-vis/data/etopo5.cdf"
+
+static struct planet *pl;
+static GDALDatasetH etopo;
+
+static int setup(void **state)
+{
+	(void)state;
+	char err[256];
+	if (access("data/earth/etopo5.tif", R_OK) || access("data/earth/bluemarble.tif", R_OK) ||
+	    access(ETOPO, R_OK)) {
+		fprintf(stderr, "test_earth: planet data missing: run `make data` (as root) first\n");
+		return -1;
+	}
+	if (planet_load(PLANET, &pl, err)) {
+		fprintf(stderr, "test_earth: %s\n", err);
+		return -1;
+	}
+	GDALAllRegister();
+	CPLPushErrorHandler(CPLQuietErrorHandler);
+	etopo = GDALOpen(ETOPO, GA_ReadOnly);
+	CPLPopErrorHandler();
+	return etopo ? 0 : -1;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	planet_destroy(pl);
+	GDALClose(etopo);
+	return 0;
+}
+
+/* ETOPO5 at (lat, lon), bilinear between the 5′ grid points, straight from the NetCDF:
+ * points at longitudes i/12 (0..359.917), latitudes 90 - r/12 (GDAL presents the rows
+ * north-up). */
+static double etopo_bilinear(double lat, double lon)
+{
+	double gt[6];
+	assert_int_equal(GDALGetGeoTransform(etopo, gt), CE_None);
+	/* The file's own georeferencing agrees with the 5′ grid (float32 coordinates). */
+	assert_true(fabs(gt[1] - 1.0 / 12) < 1e-5 && fabs(gt[5] + 1.0 / 12) < 1e-5);
+	assert_true(fabs(gt[0] + 1.0 / 24) < 1e-4 && fabs(gt[3] - (90 + 1.0 / 24)) < 1e-4);
+	int w = GDALGetRasterXSize(etopo), h = GDALGetRasterYSize(etopo);
+	assert_int_equal(w, 4320);
+	assert_int_equal(h, 2161);
+	double c = fmod(lon + 360, 360) * 12, r = (90 - lat) * 12;
+	int c0 = (int)floor(c), r0 = (int)floor(r);
+	double fc = c - c0, fr = r - r0;
+	float v[2][2];
+	GDALRasterBandH b = GDALGetRasterBand(etopo, 1);
+	for (int dy = 0; dy < 2; dy++)
+		for (int dx = 0; dx < 2; dx++)
+			assert_int_equal(GDALRasterIO(b, GF_Read, (c0 + dx) % w, r0 + dy, 1, 1,
+						      &v[dy][dx], 1, 1, GDT_Float32, 0, 0),
+					 CE_None);
+	return (1 - fr) * ((1 - fc) * v[0][0] + fc * v[0][1]) +
+	       fr * ((1 - fc) * v[1][0] + fc * v[1][1]);
+}
+
+/* The layer's texel holding (lat, lon) at level (ly + 1, ly); its centre in *clat, *clon. */
+static void texel(const char *layer, int ly, double lat, double lon, void *out, double *clat,
+		  double *clon)
+{
+	struct render_region rg;
+	render_region_around(ly + 1, ly, lat, lon, 1, &rg);
+	struct render_opts o = { .workers = 1, .cache_mb = 64 };
+	struct render_image im;
+	char err[256];
+	if (render_layer(pl, layer, &rg, &o, &im, err))
+		fail_msg("render %s at %g,%g: %s", layer, lat, lon, err);
+	uint32_t T = pl->tile_size;
+	double u = (lon + 180) / 360 * ((double)T * (1u << (ly + 1)));
+	double v = (90 - lat) / 180 * ((double)T * (1u << ly));
+	uint32_t iu = (uint32_t)u, iv = (uint32_t)v;
+	uint32_t i = iu - rg.x * T, j = iv - rg.y * T;
+	assert_true(i < T && j < T);
+	*clon = -180 + (iu + 0.5) * 360 / ((double)T * (1u << (ly + 1)));
+	*clat = 90 - (iv + 0.5) * 180 / ((double)T * (1u << ly));
+	size_t px = im.is_float ? 4 : (size_t)im.channels;
+	memcpy(out, (char *)im.pixels + ((size_t)j * T + i) * px, px);
+	render_image_free(&im);
+}
+
+struct place {
+	const char *name;
+	double lat, lon;
+	double lo, hi; /* what ETOPO5 says there, roughly */
+};
+
+static const struct place places[] = {
+	{ "Mariana Trench", 11.35, 142.2, -11000, -7000 },
+	{ "Tibet", 32.0, 88.0, 4000, 6000 },
+	{ "Dead Sea", 31.5, 35.5, -800, 300 },
+	{ "open Pacific", 0.0, -140.0, -5000, -3500 },
+	{ "Antarctic plateau", -80.0, 60.0, 2500, 4200 },
+};
+
+static void heights(void **state)
+{
+	(void)state;
+	for (size_t p = 0; p < sizeof places / sizeof places[0]; p++) {
+		const struct place *q = &places[p];
+		/* Level 3: texels of 0.088°, just coarser than 5′ (0.083°): no detail octave
+		 * is short enough to show, MIP level 0 is read bilinearly — the height is
+		 * ETOPO5's own bilinear value at the texel centre. */
+		float h;
+		double clat, clon;
+		texel("height", 3, q->lat, q->lon, &h, &clat, &clon);
+		double want = etopo_bilinear(clat, clon);
+		if (!(fabs(h - want) <= 1.0))
+			fail_msg("%s (%g, %g) level 3: %g m, ETOPO5 says %g m", q->name, clat, clon,
+				 h, want);
+		if (!(want >= q->lo && want <= q->hi))
+			fail_msg("%s: ETOPO5 gives %g m, expected %g..%g", q->name, want, q->lo,
+				 q->hi);
+		/* Level 7: texels of 0.0055° (600 m) — detail octaves of up to 8 km and
+		 * 120 m amplitude are added on top of the bilinear data. */
+		texel("height", 7, q->lat, q->lon, &h, &clat, &clon);
+		want = etopo_bilinear(clat, clon);
+		if (!(fabs(h - want) <= 150.0))
+			fail_msg("%s (%g, %g) level 7: %g m, ETOPO5 says %g m (detail ≤ 150 m)",
+				 q->name, clat, clon, h, want);
+	}
+}
+
+static void colours(void **state)
+{
+	(void)state;
+	uint8_t c[4];
+	double clat, clon;
+	texel("color", 3, 23, 10, c, &clat, &clon); /* Sahara: sand, red > green > blue */
+	if (!(c[0] > 150 && c[0] > c[1] && c[1] > c[2] && c[0] - c[2] > 40 && c[3] == 255))
+		fail_msg("Sahara: %d %d %d %d", c[0], c[1], c[2], c[3]);
+	texel("color", 3, -3, -60, c, &clat, &clon); /* Amazon: dark green forest */
+	if (!(c[1] + 5 >= c[0] && c[1] > c[2] + 15 && c[0] < 150 && c[1] < 150 && c[3] == 255))
+		fail_msg("Amazon: %d %d %d %d", c[0], c[1], c[2], c[3]);
+	texel("color", 3, -80, 0, c, &clat, &clon); /* Antarctica: white ice */
+	if (!(c[0] > 200 && c[1] > 200 && c[2] > 200 && abs(c[0] - c[2]) < 25 && c[3] == 255))
+		fail_msg("Antarctica: %d %d %d %d", c[0], c[1], c[2], c[3]);
+	texel("color", 3, 0, -140, c, &clat, &clon); /* Pacific: dark blue */
+	if (!(c[2] >= c[0] && c[2] >= c[1] && c[0] < 60 && c[3] == 255))
+		fail_msg("Pacific: %d %d %d %d", c[0], c[1], c[2], c[3]);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(heights),
+		cmocka_unit_test(colours),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}

@@ -1,0 +1,240 @@
+/* test_import — `clipmapctl import` (client/import.c) on small GeoTIFFs written with GDAL in
+ * the test: pixels and bounds survive the round trip (tiled, mipmapped, bounds in the
+ * description) and the `file` node places them from the recorded bounds; a global raster
+ * from 0..360° comes out starting at −180°, a south-up one north-up; integer nodata is
+ * recorded and honoured; errors name the file and the problem. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <gdal/gdal.h>
+#include <gdal/ogr_srs_api.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "img.h"
+#include "import.h"
+#include "ini.h"
+#include "node.h"
+#include "node_types.h"
+#include "planet.h"
+#include "tile.h"
+
+static char dir[64];
+
+static const char *tpath(const char *name)
+{
+	static char buf[4][128];
+	static int k;
+	k = (k + 1) % 4;
+	snprintf(buf[k], sizeof buf[k], "%s/%s", dir, name);
+	return buf[k];
+}
+
+static int setup(void **state)
+{
+	(void)state;
+	snprintf(dir, sizeof dir, "/tmp/test_import.XXXXXX");
+	if (!mkdtemp(dir))
+		return -1;
+	GDALAllRegister();
+	return 0;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	char cmd[128];
+	snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+	return system(cmd) == 0 ? 0 : -1;
+}
+
+static int16_t pix(int x, int y)
+{
+	return (int16_t)(x * 100 - y * 7 + 3);
+}
+
+/* A w×h int16 GeoTIFF with geotransform gt in EPSG:epsg (pixel (x, y) = pix(x, y)). */
+static void write_geotiff(const char *path, int w, int h, const double gt[6], int epsg,
+			  const double *nodata)
+{
+	GDALDriverH drv = GDALGetDriverByName("GTiff");
+	assert_non_null(drv);
+	GDALDatasetH ds = GDALCreate(drv, path, w, h, 1, GDT_Int16, NULL);
+	assert_non_null(ds);
+	assert_int_equal(GDALSetGeoTransform(ds, (double *)gt), CE_None);
+	OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(srs, epsg), OGRERR_NONE);
+	assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+	OSRDestroySpatialReference(srs);
+	int16_t *buf = malloc(sizeof *buf * (size_t)w * h);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++)
+			buf[(size_t)y * w + x] = pix(x, y);
+	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
+	if (nodata)
+		assert_int_equal(GDALSetRasterNoDataValue(b, *nodata), CE_None);
+	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, buf, w, h, GDT_Int16, 0, 0),
+			 CE_None);
+	free(buf);
+	GDALClose(ds);
+}
+
+static void read_back(const char *path, int w, int h, int16_t **px, char desc[256])
+{
+	struct img_info info;
+	char err[256];
+	void *p;
+	if (img_read(path, IMG_NONE, &p, &info, err))
+		fail_msg("%s", err);
+	assert_int_equal(info.width, w);
+	assert_int_equal(info.height, h);
+	assert_int_equal(info.type, IMG_I16);
+	assert_true(info.tiled);
+	struct img_cache *c = img_cache_create(16);
+	struct img_info ci;
+	assert_int_equal(img_cache_info(c, path, &ci, err), 0);
+	assert_true(ci.mip_levels > 1);
+	assert_int_equal(img_cache_description(c, path, desc, 256, err), 0);
+	img_cache_destroy(c);
+	*px = p;
+}
+
+static void round_trip(void **state)
+{
+	(void)state;
+	const double gt[6] = { 10, 0.5, 0, 50, 0, -0.5 }; /* 10..30°E, 40..50°N */
+	write_geotiff(tpath("a.tif"), 40, 20, gt, 4326, NULL);
+	struct import_result r;
+	char err[256] = "", desc[256];
+	if (import_raster(tpath("a.tif"), tpath("a_out.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	assert_true(r.georeferenced);
+	assert_false(r.flipped_rows);
+	assert_int_equal(r.shifted_cols, 0);
+	assert_true(r.west == 10 && r.east == 30 && r.south == 40 && r.north == 50);
+	int16_t *px;
+	read_back(tpath("a_out.tif"), 40, 20, &px, desc);
+	for (int y = 0; y < 20; y++)
+		for (int x = 0; x < 40; x++)
+			if (px[y * 40 + x] != pix(x, y))
+				fail_msg("pixel %d,%d = %d, want %d", x, y, px[y * 40 + x], pix(x, y));
+	free(px);
+	assert_string_equal(desc, "clipmap:bounds=10,40,30,50");
+
+	/* The file node places the image from the recorded bounds alone. */
+	static struct planet pl = { .tile_size = 64, .max_level = 10, .a = 6378137.0 };
+	pl.dir = dir;
+	char text[256];
+	snprintf(text, sizeof text, "[node x]\ntype = file\npath = a_out.tif\nfill = -999\n");
+	struct ini_file *ini;
+	assert_int_equal(ini_parse("t.ini", text, strlen(text), &ini, err), 0);
+	struct ini_section *sec = &ini->sections[0];
+	ini_find(sec, "type")->used = true;
+	struct node n = { .name = "x", .planet = &pl };
+	if (node_init(&n, &node_type_file, "t.ini", sec, err))
+		fail_msg("%s", err);
+	/* Level (12, 11) with T = 64: texels of 360/2^18 ≈ 0.00137°; pixel (x, y) covers
+	 * [10 + x/2, 10.5 + x/2] × [49.5 - y/2, 50 - y/2]: its centre texel holds pix(x, y). */
+	double lon = 10 + 7 * 0.5 + 0.25, lat = 50 - 3 * 0.5 - 0.25;
+	uint32_t u = (uint32_t)floor((lon + 180) / 360 * 4096 * 64);
+	uint32_t v = (uint32_t)floor((90 - lat) / 180 * 2048 * 64);
+	struct tile_key k = { .node = n.hash, .lx = 12, .ly = 11, .x = u / 64, .y = v / 64 };
+	struct tile *t = tile_create(&k, PIX_HEIGHT, 64);
+	struct gen_ctx g = { 0 };
+	assert_int_equal(n.type->generate(&n, &g, &k, NULL, 0, t), 0);
+	float got = tile_f32(t)[(v % 64) * 64 + u % 64];
+	if (fabsf(got - pix(7, 3)) > 0.5f)
+		fail_msg("file node at %g,%g: %g, want %d", lat, lon, got, pix(7, 3));
+	/* Outside the bounds: the fill. */
+	k.x = 0;
+	assert_int_equal(n.type->generate(&n, &g, &k, NULL, 0, t), 0);
+	assert_true(tile_f32(t)[0] == -999);
+	tile_unref(t);
+	gen_ctx_fini(&g);
+	node_fini(&n);
+	ini_free(ini);
+}
+
+static void global_shift_and_flip(void **state)
+{
+	(void)state;
+	/* 36×18 pixels of 10°, longitudes 0..360, rows south→north (positive y step). */
+	const double gt[6] = { 0, 10, 0, -90, 0, 10 };
+	double nd = -32768;
+	write_geotiff(tpath("g.tif"), 36, 18, gt, 4326, &nd);
+	struct import_result r;
+	char err[256] = "", desc[256];
+	if (import_raster(tpath("g.tif"), tpath("g_out.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	assert_true(r.flipped_rows);
+	assert_int_equal(r.shifted_cols, 18);
+	assert_true(r.west == -180 && r.east == 180 && r.south == -90 && r.north == 90);
+	int16_t *px;
+	read_back(tpath("g_out.tif"), 36, 18, &px, desc);
+	/* Output (x, y): lon -180 + 10x (source column x + 18 mod 36), north row first (source
+	 * row 17 - y). */
+	for (int y = 0; y < 18; y++)
+		for (int x = 0; x < 36; x++) {
+			int16_t want = pix((x + 18) % 36, 17 - y);
+			if (px[y * 36 + x] != want)
+				fail_msg("pixel %d,%d = %d, want %d", x, y, px[y * 36 + x], want);
+		}
+	free(px);
+	assert_string_equal(desc, "clipmap:bounds=-180,-90,180,90 clipmap:nodata=-32768");
+
+	/* --bounds overrides; --band picks a band. */
+	struct import_opts o = { .has_bounds = true, .bounds = { -10, -5, 10, 5 }, .band = 1 };
+	if (import_raster(tpath("g.tif"), tpath("g2.tif"), &o, &r, err))
+		fail_msg("%s", err);
+	assert_int_equal(r.shifted_cols, 0);
+	assert_true(r.west == -10 && r.north == 5);
+}
+
+static void expect_error(const char *src, const char *dst, const struct import_opts *o,
+			 int want_rc, const char *want1, const char *want2)
+{
+	char err[256] = "";
+	int rc = import_raster(src, dst, o, NULL, err);
+	if (rc != want_rc || !strstr(err, want1) || (want2 && !strstr(err, want2)))
+		fail_msg("import %s: rc %d \"%s\", want %d with \"%s\" and \"%s\"", src, rc, err,
+			 want_rc, want1, want2 ? want2 : "");
+	assert_int_equal(access(dst, F_OK), -1);
+}
+
+static void errors(void **state)
+{
+	(void)state;
+	expect_error(tpath("nope.tif"), tpath("e1.tif"), NULL, -ENOENT, "nope.tif",
+		     "No such file");
+	FILE *f = fopen(tpath("text.dat"), "w");
+	assert_non_null(f);
+	fputs("this is not a raster\n", f);
+	assert_int_equal(fclose(f), 0);
+	expect_error(tpath("text.dat"), tpath("e2.tif"), NULL, -EINVAL, "text.dat",
+		     "not a raster GDAL can read");
+	const double gt[6] = { 10, 0.5, 0, 50, 0, -0.5 };
+	write_geotiff(tpath("b.tif"), 8, 4, gt, 4326, NULL);
+	struct import_opts o = { .band = 3 };
+	expect_error(tpath("b.tif"), tpath("e3.tif"), &o, -EINVAL, "b.tif", "no band 3");
+	expect_error(tpath("b.tif"), tpath("e4.png"), NULL, -EINVAL, "e4.png", "extension");
+	const double gm[6] = { 500000, 1000, 0, 6000000, 0, -1000 };
+	write_geotiff(tpath("utm.tif"), 8, 4, gm, 32633, NULL);
+	expect_error(tpath("utm.tif"), tpath("e5.tif"), NULL, -EINVAL, "utm.tif", "projected");
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(round_trip),
+		cmocka_unit_test(global_shift_and_flip),
+		cmocka_unit_test(errors),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}
