@@ -32,7 +32,7 @@ int import_cli(int argc, char **argv)
 	struct import_opts o = { 0 };
 	const char *dst = NULL;
 	int quiet = 0, c;
-	optind = 1;
+	optind = 0; /* 0: glibc re-initialises (main parsed its options with "+") */
 	while ((c = getopt_long(argc, argv, "o:qh", opts, NULL)) != -1) {
 		char *end;
 		long v;
