@@ -521,14 +521,16 @@ int view_frame_complete(struct view *v, const struct view_camera *c, double time
 	double t0 = now_ms();
 	struct view_frame_stats s = { 0 };
 	int n = 0, rc = 0;
-	double prev_ground = NAN;
 	for (;;) {
 		rc = view_frame(v, c, 0, &s);
 		n++;
 		if (rc < 0)
 			break;
-		bool settled = s.ground == prev_ground;
-		prev_ground = s.ground;
+		/* The frame used the ground height known before its uploads: settled when the
+		 * uploads did not change it. */
+		double g = 0;
+		view_clipmap_ground(v->cm, c->lon, c->lat, &g);
+		bool settled = g == s.ground;
 		if (s.complete && settled)
 			break;
 		double left = timeout_s * 1e3 - (now_ms() - t0);
