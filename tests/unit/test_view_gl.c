@@ -349,8 +349,12 @@ static void marker_projects_to_predicted_pixel(void **state)
 		    0.3, 250);
 	/* 220 m from the north pole, a marker 110 m beyond it. */
 	marker_case(ctx, 89.998, 40.0, 1500, 0, -90, 89.999, -140.0, 60, 0);
-	/* From 1 km looking ahead at 40° down, a marker about 1.2 km ahead. */
-	marker_case(ctx, 10.0, -60.0, 1000, 0, -40, 10.0 + 0.0108, -60.0, 25, 0);
+	/* From 1 km looking ahead at 40° down, a marker about 1.2 km ahead, centred on a texel
+	 * corner of level 8 (a corner of every finer level too: the filtered blob stays
+	 * symmetric about it). */
+	double mlat = grid_v_to_lat(8, 64, round(grid_lat_to_v(8, 64, 10.0108)));
+	double mlon = grid_u_to_lon(9, 64, round(grid_lon_to_u(9, 64, -60.0)));
+	marker_case(ctx, mlat - 0.0108, mlon, 1000, 0, -40, mlat, mlon, 60, 0);
 	gl_context_destroy(ctx);
 }
 
