@@ -97,7 +97,7 @@ $(BUILD)/clipmapview: $(BUILD)/client/clipmapview.o $(VIEW_LIB) $(LIB)
 $(BUILD)/tests/test_view_%: $(BUILD)/tests/unit/test_view_%.o $(VIEW_LIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
-$(BUILD)/tests/bench_view%: $(BUILD)/tests/bench/bench_view%.o $(VIEW_LIB) $(LIB)
+$(BUILD)/tests/bench_view: $(BUILD)/tests/bench/bench_view.o $(VIEW_LIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
 $(BUILD)/tests/%: $(BUILD)/tests/unit/%.o $(LIB)
