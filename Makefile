@@ -28,7 +28,7 @@ AVX2_FLAGS   := -mavx2 -mfma -mbmi2
 AVX512_FLAGS := -mavx512f -mavx512dq -mavx512bw -mavx512vl -mavx2 -mfma -mbmi2
 
 # Every main() lives in its own file; all other sources form the library the tests link.
-MAINS        := daemon/clipmapd.c client/clipmapctl.c
+MAINS        := daemon/clipmapd.c client/clipmapctl.c client/clipmapview.c
 COMMON_SRC   := $(wildcard common/*.c)
 COMMON_CXX   := $(wildcard common/*.cpp)
 DAEMON_SRC   := $(filter-out $(MAINS),$(wildcard daemon/*.c))
@@ -43,7 +43,19 @@ BENCH_SRC    := $(wildcard tests/bench/bench_*.c)
 BENCH_BIN    := $(BENCH_SRC:tests/bench/%.c=$(BUILD)/tests/%)
 PROGS        := $(foreach m,$(MAINS),$(if $(wildcard $(m)),$(BUILD)/$(notdir $(basename $(m)))))
 
-.PHONY: all check test asan tsan bench deps clean demo data
+# The viewer: GL code in its own library (EGL linked; OSMesa dlopen'ed at run time), shaders
+# embedded as C strings generated from shaders/, every shader checked by glslangValidator.
+GL_CFLAGS    := $(shell pkg-config --cflags egl opengl 2>/dev/null)
+GL_LIBS      := $(shell pkg-config --libs egl 2>/dev/null || echo -lEGL) -ldl
+VIEW_SRC     := $(filter-out $(MAINS),$(wildcard client/gl_*.c client/view*.c))
+VIEW_OBJ     := $(VIEW_SRC:%.c=$(BUILD)/%.o)
+VIEW_LIB     := $(BUILD)/libclipmapgl.a
+SHADERS      := $(wildcard shaders/*.vert shaders/*.frag)
+SHADER_HDR   := $(foreach s,$(SHADERS),$(BUILD)/gen/$(subst .,_,$(notdir $(s))).h)
+VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/unit/test_view_*.c tests/bench/bench_view*.c)) \
+                $(BUILD)/client/clipmapview.o
+
+.PHONY: all check test asan tsan bench deps clean demo data shader-check
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 
@@ -68,6 +80,27 @@ $(BUILD)/clipmapd: $(BUILD)/daemon/clipmapd.o $(LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
 $(BUILD)/clipmapctl: $(BUILD)/client/clipmapctl.o $(LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
+$(VIEW_LIB): $(VIEW_OBJ)
+	@rm -f $@
+	ar rcs $@ $^
+$(VIEW_OBJ) $(VIEW_TESTOBJ): CFLAGS += $(GL_CFLAGS) -iquote $(BUILD)/gen
+$(VIEW_OBJ): $(SHADER_HDR)
+$(BUILD)/gen/%_vert.h: shaders/%.vert
+	@mkdir -p $(dir $@)
+	@{ echo 'static const char $(notdir $(basename $@))_src[] ='; \
+	   sed 's/\\/\\\\/g; s/"/\\"/g; s/^/"/; s/$$/\\n"/' $<; echo ';'; } > $@
+$(BUILD)/gen/%_frag.h: shaders/%.frag
+	@mkdir -p $(dir $@)
+	@{ echo 'static const char $(notdir $(basename $@))_src[] ='; \
+	   sed 's/\\/\\\\/g; s/"/\\"/g; s/^/"/; s/$$/\\n"/' $<; echo ';'; } > $@
+$(BUILD)/clipmapview: $(BUILD)/client/clipmapview.o $(VIEW_LIB) $(LIB)
+	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
+$(BUILD)/tests/test_view_%: $(BUILD)/tests/unit/test_view_%.o $(VIEW_LIB) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
+$(BUILD)/tests/bench_view: $(BUILD)/tests/bench/bench_view.o $(VIEW_LIB) $(LIB)
+	@mkdir -p $(dir $@)
+	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
 $(BUILD)/tests/%: $(BUILD)/tests/unit/%.o $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
@@ -84,10 +117,16 @@ data:
 
 check: deps
 	@$(MAKE) --no-print-directory all
+	@$(MAKE) --no-print-directory shader-check
 	@sh tests/run.sh $(BUILD)
 
-test: all
+test: all shader-check
 	@sh tests/run.sh $(BUILD)
+
+shader-check:
+	@for s in $(SHADERS); do glslangValidator $$s >/dev/null || { glslangValidator $$s; exit 1; }; done
+	@echo "shaders: $(words $(SHADERS)) checked by glslangValidator"
+
 
 asan: export ASAN_OPTIONS = detect_leaks=1:abort_on_error=0
 asan: export LSAN_OPTIONS = suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0

@@ -1,0 +1,303 @@
+/* clipmapview — the viewer. Offline mode renders pictures of a planet evaluated in this
+ * process (--planet): one camera (--camera) or a flight (--flight CSV), EGL surfaceless or
+ * OSMesa, no display needed. Exit status: 0 ok, 1 runtime failure, 2 bad usage.
+ */
+#include <errno.h>
+#include <getopt.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gl_context.h"
+#include "img.h"
+#include "view.h"
+#include "view_source_local.h"
+#include "xalloc.h"
+
+static void usage(FILE *f)
+{
+	fprintf(f,
+		"usage: clipmapview --planet FILE [options]\n"
+		"  --camera LAT,LON,ALT,HEADING,PITCH  degrees; ALT metres above the ground\n"
+		"  --flight FILE       CSV of camera keys (lat,lon,alt,heading,pitch per line)\n"
+		"  --steps N           frames from one key to the next (default 1)\n"
+		"  -o PATH             PNG to write (a flight: a printf pattern, e.g. f/%%05d.png)\n"
+		"  --size WxH          framebuffer (default 1280x720)\n"
+		"  --wait-complete     wait for every wanted level before writing a picture\n"
+		"  --timeout S         give up waiting after S seconds (default 300)\n"
+		"  --stats FILE        one JSON line per frame\n"
+		"  --fov DEG           vertical field of view (default 60)\n"
+		"  --sun AZ,EL         sun azimuth and elevation at the camera (default 135,35)\n"
+		"  --rings N,M         N steps around, M rings per level (default 256,16)\n"
+		"  --backend egl|osmesa, --workers N, --no-prefetch\n");
+}
+
+struct key {
+	double v[5];
+};
+
+static int parse_camera(const char *s, struct key *k)
+{
+	char *end;
+	const char *p = s;
+	for (int i = 0; i < 5; i++) {
+		k->v[i] = strtod(p, &end);
+		if (end == p)
+			return -EINVAL;
+		p = end;
+		if (i < 4) {
+			if (*p != ',')
+				return -EINVAL;
+			p++;
+		}
+	}
+	while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')
+		p++;
+	return *p ? -EINVAL : 0;
+}
+
+static int read_flight(const char *path, struct key **out, size_t *n)
+{
+	FILE *f = fopen(path, "r");
+	if (!f)
+		return -errno;
+	char line[512];
+	size_t cap = 0, ln = 0;
+	*out = NULL;
+	*n = 0;
+	while (fgets(line, sizeof line, f)) {
+		ln++;
+		char *s = line;
+		while (*s == ' ' || *s == '\t')
+			s++;
+		if (*s == '#' || *s == '\n' || *s == '\r' || !*s || (*s >= 'a' && *s <= 'z'))
+			continue; /* comments, blank lines, a header */
+		struct key k;
+		if (parse_camera(s, &k) < 0) {
+			fprintf(stderr, "%s:%zu: camera: expected lat,lon,alt,heading,pitch\n", path, ln);
+			fclose(f);
+			free(*out);
+			return -EINVAL;
+		}
+		if (*n == cap) {
+			cap = cap ? 2 * cap : 64;
+			*out = xrealloc(*out, cap * sizeof **out);
+		}
+		(*out)[(*n)++] = k;
+	}
+	fclose(f);
+	return *n ? 0 : -EINVAL;
+}
+
+static double lerp_angle(double a, double b, double t)
+{
+	double d = fmod(b - a + 540.0, 360.0) - 180.0;
+	return a + d * t;
+}
+
+static void stats_line(FILE *f, int frame, const struct view_frame_stats *s)
+{
+	fprintf(f,
+		"{\"frame\":%d,\"ms\":%.3f,\"lmin\":%d,\"lmax\":%d,\"lfirst\":%d,\"llast\":%d,"
+		"\"triangles\":%llu,\"bytes_uploaded\":%llu,\"tiles_received\":%d,"
+		"\"wants_sent\":%zu,\"complete\":%s,\"alt\":%.3f,\"agl\":%.3f}\n",
+		frame, s->cpu_ms, s->lmin, s->lmax, s->lfirst, s->llast,
+		(unsigned long long)s->triangles, (unsigned long long)s->bytes_uploaded,
+		s->tiles_received, s->wants_sent, s->complete ? "true" : "false", s->alt, s->agl);
+}
+
+int main(int argc, char **argv)
+{
+	const char *planet = NULL, *camera = NULL, *flight = NULL, *outp = NULL, *statsp = NULL;
+	int width = 1280, height = 720, steps = 1, workers = 0;
+	bool wait_complete = false;
+	double timeout = 300, fov = 60;
+	struct view_desc d = { 0 };
+	enum gl_backend backend = GL_BACKEND_AUTO;
+	enum { O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS,
+	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP };
+	static const struct option opts[] = {
+		{ "planet", required_argument, NULL, O_PLANET },
+		{ "camera", required_argument, NULL, O_CAMERA },
+		{ "flight", required_argument, NULL, O_FLIGHT },
+		{ "steps", required_argument, NULL, O_STEPS },
+		{ "size", required_argument, NULL, O_SIZE },
+		{ "wait-complete", no_argument, NULL, O_WAIT },
+		{ "timeout", required_argument, NULL, O_TIMEOUT },
+		{ "stats", required_argument, NULL, O_STATS },
+		{ "fov", required_argument, NULL, O_FOV },
+		{ "sun", required_argument, NULL, O_SUN },
+		{ "rings", required_argument, NULL, O_RINGS },
+		{ "backend", required_argument, NULL, O_BACKEND },
+		{ "workers", required_argument, NULL, O_WORKERS },
+		{ "no-prefetch", no_argument, NULL, O_NOPF },
+		{ "help", no_argument, NULL, O_HELP },
+		{ NULL, 0, NULL, 0 },
+	};
+	int c;
+	while ((c = getopt_long(argc, argv, "o:h", opts, NULL)) != -1) {
+		switch (c) {
+		case O_PLANET: planet = optarg; break;
+		case O_CAMERA: camera = optarg; break;
+		case O_FLIGHT: flight = optarg; break;
+		case O_STEPS: steps = atoi(optarg); break;
+		case 'o': outp = optarg; break;
+		case O_SIZE:
+			if (sscanf(optarg, "%dx%d", &width, &height) != 2 || width < 16 ||
+			    height < 16 || width > 16384 || height > 16384) {
+				fprintf(stderr, "clipmapview: --size: expected WxH\n");
+				return 2;
+			}
+			break;
+		case O_WAIT: wait_complete = true; break;
+		case O_TIMEOUT: timeout = atof(optarg); break;
+		case O_STATS: statsp = optarg; break;
+		case O_FOV: fov = atof(optarg); break;
+		case O_SUN:
+			if (sscanf(optarg, "%f,%f", &d.sun_az, &d.sun_el) != 2) {
+				fprintf(stderr, "clipmapview: --sun: expected AZ,EL\n");
+				return 2;
+			}
+			break;
+		case O_RINGS:
+			if (sscanf(optarg, "%d,%d", &d.n_phi, &d.m_rings) != 2 || d.n_phi < 8 ||
+			    d.m_rings < 1 || d.n_phi > 4096 || d.m_rings > 64) {
+				fprintf(stderr, "clipmapview: --rings: expected N,M\n");
+				return 2;
+			}
+			break;
+		case O_BACKEND:
+			if (!strcmp(optarg, "egl"))
+				backend = GL_BACKEND_EGL;
+			else if (!strcmp(optarg, "osmesa"))
+				backend = GL_BACKEND_OSMESA;
+			else {
+				fprintf(stderr, "clipmapview: --backend: egl or osmesa\n");
+				return 2;
+			}
+			break;
+		case O_WORKERS: workers = atoi(optarg); break;
+		case O_NOPF: d.no_prefetch = true; break;
+		case O_HELP:
+		case 'h': usage(stdout); return 0;
+		default: usage(stderr); return 2;
+		}
+	}
+	if (!planet || (!camera == !flight) || steps < 1 || fov <= 1 || fov >= 170) {
+		usage(stderr);
+		return 2;
+	}
+	struct key *keys = NULL;
+	size_t nkeys = 0;
+	if (camera) {
+		keys = xmalloc(sizeof *keys);
+		nkeys = 1;
+		if (parse_camera(camera, keys) < 0) {
+			fprintf(stderr, "clipmapview: --camera: expected LAT,LON,ALT,HEADING,PITCH\n");
+			free(keys);
+			return 2;
+		}
+	} else {
+		int rc = read_flight(flight, &keys, &nkeys);
+		if (rc < 0) {
+			if (rc != -EINVAL)
+				fprintf(stderr, "clipmapview: %s: %s\n", flight, strerror(-rc));
+			else if (!nkeys)
+				fprintf(stderr, "clipmapview: %s: no camera keys\n", flight);
+			return 2;
+		}
+	}
+	char err[256] = "";
+	int status = 1;
+	struct gl_context *ctx = NULL;
+	struct view_source *src = NULL;
+	struct view *v = NULL;
+	FILE *sf = NULL;
+	unsigned char *pix = NULL;
+	int rc = view_source_local_create(planet, &(struct view_source_local_opts){ workers, 0 },
+					  &src, err);
+	if (rc < 0) {
+		fprintf(stderr, "clipmapview: %s\n", err);
+		status = 2;
+		goto out;
+	}
+	rc = gl_context_create(backend, &ctx, err);
+	if (rc < 0) {
+		fprintf(stderr, "clipmapview: no OpenGL context: %s\n", err);
+		goto out;
+	}
+	d.width = width;
+	d.height = height;
+	rc = view_create(gl_context_api(ctx), src, &d, &v, err);
+	if (rc < 0) {
+		fprintf(stderr, "clipmapview: %s\n", err);
+		goto out;
+	}
+	if (statsp && !(sf = fopen(statsp, "w"))) {
+		fprintf(stderr, "clipmapview: %s: %s\n", statsp, strerror(errno));
+		goto out;
+	}
+	pix = xmalloc((size_t)width * height * 4);
+	size_t nframes = nkeys == 1 ? 1 : (nkeys - 1) * (size_t)steps + 1;
+	for (size_t f = 0; f < nframes; f++) {
+		size_t k = f / (size_t)steps;
+		double t = (double)(f % (size_t)steps) / steps;
+		const struct key *a = &keys[k], *b = &keys[k + 1 < nkeys ? k + 1 : k];
+		struct view_camera cam = {
+			.lat = a->v[0] + (b->v[0] - a->v[0]) * t,
+			.lon = lerp_angle(a->v[1], b->v[1], t),
+			.alt = a->v[2] + (b->v[2] - a->v[2]) * t,
+			.heading = lerp_angle(a->v[3], b->v[3], t),
+			.pitch = a->v[4] + (b->v[4] - a->v[4]) * t,
+			.fov_y = fov,
+		};
+		if (cam.lon >= 180)
+			cam.lon -= 360;
+		if (cam.lon < -180)
+			cam.lon += 360;
+		struct view_frame_stats st;
+		if (wait_complete)
+			rc = view_frame_complete(v, &cam, timeout, &st, NULL);
+		else
+			rc = view_frame(v, &cam, (double)f / 30.0, &st);
+		if (rc == -ETIMEDOUT)
+			fprintf(stderr, "clipmapview: frame %zu: not complete after %.0f s\n", f,
+				timeout);
+		else if (rc < 0) {
+			fprintf(stderr, "clipmapview: frame %zu: %s\n", f, strerror(-rc));
+			goto out;
+		}
+		if (sf)
+			stats_line(sf, (int)f, &st);
+		if (outp) {
+			char path[4096];
+			if (flight) {
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wformat-nonliteral"
+				snprintf(path, sizeof path, outp, (int)f);
+#pragma GCC diagnostic pop
+			} else {
+				snprintf(path, sizeof path, "%s", outp);
+			}
+			view_read_rgba(v, pix);
+			rc = img_write(path, width, height, 4, IMG_U8, pix, err);
+			if (rc < 0) {
+				fprintf(stderr, "clipmapview: %s\n", err);
+				goto out;
+			}
+		}
+	}
+	status = 0;
+out:
+	if (sf && fclose(sf) != 0 && status == 0) {
+		fprintf(stderr, "clipmapview: %s: %s\n", statsp, strerror(errno));
+		status = 1;
+	}
+	free(pix);
+	view_destroy(v);
+	gl_context_destroy(ctx);
+	view_source_destroy(src);
+	free(keys);
+	return status;
+}

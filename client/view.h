@@ -1,0 +1,75 @@
+/* view — the viewer: spherical clipmap rendering (seed 000) with the per-frame update and
+ * render loop of seed 003 Algorithm 1 over a view_source, into an offscreen framebuffer.
+ *
+ * Each frame: compute the levels the camera needs (view_levels.h); when a level's target quad
+ * moves, send the new want-set (quads coarse first, then the ring around them); take the tiles
+ * that arrived; then for each level coarse → fine, update its textures if its quad is complete
+ * and draw it as a ring when the next level can be drawn, else as a full disk, and stop. It
+ * never waits for a tile.
+ *
+ * Threads: the GL context's thread only. Ownership: borrows gl and the source (both must
+ * outlive the view); owns its GL objects and clipmap.
+ */
+#ifndef CLIPMAP_VIEW_H
+#define CLIPMAP_VIEW_H
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gl_context.h"
+#include "view_clipmap.h"
+#include "view_levels.h"
+#include "view_source.h"
+
+struct view_desc {
+	int width, height;  /* framebuffer; 0: 1280×720 */
+	int n_phi;	    /* steps around each ring; 0: 256 */
+	int m_rings;	    /* rings per level; 0: 16 */
+	bool no_prefetch;   /* want only the visible quads */
+	double fade_s;	    /* a level that becomes drawable fades in over this long (0: at once) */
+	double budget_ms;   /* stop refining when a frame has taken this long (0: no limit) */
+	bool background_set;
+	float background[3]; /* the clear colour (linear 0..1); default: space, sky near ground */
+	float sun_az, sun_el; /* degrees, at the camera; default 135, 35 */
+};
+
+struct view_frame_stats {
+	double cpu_ms;	      /* the frame's CPU time including glFinish */
+	int lmin, lmax;	      /* levels the camera wants */
+	int lfirst, llast;    /* levels drawn (-1: none) */
+	uint64_t triangles;
+	uint64_t bytes_uploaded; /* this frame */
+	int tiles_received;	 /* this frame */
+	size_t wants_sent;	 /* entries in the want-set sent this frame (0: none sent) */
+	bool complete;		 /* every wanted level drawn at its target quad */
+	double alt, agl, ground; /* camera above the ellipsoid, above the ground; ground height */
+};
+
+struct view;
+
+/* Builds the clipmap, the ring geometry, the shaders and the framebuffer. Returns 0 or -errno
+ * with err filled. */
+int view_create(const struct gl *gl, struct view_source *src, const struct view_desc *d,
+		struct view **out, char err[256]);
+void view_destroy(struct view *v);
+
+/* Renders one frame. c->alt is the camera's height above the ground (the terrain under it as
+ * far as the clipmap knows it). now_s drives fades. Returns 0 or -errno. */
+int view_frame(struct view *v, const struct view_camera *c, double now_s,
+	       struct view_frame_stats *st);
+/* Offline rendering: renders frames, sleeping on the source between them, until one is
+ * complete (every wanted level drawn at its target quad, the camera's ground height settled)
+ * or timeout_s passes. *frames (may be NULL) counts the frames. Returns 0 or -ETIMEDOUT (the
+ * last frame is still in the framebuffer) or another -errno. */
+int view_frame_complete(struct view *v, const struct view_camera *c, double timeout_s,
+			struct view_frame_stats *st, int *frames);
+/* The camera of the last frame with its height above the ellipsoid. */
+void view_last_camera(const struct view *v, struct view_camera *out);
+/* Reads the last frame as RGBA8, top row first (width·height·4 bytes). Returns 0. */
+int view_read_rgba(struct view *v, unsigned char *out);
+struct view_clipmap *view_get_clipmap(struct view *v);
+const struct view_body *view_get_body(const struct view *v);
+/* The clear colour in the framebuffer's 8-bit encoding. */
+void view_background_rgba(const struct view *v, unsigned char out[4]);
+
+#endif

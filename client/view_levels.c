@@ -1,0 +1,218 @@
+/* view_levels — see view_levels.h. */
+#include "view_levels.h"
+
+#include <math.h>
+
+#define DEG (M_PI / 180.0)
+/* Longitude windows may be filled to 85 % of their half-width (staleness margin 15 %); a
+ * coarser lx is left for a finer one only when the ring fits in 75 % (hysteresis). */
+#define K_LON 0.85
+#define K_LON_BACK 0.75
+
+void view_body_init(struct view_body *b, double a, double f)
+{
+	b->a = a;
+	b->f = f;
+	b->e2 = f * (2 - f);
+	b->hmin = -11000;
+	b->hmax = 9000;
+}
+
+double view_body_n(const struct view_body *b, double s) { return b->a / sqrt(1 - b->e2 * s * s); }
+
+double view_ring_radius(int i)
+{
+	if (i <= 0)
+		return 2 * M_PI / 3;
+	return VIEW_RING_K * (M_PI / 2) / (double)((uint64_t)1 << i);
+}
+
+double view_horizon_cap(const struct view_body *b, double alt)
+{
+	double r0 = b->a + b->hmin;
+	double c1 = acos(fmin(1.0, r0 / (b->a + fmax(alt, b->hmin))));
+	double c2 = acos(r0 / (b->a + b->hmax));
+	return fmin(c1 + c2, view_ring_radius(0));
+}
+
+void view_level_range(const struct view_body *b, const struct view_camera *c, double agl,
+		      int n_phi, int max_level, int *lmin, int *lmax)
+{
+	double cap = view_horizon_cap(b, c->alt);
+	int lo = 0;
+	while (lo < max_level && view_ring_radius(lo + 1) >= cap)
+		lo++;
+	double fov = (c->fov_y > 0 ? c->fov_y : 60) * DEG;
+	double s = fmax(agl, 0.5) * tan(fov / (c->height > 0 ? c->height : 720));
+	double need = s * n_phi / (2 * M_PI) / b->a;
+	int hi = lo;
+	while (hi < max_level && view_ring_radius(hi + 1) >= need)
+		hi++;
+	*lmin = lo;
+	*lmax = hi;
+}
+
+static double lon_extent(double lat_deg, double r)
+{
+	double colat = M_PI / 2 - fabs(lat_deg) * DEG;
+	if (r >= colat * 0.999)
+		return M_PI; /* the disk holds a pole: every longitude */
+	return asin(fmin(1.0, sin(r) / cos(lat_deg * DEG)));
+}
+
+int view_level_lx(int ly, double lat_deg, int cur_lx)
+{
+	if (ly <= 0)
+		return 0;
+	double ext = lon_extent(lat_deg, view_ring_radius(ly));
+	int lx = 0;
+	for (int cand = ly + 1; cand >= 1; cand--) {
+		double half = M_PI / (double)((uint64_t)1 << cand);
+		if (ext <= K_LON * half) {
+			lx = cand;
+			break;
+		}
+	}
+	if (cur_lx >= 0 && cur_lx < lx) {
+		double half = M_PI / (double)((uint64_t)1 << lx);
+		if (ext > K_LON_BACK * half)
+			return cur_lx;
+	}
+	return lx;
+}
+
+/* The focus's u relative to the window origin, in (-(W-T)/2, (W+T)/2]. */
+static double focus_rel_u(const struct grid_quad *q, double lon_deg)
+{
+	double W = (double)grid_tiles_x(q->lx) * q->T;
+	double rel = fmod(grid_lon_to_u(q->lx, q->T, lon_deg) - (double)q->u0, W);
+	if (rel < 0)
+		rel += W;
+	if (rel > (W + q->T) / 2)
+		rel -= W;
+	return rel;
+}
+
+bool view_window_covers(const struct grid_quad *q, double lon_deg, double lat_deg, double r,
+			double margin)
+{
+	double T = q->T;
+	double H = (double)grid_tiles_y(q->ly) * T, W = (double)grid_tiles_x(q->lx) * T;
+	double rd = r / DEG;
+	double vlo = lat_deg + rd >= 90 ? 0 : grid_lat_to_v(q->ly, q->T, lat_deg + rd);
+	double vhi = lat_deg - rd <= -90 ? H : grid_lat_to_v(q->ly, q->T, lat_deg - rd);
+	double alo = q->v0 == 0 ? 0 : (double)q->v0 + margin;
+	double ahi = (double)q->v0 + T >= H ? H : (double)q->v0 + T - margin;
+	if (vlo < alo || vhi > ahi)
+		return false;
+	if (W <= T)
+		return true;
+	double ext = lon_extent(lat_deg, r);
+	if (ext >= M_PI)
+		return false;
+	double rel = focus_rel_u(q, lon_deg), du = ext * W / (2 * M_PI);
+	return rel - du >= margin && rel + du <= T - margin;
+}
+
+void view_level_params(const struct grid_quad *q, double lon_deg, double lat_deg, double p[6])
+{
+	double T = q->T;
+	double H = (double)grid_tiles_y(q->ly) * T, W = (double)grid_tiles_x(q->lx) * T;
+	double u0m = (double)(q->u0 % q->T), v0m = (double)(q->v0 % q->T);
+	p[0] = u0m + focus_rel_u(q, lon_deg);
+	p[1] = v0m + (grid_lat_to_v(q->ly, q->T, lat_deg) - (double)q->v0);
+	p[2] = W / (2 * M_PI);
+	p[3] = H / M_PI;
+	p[4] = v0m + 0.5 - (double)q->v0;
+	p[5] = v0m + H - 0.5 - (double)q->v0;
+}
+
+/* The camera basis in ENU: right, up, forward. */
+static void basis(const struct view_camera *c, double r[3], double u[3], double f[3])
+{
+	double h = c->heading * DEG, p = c->pitch * DEG;
+	f[0] = sin(h) * cos(p);
+	f[1] = cos(h) * cos(p);
+	f[2] = sin(p);
+	r[0] = cos(h);
+	r[1] = -sin(h);
+	r[2] = 0;
+	u[0] = r[1] * f[2] - r[2] * f[1];
+	u[1] = r[2] * f[0] - r[0] * f[2];
+	u[2] = r[0] * f[1] - r[1] * f[0];
+}
+
+static void focal(const struct view_camera *c, double *fx, double *fy)
+{
+	double fov = (c->fov_y > 0 ? c->fov_y : 60) * DEG;
+	*fy = 1 / tan(fov / 2);
+	*fx = *fy * (double)c->height / (double)c->width;
+}
+
+void view_camera_matrix(const struct view_camera *c, bool reversed, double near, double far,
+			float out[16])
+{
+	double r[3], u[3], f[3], fx, fy;
+	basis(c, r, u, f);
+	focal(c, &fx, &fy);
+	/* view: rows r, u, -f; projection P; out = P · V, column-major. */
+	double V[3][3] = { { r[0], r[1], r[2] }, { u[0], u[1], u[2] }, { -f[0], -f[1], -f[2] } };
+	double pz, pw; /* clip z = pz · z_view + pw, clip w = -z_view */
+	if (reversed) {
+		pz = 0;
+		pw = near;
+	} else {
+		pz = (far + near) / (near - far);
+		pw = 2 * far * near / (near - far);
+	}
+	for (int col = 0; col < 3; col++) {
+		out[col * 4 + 0] = (float)(fx * V[0][col]);
+		out[col * 4 + 1] = (float)(fy * V[1][col]);
+		out[col * 4 + 2] = (float)(pz * V[2][col]);
+		out[col * 4 + 3] = (float)(-V[2][col]);
+	}
+	out[12] = 0;
+	out[13] = 0;
+	out[14] = (float)pw;
+	out[15] = 0;
+}
+
+bool view_camera_project(const struct view_camera *c, const double e[3], double *px, double *py)
+{
+	double r[3], u[3], f[3], fx, fy;
+	basis(c, r, u, f);
+	focal(c, &fx, &fy);
+	double x = r[0] * e[0] + r[1] * e[1] + r[2] * e[2];
+	double y = u[0] * e[0] + u[1] * e[1] + u[2] * e[2];
+	double z = f[0] * e[0] + f[1] * e[1] + f[2] * e[2];
+	if (z <= 0)
+		return false;
+	*px = (fx * x / z + 1) / 2 * c->width;
+	*py = (1 - fy * y / z) / 2 * c->height;
+	return true;
+}
+
+void view_camera_ray(const struct view_camera *c, double px, double py, double dir[3])
+{
+	double r[3], u[3], f[3], fx, fy;
+	basis(c, r, u, f);
+	focal(c, &fx, &fy);
+	double nx = 2 * px / c->width - 1, ny = 1 - 2 * py / c->height;
+	double len = 0;
+	for (int i = 0; i < 3; i++) {
+		dir[i] = f[i] + r[i] * nx / fx + u[i] * ny / fy;
+		len += dir[i] * dir[i];
+	}
+	len = sqrt(len);
+	for (int i = 0; i < 3; i++)
+		dir[i] /= len;
+}
+
+void view_ecef_to_enu(double lat_deg, double lon_deg, const double v[3], double out[3])
+{
+	double sp = sin(lat_deg * DEG), cp = cos(lat_deg * DEG);
+	double sl = sin(lon_deg * DEG), cl = cos(lon_deg * DEG);
+	out[0] = -sl * v[0] + cl * v[1];
+	out[1] = -sp * cl * v[0] - sp * sl * v[1] + cp * v[2];
+	out[2] = cp * cl * v[0] + cp * sl * v[1] + sp * v[2];
+}

@@ -1,0 +1,76 @@
+#version 330 core
+// Spherical clipmap terrain (seed 000): static rings around the point under the camera,
+// mapped to (lon, lat) by the camera's latitude, displaced by the height clipmap, placed
+// relative to the camera in its east-north-up frame. All large quantities (radii, camera
+// height) enter as differences that float holds exactly enough at 1 m above an Earth-size body.
+
+layout(location = 0) in vec3 a_ring; // sin φ̃, cos φ̃ (φ̃ = 0: north), θ̃ (angle from the nadir)
+
+uniform mat4 u_vp;      // ENU (camera at the origin) → clip
+uniform vec3 u_lat;     // sin, cos of the camera's geodetic latitude, the latitude (rad)
+uniform vec4 u_body;    // N(camera) + h(camera), h(camera), N(camera), e²
+uniform float u_a;      // equatorial radius
+uniform float u_cap;    // θ̃ beyond which nothing can be seen
+uniform float u_R;      // outer θ̃ of the level being drawn
+uniform float u_T;      // clipmap texture size
+uniform vec4 u_pf;      // fine level: focus texel u, v, texels per radian lon, lat
+uniform vec2 u_vf;      // fine level: v clamp
+uniform float u_sf;     // fine level: array slice
+uniform vec4 u_pc;      // coarse level (blended in towards the outer edge)
+uniform vec2 u_vc;
+uniform float u_sc;
+uniform float u_fade;   // 1: the fine level fully shown; < 1 while it fades in
+uniform sampler2DArray u_height;
+
+out vec3 v_delta; // unit normal minus the camera's up, ENU: per-fragment (lon, lat)
+out vec3 v_pos;   // position relative to the camera, ENU
+out float v_blend;
+
+// (Δlon, Δlat) of the direction up + d from the camera's nadir, without cancellation.
+vec2 geo_delta(vec3 d)
+{
+	float sl = u_lat.x, cl = u_lat.y;
+	float dx = cl * (1.0 + d.z) - sl * d.y;
+	float dy = d.x;
+	float dz = sl * (1.0 + d.z) + cl * d.y;
+	float rho = sqrt(dx * dx + dy * dy);
+	float cr = dx > 0.0 ? d.y - sl * dy * dy / (rho + dx) : cl * dz - sl * rho;
+	float dt = cl * rho + sl * dz;
+	return vec2(atan(dy, dx), atan(cr, dt));
+}
+
+float height_at(vec2 g, vec4 p, vec2 vc, float slice)
+{
+	float u = p.x + g.x * p.z;
+	float v = clamp(p.y - g.y * p.w, vc.x, vc.y);
+	return textureLod(u_height, vec3(u / u_T, v / u_T, slice), 0.0).r;
+}
+
+void main()
+{
+	float th = min(a_ring.z, u_cap);
+	float st = sin(th), sh = sin(0.5 * th);
+	vec3 d = vec3(st * a_ring.x, st * a_ring.y, -2.0 * sh * sh);
+	vec2 g = geo_delta(d);
+	float w = clamp((th / u_R - 0.6) / 0.35, 0.0, 1.0);
+	w = max(w, 1.0 - u_fade);
+	float hf = height_at(g, u_pf, u_vf, u_sf);
+	float hc = height_at(g, u_pc, u_vc, u_sc);
+	float h = mix(hf, hc, w);
+
+	// P - C = (Nc+hc)·d + (N-Nc + h-hc)·n - e²·(N·(s-sc) + (N-Nc)·sc)·ẑ
+	float sl = u_lat.x, cl = u_lat.y, e2 = u_body.w;
+	float ds = d.y * cl + d.z * sl; // s - sc
+	float s = sl + ds;
+	float A = sqrt(1.0 - e2 * s * s), B = sqrt(1.0 - e2 * sl * sl);
+	float dN = u_a * e2 * ds * (s + sl) / (A * B * (A + B));
+	float N = u_body.z + dN;
+	vec3 n = vec3(d.x, d.y, 1.0 + d.z);
+	vec3 zhat = vec3(0.0, cl, sl);
+	vec3 pos = u_body.x * d + (dN + (h - u_body.y)) * n - e2 * (N * ds + dN * sl) * zhat;
+
+	v_delta = d;
+	v_pos = pos;
+	v_blend = w;
+	gl_Position = u_vp * vec4(pos, 1.0);
+}
