@@ -55,7 +55,7 @@ SHADER_HDR   := $(foreach s,$(SHADERS),$(BUILD)/gen/$(subst .,_,$(notdir $(s))).
 VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/unit/test_view_*.c tests/bench/bench_view*.c)) \
                 $(BUILD)/client/clipmapview.o
 
-.PHONY: all check test asan tsan bench deps clean demo data shader-check
+.PHONY: all check test asan tsan bench deps clean demo data shader-check fuzz
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 
@@ -147,7 +147,26 @@ demo: deps
 	@$(MAKE) --no-print-directory all
 	@sh scripts/demo.sh $(BUILD)
 
+# libFuzzer targets (clang): each tests/fuzz/fuzz_NAME.c runs FUZZ_SECONDS on its corpus.
+FUZZ_SECONDS ?= 60
+FUZZ_SRC := $(wildcard tests/fuzz/fuzz_*.c)
+FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/grid.c \
+               common/xalloc.c common/errbuf.c
+FUZZ_FLAGS := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
+              -fno-sanitize-recover=all -iquote common -iquote daemon
+build-fuzz/%: tests/fuzz/%.c $(FUZZ_LIBSRC)
+	@mkdir -p build-fuzz
+	clang $(FUZZ_FLAGS) $^ $(shell pkg-config --libs libzstd liblz4 libxxhash) -lm -o $@
+fuzz: deps $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%)
+	@for f in $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%); do \
+		mkdir -p $$f-corpus; \
+		echo "== $$f: $(FUZZ_SECONDS) s"; \
+		if $$f -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 $$f-corpus >$$f.log 2>&1; \
+		then grep -E 'stat::number_of_executed_units' $$f.log; \
+		else tail -n 40 $$f.log; echo "$$f: found a failure (crash input saved in ./)"; exit 1; fi; \
+	done
+
 clean:
-	rm -rf build build-asan build-tsan
+	rm -rf build build-asan build-tsan build-fuzz
 
 -include $(shell find $(BUILD) -name '*.d' 2>/dev/null)
