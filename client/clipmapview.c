@@ -34,6 +34,8 @@ static void usage(FILE *f)
 		"  --stats FILE        one JSON line per frame\n"
 		"  --fov DEG           vertical field of view (default 60)\n"
 		"  --sun AZ,EL         sun azimuth and elevation at the camera (default 135,35)\n"
+		"  --exaggerate X      vertical exaggeration of the relief (default 1)\n"
+		"  --haze X            atmosphere density, 1 Earth's, 0 none (default 1)\n"
 		"  --rings N,M         N steps around, M rings per level (default 256,16)\n"
 		"  --backend egl|osmesa, --workers N, --no-prefetch\n");
 }
@@ -142,7 +144,7 @@ int main(int argc, char **argv)
 	enum gl_backend backend = GL_BACKEND_AUTO;
 	enum { O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS,
 	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP,
-	       O_CONNECT, O_TOKEN };
+	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE };
 	static const struct option opts[] = {
 		{ "planet", required_argument, NULL, O_PLANET },
 		{ "camera", required_argument, NULL, O_CAMERA },
@@ -161,6 +163,8 @@ int main(int argc, char **argv)
 		{ "help", no_argument, NULL, O_HELP },
 		{ "connect", required_argument, NULL, O_CONNECT },
 		{ "token-file", required_argument, NULL, O_TOKEN },
+		{ "exaggerate", required_argument, NULL, O_EXAG },
+		{ "haze", required_argument, NULL, O_HAZE },
 		{ NULL, 0, NULL, 0 },
 	};
 	int c;
@@ -169,6 +173,22 @@ int main(int argc, char **argv)
 		case O_PLANET: planet = optarg; break;
 		case O_CONNECT: connect_to = optarg; break;
 		case O_TOKEN: token_file = optarg; break;
+		case O_EXAG:
+			d.exaggeration = strtof(optarg, NULL);
+			if (!(d.exaggeration >= 0.1f && d.exaggeration <= 100)) {
+				fprintf(stderr, "clipmapview: --exaggerate: 0.1 to 100\n");
+				return 2;
+			}
+			break;
+		case O_HAZE: {
+			float hz = strtof(optarg, NULL);
+			if (!(hz >= 0 && hz <= 100)) {
+				fprintf(stderr, "clipmapview: --haze: 0 to 100\n");
+				return 2;
+			}
+			d.haze = hz > 0 ? hz : -1;
+			break;
+		}
 		case O_CAMERA: camera = optarg; break;
 		case O_FLIGHT: flight = optarg; break;
 		case O_STEPS: steps = atoi(optarg); break;
