@@ -1,6 +1,7 @@
 /* clipmapview — the viewer. Offline mode renders pictures of a planet evaluated in this
- * process (--planet): one camera (--camera) or a flight (--flight CSV), EGL surfaceless or
- * OSMesa, no display needed. Exit status: 0 ok, 1 runtime failure, 2 bad usage.
+ * process (--planet FILE) or served by clipmapd (--connect SOCKET|HOST:PORT --planet NAME):
+ * one camera (--camera) or a flight (--flight CSV), EGL surfaceless or OSMesa, no display
+ * needed. Exit status: 0 ok, 1 runtime failure, 2 bad usage.
  */
 #include <errno.h>
 #include <getopt.h>
@@ -13,12 +14,16 @@
 #include "img.h"
 #include "view.h"
 #include "view_source_local.h"
+#include "view_source_net.h"
 #include "xalloc.h"
 
 static void usage(FILE *f)
 {
 	fprintf(f,
-		"usage: clipmapview --planet FILE [options]\n"
+		"usage: clipmapview --planet FILE [options]              (in-process engine)\n"
+		"       clipmapview --connect SOCKET|HOST:PORT --planet NAME [--token-file F] [options]\n"
+		"  --connect TARGET    clipmapd's Unix socket path, or HOST:PORT (TCP)\n"
+		"  --token-file F      the daemon's shared secret (default: $CLIPMAP_TOKEN)\n"
 		"  --camera LAT,LON,ALT,HEADING,PITCH  degrees; ALT metres above the ground\n"
 		"  --flight FILE       CSV of camera keys (lat,lon,alt,heading,pitch per line)\n"
 		"  --steps N           frames from one key to the next (default 1)\n"
@@ -29,6 +34,8 @@ static void usage(FILE *f)
 		"  --stats FILE        one JSON line per frame\n"
 		"  --fov DEG           vertical field of view (default 60)\n"
 		"  --sun AZ,EL         sun azimuth and elevation at the camera (default 135,35)\n"
+		"  --exaggerate X      vertical exaggeration of the relief (default 1)\n"
+		"  --haze X            atmosphere density, 1 Earth's, 0 none (default 1)\n"
 		"  --rings N,M         N steps around, M rings per level (default 256,16)\n"
 		"  --backend egl|osmesa, --workers N, --no-prefetch\n");
 }
@@ -107,16 +114,37 @@ static void stats_line(FILE *f, int frame, const struct view_frame_stats *s)
 		s->tiles_received, s->wants_sent, s->complete ? "true" : "false", s->alt, s->agl);
 }
 
+/* A TARGET with a colon and no slash is HOST:PORT, anything else a Unix socket path. */
+static int open_net(const char *target, const char *token_file, const char *planet,
+		    struct view_source **src, char err[256])
+{
+	bool tcp = strchr(target, ':') && !strchr(target, '/');
+	struct net_opts o = { .socket_path = tcp ? NULL : target, .hostport = tcp ? target : NULL,
+			      .token_file = token_file, .name = "clipmapview/1" };
+	char e2[256];
+	int rc = view_source_net_create(&o, planet, src, e2);
+	if (rc == 0)
+		return 0;
+	const char *hint = "";
+	if (strncmp(e2, "cannot connect", 14) == 0)
+		hint = " \xe2\x80\x94 is clipmapd running and listening there? (--connect)";
+	else if (rc == -EACCES)
+		hint = " (--token-file)";
+	snprintf(err, 256, "%.180s%s", e2, hint);
+	return rc;
+}
+
 int main(int argc, char **argv)
 {
-	const char *planet = NULL, *camera = NULL, *flight = NULL, *outp = NULL, *statsp = NULL;
+	const char *planet = NULL, *connect_to = NULL, *token_file = NULL, *camera = NULL, *flight = NULL, *outp = NULL, *statsp = NULL;
 	int width = 1280, height = 720, steps = 1, workers = 0;
 	bool wait_complete = false;
 	double timeout = 300, fov = 60;
 	struct view_desc d = { 0 };
 	enum gl_backend backend = GL_BACKEND_AUTO;
 	enum { O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS,
-	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP };
+	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP,
+	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE };
 	static const struct option opts[] = {
 		{ "planet", required_argument, NULL, O_PLANET },
 		{ "camera", required_argument, NULL, O_CAMERA },
@@ -133,12 +161,34 @@ int main(int argc, char **argv)
 		{ "workers", required_argument, NULL, O_WORKERS },
 		{ "no-prefetch", no_argument, NULL, O_NOPF },
 		{ "help", no_argument, NULL, O_HELP },
+		{ "connect", required_argument, NULL, O_CONNECT },
+		{ "token-file", required_argument, NULL, O_TOKEN },
+		{ "exaggerate", required_argument, NULL, O_EXAG },
+		{ "haze", required_argument, NULL, O_HAZE },
 		{ NULL, 0, NULL, 0 },
 	};
 	int c;
 	while ((c = getopt_long(argc, argv, "o:h", opts, NULL)) != -1) {
 		switch (c) {
 		case O_PLANET: planet = optarg; break;
+		case O_CONNECT: connect_to = optarg; break;
+		case O_TOKEN: token_file = optarg; break;
+		case O_EXAG:
+			d.exaggeration = strtof(optarg, NULL);
+			if (!(d.exaggeration >= 0.1f && d.exaggeration <= 100)) {
+				fprintf(stderr, "clipmapview: --exaggerate: 0.1 to 100\n");
+				return 2;
+			}
+			break;
+		case O_HAZE: {
+			float hz = strtof(optarg, NULL);
+			if (!(hz >= 0 && hz <= 100)) {
+				fprintf(stderr, "clipmapview: --haze: 0 to 100\n");
+				return 2;
+			}
+			d.haze = hz > 0 ? hz : -1;
+			break;
+		}
 		case O_CAMERA: camera = optarg; break;
 		case O_FLIGHT: flight = optarg; break;
 		case O_STEPS: steps = atoi(optarg); break;
@@ -215,12 +265,21 @@ int main(int argc, char **argv)
 	struct view *v = NULL;
 	FILE *sf = NULL;
 	unsigned char *pix = NULL;
-	int rc = view_source_local_create(planet, &(struct view_source_local_opts){ workers, 0 },
-					  &src, err);
-	if (rc < 0) {
-		fprintf(stderr, "clipmapview: %s\n", err);
-		status = 2;
-		goto out;
+	int rc;
+	if (connect_to) {
+		rc = open_net(connect_to, token_file, planet, &src, err);
+		if (rc < 0) {
+			fprintf(stderr, "clipmapview: %s\n", err);
+			goto out;
+		}
+	} else {
+		rc = view_source_local_create(planet, &(struct view_source_local_opts){ workers, 0 },
+					      &src, err);
+		if (rc < 0) {
+			fprintf(stderr, "clipmapview: %s\n", err);
+			status = 2;
+			goto out;
+		}
 	}
 	rc = gl_context_create(backend, &ctx, err);
 	if (rc < 0) {

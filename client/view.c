@@ -28,11 +28,12 @@
 
 enum {
 	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_R, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_FADE,
-	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_LAYERS, U_COUNT
+	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_LAYERS, U_EXAG, U_COUNT
 };
 static const char *const uniform_names[U_COUNT] = {
 	"u_vp", "u_lat", "u_body", "u_a", "u_cap", "u_R", "u_T", "u_pf", "u_vf", "u_sf", "u_pc",
 	"u_vc", "u_sc", "u_fade", "u_height", "u_normal", "u_color", "u_sun", "u_haze", "u_layers",
+	"u_exag",
 };
 
 struct view {
@@ -239,8 +240,14 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 		v->d.sun_az = 135;
 		v->d.sun_el = 35;
 	}
+	if (!(v->d.exaggeration > 0))
+		v->d.exaggeration = 1;
+	if (v->d.haze == 0)
+		v->d.haze = 1;
 	const struct view_planet *p = &src->planet;
 	view_body_init(&v->body, p->a, p->f);
+	v->body.hmin *= v->d.exaggeration;
+	v->body.hmax *= v->d.exaggeration;
 	v->max_level = p->max_level < GRID_MAX_LEVEL ? p->max_level : GRID_MAX_LEVEL;
 	v->nlevels = v->max_level + 1;
 	v->T = p->tile_size;
@@ -384,8 +391,9 @@ static void common_uniforms(struct view *v, double agl, double cap)
 	double az = v->d.sun_az * DEG, el = v->d.sun_el * DEG;
 	double e = sin(az) * cos(el), n = cos(az) * cos(el), u = sin(el);
 	gl->Uniform3f(v->u[U_SUN], (float)(-sl * n + cl * u), (float)e, (float)(cl * n + sl * u));
-	double hz = 1.0 / (60e3 * exp(fmin(fmax(c->alt, 0), 60e3) / 8e3));
-	gl->Uniform4f(v->u[U_HAZE], 0.55f, 0.66f, 0.82f, (float)hz);
+	gl->Uniform4f(v->u[U_HAZE], 8000.0f * v->d.exaggeration, v->d.haze > 0 ? v->d.haze : 0.0f,
+		      0, 0);
+	gl->Uniform1f(v->u[U_EXAG], v->d.exaggeration);
 	int layers = (view_clipmap_texture(v->cm, VIEW_COLOR) ? 1 : 0) |
 		     (view_clipmap_texture(v->cm, VIEW_NORMAL) ? 2 : 0);
 	gl->Uniform1i(v->u[U_LAYERS], layers);
@@ -411,7 +419,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	double ground = 0;
 	view_clipmap_ground(v->cm, cam->lon, cam->lat, &ground);
 	double agl = fmax(cam->alt, 0.05);
-	v->last.alt = ground + agl;
+	v->last.alt = ground * v->d.exaggeration + agl;
 	s.ground = ground;
 	s.agl = agl;
 	s.alt = v->last.alt;
@@ -446,10 +454,11 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	if (v->d.background_set) {
 		memcpy(bg, v->d.background, sizeof bg);
 	} else {
-		double sky = exp(-fmax(v->last.alt, 0) / 15e3);
-		bg[0] = (float)(0.02 + 0.45 * sky);
-		bg[1] = (float)(0.02 + 0.62 * sky);
-		bg[2] = (float)(0.04 + 0.86 * sky);
+		/* space, turning to a pale blue sky inside the atmosphere (none without air) */
+		double sky = v->d.haze > 0 ? exp(-agl / 35e3) : 0;
+		bg[0] = (float)(0.01 + 0.52 * sky);
+		bg[1] = (float)(0.01 + 0.68 * sky);
+		bg[2] = (float)(0.03 + 0.87 * sky);
 	}
 	for (int i = 0; i < 3; i++)
 		v->bg[i] = (unsigned char)lrintf(fminf(fmaxf(bg[i], 0), 1) * 255);

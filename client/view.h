@@ -31,6 +31,8 @@ struct view_desc {
 	bool background_set;
 	float background[3]; /* the clear colour (linear 0..1); default: space, sky near ground */
 	float sun_az, sun_el; /* degrees, at the camera; default 135, 35 */
+	float exaggeration;   /* vertical exaggeration of the relief; 0: 1 (true scale) */
+	float haze;	      /* atmosphere density, 1: Earth's; 0: 1; < 0: none (the Moon) */
 };
 
 struct view_frame_stats {

@@ -1,5 +1,6 @@
-/* view_source_net — see view_source_net.h. One decoded tile at a time: poll decodes a TILE's
- * payload into the source's buffer, which the frame loop releases before the next poll. */
+/* view_source_net — see view_source_net.h. The frame loop holds several polled tiles at once
+ * (until it uploads them), so each decoded tile has its own buffer: the tile's handle, freed
+ * by release (a few spare buffers are kept for reuse). */
 #include "view_source_net.h"
 
 #include <errno.h>
@@ -11,6 +12,7 @@
 #include "ctl_conn.h"
 #include "errbuf.h"
 #include "proto.h"
+#include "tilecodec.h"
 #include "xalloc.h"
 
 struct net_source {
@@ -19,9 +21,9 @@ struct net_source {
 	uint32_t planet_id, seq;
 	struct proto_want_entry *entries;
 	size_t cap_entries;
-	void *texels;
-	size_t cap_texels;
-	int busy; /* a polled tile not yet released */
+	void *spare[8]; /* released buffers of spare_len bytes, for the next tiles */
+	int nspare;
+	size_t spare_len;
 	char err[256];
 };
 
@@ -57,8 +59,6 @@ static int ns_want(struct view_source *s, const struct view_want *w, size_t n,
 static int ns_poll(struct view_source *s, struct view_tile *out)
 {
 	struct net_source *ns = ns_of(s);
-	if (ns->busy)
-		return -EBUSY;
 	for (;;) {
 		struct proto_msg m;
 		int rc = net_recv(ns->c, &m, 0, ns->err);
@@ -68,25 +68,32 @@ static int ns_poll(struct view_source *s, struct view_tile *out)
 			return rc;
 		if (m.type == PROTO_TILE && m.tile.planet_id == ns->planet_id) {
 			size_t need = m.tile.enc.raw_len;
-			if (need > ns->cap_texels) {
-				free(ns->texels);
-				ns->cap_texels = need;
-				ns->texels = xaligned_alloc(64, need);
+			void *buf;
+			if (need == ns->spare_len && ns->nspare > 0) {
+				buf = ns->spare[--ns->nspare];
+			} else {
+				buf = xaligned_alloc(64, need ? need : 64);
 			}
-			rc = net_tile_decode(ns->c, &m.tile, ns->texels, ns->cap_texels, ns->err);
+			rc = net_tile_decode(ns->c, &m.tile, buf, need, ns->err);
+			if (rc) {
+				free(buf);
+				buf = NULL;
+			}
 			*out = (struct view_tile){ .layer = m.tile.layer, .key = m.tile.key,
 						   .format = (enum pix_type)m.tile.enc.format,
-						   .size = m.tile.enc.size,
-						   .texels = rc ? NULL : ns->texels, .err = rc };
+						   .size = m.tile.enc.size, .texels = buf, .err = rc,
+						   .handle = buf };
 			proto_msg_fini(&m);
-			ns->busy = 1;
 			return 1;
 		}
 		if (m.type == PROTO_TILE_FAIL && m.tile_fail.planet_id == ns->planet_id) {
-			*out = (struct view_tile){ .layer = m.tile_fail.layer, .key = m.tile_fail.key,
-						   .err = -EIO };
+			uint8_t l = m.tile_fail.layer;
+			*out = (struct view_tile){ .layer = l, .key = m.tile_fail.key, .err = -EIO,
+						   .size = s->planet.tile_size,
+						   .format = l < s->planet.nlayers
+								     ? s->planet.layer[l].format
+								     : PIX_NONE };
 			proto_msg_fini(&m);
-			ns->busy = 1;
 			return 1;
 		}
 		if (m.type == PROTO_ERROR || m.type == PROTO_BYE) {
@@ -113,8 +120,19 @@ static int ns_wait(struct view_source *s, int timeout_ms)
 
 static void ns_release(struct view_source *s, struct view_tile *t)
 {
-	(void)t;
-	ns_of(s)->busy = 0;
+	struct net_source *ns = ns_of(s);
+	if (t->handle) {
+		size_t len = (size_t)t->size * t->size * tilecodec_texel_bytes((enum tile_format)t->format);
+		if (len && ns->nspare < (int)(sizeof ns->spare / sizeof ns->spare[0]) &&
+		    (ns->nspare == 0 || len == ns->spare_len)) {
+			ns->spare_len = len;
+			ns->spare[ns->nspare++] = t->handle;
+		} else {
+			free(t->handle);
+		}
+	}
+	t->handle = NULL;
+	t->texels = NULL;
 }
 
 static void ns_destroy(struct view_source *s)
@@ -122,7 +140,8 @@ static void ns_destroy(struct view_source *s)
 	struct net_source *ns = ns_of(s);
 	net_close(ns->c);
 	free(ns->entries);
-	free(ns->texels);
+	for (int i = 0; i < ns->nspare; i++)
+		free(ns->spare[i]);
 	free(ns);
 }
 

@@ -6,6 +6,7 @@
 in vec3 v_delta;
 in vec3 v_pos;
 in float v_blend;
+in float v_h;
 
 uniform vec3 u_lat;
 uniform float u_T;
@@ -16,7 +17,9 @@ uniform vec4 u_pc;
 uniform vec2 u_vc;
 uniform float u_sc;
 uniform vec3 u_sun;      // towards the sun, in the frame with the camera on meridian 0
-uniform vec4 u_haze;     // haze colour, 1 / haze distance
+uniform vec4 u_haze;     // scale height (m, exaggerated), strength (0: no air), unused ×2
+uniform vec4 u_body;     // N + h, h of the camera (exaggerated), N, e²
+uniform float u_exag;    // vertical exaggeration: steepens the normals too
 uniform int u_layers;    // bit 0: colour present, bit 1: normals present
 uniform sampler2DArray u_color;
 uniform sampler2DArray u_normal;
@@ -56,6 +59,11 @@ void main()
 		en = mix(nf, nc, w) * (255.0 / 127.5) - 1.0;
 	}
 	float up = sqrt(max(0.0, 1.0 - dot(en, en)));
+	if (u_exag != 1.0) { // slopes × exaggeration
+		vec3 sn = normalize(vec3(en * u_exag, up));
+		en = sn.xy;
+		up = sn.z;
+	}
 
 	// The fragment's local frame in the frame where the camera sits on meridian 0.
 	float lat = u_lat.z + g.y, lon = g.x;
@@ -66,9 +74,23 @@ void main()
 	vec3 nrm = normalize(en.x * E + en.y * Nn + up * U);
 	float diff = max(dot(nrm, u_sun), 0.0);
 	float day = smoothstep(-0.1, 0.1, dot(U, u_sun));
-	vec3 lit = albedo * (0.06 + 0.94 * diff * day) + albedo * 0.1 * day;
+	float sky = 0.5 + 0.5 * dot(nrm, U); // the open sky a slope sees
+	vec3 lit = albedo * (vec3(1.0, 0.97, 0.92) * 1.05 * diff * day +
+			     vec3(0.30, 0.38, 0.50) * 0.22 * sky * (0.1 + 0.9 * day) + 0.015);
 
-	float haze = 1.0 - exp(-length(v_pos) * u_haze.w);
-	lit = mix(lit, u_haze.rgb * (0.25 + 0.75 * day), haze);
-	o_color = vec4(pow(clamp(lit, 0.0, 1.0), vec3(1.0 / 2.2)), 1.0);
+	if (u_haze.y > 0.0) {
+		float H = u_haze.x;
+		float s = length(v_pos);
+		vec3 upp = normalize(v_delta + vec3(0.0, 0.0, 1.0));
+		float cz = dot(-v_pos, upp) / max(s, 1e-3); // cos of the ray's zenith angle there
+		float x = s * (cz > 0.0 ? max(cz, 0.025) : cz) / H;
+		x = max(x, -30.0);
+		float f = abs(x) < 1e-3 ? 1.0 - 0.5 * x : (1.0 - exp(-x)) / x;
+		float air = s * exp(-max(v_h, 0.0) / H) * f; // metres of sea-level air
+		air /= 1.0 + (u_exag - 1.0) * cz * cz; // exaggerated verticals hold no more air
+		vec3 beta = (vec3(5.8e-6, 13.5e-6, 33.1e-6) + 2.0e-6) * (0.45 * u_haze.y);
+		vec3 tr = exp(-beta * air);
+		vec3 sunlight = vec3(1.0, 0.96, 0.90) * (0.03 + 0.97 * day);
+		lit = lit * tr + (1.0 - tr) * sunlight * 0.7;
+	}	o_color = vec4(pow(clamp(lit, 0.0, 1.0), vec3(1.0 / 2.2)), 1.0);
 }

@@ -20,11 +20,13 @@ uniform vec4 u_pc;      // coarse level (blended in towards the outer edge)
 uniform vec2 u_vc;
 uniform float u_sc;
 uniform float u_fade;   // 1: the fine level fully shown; < 1 while it fades in
+uniform float u_exag;   // vertical exaggeration of the relief (1: true scale)
 uniform sampler2DArray u_height;
 
 out vec3 v_delta; // unit normal minus the camera's up, ENU: per-fragment (lon, lat)
 out vec3 v_pos;   // position relative to the camera, ENU
 out float v_blend;
+out float v_h;    // the point's height above the ellipsoid (exaggerated), for the haze
 
 // (Δlon, Δlat) of the direction up + d from the camera's nadir, without cancellation.
 vec2 geo_delta(vec3 d)
@@ -56,7 +58,7 @@ void main()
 	w = max(w, 1.0 - u_fade);
 	float hf = height_at(g, u_pf, u_vf, u_sf);
 	float hc = height_at(g, u_pc, u_vc, u_sc);
-	float h = mix(hf, hc, w);
+	float h = mix(hf, hc, w) * u_exag;
 
 	// P - C = (Nc+hc)·d + (N-Nc + h-hc)·n - e²·(N·(s-sc) + (N-Nc)·sc)·ẑ
 	float sl = u_lat.x, cl = u_lat.y, e2 = u_body.w;
@@ -72,5 +74,6 @@ void main()
 	v_delta = d;
 	v_pos = pos;
 	v_blend = w;
+	v_h = h;
 	gl_Position = u_vp * vec4(pos, 1.0);
 }
