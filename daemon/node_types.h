@@ -29,6 +29,9 @@ extern const struct node_type node_type_normal;
 /* `file`: an equirectangular raster (global or within `bounds`) read through OpenImageIO,
  * resampled bilinearly, filtered from MIP levels when coarser than the file. */
 extern const struct node_type node_type_file;
+/* `geoid`: input (height above the geoid) → height above the ellipsoid: + N(lat, lon) from a
+ * GTX geoid grid (default EGM96 from proj-data); `sign = -1` reverses it. */
+extern const struct node_type node_type_geoid;
 /* `craters`: seeded, size-distributed impact craters on the sphere, a height source or added
  * to an optional input height; band-limited per level (node_craters.c lists the parameters). */
 extern const struct node_type node_type_craters;
