@@ -917,10 +917,10 @@ static void write_png(const char *path, struct config *cf, int ncf)
 		double x = PX(pow(10, e));
 		line(&c, x, T, x, B, grey, 1, 0);
 		char s[16];
-		fmt_alt(pow(10, e), s, sizeof s);
-		for (char *q = s; *q; q++)
-			if (*q == ' ')
-				memmove(q, q + 1, strlen(q));
+		if (e >= 3)
+			snprintf(s, sizeof s, "%.0fkm", pow(10, e - 3));
+		else
+			snprintf(s, sizeof s, "%.0fm", pow(10, e));
 		text(&c, (int)x - 3 * (int)strlen(s) * 2, B + 10, s, black, 2);
 	}
 	for (int e = (int)ay0; e <= (int)ay1; e++) {
