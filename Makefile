@@ -52,10 +52,11 @@ VIEW_OBJ     := $(VIEW_SRC:%.c=$(BUILD)/%.o)
 VIEW_LIB     := $(BUILD)/libclipmapgl.a
 SHADERS      := $(wildcard shaders/*.vert shaders/*.frag)
 SHADER_HDR   := $(foreach s,$(SHADERS),$(BUILD)/gen/$(subst .,_,$(notdir $(s))).h)
-VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/unit/test_view_*.c tests/bench/bench_view*.c)) \
+VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/unit/test_view_*.c tests/bench/bench_view*.c \
+                  tests/bench/bench_keepup.c)) \
                 $(BUILD)/client/clipmapview.o
 
-.PHONY: all check test asan tsan bench deps clean demo data shader-check fuzz
+.PHONY: all check test asan tsan bench bench-keepup deps clean demo data shader-check fuzz
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 
@@ -98,7 +99,7 @@ $(BUILD)/clipmapview: $(BUILD)/client/clipmapview.o $(VIEW_LIB) $(LIB)
 $(BUILD)/tests/test_view_%: $(BUILD)/tests/unit/test_view_%.o $(VIEW_LIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
-$(BUILD)/tests/bench_view: $(BUILD)/tests/bench/bench_view.o $(VIEW_LIB) $(LIB)
+$(BUILD)/tests/bench_view $(BUILD)/tests/bench_keepup: $(BUILD)/tests/%: $(BUILD)/tests/bench/%.o $(VIEW_LIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
 $(BUILD)/tests/%: $(BUILD)/tests/unit/%.o $(LIB)
@@ -142,6 +143,10 @@ tsan:
 bench: deps
 	@$(MAKE) --no-print-directory all
 	@sh tests/bench/run.sh $(BUILD)
+
+# The keep-up table alone (seed 003 Table 1); KEEPUP_FULL=1 for the full matrix.
+bench-keepup: all
+	@$(BUILD)/tests/bench_keepup
 
 demo: deps
 	@$(MAKE) --no-print-directory all

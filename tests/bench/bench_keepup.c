@@ -1,0 +1,1054 @@
+/* bench_keepup — seed 003 §8.2 Table 1 on this machine: the highest camera velocity at which
+ * the back-end keeps up with the client at each of the table's nine altitudes. The client is
+ * the real one minus rasterisation: view_levels picks the levels (1280×720, 60°, 256 steps
+ * around a ring, as clipmapview), view_clipmap builds the want-sets and uploads into real GL
+ * textures (a tiny EGL/OSMesa context), tiles come from build/clipmapd over a Unix socket
+ * (view_source_net). The frame below mirrors view_frame() (client/view.c) without the draw
+ * calls. A 60 Hz frame clock runs in real time; the camera flies a great circle at constant
+ * height above the ground. A frame is "full detail" when every level visibility wants holds
+ * its target quad; a velocity keeps up when ≥ 95 % of the flight's frames are full detail.
+ * Every trial starts a fresh daemon (a cold cache); "prefetched" first runs a PREFETCH job
+ * along the route (levels 0..lmax, corridor = the quad and its ring) and then flies.
+ *
+ * Output: a table on stdout, out/bench/keepup.json and out/bench/keepup.png (log-log plot).
+ * Environment: KEEPUP_FULL=1 the full matrix (both planets × cold/prefetched, finer search);
+ * by default both planets cold (about 6 min). KEEPUP_TRIAL_S flight seconds;
+ * KEEPUP_ONLY=substring of a configuration's label, KEEPUP_ALTS=row digits (0 = 800 km … 8 =
+ * 50 m) for quick runs.
+ * Single-threaded (the daemon is a separate process); owns everything it creates.
+ */
+#include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <math.h>
+#include <signal.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "ctl_prefetch.h"
+#include "gl_context.h"
+#include "img.h"
+#include "net.h"
+#include "view_clipmap.h"
+#include "view_levels.h"
+#include "view_source_net.h"
+#include "xalloc.h"
+
+#define DEG (M_PI / 180.0)
+#define HZ 60.0
+#define MAX_WANTS 4096
+#define MAX_NODES 32
+#define WIDTH 1280
+#define HEIGHT 720
+#define N_PHI 256
+#define NALT 9
+#define MAX_TRIALS 8
+
+/* Seed 003 Table 1. */
+static const struct {
+	double alt, vel;
+	const char *levels;
+} seed[NALT] = {
+	{ 800e3, 640e3, "1-5" }, { 80e3, 64e3, "3-9" },  { 50e3, 40e3, "3-10" },
+	{ 20e3, 16e3, "4-11" },	 { 6000, 4800, "5-13" }, { 2000, 1600, "5-14" },
+	{ 800, 640, "6-16" },	 { 200, 160, "7-17" },	 { 50, 40, "8-20" },
+};
+
+/* The route: a great circle from (0°, 20°E) heading 80°, where lx = ly + 1 for every level. */
+#define START_LAT 0.0
+#define START_LON 20.0
+#define HEADING 80.0
+
+static double now_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
+}
+
+static void sleep_until(double t)
+{
+	double d = t - now_s();
+	if (d <= 0)
+		return;
+	struct timespec ts = { (time_t)d, (long)((d - floor(d)) * 1e9) };
+	nanosleep(&ts, NULL);
+}
+
+/* Point at ground distance s (metres) along the route (a sphere of radius a is close enough
+ * for a straight flight). */
+static void route_point(double a, double s, double *lat, double *lon)
+{
+	double p1 = START_LAT * DEG, th = HEADING * DEG, d = s / a;
+	double p2 = asin(sin(p1) * cos(d) + cos(p1) * sin(d) * cos(th));
+	double l2 = START_LON * DEG + atan2(sin(th) * sin(d) * cos(p1), cos(d) - sin(p1) * sin(p2));
+	*lat = p2 / DEG;
+	*lon = remainder(l2 / DEG, 360.0);
+}
+
+/* ---- the daemon ------------------------------------------------------------------------ */
+
+struct daemon {
+	char dir[64], sock[128], conf[128];
+	pid_t pid;
+};
+
+static bool socket_up(const char *path)
+{
+	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	if (s < 0)
+		return false;
+	struct sockaddr_un a = { .sun_family = AF_UNIX };
+	snprintf(a.sun_path, sizeof a.sun_path, "%s", path);
+	bool ok = connect(s, (struct sockaddr *)&a, sizeof a) == 0;
+	close(s);
+	return ok;
+}
+
+/* Copies a planet file into dir, making relative `path =` values absolute (they resolve
+ * against the original file's directory). */
+static int copy_planet(const char *from, const char *dir, char *name, size_t nname)
+{
+	char absdir[PATH_MAX];
+	if (!realpath(from, absdir))
+		return -errno;
+	*strrchr(absdir, '/') = '\0';
+	const char *base = strrchr(from, '/') ? strrchr(from, '/') + 1 : from;
+	snprintf(name, nname, "%.*s", (int)(strcspn(base, ".")), base);
+	char to[300];
+	snprintf(to, sizeof to, "%s/%s", dir, base);
+	FILE *a = fopen(from, "r"), *b = fopen(to, "w");
+	if (!a || !b) {
+		if (a)
+			fclose(a);
+		if (b)
+			fclose(b);
+		return -EIO;
+	}
+	char line[4096];
+	while (fgets(line, sizeof line, a)) {
+		const char *p = line + strspn(line, " \t");
+		if (strncmp(p, "path", 4) == 0 && strchr(p, '=')) {
+			const char *v = strchr(p, '=') + 1;
+			v += strspn(v, " \t");
+			if (*v != '/') {
+				fprintf(b, "path = %s/%s", absdir, v);
+				continue;
+			}
+		}
+		fputs(line, b);
+	}
+	fclose(a);
+	return fclose(b) ? -EIO : 0;
+}
+
+static int daemon_start(struct daemon *d, const char *bindir, const char *planet, char *name,
+			size_t nname, char err[256])
+{
+	memset(d, 0, sizeof *d);
+	snprintf(d->dir, sizeof d->dir, "/tmp/bench_keepup_XXXXXX");
+	if (!mkdtemp(d->dir)) {
+		snprintf(err, 256, "mkdtemp: %s", strerror(errno));
+		return -errno;
+	}
+	char planets[128], logp[128];
+	snprintf(planets, sizeof planets, "%s/planets", d->dir);
+	snprintf(d->sock, sizeof d->sock, "%s/d.sock", d->dir);
+	snprintf(d->conf, sizeof d->conf, "%s/d.conf", d->dir);
+	snprintf(logp, sizeof logp, "%s/d.log", d->dir);
+	if (mkdir(planets, 0755) || copy_planet(planet, planets, name, nname)) {
+		snprintf(err, 256, "cannot prepare %s from %s", planets, planet);
+		return -EIO;
+	}
+	FILE *f = fopen(d->conf, "w");
+	if (!f)
+		return -errno;
+	fprintf(f, "[listen]\nunix = %s\ntcp =\n[engine]\nplanets = %s\nworkers = 0\ncache_mb = 3072\n"
+		   "[session]\nmax_rate = 0\n[log]\nlevel = warn\n",
+		d->sock, planets);
+	fclose(f);
+	char exe[600];
+	snprintf(exe, sizeof exe, "%s/clipmapd", bindir);
+	int logfd = open(logp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+	pid_t pid = fork();
+	if (pid < 0)
+		return -errno;
+	if (pid == 0) {
+		if (logfd >= 0)
+			dup2(logfd, 2);
+		execl(exe, exe, "-c", d->conf, (char *)NULL);
+		_exit(127);
+	}
+	if (logfd >= 0)
+		close(logfd);
+	d->pid = pid;
+	for (int i = 0; i < 2000 && !socket_up(d->sock); i++) {
+		int st;
+		if (waitpid(pid, &st, WNOHANG) == pid) {
+			d->pid = 0;
+			snprintf(err, 256, "clipmapd exited at start (see %s)", logp);
+			return -EIO;
+		}
+		nanosleep(&(struct timespec){ .tv_nsec = 5000000 }, NULL);
+	}
+	if (!socket_up(d->sock)) {
+		snprintf(err, 256, "clipmapd did not listen on %s", d->sock);
+		return -ETIMEDOUT;
+	}
+	return 0;
+}
+
+static void daemon_stop(struct daemon *d)
+{
+	if (d->pid > 0) {
+		kill(d->pid, SIGTERM);
+		int st;
+		waitpid(d->pid, &st, 0);
+		d->pid = 0;
+	}
+	if (d->dir[0]) {
+		char cmd[200];
+		snprintf(cmd, sizeof cmd, "rm -rf '%s'", d->dir);
+		if (system(cmd) != 0)
+			fprintf(stderr, "bench_keepup: could not remove %s\n", d->dir);
+	}
+}
+
+/* ---- daemon statistics ----------------------------------------------------------------- */
+
+struct dstats {
+	uint64_t generated, hits, misses, workers;
+	int nnodes;
+	struct {
+		char name[64];
+		double total_ms;
+	} node[MAX_NODES];
+};
+
+static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
+{
+	memset(out, 0, sizeof *out);
+	struct proto_msg req = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
+	int rc = net_send(c, &req, err);
+	if (rc)
+		return rc;
+	struct proto_msg m = { 0 };
+	rc = net_expect(c, PROTO_STATS, &m, 10000, NULL, NULL, err);
+	if (rc)
+		return rc;
+	uint64_t gen[MAX_NODES] = { 0 };
+	for (size_t i = 0; i < m.stats.count; i++) {
+		const struct proto_stat *s = &m.stats.items[i];
+		if (strcmp(s->key, "sched.generated") == 0)
+			out->generated = s->u;
+		else if (strcmp(s->key, "cache.hits") == 0)
+			out->hits = s->u;
+		else if (strcmp(s->key, "cache.misses") == 0)
+			out->misses = s->u;
+		else if (strcmp(s->key, "sched.workers") == 0)
+			out->workers = s->u;
+		else if (strncmp(s->key, "node.", 5) == 0) {
+			/* node.PLANET.NODE.generated / .mean_ms, in that order */
+			const char *dot = strrchr(s->key, '.');
+			int len = (int)(dot - s->key);
+			int k = out->nnodes - 1;
+			if (k < 0 || strncmp(out->node[k].name, s->key, (size_t)len) != 0 ||
+			    out->node[k].name[len] != '\0') {
+				if (out->nnodes == MAX_NODES)
+					continue;
+				k = out->nnodes++;
+				snprintf(out->node[k].name, sizeof out->node[k].name, "%.*s", len, s->key);
+			}
+			if (strcmp(dot, ".generated") == 0)
+				gen[k] = s->u;
+			else if (strcmp(dot, ".mean_ms") == 0)
+				out->node[k].total_ms = s->f * (double)gen[k];
+		}
+	}
+	proto_msg_fini(&m);
+	return 0;
+}
+
+/* ---- a copying wrapper around the net source ------------------------------------------
+ * view_source_net decodes into one buffer and allows one polled tile at a time, while
+ * view_clipmap keeps the tiles of a quad until it is complete: each polled tile is copied
+ * out here and released at once (a 256² tile copy costs ~10 µs). */
+
+struct copy_source {
+	struct view_source base; /* first */
+	struct view_source *inner;
+};
+
+static int cs_want(struct view_source *s, const struct view_want *w, size_t n,
+		   const struct view_focus *f)
+{
+	struct view_source *in = ((struct copy_source *)s)->inner;
+	return in->ops->want(in, w, n, f);
+}
+
+static int cs_poll(struct view_source *s, struct view_tile *out)
+{
+	struct view_source *in = ((struct copy_source *)s)->inner;
+	int rc = in->ops->poll(in, out);
+	if (rc != 1)
+		return rc;
+	void *copy = NULL;
+	if (out->texels) {
+		size_t n = (size_t)out->size * out->size * pix_bytes(out->format);
+		copy = xmalloc(n);
+		memcpy(copy, out->texels, n);
+	}
+	in->ops->release(in, out);
+	out->texels = copy;
+	out->handle = copy;
+	return 1;
+}
+
+static int cs_wait(struct view_source *s, int timeout_ms)
+{
+	struct view_source *in = ((struct copy_source *)s)->inner;
+	return in->ops->wait(in, timeout_ms);
+}
+
+static void cs_release(struct view_source *s, struct view_tile *t)
+{
+	(void)s;
+	free(t->handle);
+	t->handle = NULL;
+}
+
+static void cs_destroy(struct view_source *s)
+{
+	view_source_destroy(((struct copy_source *)s)->inner);
+	free(s);
+}
+
+static const struct view_source_ops cs_ops = { cs_want, cs_poll, cs_wait, cs_release, cs_destroy };
+
+static struct view_source *copy_source_wrap(struct view_source *inner)
+{
+	struct copy_source *c = xcalloc(1, sizeof *c);
+	c->base.ops = &cs_ops;
+	c->base.planet = inner->planet;
+	c->inner = inner;
+	return &c->base;
+}
+
+/* ---- the headless frame (view_frame without drawing) ----------------------------------- */
+
+struct client {
+	struct view_source *src;
+	struct view_clipmap *cm;
+	struct view_body body;
+	int nlevels, max_level;
+	uint32_t T;
+	bool sent_once;
+	struct view_want *wants;
+};
+
+struct frame {
+	bool complete;
+	int lmin, lmax, llast, received;
+	double cpu_ms;
+};
+
+static bool usable(struct client *c, int l, double lon, double lat, double r)
+{
+	view_clipmap_update(c->cm, l);
+	const struct grid_quad *h = view_clipmap_held(c->cm, l);
+	return h && view_window_covers(h, lon, lat, r, 1.5);
+}
+
+static int client_frame(struct client *c, double lat, double lon, double agl, struct frame *f)
+{
+	double t0 = now_s();
+	double ground = 0;
+	view_clipmap_ground(c->cm, lon, lat, &ground);
+	struct view_camera cam = { .lat = lat, .lon = lon, .alt = ground + agl, .heading = HEADING,
+				   .pitch = -10, .fov_y = 60, .width = WIDTH, .height = HEIGHT };
+	int lmin, lmax;
+	view_level_range(&c->body, &cam, agl, N_PHI, c->max_level, &lmin, &lmax);
+	double cap = view_horizon_cap(&c->body, cam.alt);
+	bool changed = !c->sent_once;
+	for (int l = 0; l < c->nlevels; l++) {
+		if (l != 0 && (l < lmin || l > lmax)) {
+			changed |= view_clipmap_target(c->cm, l, NULL);
+			continue;
+		}
+		const struct grid_quad *cur = view_clipmap_target_of(c->cm, l);
+		int lx = view_level_lx(l, lat, cur ? cur->lx : -1);
+		struct grid_quad q;
+		grid_quad(lx, l, c->T, lon, lat, &q);
+		changed |= view_clipmap_target(c->cm, l, &q);
+	}
+	int rc = view_clipmap_receive(c->cm);
+	if (rc < 0)
+		return rc;
+	f->received = rc;
+	if (changed) {
+		size_t n = view_clipmap_wants(c->cm, true, c->wants, MAX_WANTS);
+		struct view_focus foc = { lon, lat, cam.alt, { 0, 0, 0 } };
+		rc = c->src->ops->want(c->src, c->wants, n, &foc);
+		if (rc < 0)
+			return rc;
+		c->sent_once = true;
+	}
+	int first = -1, llast = -1;
+	for (int j = lmin; j >= 0 && first < 0; j--)
+		if (usable(c, j, lon, lat, fmin(view_ring_radius(j), cap)))
+			first = j;
+	bool complete = first == lmin;
+	for (int i = first; i >= 0 && i <= lmax; i++) {
+		llast = i;
+		if (!(i + 1 <= lmax && usable(c, i + 1, lon, lat, fmin(view_ring_radius(i + 1), cap))))
+			break;
+	}
+	if (llast != lmax)
+		complete = false;
+	for (int l = lmin; l <= lmax && complete; l++) {
+		const struct grid_quad *h = view_clipmap_held(c->cm, l);
+		const struct grid_quad *t = view_clipmap_target_of(c->cm, l);
+		complete = h && t && grid_quad_equal(h, t);
+	}
+	f->complete = complete;
+	f->lmin = lmin;
+	f->lmax = lmax;
+	f->llast = llast;
+	f->cpu_ms = (now_s() - t0) * 1e3;
+	return 0;
+}
+
+/* Waits for the next tick. drain: takes tiles as they arrive meanwhile (the socket holds
+ * less than one 256² RGBA tile, so a client that reads once per frame gets about one tile
+ * per frame); else sleeps like a viewer blocked on its swap. */
+static void idle_until(struct client *c, double t, bool drain)
+{
+	if (!drain) {
+		sleep_until(t);
+		return;
+	}
+	for (;;) {
+		double left = t - now_s();
+		if (left <= 0)
+			return;
+		if (c->src->ops->wait(c->src, (int)ceil(left * 1e3)) == 1)
+			view_clipmap_receive(c->cm);
+	}
+}
+
+/* ---- one trial ------------------------------------------------------------------------- */
+
+struct ctx {
+	char bindir[512];
+	const struct gl *gl;
+	double trial_s;
+	bool drain;
+};
+
+struct trial {
+	bool ok;	 /* it ran (the daemon started, the start view loaded) */
+	double full;	 /* fraction of full-detail frames */
+	int frames, lmin, lmax;
+	double gen_per_s, hit_ratio, util, frame_p95_ms, late_frac;
+	double hover_s, prefetch_s;
+	uint64_t prefetch_tiles;
+	char top_node[64];
+	double top_share;
+};
+
+static int cmpd(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return (x > y) - (x < y);
+}
+
+/* Levels the camera wants at height agl (the ground at 0). */
+static void levels_at(const struct view_source *src, double agl, int *lmin, int *lmax)
+{
+	struct view_body b;
+	view_body_init(&b, src->planet.a, src->planet.f);
+	struct view_camera cam = { .lat = START_LAT, .lon = START_LON, .alt = agl, .fov_y = 60,
+				   .width = WIDTH, .height = HEIGHT };
+	int ml = src->planet.max_level < GRID_MAX_LEVEL ? src->planet.max_level : GRID_MAX_LEVEL;
+	view_level_range(&b, &cam, agl, N_PHI, ml, lmin, lmax);
+}
+
+static int prefetch_route(struct net_conn *c, const char *planet, double a, double len, int lmax,
+			  uint64_t *tiles, char err[256])
+{
+	enum { NP = 16 };
+	struct proto_lonlat pts[NP];
+	for (int i = 0; i < NP; i++)
+		route_point(a, len * i / (NP - 1), &pts[i].lat, &pts[i].lon);
+	*tiles = 0;
+	for (int l = 0; l <= lmax; l++) {
+		double tile_m = M_PI * a / (double)(1u << l); /* a tile's height at level l */
+		struct ctl_prefetch_opts o = { .planet = planet, .shape = PROTO_SHAPE_PATH,
+					       .points = pts, .npoints = NP,
+					       .width_m = 4 * tile_m, .lmin = (uint8_t)l,
+					       .lmax = (uint8_t)l };
+		struct ctl_prefetch_ui ui = { .stop_fd = -1, .stall_ms = 120000 };
+		struct proto_prefetch_progress fin = { 0 };
+		int rc = ctl_prefetch_run(c, &o, &ui, &fin, err);
+		if (rc)
+			return rc;
+		*tiles += fin.total;
+	}
+	return 0;
+}
+
+static int run_trial(const struct ctx *x, const char *planet_ini, double agl, double v,
+		     bool prefetch, struct trial *tr)
+{
+	memset(tr, 0, sizeof *tr);
+	char err[256] = "", name[64];
+	struct daemon d;
+	int rc = daemon_start(&d, x->bindir, planet_ini, name, sizeof name, err);
+	struct net_conn *sc = NULL;
+	struct client c = { 0 };
+	struct frame *fr = NULL;
+	if (rc)
+		goto out;
+	struct net_opts no = { .socket_path = d.sock, .name = "bench_keepup/1" };
+	rc = net_connect(&no, &sc, err);
+	if (rc)
+		goto out;
+	rc = view_source_net_create(&no, name, &c.src, err);
+	if (rc)
+		goto out;
+	c.src = copy_source_wrap(c.src);
+	const struct view_planet *p = &c.src->planet;
+	levels_at(c.src, agl, &tr->lmin, &tr->lmax);
+	double warm_s = 0.25, len = v * (x->trial_s + 0.5);
+	if (prefetch) {
+		double t0 = now_s();
+		rc = prefetch_route(sc, name, p->a, len, tr->lmax, &tr->prefetch_tiles, err);
+		tr->prefetch_s = now_s() - t0;
+		if (rc)
+			goto out;
+	}
+	view_body_init(&c.body, p->a, p->f);
+	c.max_level = p->max_level < GRID_MAX_LEVEL ? p->max_level : GRID_MAX_LEVEL;
+	c.nlevels = c.max_level + 1;
+	c.T = p->tile_size;
+	c.wants = xmalloc(MAX_WANTS * sizeof *c.wants);
+	rc = view_clipmap_create(x->gl, c.src, c.nlevels, &c.cm, err);
+	if (rc)
+		goto out;
+	/* Hover at the start until the view is complete (then 0.5 s more for the rings). */
+	double t0 = now_s(), done_at = -1;
+	struct frame f;
+	for (int k = 0;; k++) {
+		rc = client_frame(&c, START_LAT, START_LON, agl, &f);
+		if (rc)
+			goto out;
+		double t = now_s();
+		if (f.complete && done_at < 0)
+			done_at = t;
+		if (done_at >= 0 && t - done_at > 0.5)
+			break;
+		if (t - t0 > 60) {
+			snprintf(err, sizeof err, "the start view did not load in 60 s");
+			rc = -ETIMEDOUT;
+			goto out;
+		}
+		idle_until(&c, t0 + (k + 1) / HZ, x->drain);
+	}
+	tr->hover_s = now_s() - t0;
+	struct dstats s0, s1;
+	rc = get_stats(sc, &s0, err);
+	if (rc)
+		goto out;
+	/* The flight. */
+	int nmax = (int)((x->trial_s + warm_s) * HZ) + 4, n = 0, counted = 0, full = 0, late = 0;
+	fr = xcalloc((size_t)nmax, sizeof *fr);
+	double *ms = xcalloc((size_t)nmax, sizeof *ms);
+	t0 = now_s();
+	double tc = 0;
+	for (int k = 0; n < nmax; k++) {
+		double t = now_s() - t0;
+		if (t >= x->trial_s + warm_s)
+			break;
+		if (t >= warm_s && tc == 0)
+			tc = now_s();
+		double lat, lon;
+		route_point(p->a, v * t, &lat, &lon);
+		rc = client_frame(&c, lat, lon, agl, &fr[n]);
+		if (rc) {
+			free(ms);
+			goto out;
+		}
+		if (getenv("KEEPUP_DEBUG"))
+			fprintf(stderr, "    t %.3f full %d lmin %d llast %d lmax %d recv %d ms %.1f\n", t,
+				fr[n].complete, fr[n].lmin, fr[n].llast, fr[n].lmax, fr[n].received,
+				fr[n].cpu_ms);
+		if (t >= warm_s) {
+			ms[counted++] = fr[n].cpu_ms;
+			full += fr[n].complete;
+		}
+		n++;
+		double next = t0 + (k + 1) / HZ;
+		if (now_s() > next)
+			late++, k = (int)((now_s() - t0) * HZ); /* a missed tick is skipped */
+		idle_until(&c, t0 + (k + 1) / HZ, x->drain);
+	}
+	double fly = now_s() - (tc > 0 ? tc : t0);
+	rc = get_stats(sc, &s1, err);
+	if (rc) {
+		free(ms);
+		goto out;
+	}
+	tr->frames = counted;
+	tr->full = counted ? (double)full / counted : 0;
+	qsort(ms, (size_t)counted, sizeof *ms, cmpd);
+	tr->frame_p95_ms = counted ? ms[(size_t)(0.95 * (counted - 1))] : 0;
+	tr->late_frac = n ? (double)late / n : 0;
+	free(ms);
+	/* Daemon-side figures over the whole flight (warm-up included). */
+	double flight_s = fly + warm_s;
+	tr->gen_per_s = (double)(s1.generated - s0.generated) / flight_s;
+	uint64_t h = s1.hits - s0.hits, m = s1.misses - s0.misses;
+	tr->hit_ratio = h + m ? (double)h / (double)(h + m) : 1;
+	double busy = 0, top = 0;
+	for (int i = 0; i < s1.nnodes; i++) {
+		double d0 = 0;
+		for (int j = 0; j < s0.nnodes; j++)
+			if (strcmp(s0.node[j].name, s1.node[i].name) == 0)
+				d0 = s0.node[j].total_ms;
+		double dt = s1.node[i].total_ms - d0;
+		busy += dt;
+		if (dt > top) {
+			top = dt;
+			const char *nm = strchr(s1.node[i].name + 5, '.');
+			snprintf(tr->top_node, sizeof tr->top_node, "%s", nm ? nm + 1 : s1.node[i].name);
+		}
+	}
+	tr->util = busy / (flight_s * 1e3 * (double)(s1.workers ? s1.workers : 1));
+	tr->top_share = busy > 0 ? top / busy : 0;
+	tr->ok = true;
+out:
+	if (rc)
+		fprintf(stderr, "bench_keepup: %s at %.0f m, %.0f m/s: %s (%s)\n", planet_ini, agl, v,
+			err, strerror(-rc));
+	free(fr);
+	free(c.wants);
+	view_clipmap_destroy(c.cm);
+	view_source_destroy(c.src);
+	net_close(sc);
+	daemon_stop(&d);
+	return rc;
+}
+
+/* ---- the search ------------------------------------------------------------------------ */
+
+struct row {
+	double alt, seed_v, v; /* v: highest velocity that kept up (0: none tried did) */
+	bool capped;	       /* the search stopped at its cap without a failure */
+	int lmin, lmax, trials;
+	struct trial pass, fail; /* the best passing and the lowest failing trial */
+	double seconds;
+	char limit[96];
+};
+
+static void limiting_stage(struct row *r)
+{
+	const struct trial *t = &r->fail;
+	if (r->capped || !t->ok) {
+		snprintf(r->limit, sizeof r->limit, "none up to the search cap");
+		return;
+	}
+	if (t->frame_p95_ms > 1e3 / HZ || t->late_frac > 0.2)
+		snprintf(r->limit, sizeof r->limit, "client frame (p95 %.1f ms)", t->frame_p95_ms);
+	else if (t->util > 0.7)
+		snprintf(r->limit, sizeof r->limit, "synthesis: workers %.0f%% busy, %s %.0f%%",
+			 t->util * 100, t->top_node, t->top_share * 100);
+	else
+		snprintf(r->limit, sizeof r->limit, "delivery: workers %.0f%% busy, hits %.0f%%",
+			 t->util * 100, t->hit_ratio * 100);
+}
+
+static void search(const struct ctx *x, const char *planet, bool prefetch, int i, bool fine,
+		   struct row *r)
+{
+	memset(r, 0, sizeof *r);
+	r->alt = seed[i].alt;
+	r->seed_v = seed[i].vel;
+	double t0 = now_s();
+	double lo = 0, hi = INFINITY, v = (fine ? 10 : 2) * seed[i].vel;
+	double cap = (prefetch ? 40 : 160) * seed[i].vel, floor_v = seed[i].vel / 16;
+	double stop_ratio = fine ? 1.19 : 1.42;
+	while (r->trials < MAX_TRIALS) {
+		struct trial tr;
+		int rc = run_trial(x, planet, seed[i].alt, v, prefetch, &tr);
+		r->trials++;
+		if (rc || !tr.ok)
+			break;
+		r->lmin = tr.lmin;
+		r->lmax = tr.lmax;
+		bool pass = tr.full >= 0.95;
+		fprintf(stderr, "  keepup %s%s %7.0f m  v %9.0f m/s: %5.1f%% full, %5.0f tiles/s, "
+				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, hover %.1f s%s\n",
+			strrchr(planet, '/') ? strrchr(planet, '/') + 1 : planet,
+			prefetch ? " prefetched" : "", seed[i].alt, v, tr.full * 100, tr.gen_per_s,
+			tr.hit_ratio * 100, tr.util * 100, tr.frame_p95_ms, tr.hover_s,
+			prefetch ? "" : "");
+		if (pass) {
+			lo = v;
+			r->pass = tr;
+		} else {
+			hi = v;
+			r->fail = tr;
+		}
+		if (pass && isinf(hi)) {
+			if (v * 2 > cap * 1.001) {
+				r->capped = true;
+				break;
+			}
+			v *= 2;
+		} else if (!pass && lo == 0) {
+			if (v / 2 < floor_v)
+				break;
+			v /= 2;
+		} else {
+			if (hi / lo <= stop_ratio)
+				break;
+			v = sqrt(lo * hi);
+		}
+	}
+	r->v = lo;
+	r->seconds = now_s() - t0;
+	limiting_stage(r);
+}
+
+/* ---- output ---------------------------------------------------------------------------- */
+
+static void fmt_v(double v, char *out, size_t n)
+{
+	if (v <= 0)
+		snprintf(out, n, "-");
+	else if (v >= 1e4)
+		snprintf(out, n, "%.0f km/s", v / 1e3);
+	else
+		snprintf(out, n, "%.0f m/s", v);
+}
+
+static void fmt_alt(double a, char *out, size_t n)
+{
+	if (a >= 1e4)
+		snprintf(out, n, "%.0f km", a / 1e3);
+	else
+		snprintf(out, n, "%.0f m", a);
+}
+
+struct config {
+	const char *label, *planet;
+	bool prefetch;
+	struct row rows[NALT];
+	bool run;
+	double seconds;
+};
+
+static void print_table(const struct config *cf, double trial_s)
+{
+	printf("keepup/%s: 60 Hz, full detail >= 95%% of %.1f s flights, 1280x720 levels, "
+	       "%.0f s in all\n", cf->label, trial_s, cf->seconds);
+	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s  %s\n", "altitude", "seed", "ours",
+	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "limiting stage");
+	for (int i = 0; i < NALT; i++) {
+		const struct row *r = &cf->rows[i];
+		char a[32], sv[32], ov[48], lv[16];
+		fmt_alt(r->alt, a, sizeof a);
+		fmt_v(r->seed_v, sv, sizeof sv);
+		fmt_v(r->v, ov, sizeof ov);
+		if (r->capped) {
+			char t[40];
+			snprintf(t, sizeof t, ">=%.30s", ov);
+			snprintf(ov, sizeof ov, "%s", t);
+		}
+		snprintf(lv, sizeof lv, "%d-%d", r->lmin, r->lmax);
+		const struct trial *t = r->v > 0 ? &r->pass : &r->fail;
+		printf("  %-8s %-6s %-6s %11s %11s %6.1fx %9.0f %5.0f%%  %s\n", a, seed[i].levels, lv,
+		       sv, ov, r->v / r->seed_v, t->gen_per_s, t->hit_ratio * 100, r->limit);
+	}
+	double worst = INFINITY;
+	for (int i = 0; i < NALT; i++)
+		worst = fmin(worst, cf->rows[i].v / cf->rows[i].seed_v);
+	printf("keepup/%s: lowest ours/seed %.1fx (target >= 10x)\n", cf->label, worst);
+}
+
+static void write_json(const char *path, struct config *cf, int ncf, double trial_s)
+{
+	FILE *f = fopen(path, "w");
+	if (!f) {
+		fprintf(stderr, "bench_keepup: cannot write %s\n", path);
+		return;
+	}
+	fprintf(f, "{\n  \"frame_hz\": %.0f,\n  \"full_detail_fraction\": 0.95,\n"
+		   "  \"flight_s\": %.2f,\n  \"configs\": [\n", HZ, trial_s);
+	bool firstc = true;
+	for (int c = 0; c < ncf; c++) {
+		if (!cf[c].run)
+			continue;
+		fprintf(f, "%s    {\"label\": \"%s\", \"planet\": \"%s\", \"prefetched\": %s, "
+			   "\"seconds\": %.1f, \"rows\": [\n",
+			firstc ? "" : ",\n", cf[c].label, cf[c].planet,
+			cf[c].prefetch ? "true" : "false", cf[c].seconds);
+		firstc = false;
+		for (int i = 0; i < NALT; i++) {
+			const struct row *r = &cf[c].rows[i];
+			const struct trial *t = r->v > 0 ? &r->pass : &r->fail;
+			fprintf(f, "      {\"altitude_m\": %.0f, \"seed_levels\": \"%s\", "
+				   "\"levels\": [%d, %d], \"seed_velocity_mps\": %.0f, "
+				   "\"velocity_mps\": %.1f, \"at_search_cap\": %s, \"ratio\": %.2f, "
+				   "\"full_detail\": %.3f, \"tiles_per_s\": %.1f, \"cache_hit_ratio\": %.3f, "
+				   "\"worker_busy\": %.3f, \"frame_p95_ms\": %.2f, \"trials\": %d, "
+				   "\"prefetch_s\": %.2f, \"limiting_stage\": \"%s\"}%s\n",
+				r->alt, seed[i].levels, r->lmin, r->lmax, r->seed_v, r->v,
+				r->capped ? "true" : "false", r->v / r->seed_v, t->full, t->gen_per_s,
+				t->hit_ratio, t->util, t->frame_p95_ms, r->trials, r->pass.prefetch_s,
+				r->limit, i + 1 < NALT ? "," : "");
+		}
+		fprintf(f, "    ]}");
+	}
+	fprintf(f, "\n  ]\n}\n");
+	fclose(f);
+}
+
+/* A 5×7 bitmap font: each glyph is 7 rows of 5 bits (bit 4 = leftmost). */
+static const struct {
+	char c;
+	uint8_t rows[7];
+} font[] = {
+	{ '0', { 14, 17, 19, 21, 25, 17, 14 } }, { '1', { 4, 12, 4, 4, 4, 4, 14 } },
+	{ '2', { 14, 17, 1, 2, 4, 8, 31 } },	 { '3', { 31, 2, 4, 2, 1, 17, 14 } },
+	{ '4', { 2, 6, 10, 18, 31, 2, 2 } },	 { '5', { 31, 16, 30, 1, 1, 17, 14 } },
+	{ '6', { 6, 8, 16, 30, 17, 17, 14 } },	 { '7', { 31, 1, 2, 4, 8, 8, 8 } },
+	{ '8', { 14, 17, 17, 14, 17, 17, 14 } }, { '9', { 14, 17, 17, 15, 1, 2, 12 } },
+	{ 'a', { 0, 0, 14, 1, 15, 17, 15 } },	 { 'c', { 0, 0, 14, 16, 16, 17, 14 } },
+	{ 'd', { 1, 1, 13, 19, 17, 17, 15 } },	 { 'e', { 0, 0, 14, 17, 31, 16, 14 } },
+	{ 'f', { 6, 9, 8, 28, 8, 8, 8 } },	 { 'h', { 16, 16, 22, 25, 17, 17, 17 } },
+	{ 'i', { 4, 0, 12, 4, 4, 4, 14 } },	 { 'k', { 16, 16, 18, 20, 24, 20, 18 } },
+	{ 'l', { 12, 4, 4, 4, 4, 4, 14 } },	 { 'm', { 0, 0, 26, 21, 21, 17, 17 } },
+	{ 'n', { 0, 0, 22, 25, 17, 17, 17 } },	 { 'o', { 0, 0, 14, 17, 17, 17, 14 } },
+	{ 'p', { 0, 0, 30, 17, 30, 16, 16 } },	 { 'r', { 0, 0, 22, 25, 16, 16, 16 } },
+	{ 's', { 0, 0, 14, 16, 14, 1, 30 } },	 { 't', { 8, 8, 28, 8, 8, 9, 6 } },
+	{ 'u', { 0, 0, 17, 17, 17, 19, 13 } },	 { 'v', { 0, 0, 17, 17, 17, 10, 4 } },
+	{ 'x', { 0, 0, 17, 10, 4, 10, 17 } },	 { 'y', { 0, 0, 17, 17, 15, 1, 14 } },
+	{ 'g', { 0, 0, 15, 17, 15, 1, 14 } },	 { 'b', { 16, 16, 22, 25, 17, 17, 30 } },
+	{ '/', { 1, 1, 2, 4, 8, 16, 16 } },	 { '.', { 0, 0, 0, 0, 0, 12, 12 } },
+	{ '(', { 2, 4, 8, 8, 8, 4, 2 } },	 { ')', { 8, 4, 2, 2, 2, 4, 8 } },
+	{ '-', { 0, 0, 0, 31, 0, 0, 0 } },	 { '=', { 0, 0, 31, 0, 31, 0, 0 } },
+	{ '>', { 8, 4, 2, 1, 2, 4, 8 } },	 { ',', { 0, 0, 0, 0, 12, 4, 8 } },
+	{ 'E', { 31, 16, 16, 30, 16, 16, 31 } }, { 'A', { 14, 17, 17, 31, 17, 17, 17 } },
+};
+
+struct canvas {
+	int w, h;
+	uint8_t *px;
+};
+
+static void put(struct canvas *c, int x, int y, const uint8_t col[3])
+{
+	if (x < 0 || y < 0 || x >= c->w || y >= c->h)
+		return;
+	uint8_t *p = c->px + ((size_t)y * c->w + x) * 4;
+	p[0] = col[0];
+	p[1] = col[1];
+	p[2] = col[2];
+	p[3] = 255;
+}
+
+static void text(struct canvas *c, int x, int y, const char *s, const uint8_t col[3], int scale)
+{
+	for (; *s; s++, x += 6 * scale) {
+		for (size_t g = 0; g < sizeof font / sizeof font[0]; g++) {
+			if (font[g].c != *s)
+				continue;
+			for (int r = 0; r < 7; r++)
+				for (int b = 0; b < 5; b++)
+					if (font[g].rows[r] & (16 >> b))
+						for (int dy = 0; dy < scale; dy++)
+							for (int dx = 0; dx < scale; dx++)
+								put(c, x + b * scale + dx,
+								    y + r * scale + dy, col);
+		}
+	}
+}
+
+static void line(struct canvas *c, double x0, double y0, double x1, double y1, const uint8_t col[3],
+		 int thick, int dash)
+{
+	double len = fmax(fabs(x1 - x0), fabs(y1 - y0));
+	int n = (int)ceil(len) + 1;
+	for (int i = 0; i <= n; i++) {
+		if (dash && (i / dash) % 2)
+			continue;
+		double t = (double)i / n;
+		int x = (int)lround(x0 + (x1 - x0) * t), y = (int)lround(y0 + (y1 - y0) * t);
+		for (int dy = -thick / 2; dy <= thick / 2; dy++)
+			for (int dx = -thick / 2; dx <= thick / 2; dx++)
+				put(c, x + dx, y + dy, col);
+	}
+}
+
+static void write_png(const char *path, struct config *cf, int ncf)
+{
+	struct canvas c = { 900, 640, NULL };
+	c.px = xmalloc((size_t)c.w * c.h * 4);
+	memset(c.px, 255, (size_t)c.w * c.h * 4);
+	const int L = 110, R = 860, T = 40, B = 560;
+	const double ax0 = 1, ax1 = 6, ay0 = 1, ay1 = 8; /* log10 ranges: 10 m..1000 km, 10 m/s..1e8 */
+#define PX(a) (L + ((log10(a) - ax0) / (ax1 - ax0)) * (R - L))
+#define PY(v) (B - ((log10(v) - ay0) / (ay1 - ay0)) * (B - T))
+	static const uint8_t black[3] = { 0, 0, 0 }, grey[3] = { 210, 210, 210 },
+			     dark[3] = { 90, 90, 90 };
+	static const uint8_t cols[4][3] = { { 215, 40, 40 }, { 230, 140, 20 }, { 30, 130, 60 },
+					    { 40, 90, 210 } };
+	for (int e = (int)ax0; e <= (int)ax1; e++) {
+		double x = PX(pow(10, e));
+		line(&c, x, T, x, B, grey, 1, 0);
+		char s[16];
+		if (e >= 3)
+			snprintf(s, sizeof s, "%.0fkm", pow(10, e - 3));
+		else
+			snprintf(s, sizeof s, "%.0fm", pow(10, e));
+		text(&c, (int)x - 3 * (int)strlen(s) * 2, B + 10, s, black, 2);
+	}
+	for (int e = (int)ay0; e <= (int)ay1; e++) {
+		double y = PY(pow(10, e));
+		line(&c, L, y, R, y, grey, 1, 0);
+		char s[16];
+		snprintf(s, sizeof s, "1e%d", e);
+		text(&c, L - 12 * (int)strlen(s) - 8, (int)y - 7, s, black, 2);
+	}
+	line(&c, L, T, L, B, black, 2, 0);
+	line(&c, L, B, R, B, black, 2, 0);
+	text(&c, (L + R) / 2 - 120, B + 40, "altitude (m)", black, 2);
+	text(&c, 8, T - 30, "velocity (m/s)", black, 2);
+	/* seed and the 10x target */
+	for (int k = 0; k < 2; k++)
+		for (int i = 0; i + 1 < NALT; i++)
+			line(&c, PX(seed[i].alt), PY(seed[i].vel * (k ? 10 : 1)), PX(seed[i + 1].alt),
+			     PY(seed[i + 1].vel * (k ? 10 : 1)), k ? dark : black, k ? 1 : 3, k ? 6 : 0);
+	int ly = T + 10, ci = 0;
+	text(&c, L + 20, ly, "seed 2007", black, 2);
+	line(&c, L + 250, ly + 7, L + 300, ly + 7, black, 3, 0);
+	ly += 22;
+	text(&c, L + 20, ly, "seed x10 target", dark, 2);
+	line(&c, L + 250, ly + 7, L + 300, ly + 7, dark, 1, 6);
+	ly += 22;
+	for (int k = 0; k < ncf; k++) {
+		if (!cf[k].run)
+			continue;
+		const uint8_t *col = cols[ci++ % 4];
+		double px = -1, py = -1;
+		for (int i = 0; i < NALT; i++) {
+			const struct row *r = &cf[k].rows[i];
+			if (r->v <= 0)
+				continue;
+			double x = PX(r->alt), y = PY(r->v);
+			if (px >= 0)
+				line(&c, px, py, x, y, col, 3, 0);
+			for (int d = -4; d <= 4; d++)
+				line(&c, x - 4, y + d, x + 4, y + d, col, 1, 0);
+			px = x;
+			py = y;
+		}
+		text(&c, L + 20, ly, cf[k].label, col, 2);
+		line(&c, L + 250, ly + 7, L + 300, ly + 7, col, 3, 0);
+		ly += 22;
+	}
+#undef PX
+#undef PY
+	char err[256];
+	if (img_write(path, c.w, c.h, 4, IMG_U8, c.px, err) < 0)
+		fprintf(stderr, "bench_keepup: %s\n", err);
+	free(c.px);
+}
+
+int main(int argc, char **argv)
+{
+	(void)argc;
+	(void)argv;
+	struct ctx x = { 0 };
+	ssize_t l = readlink("/proc/self/exe", x.bindir, sizeof x.bindir - 1);
+	if (l <= 0)
+		return 1;
+	x.bindir[l] = '\0';
+	*strrchr(x.bindir, '/') = '\0'; /* build/tests */
+	*strrchr(x.bindir, '/') = '\0'; /* build */
+	char exe[600];
+	snprintf(exe, sizeof exe, "%s/clipmapd", x.bindir);
+	if (access(exe, X_OK)) {
+		printf("keepup: skipped (%s not built)\n", exe);
+		return 0;
+	}
+	bool full = getenv("KEEPUP_FULL") && atoi(getenv("KEEPUP_FULL")) > 0;
+	x.trial_s = getenv("KEEPUP_TRIAL_S") ? atof(getenv("KEEPUP_TRIAL_S")) : (full ? 4 : 2);
+	if (x.trial_s < 0.5)
+		x.trial_s = 0.5;
+	x.drain = !getenv("KEEPUP_DRAIN") || atoi(getenv("KEEPUP_DRAIN")) > 0;
+	const char *only = getenv("KEEPUP_ONLY"); /* a label substring, for quick runs */
+	const char *alts = getenv("KEEPUP_ALTS"); /* row digits 0 (800 km) .. 8 (50 m) */
+	char err[256];
+	struct gl_context *glc;
+	if (gl_context_create(GL_BACKEND_AUTO, &glc, err) < 0) {
+		printf("keepup: skipped (no GL: %s)\n", err);
+		return 0;
+	}
+	x.gl = gl_context_api(glc);
+	static struct config cf[] = {
+		{ .label = "procedural cold", .planet = "conf/planets/procedural.ini" },
+		{ .label = "procedural prefetched", .planet = "conf/planets/procedural.ini",
+		  .prefetch = true },
+		{ .label = "earth cold", .planet = "conf/planets/earth.ini" },
+		{ .label = "earth prefetched", .planet = "conf/planets/earth.ini", .prefetch = true },
+	};
+	enum { NCF = sizeof cf / sizeof cf[0] };
+	bool have_earth = access("data/earth/etopo5.tif", R_OK) == 0;
+	for (int k = 0; k < NCF; k++) {
+		cf[k].run = full || !cf[k].prefetch;
+		if (k >= 2 && !have_earth)
+			cf[k].run = false;
+		if (only && !strstr(cf[k].label, only))
+			cf[k].run = false;
+	}
+	printf("keepup: %s, GL %s (%s); %s matrix (KEEPUP_FULL=1 for all four), flights %.1f s\n",
+	       full ? "full" : "default", gl_context_backend(glc), gl_context_renderer(glc),
+	       full ? "full" : "reduced", x.trial_s);
+	if (!have_earth)
+		printf("keepup: earth skipped (no data/earth: make data)\n");
+	fflush(stdout);
+	for (int k = 0; k < NCF; k++) {
+		if (!cf[k].run)
+			continue;
+		double t0 = now_s();
+		for (int i = 0; i < NALT; i++) {
+			if (alts && !strchr(alts, '0' + i)) {
+				cf[k].rows[i] = (struct row){ .alt = seed[i].alt, .seed_v = seed[i].vel,
+							      .limit = "not run" };
+				continue;
+			}
+			search(&x, cf[k].planet, cf[k].prefetch, i, full, &cf[k].rows[i]);
+		}
+		cf[k].seconds = now_s() - t0;
+		print_table(&cf[k], x.trial_s);
+		fflush(stdout);
+	}
+	mkdir("out", 0755);
+	mkdir("out/bench", 0755);
+	write_json("out/bench/keepup.json", cf, NCF, x.trial_s);
+	write_png("out/bench/keepup.png", cf, NCF);
+	printf("keepup: wrote out/bench/keepup.json, out/bench/keepup.png\n");
+	gl_context_destroy(glc);
+	return 0;
+}
