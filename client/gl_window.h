@@ -3,8 +3,8 @@
  * glfwGetProcAddress), and its input reduced to what the viewer's controls read.
  *
  * Thread-safety: GLFW's rules: create, poll and destroy on the main thread only.
- * Ownership: gl_window_create returns an owned window; gl_window_destroy frees it (and
- * terminates GLFW).
+ * Ownership: gl_window_create returns an owned window; gl_window_destroy closes and frees it
+ * (GLFW itself stays initialised until the process exits).
  */
 #ifndef CLIPMAP_GL_WINDOW_H
 #define CLIPMAP_GL_WINDOW_H
