@@ -43,10 +43,11 @@ BENCH_SRC    := $(wildcard tests/bench/bench_*.c)
 BENCH_BIN    := $(BENCH_SRC:tests/bench/%.c=$(BUILD)/tests/%)
 PROGS        := $(foreach m,$(MAINS),$(if $(wildcard $(m)),$(BUILD)/$(notdir $(basename $(m)))))
 
-# The viewer: GL code in its own library (EGL linked; OSMesa dlopen'ed at run time), shaders
+# The viewer: GL code in its own library (EGL, GLFW linked; OSMesa dlopen'ed at run time), shaders
 # embedded as C strings generated from shaders/, every shader checked by glslangValidator.
-GL_CFLAGS    := $(shell pkg-config --cflags egl opengl 2>/dev/null)
-GL_LIBS      := $(shell pkg-config --libs egl 2>/dev/null || echo -lEGL) -ldl
+GL_CFLAGS    := $(shell pkg-config --cflags egl opengl glfw3 2>/dev/null)
+GL_LIBS      := $(shell pkg-config --libs egl 2>/dev/null || echo -lEGL) \
+                $(shell pkg-config --libs glfw3 2>/dev/null || echo -lglfw) -ldl
 VIEW_SRC     := $(filter-out $(MAINS),$(wildcard client/gl_*.c client/view*.c))
 VIEW_OBJ     := $(VIEW_SRC:%.c=$(BUILD)/%.o)
 VIEW_LIB     := $(BUILD)/libclipmapgl.a

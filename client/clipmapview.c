@@ -1,7 +1,8 @@
 /* clipmapview — the viewer. Offline mode renders pictures of a planet evaluated in this
  * process (--planet FILE) or served by clipmapd (--connect SOCKET|HOST:PORT --planet NAME):
  * one camera (--camera) or a flight (--flight CSV), EGL surfaceless or OSMesa, no display
- * needed. Exit status: 0 ok, 1 runtime failure, 2 bad usage.
+ * needed. Window mode (--window) flies the same views interactively in a GLFW window at up to
+ * 60 frames/s, never waiting for tiles. Exit status: 0 ok, 1 runtime failure, 2 bad usage.
  */
 #include <errno.h>
 #include <getopt.h>
@@ -9,10 +10,13 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "gl_context.h"
+#include "gl_window.h"
 #include "img.h"
 #include "view.h"
+#include "view_fly.h"
 #include "view_source_local.h"
 #include "view_source_net.h"
 #include "xalloc.h"
@@ -37,7 +41,142 @@ static void usage(FILE *f)
 		"  --exaggerate X      vertical exaggeration of the relief (default 1)\n"
 		"  --haze X            atmosphere density, 1 Earth's, 0 none (default 1)\n"
 		"  --rings N,M         N steps around, M rings per level (default 256,16)\n"
-		"  --backend egl|osmesa, --workers N, --no-prefetch\n");
+		"  --backend egl|osmesa, --workers N, --no-prefetch\n"
+		"  --window            fly interactively in a window (--camera optional):\n"
+		"                      left drag orbit, right drag look, wheel zoom, WASD/arrows move,\n"
+		"                      E/PageUp climb, Q/PageDown descend, Shift faster, R reset, Esc quit\n"
+		"  --exit-after N      (window) close after N frames\n"
+		"  --screenshot FILE   (window) write the last frame as PNG on exit\n");
+}
+
+static double mono_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
+
+static void sleep_s(double s)
+{
+	if (s <= 0)
+		return;
+	struct timespec ts = { (time_t)s, (long)((s - (double)(time_t)s) * 1e9) };
+	while (nanosleep(&ts, &ts) != 0 && errno == EINTR)
+		;
+}
+
+struct window_opts {
+	const char *title;
+	int width, height;
+	long exit_after; /* frames; 0: until closed */
+	const char *screenshot;
+	FILE *stats;
+};
+
+static void fly_input(const struct gl_window_input *in, struct view_fly_input *f)
+{
+	memset(f, 0, sizeof *f);
+	f->key[FLY_FORWARD] = in->key[GLW_W] || in->key[GLW_UP];
+	f->key[FLY_BACK] = in->key[GLW_S] || in->key[GLW_DOWN];
+	f->key[FLY_LEFT] = in->key[GLW_A] || in->key[GLW_LEFT];
+	f->key[FLY_RIGHT] = in->key[GLW_D] || in->key[GLW_RIGHT];
+	f->key[FLY_UP] = in->key[GLW_E] || in->key[GLW_PAGE_UP];
+	f->key[FLY_DOWN] = in->key[GLW_Q] || in->key[GLW_PAGE_DOWN];
+	f->key[FLY_FAST] = in->key[GLW_SHIFT];
+	if (in->left) {
+		f->orbit_dx = in->dx;
+		f->orbit_dy = in->dy;
+	} else if (in->right) {
+		f->look_dx = in->dx;
+		f->look_dy = in->dy;
+	}
+	f->wheel = in->wheel;
+	f->reset = in->reset;
+}
+
+static void stats_line(FILE *f, int frame, const struct view_frame_stats *s);
+
+/* The interactive loop: input → camera → view_frame → blit → swap, paced to 60 Hz (vsync
+ * when the system gives it, else a clock). The title carries the HUD, refreshed twice a
+ * second. Returns the exit status. */
+static int window_loop(struct gl_window *w, struct view *v, const struct view_camera *home,
+		       double radius, const struct window_opts *o)
+{
+	struct view_fly fly;
+	view_fly_init(&fly, home, radius);
+	const double period = 1.0 / 60;
+	double t_start = mono_s(), t_prev = t_start, t_hud = t_start;
+	long frames = 0, hud_frames = 0;
+	uint64_t hud_bytes = 0;
+	long hud_tiles = 0;
+	char err[256];
+	for (;;) {
+		struct gl_window_input in;
+		gl_window_poll(w, &in);
+		if (in.quit)
+			break;
+		int fw, fh;
+		gl_window_framebuffer_size(w, &fw, &fh);
+		if (fw > 0 && fh > 0 && view_resize(v, fw, fh, err) < 0) {
+			fprintf(stderr, "clipmapview: %s\n", err);
+			return 1;
+		}
+		double t = mono_s();
+		struct view_fly_input fi;
+		fly_input(&in, &fi);
+		struct view_camera last;
+		view_last_camera(v, &last);
+		fly.cam.width = last.width > 0 ? last.width : fw;
+		fly.cam.height = last.height > 0 ? last.height : fh;
+		view_fly_step(&fly, &fi, t - t_prev);
+		t_prev = t;
+		struct view_frame_stats st;
+		int rc = view_frame(v, &fly.cam, t - t_start, &st);
+		if (rc < 0) {
+			fprintf(stderr, "clipmapview: frame %ld: %s\n", frames, strerror(-rc));
+			return 1;
+		}
+		if (o->stats)
+			stats_line(o->stats, (int)frames, &st);
+		gl_window_present(w, view_framebuffer(v), fw, fh);
+		frames++;
+		hud_frames++;
+		hud_tiles += st.tiles_received;
+		hud_bytes += st.bytes_uploaded;
+		double now = mono_s();
+		if (now - t_hud >= 0.5) {
+			double dt = now - t_hud;
+			char title[256];
+			snprintf(title, sizeof title,
+				 "%s | %.1f fps | levels %d-%d of %d-%d%s | %.0f tiles/s | %.2f MB/s"
+				 " | %.4f, %.4f, %.0f m",
+				 o->title, hud_frames / dt, st.lfirst, st.llast, st.lmin, st.lmax,
+				 st.complete ? " ready" : "", hud_tiles / dt, hud_bytes / dt / 1e6,
+				 fly.cam.lat, fly.cam.lon, st.agl);
+			gl_window_set_title(w, title);
+			t_hud = now;
+			hud_frames = 0;
+			hud_tiles = 0;
+			hud_bytes = 0;
+		}
+		if (o->exit_after > 0 && frames >= o->exit_after)
+			break;
+		/* 60 Hz: vsync already waited when the frame took a full period. */
+		sleep_s(period - (mono_s() - t));
+	}
+	if (o->screenshot && frames > 0) {
+		struct view_camera last;
+		view_last_camera(v, &last);
+		unsigned char *pix = xmalloc((size_t)last.width * last.height * 4);
+		view_read_rgba(v, pix);
+		int rc = img_write(o->screenshot, last.width, last.height, 4, IMG_U8, pix, err);
+		free(pix);
+		if (rc < 0) {
+			fprintf(stderr, "clipmapview: %s\n", err);
+			return 1;
+		}
+	}
+	return 0;
 }
 
 struct key {
@@ -138,13 +277,15 @@ int main(int argc, char **argv)
 {
 	const char *planet = NULL, *connect_to = NULL, *token_file = NULL, *camera = NULL, *flight = NULL, *outp = NULL, *statsp = NULL;
 	int width = 1280, height = 720, steps = 1, workers = 0;
-	bool wait_complete = false;
+	bool wait_complete = false, window = false;
+	long exit_after = 0;
+	const char *screenshot = NULL;
 	double timeout = 300, fov = 60;
 	struct view_desc d = { 0 };
 	enum gl_backend backend = GL_BACKEND_AUTO;
 	enum { O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS,
 	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP,
-	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE };
+	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE, O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT };
 	static const struct option opts[] = {
 		{ "planet", required_argument, NULL, O_PLANET },
 		{ "camera", required_argument, NULL, O_CAMERA },
@@ -165,6 +306,9 @@ int main(int argc, char **argv)
 		{ "token-file", required_argument, NULL, O_TOKEN },
 		{ "exaggerate", required_argument, NULL, O_EXAG },
 		{ "haze", required_argument, NULL, O_HAZE },
+		{ "window", no_argument, NULL, O_WINDOW },
+		{ "exit-after", required_argument, NULL, O_EXIT_AFTER },
+		{ "screenshot", required_argument, NULL, O_SCREENSHOT },
 		{ NULL, 0, NULL, 0 },
 	};
 	int c;
@@ -189,6 +333,17 @@ int main(int argc, char **argv)
 			d.haze = hz > 0 ? hz : -1;
 			break;
 		}
+		case O_WINDOW: window = true; break;
+		case O_EXIT_AFTER: {
+			char *end;
+			exit_after = strtol(optarg, &end, 10);
+			if (*end || exit_after < 1) {
+				fprintf(stderr, "clipmapview: --exit-after: a number of frames >= 1\n");
+				return 2;
+			}
+			break;
+		}
+		case O_SCREENSHOT: screenshot = optarg; break;
 		case O_CAMERA: camera = optarg; break;
 		case O_FLIGHT: flight = optarg; break;
 		case O_STEPS: steps = atoi(optarg); break;
@@ -234,7 +389,16 @@ int main(int argc, char **argv)
 		default: usage(stderr); return 2;
 		}
 	}
-	if (!planet || (!camera == !flight) || steps < 1 || fov <= 1 || fov >= 170) {
+	if (window && (flight || outp || wait_complete)) {
+		fprintf(stderr, "clipmapview: --window flies interactively: no --flight, -o or "
+				"--wait-complete (use --screenshot)\n");
+		return 2;
+	}
+	if (!window && (exit_after || screenshot)) {
+		fprintf(stderr, "clipmapview: --exit-after and --screenshot need --window\n");
+		return 2;
+	}
+	if (!planet || (!window && !camera == !flight) || steps < 1 || fov <= 1 || fov >= 170) {
 		usage(stderr);
 		return 2;
 	}
@@ -248,7 +412,7 @@ int main(int argc, char **argv)
 			free(keys);
 			return 2;
 		}
-	} else {
+	} else if (flight) {
 		int rc = read_flight(flight, &keys, &nkeys);
 		if (rc < 0) {
 			if (rc != -EINVAL)
@@ -261,6 +425,7 @@ int main(int argc, char **argv)
 	char err[256] = "";
 	int status = 1;
 	struct gl_context *ctx = NULL;
+	struct gl_window *win = NULL;
 	struct view_source *src = NULL;
 	struct view *v = NULL;
 	FILE *sf = NULL;
@@ -281,6 +446,40 @@ int main(int argc, char **argv)
 			goto out;
 		}
 	}
+	if (statsp && !(sf = fopen(statsp, "w"))) {
+		fprintf(stderr, "clipmapview: %s: %s\n", statsp, strerror(errno));
+		goto out;
+	}
+	if (window) {
+		char title[128];
+		snprintf(title, sizeof title, "clipmapview %s", src->planet.name);
+		rc = gl_window_create(width, height, title, &win, err);
+		if (rc < 0) {
+			fprintf(stderr, "clipmapview: --window: %s\n", err);
+			goto out;
+		}
+		gl_window_framebuffer_size(win, &d.width, &d.height);
+		rc = view_create(gl_window_api(win), src, &d, &v, err);
+		if (rc < 0) {
+			fprintf(stderr, "clipmapview: %s\n", err);
+			goto out;
+		}
+		double radius = src->planet.a * (1 - src->planet.f / 3);
+		/* default: the whole planet from above, north up */
+		struct view_camera home = { .lat = 20, .lon = 0, .alt = 2.2 * radius,
+					    .heading = 0, .pitch = -90, .fov_y = fov,
+					    .width = d.width, .height = d.height };
+		if (keys) {
+			home.lat = keys->v[0];
+			home.lon = keys->v[1];
+			home.alt = keys->v[2];
+			home.heading = keys->v[3];
+			home.pitch = keys->v[4];
+		}
+		struct window_opts wo = { title, width, height, exit_after, screenshot, sf };
+		status = window_loop(win, v, &home, radius, &wo);
+		goto out;
+	}
 	rc = gl_context_create(backend, &ctx, err);
 	if (rc < 0) {
 		fprintf(stderr, "clipmapview: no OpenGL context: %s\n", err);
@@ -291,10 +490,6 @@ int main(int argc, char **argv)
 	rc = view_create(gl_context_api(ctx), src, &d, &v, err);
 	if (rc < 0) {
 		fprintf(stderr, "clipmapview: %s\n", err);
-		goto out;
-	}
-	if (statsp && !(sf = fopen(statsp, "w"))) {
-		fprintf(stderr, "clipmapview: %s: %s\n", statsp, strerror(errno));
 		goto out;
 	}
 	pix = xmalloc((size_t)width * height * 4);
@@ -356,6 +551,7 @@ out:
 	free(pix);
 	view_destroy(v);
 	gl_context_destroy(ctx);
+	gl_window_destroy(win);
 	view_source_destroy(src);
 	free(keys);
 	return status;

@@ -41,33 +41,31 @@ struct gl_context {
 	unsigned char obuf[4 * 4 * 4]; /* OSMesa wants a colour buffer; we draw into our FBOs */
 };
 
-typedef void (*gl_proc)(void);
-
-static int load_table(struct gl_context *c, gl_proc (*get)(void *ud, const char *), void *ud,
-		      char err[256])
+int gl_load_table(struct gl *gl, gl_proc (*get)(void *ud, const char *name), void *ud,
+		  char err[256])
 {
 	char name[64];
 #define GL_FUNC_LOAD(type, fname)                                                             \
 	snprintf(name, sizeof name, "gl%s", #fname);                                           \
-	c->gl.fname = (type)get(ud, name);                                                     \
-	if (!c->gl.fname) {                                                                    \
+	gl->fname = (type)get(ud, name);                                                     \
+	if (!gl->fname) {                                                                    \
 		snprintf(err, 256, "GL entry point %s missing", name);                         \
 		return -ENOSYS;                                                                \
 	}
 	GL_FUNCS(GL_FUNC_LOAD)
 #undef GL_FUNC_LOAD
-	const char *v = (const char *)c->gl.GetString(GL_VERSION);
-	if (!v || sscanf(v, "%d.%d", &c->gl.major, &c->gl.minor) != 2) {
+	const char *v = (const char *)gl->GetString(GL_VERSION);
+	if (!v || sscanf(v, "%d.%d", &gl->major, &gl->minor) != 2) {
 		snprintf(err, 256, "cannot read GL_VERSION");
 		return -ENODEV;
 	}
-	if (c->gl.major * 10 + c->gl.minor < 33) {
+	if (gl->major * 10 + gl->minor < 33) {
 		snprintf(err, 256, "OpenGL %s: 3.3 core needed", v);
 		return -ENODEV;
 	}
-	c->gl.ClipControl = NULL;
-	if (c->gl.major * 10 + c->gl.minor >= 45)
-		c->gl.ClipControl = (PFNGLCLIPCONTROLPROC)get(ud, "glClipControl");
+	gl->ClipControl = NULL;
+	if (gl->major * 10 + gl->minor >= 45)
+		gl->ClipControl = (PFNGLCLIPCONTROLPROC)get(ud, "glClipControl");
 	return 0;
 }
 
@@ -116,7 +114,7 @@ static int egl_create(struct gl_context *c, char err[256])
 		return -ENODEV;
 	}
 	c->backend = GL_BACKEND_EGL;
-	return load_table(c, egl_get, NULL, err);
+	return gl_load_table(&c->gl, egl_get, NULL, err);
 }
 
 static gl_proc osmesa_get(void *ud, const char *name)
@@ -157,7 +155,7 @@ static int osmesa_create(struct gl_context *c, char err[256])
 		return -ENODEV;
 	}
 	c->backend = GL_BACKEND_OSMESA;
-	return load_table(c, osmesa_get, *(void **)&proc, err);
+	return gl_load_table(&c->gl, osmesa_get, *(void **)&proc, err);
 }
 
 static void teardown(struct gl_context *c)

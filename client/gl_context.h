@@ -40,6 +40,7 @@
 	X(PFNGLBINDFRAMEBUFFERPROC, BindFramebuffer)                                           \
 	X(PFNGLFRAMEBUFFERTEXTURE2DPROC, FramebufferTexture2D)                                 \
 	X(PFNGLCHECKFRAMEBUFFERSTATUSPROC, CheckFramebufferStatus)                             \
+	X(PFNGLBLITFRAMEBUFFERPROC, BlitFramebuffer)                                           \
 	X(PFNGLCREATESHADERPROC, CreateShader)                                                 \
 	X(PFNGLDELETESHADERPROC, DeleteShader)                                                 \
 	X(PFNGLSHADERSOURCEPROC, ShaderSource)                                                 \
@@ -99,5 +100,12 @@ const struct gl *gl_context_api(const struct gl_context *c);
 /* "egl" or "osmesa", and the GL_RENDERER string. */
 const char *gl_context_backend(const struct gl_context *c);
 const char *gl_context_renderer(const struct gl_context *c);
+
+/* Fills *gl from a GetProcAddress-like function (get(ud, "glName")) of the context current
+ * on this thread — for contexts made elsewhere (the window, gl_window.h). Checks that the
+ * context is 3.3 or later. Returns 0 or -errno with err filled. */
+typedef void (*gl_proc)(void);
+int gl_load_table(struct gl *gl, gl_proc (*get)(void *ud, const char *name), void *ud,
+		  char err[256]);
 
 #endif

@@ -277,6 +277,8 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	return 0;
 }
 
+static void free_fbo(struct view *v);
+
 void view_destroy(struct view *v)
 {
 	if (!v)
@@ -291,12 +293,7 @@ void view_destroy(struct view *v)
 		gl->DeleteBuffers(1, &v->vbo);
 	if (v->ibo)
 		gl->DeleteBuffers(1, &v->ibo);
-	if (v->fbo)
-		gl->DeleteFramebuffers(1, &v->fbo);
-	if (v->color_tex)
-		gl->DeleteTextures(1, &v->color_tex);
-	if (v->depth_tex)
-		gl->DeleteTextures(1, &v->depth_tex);
+	free_fbo(v);
 	free(v->ring_first);
 	free(v->ring_count);
 	free(v->fan_first);
@@ -557,6 +554,34 @@ int view_frame_complete(struct view *v, const struct view_camera *c, double time
 		*frames = n;
 	return rc;
 }
+
+static void free_fbo(struct view *v)
+{
+	const struct gl *gl = v->gl;
+	if (v->fbo)
+		gl->DeleteFramebuffers(1, &v->fbo);
+	if (v->color_tex)
+		gl->DeleteTextures(1, &v->color_tex);
+	if (v->depth_tex)
+		gl->DeleteTextures(1, &v->depth_tex);
+	v->fbo = v->color_tex = v->depth_tex = 0;
+}
+
+int view_resize(struct view *v, int width, int height, char err[256])
+{
+	if (width < 1 || height < 1 || width > 16384 || height > 16384) {
+		snprintf(err, 256, "framebuffer %dx%d: out of range", width, height);
+		return -EINVAL;
+	}
+	if (width == v->d.width && height == v->d.height && v->fbo)
+		return 0;
+	free_fbo(v);
+	v->d.width = width;
+	v->d.height = height;
+	return build_fbo(v, err);
+}
+
+unsigned view_framebuffer(const struct view *v) { return v->fbo; }
 
 void view_last_camera(const struct view *v, struct view_camera *out) { *out = v->last; }
 

@@ -65,6 +65,11 @@ int view_frame(struct view *v, const struct view_camera *c, double now_s,
  * last frame is still in the framebuffer) or another -errno. */
 int view_frame_complete(struct view *v, const struct view_camera *c, double timeout_s,
 			struct view_frame_stats *st, int *frames);
+/* Rebuilds the framebuffer at width×height (a window's new size); the clipmap is kept.
+ * Returns 0 or -errno with err filled. */
+int view_resize(struct view *v, int width, int height, char err[256]);
+/* The framebuffer object the frames are drawn into (to blit it to a window). */
+unsigned view_framebuffer(const struct view *v);
 /* The camera of the last frame with its height above the ellipsoid. */
 void view_last_camera(const struct view *v, struct view_camera *out);
 /* Reads the last frame as RGBA8, top row first (width·height·4 bytes). Returns 0. */
