@@ -118,7 +118,7 @@ const struct node_type node_type_noise = {
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
 	       "max_wavelength m), band-limited per level; optional input height gets the "
 	       "octaves with wavelength <= max_wavelength added",
-	.version = 2, /* 2: per-octave rotation */
+	.version = 3, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice */
 	.slots = slots,
 	.nslots = 1,
 	.create = noise_create,

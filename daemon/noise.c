@@ -307,9 +307,51 @@ static int active_octaves(const struct noise *nz, int ly, uint32_t T, int idx[],
 	return m;
 }
 
+
+/* Lattice of a tile: M = T/h + 5 points across and down (2 beyond each edge, the one at the
+ * far edge included), stored row-major in P floats (M² rounded up to 16). */
+static uint32_t lattice_m(uint32_t T)
+{
+	return T / NOISE_MR_STRIDE + 5;
+}
+
+static size_t lattice_p(uint32_t T)
+{
+	size_t m = lattice_m(T);
+	return (m * m + 15) / 16 * 16;
+}
+
 size_t noise_scratch_size(uint32_t T)
 {
-	return (size_t)T * (2 * sizeof(double) + 8 * sizeof(float)) + 64;
+	/* texel rows: 2 double + 8 float arrays of T; lattice: 8 + NOISE_MAX_OCTAVES float
+	 * arrays of P; one interpolated lattice row and its slopes: 2 float arrays of M (rounded
+	 * up to 16) */
+	return (size_t)T * (2 * sizeof(double) + 8 * sizeof(float)) +
+	       lattice_p(T) * (8 + NOISE_MAX_OCTAVES) * sizeof(float) +
+	       (lattice_m(T) + 15) / 16 * 16 * 2 * sizeof(float) + 64;
+}
+
+/* Active octaves 0..mc-1 have a wavelength of at least NOISE_MR_MIN_TEXELS texels of the
+ * level, measured along the equator in longitude (the larger texel side anywhere). The
+ * sphere itself (the map from texels to points) varies on the scale of its circumference, so
+ * a level whose circumference is shorter than that many texels gets no lattice at all. */
+static int coarse_count(const struct noise *nz, int lx, uint32_t T, const int idx[], int m)
+{
+	if (nz->p.exact)
+		return 0;
+	double circ = 2.0 * M_PI * nz->p.radius, su = circ / (ldexp(1.0, lx) * T);
+	int mc = 0;
+	while (mc < m && fmin(nz->oct[idx[mc]].lambda, circ) >= NOISE_MR_MIN_TEXELS * su)
+		mc++;
+	return mc;
+}
+
+int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T)
+{
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	int m = active_octaves(nz, ly, T, idx, w);
+	return coarse_count(nz, lx, T, idx, m);
 }
 
 static noise_row_fn *kernel_for(enum noise_isa isa)
@@ -427,6 +469,52 @@ static void acc_ridged(float *row, float *wt, const float *nb, float a, float mu
 	}
 }
 
+/* Cubic Hermite basis at t = q/h, q = 0..h-1 (from double, so the same bits on every path):
+ * value = h00·f0 + h10·m0 + h01·f1 + h11·m1 with slopes m per lattice step. */
+static void hermite_basis(float b[4][NOISE_MR_STRIDE])
+{
+	for (int q = 0; q < NOISE_MR_STRIDE; q++) {
+		double t = (double)q / NOISE_MR_STRIDE, t2 = t * t, t3 = t2 * t;
+		b[0][q] = (float)(2 * t3 - 3 * t2 + 1);
+		b[1][q] = (float)(t3 - 2 * t2 + t);
+		b[2][q] = (float)(3 * t2 - 2 * t3);
+		b[3][q] = (float)(t3 - t2);
+	}
+}
+
+/* 4th-order central difference at v[0] along a stride. */
+static inline float slope4(const float *v, size_t st)
+{
+	return ((v[-2 * (ptrdiff_t)st] - v[2 * st]) + 8.0f * (v[st] - v[-(ptrdiff_t)st])) *
+	       (1.0f / 12.0f);
+}
+
+/* Texel row j of the interpolated lattice l (M×M, row-major) into out[T]: first down the
+ * lattice columns (slopes from lattice rows j/h .. j/h + 5), then along the row (slopes from
+ * the interpolated row). c and d are M-float temporaries. */
+static void interp_row(const float *l, uint32_t M, uint32_t j, const float b[4][NOISE_MR_STRIDE],
+		       float *c, float *d, float *out)
+{
+	const uint32_t h = NOISE_MR_STRIDE, q = j % h;
+	const float *l0 = l + (size_t)(j / h + 2) * M, *l1 = l0 + M;
+	const float b0 = b[0][q], b1 = b[1][q], b2 = b[2][q], b3 = b[3][q];
+	for (uint32_t a = 0; a < M; a++)
+		c[a] = ((b0 * l0[a] + b1 * slope4(l0 + a, M)) + b2 * l1[a]) + b3 * slope4(l1 + a, M);
+	for (uint32_t a = 2; a + 2 < M; a++)
+		d[a] = slope4(c + a, 1);
+	for (uint32_t cell = 0; cell + 5 < M; cell++) {
+		const float f0 = c[cell + 2], m0 = d[cell + 2], f1 = c[cell + 3], m1 = d[cell + 3];
+		const v4f vf0 = { f0, f0, f0, f0 }, vm0 = { m0, m0, m0, m0 };
+		const v4f vf1 = { f1, f1, f1, f1 }, vm1 = { m1, m1, m1, m1 };
+		for (uint32_t t = 0; t < h; t += 4) {
+			v4f r = ((load4(b[0] + t) * vf0 + load4(b[1] + t) * vm0) +
+				 load4(b[2] + t) * vf1) +
+				load4(b[3] + t) * vm1;
+			memcpy(out + cell * h + t, &r, sizeof r);
+		}
+	}
+}
+
 int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enum noise_isa isa,
 	       void *scratch, float *out)
 {
@@ -440,10 +528,15 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
 	int m = active_octaves(nz, k->ly, T, idx, w);
+	int mc = coarse_count(nz, k->lx, T, idx, m);
 
+	const uint32_t M = lattice_m(T), P = (uint32_t)lattice_p(T), MP = (M + 15) / 16 * 16;
 	double *ccos = scratch, *csin = ccos + T;
 	float *dx = (float *)(csin + T), *dy = dx + T, *dz = dy + T, *nb = dz + T, *wt = nb + T;
 	float *rx = wt + T, *ry = rx + T, *rz = ry + T;
+	float *ldx = rz + T, *ldy = ldx + P, *ldz = ldy + P, *lrx = ldz + P, *lry = lrx + P;
+	float *lrz = lry + P, *lnb = lrz + P, *ls = lnb + P, *ln = ls + P; /* ln: mc × P */
+	float *tc = ln + (size_t)NOISE_MAX_OCTAVES * P, *td = tc + MP;
 	if (m == 0) {
 		memset(out, 0, (size_t)T * T * sizeof *out);
 		return 0;
@@ -460,13 +553,66 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 		amp[o] = (float)(nz->oct[idx[o]].amp * w[o]);
 		mean[o] = (float)nz->oct[idx[o]].mean;
 	}
-	for (uint32_t i = 0; i < T; i++) {
-		double lon = grid_u_to_lon(k->lx, T, (double)k->x * T + i + 0.5) * (M_PI / 180.0);
-		ccos[i] = cos(lon);
-		csin[i] = sin(lon);
-	}
 	const float ro = (float)nz->p.ridge_offset, rg = (float)nz->p.ridge_gain;
+	const bool ridged = nz->p.kind == NOISE_RIDGED;
+	float hb[4][NOISE_MR_STRIDE];
+	if (mc > 0) {
+		/* The coarse octaves at the lattice points (texel centres of level texels whose
+		 * u and v are multiples of h), as one flat array through the row kernel. */
+		const double h = NOISE_MR_STRIDE;
+		for (uint32_t a = 0; a < M; a++) {
+			double u = (double)k->x * T + ((double)a - 2) * h + 0.5;
+			double lon = grid_u_to_lon(k->lx, T, u) * (M_PI / 180.0);
+			ccos[a] = cos(lon);
+			csin[a] = sin(lon);
+		}
+		for (uint32_t r = 0; r < M; r++) {
+			double v = (double)k->y * T + ((double)r - 2) * h + 0.5;
+			double lat = grid_v_to_lat(k->ly, T, v) * (M_PI / 180.0);
+			double cl = cos(lat), sl = sin(lat);
+			float fz = (float)(sl - pc[2]);
+			for (uint32_t a = 0; a < M; a++) {
+				ldx[r * M + a] = (float)(cl * ccos[a] - pc[0]);
+				ldy[r * M + a] = (float)(cl * csin[a] - pc[1]);
+				ldz[r * M + a] = fz;
+			}
+		}
+		for (uint32_t q = M * M; q < P; q++)
+			ldx[q] = ldy[q] = ldz[q] = 0;
+		/* fBm: their weighted sum; ridged: each octave's raw noise (smooth, unlike the
+		 * creased signal), put through the ridge per texel after interpolation. */
+		memset(ls, 0, P * sizeof *ls);
+		for (int o = 0; o < mc; o++) {
+			rotate_row(rot[o], ldx, ldy, ldz, lrx, lry, lrz, P);
+			if (!ridged) {
+				row_fn(&rows[o], lrx, lry, lrz, lnb, P);
+				acc_fbm(ls, lnb, amp[o], P);
+			} else {
+				row_fn(&rows[o], lrx, lry, lrz, ln + (size_t)o * P, P);
+			}
+		}
+		hermite_basis(hb);
+	}
+	if (mc < m)
+		for (uint32_t i = 0; i < T; i++) {
+			double lon = grid_u_to_lon(k->lx, T, (double)k->x * T + i + 0.5) *
+				     (M_PI / 180.0);
+			ccos[i] = cos(lon);
+			csin[i] = sin(lon);
+		}
 	for (uint32_t j = 0; j < T; j++) {
+		float *row = out + (size_t)j * T;
+		if (mc > 0 && !ridged) {
+			interp_row(ls, M, j, hb, tc, td, row);
+		} else {
+			memset(row, 0, T * sizeof *row);
+			for (int o = 0; o < mc; o++) {
+				interp_row(ln + (size_t)o * P, M, j, hb, tc, td, nb);
+				acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, o == 0, T);
+			}
+		}
+		if (mc == m)
+			continue;
 		double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5) * (M_PI / 180.0);
 		double cl = cos(lat), sl = sin(lat);
 		const v2d vcl = { cl, cl }, vpx = { pc[0], pc[0] }, vpy = { pc[1], pc[1] };
@@ -481,12 +627,10 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 			memcpy(dy + i, &y2, sizeof y2);
 			dz[i] = dz[i + 1] = fz;
 		}
-		float *row = out + (size_t)j * T;
-		memset(row, 0, T * sizeof *row);
-		for (int o = 0; o < m; o++) {
+		for (int o = mc; o < m; o++) {
 			rotate_row(rot[o], dx, dy, dz, rx, ry, rz, T);
 			row_fn(&rows[o], rx, ry, rz, nb, T);
-			if (nz->p.kind == NOISE_FBM)
+			if (!ridged)
 				acc_fbm(row, nb, amp[o], T);
 			else
 				acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, o == 0, T);
