@@ -57,7 +57,7 @@ VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/unit/test_view_*.c 
                   tests/bench/bench_keepup.c)) \
                 $(BUILD)/client/clipmapview.o
 
-.PHONY: all check test asan tsan bench bench-keepup deps clean demo data shader-check fuzz
+.PHONY: all check test asan tsan bench bench-keepup deps clean demo data shader-check fuzz install
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 
@@ -171,6 +171,19 @@ fuzz: deps $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%)
 		then grep -E 'stat::number_of_executed_units' $$f.log; \
 		else tail -n 40 $$f.log; echo "$$f: found a failure (crash input saved in ./)"; exit 1; fi; \
 	done
+
+# Install: binaries in $(PREFIX)/bin (the units expect /usr/local/bin), the config and the
+# planets in /etc/clipmap (kept if present), the units in /etc/systemd/system. DESTDIR stages.
+PREFIX ?= /usr/local
+install: all
+	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)/etc/clipmap/planets $(DESTDIR)/etc/systemd/system
+	install -m 755 $(PROGS) $(DESTDIR)$(PREFIX)/bin/
+	test -e $(DESTDIR)/etc/clipmap/clipmapd.conf || \
+		install -m 644 conf/clipmapd.conf $(DESTDIR)/etc/clipmap/clipmapd.conf
+	for f in conf/planets/*.ini; do \
+		test -e $(DESTDIR)/etc/clipmap/planets/$$(basename $$f) || \
+		install -m 644 $$f $(DESTDIR)/etc/clipmap/planets/; done
+	install -m 644 systemd/clipmapd.service systemd/clipmapd.socket $(DESTDIR)/etc/systemd/system/
 
 clean:
 	rm -rf build build-asan build-tsan build-fuzz
