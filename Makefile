@@ -16,7 +16,7 @@ PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 OPT     ?= -O2 -g
 WARN    := -Wall -Wextra -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wformat=2 -Wvla \
            -fno-common -Werror
-CFLAGS  += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -MMD -MP -iquote common -iquote daemon -iquote client \
+CFLAGS  += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -MMD -MP -iquote common -iquote daemon -iquote client -iquote tests/support \
            $(SAN)
 CXXFLAGS += -std=c++17 $(OPT) -Wall -Wextra -Werror -fPIC -pthread -MMD -MP -iquote common $(SAN) \
            $(filter-out -I/usr/include,$(PKG_CFLAGS))
@@ -39,6 +39,8 @@ LIB          := $(BUILD)/libclipmap.a
 
 UNIT_SRC     := $(wildcard tests/unit/test_*.c)
 UNIT_BIN     := $(UNIT_SRC:tests/unit/%.c=$(BUILD)/tests/%)
+# Test-only helpers (tests/support/) linked into every unit test program.
+TEST_SUPPORT_OBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/support/*.c))
 BENCH_SRC    := $(wildcard tests/bench/bench_*.c)
 BENCH_BIN    := $(BENCH_SRC:tests/bench/%.c=$(BUILD)/tests/%)
 PROGS        := $(foreach m,$(MAINS),$(if $(wildcard $(m)),$(BUILD)/$(notdir $(basename $(m)))))
@@ -97,13 +99,13 @@ $(BUILD)/gen/%_frag.h: shaders/%.frag
 	   sed 's/\\/\\\\/g; s/"/\\"/g; s/^/"/; s/$$/\\n"/' $<; echo ';'; } > $@
 $(BUILD)/clipmapview: $(BUILD)/client/clipmapview.o $(VIEW_LIB) $(LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
-$(BUILD)/tests/test_view_%: $(BUILD)/tests/unit/test_view_%.o $(VIEW_LIB) $(LIB)
+$(BUILD)/tests/test_view_%: $(BUILD)/tests/unit/test_view_%.o $(TEST_SUPPORT_OBJ) $(VIEW_LIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
 $(BUILD)/tests/bench_view $(BUILD)/tests/bench_keepup: $(BUILD)/tests/%: $(BUILD)/tests/bench/%.o $(VIEW_LIB) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
-$(BUILD)/tests/%: $(BUILD)/tests/unit/%.o $(LIB)
+$(BUILD)/tests/%: $(BUILD)/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(LIB)
 	@mkdir -p $(dir $@)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
 $(BUILD)/tests/bench_%: $(BUILD)/tests/bench/bench_%.o $(LIB)

@@ -26,173 +26,32 @@
 #include <unistd.h>
 #include <cmocka.h>
 
+#include "daemon_env.h"
 #include "img.h"
 
 struct env {
-	char bindir[512];  /* build/ */
-	char root[600];	   /* the repository (build/..) */
-	char dir[64];	   /* temporary */
-	char sock[128];
-	char conf[128];
-	char planets[128];
-	pid_t daemon;
-	int daemon_log; /* its stderr, read at teardown when something failed */
+	struct daemon_env d;
 };
-
-static int run_capture(char *const argv[], char *out, size_t n)
-{
-	int p[2];
-	if (pipe(p))
-		return -1;
-	pid_t pid = fork();
-	if (pid < 0)
-		return -1;
-	if (pid == 0) {
-		dup2(p[1], 1);
-		dup2(p[1], 2);
-		close(p[0]);
-		close(p[1]);
-		execv(argv[0], argv);
-		_exit(127);
-	}
-	close(p[1]);
-	size_t len = 0;
-	ssize_t r;
-	while ((r = read(p[0], out + len, n - 1 - len)) > 0)
-		len += (size_t)r;
-	out[len] = '\0';
-	close(p[0]);
-	int st;
-	if (waitpid(pid, &st, 0) != pid)
-		return -1;
-	return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-}
-
-static int write_file(const char *path, const char *text)
-{
-	FILE *f = fopen(path, "w");
-	if (!f)
-		return -1;
-	fputs(text, f);
-	return fclose(f);
-}
-
-static int copy_file(const char *from, const char *to)
-{
-	FILE *a = fopen(from, "rb"), *b = fopen(to, "wb");
-	if (!a || !b) {
-		if (a)
-			fclose(a);
-		if (b)
-			fclose(b);
-		return -1;
-	}
-	char buf[8192];
-	size_t n;
-	while ((n = fread(buf, 1, sizeof buf, a)) > 0)
-		fwrite(buf, 1, n, b);
-	fclose(a);
-	return fclose(b);
-}
-
-/* Whether the daemon accepts connections yet. */
-static bool socket_up(const char *path)
-{
-	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-	struct sockaddr_un a = { .sun_family = AF_UNIX };
-	snprintf(a.sun_path, sizeof a.sun_path, "%s", path);
-	bool ok = connect(s, (struct sockaddr *)&a, sizeof a) == 0;
-	close(s);
-	return ok;
-}
 
 static int setup(void **state)
 {
 	struct env *e = calloc(1, sizeof *e);
-	ssize_t l = readlink("/proc/self/exe", e->bindir, sizeof e->bindir - 1);
-	if (l <= 0)
-		return -1;
-	e->bindir[l] = '\0';
-	*strrchr(e->bindir, '/') = '\0'; /* build/tests */
-	*strrchr(e->bindir, '/') = '\0'; /* build */
-	snprintf(e->root, sizeof e->root, "%s/..", e->bindir);
 	*state = e;
-	char d[600], c[600];
-	snprintf(d, sizeof d, "%s/clipmapd", e->bindir);
-	snprintf(c, sizeof c, "%s/clipmapview", e->bindir);
-	if (access(d, X_OK) || access(c, X_OK)) {
-		e->daemon = 0;
-		return 0; /* the tests skip */
-	}
-	snprintf(e->dir, sizeof e->dir, "/tmp/test_view_net_XXXXXX");
-	if (!mkdtemp(e->dir))
-		return -1;
-	snprintf(e->sock, sizeof e->sock, "%s/d.sock", e->dir);
-	snprintf(e->conf, sizeof e->conf, "%s/clipmapd.conf", e->dir);
-	snprintf(e->planets, sizeof e->planets, "%s/planets", e->dir);
-	if (mkdir(e->planets, 0755))
-		return -1;
-	char from[700], to[300], text[1024];
-	snprintf(from, sizeof from, "%s/conf/planets/procedural.ini", e->root);
-	snprintf(to, sizeof to, "%s/procedural.ini", e->planets);
-	if (copy_file(from, to))
-		return -1;
-	snprintf(text, sizeof text,
-		 "[listen]\nunix = %s\ntcp =\n[engine]\nplanets = %s\nworkers = 2\ncache_mb = 64\n"
-		 "[log]\nlevel = warn\n", e->sock, e->planets);
-	if (write_file(e->conf, text))
-		return -1;
-	char logpath[200];
-	snprintf(logpath, sizeof logpath, "%s/daemon.log", e->dir);
-	e->daemon_log = open(logpath, O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-	pid_t pid = fork();
-	if (pid < 0)
-		return -1;
-	if (pid == 0) {
-		dup2(e->daemon_log, 2);
-		execl(d, d, "-c", e->conf, (char *)NULL);
-		_exit(127);
-	}
-	e->daemon = pid;
-	/* wait (bounded) for the socket to accept: the daemon loads the planets first */
-	for (int i = 0; i < 400 && !socket_up(e->sock); i++) {
-		int st;
-		if (waitpid(pid, &st, WNOHANG) == pid) {
-			char log[2048];
-			ssize_t n = pread(e->daemon_log, log, sizeof log - 1, 0);
-			log[n > 0 ? n : 0] = '\0';
-			fprintf(stderr, "clipmapd exited at start:\n%s", log);
-			e->daemon = 0;
-			return -1;
-		}
-		nanosleep(&(struct timespec){ .tv_nsec = 25000000 }, NULL);
-	}
-	return socket_up(e->sock) ? 0 : -1;
+	return e ? daemon_env_setup(&e->d, "test_view_net", "clipmapview") : -1;
 }
 
 static int teardown(void **state)
 {
 	struct env *e = *state;
-	if (e->daemon > 0) {
-		kill(e->daemon, SIGTERM);
-		int st;
-		waitpid(e->daemon, &st, 0);
-	}
-	if (e->dir[0]) {
-		char cmd[200];
-		snprintf(cmd, sizeof cmd, "rm -rf '%s'", e->dir);
-		if (system(cmd) != 0)
-			fprintf(stderr, "could not remove %s\n", e->dir);
-	}
-	if (e->daemon_log > 0)
-		close(e->daemon_log);
+	daemon_env_teardown(&e->d);
 	free(e);
 	return 0;
 }
 
+
 #define NEED_DAEMON(e)                 \
 	do {                           \
-		if ((e)->daemon <= 0)  \
+		if ((e)->d.daemon <= 0)\
 			skip();        \
 	} while (0)
 
@@ -201,7 +60,7 @@ static int view(struct env *e, char *out, size_t n, const char *camera, const ch
 		const char *a0, ...)
 {
 	char exe[600];
-	snprintf(exe, sizeof exe, "%s/clipmapview", e->bindir);
+	snprintf(exe, sizeof exe, "%s/clipmapview", e->d.bindir);
 	char *argv[32] = { exe, "--camera", (char *)camera, "--size", "320x240", "--wait-complete",
 			   "--timeout", "60", "-o", (char *)png };
 	int argc = 10;
@@ -211,7 +70,7 @@ static int view(struct env *e, char *out, size_t n, const char *camera, const ch
 		argv[argc++] = (char *)a;
 	va_end(ap);
 	argv[argc] = NULL;
-	return run_capture(argv, out, n);
+	return daemon_env_run(argv, out, n);
 }
 
 /* Mean absolute difference per channel, and the share of pixels differing by more than 8. */
@@ -272,11 +131,11 @@ static void connect_equals_local(void **state)
 		"-9,-68,3000,30,-20",	   /* low over a range, oblique */
 	};
 	char planet[300];
-	snprintf(planet, sizeof planet, "%s/procedural.ini", e->planets);
+	snprintf(planet, sizeof planet, "%s/procedural.ini", e->d.planets);
 	for (size_t i = 0; i < sizeof cams / sizeof cams[0]; i++) {
 		char out[8192], a[200], b[200];
-		snprintf(a, sizeof a, "%s/net%zu.png", e->dir, i);
-		snprintf(b, sizeof b, "%s/local%zu.png", e->dir, i);
+		snprintf(a, sizeof a, "%s/net%zu.png", e->d.dir, i);
+		snprintf(b, sizeof b, "%s/local%zu.png", e->d.dir, i);
 		int rc = view(e, out, sizeof out, cams[i], b, "--planet", planet, NULL);
 		if (rc == 1 && strstr(out, "no OpenGL context")) {
 			fprintf(stderr, "no GL context here: %s", out);
@@ -285,7 +144,7 @@ static void connect_equals_local(void **state)
 		if (rc != 0)
 			fprintf(stderr, "local: %s", out);
 		assert_int_equal(rc, 0);
-		rc = view(e, out, sizeof out, cams[i], a, "--connect", e->sock, "--planet",
+		rc = view(e, out, sizeof out, cams[i], a, "--connect", e->d.sock, "--planet",
 			  "procedural", NULL);
 		if (rc != 0)
 			fprintf(stderr, "connect: %s", out);
@@ -305,8 +164,8 @@ static void unknown_planet_is_exit_1(void **state)
 	struct env *e = *state;
 	NEED_DAEMON(e);
 	char out[8192], a[200];
-	snprintf(a, sizeof a, "%s/none.png", e->dir);
-	int rc = view(e, out, sizeof out, "0,0,1000,0,-30", a, "--connect", e->sock, "--planet",
+	snprintf(a, sizeof a, "%s/none.png", e->d.dir);
+	int rc = view(e, out, sizeof out, "0,0,1000,0,-30", a, "--connect", e->d.sock, "--planet",
 		      "atlantis", NULL);
 	assert_int_equal(rc, 1);
 	assert_non_null(strstr(out, "atlantis"));
@@ -318,8 +177,8 @@ static void bad_socket_is_exit_1_naming_it(void **state)
 	struct env *e = *state;
 	NEED_DAEMON(e);
 	char out[8192], a[200], s[200];
-	snprintf(a, sizeof a, "%s/none.png", e->dir);
-	snprintf(s, sizeof s, "%s/nobody-here.sock", e->dir);
+	snprintf(a, sizeof a, "%s/none.png", e->d.dir);
+	snprintf(s, sizeof s, "%s/nobody-here.sock", e->d.dir);
 	int rc = view(e, out, sizeof out, "0,0,1000,0,-30", a, "--connect", s, "--planet",
 		      "procedural", NULL);
 	assert_int_equal(rc, 1);
