@@ -1,8 +1,14 @@
 /* view — see view.h. Design notes:
  * - Geometry: NR = nlevels rings of m circles of n vertices (θ̃ geometric within a ring,
- *   halving per level, seed 000 §3.4) plus the nadir vertex; uploaded once. Ring i's strips
- *   are one index range; a level drawn as a full disk uses its ring, the two finer rings
- *   (still finer than its texels need) and a fan to the nadir.
+ *   halving per level, seed 000 §3.4) plus the nadir vertex; uploaded once. A level drawn as
+ *   a full disk uses its ring, the two finer rings (still finer than its texels need) and a
+ *   fan to the nadir.
+ * - Culling: each ring (and fan) is split into NSEC sectors of φ̃, each one index range
+ *   (ring-major, then sector, then circle). Per frame the CPU tests each sector's bounds
+ *   (view_sector_visible: its θ̃ × φ̃ patch at the terrain's height bounds, placed in doubles
+ *   as the shader does, inflated by the patch's bulge) against the frustum's side planes, the
+ *   plane behind the camera and the horizon cap, and draws the visible ranges, contiguous
+ *   ones merged. The triangle order is the same with culling off, so the pixels are too.
  * - Blending: over the outer 40 % of a ring the height, colour and normal fade to the next
  *   coarser level, reaching it exactly on the boundary, so neighbouring rings share
  *   bit-identical boundary vertices (no cracks) and no level boundary pops.
@@ -46,8 +52,10 @@ struct view {
 	uint32_t T;
 	/* geometry */
 	unsigned vao, vbo, ibo;
-	size_t *ring_first, *ring_count; /* per ring, in indices */
-	size_t *fan_first;		 /* per circle-boundary k·m (k = 1..NR), n·3 indices each */
+	int nsec;		 /* sectors per ring */
+	size_t *sec_first;	 /* ring i sector s: [sec_first[i·nsec+s], sec_first[i·nsec+s+1]) */
+	size_t *fan_first;	 /* per circle-boundary k·m (k = 1..NR), n·3 indices each */
+	bool cull;
 	/* program */
 	unsigned prog;
 	int u[U_COUNT];
@@ -126,6 +134,9 @@ static double circle_theta(int c, int m)
 	return r0 * pow(r1 / r0, (double)j / m);
 }
 
+/* The first φ̃ step of sector s. */
+static int sector_k(const struct view *v, int s) { return s * v->d.n_phi / v->nsec; }
+
 static void build_geometry(struct view *v)
 {
 	const struct gl *gl = v->gl;
@@ -149,25 +160,27 @@ static void build_geometry(struct view *v)
 	centre[2] = 0;
 	size_t nidx = (size_t)NR * m * n * 6 + (size_t)NR * n * 3;
 	uint32_t *idx = xmalloc(nidx * sizeof *idx);
-	v->ring_first = xcalloc((size_t)NR, sizeof *v->ring_first);
-	v->ring_count = xcalloc((size_t)NR, sizeof *v->ring_count);
+	v->nsec = n < 32 ? n : 32;
+	v->sec_first = xcalloc((size_t)NR * v->nsec + 1, sizeof *v->sec_first);
 	v->fan_first = xcalloc((size_t)NR + 1, sizeof *v->fan_first);
 	size_t q = 0;
-	for (int i = 0; i < NR; i++) {
-		v->ring_first[i] = q;
-		for (int c = i * m; c < (i + 1) * m; c++)
-			for (int k = 0; k < n; k++) {
-				uint32_t a = (uint32_t)(c * n + k), b = (uint32_t)(c * n + (k + 1) % n);
-				uint32_t a2 = a + (uint32_t)n, b2 = b + (uint32_t)n;
-				idx[q++] = a;
-				idx[q++] = b;
-				idx[q++] = b2;
-				idx[q++] = a;
-				idx[q++] = b2;
-				idx[q++] = a2;
-			}
-		v->ring_count[i] = q - v->ring_first[i];
-	}
+	for (int i = 0; i < NR; i++)
+		for (int sec = 0; sec < v->nsec; sec++) {
+			v->sec_first[i * v->nsec + sec] = q;
+			for (int c = i * m; c < (i + 1) * m; c++)
+				for (int k = sector_k(v, sec); k < sector_k(v, sec + 1); k++) {
+					uint32_t a = (uint32_t)(c * n + k);
+					uint32_t b = (uint32_t)(c * n + (k + 1) % n);
+					uint32_t a2 = a + (uint32_t)n, b2 = b + (uint32_t)n;
+					idx[q++] = a;
+					idx[q++] = b;
+					idx[q++] = b2;
+					idx[q++] = a;
+					idx[q++] = b2;
+					idx[q++] = a2;
+				}
+		}
+	v->sec_first[NR * v->nsec] = q;
 	for (int k1 = 1; k1 <= NR; k1++) {
 		v->fan_first[k1] = q;
 		int c = k1 * m;
@@ -252,6 +265,8 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->nlevels = v->max_level + 1;
 	v->T = p->tile_size;
 	v->reversed = gl->ClipControl != NULL;
+	const char *nc = getenv("CLIPMAP_NO_CULL");
+	v->cull = !v->d.no_cull && !(nc && strcmp(nc, "1") == 0);
 	v->wants = xmalloc(MAX_WANTS * sizeof *v->wants);
 	v->was_usable = xcalloc((size_t)v->nlevels, sizeof *v->was_usable);
 	v->ready_since = xcalloc((size_t)v->nlevels, sizeof *v->ready_since);
@@ -294,8 +309,7 @@ void view_destroy(struct view *v)
 	if (v->ibo)
 		gl->DeleteBuffers(1, &v->ibo);
 	free_fbo(v);
-	free(v->ring_first);
-	free(v->ring_count);
+	free(v->sec_first);
 	free(v->fan_first);
 	free(v->wants);
 	free(v->was_usable);
@@ -321,7 +335,50 @@ static void level_uniforms(struct view *v, int l, int up, int uv, int us)
 	gl->Uniform1f(us, (float)l);
 }
 
-static uint64_t draw_level(struct view *v, int i, bool ring, bool first, double fade)
+void view_set_culling(struct view *v, bool on) { v->cull = on; }
+
+/* Index ranges drawn as few calls: a range adjoining the pending one extends it. */
+struct ranges {
+	const struct gl *gl;
+	size_t first, count;
+};
+
+static void ranges_flush(struct ranges *r)
+{
+	if (r->count)
+		r->gl->DrawElements(GL_TRIANGLES, (GLsizei)r->count, GL_UNSIGNED_INT,
+				    (const void *)(r->first * sizeof(uint32_t)));
+	r->count = 0;
+}
+
+static void ranges_add(struct ranges *r, size_t first, size_t count)
+{
+	if (r->count && r->first + r->count == first) {
+		r->count += count;
+		return;
+	}
+	ranges_flush(r);
+	r->first = first;
+	r->count = count;
+}
+
+/* Draws sector s of the geometry over θ̃ ∈ [th0, th1] (indices [first, first + count)) if
+ * visible; counts its indices in *drawn or *culled. */
+static void draw_sector(struct view *v, struct ranges *r, double th0, double th1, int s,
+			size_t first, size_t count, double cap, uint64_t *drawn, uint64_t *culled)
+{
+	double ph0 = 2 * M_PI * sector_k(v, s) / v->d.n_phi;
+	double ph1 = 2 * M_PI * sector_k(v, s + 1) / v->d.n_phi;
+	if (v->cull && !view_sector_visible(&v->body, &v->last, th0, th1, ph0, ph1, cap)) {
+		*culled += count;
+		return;
+	}
+	ranges_add(r, first, count);
+	*drawn += count;
+}
+
+static uint64_t draw_level(struct view *v, int i, bool ring, bool first, double fade,
+			   double cap, uint64_t *culled)
 {
 	const struct gl *gl = v->gl;
 	level_uniforms(v, i, v->u[U_PF], v->u[U_VF], v->u[U_SF]);
@@ -329,19 +386,23 @@ static uint64_t draw_level(struct view *v, int i, bool ring, bool first, double 
 	level_uniforms(v, c, v->u[U_PC], v->u[U_VC], v->u[U_SC]);
 	gl->Uniform1f(v->u[U_R], (float)view_ring_radius(i));
 	gl->Uniform1f(v->u[U_FADE], ring ? 1.0f : (float)fade);
-	uint64_t idx = 0;
+	uint64_t idx = 0, cidx = 0;
 	int last = ring ? i : (i + 2 < v->nlevels - 1 ? i + 2 : v->nlevels - 1);
-	size_t first_idx = v->ring_first[i];
-	size_t count = v->ring_first[last] + v->ring_count[last] - first_idx;
-	gl->DrawElements(GL_TRIANGLES, (GLsizei)count, GL_UNSIGNED_INT,
-			 (const void *)(first_idx * sizeof(uint32_t)));
-	idx += count;
-	if (!ring) {
-		size_t f = v->fan_first[last + 1];
-		gl->DrawElements(GL_TRIANGLES, (GLsizei)(v->d.n_phi * 3), GL_UNSIGNED_INT,
-				 (const void *)(f * sizeof(uint32_t)));
-		idx += (size_t)v->d.n_phi * 3;
-	}
+	struct ranges r = { gl, 0, 0 };
+	for (int j = i; j <= last; j++)
+		for (int s = 0; s < v->nsec; s++) {
+			size_t f = v->sec_first[j * v->nsec + s];
+			draw_sector(v, &r, view_ring_radius(j + 1), view_ring_radius(j), s, f,
+				    v->sec_first[j * v->nsec + s + 1] - f, cap, &idx, &cidx);
+		}
+	if (!ring)
+		for (int s = 0; s < v->nsec; s++) {
+			size_t f = v->fan_first[last + 1] + (size_t)sector_k(v, s) * 3;
+			size_t n = (size_t)(sector_k(v, s + 1) - sector_k(v, s)) * 3;
+			draw_sector(v, &r, 0, view_ring_radius(last + 1), s, f, n, cap, &idx, &cidx);
+		}
+	ranges_flush(&r);
+	*culled += cidx / 3;
 	return idx / 3;
 }
 
@@ -493,7 +554,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 		double fade = 1;
 		if (v->d.fade_s > 0 && i != first)
 			fade = fmin(1, (now_s - v->ready_since[i]) / v->d.fade_s);
-		s.triangles += draw_level(v, i, more, i == first, fade);
+		s.triangles += draw_level(v, i, more, i == first, fade, cap, &s.triangles_culled);
 		if (s.lfirst < 0)
 			s.lfirst = i;
 		s.llast = i;

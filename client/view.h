@@ -33,13 +33,15 @@ struct view_desc {
 	float sun_az, sun_el; /* degrees, at the camera; default 135, 35 */
 	float exaggeration;   /* vertical exaggeration of the relief; 0: 1 (true scale) */
 	float haze;	      /* atmosphere density, 1: Earth's; 0: 1; < 0: none (the Moon) */
+	bool no_cull;	      /* draw every ring sector (also: CLIPMAP_NO_CULL=1 in the env) */
 };
 
 struct view_frame_stats {
 	double cpu_ms;	      /* the frame's CPU time including glFinish */
 	int lmin, lmax;	      /* levels the camera wants */
 	int lfirst, llast;    /* levels drawn (-1: none) */
-	uint64_t triangles;
+	uint64_t triangles;	   /* drawn */
+	uint64_t triangles_culled; /* in the drawn levels' geometry, left out by frustum culling */
 	uint64_t bytes_uploaded; /* this frame */
 	int tiles_received;	 /* this frame */
 	size_t wants_sent;	 /* entries in the want-set sent this frame (0: none sent) */
@@ -59,6 +61,8 @@ void view_destroy(struct view *v);
  * far as the clipmap knows it). now_s drives fades. Returns 0 or -errno. */
 int view_frame(struct view *v, const struct view_camera *c, double now_s,
 	       struct view_frame_stats *st);
+/* Turns frustum culling of ring sectors on or off (a debug switch: the pixels are the same). */
+void view_set_culling(struct view *v, bool on);
 /* Offline rendering: renders frames, sleeping on the source between them, until one is
  * complete (every wanted level drawn at its target quad, the camera's ground height settled)
  * or timeout_s passes. *frames (may be NULL) counts the frames. Returns 0 or -ETIMEDOUT (the

@@ -216,3 +216,73 @@ void view_ecef_to_enu(double lat_deg, double lon_deg, const double v[3], double 
 	out[1] = -sp * cl * v[0] - sp * sl * v[1] + cp * v[2];
 	out[2] = cp * cl * v[0] + cp * sl * v[1] + sp * v[2];
 }
+
+void view_ring_point(const struct view_body *b, double lat_deg, double alt, double th, double ph,
+		     double h, double out[3])
+{
+	double sl = sin(lat_deg * DEG), cl = cos(lat_deg * DEG), e2 = b->e2;
+	double Nc = view_body_n(b, sl);
+	double st = sin(th), sh = sin(0.5 * th);
+	double d[3] = { st * sin(ph), st * cos(ph), -2 * sh * sh };
+	double ds = d[1] * cl + d[2] * sl, s = sl + ds;
+	double A = sqrt(1 - e2 * s * s), B = sqrt(1 - e2 * sl * sl);
+	double dN = b->a * e2 * ds * (s + sl) / (A * B * (A + B));
+	double N = Nc + dN;
+	double n[3] = { d[0], d[1], 1 + d[2] }, z[3] = { 0, cl, sl };
+	double k = e2 * (N * ds + dN * sl);
+	for (int i = 0; i < 3; i++)
+		out[i] = (Nc + alt) * d[i] + (dN + h - alt) * n[i] - k * z[i];
+}
+
+/* Samples per sector: the surface patch between neighbouring samples (angle ≤ δ apart)
+ * bulges at most ρ(1 − cos δ) beyond their convex hull. */
+#define SEC_NTH 5
+#define SEC_NPH 3
+
+bool view_sector_visible(const struct view_body *b, const struct view_camera *c, double th0,
+			 double th1, double ph0, double ph1, double cap)
+{
+	if (th0 >= cap)
+		return false;
+	th1 = fmin(th1, cap);
+	double r[3], u[3], f[3], fx, fy;
+	basis(c, r, u, f);
+	focal(c, &fx, &fy);
+	/* Outward normals of the four side planes and the plane behind the camera (all through
+	 * the camera): a point p is outside plane k when pl[k]·p > 0. */
+	double pl[5][3];
+	for (int i = 0; i < 3; i++) {
+		pl[0][i] = fx * r[i] - f[i];
+		pl[1][i] = -fx * r[i] - f[i];
+		pl[2][i] = fy * u[i] - f[i];
+		pl[3][i] = -fy * u[i] - f[i];
+		pl[4][i] = -f[i];
+	}
+	for (int k = 0; k < 5; k++) {
+		double len = sqrt(pl[k][0] * pl[k][0] + pl[k][1] * pl[k][1] + pl[k][2] * pl[k][2]);
+		for (int i = 0; i < 3; i++)
+			pl[k][i] /= len;
+	}
+	double dth = (th1 - th0) / (SEC_NTH - 1), dph = (ph1 - ph0) / (SEC_NPH - 1);
+	double delta = hypot(dth, sin(fmin(th1, M_PI / 2)) * dph);
+	double rho = view_body_n(b, 1) + fmax(fabs(b->hmax), fabs(b->hmin));
+	double dmin[5] = { INFINITY, INFINITY, INFINITY, INFINITY, INFINITY }, pmax = 0;
+	for (int i = 0; i < SEC_NTH; i++)
+		for (int j = 0; j < SEC_NPH; j++)
+			for (int m = 0; m < 2; m++) {
+				double p[3];
+				view_ring_point(b, c->lat, c->alt, th0 + i * dth, ph0 + j * dph,
+						m ? b->hmax : b->hmin, p);
+				for (int k = 0; k < 5; k++)
+					dmin[k] = fmin(dmin[k], pl[k][0] * p[0] + pl[k][1] * p[1] +
+									pl[k][2] * p[2]);
+				pmax = fmax(pmax, fabs(p[0]) + fabs(p[1]) + fabs(p[2]));
+			}
+	/* The bulge (twice the bound: the ellipsoid is not a sphere), float rounding in the
+	 * shader, and a centimetre. */
+	double margin = 2 * rho * (1 - cos(delta)) + 1e-5 * pmax + 0.01;
+	for (int k = 0; k < 5; k++)
+		if (dmin[k] > margin)
+			return false;
+	return true;
+}

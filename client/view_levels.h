@@ -75,6 +75,18 @@ void view_camera_matrix(const struct view_camera *c, bool reversed, double near,
 bool view_camera_project(const struct view_camera *c, const double e[3], double *px, double *py);
 /* The ray through pixel centre (px, py) in ENU, unit length. */
 void view_camera_ray(const struct view_camera *c, double px, double py, double dir[3]);
+/* Where terrain.vert places the ring point at view-space angles (θ̃, φ̃) with (exaggerated)
+ * height h, for a camera at geodetic latitude lat_deg, alt above the ellipsoid: ENU metres
+ * from the camera, in doubles. */
+void view_ring_point(const struct view_body *b, double lat_deg, double alt, double th, double ph,
+		     double h, double out[3]);
+/* Frustum culling of ring geometry: whether terrain of the sector θ̃ ∈ [th0, th1],
+ * φ̃ ∈ [ph0, ph1] (heights within b->hmin..hmax; θ̃ beyond cap is drawn at cap) can show in
+ * camera c's image (c->alt: above the ellipsoid; c->width, c->height set). Conservative:
+ * false only when the whole sector lies outside one side plane of the frustum, behind the
+ * camera, or beyond the cap (where its triangles collapse onto the cap circle). */
+bool view_sector_visible(const struct view_body *b, const struct view_camera *c, double th0,
+			 double th1, double ph0, double ph1, double cap);
 /* ECEF → the camera's ENU frame (rotation only). */
 void view_ecef_to_enu(double lat_deg, double lon_deg, const double v[3], double out[3]);
 

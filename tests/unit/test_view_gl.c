@@ -460,12 +460,80 @@ static void coverage_views(void **state)
 	gl_context_destroy(ctx);
 }
 
+/* ---- frustum culling: the same pixels, fewer triangles ---- */
+
+static void culling_keeps_pixels(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = ctx_or_skip();
+	if (!ctx)
+		skip();
+	struct view_source *src;
+	char err[256];
+	int rc = view_source_local_create("conf/planets/procedural.ini",
+					  &(struct view_source_local_opts){ 2, 256 }, &src, err);
+	if (rc < 0)
+		fail_msg("%s", err);
+	int W = 160, H = 90;
+	struct view_desc d = { .width = W, .height = H, .n_phi = 128, .m_rings = 8,
+			       .no_prefetch = true, .background_set = true,
+			       .background = { 1, 0, 1 } };
+	struct view *v = NULL;
+	assert_int_equal(view_create(gl_context_api(ctx), src, &d, &v, err), 0);
+	static const struct {
+		const char *name;
+		struct view_camera c;
+		double max_ratio; /* triangles drawn with culling / without, at most */
+	} cases[] = {
+		{ "2 m, at the horizon", { -14, -76, 2, 45, -5, 60, 0, 0 }, 0.8 },
+		{ "4 km, at the horizon", { -14, -76, 4000, 200, 0, 60, 0, 0 }, 0.4 },
+		{ "100 m, looking up", { 30, 100, 100, 300, 40, 60, 0, 0 }, 0.8 },
+		{ "orbit", { 20, -30, 15e6, 0, -90, 60, 0, 0 }, 1.0 },
+		{ "oblique orbit", { -60, 120, 3e6, 180, -60, 60, 0, 0 }, 0.7 },
+	};
+	unsigned char *on = xmalloc((size_t)W * H * 4), *off = xmalloc((size_t)W * H * 4);
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		const struct view_camera *c = &cases[i].c;
+		struct view_frame_stats s1, s0;
+		view_set_culling(v, true);
+		assert_int_equal(view_frame_complete(v, c, 60, &s1, NULL), 0);
+		view_read_rgba(v, on);
+		view_set_culling(v, false);
+		assert_int_equal(view_frame(v, c, 0, &s0), 0);
+		view_read_rgba(v, off);
+		fprintf(stderr, "culling, %s: %llu triangles drawn, %llu culled; %llu without\n",
+			cases[i].name, (unsigned long long)s1.triangles,
+			(unsigned long long)s1.triangles_culled, (unsigned long long)s0.triangles);
+		assert_int_equal(s0.triangles_culled, 0);
+		assert_int_equal(s1.triangles + s1.triangles_culled, s0.triangles);
+		assert_int_equal(s1.lfirst, s0.lfirst);
+		assert_int_equal(s1.llast, s0.llast);
+		size_t diff = 0;
+		for (size_t k = 0; k < (size_t)W * H * 4; k++)
+			diff += on[k] != off[k];
+		if (diff) {
+			img_write("/tmp/view_cull_on.png", W, H, 4, IMG_U8, on, err);
+			img_write("/tmp/view_cull_off.png", W, H, 4, IMG_U8, off, err);
+			fail_msg("%s: %zu bytes differ with culling", cases[i].name, diff);
+		}
+		if ((double)s1.triangles > cases[i].max_ratio * (double)s0.triangles)
+			fail_msg("%s: culling drew %llu of %llu triangles", cases[i].name,
+				 (unsigned long long)s1.triangles, (unsigned long long)s0.triangles);
+	}
+	free(on);
+	free(off);
+	view_destroy(v);
+	view_source_destroy(src);
+	gl_context_destroy(ctx);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(toroidal_after_moves),
 		cmocka_unit_test(marker_projects_to_predicted_pixel),
 		cmocka_unit_test(coverage_views),
+		cmocka_unit_test(culling_keeps_pixels),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
