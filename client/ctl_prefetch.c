@@ -136,6 +136,25 @@ static int cancel(struct run *r, char err[256])
 	return -ECANCELED;
 }
 
+/* Handles every whole message the socket already holds (never blocks). Returns 0, 1 when the
+ * job ended, or -errno. */
+static int drain(struct net_conn *c, struct run *r, double *last_msg, char err[256])
+{
+	for (;;) {
+		struct proto_msg m = { 0 };
+		int g = net_recv(c, &m, 0, err);
+		if (g == -EAGAIN)
+			return 0;
+		if (g)
+			return g;
+		*last_msg = now_s();
+		g = handle(r, &m, err);
+		proto_msg_fini(&m);
+		if (g)
+			return g;
+	}
+}
+
 int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		     const struct ctl_prefetch_ui *ui, struct proto_prefetch_progress *final,
 		     char err[256])
@@ -169,24 +188,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	double last_msg = now_s();
 	while (rc == 0) {
 		/* everything already buffered first */
-		for (;;) {
-			struct proto_msg m = { 0 };
-			int g = net_recv(c, &m, 0, err);
-			if (g == -EAGAIN)
-				break;
-			if (g) {
-				rc = g;
-				break;
-			}
-			last_msg = now_s();
-			g = handle(&r, &m, err);
-			proto_msg_fini(&m);
-			if (g) {
-				rc = g;
-				break;
-			}
-		}
-		if (rc)
+		if ((rc = drain(c, &r, &last_msg, err)))
 			break;
 		struct pollfd p[2] = { { .fd = net_fd(c), .events = POLLIN },
 				       { .fd = ui->stop_fd, .events = POLLIN } };
@@ -207,6 +209,11 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		if (pr > 0 && np == 2 && (p[1].revents & POLLIN)) {
 			char buf[128];
 			(void)!read(ui->stop_fd, buf, sizeof buf);
+			/* what the daemon sent before the interrupt is shown before cancelling */
+			if ((rc = drain(c, &r, &last_msg, err)))
+				break;
+			if (!ui->tty)
+				show(&r, true);
 			rc = cancel(&r, err);
 			break;
 		}
