@@ -1,6 +1,5 @@
-/* ctl_tile — see ctl_tile.h. The normal expansion repeats render.c's blit() formula
- * (render.c keeps it static); the byte-equality test in tests/unit/test_ctl_online.c
- * would notice if the two drifted apart. */
+/* ctl_tile — see ctl_tile.h. Pictures are built like the offline renderer's (normals through
+ * render_normals_rgb), so `tile` and `render` write the same bytes. */
 #include "ctl_tile.h"
 
 #include <errno.h>
@@ -42,14 +41,7 @@ int ctl_tile_image(enum tile_format format, uint32_t T, const void *texels,
 	} else {
 		out->channels = 3;
 		unsigned char *d = xmalloc(n * 3);
-		const unsigned char *s = texels;
-		for (size_t i = 0; i < n; i++) {
-			double e = s[2 * i] / 127.5 - 1.0, no = s[2 * i + 1] / 127.5 - 1.0;
-			double up2 = 1.0 - e * e - no * no;
-			d[3 * i] = s[2 * i];
-			d[3 * i + 1] = s[2 * i + 1];
-			d[3 * i + 2] = (unsigned char)lrint(((up2 > 0 ? sqrt(up2) : 0) + 1.0) * 127.5);
-		}
+		render_normals_rgb(texels, d, n);
 		out->pixels = d;
 	}
 	return 0;

@@ -87,14 +87,7 @@ static void blit(struct render_image *im, const struct tile *t, const struct til
 			memcpy(dst, src + (size_t)j * T * 4, (size_t)T * 4);
 		} else {
 			unsigned char *dst = (unsigned char *)im->pixels + (y * (size_t)im->width + x0) * 3;
-			const unsigned char *s = src + (size_t)j * T * 2;
-			for (uint32_t i = 0; i < T; i++) {
-				double e = s[2 * i] / 127.5 - 1.0, no = s[2 * i + 1] / 127.5 - 1.0;
-				double up2 = 1.0 - e * e - no * no;
-				dst[3 * i] = s[2 * i];
-				dst[3 * i + 1] = s[2 * i + 1];
-				dst[3 * i + 2] = (unsigned char)lrint(((up2 > 0 ? sqrt(up2) : 0) + 1.0) * 127.5);
-			}
+			render_normals_rgb(src + (size_t)j * T * 2, dst, T);
 		}
 	}
 	free(tmp);
@@ -255,6 +248,17 @@ int render_write(const struct render_image *im, const char *path, char note[256]
 		snprintf(note, 256, "heights %.2f .. %.2f m: metres = %.6f + value * %.9f", lo, hi, lo,
 			 scale);
 	return rc;
+}
+
+void render_normals_rgb(const unsigned char *rg, unsigned char *rgb, size_t n)
+{
+	for (size_t i = 0; i < n; i++) {
+		double e = rg[2 * i] / 127.5 - 1.0, no = rg[2 * i + 1] / 127.5 - 1.0;
+		double up2 = 1.0 - e * e - no * no;
+		rgb[3 * i] = rg[2 * i];
+		rgb[3 * i + 1] = rg[2 * i + 1];
+		rgb[3 * i + 2] = (unsigned char)lrint(((up2 > 0 ? sqrt(up2) : 0) + 1.0) * 127.5);
+	}
 }
 
 void render_image_free(struct render_image *im)

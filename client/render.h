@@ -48,5 +48,8 @@ int render_layer(const struct planet *p, const char *layer, const struct render_
  * Returns 0 or -errno with err filled. */
 int render_write(const struct render_image *im, const char *path, char note[256], char err[256]);
 void render_image_free(struct render_image *im);
+/* Expands n RG8 normals (east, north) to RGB8 with the implied up component — the picture
+ * form of a normal tile, shared by every writer so their bytes agree. */
+void render_normals_rgb(const unsigned char *rg, unsigned char *rgb, size_t n);
 
 #endif
