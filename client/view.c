@@ -3,15 +3,20 @@
  *   halving per level, seed 000 §3.4) plus the nadir vertex; uploaded once. A level drawn as
  *   a full disk uses its ring, the two finer rings (still finer than its texels need) and a
  *   fan to the nadir.
- * - Culling: each ring (and fan) is split into NSEC sectors of φ̃, each one index range
- *   (ring-major, then sector, then circle). Per frame the CPU tests each sector's bounds
- *   (view_sector_visible: its θ̃ × φ̃ patch at the terrain's height bounds, placed in doubles
- *   as the shader does, inflated by the patch's bulge) against the frustum's side planes, the
- *   plane behind the camera and the horizon cap, and draws the visible ranges, contiguous
- *   ones merged. The triangle order is the same with culling off, so the pixels are too.
- * - Blending: over the outer 40 % of a ring the height, colour and normal fade to the next
- *   coarser level, reaching it exactly on the boundary, so neighbouring rings share
- *   bit-identical boundary vertices (no cracks) and no level boundary pops.
+ * - Culling: each ring is split into an outer and an inner part (below), each part (and the
+ *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
+ *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
+ *   range the level's slices hold, placed in doubles as the shader does, inflated by the
+ *   patch's bulge) against the frustum's side planes, the plane behind the camera and the
+ *   horizon cap, and draws the visible ranges, contiguous ones merged. The triangle order is
+ *   the same with culling off, so the pixels are too.
+ * - Blending: over the outer part of a ring (from θ̃ = 2^(−j0/m)·R, about 0.74 R, to 0.95 R)
+ *   the height, colour and normal fade to the next coarser level, reaching it on the boundary,
+ *   so neighbouring rings share their boundary vertices (no cracks) and no level boundary
+ *   pops. The inner part shows the fine level alone and is drawn by a program variant that
+ *   samples one level: llvmpipe executes both sides of every branch, so work a pixel does not
+ *   need is compiled out rather than skipped (variants: blend, per-fragment lon/lat near the
+ *   poles, haze, exaggeration, which layers exist — compiled on first use).
  * - Precision: the shader works with n − up (the direction from the nadir) and differences of
  *   radii; the camera sits at the origin of its east-north-up frame.
  */
@@ -33,13 +38,31 @@
 #define MAX_WANTS 4096
 
 enum {
-	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_R, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_FADE,
-	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_LAYERS, U_EXAG, U_COUNT
+	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_FADE,
+	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_EXAG, U_COUNT
 };
 static const char *const uniform_names[U_COUNT] = {
-	"u_vp", "u_lat", "u_body", "u_a", "u_cap", "u_R", "u_T", "u_pf", "u_vf", "u_sf", "u_pc",
-	"u_vc", "u_sc", "u_fade", "u_height", "u_normal", "u_color", "u_sun", "u_haze", "u_layers",
-	"u_exag",
+	"u_vp", "u_lat", "u_body", "u_a", "u_cap", "u_blend", "u_T", "u_pf", "u_vf", "u_sf", "u_pc",
+	"u_vc", "u_sc", "u_fade", "u_height", "u_normal", "u_color", "u_sun", "u_haze", "u_exag",
+};
+
+/* Program variants: the shaders' #defines (see their headers). */
+enum {
+	VAR_BLEND = 1, VAR_GEO_FRAG = 2, VAR_HAZE = 4, VAR_EXAG = 8, VAR_COLOR = 16, VAR_NORMAL = 32,
+	NVARIANT = 64
+};
+static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG", "COLOR", "NORMAL" };
+
+#define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
+
+struct frame_uniforms {
+	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4];
+};
+
+struct program {
+	unsigned id;
+	int u[U_COUNT];
+	uint64_t frame; /* the frame whose common uniforms it holds */
 };
 
 struct view {
@@ -52,13 +75,18 @@ struct view {
 	uint32_t T;
 	/* geometry */
 	unsigned vao, vbo, ibo;
-	int nsec;		 /* sectors per ring */
-	size_t *sec_first;	 /* ring i sector s: [sec_first[i·nsec+s], sec_first[i·nsec+s+1]) */
+	int nsec;		 /* sectors per ring part */
+	int j0;			 /* rows 0..j0-1 of a ring (from its outer edge) form its outer part */
+	size_t *sec_first;	 /* ring i part p sector s: from sec_first[(2i+p)·nsec+s] to the next */
 	size_t *fan_first;	 /* per circle-boundary k·m (k = 1..NR), n·3 indices each */
 	bool cull;
-	/* program */
-	unsigned prog;
-	int u[U_COUNT];
+	/* programs, by variant; the one in use */
+	struct program prog[NVARIANT];
+	struct program *cur;
+	uint64_t frame_no;
+	int frame_bits; /* this frame's variant bits that every level shares */
+	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
+	struct frame_uniforms fu;
 	/* framebuffer */
 	unsigned fbo, color_tex, depth_tex;
 	bool reversed;
@@ -78,52 +106,67 @@ static double now_ms(void)
 	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
 }
 
-static unsigned compile(const struct gl *gl, GLenum type, const char *src, const char *name,
-			char err[256])
+static unsigned compile(const struct gl *gl, GLenum type, const char *src, int bits,
+			const char *name, char err[256])
 {
+	/* The defines go after the #version line, which must come first. */
+	char head[256];
+	int n = snprintf(head, sizeof head, "#version 330 core\n");
+	for (int b = 0; b < (int)(sizeof variant_names / sizeof variant_names[0]); b++)
+		n += snprintf(head + n, sizeof head - (size_t)n, "#define %s %d\n", variant_names[b],
+			      (bits >> b) & 1);
+	const char *body = strchr(src, '\n');
+	const char *parts[2] = { head, body ? body + 1 : src };
 	unsigned s = gl->CreateShader(type);
-	gl->ShaderSource(s, 1, &src, NULL);
+	gl->ShaderSource(s, 2, parts, NULL);
 	gl->CompileShader(s);
 	int ok = 0;
 	gl->GetShaderiv(s, GL_COMPILE_STATUS, &ok);
 	if (!ok) {
 		char log[200] = "";
 		gl->GetShaderInfoLog(s, sizeof log, NULL, log);
-		snprintf(err, 256, "%s: %s", name, log);
+		snprintf(err, 256, "%s (variant %d): %s", name, bits, log);
 		gl->DeleteShader(s);
 		return 0;
 	}
 	return s;
 }
 
-static int build_program(struct view *v, char err[256])
+/* The program of variant bits, compiled and linked on first use. */
+static struct program *get_program(struct view *v, int bits, char err[256])
 {
+	struct program *p = &v->prog[bits];
+	if (p->id)
+		return p;
 	const struct gl *gl = v->gl;
-	unsigned vs = compile(gl, GL_VERTEX_SHADER, terrain_vert_src, "terrain.vert", err);
+	unsigned vs = compile(gl, GL_VERTEX_SHADER, terrain_vert_src, bits, "terrain.vert", err);
 	if (!vs)
-		return -EINVAL;
-	unsigned fs = compile(gl, GL_FRAGMENT_SHADER, terrain_frag_src, "terrain.frag", err);
+		return NULL;
+	unsigned fs = compile(gl, GL_FRAGMENT_SHADER, terrain_frag_src, bits, "terrain.frag", err);
 	if (!fs) {
 		gl->DeleteShader(vs);
-		return -EINVAL;
+		return NULL;
 	}
-	v->prog = gl->CreateProgram();
-	gl->AttachShader(v->prog, vs);
-	gl->AttachShader(v->prog, fs);
-	gl->LinkProgram(v->prog);
+	unsigned id = gl->CreateProgram();
+	gl->AttachShader(id, vs);
+	gl->AttachShader(id, fs);
+	gl->LinkProgram(id);
 	gl->DeleteShader(vs);
 	gl->DeleteShader(fs);
 	int ok = 0;
-	gl->GetProgramiv(v->prog, GL_LINK_STATUS, &ok);
+	gl->GetProgramiv(id, GL_LINK_STATUS, &ok);
 	if (!ok) {
 		char log[200] = "";
-		gl->GetProgramInfoLog(v->prog, sizeof log, NULL, log);
-		snprintf(err, 256, "terrain program: %s", log);
-		return -EINVAL;
+		gl->GetProgramInfoLog(id, sizeof log, NULL, log);
+		snprintf(err, 256, "terrain program (variant %d): %s", bits, log);
+		gl->DeleteProgram(id);
+		return NULL;
 	}
+	p->id = id;
 	for (int i = 0; i < U_COUNT; i++)
-		v->u[i] = gl->GetUniformLocation(v->prog, uniform_names[i]);
-	return 0;
+		p->u[i] = gl->GetUniformLocation(id, uniform_names[i]);
+	p->frame = 0;
+	return p;
 }
 
 /* θ̃ of circle c (c = ring·m + j). */
@@ -161,13 +204,18 @@ static void build_geometry(struct view *v)
 	size_t nidx = (size_t)NR * m * n * 6 + (size_t)NR * n * 3;
 	uint32_t *idx = xmalloc(nidx * sizeof *idx);
 	v->nsec = n < 32 ? n : 32;
-	v->sec_first = xcalloc((size_t)NR * v->nsec + 1, sizeof *v->sec_first);
+	v->j0 = m - (m * 9) / 16; /* the inner ~56 % of the rows show the fine level alone */
+	if (v->j0 < 1)
+		v->j0 = 1;
+	v->sec_first = xcalloc((size_t)NR * 2 * v->nsec + 1, sizeof *v->sec_first);
 	v->fan_first = xcalloc((size_t)NR + 1, sizeof *v->fan_first);
 	size_t q = 0;
-	for (int i = 0; i < NR; i++)
+	for (int ip = 0; ip < NR * 2; ip++)
 		for (int sec = 0; sec < v->nsec; sec++) {
-			v->sec_first[i * v->nsec + sec] = q;
-			for (int c = i * m; c < (i + 1) * m; c++)
+			int i = ip / 2, c0 = i * m + (ip % 2 ? v->j0 : 0);
+			int c1 = ip % 2 ? (i + 1) * m : i * m + v->j0;
+			v->sec_first[ip * v->nsec + sec] = q;
+			for (int c = c0; c < c1; c++)
 				for (int k = sector_k(v, sec); k < sector_k(v, sec + 1); k++) {
 					uint32_t a = (uint32_t)(c * n + k);
 					uint32_t b = (uint32_t)(c * n + (k + 1) % n);
@@ -180,7 +228,7 @@ static void build_geometry(struct view *v)
 					idx[q++] = a2;
 				}
 		}
-	v->sec_first[NR * v->nsec] = q;
+	v->sec_first[NR * 2 * v->nsec] = q;
 	for (int k1 = 1; k1 <= NR; k1++) {
 		v->fan_first[k1] = q;
 		int c = k1 * m;
@@ -270,9 +318,10 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->wants = xmalloc(MAX_WANTS * sizeof *v->wants);
 	v->was_usable = xcalloc((size_t)v->nlevels, sizeof *v->was_usable);
 	v->ready_since = xcalloc((size_t)v->nlevels, sizeof *v->ready_since);
+	v->floor = xcalloc((size_t)v->nlevels, sizeof *v->floor);
 	int rc = view_clipmap_create(gl, src, v->nlevels, &v->cm, err);
 	if (rc == 0)
-		rc = build_program(v, err);
+		rc = get_program(v, NVARIANT - 1, err) ? 0 : -EINVAL; /* every feature: fail early */
 	if (rc == 0) {
 		build_geometry(v);
 		rc = build_fbo(v, err);
@@ -300,8 +349,9 @@ void view_destroy(struct view *v)
 		return;
 	const struct gl *gl = v->gl;
 	view_clipmap_destroy(v->cm);
-	if (v->prog)
-		gl->DeleteProgram(v->prog);
+	for (int i = 0; i < NVARIANT; i++)
+		if (v->prog[i].id)
+			gl->DeleteProgram(v->prog[i].id);
 	if (v->vao)
 		gl->DeleteVertexArrays(1, &v->vao);
 	if (v->vbo)
@@ -314,6 +364,7 @@ void view_destroy(struct view *v)
 	free(v->wants);
 	free(v->was_usable);
 	free(v->ready_since);
+	free(v->floor);
 	free(v);
 }
 
@@ -364,12 +415,13 @@ static void ranges_add(struct ranges *r, size_t first, size_t count)
 
 /* Draws sector s of the geometry over θ̃ ∈ [th0, th1] (indices [first, first + count)) if
  * visible; counts its indices in *drawn or *culled. */
-static void draw_sector(struct view *v, struct ranges *r, double th0, double th1, int s,
-			size_t first, size_t count, double cap, uint64_t *drawn, uint64_t *culled)
+static void draw_sector(struct view *v, const struct view_body *b, struct ranges *r, double th0,
+			double th1, int s, size_t first, size_t count, double cap, uint64_t *drawn,
+			uint64_t *culled)
 {
 	double ph0 = 2 * M_PI * sector_k(v, s) / v->d.n_phi;
 	double ph1 = 2 * M_PI * sector_k(v, s + 1) / v->d.n_phi;
-	if (v->cull && !view_sector_visible(&v->body, &v->last, th0, th1, ph0, ph1, cap)) {
+	if (v->cull && !view_sector_visible(b, &v->last, th0, th1, ph0, ph1, cap)) {
 		*culled += count;
 		return;
 	}
@@ -377,33 +429,113 @@ static void draw_sector(struct view *v, struct ranges *r, double th0, double th1
 	*drawn += count;
 }
 
-static uint64_t draw_level(struct view *v, int i, bool ring, bool first, double fade,
-			   double cap, uint64_t *culled)
+/* Binds the program of variant bits for drawing level i (fine) blended towards level c
+ * (coarse): the frame's common uniforms on its first use this frame, the levels' always. */
+static int bind_program(struct view *v, int bits, int i, int c, float fade)
 {
 	const struct gl *gl = v->gl;
-	level_uniforms(v, i, v->u[U_PF], v->u[U_VF], v->u[U_SF]);
+	char err[256];
+	struct program *p = get_program(v, bits, err);
+	if (!p)
+		return -EINVAL;
+	gl->UseProgram(p->id);
+	v->cur = p;
+	if (p->frame != v->frame_no) {
+		const struct frame_uniforms *f = &v->fu;
+		gl->UniformMatrix4fv(p->u[U_VP], 1, GL_FALSE, f->vp);
+		gl->Uniform3f(p->u[U_LAT], f->lat[0], f->lat[1], f->lat[2]);
+		gl->Uniform4fv(p->u[U_BODY], 1, f->body);
+		gl->Uniform1f(p->u[U_A], f->a);
+		gl->Uniform1f(p->u[U_CAP], f->cap);
+		gl->Uniform1f(p->u[U_T], (float)v->T);
+		gl->Uniform1i(p->u[U_HEIGHT], 0);
+		gl->Uniform1i(p->u[U_NORMAL], 1);
+		gl->Uniform1i(p->u[U_COLOR], 2);
+		gl->Uniform3f(p->u[U_SUN], f->sun[0], f->sun[1], f->sun[2]);
+		gl->Uniform4fv(p->u[U_HAZE], 1, f->haze);
+		gl->Uniform1f(p->u[U_EXAG], v->d.exaggeration);
+		p->frame = v->frame_no;
+	}
+	level_uniforms(v, i, p->u[U_PF], p->u[U_VF], p->u[U_SF]);
+	level_uniforms(v, c, p->u[U_PC], p->u[U_VC], p->u[U_SC]);
+	double R = view_ring_radius(i);
+	gl->Uniform3f(p->u[U_BLEND], (float)R, (float)(circle_theta(i * v->d.m_rings + v->j0,
+								     v->d.m_rings) / R),
+		      (float)BLEND_END);
+	gl->Uniform1f(p->u[U_FADE], fade);
+	return 0;
+}
+
+/* Draws level i: its ring, or (ring false) the disk out to its ring's outer edge. The parts
+ * that show the fine level alone go first with the one-level program, then the blended ones;
+ * visible sectors only. Returns the triangles drawn (-EINVAL if a program failed). */
+static int64_t draw_level(struct view *v, int i, bool ring, bool first, double fade,
+			  double cap, uint64_t *culled)
+{
+	const struct gl *gl = v->gl;
+	int m = v->d.m_rings;
 	int c = (first || i == 0) ? i : i - 1;
-	level_uniforms(v, c, v->u[U_PC], v->u[U_VC], v->u[U_SC]);
-	gl->Uniform1f(v->u[U_R], (float)view_ring_radius(i));
-	gl->Uniform1f(v->u[U_FADE], ring ? 1.0f : (float)fade);
+	bool fading = !ring && fade < 1;
+	/* Near a pole the ring's vertices' (lon, lat) cannot be interpolated (the meridian behind
+	 * the pole, lon's curvature there): per-fragment lon/lat where the level reaches 0.8 of
+	 * the way to the nearer pole. */
+	double dpole = M_PI / 2 - fabs(v->last.lat * DEG);
+	int bits = v->frame_bits | (fmin(view_ring_radius(i), cap) > 0.8 * dpole ? VAR_GEO_FRAG : 0);
+	/* Cull against the heights the two levels' slices hold (the planet's bounds until
+	 * both have them), and against the horizon of the lowest ground between the camera and
+	 * the level (the slices of this level and every finer one drawn hold all of it): a sphere
+	 * through that ground hides whatever of the level lies beyond its horizon. */
+	struct view_body b = v->body;
+	double lo[2], hi[2];
+	if (view_clipmap_height_range(v->cm, i, &lo[0], &hi[0]) == 0 &&
+	    view_clipmap_height_range(v->cm, c, &lo[1], &hi[1]) == 0) {
+		double e = v->d.exaggeration;
+		b.hmin = fmin(lo[0], lo[1]) * e;
+		b.hmax = fmax(hi[0], hi[1]) * e;
+		if (v->floor[i] < INFINITY) {
+			/* margins: a sphere of radius a stands in for the ellipsoid's curvature */
+			struct view_body occ = b;
+			double slack = 100 * e + 1e-5 * b.a;
+			occ.hmin = fmin(v->floor[i] * e, b.hmin) - slack;
+			occ.hmax = b.hmax + slack;
+			cap = fmin(cap, view_horizon_cap(&occ, v->last.alt));
+		}
+	}
 	uint64_t idx = 0, cidx = 0;
 	int last = ring ? i : (i + 2 < v->nlevels - 1 ? i + 2 : v->nlevels - 1);
-	struct ranges r = { gl, 0, 0 };
-	for (int j = i; j <= last; j++)
-		for (int s = 0; s < v->nsec; s++) {
-			size_t f = v->sec_first[j * v->nsec + s];
-			draw_sector(v, &r, view_ring_radius(j + 1), view_ring_radius(j), s, f,
-				    v->sec_first[j * v->nsec + s + 1] - f, cap, &idx, &cidx);
-		}
-	if (!ring)
-		for (int s = 0; s < v->nsec; s++) {
-			size_t f = v->fan_first[last + 1] + (size_t)sector_k(v, s) * 3;
-			size_t n = (size_t)(sector_k(v, s + 1) - sector_k(v, s)) * 3;
-			draw_sector(v, &r, 0, view_ring_radius(last + 1), s, f, n, cap, &idx, &cidx);
-		}
-	ranges_flush(&r);
+	for (int pass = 0; pass < 2; pass++) {
+		/* pass 0: one level; pass 1: blended (the outer part of ring i, all when fading) */
+		if (pass == 0 && fading)
+			continue;
+		if (pass == 1 && !fading && c == i)
+			break;
+		if (bind_program(v, bits | (pass ? VAR_BLEND : 0), i, c, ring ? 1.0f : (float)fade) < 0)
+			return -EINVAL;
+		struct ranges r = { gl, 0, 0 };
+		for (int j = i; j <= last; j++)
+			for (int part = 0; part < 2; part++) {
+				bool blended = fading || (j == i && part == 0 && c != i);
+				if (blended != (pass == 1))
+					continue;
+				double split = circle_theta(j * m + v->j0, m);
+				double th0 = part ? view_ring_radius(j + 1) : split;
+				double th1 = part ? split : view_ring_radius(j);
+				const size_t *sf = v->sec_first + (size_t)(2 * j + part) * v->nsec;
+				for (int sc = 0; sc < v->nsec; sc++)
+					draw_sector(v, &b, &r, th0, th1, sc, sf[sc], sf[sc + 1] - sf[sc],
+						    cap, &idx, &cidx);
+			}
+		if (!ring)
+			for (int sc = 0; sc < v->nsec && (pass == 1) == fading; sc++) {
+				size_t f = v->fan_first[last + 1] + (size_t)sector_k(v, sc) * 3;
+				size_t n = (size_t)(sector_k(v, sc + 1) - sector_k(v, sc)) * 3;
+				draw_sector(v, &b, &r, 0, view_ring_radius(last + 1), sc, f, n, cap,
+					    &idx, &cidx);
+			}
+		ranges_flush(&r);
+	}
 	*culled += cidx / 3;
-	return idx / 3;
+	return (int64_t)(idx / 3);
 }
 
 static void set_targets(struct view *v, int lmin, int lmax, bool *changed)
@@ -421,9 +553,11 @@ static void set_targets(struct view *v, int lmin, int lmax, bool *changed)
 	}
 }
 
-static void common_uniforms(struct view *v, double agl, double cap)
+/* The frame's uniforms every program variant shares, and the variant bits that do not
+ * depend on the level. */
+static void frame_uniforms(struct view *v, double agl, double cap)
 {
-	const struct gl *gl = v->gl;
+	struct frame_uniforms *f = &v->fu;
 	const struct view_camera *c = &v->last;
 	double sl = sin(c->lat * DEG), cl = cos(c->lat * DEG);
 	double N = view_body_n(&v->body, sl);
@@ -433,28 +567,28 @@ static void common_uniforms(struct view *v, double agl, double cap)
 		     sqrt((v->body.a + v->body.hmax) * (v->body.a + v->body.hmax) -
 			  (v->body.a + v->body.hmin) * (v->body.a + v->body.hmin)) +
 		     2 * fabs(c->alt);
-	float vp[16];
-	view_camera_matrix(c, v->reversed, near, far, vp);
-	gl->UniformMatrix4fv(v->u[U_VP], 1, GL_FALSE, vp);
-	gl->Uniform3f(v->u[U_LAT], (float)sl, (float)cl, (float)(c->lat * DEG));
-	gl->Uniform4f(v->u[U_BODY], (float)(N + c->alt), (float)c->alt, (float)N, (float)v->body.e2);
-	gl->Uniform1f(v->u[U_A], (float)v->body.a);
-	gl->Uniform1f(v->u[U_CAP], (float)cap);
-	gl->Uniform1f(v->u[U_T], (float)v->T);
-	gl->Uniform1i(v->u[U_HEIGHT], 0);
-	gl->Uniform1i(v->u[U_NORMAL], 1);
-	gl->Uniform1i(v->u[U_COLOR], 2);
-	/* The sun: azimuth/elevation at the camera → the frame with the camera on meridian 0
-	 * (x: lat 0 lon 0 direction, y: east, z: north). */
+	view_camera_matrix(c, v->reversed, near, far, f->vp);
+	f->lat[0] = (float)sl;
+	f->lat[1] = (float)cl;
+	f->lat[2] = (float)(c->lat * DEG);
+	f->body[0] = (float)(N + c->alt);
+	f->body[1] = (float)c->alt;
+	f->body[2] = (float)N;
+	f->body[3] = (float)v->body.e2;
+	f->a = (float)v->body.a;
+	f->cap = (float)cap;
+	/* The sun: azimuth/elevation at the camera, in its east-north-up frame. */
 	double az = v->d.sun_az * DEG, el = v->d.sun_el * DEG;
-	double e = sin(az) * cos(el), n = cos(az) * cos(el), u = sin(el);
-	gl->Uniform3f(v->u[U_SUN], (float)(-sl * n + cl * u), (float)e, (float)(cl * n + sl * u));
-	gl->Uniform4f(v->u[U_HAZE], 8000.0f * v->d.exaggeration, v->d.haze > 0 ? v->d.haze : 0.0f,
-		      0, 0);
-	gl->Uniform1f(v->u[U_EXAG], v->d.exaggeration);
-	int layers = (view_clipmap_texture(v->cm, VIEW_COLOR) ? 1 : 0) |
-		     (view_clipmap_texture(v->cm, VIEW_NORMAL) ? 2 : 0);
-	gl->Uniform1i(v->u[U_LAYERS], layers);
+	f->sun[0] = (float)(sin(az) * cos(el));
+	f->sun[1] = (float)(cos(az) * cos(el));
+	f->sun[2] = (float)sin(el);
+	f->haze[0] = 8000.0f * v->d.exaggeration;
+	f->haze[1] = v->d.haze > 0 ? v->d.haze : 0.0f;
+	f->haze[2] = f->haze[3] = 0;
+	v->frame_bits = (v->d.haze > 0 ? VAR_HAZE : 0) | (v->d.exaggeration != 1 ? VAR_EXAG : 0) |
+			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
+			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
+	const struct gl *gl = v->gl;
 	for (int r = 0; r < VIEW_NROLES; r++) {
 		gl->ActiveTexture(GL_TEXTURE0 + (GLenum)r);
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, view_clipmap_texture(v->cm, (enum view_role)r));
@@ -533,10 +667,23 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	gl->Enable(GL_DEPTH_TEST);
 	gl->DepthMask(GL_TRUE);
 	gl->Clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-	gl->UseProgram(v->prog);
 	gl->BindVertexArray(v->vao);
-	common_uniforms(v, agl, cap);
+	v->frame_no++;
+	frame_uniforms(v, agl, cap);
 
+	/* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
+	 * while any of them holds nothing yet). */
+	double fl = INFINITY;
+	bool known = true;
+	for (int l = v->nlevels - 1; l >= 0; l--) {
+		double lo, hi;
+		if (l > lmax)
+			v->floor[l] = INFINITY;
+		else if (known && view_clipmap_height_range(v->cm, l, &lo, &hi) == 0)
+			v->floor[l] = fl = fmin(fl, lo);
+		else
+			v->floor[l] = fl = INFINITY, known = false;
+	}
 	int first = -1;
 	for (int j = lmin; j >= 0 && first < 0; j--)
 		if (usable(v, j, fmin(view_ring_radius(j), cap)))
@@ -554,7 +701,12 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 		double fade = 1;
 		if (v->d.fade_s > 0 && i != first)
 			fade = fmin(1, (now_s - v->ready_since[i]) / v->d.fade_s);
-		s.triangles += draw_level(v, i, more, i == first, fade, cap, &s.triangles_culled);
+		int64_t tri = draw_level(v, i, more, i == first, fade, cap, &s.triangles_culled);
+		if (tri < 0) {
+			gl->BindVertexArray(0);
+			return (int)tri;
+		}
+		s.triangles += (uint64_t)tri;
 		if (s.lfirst < 0)
 			s.lfirst = i;
 		s.llast = i;

@@ -25,6 +25,8 @@ struct level {
 	struct grid_quad target, held;
 	struct slot slots[VIEW_NROLES][SLOTS];
 	float *hmirror; /* T × T heights, toroidal like the texture; NULL until first upload */
+	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
+	float hlo, hhi; /* the heights' range over the whole slice */
 };
 
 struct view_clipmap {
@@ -263,6 +265,7 @@ static void mirror_region(struct view_clipmap *cm, struct level *L, const struct
 	for (uint32_t j = 0; j < r->h; j++)
 		memcpy(L->hmirror + (size_t)(r->y + j) * T + r->x,
 		       src + ((size_t)(r->y + j) * T + r->x) * 4, (size_t)r->w * 4);
+	L->hdirty = true;
 }
 
 int view_clipmap_update(struct view_clipmap *cm, int level)
@@ -367,4 +370,27 @@ int view_clipmap_levels(const struct view_clipmap *cm) { return cm->nlevels; }
 void view_clipmap_get_stats(const struct view_clipmap *cm, struct view_clipmap_stats *out)
 {
 	*out = cm->st;
+}
+
+int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, double *hi)
+{
+	struct level *L = &cm->lv[level];
+	if (!L->has_held || !L->hmirror)
+		return -ENOENT;
+	if (L->hdirty) {
+		/* The whole slice, stale texels included: whatever the shader can sample. */
+		const float *h = L->hmirror;
+		size_t n = (size_t)cm->T * cm->T;
+		float a = h[0], b = h[0];
+		for (size_t i = 1; i < n; i++) {
+			a = h[i] < a ? h[i] : a;
+			b = h[i] > b ? h[i] : b;
+		}
+		L->hlo = a;
+		L->hhi = b;
+		L->hdirty = false;
+	}
+	*lo = L->hlo;
+	*hi = L->hhi;
+	return 0;
 }

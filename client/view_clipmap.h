@@ -56,6 +56,10 @@ const struct grid_quad *view_clipmap_target_of(const struct view_clipmap *cm, in
 /* The ground height at (lon, lat) from the finest level that holds it. 0 or -ENOENT. */
 int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, double *h);
 
+/* The range of the heights a level's height slice holds (metres, not exaggerated): what the
+ * shader can sample there, for culling. 0, or -ENOENT before the level's first upload. */
+int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, double *hi);
+
 unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r); /* 0: absent */
 /* Reads every slice of a role's texture (T × T × nlevels texels, slice-major) into out.
  * Returns 0 or -ENOENT. */

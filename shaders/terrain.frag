@@ -1,12 +1,40 @@
 #version 330 core
-// Terrain shading: colour and normal clipmaps sampled per fragment at the fragment's own
-// (lon, lat) — recomputed from the interpolated direction, so nothing is interpolated across
-// the meridian behind a pole — lit by a sun, hazed by distance.
+// Terrain shading: colour and normal clipmaps, lit by a sun in the east-north-up frame at the
+// camera, hazed by the air the vertex shader integrated. Compiled in variants (view.c prepends
+// the #defines; the defaults below are the full one): GEO_FRAG recomputes (lon, lat) per
+// fragment from the interpolated direction — needed where a ring reaches the pole, so nothing is
+// interpolated across the meridian behind it; elsewhere the vertices' (lon, lat) interpolate.
+// BLEND samples the coarser level too, HAZE applies the vertex shader's air, EXAG steepens the
+// normals by the vertical exaggeration, COLOR and NORMAL say which layers exist.
+
+#ifndef BLEND
+#define BLEND 1
+#endif
+#ifndef GEO_FRAG
+#define GEO_FRAG 1
+#endif
+#ifndef HAZE
+#define HAZE 1
+#endif
+#ifndef EXAG
+#define EXAG 1
+#endif
+#ifndef COLOR
+#define COLOR 1
+#endif
+#ifndef NORMAL
+#define NORMAL 1
+#endif
 
 in vec3 v_delta;
-in vec3 v_pos;
+in vec2 v_g;
+#if BLEND
 in float v_blend;
-in float v_h;
+#endif
+#if HAZE
+in vec3 v_tr;
+in vec3 v_in;
+#endif
 
 uniform vec3 u_lat;
 uniform float u_T;
@@ -16,16 +44,14 @@ uniform float u_sf;
 uniform vec4 u_pc;
 uniform vec2 u_vc;
 uniform float u_sc;
-uniform vec3 u_sun;      // towards the sun, in the frame with the camera on meridian 0
-uniform vec4 u_haze;     // scale height (m, exaggerated), strength (0: no air), unused ×2
-uniform vec4 u_body;     // N + h, h of the camera (exaggerated), N, e²
+uniform vec3 u_sun;      // towards the sun, ENU at the camera
 uniform float u_exag;    // vertical exaggeration: steepens the normals too
-uniform int u_layers;    // bit 0: colour present, bit 1: normals present
 uniform sampler2DArray u_color;
 uniform sampler2DArray u_normal;
 
 out vec4 o_color;
 
+#if GEO_FRAG
 vec2 geo_delta(vec3 d)
 {
 	float sl = u_lat.x, cl = u_lat.y;
@@ -37,6 +63,7 @@ vec2 geo_delta(vec3 d)
 	float dt = cl * rho + sl * dz;
 	return vec2(atan(dy, dx), atan(cr, dt));
 }
+#endif
 
 vec3 tex_at(sampler2DArray s, vec2 g, vec4 p, vec2 vc, float slice)
 {
@@ -47,50 +74,48 @@ vec3 tex_at(sampler2DArray s, vec2 g, vec4 p, vec2 vc, float slice)
 
 void main()
 {
+#if GEO_FRAG
 	vec2 g = geo_delta(v_delta);
-	float w = v_blend;
+#else
+	vec2 g = v_g;
+#endif
+#if COLOR
+	vec3 albedo = tex_at(u_color, g, u_pf, u_vf, u_sf);
+#if BLEND
+	albedo = mix(albedo, tex_at(u_color, g, u_pc, u_vc, u_sc), v_blend);
+#endif
+#else
 	vec3 albedo = vec3(0.5);
-	if ((u_layers & 1) != 0)
-		albedo = mix(tex_at(u_color, g, u_pf, u_vf, u_sf), tex_at(u_color, g, u_pc, u_vc, u_sc), w);
+#endif
+#if NORMAL
+	vec2 en = tex_at(u_normal, g, u_pf, u_vf, u_sf).rg;
+#if BLEND
+	en = mix(en, tex_at(u_normal, g, u_pc, u_vc, u_sc).rg, v_blend);
+#endif
+	en = en * (255.0 / 127.5) - 1.0;
+#else
 	vec2 en = vec2(0.0);
-	if ((u_layers & 2) != 0) {
-		vec2 nf = tex_at(u_normal, g, u_pf, u_vf, u_sf).rg;
-		vec2 nc = tex_at(u_normal, g, u_pc, u_vc, u_sc).rg;
-		en = mix(nf, nc, w) * (255.0 / 127.5) - 1.0;
-	}
+#endif
 	float up = sqrt(max(0.0, 1.0 - dot(en, en)));
-	if (u_exag != 1.0) { // slopes × exaggeration
-		vec3 sn = normalize(vec3(en * u_exag, up));
-		en = sn.xy;
-		up = sn.z;
-	}
+#if EXAG
+	vec3 sn = normalize(vec3(en * u_exag, up)); // slopes × exaggeration
+	en = sn.xy;
+	up = sn.z;
+#endif
 
-	// The fragment's local frame in the frame where the camera sits on meridian 0.
-	float lat = u_lat.z + g.y, lon = g.x;
-	float sp = sin(lat), cp = cos(lat), so = sin(lon), co = cos(lon);
-	vec3 E = vec3(-so, co, 0.0);
-	vec3 Nn = vec3(-sp * co, -sp * so, cp);
-	vec3 U = vec3(cp * co, cp * so, sp);
+	// The fragment's local east, north, up in the camera's ENU frame.
+	vec3 U = normalize(v_delta + vec3(0.0, 0.0, 1.0));
+	vec3 E = cross(vec3(0.0, u_lat.y, u_lat.x), U);
+	E *= inversesqrt(max(dot(E, E), 1e-12));
+	vec3 Nn = cross(U, E);
 	vec3 nrm = normalize(en.x * E + en.y * Nn + up * U);
 	float diff = max(dot(nrm, u_sun), 0.0);
 	float day = smoothstep(-0.1, 0.1, dot(U, u_sun));
 	float sky = 0.5 + 0.5 * dot(nrm, U); // the open sky a slope sees
 	vec3 lit = albedo * (vec3(1.0, 0.97, 0.92) * 1.05 * diff * day +
 			     vec3(0.30, 0.38, 0.50) * 0.22 * sky * (0.1 + 0.9 * day) + 0.015);
-
-	if (u_haze.y > 0.0) {
-		float H = u_haze.x;
-		float s = length(v_pos);
-		vec3 upp = normalize(v_delta + vec3(0.0, 0.0, 1.0));
-		float cz = dot(-v_pos, upp) / max(s, 1e-3); // cos of the ray's zenith angle there
-		float x = s * (cz > 0.0 ? max(cz, 0.025) : cz) / H;
-		x = max(x, -30.0);
-		float f = abs(x) < 1e-3 ? 1.0 - 0.5 * x : (1.0 - exp(-x)) / x;
-		float air = s * exp(-max(v_h, 0.0) / H) * f; // metres of sea-level air
-		air /= 1.0 + (u_exag - 1.0) * cz * cz; // exaggerated verticals hold no more air
-		vec3 beta = (vec3(5.8e-6, 13.5e-6, 33.1e-6) + 2.0e-6) * (0.45 * u_haze.y);
-		vec3 tr = exp(-beta * air);
-		vec3 sunlight = vec3(1.0, 0.96, 0.90) * (0.03 + 0.97 * day);
-		lit = lit * tr + (1.0 - tr) * sunlight * 0.7;
-	}	o_color = vec4(pow(clamp(lit, 0.0, 1.0), vec3(1.0 / 2.2)), 1.0);
+#if HAZE
+	lit = lit * v_tr + v_in;
+#endif
+	o_color = vec4(pow(clamp(lit, 0.0, 1.0), vec3(1.0 / 2.2)), 1.0);
 }

@@ -3,6 +3,16 @@
 // mapped to (lon, lat) by the camera's latitude, displaced by the height clipmap, placed
 // relative to the camera in its east-north-up frame. All large quantities (radii, camera
 // height) enter as differences that float holds exactly enough at 1 m above an Earth-size body.
+// Compiled in variants (view.c prepends the #defines; the defaults below are the full one):
+// BLEND samples the coarser level too (the outer part of a ring, or a level fading in), HAZE
+// computes the air's transmittance and in-scatter here, per vertex.
+
+#ifndef BLEND
+#define BLEND 1
+#endif
+#ifndef HAZE
+#define HAZE 1
+#endif
 
 layout(location = 0) in vec3 a_ring; // sin φ̃, cos φ̃ (φ̃ = 0: north), θ̃ (angle from the nadir)
 
@@ -11,7 +21,7 @@ uniform vec3 u_lat;     // sin, cos of the camera's geodetic latitude, the latit
 uniform vec4 u_body;    // N(camera) + h(camera), h(camera), N(camera), e²
 uniform float u_a;      // equatorial radius
 uniform float u_cap;    // θ̃ beyond which nothing can be seen
-uniform float u_R;      // outer θ̃ of the level being drawn
+uniform vec3 u_blend;   // outer θ̃ of the level being drawn, blend start and end (× it)
 uniform float u_T;      // clipmap texture size
 uniform vec4 u_pf;      // fine level: focus texel u, v, texels per radian lon, lat
 uniform vec2 u_vf;      // fine level: v clamp
@@ -21,12 +31,19 @@ uniform vec2 u_vc;
 uniform float u_sc;
 uniform float u_fade;   // 1: the fine level fully shown; < 1 while it fades in
 uniform float u_exag;   // vertical exaggeration of the relief (1: true scale)
+uniform vec3 u_sun;     // towards the sun, ENU at the camera
+uniform vec4 u_haze;    // scale height (m, exaggerated), strength (0: no air), unused ×2
 uniform sampler2DArray u_height;
 
-out vec3 v_delta; // unit normal minus the camera's up, ENU: per-fragment (lon, lat)
-out vec3 v_pos;   // position relative to the camera, ENU
+out vec3 v_delta; // unit normal minus the camera's up, ENU: the fragment's up, (lon, lat)
+out vec2 v_g;     // (Δlon, Δlat) from the camera's nadir
+#if BLEND
 out float v_blend;
-out float v_h;    // the point's height above the ellipsoid (exaggerated), for the haze
+#endif
+#if HAZE
+out vec3 v_tr;    // transmittance of the air between the camera and the point
+out vec3 v_in;    // light scattered into the ray by that air
+#endif
 
 // (Δlon, Δlat) of the direction up + d from the camera's nadir, without cancellation.
 vec2 geo_delta(vec3 d)
@@ -54,11 +71,16 @@ void main()
 	float st = sin(th), sh = sin(0.5 * th);
 	vec3 d = vec3(st * a_ring.x, st * a_ring.y, -2.0 * sh * sh);
 	vec2 g = geo_delta(d);
-	float w = clamp((th / u_R - 0.6) / 0.35, 0.0, 1.0);
-	w = max(w, 1.0 - u_fade);
 	float hf = height_at(g, u_pf, u_vf, u_sf);
+#if BLEND
+	float w = clamp((th / u_blend.x - u_blend.y) / (u_blend.z - u_blend.y), 0.0, 1.0);
+	w = max(w, 1.0 - u_fade);
 	float hc = height_at(g, u_pc, u_vc, u_sc);
 	float h = mix(hf, hc, w) * u_exag;
+	v_blend = w;
+#else
+	float h = hf * u_exag;
+#endif
 
 	// P - C = (Nc+hc)·d + (N-Nc + h-hc)·n - e²·(N·(s-sc) + (N-Nc)·sc)·ẑ
 	float sl = u_lat.x, cl = u_lat.y, e2 = u_body.w;
@@ -72,8 +94,22 @@ void main()
 	vec3 pos = u_body.x * d + (dN + (h - u_body.y)) * n - e2 * (N * ds + dN * sl) * zhat;
 
 	v_delta = d;
-	v_pos = pos;
-	v_blend = w;
-	v_h = h;
+	v_g = g;
+#if HAZE
+	// Air between the camera and the point: an exponential atmosphere integrated along the
+	// straight ray (exact for a flat one, a good fit for short rays and slant views).
+	float H = u_haze.x;
+	float sd = length(pos);
+	float cz = dot(-pos, n) / max(sd, 1e-3); // cos of the ray's zenith angle at the point
+	float x = sd * (cz > 0.0 ? max(cz, 0.025) : cz) / H;
+	x = max(x, -30.0);
+	float f = abs(x) < 1e-3 ? 1.0 - 0.5 * x : (1.0 - exp(-x)) / x;
+	float air = sd * exp(-max(h, 0.0) / H) * f; // metres of sea-level air
+	air /= 1.0 + (u_exag - 1.0) * cz * cz;      // exaggerated verticals hold no more air
+	vec3 beta = (vec3(5.8e-6, 13.5e-6, 33.1e-6) + 2.0e-6) * (0.45 * u_haze.y);
+	v_tr = exp(-beta * air);
+	float day = smoothstep(-0.1, 0.1, dot(n, u_sun));
+	v_in = (1.0 - v_tr) * vec3(1.0, 0.96, 0.90) * (0.03 + 0.97 * day) * 0.7;
+#endif
 	gl_Position = u_vp * vec4(pos, 1.0);
 }
