@@ -322,6 +322,8 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 	int tile = o->tile ? o->tile : 256;
 	int64_t k = ((int64_t)32 << 20) / ((int64_t)row * tile);
 	int band = tile * (int)(k < 1 ? 1 : k > 16 ? 16 : k);
+	if (o->band_rows > 0)
+		band = (o->band_rows + tile - 1) / tile * tile;
 	if (band > h)
 		band = (int)h;
 	buf = xmalloc(row * (size_t)band);

@@ -23,6 +23,8 @@ struct import_opts {
 	int band;	  /* 1-based band to import; 0: all bands (at most 4) */
 	int tile;	  /* tile edge in pixels; 0: 256 */
 	bool no_mip;	  /* skip the MIP pyramid */
+	int band_rows;	  /* rows read per band, a multiple of tile; 0: automatic (about
+			   * 32 MiB, at least one tile row) */
 };
 
 struct import_result {
