@@ -578,6 +578,7 @@ struct img_tiled_out {
 	bool mip = false;
 	std::vector<level> lv;
 	std::vector<float> f0;
+	std::vector<char> tilebuf;
 	int spool = -1;
 	bool failed = false;
 };
@@ -795,6 +796,36 @@ void tiled_discard(img_tiled_out *o)
 	o->spool = -1;
 }
 
+// Writes rows [y0, y0 + n) of a w-wide level (packed rows of the stored type). Whole tiles go
+// through write_tiles (which may compress in parallel); tiles crossing the right or bottom
+// edge go one by one from a zero-padded tile, so their padding is zeros (small once zipped,
+// and the file does not depend on whatever a scratch buffer held before).
+bool write_band(img_tiled_out *o, int w, int y0, int n, const char *data)
+{
+	int T = o->tile;
+	size_t row = (size_t)w * o->px;
+	int wfull = w / T * T, nfull = n / T * T;
+	if (wfull && nfull &&
+	    !o->out->write_tiles(0, wfull, y0, y0 + nfull, 0, 1, o->td, data, (stride_t)o->px,
+				 (stride_t)row))
+		return false;
+	o->tilebuf.resize((size_t)T * T * o->px);
+	for (int ty = 0; ty < n; ty += T) {
+		int rows = std::min(T, n - ty);
+		for (int tx = ty < nfull ? wfull : 0; tx < w; tx += T) {
+			int cols = std::min(T, w - tx);
+			std::memset(o->tilebuf.data(), 0, o->tilebuf.size());
+			for (int y = 0; y < rows; y++)
+				std::memcpy(o->tilebuf.data() + (size_t)y * T * o->px,
+					    data + (size_t)(ty + y) * row + (size_t)tx * o->px,
+					    (size_t)cols * o->px);
+			if (!o->out->write_tile(tx, y0 + ty, 0, o->td, o->tilebuf.data()))
+				return false;
+		}
+	}
+	return true;
+}
+
 int tiled_open_impl(img_tiled_out *o, const char *path, int width, int height, int channels,
 		    enum img_type type, int tile, bool mip, const char *desc, char *err)
 {
@@ -857,7 +888,7 @@ int tiled_rows_impl(img_tiled_out *o, const void *rows, int n, char *err)
 	}
 	const char *p = (const char *)rows;
 	size_t row = (size_t)o->width * o->px;
-	if (!o->out->write_tiles(0, o->width, o->rows, o->rows + n, 0, 1, o->td, p)) {
+	if (!write_band(o, o->width, o->rows, n, p)) {
 		set_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
 		return -EIO;
 	}
@@ -894,6 +925,7 @@ int tiled_finish_impl(img_tiled_out *o, char *err)
 		}
 		ImageSpec s(L.w, L.h, o->nch, o->td);
 		s.tile_width = s.tile_height = o->tile;
+		s.attribute("compression", "zip");
 		// As make_texture: TIFF takes the levels as appended subimages.
 		ImageOutput::OpenMode mode = o->out->supports("mipmap")
 						     ? ImageOutput::AppendMIPLevel
@@ -913,7 +945,7 @@ int tiled_finish_impl(img_tiled_out *o, char *err)
 						std::strerror(-rc));
 				return rc;
 			}
-			if (!o->out->write_tiles(0, L.w, y0, y0 + n, 0, 1, o->td, band.data())) {
+			if (!write_band(o, L.w, y0, n, band.data())) {
 				set_err(err, "%s: cannot write: %s", o->path.c_str(),
 					o->out->geterror());
 				return -EIO;

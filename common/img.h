@@ -1,5 +1,6 @@
 /* img — the C interface to OpenImageIO (img.cpp is the only C++ that touches it): a region
- * reader over a private OIIO::ImageCache, and whole-image read/write for tools and tests.
+ * reader over a private OIIO::ImageCache, whole-image read/write for tools and tests, and a
+ * streaming writer of tiled, mipmapped TIFFs for images larger than memory (img_tiled_*).
  *
  * Threads: an img_cache may be used by any number of threads at once (OIIO's cache is
  * thread-safe and its error messages are per thread); img_write/img_read are reentrant.
