@@ -62,7 +62,7 @@ static int teardown(void **state)
 
 static int16_t pix(int x, int y)
 {
-	return (int16_t)(x * 100 - y * 7 + 3);
+	return (int16_t)(x * 100 - y * 7 + 3 + (x * x + 3 * y * y) % 97); /* not linear */
 }
 
 /* A w×h int16 GeoTIFF with geotransform gt in EPSG:epsg (pixel (x, y) = pix(x, y)). */
