@@ -1,7 +1,8 @@
-/* import — GDAL in, OpenImageIO out (see import.h). The steps: open with GDAL, read every
- * wanted band pixel-interleaved into one buffer, take the geotransform (snapping float32
- * coordinate noise to the half-pixel lattice), turn the image north-up and west→east, rotate
- * a global raster's columns so it starts at −180°, and hand the buffer to img_write_tiled_desc.
+/* import — GDAL in, OpenImageIO out (see import.h). The steps: open with GDAL, take the
+ * geotransform (snapping float32 coordinate noise to the half-pixel lattice) and decide the
+ * bounds and the column rotation (a global raster starts at −180°), then per band of tile
+ * rows: read every wanted band pixel-interleaved, turn it north-up and west→east, rotate the
+ * columns, and hand it to the streaming tiled writer (img_tiled_rows).
  * Thread-safety: reentrant; GDALAllRegister runs once.
  */
 #include "import.h"
@@ -202,6 +203,7 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 	CPLPushErrorHandler(CPLQuietErrorHandler);
 	CPLErrorReset();
 	unsigned char *buf = NULL;
+	struct img_tiled_out *tw = NULL;
 	int rc = 0;
 	GDALDatasetH ds = GDALOpenEx(src, GDAL_OF_RASTER | GDAL_OF_READONLY, NULL, NULL, NULL);
 	if (!ds) {
@@ -272,50 +274,17 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 		r.west = -180, r.south = -90, r.east = 180, r.north = 90;
 	}
 
-	size_t sz = img_type_bytes(type), px = sz * (size_t)nch;
-	size_t row = px * (size_t)w;
-	double t0 = now_s();
-	buf = malloc(row * (size_t)h);
-	if (!buf) {
-		snprintf(err, 256, "%s: cannot allocate %zu MiB to convert it", src,
-			 row * (size_t)h >> 20);
-		rc = -EFBIG;
-		goto out;
-	}
-	GDALRasterIOExtraArg extra;
-	INIT_RASTERIO_EXTRA_ARG(extra);
-	if (GDALDatasetRasterIOEx(ds, GF_Read, 0, 0, (int)w, (int)h, buf, (int)w, (int)h, rt, nch,
-				  bands, (GSpacing)px, (GSpacing)row, (GSpacing)sz,
-				  &extra) != CE_None) {
-		snprintf(err, 256, "%s: read failed: %s", src, gdal_msg());
-		rc = -EIO;
-		goto out;
-	}
-	r.read_s = now_s() - t0;
-
-	if (has_nd && type == IMG_F32) {
-		float *f = (float *)(void *)buf, ndf = (float)nd;
-		size_t n = (size_t)w * (size_t)h * (size_t)nch;
-		for (size_t i = 0; i < n; i++)
-			if (f[i] == ndf)
-				f[i] = NAN;
-	} else if (has_nd) {
-		r.has_nodata = true;
-		r.nodata = nd;
-	}
-	if (r.flipped_rows)
-		flip_rows(buf, h, row);
-	if (colflip)
-		flip_cols(buf, w, h, px);
+	/* Every decision about bounds and column order comes from the georeferencing alone, so
+	 * it is made (and refused) before a pixel is read. */
 	double span = r.east - r.west;
+	int64_t c0 = 0;
 	if (r.georeferenced && !o->has_bounds && fabs(span - 360) < 1e-9 * 360) {
 		double dx = span / (double)w;
 		/* west' in [-180 - dx/2, -180 + dx/2): a raster already there stays put */
-		int64_t c0 = (int64_t)ceil((-180 - r.west) / dx - 0.5 - 1e-9) % w;
+		c0 = (int64_t)ceil((-180 - r.west) / dx - 0.5 - 1e-9) % w;
 		if (c0 < 0)
 			c0 += w;
 		if (c0) {
-			rotate_cols(buf, w, h, px, c0);
 			r.shifted_cols = (int)c0;
 			r.west += (double)c0 * dx;
 			while (r.west > -180 + dx)
@@ -333,22 +302,81 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 		rc = -EINVAL;
 		goto out;
 	}
+	if (has_nd && type != IMG_F32) {
+		r.has_nodata = true;
+		r.nodata = nd;
+	}
 
 	char desc[256];
 	int dl = snprintf(desc, sizeof desc, "clipmap:bounds=%.17g,%.17g,%.17g,%.17g", r.west,
 			  r.south, r.east, r.north);
 	if (r.has_nodata)
 		snprintf(desc + dl, sizeof desc - (size_t)dl, " clipmap:nodata=%.17g", r.nodata);
-	t0 = now_s();
-	rc = img_write_tiled_desc(dst, (int)w, (int)h, nch, type, buf, o->tile ? o->tile : 256,
-				  !o->no_mip, desc, err);
-	r.write_s = now_s() - t0;
+
+	/* Stream: bands of whole tile rows (several when rows are short, up to ~32 MiB), read
+	 * in output order (a south→north source from the bottom up), turned north-up and
+	 * west→east in place, and handed to the tiled writer, which builds the MIP levels as
+	 * the rows pass. */
+	size_t sz = img_type_bytes(type), px = sz * (size_t)nch;
+	size_t row = px * (size_t)w;
+	int tile = o->tile ? o->tile : 256;
+	int64_t k = ((int64_t)32 << 20) / ((int64_t)row * tile);
+	int band = tile * (int)(k < 1 ? 1 : k > 16 ? 16 : k);
+	if (o->band_rows > 0)
+		band = (o->band_rows + tile - 1) / tile * tile;
+	if (band > h)
+		band = (int)h;
+	buf = xmalloc(row * (size_t)band);
+	if ((rc = img_tiled_open(&tw, dst, (int)w, (int)h, nch, type, tile, !o->no_mip, desc,
+				 err)))
+		goto out;
+	GDALRasterIOExtraArg extra;
+	INIT_RASTERIO_EXTRA_ARG(extra);
+	for (int64_t y0 = 0; y0 < h; y0 += band) {
+		int n = (int)(h - y0 < band ? h - y0 : band);
+		int64_t sy = r.flipped_rows ? h - y0 - n : y0;
+		double t0 = now_s();
+		CPLErrorReset();
+		if (GDALDatasetRasterIOEx(ds, GF_Read, 0, (int)sy, (int)w, n, buf, (int)w, n, rt,
+					  nch, bands, (GSpacing)px, (GSpacing)row, (GSpacing)sz,
+					  &extra) != CE_None) {
+			snprintf(err, 256, "%s: read failed at rows %lld..%lld of %lld: %s", src,
+				 (long long)sy, (long long)sy + n - 1, (long long)h, gdal_msg());
+			rc = -EIO;
+			goto out;
+		}
+		GDALFlushCache(ds); /* drop the blocks just read: GDAL's cache would keep them */
+		r.read_s += now_s() - t0;
+		if (has_nd && type == IMG_F32) {
+			float *f = (float *)(void *)buf, ndf = (float)nd;
+			size_t cnt = (size_t)w * (size_t)n * (size_t)nch;
+			for (size_t i = 0; i < cnt; i++)
+				if (f[i] == ndf)
+					f[i] = NAN;
+		}
+		if (r.flipped_rows)
+			flip_rows(buf, n, row);
+		if (colflip)
+			flip_cols(buf, w, n, px);
+		if (c0)
+			rotate_cols(buf, w, n, px, c0);
+		t0 = now_s();
+		rc = img_tiled_rows(tw, buf, n, err);
+		r.write_s += now_s() - t0;
+		if (rc)
+			goto out;
+	}
+	double t1 = now_s();
+	rc = img_tiled_finish(tw, err);
+	tw = NULL;
+	r.write_s += now_s() - t1;
 	if (rc)
 		goto out;
 	r.width = (int)w, r.height = (int)h, r.channels = nch, r.type = type;
 	if (res)
 		*res = r;
 out:
+	img_tiled_abort(tw); /* a failed import leaves neither dst nor dst.tmp behind */
 	free(buf);
 	if (ds)
 		GDALClose(ds);

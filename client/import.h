@@ -6,8 +6,10 @@
  * (degrees; the `file` node takes them when the planet file gives no `bounds`).
  *
  * Library code: never logs (GDAL's own messages are silenced and returned through err).
- * Reentrant; GDAL's driver registration runs once (pthread_once). Holds the whole image in
- * memory while it converts (width × height × bands × sample size, plus OIIO's pyramid).
+ * Reentrant; GDAL's driver registration runs once (pthread_once). Streams: reads the source
+ * in bands of whole tile rows and writes them as they come (img_tiled_*), so memory is
+ * O(width × tile × bands) whatever the height; the coarser MIP levels are spooled to an
+ * unlinked temporary file beside dst (at most 1/3 of the raw image) until level 0 is done.
  */
 #ifndef CLIPMAP_IMPORT_H
 #define CLIPMAP_IMPORT_H
@@ -21,6 +23,8 @@ struct import_opts {
 	int band;	  /* 1-based band to import; 0: all bands (at most 4) */
 	int tile;	  /* tile edge in pixels; 0: 256 */
 	bool no_mip;	  /* skip the MIP pyramid */
+	int band_rows;	  /* rows read per band, a multiple of tile; 0: automatic (about
+			   * 32 MiB, at least one tile row) */
 };
 
 struct import_result {
@@ -32,7 +36,8 @@ struct import_result {
 	int shifted_cols;		/* columns rotated to start at −180° (global rasters) */
 	bool has_nodata;
 	double nodata;			/* integer outputs: the recorded nodata value */
-	double read_s, write_s;		/* seconds spent reading (GDAL) and writing (OIIO) */
+	double read_s, write_s;		/* seconds spent reading (GDAL) and writing (OIIO,
+					 * including the MIP levels) */
 };
 
 /* Converts src into dst (a .tif/.tiff path; written to dst.tmp, then renamed). o may be NULL

@@ -6,6 +6,7 @@
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
+#include <OpenImageIO/fmath.h>
 #include <OpenImageIO/imagecache.h>
 #include <OpenImageIO/imageio.h>
 
@@ -14,12 +15,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <ctime>
 #include <fcntl.h>
 #include <memory>
 #include <new>
 #include <string>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <vector>
 
 using namespace OIIO;
 
@@ -536,4 +539,514 @@ extern "C" int img_read(const char *path, enum img_type type, void **pixels,
 		set_err(err, "%s: %s", path, e.what());
 		return -EIO;
 	}
+}
+
+// ---- streaming tiled writer (img_tiled_*) ----
+//
+// make_texture (OIIO 2.4, maketexture.cpp, filter "box", forcefloat) keeps the top level as
+// float (the stored type converted, normalised), and computes each coarser level in float
+// from the float level above: resize_block_2pass (0.5·(a+b) across, then 0.5·(r0+r1) down)
+// when both sides of the level above are even, otherwise resize_block_ (bilinear sample at
+// each destination pixel's centre, clamped at the edges). The cascade below repeats exactly
+// those float operations, row by row: destination row y needs at most the two newest rows of
+// the level above, so each level keeps a two-row window. Levels ≥ 1 are converted to the
+// stored type as OIIO's ImageOutput would and spooled to a temporary file until level 0 is
+// complete (TIFF stores the MIP levels in order).
+
+struct img_tiled_out {
+	struct level {
+		int w = 0, h = 0;
+		int rows_in = 0;  // rows of this level pushed into the cascade
+		int rows_out = 0; // rows of the next level produced from this one
+		bool two_pass = false;
+		std::vector<float> ring;     // the two newest rows (slot r & 1)
+		std::vector<int> xt;	     // bilinear: left texel per destination column
+		std::vector<float> xf;	     // bilinear: its fraction
+		std::vector<float> s0, s1;   // two-pass: the halved rows
+		std::vector<float> next;     // the row produced for the next level
+		std::vector<char> band;	     // this level (≥ 1) in the stored type, tile rows
+		int band_y0 = 0, band_n = 0; // rows [band_y0, band_y0 + band_n) held in band
+		off_t off = 0;		     // where this level starts in the spool
+		size_t row_bytes = 0;
+	};
+	std::string path, tmp;
+	std::unique_ptr<ImageOutput> out;
+	TypeDesc td;
+	int width = 0, height = 0, nch = 0, tile = 0;
+	size_t px = 0;
+	int rows = 0;
+	bool mip = false;
+	std::vector<level> lv;
+	std::vector<float> f0;
+	std::vector<char> tilebuf;
+	int spool = -1;
+	bool failed = false;
+};
+
+namespace {
+
+int spool_open(const std::string &path)
+{
+	std::string dir = ".";
+	size_t slash = path.rfind('/');
+	if (slash != std::string::npos)
+		dir = slash ? path.substr(0, slash) : "/";
+	int fd = open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+	if (fd >= 0)
+		return fd;
+	std::string t = path + ".mip.XXXXXX";
+	std::vector<char> name(t.begin(), t.end());
+	name.push_back(0);
+	fd = mkostemp(name.data(), O_CLOEXEC);
+	if (fd < 0)
+		return -errno;
+	unlink(name.data());
+	return fd;
+}
+
+int write_all(int fd, const char *p, size_t n, off_t off)
+{
+	while (n) {
+		ssize_t k = pwrite(fd, p, n, off);
+		if (k < 0 && errno == EINTR)
+			continue;
+		if (k <= 0)
+			return k < 0 ? -errno : -EIO;
+		p += k, n -= (size_t)k, off += k;
+	}
+	return 0;
+}
+
+int read_all(int fd, char *p, size_t n, off_t off)
+{
+	while (n) {
+		ssize_t k = pread(fd, p, n, off);
+		if (k < 0 && errno == EINTR)
+			continue;
+		if (k <= 0)
+			return k < 0 ? -errno : -EIO;
+		p += k, n -= (size_t)k, off += k;
+	}
+	return 0;
+}
+
+int flush_band(img_tiled_out *o, img_tiled_out::level &L, char *err)
+{
+	if (!L.band_n)
+		return 0;
+	int rc = write_all(o->spool, L.band.data(), L.row_bytes * (size_t)L.band_n,
+			   L.off + (off_t)L.row_bytes * L.band_y0);
+	if (rc) {
+		set_err(err, "%s: %s", o->path.c_str(),
+			std::string("cannot spool MIP levels: ") + std::strerror(-rc));
+		return rc;
+	}
+	L.band_y0 += L.band_n;
+	L.band_n = 0;
+	return 0;
+}
+
+int push_row(img_tiled_out *o, size_t k, const float *row, char *err);
+
+// Level k + 1's next row is in L.next: store it (stored type) and feed it on.
+int emit_row(img_tiled_out *o, size_t k, char *err)
+{
+	img_tiled_out::level &L = o->lv[k], &D = o->lv[k + 1];
+	int y = L.rows_out++;
+	char *dst = D.band.data() + (size_t)(y - D.band_y0) * D.row_bytes;
+	if (!convert_pixel_values(TypeFloat, L.next.data(), o->td, dst, D.w * o->nch)) {
+		set_err(err, "%s: %s", o->path.c_str(), std::string("pixel conversion failed"));
+		return -EIO;
+	}
+	D.band_n++;
+	if (D.band_n == o->tile || y == D.h - 1) {
+		int rc = flush_band(o, D, err);
+		if (rc)
+			return rc;
+	}
+	return push_row(o, k + 1, L.next.data(), err);
+}
+
+int push_row(img_tiled_out *o, size_t k, const float *row, char *err)
+{
+	img_tiled_out::level &L = o->lv[k];
+	int nch = o->nch;
+	size_t n = (size_t)L.w * nch;
+	int r = L.rows_in++;
+	std::memcpy(L.ring.data() + (size_t)(r & 1) * n, row, n * sizeof(float));
+	if (k + 1 >= o->lv.size())
+		return 0;
+	const img_tiled_out::level &D = o->lv[k + 1];
+	if (L.two_pass) {
+		if (!(r & 1))
+			return 0;
+		const float *a = L.ring.data(), *b = a + n; // rows r - 1 (even), r (odd)
+		size_t dn = (size_t)D.w * nch;
+		for (size_t i = 0, x = 0; x < (size_t)D.w; x++) {
+			for (int c = 0; c < nch; c++, i++) {
+				size_t s = 2 * x * nch + c;
+				L.s0[i] = 0.5f * (float)(a[s] + a[s + nch]);
+				L.s1[i] = 0.5f * (float)(b[s] + b[s + nch]);
+			}
+		}
+		for (size_t i = 0; i < dn; i++)
+			L.next[i] = (float)(0.5f * (L.s0[i] + L.s1[i]));
+		return emit_row(o, k, err);
+	}
+	// resize_block_ / interppixel_NDC with WrapClamp, the same float expressions.
+	float yscale = 1.0f / (float)D.h, yoffset = 0.0f, fy = 0.0f, fh = (float)L.h;
+	while (L.rows_out < D.h) {
+		int y = L.rows_out;
+		float t = (y + 0.5f) * yscale + yoffset;
+		float yy = fy + t * fh;
+		yy -= 0.5f;
+		int yt;
+		float yfrac = floorfrac(yy, &yt);
+		int ya = std::min(std::max(yt, 0), L.h - 1);
+		int yb = std::min(std::max(yt + 1, 0), L.h - 1);
+		if (yb > r)
+			break;
+		if (ya < r - 1) { // cannot happen: rows are consumed in order
+			set_err(err, "%s: %s", o->path.c_str(), std::string("MIP cascade out of order"));
+			return -EIO;
+		}
+		const float *ra = L.ring.data() + (size_t)(ya & 1) * n;
+		const float *rb = L.ring.data() + (size_t)(yb & 1) * n;
+		for (int x = 0; x < D.w; x++) {
+			int xa = L.xt[(size_t)x];
+			int xb = std::min(xa + 1, L.w - 1);
+			xa = std::max(xa, 0);
+			xb = std::max(xb, 0);
+			bilerp(ra + (size_t)xa * nch, ra + (size_t)xb * nch, rb + (size_t)xa * nch,
+			       rb + (size_t)xb * nch, L.xf[(size_t)x], yfrac, nch,
+			       L.next.data() + (size_t)x * nch);
+		}
+		int rc = emit_row(o, k, err);
+		if (rc)
+			return rc;
+	}
+	return 0;
+}
+
+void setup_levels(img_tiled_out *o)
+{
+	int w = o->width, h = o->height;
+	off_t off = 0;
+	for (;;) {
+		img_tiled_out::level L;
+		L.w = w, L.h = h;
+		L.row_bytes = (size_t)w * o->px;
+		if (!o->lv.empty()) {
+			L.off = off;
+			off += (off_t)L.row_bytes * h;
+			L.band.resize(L.row_bytes * (size_t)std::min(o->tile, h));
+		}
+		o->lv.push_back(std::move(L));
+		if (w == 1 && h == 1)
+			break;
+		w = w > 1 ? w / 2 : 1;
+		h = h > 1 ? h / 2 : 1;
+	}
+	for (size_t k = 0; k + 1 < o->lv.size(); k++) {
+		img_tiled_out::level &L = o->lv[k];
+		const img_tiled_out::level &D = o->lv[k + 1];
+		size_t n = (size_t)L.w * o->nch, dn = (size_t)D.w * o->nch;
+		L.ring.resize(2 * n);
+		L.next.resize(dn);
+		L.two_pass = L.w % 2 == 0 && L.h % 2 == 0;
+		if (L.two_pass) {
+			L.s0.resize(dn);
+			L.s1.resize(dn);
+		} else {
+			float xscale = 1.0f / (float)D.w, xoffset = 0.0f, fx = 0.0f;
+			float fw = (float)L.w;
+			L.xt.resize((size_t)D.w);
+			L.xf.resize((size_t)D.w);
+			for (int x = 0; x < D.w; x++) {
+				float s = (x + 0.5f) * xscale + xoffset;
+				float xx = fx + s * fw;
+				xx -= 0.5f;
+				L.xf[(size_t)x] = floorfrac(xx, &L.xt[(size_t)x]);
+			}
+		}
+	}
+	o->lv.back().ring.resize((size_t)o->lv.back().w * o->nch * 2);
+	o->f0.resize((size_t)o->width * o->nch);
+}
+
+std::string date_now()
+{
+	time_t t = time(nullptr);
+	struct tm tm;
+	localtime_r(&t, &tm);
+	char b[32];
+	if (!strftime(b, sizeof b, "%Y:%m:%d %H:%M:%S", &tm))
+		b[0] = 0;
+	return b;
+}
+
+void tiled_discard(img_tiled_out *o)
+{
+	if (o->out)
+		o->out->close();
+	o->out.reset();
+	unlink(o->tmp.c_str());
+	if (o->spool >= 0)
+		close(o->spool);
+	o->spool = -1;
+}
+
+// Writes rows [y0, y0 + n) of a w-wide level (packed rows of the stored type). Whole tiles go
+// through write_tiles (which may compress in parallel); tiles crossing the right or bottom
+// edge go one by one from a zero-padded tile, so their padding is zeros (small once zipped,
+// and the file does not depend on whatever a scratch buffer held before).
+bool write_band(img_tiled_out *o, int w, int y0, int n, const char *data)
+{
+	int T = o->tile;
+	size_t row = (size_t)w * o->px;
+	int wfull = w / T * T, nfull = n / T * T;
+	if (wfull && nfull &&
+	    !o->out->write_tiles(0, wfull, y0, y0 + nfull, 0, 1, o->td, data, (stride_t)o->px,
+				 (stride_t)row))
+		return false;
+	o->tilebuf.resize((size_t)T * T * o->px);
+	for (int ty = 0; ty < n; ty += T) {
+		int rows = std::min(T, n - ty);
+		for (int tx = ty < nfull ? wfull : 0; tx < w; tx += T) {
+			int cols = std::min(T, w - tx);
+			std::memset(o->tilebuf.data(), 0, o->tilebuf.size());
+			for (int y = 0; y < rows; y++)
+				std::memcpy(o->tilebuf.data() + (size_t)y * T * o->px,
+					    data + (size_t)(ty + y) * row + (size_t)tx * o->px,
+					    (size_t)cols * o->px);
+			if (!o->out->write_tile(tx, y0 + ty, 0, o->td, o->tilebuf.data()))
+				return false;
+		}
+	}
+	return true;
+}
+
+int tiled_open_impl(img_tiled_out *o, const char *path, int width, int height, int channels,
+		    enum img_type type, int tile, bool mip, const char *desc, char *err)
+{
+	const char *fmt = nullptr;
+	int rc = pick_format(path, type, true, &fmt, err);
+	if (rc)
+		return rc;
+	o->path = path;
+	o->tmp = o->path + ".tmp";
+	o->td = to_desc(type);
+	o->width = width, o->height = height, o->nch = channels, o->tile = tile;
+	o->px = (size_t)channels * img_type_bytes(type);
+	o->mip = mip;
+	ImageSpec spec(width, height, channels, o->td);
+	spec.attribute("oiio:UnassociatedAlpha", 1);
+	spec.tile_width = spec.tile_height = tile;
+	spec.attribute("compression", "zip");
+	double bytes = (double)width * height * channels * (double)img_type_bytes(type);
+	if (bytes * (mip ? 4.0 / 3.0 : 1.0) > 3.5e9)
+		spec.attribute("tiff:bigtiff", 1);
+	if (desc)
+		spec.attribute("ImageDescription", desc);
+	if (mip) { // what make_texture adds
+		spec.attribute("planarconfig", "contig");
+		spec.attribute("wrapmodes", "black,black");
+		spec.attribute("DateTime", date_now());
+		spec.attribute("textureformat", "Plain Texture");
+		spec.attribute("fovcot", (float)width / (float)height);
+		setup_levels(o);
+		if (o->lv.size() > 1) {
+			o->spool = spool_open(o->path);
+			if (o->spool < 0) {
+				set_err(err, "%s: %s", path,
+					std::string("cannot create a temporary file for the MIP "
+						    "levels: ") + std::strerror(-o->spool));
+				return -EIO;
+			}
+		}
+	}
+	o->out = ImageOutput::create(fmt);
+	if (!o->out) {
+		set_err(err, "%s: %s", path, OIIO::geterror());
+		return -EIO;
+	}
+	if (!o->out->open(o->tmp, spec)) {
+		set_err(err, "%s: cannot write: %s", path, o->out->geterror());
+		tiled_discard(o);
+		return -EIO;
+	}
+	return 0;
+}
+
+int tiled_rows_impl(img_tiled_out *o, const void *rows, int n, char *err)
+{
+	if (n <= 0 || o->rows + n > o->height || (n % o->tile && o->rows + n != o->height)) {
+		if (err)
+			snprintf(err, 256, "%s: %d rows at row %d of %d (tile %d)", o->path.c_str(),
+				 n, o->rows, o->height, o->tile);
+		return -EINVAL;
+	}
+	const char *p = (const char *)rows;
+	size_t row = (size_t)o->width * o->px;
+	if (!write_band(o, o->width, o->rows, n, p)) {
+		set_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
+		return -EIO;
+	}
+	o->rows += n;
+	if (!o->mip || o->lv.size() < 2)
+		return 0;
+	for (int y = 0; y < n; y++) {
+		if (!convert_pixel_values(o->td, p + (size_t)y * row, TypeFloat, o->f0.data(),
+					  o->width * o->nch)) {
+			set_err(err, "%s: %s", o->path.c_str(), std::string("pixel conversion failed"));
+			return -EIO;
+		}
+		int rc = push_row(o, 0, o->f0.data(), err);
+		if (rc)
+			return rc;
+	}
+	return 0;
+}
+
+int tiled_finish_impl(img_tiled_out *o, char *err)
+{
+	if (o->rows != o->height) {
+		if (err)
+			snprintf(err, 256, "%s: only %d of %d rows were written", o->path.c_str(),
+				 o->rows, o->height);
+		return -EINVAL;
+	}
+	std::vector<char> band;
+	for (size_t k = 1; o->mip && k < o->lv.size(); k++) {
+		img_tiled_out::level &L = o->lv[k];
+		if (L.band_y0 != L.h || L.band_n) { // cannot happen: the cascade ends each level
+			set_err(err, "%s: %s", o->path.c_str(), std::string("MIP level incomplete"));
+			return -EIO;
+		}
+		ImageSpec s(L.w, L.h, o->nch, o->td);
+		s.tile_width = s.tile_height = o->tile;
+		s.attribute("compression", "zip");
+		// As make_texture: TIFF takes the levels as appended subimages.
+		ImageOutput::OpenMode mode = o->out->supports("mipmap")
+						     ? ImageOutput::AppendMIPLevel
+						     : ImageOutput::AppendSubimage;
+		if (!o->out->open(o->tmp, s, mode)) {
+			set_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
+			return -EIO;
+		}
+		band.resize(L.row_bytes * (size_t)std::min(o->tile, L.h));
+		for (int y0 = 0; y0 < L.h; y0 += o->tile) {
+			int n = std::min(o->tile, L.h - y0);
+			int rc = read_all(o->spool, band.data(), L.row_bytes * (size_t)n,
+					  L.off + (off_t)L.row_bytes * y0);
+			if (rc) {
+				set_err(err, "%s: %s", o->path.c_str(),
+					std::string("cannot read the spooled MIP levels: ") +
+						std::strerror(-rc));
+				return rc;
+			}
+			if (!write_band(o, L.w, y0, n, band.data())) {
+				set_err(err, "%s: cannot write: %s", o->path.c_str(),
+					o->out->geterror());
+				return -EIO;
+			}
+		}
+	}
+	if (!o->out->close()) {
+		set_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
+		return -EIO;
+	}
+	o->out.reset();
+	if (o->spool >= 0)
+		close(o->spool);
+	o->spool = -1;
+	return publish(o->tmp, o->path.c_str(), err);
+}
+
+} // namespace
+
+extern "C" int img_tiled_open(struct img_tiled_out **out, const char *path, int width,
+			      int height, int channels, enum img_type type, int tile, bool mip,
+			      const char *description, char err[256])
+{
+	*out = nullptr;
+	if (width <= 0 || height <= 0 || channels <= 0 || channels > 4 || tile <= 0 || tile % 16) {
+		if (err)
+			snprintf(err, 256, "%s: bad image size %dx%dx%d or tile %d", path, width,
+				 height, channels, tile);
+		return -EINVAL;
+	}
+	img_tiled_out *o = nullptr;
+	try {
+		o = new img_tiled_out;
+		int rc = tiled_open_impl(o, path, width, height, channels, type, tile, mip,
+					 description, err);
+		if (rc) {
+			tiled_discard(o);
+			delete o;
+			return rc;
+		}
+		*out = o;
+		return 0;
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (const std::exception &e) {
+		set_err(err, "%s: %s", path, e.what());
+		if (o) {
+			tiled_discard(o);
+			delete o;
+		}
+		return -EIO;
+	}
+}
+
+extern "C" int img_tiled_rows(struct img_tiled_out *o, const void *rows, int n, char err[256])
+{
+	if (o->failed) {
+		if (err)
+			snprintf(err, 256, "%s: an earlier write failed", o->path.c_str());
+		return -EIO;
+	}
+	try {
+		int rc = tiled_rows_impl(o, rows, n, err);
+		if (rc && rc != -EINVAL)
+			o->failed = true;
+		return rc;
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (const std::exception &e) {
+		set_err(err, "%s: %s", o->path.c_str(), e.what());
+		o->failed = true;
+		return -EIO;
+	}
+}
+
+extern "C" int img_tiled_finish(struct img_tiled_out *o, char err[256])
+{
+	int rc;
+	try {
+		rc = o->failed ? -EIO : tiled_finish_impl(o, err);
+		if (o->failed && err)
+			snprintf(err, 256, "%s: an earlier write failed", o->path.c_str());
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (const std::exception &e) {
+		set_err(err, "%s: %s", o->path.c_str(), e.what());
+		rc = -EIO;
+	}
+	if (rc)
+		tiled_discard(o);
+	delete o;
+	return rc;
+}
+
+extern "C" void img_tiled_abort(struct img_tiled_out *o)
+{
+	if (!o)
+		return;
+	try {
+		tiled_discard(o);
+	} catch (...) {
+	}
+	delete o;
 }

@@ -1,5 +1,6 @@
 /* img — the C interface to OpenImageIO (img.cpp is the only C++ that touches it): a region
- * reader over a private OIIO::ImageCache, and whole-image read/write for tools and tests.
+ * reader over a private OIIO::ImageCache, whole-image read/write for tools and tests, and a
+ * streaming writer of tiled, mipmapped TIFFs for images larger than memory (img_tiled_*).
  *
  * Threads: an img_cache may be used by any number of threads at once (OIIO's cache is
  * thread-safe and its error messages are per thread); img_write/img_read are reentrant.
@@ -80,6 +81,30 @@ int img_write_tiled(const char *path, int width, int height, int channels, enum 
 int img_write_tiled_desc(const char *path, int width, int height, int channels, enum img_type type,
 			 const void *pixels, int tile, bool mip, const char *description,
 			 char err[256]);
+/* A streaming writer for the layout img_write_tiled_desc makes (tiled tile² zip TIFF, BigTIFF
+ * when large, description, and with mip a MIP pyramid with make_texture's box filter, bit for
+ * bit: levels computed in float from the level above, a 2×2 box where both sides are even,
+ * OIIO's bilinear resample otherwise), fed rows top to bottom, so memory is O(width × tile)
+ * instead of O(image). Level 0 goes straight to path.tmp band by band; the coarser levels are
+ * built at the same time through a cascade of two-row windows and spooled (already converted
+ * to `type`) to an anonymous temporary file in path's directory (1/3 of the image's raw size
+ * at most), then appended once level 0 is complete. One writer is used by one thread. */
+struct img_tiled_out;
+
+/* Starts writing path (through path.tmp). Returns 0 with *out owned, or -EINVAL (bad size,
+ * tile, type or extension: only .tif/.tiff) / -EIO with err filled. */
+int img_tiled_open(struct img_tiled_out **out, const char *path, int width, int height,
+		   int channels, enum img_type type, int tile, bool mip, const char *description,
+		   char err[256]);
+/* Appends n rows (packed, `type`, channels interleaved) below those written so far. n must be
+ * a multiple of the tile size unless these rows complete the image. Returns 0, -EINVAL (bad
+ * n) or -EIO with err filled; after an error only img_tiled_abort is allowed. */
+int img_tiled_rows(struct img_tiled_out *o, const void *rows, int n, char err[256]);
+/* Writes the MIP levels, closes, fsyncs and renames path.tmp over path. Always frees o.
+ * Returns 0, -EINVAL (not every row was given) or -EIO with err filled (path.tmp removed). */
+int img_tiled_finish(struct img_tiled_out *o, char err[256]);
+/* Abandons the file: closes it, removes path.tmp and frees o. NULL is a no-op. */
+void img_tiled_abort(struct img_tiled_out *o);
 /* Copies the image's ImageDescription (TIFF) into buf (n bytes, NUL-terminated, truncated).
  * Returns 0, -ENODATA (the file has none) or -ENOENT / -EIO with err filled. */
 int img_cache_description(struct img_cache *c, const char *path, char *buf, size_t n,

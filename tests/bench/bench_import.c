@@ -3,7 +3,10 @@
  * write), then served by the `file` node: tile rate and memory for random access (any level,
  * anywhere) and for a flight (adjacent fine tiles along a path, the clipmap's pattern).
  * Default 10800×5400 (2′, 117 MB); CLIPMAP_BENCH_SCALE=1 runs the issue's 43200×21600 (30″,
- * 1.8 GB raw, minutes on 2 cores). Files live in /tmp and are removed. One worker. */
+ * 1.8 GB raw, minutes on 2 cores). Files live in /tmp and are removed. One worker.
+ * The source is generated and imported in child processes of their own, so "import peak
+ * RSS" is the import's alone: ru_maxrss of the import child (wait4). "serve peak RSS" is
+ * this process's ru_maxrss (getrusage RUSAGE_SELF) after serving. */
 #include <errno.h>
 #include <gdal/cpl_error.h>
 #include <gdal/gdal.h>
@@ -14,6 +17,7 @@
 #include <string.h>
 #include <sys/resource.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -99,7 +103,17 @@ int main(void)
 	snprintf(dst, sizeof dst, "/tmp/bench_import_out_%d.tif", (int)getpid());
 
 	double t0 = now();
-	make_source(src, w, h);
+	fflush(stdout);
+	pid_t pid = fork();
+	if (pid < 0)
+		die("fork", strerror(errno));
+	if (pid == 0) {
+		make_source(src, w, h);
+		_exit(0);
+	}
+	int status;
+	if (waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status))
+		die("source", "generator failed");
 	double tgen = now() - t0;
 	struct stat st;
 	stat(src, &st);
@@ -107,14 +121,34 @@ int main(void)
 	       st.st_size / 1e6, tgen, full ? "" : " (CLIPMAP_BENCH_SCALE=1: 43200x21600)");
 
 	struct import_result r;
+	int fds[2];
+	if (pipe(fds))
+		die("pipe", strerror(errno));
 	t0 = now();
-	if (import_raster(src, dst, NULL, &r, err))
-		die("import", err);
+	pid = fork();
+	if (pid < 0)
+		die("fork", strerror(errno));
+	if (pid == 0) {
+		close(fds[0]);
+		if (import_raster(src, dst, NULL, &r, err))
+			die("import", err);
+		if (write(fds[1], &r, sizeof r) != (ssize_t)sizeof r)
+			_exit(1);
+		_exit(0);
+	}
+	close(fds[1]);
+	ssize_t got = read(fds[0], &r, sizeof r);
+	close(fds[0]);
+	struct rusage ru;
+	if (wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status) ||
+	    got != (ssize_t)sizeof r)
+		die("import", "child failed");
 	double timp = now() - t0;
 	stat(dst, &st);
 	printf("import/%dx%d: %.1f s (GDAL read %.1f s, tiled mipmapped write %.1f s), %.1f Mpx/s, "
-	       "output %.0f MB, peak RSS %.0f MB\n", w, h, timp, r.read_s, r.write_s,
-	       (double)w * h / timp / 1e6, st.st_size / 1e6, peak_mb());
+	       "output %.0f MB, import peak RSS %.0f MB (ru_maxrss of the import child)\n", w, h,
+	       timp, r.read_s, r.write_s, (double)w * h / timp / 1e6, st.st_size / 1e6,
+	       ru.ru_maxrss / 1024.0);
 	unlink(src);
 
 	static struct planet pl = { .tile_size = 256, .max_level = 12, .a = 6378137.0 };
@@ -172,7 +206,7 @@ int main(void)
 	}
 	double tfl = now() - t0;
 	printf("import/serve flight (level %d, adjacent): %.0f tiles/s (%.2f ms/tile), RSS %.0f MB, "
-	       "peak RSS %.0f MB\n", fine, made / tfl, tfl / made * 1e3, rss_mb(), peak_mb());
+	       "serve peak RSS %.0f MB (ru_maxrss of this process)\n", fine, made / tfl, tfl / made * 1e3, rss_mb(), peak_mb());
 	gen_ctx_fini(&g);
 	node_fini(&n);
 	ini_free(ini);

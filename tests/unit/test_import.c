@@ -2,7 +2,11 @@
  * the test: pixels and bounds survive the round trip (tiled, mipmapped, bounds in the
  * description) and the `file` node places them from the recorded bounds; a global raster
  * from 0..360° comes out starting at −180°, a south-up one north-up; integer nodata is
- * recorded and honoured; errors name the file and the problem. */
+ * recorded and honoured; errors name the file and the problem. The import streams: sources
+ * read in several bands (rows not a multiple of the band) give the same pixels, the same MIP
+ * levels as OpenImageIO's make_texture of the whole image (the old in-memory path) and as a
+ * box/bilinear reference computed here; a truncated source fails clearly and leaves neither
+ * the destination nor its .tmp behind (an older destination stays as it was). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -16,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "img.h"
@@ -57,7 +62,7 @@ static int teardown(void **state)
 
 static int16_t pix(int x, int y)
 {
-	return (int16_t)(x * 100 - y * 7 + 3);
+	return (int16_t)(x * 100 - y * 7 + 3 + (x * x + 3 * y * y) % 97); /* not linear */
 }
 
 /* A w×h int16 GeoTIFF with geotransform gt in EPSG:epsg (pixel (x, y) = pix(x, y)). */
@@ -229,12 +234,190 @@ static void errors(void **state)
 	expect_error(tpath("utm.tif"), tpath("e5.tif"), NULL, -EINVAL, "utm.tif", "projected");
 }
 
+/* All MIP levels of path as int16, level m at lv[m] (sizes in lw, lh); returns the count. */
+static int read_levels(const char *path, int16_t *lv[16], int lw[16], int lh[16])
+{
+	struct img_cache *c = img_cache_create(64);
+	struct img_info ci;
+	char err[256];
+	if (img_cache_info(c, path, &ci, err))
+		fail_msg("%s", err);
+	assert_true(ci.mip_levels <= 16);
+	for (int m = 0; m < ci.mip_levels; m++) {
+		assert_int_equal(img_cache_level_size(c, path, m, &lw[m], &lh[m], err), 0);
+		lv[m] = malloc(sizeof(int16_t) * (size_t)lw[m] * (size_t)lh[m]);
+		if (img_cache_read(c, path, m, 0, lw[m], 0, lh[m], 0, 1, IMG_I16, lv[m], 0, err))
+			fail_msg("%s", err);
+	}
+	img_cache_destroy(c);
+	return ci.mip_levels;
+}
+
+/* The pyramid the importer promises, computed independently in double: each level halves
+ * (rounding down, not below 1); a 2×2 box where both sides of the level above are even,
+ * otherwise a bilinear sample of the level above at the destination pixel's centre (edges
+ * clamped). Values stay unrounded from level to level; the stored int16 is the rounded one. */
+static double *ref_level(const double *src, int sw, int sh, int dw, int dh)
+{
+	double *d = malloc(sizeof *d * (size_t)dw * (size_t)dh);
+	for (int y = 0; y < dh; y++)
+		for (int x = 0; x < dw; x++) {
+			double v;
+			if (sw % 2 == 0 && sh % 2 == 0) {
+				const double *a = src + (size_t)(2 * y) * sw + 2 * x;
+				v = (a[0] + a[1] + a[sw] + a[sw + 1]) / 4;
+			} else {
+				double fx = (x + 0.5) * sw / dw - 0.5, fy = (y + 0.5) * sh / dh - 0.5;
+				int x0 = (int)floor(fx), y0 = (int)floor(fy);
+				double ax = fx - x0, ay = fy - y0;
+				int xa = x0 < 0 ? 0 : x0, xb = x0 + 1 > sw - 1 ? sw - 1 : x0 + 1;
+				int ya = y0 < 0 ? 0 : y0, yb = y0 + 1 > sh - 1 ? sh - 1 : y0 + 1;
+				if (xb < 0)
+					xb = 0;
+				if (yb < 0)
+					yb = 0;
+				v = (1 - ay) * ((1 - ax) * src[(size_t)ya * sw + xa] +
+						ax * src[(size_t)ya * sw + xb]) +
+				    ay * ((1 - ax) * src[(size_t)yb * sw + xa] +
+					  ax * src[(size_t)yb * sw + xb]);
+			}
+			d[(size_t)y * dw + x] = v;
+		}
+	return d;
+}
+
+static void streaming_bands(void **state)
+{
+	(void)state;
+	/* 72×100 pixels of 5°, longitudes 0..360, rows south→north: read in bands of 32 rows
+	 * (tile 16) from the bottom up, the last band 4 rows; columns rotated by 36. */
+	enum { W = 72, H = 100 };
+	const double gt[6] = { 0, 5, 0, -90, 0, 1.8 };
+	write_geotiff(tpath("s.tif"), W, H, gt, 4326, NULL);
+	struct import_opts o = { .tile = 16, .band_rows = 32 };
+	struct import_result r;
+	char err[256] = "", desc[256];
+	if (import_raster(tpath("s.tif"), tpath("s_out.tif"), &o, &r, err))
+		fail_msg("%s", err);
+	assert_true(r.flipped_rows);
+	assert_int_equal(r.shifted_cols, 36);
+	struct img_cache *c = img_cache_create(16);
+	assert_int_equal(img_cache_description(c, tpath("s_out.tif"), desc, sizeof desc, err), 0);
+	img_cache_destroy(c);
+	assert_string_equal(desc, "clipmap:bounds=-180,-90,180,90");
+	assert_int_equal(access(tpath("s_out.tif.tmp"), F_OK), -1);
+
+	/* Level 0: every pixel where it belongs. */
+	int16_t *want = malloc(sizeof *want * W * H);
+	for (int y = 0; y < H; y++)
+		for (int x = 0; x < W; x++)
+			want[y * W + x] = pix((x + 36) % W, H - 1 - y);
+	int16_t *lv[16];
+	int lw[16], lh[16];
+	int nl = read_levels(tpath("s_out.tif"), lv, lw, lh);
+	assert_int_equal(nl, 7); /* 72×100 36×50 18×25 9×12 4×6 2×3 1×1 */
+	assert_int_equal(lw[0], W);
+	assert_int_equal(lh[0], H);
+	assert_memory_equal(lv[0], want, sizeof *want * W * H);
+
+	/* Every level: the independent reference (within the last unit: ties round either way
+	 * in float) ... */
+	double *ref = malloc(sizeof *ref * W * H);
+	for (int i = 0; i < W * H; i++)
+		ref[i] = want[i];
+	int w = W, h = H;
+	for (int m = 1; m < nl; m++) {
+		int dw = w > 1 ? w / 2 : 1, dh = h > 1 ? h / 2 : 1;
+		assert_int_equal(lw[m], dw);
+		assert_int_equal(lh[m], dh);
+		double *d = ref_level(ref, w, h, dw, dh);
+		for (int i = 0; i < dw * dh; i++)
+			if (fabs(lv[m][i] - d[i]) > 1.0)
+				fail_msg("level %d pixel %d,%d = %d, reference %.3f", m, i % dw, i / dw,
+					 lv[m][i], d[i]);
+		free(ref);
+		ref = d, w = dw, h = dh;
+	}
+	free(ref);
+
+	/* ... and exactly what the in-memory writer (OIIO make_texture) makes of the image. */
+	assert_int_equal(img_write_tiled_desc(tpath("s_ref.tif"), W, H, 1, IMG_I16, want, 16, true,
+					      desc, err), 0);
+	int16_t *rv[16];
+	int rw[16], rh[16];
+	assert_int_equal(read_levels(tpath("s_ref.tif"), rv, rw, rh), nl);
+	for (int m = 0; m < nl; m++) {
+		assert_int_equal(rw[m], lw[m]);
+		assert_int_equal(rh[m], lh[m]);
+		if (memcmp(rv[m], lv[m], sizeof(int16_t) * (size_t)lw[m] * (size_t)lh[m]))
+			fail_msg("level %d differs from make_texture's", m);
+		free(rv[m]);
+		free(lv[m]);
+	}
+
+	/* The same source in one band: the same file contents. */
+	o.band_rows = 0;
+	if (import_raster(tpath("s.tif"), tpath("s_one.tif"), &o, &r, err))
+		fail_msg("%s", err);
+	nl = read_levels(tpath("s_one.tif"), rv, rw, rh);
+	int n2 = read_levels(tpath("s_out.tif"), lv, lw, lh);
+	assert_int_equal(nl, n2);
+	for (int m = 0; m < nl; m++) {
+		assert_memory_equal(rv[m], lv[m], sizeof(int16_t) * (size_t)lw[m] * (size_t)lh[m]);
+		free(rv[m]);
+		free(lv[m]);
+	}
+	free(want);
+}
+
+static void truncated_source(void **state)
+{
+	(void)state;
+	/* An uncompressed striped GeoTIFF cut to 40 %: its header is intact, rows past the cut
+	 * are missing. */
+	enum { W = 64, H = 200 };
+	const double gt[6] = { -180, 360.0 / W, 0, 90, 0, -180.0 / H };
+	write_geotiff(tpath("t.tif"), W, H, gt, 4326, NULL);
+	FILE *f = fopen(tpath("t.tif"), "rb");
+	assert_non_null(f);
+	unsigned char *all = malloc(1 << 20);
+	size_t n = fread(all, 1, 1 << 20, f);
+	fclose(f);
+	assert_true(n > (size_t)W * H * 2);
+	f = fopen(tpath("t_cut.tif"), "wb");
+	assert_non_null(f);
+	assert_int_equal(fwrite(all, 1, n * 4 / 10, f), n * 4 / 10);
+	assert_int_equal(fclose(f), 0);
+	free(all);
+
+	/* An older destination survives a failed import untouched. */
+	struct import_opts o = { .tile = 16, .band_rows = 16 };
+	char err[256] = "";
+	if (import_raster(tpath("t.tif"), tpath("t_out.tif"), &o, NULL, err))
+		fail_msg("%s", err);
+	struct stat st0, st1;
+	assert_int_equal(stat(tpath("t_out.tif"), &st0), 0);
+	int rc = import_raster(tpath("t_cut.tif"), tpath("t_out.tif"), &o, NULL, err);
+	if (rc != -EIO || !strstr(err, "t_cut.tif") || !strstr(err, "read failed"))
+		fail_msg("truncated source: rc %d \"%s\"", rc, err);
+	assert_int_equal(stat(tpath("t_out.tif"), &st1), 0);
+	assert_true(st0.st_ino == st1.st_ino && st0.st_size == st1.st_size &&
+		    st0.st_mtim.tv_sec == st1.st_mtim.tv_sec &&
+		    st0.st_mtim.tv_nsec == st1.st_mtim.tv_nsec);
+	assert_int_equal(access(tpath("t_out.tif.tmp"), F_OK), -1);
+	/* And with no older destination: nothing at all. */
+	expect_error(tpath("t_cut.tif"), tpath("t_new.tif"), &o, -EIO, "t_cut.tif", "read failed");
+	assert_int_equal(access(tpath("t_new.tif.tmp"), F_OK), -1);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(round_trip),
 		cmocka_unit_test(global_shift_and_flip),
 		cmocka_unit_test(errors),
+		cmocka_unit_test(streaming_bands),
+		cmocka_unit_test(truncated_source),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
