@@ -86,6 +86,7 @@ struct view {
 	uint64_t frame_no;
 	int frame_bits; /* this frame's variant bits that every level shares */
 	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
+	double *fade;	/* per level: this frame's fade-in (1: fully shown) */
 	struct frame_uniforms fu;
 	/* framebuffer */
 	unsigned fbo, color_tex, depth_tex;
@@ -319,6 +320,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->was_usable = xcalloc((size_t)v->nlevels, sizeof *v->was_usable);
 	v->ready_since = xcalloc((size_t)v->nlevels, sizeof *v->ready_since);
 	v->floor = xcalloc((size_t)v->nlevels, sizeof *v->floor);
+	v->fade = xcalloc((size_t)v->nlevels, sizeof *v->fade);
 	int rc = view_clipmap_create(gl, src, v->nlevels, &v->cm, err);
 	if (rc == 0)
 		rc = get_program(v, NVARIANT - 1, err) ? 0 : -EINVAL; /* every feature: fail early */
@@ -365,6 +367,7 @@ void view_destroy(struct view *v)
 	free(v->was_usable);
 	free(v->ready_since);
 	free(v->floor);
+	free(v->fade);
 	free(v);
 }
 
@@ -671,20 +674,9 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	v->frame_no++;
 	frame_uniforms(v, agl, cap);
 
-	/* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
-	 * while any of them holds nothing yet). */
-	double fl = INFINITY;
-	bool known = true;
-	for (int l = v->nlevels - 1; l >= 0; l--) {
-		double lo, hi;
-		if (l > lmax)
-			v->floor[l] = INFINITY;
-		else if (known && view_clipmap_height_range(v->cm, l, &lo, &hi) == 0)
-			v->floor[l] = fl = fmin(fl, lo);
-		else
-			v->floor[l] = fl = INFINITY, known = false;
-	}
-	int first = -1;
+	/* The plan: coarse → fine, ring while the next level can be drawn, else disk (the
+	 * uploads happen here, in usable()). */
+	int first = -1, last = -1;
 	for (int j = lmin; j >= 0 && first < 0; j--)
 		if (usable(v, j, fmin(view_ring_radius(j), cap)))
 			first = j;
@@ -698,21 +690,41 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 		bool more = next <= lmax &&
 			    (v->d.budget_ms <= 0 || now_ms() - t0 < v->d.budget_ms) &&
 			    usable(v, next, fmin(view_ring_radius(next), cap));
-		double fade = 1;
+		v->fade[i] = 1;
 		if (v->d.fade_s > 0 && i != first)
-			fade = fmin(1, (now_s - v->ready_since[i]) / v->d.fade_s);
-		int64_t tri = draw_level(v, i, more, i == first, fade, cap, &s.triangles_culled);
+			v->fade[i] = fmin(1, (now_s - v->ready_since[i]) / v->d.fade_s);
+		last = i;
+		if (!more)
+			break;
+	}
+
+	/* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
+	 * while any of them holds nothing yet). */
+	double fl = INFINITY;
+	bool known = true;
+	for (int l = v->nlevels - 1; l >= 0; l--) {
+		double lo, hi;
+		if (l > lmax)
+			v->floor[l] = INFINITY;
+		else if (known && view_clipmap_height_range(v->cm, l, &lo, &hi) == 0)
+			v->floor[l] = fl = fmin(fl, lo);
+		else
+			v->floor[l] = fl = INFINITY, known = false;
+	}
+
+	/* Drawn fine → coarse: the nearer ground first, so the depth test rejects what it hides
+	 * before that is shaded (llvmpipe tests depth before running the fragment shader). */
+	for (int i = last; first >= 0 && i >= first; i--) {
+		int64_t tri = draw_level(v, i, i < last, i == first, v->fade[i], cap,
+					 &s.triangles_culled);
 		if (tri < 0) {
 			gl->BindVertexArray(0);
 			return (int)tri;
 		}
 		s.triangles += (uint64_t)tri;
-		if (s.lfirst < 0)
-			s.lfirst = i;
-		s.llast = i;
-		if (!more)
-			break;
 	}
+	s.lfirst = first >= 0 ? first : -1;
+	s.llast = first >= 0 ? last : -1;
 	for (int l = (s.llast >= 0 ? s.llast + 1 : 0); l < v->nlevels; l++)
 		v->was_usable[l] = false;
 	if (s.llast != lmax)
