@@ -48,7 +48,7 @@ static const struct {
 } roles[VIEW_NROLES] = {
 	[VIEW_HEIGHT] = { "height", PIX_HEIGHT, GL_R32F, GL_RED, GL_FLOAT },
 	[VIEW_NORMAL] = { "normal", PIX_NORMAL, GL_RG8, GL_RG, GL_UNSIGNED_BYTE },
-	[VIEW_COLOR] = { "color", PIX_COLOR, GL_SRGB8_ALPHA8, GL_RGBA, GL_UNSIGNED_BYTE },
+	[VIEW_COLOR] = { "color", PIX_COLOR, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE },
 };
 
 static bool same_tile(const struct tile_key *a, const struct tile_key *b)

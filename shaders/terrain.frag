@@ -65,6 +65,14 @@ vec2 geo_delta(vec3 d)
 }
 #endif
 
+// The colour clipmap holds sRGB bytes in a plain RGBA8 texture: llvmpipe filters 8-bit unorm
+// textures on a fast fixed-point path and sRGB ones in float, decoding all four texels of
+// every lookup. Decoded here once, after filtering, with the same 2.2 gamma the output uses.
+vec3 srgb_to_linear(vec3 c)
+{
+	return pow(c, vec3(2.2));
+}
+
 vec3 tex_at(sampler2DArray s, vec2 g, vec4 p, vec2 vc, float slice)
 {
 	float u = p.x + g.x * p.z;
@@ -84,6 +92,7 @@ void main()
 #if BLEND
 	albedo = mix(albedo, tex_at(u_color, g, u_pc, u_vc, u_sc), v_blend);
 #endif
+	albedo = srgb_to_linear(albedo);
 #else
 	vec3 albedo = vec3(0.5);
 #endif
