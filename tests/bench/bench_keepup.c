@@ -14,7 +14,9 @@
  * Environment: KEEPUP_FULL=1 the full matrix (both planets × cold/prefetched, finer search);
  * by default both planets cold (about 6 min). KEEPUP_TRIAL_S flight seconds;
  * KEEPUP_ONLY=substring of a configuration's label, KEEPUP_ALTS=row digits (0 = 800 km … 8 =
- * 50 m) for quick runs.
+ * 50 m) for quick runs; KEEPUP_V=R one trial per row at R × the seed's velocity (for A/B
+ * comparisons); KEEPUP_DEBUG=1 prints every frame; KEEPUP_AHEAD=0 no look-ahead along the
+ * motion (view_clipmap_motion); KEEPUP_DRAIN=0 no reading between frames.
  * Single-threaded (the daemon is a separate process); owns everything it creates.
  */
 #include <errno.h>
@@ -351,7 +353,7 @@ struct client {
 	struct view_body body;
 	int nlevels, max_level;
 	uint32_t T;
-	bool sent_once;
+	bool sent_once, ahead;
 	struct view_want *wants;
 };
 
@@ -390,6 +392,8 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 		grid_quad(lx, l, c->T, lon, lat, &q);
 		changed |= view_clipmap_target(c->cm, l, &q);
 	}
+	if (c->ahead)
+		changed |= view_clipmap_motion(c->cm, lon, lat, t0);
 	int rc = view_clipmap_receive(c->cm);
 	if (rc < 0)
 		return rc;
@@ -451,7 +455,7 @@ struct ctx {
 	char bindir[512];
 	const struct gl *gl;
 	double trial_s;
-	bool drain;
+	bool drain, ahead;
 };
 
 struct trial {
@@ -541,6 +545,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	c.nlevels = c.max_level + 1;
 	c.T = p->tile_size;
 	c.wants = xmalloc(MAX_WANTS * sizeof *c.wants);
+	c.ahead = x->ahead;
 	rc = view_clipmap_create(x->gl, c.src, c.nlevels, &c.cm, err);
 	if (rc)
 		goto out;
@@ -684,6 +689,9 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 	r->seed_v = seed[i].vel;
 	double t0 = now_s();
 	double lo = 0, hi = INFINITY, v = (fine ? 10 : 2) * seed[i].vel;
+	const char *fixed = getenv("KEEPUP_V"); /* one trial at this multiple of the seed's */
+	if (fixed && atof(fixed) > 0)
+		v = atof(fixed) * seed[i].vel;
 	double cap = (prefetch ? 40 : 160) * seed[i].vel, floor_v = seed[i].vel / 16;
 	double stop_ratio = fine ? 1.19 : 1.42;
 	while (r->trials < MAX_TRIALS) {
@@ -708,6 +716,8 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 			hi = v;
 			r->fail = tr;
 		}
+		if (fixed && atof(fixed) > 0)
+			break;
 		if (pass && isinf(hi)) {
 			if (v * 2 > cap * 1.001) {
 				r->capped = true;
@@ -997,6 +1007,7 @@ int main(int argc, char **argv)
 	if (x.trial_s < 0.5)
 		x.trial_s = 0.5;
 	x.drain = !getenv("KEEPUP_DRAIN") || atoi(getenv("KEEPUP_DRAIN")) > 0;
+	x.ahead = !getenv("KEEPUP_AHEAD") || atoi(getenv("KEEPUP_AHEAD")) > 0;
 	const char *only = getenv("KEEPUP_ONLY"); /* a label substring, for quick runs */
 	const char *alts = getenv("KEEPUP_ALTS"); /* row digits 0 (800 km) .. 8 (50 m) */
 	char err[256];
