@@ -571,12 +571,14 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 	for (uint32_t j = 0; j < T; j++) {
 		float *row = out + (size_t)j * T;
 		if (mc > 0 && !ridged) {
-			ns->interp_cols(ls, M, j, hb, tc, td);
+			ns->interp_cols(ls, M, j, hb, tc);
+			ns->interp_slopes(tc, M, td);
 			ns->interp_row(tc, td, M, hb, row);
 		} else if (mc > 0) {
 			for (int o = 0; o < mc; o++)
-				ns->interp_cols(ln + (size_t)o * P, M, j, hb, tc + (size_t)o * MP,
-						td + (size_t)o * MP);
+				ns->interp_cols(ln + (size_t)o * P, M, j, hb, tc + (size_t)o * MP);
+			for (int o = 0; o < mc; o++)
+				ns->interp_slopes(tc + (size_t)o * MP, M, td + (size_t)o * MP);
 			ns->ridged_coarse(row, wt, mc, tc, td, MP, M, hb, amp, mean, ro, rg);
 		} else {
 			memset(row, 0, T * sizeof *row);

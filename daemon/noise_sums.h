@@ -25,11 +25,15 @@ struct noise_sums {
 	/* Musgrave: s = (ro − |n|)² · weight; weight = clamp(s · rg, 0, 1); row += (s − mu) · a. */
 	void (*acc_ridged)(float *row, float *wt, const float *nb, float a, float mu, float ro,
 			   float rg, int first, uint32_t T);
-	/* Column pass of lattice row j: c[0..M) interpolated down the lattice columns, then
-	 * d[2..M-2) their slopes along the row. The lattice l (M×M) must be followed by
-	 * NOISE_LATTICE_PAD(M) readable floats, c and d must have room for M + NOISE_ROW_PAD. */
+	/* Column pass of lattice row j: c[0..M) interpolated down the lattice columns. The
+	 * lattice l (M×M) must be followed by NOISE_LATTICE_PAD(M) readable floats, c must have
+	 * room for M + NOISE_ROW_PAD. */
 	void (*interp_cols)(const float *l, uint32_t M, uint32_t j, const float b[4][NOISE_MR_STRIDE],
-			    float *c, float *d);
+			    float *c);
+	/* d[2..M-2): the slopes of c along the row (d: room for M + NOISE_ROW_PAD). A separate
+	 * call, so several rows' c can be stored before any is read back unaligned (a load
+	 * straddling two fresh stores waits for them). */
+	void (*interp_slopes)(const float *c, uint32_t M, float *d);
 	/* Row pass: out[0..(M-5)·h) from c, d. */
 	void (*interp_row)(const float *c, const float *d, uint32_t M,
 			   const float b[4][NOISE_MR_STRIDE], float *out);
@@ -133,18 +137,23 @@ NS_INLINE ns_v8f ns_slope4v(const float *v, size_t st)
 }
 
 static void ns_interp_cols(const float *l, uint32_t M, uint32_t j,
-			   const float b[4][NOISE_MR_STRIDE], float *c, float *d)
+			   const float b[4][NOISE_MR_STRIDE], float *c)
 {
 	const uint32_t h = NOISE_MR_STRIDE, q = j % h;
 	const float *l0 = l + (size_t)(j / h + 2) * M, *l1 = l0 + M;
 	const ns_v8f vb0 = ns_set1(b[0][q]), vb1 = ns_set1(b[1][q]), vb2 = ns_set1(b[2][q]),
 		     vb3 = ns_set1(b[3][q]);
 	/* Whole vectors only: the lattice is padded (NOISE_LATTICE_PAD) and c, d hold
-	 * NOISE_ROW_PAD floats beyond M, so the values past the end are finite and unused. */
+	 * NOISE_ROW_PAD floats beyond M, so the values past the end are finite and unused (c up
+	 * to M + 6 feeds interp_slopes' last vector). */
 	for (uint32_t a = 0; a < M + 7; a += 8)
 		ns_store(c + a, ((vb0 * ns_load(l0 + a) + vb1 * ns_slope4v(l0 + a, M)) +
 				 vb2 * ns_load(l1 + a)) +
 					vb3 * ns_slope4v(l1 + a, M));
+}
+
+static void ns_interp_slopes(const float *c, uint32_t M, float *d)
+{
 	for (uint32_t a = 2; a + 2 < M; a += 8)
 		ns_store(d + a, ns_slope4v(c + a, 1));
 }
@@ -194,7 +203,7 @@ static void ns_finish(float *row, const float *base, float a, float off, uint32_
 }
 
 #define NOISE_SUMS_INIT                                                                          \
-	{ ns_rotate_row, ns_acc_fbm, ns_acc_ridged, ns_interp_cols, ns_interp_row,               \
+	{ ns_rotate_row, ns_acc_fbm, ns_acc_ridged, ns_interp_cols, ns_interp_slopes, ns_interp_row, \
 	  ns_ridged_coarse, ns_finish }
 
 #endif
