@@ -467,7 +467,21 @@ struct trial {
 	uint64_t prefetch_tiles;
 	char top_node[64];
 	double top_share;
+	double fine_lag; /* of the frames short of full detail: those missing only the 2 finest */
+	double load1;	 /* the machine's 1-minute load average at the end (other processes) */
 };
+
+static double loadavg1(void)
+{
+	double l = 0;
+	FILE *f = fopen("/proc/loadavg", "r");
+	if (f) {
+		if (fscanf(f, "%lf", &l) != 1)
+			l = 0;
+		fclose(f);
+	}
+	return l;
+}
 
 static int cmpd(const void *a, const void *b)
 {
@@ -575,6 +589,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		goto out;
 	/* The flight. */
 	int nmax = (int)((x->trial_s + warm_s) * HZ) + 4, n = 0, counted = 0, full = 0, late = 0;
+	int short_frames = 0, fine_only = 0;
 	fr = xcalloc((size_t)nmax, sizeof *fr);
 	double *ms = xcalloc((size_t)nmax, sizeof *ms);
 	t0 = now_s();
@@ -599,6 +614,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		if (t >= warm_s) {
 			ms[counted++] = fr[n].cpu_ms;
 			full += fr[n].complete;
+			short_frames += !fr[n].complete;
+			fine_only += !fr[n].complete && fr[n].llast >= fr[n].lmax - 2 &&
+				     fr[n].llast >= 0;
 		}
 		n++;
 		double next = t0 + (k + 1) / HZ;
@@ -613,6 +631,8 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		goto out;
 	}
 	tr->frames = counted;
+	tr->fine_lag = short_frames ? (double)fine_only / short_frames : 0;
+	tr->load1 = loadavg1();
 	tr->full = counted ? (double)full / counted : 0;
 	qsort(ms, (size_t)counted, sizeof *ms, cmpd);
 	tr->frame_p95_ms = counted ? ms[(size_t)(0.95 * (counted - 1))] : 0;
@@ -661,9 +681,13 @@ struct row {
 	int lmin, lmax, trials;
 	struct trial pass, fail; /* the best passing and the lowest failing trial */
 	double seconds;
-	char limit[96];
+	char limit[128];
 };
 
+/* What stopped the lowest failing velocity: the client's own frame; synthesis throughput
+ * (workers busy most of the flight); synthesis latency (workers with time to spare but the
+ * finest levels' new tiles not ready when the quad moves on: look-ahead reach); else
+ * delivery. A load average above the core count is appended: other processes shared it. */
 static void limiting_stage(struct row *r)
 {
 	const struct trial *t = &r->fail;
@@ -671,14 +695,23 @@ static void limiting_stage(struct row *r)
 		snprintf(r->limit, sizeof r->limit, "none up to the search cap");
 		return;
 	}
+	char load[32] = "";
+	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+	if (t->load1 > (double)(ncpu > 0 ? ncpu : 1))
+		snprintf(load, sizeof load, "; load %.1f", t->load1);
 	if (t->frame_p95_ms > 1e3 / HZ || t->late_frac > 0.2)
-		snprintf(r->limit, sizeof r->limit, "client frame (p95 %.1f ms)", t->frame_p95_ms);
+		snprintf(r->limit, sizeof r->limit, "client frame (p95 %.1f ms)%s", t->frame_p95_ms,
+			 load);
 	else if (t->util > 0.7)
-		snprintf(r->limit, sizeof r->limit, "synthesis: workers %.0f%% busy, %s %.0f%%",
-			 t->util * 100, t->top_node, t->top_share * 100);
+		snprintf(r->limit, sizeof r->limit, "synthesis: workers %.0f%% busy, %s %.0f%%%s",
+			 t->util * 100, t->top_node, t->top_share * 100, load);
+	else if (t->fine_lag > 0.5)
+		snprintf(r->limit, sizeof r->limit,
+			 "latency: 2 finest late in %.0f%% of short frames, workers %.0f%%%s",
+			 t->fine_lag * 100, t->util * 100, load);
 	else
-		snprintf(r->limit, sizeof r->limit, "delivery: workers %.0f%% busy, hits %.0f%%",
-			 t->util * 100, t->hit_ratio * 100);
+		snprintf(r->limit, sizeof r->limit, "delivery: workers %.0f%% busy, hits %.0f%%%s",
+			 t->util * 100, t->hit_ratio * 100, load);
 }
 
 static void search(const struct ctx *x, const char *planet, bool prefetch, int i, bool fine,
@@ -704,11 +737,12 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 		r->lmax = tr.lmax;
 		bool pass = tr.full >= 0.95;
 		fprintf(stderr, "  keepup %s%s %7.0f m  v %9.0f m/s: %5.1f%% full, %5.0f tiles/s, "
-				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, hover %.1f s%s\n",
+				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, hover %.1f s, fine-lag %.0f%%, "
+				"load %.1f%s\n",
 			strrchr(planet, '/') ? strrchr(planet, '/') + 1 : planet,
 			prefetch ? " prefetched" : "", seed[i].alt, v, tr.full * 100, tr.gen_per_s,
 			tr.hit_ratio * 100, tr.util * 100, tr.frame_p95_ms, tr.hover_s,
-			prefetch ? "" : "");
+			tr.fine_lag * 100, tr.load1, prefetch ? "" : "");
 		if (pass) {
 			lo = v;
 			r->pass = tr;
