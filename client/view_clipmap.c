@@ -13,7 +13,11 @@
 #include "view_levels.h"
 #include "xalloc.h"
 
-#define SLOTS 16
+/* Per role: the quad (4), its ring (12) and the look-ahead (≤ 2 × AHEAD_MAX lines of 4). */
+#define AHEAD_MAX 2
+#define SLOTS (16 + 4 * 2 * AHEAD_MAX)
+#define AHEAD_LEAD_S 0.15   /* look ahead as far as the camera moves in this time */
+#define AHEAD_CAP 96	    /* look-ahead tiles per want-set, all levels and roles together */
 
 struct slot {
 	bool used;
@@ -23,6 +27,7 @@ struct slot {
 struct level {
 	bool has_target, has_held;
 	struct grid_quad target, held;
+	int ahead[2]; /* look-ahead lines beyond the ring: x (signed: + east), y (+ south) */
 	struct slot slots[VIEW_NROLES][SLOTS];
 	float *hmirror; /* T × T heights, toroidal like the texture; NULL until first upload */
 	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
@@ -37,6 +42,8 @@ struct view_clipmap {
 	int layer[VIEW_NROLES]; /* source layer index per role, -1 absent */
 	unsigned tex[VIEW_NROLES];
 	unsigned char *zeros; /* a T×T tile of zeros for tiles that failed */
+	bool has_motion;       /* the camera's ground motion, smoothed: */
+	double m_lon, m_lat, m_t, v_lon, v_lat; /* last position (deg), time (s), deg/s */
 	struct level *lv;
 	struct view_clipmap_stats st;
 };
@@ -139,12 +146,101 @@ void view_clipmap_destroy(struct view_clipmap *cm)
 	free(cm);
 }
 
+/* The look-ahead tiles of a level: lines (columns for x, rows for y) at distances 2 ..
+ * 1 + |ahead| from the quad on the side the camera moves to, each as long as the ring. */
+static int ahead_tiles(const struct level *L, struct tile_key out[4 * 2 * AHEAD_MAX])
+{
+	const struct grid_quad *q = &L->target;
+	int n = 0;
+	int64_t ny = grid_tiles_y(q->ly);
+	for (int s = 2; s <= 1 + abs(L->ahead[0]); s++) {
+		int64_t x = L->ahead[0] > 0 ? (int64_t)q->tx[0] + 1 + s : (int64_t)q->tx[0] - s;
+		for (int64_t dy = -1; dy <= 2; dy++) {
+			int64_t y = (int64_t)q->ty[0] + dy;
+			if (y >= 0 && y < ny)
+				out[n++] = (struct tile_key){ 0, grid_wrap_x(q->lx, x), (uint32_t)y, q->lx,
+							      q->ly };
+		}
+	}
+	for (int s = 2; s <= 1 + abs(L->ahead[1]); s++) {
+		int64_t y = L->ahead[1] > 0 ? (int64_t)q->ty[0] + 1 + s : (int64_t)q->ty[0] - s;
+		if (y < 0 || y >= ny)
+			continue;
+		for (int64_t dx = -1; dx <= 2; dx++)
+			out[n++] = (struct tile_key){ 0, grid_wrap_x(q->lx, (int64_t)q->tx[0] + dx),
+						      (uint32_t)y, q->lx, q->ly };
+	}
+	return n;
+}
+
+/* Whether level L wants tile k now: in or next to the target quad, or ahead of it. */
+static bool wanted(const struct level *L, const struct tile_key *k)
+{
+	if (!L->has_target)
+		return false;
+	if (grid_quad_distance(&L->target, k) <= 1)
+		return true;
+	struct tile_key a[4 * 2 * AHEAD_MAX];
+	int n = ahead_tiles(L, a);
+	for (int i = 0; i < n; i++)
+		if (same_tile(&a[i], k))
+			return true;
+	return false;
+}
+
+static void drop_unwanted(struct view_clipmap *cm, struct level *L)
+{
+	for (int r = 0; r < VIEW_NROLES; r++)
+		for (int i = 0; i < SLOTS; i++)
+			if (L->slots[r][i].used && !wanted(L, &L->slots[r][i].t.key))
+				drop(cm, &L->slots[r][i]);
+}
+
+bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t)
+{
+	if (cm->has_motion && t > cm->m_t) {
+		double dt = t - cm->m_t, a = fmin(1.0, dt / 0.1); /* ~0.1 s smoothing */
+		double dlon = remainder(lon - cm->m_lon, 360.0), dlat = lat - cm->m_lat;
+		cm->v_lon += a * (dlon / dt - cm->v_lon);
+		cm->v_lat += a * (dlat / dt - cm->v_lat);
+	} else if (!cm->has_motion) {
+		cm->v_lon = cm->v_lat = 0;
+	}
+	cm->has_motion = true;
+	cm->m_lon = lon;
+	cm->m_lat = lat;
+	cm->m_t = t;
+	bool changed = false;
+	for (int l = 0; l < cm->nlevels; l++) {
+		struct level *L = &cm->lv[l];
+		int a[2] = { 0, 0 };
+		if (L->has_target) {
+			/* tiles crossed in the lead time, per axis */
+			double nx = cm->v_lon * AHEAD_LEAD_S / (360.0 / ldexp(1.0, L->target.lx));
+			double ny = -cm->v_lat * AHEAD_LEAD_S / (180.0 / ldexp(1.0, L->target.ly));
+			for (int i = 0; i < 2; i++) {
+				double v = i ? ny : nx;
+				int k = (int)fmin(AHEAD_MAX, floor(fabs(v) + 0.5));
+				a[i] = v < 0 ? -k : k;
+			}
+		}
+		if (a[0] != L->ahead[0] || a[1] != L->ahead[1]) {
+			L->ahead[0] = a[0];
+			L->ahead[1] = a[1];
+			changed = true;
+			drop_unwanted(cm, L);
+		}
+	}
+	return changed;
+}
+
 bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_quad *q)
 {
 	struct level *L = &cm->lv[level];
 	if (!q) {
 		bool changed = L->has_target;
 		L->has_target = false;
+		L->ahead[0] = L->ahead[1] = 0;
 		for (int r = 0; r < VIEW_NROLES; r++)
 			for (int i = 0; i < SLOTS; i++)
 				drop(cm, &L->slots[r][i]);
@@ -154,10 +250,7 @@ bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_q
 		return false;
 	L->target = *q;
 	L->has_target = true;
-	for (int r = 0; r < VIEW_NROLES; r++)
-		for (int i = 0; i < SLOTS; i++)
-			if (L->slots[r][i].used && grid_quad_distance(q, &L->slots[r][i].t.key) > 1)
-				drop(cm, &L->slots[r][i]);
+	drop_unwanted(cm, L);
 	return true;
 }
 
@@ -196,24 +289,28 @@ static int ring_tiles(const struct grid_quad *q, struct tile_key out[16])
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
 			  size_t cap)
 {
-	size_t n = 0;
-	for (int pass = 0; pass < (prefetch ? 2 : 1); pass++) {
+	size_t n = 0, ahead = 0;
+	static const enum view_class cls[3] = { VIEW_CLASS_VISIBLE, VIEW_CLASS_PREFETCH,
+						VIEW_CLASS_AHEAD };
+	for (int pass = 0; pass < (prefetch ? 3 : 1); pass++) {
 		for (int l = 0; l < cm->nlevels; l++) {
 			struct level *L = &cm->lv[l];
 			if (!L->has_target)
 				continue;
-			struct tile_key k[16];
-			int nk = pass == 0 ? grid_quad_tiles(&L->target, 0, k) : ring_tiles(&L->target, k);
+			struct tile_key k[4 * 2 * AHEAD_MAX > 16 ? 4 * 2 * AHEAD_MAX : 16];
+			int nk = pass == 0   ? grid_quad_tiles(&L->target, 0, k)
+				 : pass == 1 ? ring_tiles(&L->target, k)
+					     : ahead_tiles(L, k);
 			for (int r = 0; r < VIEW_NROLES; r++) {
 				if (cm->layer[r] < 0)
 					continue;
 				for (int i = 0; i < nk; i++) {
-					if (find(L, r, &k[i]) || n >= cap)
+					if (find(L, r, &k[i]) || n >= cap ||
+					    (pass == 2 && ahead >= AHEAD_CAP))
 						continue;
-					out[n++] = (struct view_want){
-						(uint8_t)cm->layer[r],
-						pass == 0 ? VIEW_CLASS_VISIBLE : VIEW_CLASS_PREFETCH, k[i]
-					};
+					ahead += pass == 2;
+					out[n++] = (struct view_want){ (uint8_t)cm->layer[r], cls[pass],
+								       k[i] };
 				}
 			}
 		}
@@ -235,13 +332,17 @@ int view_clipmap_receive(struct view_clipmap *cm)
 				role = r;
 		int l = t.key.ly;
 		struct level *L = l < cm->nlevels ? &cm->lv[l] : NULL;
-		bool keep = role >= 0 && L && L->has_target &&
-			    grid_quad_distance(&L->target, &t.key) <= 1 && !find(L, role, &t.key) &&
+		bool keep = role >= 0 && L && wanted(L, &t.key) && !find(L, role, &t.key) &&
 			    t.size == cm->T && t.format == roles[role].type;
 		struct slot *s = NULL;
 		for (int i = 0; keep && i < SLOTS && !s; i++)
 			if (!L->slots[role][i].used)
 				s = &L->slots[role][i];
+		for (int i = 0; keep && i < SLOTS && !s; i++) /* a tile the level no longer wants */
+			if (!wanted(L, &L->slots[role][i].t.key)) {
+				drop(cm, &L->slots[role][i]);
+				s = &L->slots[role][i];
+			}
 		if (!s) {
 			cm->st.tiles_dropped++;
 			cm->src->ops->release(cm->src, &t);

@@ -3,8 +3,9 @@
  * level, addressed toroidally: level texel (u, v) lives at (u mod T, v mod T). Each level has
  * a target quad (where the camera wants it) and the quad its texture holds; when every tile
  * of the target quad has arrived, only the changed regions are copied (grid_update_regions).
- * Tiles are kept while they are in or next to their level's target quad (the prefetch ring),
- * released otherwise: the client never holds more than that.
+ * Tiles are kept while they are in or next to their level's target quad (the prefetch ring)
+ * or ahead of it along the camera's motion (view_clipmap_motion), released otherwise: the
+ * client never holds more than that.
  *
  * Threads: one thread (the GL context's). Ownership: the clipmap borrows gl and the source,
  * owns its textures and the tiles it holds (released through the source).
@@ -41,8 +42,17 @@ void view_clipmap_destroy(struct view_clipmap *cm);
 /* Sets level's target quad (NULL: the level is not wanted). Tiles farther than the ring
  * around the new quad are released. Returns whether the target changed. */
 bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_quad *q);
+/* The camera's ground position (degrees) at time t (seconds, any monotonic origin), once per
+ * frame after the targets are set: its smoothed velocity sets each level's look-ahead, the
+ * lines of tiles beyond the ring that the camera reaches within ~0.15 s (up to 2 lines per
+ * axis; none on levels it crosses slowly). Returns whether a look-ahead changed — the want-set
+ * must then be sent again. Tiles that fall out of the look-ahead are released. Optional: a
+ * caller that never calls it gets no look-ahead. */
+bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t);
+
 /* The want-set for the current targets: every missing tile of every target quad, coarse
- * levels first, then (prefetch) the missing ring tiles. Returns the count (≤ cap). */
+ * levels first, then (prefetch) the missing ring tiles, then the missing look-ahead tiles
+ * (class VIEW_CLASS_AHEAD, at most 96). Returns the count (≤ cap). */
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
 			  size_t cap);
 /* Takes every tile the source has ready. Returns how many arrived, or -errno. */

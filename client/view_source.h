@@ -21,7 +21,8 @@
 enum view_class {
 	VIEW_CLASS_NONE = 0,
 	VIEW_CLASS_VISIBLE, /* a quad the frame shows */
-	VIEW_CLASS_PREFETCH /* the ring around a quad */
+	VIEW_CLASS_PREFETCH, /* the ring around a quad */
+	VIEW_CLASS_AHEAD     /* beyond the ring along the motion: after every ring tile */
 };
 
 struct view_want {

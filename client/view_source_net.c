@@ -45,7 +45,9 @@ static int ns_want(struct view_source *s, const struct view_want *w, size_t n,
 	for (size_t i = 0; i < n; i++)
 		ns->entries[i] = (struct proto_want_entry){
 			.layer = w[i].layer,
-			.cls = w[i].cls == VIEW_CLASS_VISIBLE ? PROTO_CLASS_VISIBLE : PROTO_CLASS_PREFETCH,
+			.cls = w[i].cls == VIEW_CLASS_VISIBLE	 ? PROTO_CLASS_VISIBLE
+			       : w[i].cls == VIEW_CLASS_AHEAD ? PROTO_CLASS_BULK
+							      : PROTO_CLASS_PREFETCH,
 			.lx = w[i].key.lx, .ly = w[i].key.ly, .x = w[i].key.x, .y = w[i].key.y,
 		};
 	struct proto_msg m = { .type = PROTO_WANT,

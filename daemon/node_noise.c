@@ -94,21 +94,12 @@ static int noise_generate(const struct node *n, struct gen_ctx *g, const struct 
 			return -EINVAL;
 		src = in[0];
 	}
-	float *dst = tile_f32(out);
-	int rc = noise_tile(&im->nz, k, T, NOISE_ISA_AUTO, gen_scratch(g, noise_scratch_size(T)),
-			    dst);
+	/* out = input + (offset + amplitude · noise), each row while it is in cache */
+	int rc = noise_tile_scaled(&im->nz, k, T, NOISE_ISA_AUTO,
+				   gen_scratch(g, noise_scratch_size(T)), src ? tile_f32(src) : NULL,
+				   im->amplitude, im->offset, tile_f32(out));
 	if (rc < 0)
 		return rc;
-	const float a = im->amplitude, off = im->offset;
-	size_t nt = (size_t)T * T;
-	if (src) {
-		const float *s = tile_f32(src);
-		for (size_t i = 0; i < nt; i++)
-			dst[i] = s[i] + (off + a * dst[i]);
-	} else {
-		for (size_t i = 0; i < nt; i++)
-			dst[i] = off + a * dst[i];
-	}
 	return 0;
 }
 

@@ -6,6 +6,7 @@
  * everything else (set-up, fractal sums) is this file's code for all paths.
  */
 #include "noise.h"
+#include "noise_sums.h"
 
 #include <errno.h>
 #include <math.h>
@@ -318,17 +319,23 @@ static uint32_t lattice_m(uint32_t T)
 static size_t lattice_p(uint32_t T)
 {
 	size_t m = lattice_m(T);
-	return (m * m + 15) / 16 * 16;
+	return (m * m + NOISE_LATTICE_PAD(m) + 15) / 16 * 16;
+}
+
+/* Floats of one interpolated lattice row (and of its slopes). */
+static size_t lattice_row(uint32_t T)
+{
+	return (lattice_m(T) + NOISE_ROW_PAD + 15) / 16 * 16;
 }
 
 size_t noise_scratch_size(uint32_t T)
 {
 	/* texel rows: 2 double + 8 float arrays of T; lattice: 8 + NOISE_MAX_OCTAVES float
-	 * arrays of P; one interpolated lattice row and its slopes: 2 float arrays of M (rounded
-	 * up to 16) */
+	 * arrays of P (M² and a pad); per coarse octave one interpolated lattice row and its
+	 * slopes: 2 float arrays of M and a pad */
 	return (size_t)T * (2 * sizeof(double) + 8 * sizeof(float)) +
 	       lattice_p(T) * (8 + NOISE_MAX_OCTAVES) * sizeof(float) +
-	       (lattice_m(T) + 15) / 16 * 16 * 2 * sizeof(float) + 64;
+	       lattice_row(T) * 2 * NOISE_MAX_OCTAVES * sizeof(float) + 64;
 }
 
 /* Active octaves 0..mc-1 have a wavelength of at least NOISE_MR_MIN_TEXELS texels of the
@@ -402,70 +409,23 @@ static void octave_row(const struct noise_octave *oc, const double pc0[3], struc
 	r->seed = oc->seed;
 }
 
-/* The fractal sums run in this file for every ISA, with GCC vector extensions (SSE2 in a
- * baseline build): elementwise IEEE operations give the same bits at any width. */
+/* The fractal sums (noise_sums.h) run at each ISA's width; the per-row set-up below uses
+ * GCC vector extensions too (SSE2 in a baseline build): elementwise IEEE operations give the
+ * same bits at any width. */
 typedef double v2d __attribute__((vector_size(16)));
 typedef float v2f __attribute__((vector_size(8)));
-typedef float v4f __attribute__((vector_size(16)));
 
-static inline v4f load4(const float *p)
-{
-	v4f v;
-	memcpy(&v, p, sizeof v);
-	return v;
-}
+const struct noise_sums noise_sums_scalar = NOISE_SUMS_INIT;
 
-/* (rx, ry, rz) = R·(dx, dy, dz) for a row: the texel offsets in the octave's frame. Plain
- * multiplies and adds in a fixed order (no FMA contraction in this file), so every ISA sees
- * the same bits. */
-static void rotate_row(const float r[9], const float *dx, const float *dy, const float *dz,
-		       float *rx, float *ry, float *rz, uint32_t T)
+static const struct noise_sums *sums_for(enum noise_isa isa)
 {
-	const v4f r0 = { r[0], r[0], r[0], r[0] }, r1 = { r[1], r[1], r[1], r[1] },
-		  r2 = { r[2], r[2], r[2], r[2] }, r3 = { r[3], r[3], r[3], r[3] },
-		  r4 = { r[4], r[4], r[4], r[4] }, r5 = { r[5], r[5], r[5], r[5] },
-		  r6 = { r[6], r[6], r[6], r[6] }, r7 = { r[7], r[7], r[7], r[7] },
-		  r8 = { r[8], r[8], r[8], r[8] };
-	for (uint32_t i = 0; i < T; i += 4) {
-		v4f x = load4(dx + i), y = load4(dy + i), z = load4(dz + i);
-		v4f a = (r0 * x + r1 * y) + r2 * z;
-		v4f b = (r3 * x + r4 * y) + r5 * z;
-		v4f c = (r6 * x + r7 * y) + r8 * z;
-		memcpy(rx + i, &a, sizeof a);
-		memcpy(ry + i, &b, sizeof b);
-		memcpy(rz + i, &c, sizeof c);
-	}
-}
-
-static void acc_fbm(float *row, const float *nb, float a, uint32_t T)
-{
-	const v4f va = { a, a, a, a };
-	for (uint32_t i = 0; i < T; i += 4) {
-		v4f r = load4(row + i) + va * load4(nb + i);
-		memcpy(row + i, &r, sizeof r);
-	}
-}
-
-/* Musgrave: s = (ro − |n|)² · weight; next weight = clamp(s · rg, 0, 1); sum += (s − mean) · a. */
-static void acc_ridged(float *row, float *wt, const float *nb, float a, float mu, float ro,
-		       float rg, int first, uint32_t T)
-{
-	const v4f va = { a, a, a, a }, vmu = { mu, mu, mu, mu }, vro = { ro, ro, ro, ro };
-	const v4f vrg = { rg, rg, rg, rg }, one = { 1, 1, 1, 1 }, zero = { 0, 0, 0, 0 };
-	typedef int v4i __attribute__((vector_size(16)));
-	const v4i absmask = { 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff };
-	for (uint32_t i = 0; i < T; i += 4) {
-		v4f n = load4(nb + i);
-		v4f an = (v4f)((v4i)n & absmask);
-		v4f s = vro - an;
-		s = s * s * (first ? one : load4(wt + i));
-		v4f nw = s * vrg;
-		nw = (v4f)((v4i)nw & (nw > zero));
-		v4i big = nw > one;
-		nw = (v4f)(((v4i)one & big) | ((v4i)nw & ~big));
-		memcpy(wt + i, &nw, sizeof nw);
-		v4f r = load4(row + i) + (s - vmu) * va;
-		memcpy(row + i, &r, sizeof r);
+	switch (isa) {
+	case NOISE_ISA_AVX2:
+		return &noise_sums_avx2;
+	case NOISE_ISA_AVX512:
+		return &noise_sums_avx512;
+	default:
+		return &noise_sums_scalar;
 	}
 }
 
@@ -482,41 +442,45 @@ static void hermite_basis(float b[4][NOISE_MR_STRIDE])
 	}
 }
 
-/* 4th-order central difference at v[0] along a stride. */
-static inline float slope4(const float *v, size_t st)
+/* The octaves mc..m-1 of texel row j, evaluated at every texel and added into row (wt: the
+ * ridged weights so far). tmp: 7 float arrays of T (dx, dy, dz, rx, ry, rz, nb). */
+static void full_res_row(const struct noise *nz, const struct noise_sums *ns, noise_row_fn *row_fn,
+			 const struct tile_key *k, uint32_t T, uint32_t j, const double pc[3],
+			 const double *ccos, const double *csin, const struct noise_row *rows,
+			 const float (*rot)[9], const float *amp, const float *mean, int mc, int m,
+			 float *row, float *wt, float *const tmp[7])
 {
-	return ((v[-2 * (ptrdiff_t)st] - v[2 * st]) + 8.0f * (v[st] - v[-(ptrdiff_t)st])) *
-	       (1.0f / 12.0f);
-}
-
-/* Texel row j of the interpolated lattice l (M×M, row-major) into out[T]: first down the
- * lattice columns (slopes from lattice rows j/h .. j/h + 5), then along the row (slopes from
- * the interpolated row). c and d are M-float temporaries. */
-static void interp_row(const float *l, uint32_t M, uint32_t j, const float b[4][NOISE_MR_STRIDE],
-		       float *c, float *d, float *out)
-{
-	const uint32_t h = NOISE_MR_STRIDE, q = j % h;
-	const float *l0 = l + (size_t)(j / h + 2) * M, *l1 = l0 + M;
-	const float b0 = b[0][q], b1 = b[1][q], b2 = b[2][q], b3 = b[3][q];
-	for (uint32_t a = 0; a < M; a++)
-		c[a] = ((b0 * l0[a] + b1 * slope4(l0 + a, M)) + b2 * l1[a]) + b3 * slope4(l1 + a, M);
-	for (uint32_t a = 2; a + 2 < M; a++)
-		d[a] = slope4(c + a, 1);
-	for (uint32_t cell = 0; cell + 5 < M; cell++) {
-		const float f0 = c[cell + 2], m0 = d[cell + 2], f1 = c[cell + 3], m1 = d[cell + 3];
-		const v4f vf0 = { f0, f0, f0, f0 }, vm0 = { m0, m0, m0, m0 };
-		const v4f vf1 = { f1, f1, f1, f1 }, vm1 = { m1, m1, m1, m1 };
-		for (uint32_t t = 0; t < h; t += 4) {
-			v4f r = ((load4(b[0] + t) * vf0 + load4(b[1] + t) * vm0) +
-				 load4(b[2] + t) * vf1) +
-				load4(b[3] + t) * vm1;
-			memcpy(out + cell * h + t, &r, sizeof r);
-		}
+	float *dx = tmp[0], *dy = tmp[1], *dz = tmp[2], *rx = tmp[3], *ry = tmp[4], *rz = tmp[5];
+	float *nb = tmp[6];
+	const float ro = (float)nz->p.ridge_offset, rg = (float)nz->p.ridge_gain;
+	const bool ridged = nz->p.kind == NOISE_RIDGED;
+	double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5) * (M_PI / 180.0);
+	double cl = cos(lat), sl = sin(lat);
+	const v2d vcl = { cl, cl }, vpx = { pc[0], pc[0] }, vpy = { pc[1], pc[1] };
+	const float fz = (float)(sl - pc[2]);
+	for (uint32_t i = 0; i < T; i += 2) {
+		v2d c2, s2;
+		memcpy(&c2, ccos + i, sizeof c2);
+		memcpy(&s2, csin + i, sizeof s2);
+		v2f x2 = __builtin_convertvector(vcl * c2 - vpx, v2f);
+		v2f y2 = __builtin_convertvector(vcl * s2 - vpy, v2f);
+		memcpy(dx + i, &x2, sizeof x2);
+		memcpy(dy + i, &y2, sizeof y2);
+		dz[i] = dz[i + 1] = fz;
+	}
+	for (int o = mc; o < m; o++) {
+		ns->rotate_row(rot[o], dx, dy, dz, rx, ry, rz, T);
+		row_fn(&rows[o], rx, ry, rz, nb, T);
+		if (!ridged)
+			ns->acc_fbm(row, nb, amp[o], T);
+		else
+			ns->acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, o == 0, T);
 	}
 }
 
-int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enum noise_isa isa,
-	       void *scratch, float *out)
+static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		    enum noise_isa isa, void *scratch, bool scale, const float *base, float amplitude,
+		    float offset, float *out)
 {
 	if (!grid_key_valid(k) || T < 16 || T > 4096 || T % 16)
 		return -EINVAL;
@@ -525,20 +489,24 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 	if (!noise_isa_supported(isa))
 		return -ENOTSUP;
 	noise_row_fn *row_fn = kernel_for(isa);
+	const struct noise_sums *ns = sums_for(isa);
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
 	int m = active_octaves(nz, k->ly, T, idx, w);
 	int mc = coarse_count(nz, k->lx, T, idx, m);
 
-	const uint32_t M = lattice_m(T), P = (uint32_t)lattice_p(T), MP = (M + 15) / 16 * 16;
+	const uint32_t M = lattice_m(T), P = (uint32_t)lattice_p(T), MP = (uint32_t)lattice_row(T);
 	double *ccos = scratch, *csin = ccos + T;
 	float *dx = (float *)(csin + T), *dy = dx + T, *dz = dy + T, *nb = dz + T, *wt = nb + T;
 	float *rx = wt + T, *ry = rx + T, *rz = ry + T;
 	float *ldx = rz + T, *ldy = ldx + P, *ldz = ldy + P, *lrx = ldz + P, *lry = lrx + P;
 	float *lrz = lry + P, *lnb = lrz + P, *ls = lnb + P, *ln = ls + P; /* ln: mc × P */
-	float *tc = ln + (size_t)NOISE_MAX_OCTAVES * P, *td = tc + MP;
+	float *tc = ln + (size_t)NOISE_MAX_OCTAVES * P, *td = tc + (size_t)NOISE_MAX_OCTAVES * MP;
 	if (m == 0) {
 		memset(out, 0, (size_t)T * T * sizeof *out);
+		for (uint32_t j = 0; scale && j < T; j++)
+			ns->finish(out + (size_t)j * T, base ? base + (size_t)j * T : NULL, amplitude,
+				   offset, T);
 		return 0;
 	}
 	double pc[3];
@@ -583,10 +551,10 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 		 * creased signal), put through the ridge per texel after interpolation. */
 		memset(ls, 0, P * sizeof *ls);
 		for (int o = 0; o < mc; o++) {
-			rotate_row(rot[o], ldx, ldy, ldz, lrx, lry, lrz, P);
+			ns->rotate_row(rot[o], ldx, ldy, ldz, lrx, lry, lrz, P);
 			if (!ridged) {
 				row_fn(&rows[o], lrx, lry, lrz, lnb, P);
-				acc_fbm(ls, lnb, amp[o], P);
+				ns->acc_fbm(ls, lnb, amp[o], P);
 			} else {
 				row_fn(&rows[o], lrx, lry, lrz, ln + (size_t)o * P, P);
 			}
@@ -603,40 +571,39 @@ int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enu
 	for (uint32_t j = 0; j < T; j++) {
 		float *row = out + (size_t)j * T;
 		if (mc > 0 && !ridged) {
-			interp_row(ls, M, j, hb, tc, td, row);
+			ns->interp_cols(ls, M, j, hb, tc);
+			ns->interp_slopes(tc, M, td);
+			ns->interp_row(tc, td, M, hb, row);
+		} else if (mc > 0) {
+			for (int o = 0; o < mc; o++)
+				ns->interp_cols(ln + (size_t)o * P, M, j, hb, tc + (size_t)o * MP);
+			for (int o = 0; o < mc; o++)
+				ns->interp_slopes(tc + (size_t)o * MP, M, td + (size_t)o * MP);
+			ns->ridged_coarse(row, wt, mc, tc, td, MP, M, hb, amp, mean, ro, rg);
 		} else {
 			memset(row, 0, T * sizeof *row);
-			for (int o = 0; o < mc; o++) {
-				interp_row(ln + (size_t)o * P, M, j, hb, tc, td, nb);
-				acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, o == 0, T);
-			}
 		}
-		if (mc == m)
-			continue;
-		double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5) * (M_PI / 180.0);
-		double cl = cos(lat), sl = sin(lat);
-		const v2d vcl = { cl, cl }, vpx = { pc[0], pc[0] }, vpy = { pc[1], pc[1] };
-		const float fz = (float)(sl - pc[2]);
-		for (uint32_t i = 0; i < T; i += 2) {
-			v2d c2, s2;
-			memcpy(&c2, ccos + i, sizeof c2);
-			memcpy(&s2, csin + i, sizeof s2);
-			v2f x2 = __builtin_convertvector(vcl * c2 - vpx, v2f);
-			v2f y2 = __builtin_convertvector(vcl * s2 - vpy, v2f);
-			memcpy(dx + i, &x2, sizeof x2);
-			memcpy(dy + i, &y2, sizeof y2);
-			dz[i] = dz[i + 1] = fz;
-		}
-		for (int o = mc; o < m; o++) {
-			rotate_row(rot[o], dx, dy, dz, rx, ry, rz, T);
-			row_fn(&rows[o], rx, ry, rz, nb, T);
-			if (!ridged)
-				acc_fbm(row, nb, amp[o], T);
-			else
-				acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, o == 0, T);
-		}
+		if (mc < m)
+			full_res_row(nz, ns, row_fn, k, T, j, pc, ccos, csin, rows, rot, amp, mean, mc,
+				     m, row, wt, (float *[7]){ dx, dy, dz, rx, ry, rz, nb });
+		if (scale)
+			ns->finish(row, base ? base + (size_t)j * T : NULL, amplitude, offset, T);
 	}
 	return m;
+}
+
+
+int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enum noise_isa isa,
+	       void *scratch, float *out)
+{
+	return tile_sum(nz, k, T, isa, scratch, false, NULL, 1, 0, out);
+}
+
+int noise_tile_scaled(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		      enum noise_isa isa, void *scratch, const float *base, float amplitude,
+		      float offset, float *out)
+{
+	return tile_sum(nz, k, T, isa, scratch, true, base, amplitude, offset, out);
 }
 
 double noise_point(const struct noise *nz, double lon, double lat, int ly, uint32_t T)

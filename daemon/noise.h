@@ -106,6 +106,13 @@ size_t noise_scratch_size(uint32_t T);
 int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enum noise_isa isa,
 	       void *scratch, float *out);
 
+/* noise_tile, then out = base + (offset + amplitude · value) texel by texel (base NULL: no
+ * base), each row while it is in cache — what the noise node stores. Same bits as doing that
+ * in float after noise_tile. */
+int noise_tile_scaled(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		      enum noise_isa isa, void *scratch, const float *base, float amplitude,
+		      float offset, float *out);
+
 /* The same field at one point (degrees) for a tile of level ly and size T, computed in double
  * with the reference simplex: a slow oracle for tests. */
 double noise_point(const struct noise *nz, double lon, double lat, int ly, uint32_t T);

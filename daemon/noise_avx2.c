@@ -5,6 +5,9 @@
 #include <immintrin.h>
 
 #include "noise.h"
+#include "noise_sums.h"
+
+const struct noise_sums noise_sums_avx2 = NOISE_SUMS_INIT;
 
 static inline __m256 corner(__m256i h, __m256 x, __m256 y, __m256 z)
 {

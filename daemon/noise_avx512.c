@@ -6,6 +6,9 @@
 #include <immintrin.h>
 
 #include "noise.h"
+#include "noise_sums.h"
+
+const struct noise_sums noise_sums_avx512 = NOISE_SUMS_INIT;
 
 static inline __m512 corner(__m512i h, __m512 x, __m512 y, __m512 z)
 {

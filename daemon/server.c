@@ -31,6 +31,8 @@
 #include "tilecodec.h"
 #include "xalloc.h"
 
+#define UNIX_SNDBUF (4 << 20) /* bytes asked for per Unix session */
+
 #define TICK_NS 250000000ull
 #define STOP_GRACE_NS 2000000000ull
 
@@ -415,6 +417,13 @@ static void on_accept(struct server *srv, struct listener *l)
 			int one = 1;
 			if (setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one))
 				log_msg(LOG_WARN, "%s: TCP_NODELAY: %s", l->name, strerror(errno));
+		} else {
+			/* A Unix stream queues what the sender's buffer holds: the default (~208 KiB)
+			 * is less than one 256² RGBA tile, so ask for room for a few (the kernel caps
+			 * it at net.core.wmem_max; TCP keeps its autotuning). */
+			int sz = UNIX_SNDBUF;
+			if (setsockopt(fd, SOL_SOCKET, SO_SNDBUF, &sz, sizeof sz))
+				log_msg(LOG_DEBUG, "%s: SO_SNDBUF: %s", l->name, strerror(errno));
 		}
 		session_create(srv, fd, l);
 	}

@@ -14,7 +14,9 @@
  * Environment: KEEPUP_FULL=1 the full matrix (both planets × cold/prefetched, finer search);
  * by default both planets cold (about 6 min). KEEPUP_TRIAL_S flight seconds;
  * KEEPUP_ONLY=substring of a configuration's label, KEEPUP_ALTS=row digits (0 = 800 km … 8 =
- * 50 m) for quick runs.
+ * 50 m) for quick runs; KEEPUP_V=R one trial per row at R × the seed's velocity (for A/B
+ * comparisons); KEEPUP_DEBUG=1 prints every frame; KEEPUP_AHEAD=0 no look-ahead along the
+ * motion (view_clipmap_motion); KEEPUP_DRAIN=0 no reading between frames.
  * Single-threaded (the daemon is a separate process); owns everything it creates.
  */
 #include <errno.h>
@@ -351,7 +353,7 @@ struct client {
 	struct view_body body;
 	int nlevels, max_level;
 	uint32_t T;
-	bool sent_once;
+	bool sent_once, ahead;
 	struct view_want *wants;
 };
 
@@ -390,6 +392,8 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 		grid_quad(lx, l, c->T, lon, lat, &q);
 		changed |= view_clipmap_target(c->cm, l, &q);
 	}
+	if (c->ahead)
+		changed |= view_clipmap_motion(c->cm, lon, lat, t0);
 	int rc = view_clipmap_receive(c->cm);
 	if (rc < 0)
 		return rc;
@@ -451,7 +455,7 @@ struct ctx {
 	char bindir[512];
 	const struct gl *gl;
 	double trial_s;
-	bool drain;
+	bool drain, ahead;
 };
 
 struct trial {
@@ -463,7 +467,21 @@ struct trial {
 	uint64_t prefetch_tiles;
 	char top_node[64];
 	double top_share;
+	double fine_lag; /* of the frames short of full detail: those missing only the 2 finest */
+	double load1;	 /* the machine's 1-minute load average at the end (other processes) */
 };
+
+static double loadavg1(void)
+{
+	double l = 0;
+	FILE *f = fopen("/proc/loadavg", "r");
+	if (f) {
+		if (fscanf(f, "%lf", &l) != 1)
+			l = 0;
+		fclose(f);
+	}
+	return l;
+}
 
 static int cmpd(const void *a, const void *b)
 {
@@ -541,6 +559,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	c.nlevels = c.max_level + 1;
 	c.T = p->tile_size;
 	c.wants = xmalloc(MAX_WANTS * sizeof *c.wants);
+	c.ahead = x->ahead;
 	rc = view_clipmap_create(x->gl, c.src, c.nlevels, &c.cm, err);
 	if (rc)
 		goto out;
@@ -570,6 +589,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		goto out;
 	/* The flight. */
 	int nmax = (int)((x->trial_s + warm_s) * HZ) + 4, n = 0, counted = 0, full = 0, late = 0;
+	int short_frames = 0, fine_only = 0;
 	fr = xcalloc((size_t)nmax, sizeof *fr);
 	double *ms = xcalloc((size_t)nmax, sizeof *ms);
 	t0 = now_s();
@@ -594,6 +614,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		if (t >= warm_s) {
 			ms[counted++] = fr[n].cpu_ms;
 			full += fr[n].complete;
+			short_frames += !fr[n].complete;
+			fine_only += !fr[n].complete && fr[n].llast >= fr[n].lmax - 2 &&
+				     fr[n].llast >= 0;
 		}
 		n++;
 		double next = t0 + (k + 1) / HZ;
@@ -608,6 +631,8 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		goto out;
 	}
 	tr->frames = counted;
+	tr->fine_lag = short_frames ? (double)fine_only / short_frames : 0;
+	tr->load1 = loadavg1();
 	tr->full = counted ? (double)full / counted : 0;
 	qsort(ms, (size_t)counted, sizeof *ms, cmpd);
 	tr->frame_p95_ms = counted ? ms[(size_t)(0.95 * (counted - 1))] : 0;
@@ -656,9 +681,13 @@ struct row {
 	int lmin, lmax, trials;
 	struct trial pass, fail; /* the best passing and the lowest failing trial */
 	double seconds;
-	char limit[96];
+	char limit[128];
 };
 
+/* What stopped the lowest failing velocity: the client's own frame; synthesis throughput
+ * (workers busy most of the flight); synthesis latency (workers with time to spare but the
+ * finest levels' new tiles not ready when the quad moves on: look-ahead reach); else
+ * delivery. A load average above the core count is appended: other processes shared it. */
 static void limiting_stage(struct row *r)
 {
 	const struct trial *t = &r->fail;
@@ -666,14 +695,23 @@ static void limiting_stage(struct row *r)
 		snprintf(r->limit, sizeof r->limit, "none up to the search cap");
 		return;
 	}
+	char load[32] = "";
+	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+	if (t->load1 > (double)(ncpu > 0 ? ncpu : 1))
+		snprintf(load, sizeof load, "; load %.1f", t->load1);
 	if (t->frame_p95_ms > 1e3 / HZ || t->late_frac > 0.2)
-		snprintf(r->limit, sizeof r->limit, "client frame (p95 %.1f ms)", t->frame_p95_ms);
+		snprintf(r->limit, sizeof r->limit, "client frame (p95 %.1f ms)%s", t->frame_p95_ms,
+			 load);
 	else if (t->util > 0.7)
-		snprintf(r->limit, sizeof r->limit, "synthesis: workers %.0f%% busy, %s %.0f%%",
-			 t->util * 100, t->top_node, t->top_share * 100);
+		snprintf(r->limit, sizeof r->limit, "synthesis: workers %.0f%% busy, %s %.0f%%%s",
+			 t->util * 100, t->top_node, t->top_share * 100, load);
+	else if (t->fine_lag > 0.5)
+		snprintf(r->limit, sizeof r->limit,
+			 "latency: 2 finest late in %.0f%% of short frames, workers %.0f%%%s",
+			 t->fine_lag * 100, t->util * 100, load);
 	else
-		snprintf(r->limit, sizeof r->limit, "delivery: workers %.0f%% busy, hits %.0f%%",
-			 t->util * 100, t->hit_ratio * 100);
+		snprintf(r->limit, sizeof r->limit, "delivery: workers %.0f%% busy, hits %.0f%%%s",
+			 t->util * 100, t->hit_ratio * 100, load);
 }
 
 static void search(const struct ctx *x, const char *planet, bool prefetch, int i, bool fine,
@@ -684,6 +722,9 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 	r->seed_v = seed[i].vel;
 	double t0 = now_s();
 	double lo = 0, hi = INFINITY, v = (fine ? 10 : 2) * seed[i].vel;
+	const char *fixed = getenv("KEEPUP_V"); /* one trial at this multiple of the seed's */
+	if (fixed && atof(fixed) > 0)
+		v = atof(fixed) * seed[i].vel;
 	double cap = (prefetch ? 40 : 160) * seed[i].vel, floor_v = seed[i].vel / 16;
 	double stop_ratio = fine ? 1.19 : 1.42;
 	while (r->trials < MAX_TRIALS) {
@@ -696,11 +737,12 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 		r->lmax = tr.lmax;
 		bool pass = tr.full >= 0.95;
 		fprintf(stderr, "  keepup %s%s %7.0f m  v %9.0f m/s: %5.1f%% full, %5.0f tiles/s, "
-				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, hover %.1f s%s\n",
+				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, hover %.1f s, fine-lag %.0f%%, "
+				"load %.1f%s\n",
 			strrchr(planet, '/') ? strrchr(planet, '/') + 1 : planet,
 			prefetch ? " prefetched" : "", seed[i].alt, v, tr.full * 100, tr.gen_per_s,
 			tr.hit_ratio * 100, tr.util * 100, tr.frame_p95_ms, tr.hover_s,
-			prefetch ? "" : "");
+			tr.fine_lag * 100, tr.load1, prefetch ? "" : "");
 		if (pass) {
 			lo = v;
 			r->pass = tr;
@@ -708,6 +750,8 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 			hi = v;
 			r->fail = tr;
 		}
+		if (fixed && atof(fixed) > 0)
+			break;
 		if (pass && isinf(hi)) {
 			if (v * 2 > cap * 1.001) {
 				r->capped = true;
@@ -997,6 +1041,7 @@ int main(int argc, char **argv)
 	if (x.trial_s < 0.5)
 		x.trial_s = 0.5;
 	x.drain = !getenv("KEEPUP_DRAIN") || atoi(getenv("KEEPUP_DRAIN")) > 0;
+	x.ahead = !getenv("KEEPUP_AHEAD") || atoi(getenv("KEEPUP_AHEAD")) > 0;
 	const char *only = getenv("KEEPUP_ONLY"); /* a label substring, for quick runs */
 	const char *alts = getenv("KEEPUP_ALTS"); /* row digits 0 (800 km) .. 8 (50 m) */
 	char err[256];

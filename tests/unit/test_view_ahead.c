@@ -1,0 +1,216 @@
+/* view_clipmap look-ahead (view_clipmap_motion): a camera moving east gets the lines of tiles
+ * beyond the ring on the levels it crosses quickly, ranked after every quad and ring tile;
+ * the tiles it got ahead make the next quad complete without asking again; reversing drops
+ * them. A synthetic source delivers every wanted tile at once (zeros). Needs a GL context
+ * (llvmpipe); skipped without one.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gl_context.h"
+#include "view_clipmap.h"
+#include "xalloc.h"
+
+#define T 16
+#define NLEVELS 11
+#define LAT 0.3
+#define MAX_WANTS 2048
+
+struct src {
+	struct view_source base;
+	struct view_want *list;
+	size_t n, next;
+};
+
+static int s_want(struct view_source *vs, const struct view_want *w, size_t n,
+		  const struct view_focus *f)
+{
+	(void)f;
+	struct src *s = (struct src *)vs;
+	s->list = xrealloc(s->list, (n ? n : 1) * sizeof *w);
+	memcpy(s->list, w, n * sizeof *w);
+	s->n = n;
+	s->next = 0;
+	return 0;
+}
+
+static int s_poll(struct view_source *vs, struct view_tile *out)
+{
+	struct src *s = (struct src *)vs;
+	if (s->next >= s->n)
+		return 0;
+	const struct view_want *w = &s->list[s->next++];
+	enum pix_type f = vs->planet.layer[w->layer].format;
+	void *data = xcalloc((size_t)T * T, pix_bytes(f));
+	*out = (struct view_tile){ w->layer, w->key, f, T, data, 0, data };
+	return 1;
+}
+
+static int s_wait(struct view_source *vs, int ms)
+{
+	(void)ms;
+	struct src *s = (struct src *)vs;
+	return s->next < s->n;
+}
+
+static void s_release(struct view_source *vs, struct view_tile *t)
+{
+	(void)vs;
+	free(t->handle);
+	t->handle = NULL;
+}
+
+static void s_destroy(struct view_source *vs)
+{
+	struct src *s = (struct src *)vs;
+	free(s->list);
+	free(s);
+}
+
+static const struct view_source_ops ops = { s_want, s_poll, s_wait, s_release, s_destroy };
+
+static struct src *src_create(void)
+{
+	struct src *s = xcalloc(1, sizeof *s);
+	s->base.ops = &ops;
+	struct view_planet *p = &s->base.planet;
+	snprintf(p->name, sizeof p->name, "synth");
+	p->a = 6378137.0;
+	p->f = 1 / 298.257223563;
+	p->tile_size = T;
+	p->max_level = NLEVELS - 1;
+	p->nlayers = 3;
+	snprintf(p->layer[0].name, 32, "height");
+	p->layer[0].format = PIX_HEIGHT;
+	snprintf(p->layer[1].name, 32, "normal");
+	p->layer[1].format = PIX_NORMAL;
+	snprintf(p->layer[2].name, 32, "color");
+	p->layer[2].format = PIX_COLOR;
+	return s;
+}
+
+/* Targets at (lon, LAT) on every level; returns whether any changed. */
+static bool aim(struct view_clipmap *cm, double lon)
+{
+	bool changed = false;
+	for (int l = 0; l < NLEVELS; l++) {
+		struct grid_quad q;
+		grid_quad(l + 1, l, T, lon, LAT, &q);
+		changed |= view_clipmap_target(cm, l, &q);
+	}
+	return changed;
+}
+
+static size_t ask(struct view_clipmap *cm, struct src *s, struct view_want *w)
+{
+	size_t n = view_clipmap_wants(cm, true, w, MAX_WANTS);
+	struct view_focus f = { 0 };
+	assert_int_equal(s->base.ops->want(&s->base, w, n, &f), 0);
+	return n;
+}
+
+static void look_ahead(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = NULL;
+	char err[256];
+	if (gl_context_create(GL_BACKEND_AUTO, &ctx, err) < 0) {
+		printf("view_ahead: skipped (no GL: %s)\n", err);
+		skip();
+	}
+	struct src *s = src_create();
+	struct view_clipmap *cm = NULL;
+	assert_int_equal(view_clipmap_create(gl_context_api(ctx), &s->base, NLEVELS, &cm, err), 0);
+	struct view_want *w = xmalloc(MAX_WANTS * sizeof *w);
+
+	/* At rest: no look-ahead. */
+	double lon = 20.0, t = 0;
+	aim(cm, lon);
+	assert_false(view_clipmap_motion(cm, lon, LAT, t));
+	size_t n = ask(cm, s, w);
+	for (size_t i = 0; i < n; i++)
+		assert_true(w[i].cls != VIEW_CLASS_AHEAD);
+	assert_true(view_clipmap_receive(cm) > 0);
+
+	/* Moving east at 5°/s: level 10 tiles are 360/2^11 ≈ 0.18° wide (≈ 4 crossed in 0.15 s:
+	 * 2 lines), level 6 tiles 2.8° (0.27: none). */
+	bool changed = false;
+	for (int k = 0; k < 3; k++) {
+		t += 0.1;
+		lon += 0.5;
+		changed |= aim(cm, lon);
+		changed |= view_clipmap_motion(cm, lon, LAT, t);
+	}
+	assert_true(changed);
+	n = ask(cm, s, w);
+	size_t ahead = 0;
+	bool seen_ahead = false;
+	for (size_t i = 0; i < n; i++) {
+		if (w[i].cls != VIEW_CLASS_AHEAD) {
+			assert_false(seen_ahead); /* every quad and ring tile first */
+			continue;
+		}
+		seen_ahead = true;
+		ahead++;
+		int l = w[i].key.ly;
+		assert_true(l >= 7);
+		const struct grid_quad *q = view_clipmap_target_of(cm, l);
+		assert_non_null(q);
+		uint32_t e2 = (uint32_t)grid_wrap_x(q->lx, (int64_t)q->tx[0] + 3);
+		uint32_t e3 = (uint32_t)grid_wrap_x(q->lx, (int64_t)q->tx[0] + 4);
+		assert_true(w[i].key.x == e2 || (l >= 9 && w[i].key.x == e3));
+	}
+	assert_true(ahead > 0 && ahead <= 96);
+	while (view_clipmap_receive(cm) > 0)
+		;
+
+	/* One level-10 tile further east: the new quad and its ring are already here. */
+	struct view_clipmap_stats st0, st1;
+	view_clipmap_get_stats(cm, &st0);
+	const struct grid_quad *q10 = view_clipmap_target_of(cm, 10);
+	uint32_t tx0 = q10->tx[0];
+	double step = 360.0 / (1u << 11);
+	for (int k = 0; k < 40 && view_clipmap_target_of(cm, 10)->tx[0] == tx0; k++) {
+		t += 0.01;
+		lon += step / 8;
+		aim(cm, lon);
+		view_clipmap_motion(cm, lon, LAT, t);
+	}
+	assert_int_not_equal(view_clipmap_target_of(cm, 10)->tx[0], tx0);
+	assert_int_equal(view_clipmap_update(cm, 10), 1);
+	n = ask(cm, s, w);
+	for (size_t i = 0; i < n; i++)
+		if (w[i].key.ly == 10)
+			assert_int_equal(w[i].cls, VIEW_CLASS_AHEAD); /* only the new far line */
+
+	/* Turning back west: the lines ahead in the east are released. */
+	while (view_clipmap_receive(cm) > 0)
+		;
+	view_clipmap_get_stats(cm, &st0);
+	for (int k = 0; k < 3; k++) {
+		t += 0.1;
+		lon -= 0.5;
+		aim(cm, lon);
+		view_clipmap_motion(cm, lon, LAT, t);
+	}
+	view_clipmap_get_stats(cm, &st1);
+	assert_true(st1.tiles_held < st0.tiles_held);
+
+	free(w);
+	view_clipmap_destroy(cm);
+	view_source_destroy(&s->base);
+	gl_context_destroy(ctx);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = { cmocka_unit_test(look_ahead) };
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
