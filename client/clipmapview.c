@@ -35,6 +35,8 @@ static void usage(FILE *f)
 		"  --size WxH          framebuffer (default 1280x720)\n"
 		"  --wait-complete     wait for every wanted level before writing a picture\n"
 		"  --timeout S         give up waiting after S seconds (default 300)\n"
+		"  --fps N             without --wait-complete: frames paced at N per second in real\n"
+		"                      time, tiles taken between them (default 30; 0: unpaced)\n"
 		"  --stats FILE        one JSON line per frame\n"
 		"  --fov DEG           vertical field of view (default 60)\n"
 		"  --sun AZ,EL         sun azimuth and elevation at the camera (default 135,35)\n"
@@ -54,15 +56,6 @@ static double mono_s(void)
 	struct timespec ts;
 	clock_gettime(CLOCK_MONOTONIC, &ts);
 	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
-}
-
-static void sleep_s(double s)
-{
-	if (s <= 0)
-		return;
-	struct timespec ts = { (time_t)s, (long)((s - (double)(time_t)s) * 1e9) };
-	while (nanosleep(&ts, &ts) != 0 && errno == EINTR)
-		;
 }
 
 struct window_opts {
@@ -161,8 +154,14 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 		}
 		if (o->exit_after > 0 && frames >= o->exit_after)
 			break;
-		/* 60 Hz: vsync already waited when the frame took a full period. */
-		sleep_s(period - (mono_s() - t));
+		/* 60 Hz (vsync already waited when the frame took a full period); tiles that
+		 * arrive meanwhile are taken now and uploaded by the next frame. */
+		double left = period - (mono_s() - t);
+		rc = left > 0 ? view_idle(v, left) : 0;
+		if (rc < 0) {
+			fprintf(stderr, "clipmapview: after frame %ld: %s\n", frames, strerror(-rc));
+			return 1;
+		}
 	}
 	if (o->screenshot && frames > 0) {
 		struct view_camera last;
@@ -280,12 +279,12 @@ int main(int argc, char **argv)
 	bool wait_complete = false, window = false;
 	long exit_after = 0;
 	const char *screenshot = NULL;
-	double timeout = 300, fov = 60;
+	double timeout = 300, fov = 60, fps = 30;
 	struct view_desc d = { 0 };
 	enum gl_backend backend = GL_BACKEND_AUTO;
 	enum { O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS,
 	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP,
-	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE, O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT };
+	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE, O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS };
 	static const struct option opts[] = {
 		{ "planet", required_argument, NULL, O_PLANET },
 		{ "camera", required_argument, NULL, O_CAMERA },
@@ -294,6 +293,7 @@ int main(int argc, char **argv)
 		{ "size", required_argument, NULL, O_SIZE },
 		{ "wait-complete", no_argument, NULL, O_WAIT },
 		{ "timeout", required_argument, NULL, O_TIMEOUT },
+		{ "fps", required_argument, NULL, O_FPS },
 		{ "stats", required_argument, NULL, O_STATS },
 		{ "fov", required_argument, NULL, O_FOV },
 		{ "sun", required_argument, NULL, O_SUN },
@@ -357,6 +357,15 @@ int main(int argc, char **argv)
 			break;
 		case O_WAIT: wait_complete = true; break;
 		case O_TIMEOUT: timeout = atof(optarg); break;
+		case O_FPS: {
+			char *end;
+			fps = strtod(optarg, &end);
+			if (*end || !(fps >= 0) || fps > 1000) {
+				fprintf(stderr, "clipmapview: --fps: frames per second, 0 to 1000\n");
+				return 2;
+			}
+			break;
+		}
 		case O_STATS: statsp = optarg; break;
 		case O_FOV: fov = atof(optarg); break;
 		case O_SUN:
@@ -494,6 +503,7 @@ int main(int argc, char **argv)
 	}
 	pix = xmalloc((size_t)width * height * 4);
 	size_t nframes = nkeys == 1 ? 1 : (nkeys - 1) * (size_t)steps + 1;
+	double t_start = mono_s();
 	for (size_t f = 0; f < nframes; f++) {
 		size_t k = f / (size_t)steps;
 		double t = (double)(f % (size_t)steps) / steps;
@@ -514,7 +524,7 @@ int main(int argc, char **argv)
 		if (wait_complete)
 			rc = view_frame_complete(v, &cam, timeout, &st, NULL);
 		else
-			rc = view_frame(v, &cam, (double)f / 30.0, &st);
+			rc = view_frame(v, &cam, fps > 0 ? mono_s() - t_start : (double)f / 30.0, &st);
 		if (rc == -ETIMEDOUT)
 			fprintf(stderr, "clipmapview: frame %zu: not complete after %.0f s\n", f,
 				timeout);
@@ -538,6 +548,15 @@ int main(int argc, char **argv)
 			rc = img_write(path, width, height, 4, IMG_U8, pix, err);
 			if (rc < 0) {
 				fprintf(stderr, "clipmapview: %s\n", err);
+				goto out;
+			}
+		}
+		/* Real time: the next frame is due at (f + 1) / fps; tiles come in meanwhile. */
+		double left = t_start + (double)(f + 1) / fps - mono_s();
+		if (!wait_complete && fps > 0 && f + 1 < nframes && left > 0) {
+			rc = view_idle(v, left);
+			if (rc < 0) {
+				fprintf(stderr, "clipmapview: %s\n", strerror(-rc));
 				goto out;
 			}
 		}

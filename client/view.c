@@ -87,6 +87,7 @@ struct view {
 	int frame_bits; /* this frame's variant bits that every level shares */
 	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
 	double *fade;	/* per level: this frame's fade-in (1: fully shown) */
+	int idle_tiles; /* tiles taken by view_idle since the last frame */
 	struct frame_uniforms fu;
 	/* framebuffer */
 	unsigned fbo, color_tex, depth_tex;
@@ -628,10 +629,15 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	/* Algorithm 1, lines 2-9: a new focus sends a new want-set. */
 	bool changed = !v->sent_once;
 	set_targets(v, lmin, lmax, &changed);
+	/* The look-ahead along the camera's motion (real time only: a frame without time —
+	 * offline rendering — has no motion). */
+	if (now_s > 0)
+		changed |= view_clipmap_motion(v->cm, cam->lon, cam->lat, now_s);
 	int rc = view_clipmap_receive(v->cm);
 	if (rc < 0)
 		return rc;
-	s.tiles_received = rc;
+	s.tiles_received = rc + v->idle_tiles;
+	v->idle_tiles = 0;
 	if (changed) {
 		size_t n = view_clipmap_wants(v->cm, !v->d.no_prefetch, v->wants, MAX_WANTS);
 		struct view_focus f = { cam->lon, cam->lat, v->last.alt, { 0, 0, 0 } };
@@ -744,6 +750,25 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	if (st)
 		*st = s;
 	return e == GL_NO_ERROR ? 0 : -EIO;
+}
+
+int view_idle(struct view *v, double seconds)
+{
+	double end = now_ms() + seconds * 1e3;
+	int got = 0;
+	for (;;) {
+		double left = end - now_ms();
+		if (left <= 0)
+			break;
+		int rc = v->src->ops->wait(v->src, (int)ceil(left));
+		if (rc == 1)
+			rc = view_clipmap_receive(v->cm);
+		if (rc < 0)
+			return rc;
+		got += rc;
+	}
+	v->idle_tiles += got;
+	return got;
 }
 
 int view_frame_complete(struct view *v, const struct view_camera *c, double timeout_s,

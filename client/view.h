@@ -61,6 +61,9 @@ void view_destroy(struct view *v);
  * far as the clipmap knows it). now_s drives fades. Returns 0 or -errno. */
 int view_frame(struct view *v, const struct view_camera *c, double now_s,
 	       struct view_frame_stats *st);
+/* Between frames: takes the tiles that arrive for the next `seconds` (they are uploaded by
+ * the next frame, within its budget). Returns how many arrived, or -errno. */
+int view_idle(struct view *v, double seconds);
 /* Turns frustum culling of ring sectors on or off (a debug switch: the pixels are the same). */
 void view_set_culling(struct view *v, bool on);
 /* Offline rendering: renders frames, sleeping on the source between them, until one is

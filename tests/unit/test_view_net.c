@@ -3,7 +3,8 @@
  * files); clipmapview runs as a real process twice per camera, once over the daemon
  * (--connect SOCKET --planet procedural) and once with the engine in-process (--planet FILE),
  * both --wait-complete. The two pictures must be the same (decoded pixels, within a small
- * tolerance for the GL rasteriser). A socket nobody listens on is exit 1 with a message
+ * tolerance for the GL rasteriser). A flight without --wait-complete is paced in real time
+ * and takes tiles between its frames. A socket nobody listens on is exit 1 with a message
  * naming it. Skipped when the daemon or the viewer was not built, or no GL context exists.
  */
 #include <errno.h>
@@ -193,10 +194,63 @@ static void bad_socket_is_exit_1_naming_it(void **state)
 	assert_non_null(strstr(out, "127.0.0.1:1"));
 }
 
+static double mono_s(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
+
+/* Without --wait-complete a flight is paced in real time (--fps) and the tiles that arrive
+ * between frames are taken: 11 frames at 5 per second last at least 2 s, and the frames
+ * show the terrain coming in (tiles received, levels drawn by the end). */
+static void paced_flight_takes_tiles_between_frames(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char exe[600], fl[300], png[300], stats[300], out[8192];
+	snprintf(exe, sizeof exe, "%s/clipmapview", e->d.bindir);
+	snprintf(fl, sizeof fl, "%s/hover.csv", e->d.dir);
+	snprintf(png, sizeof png, "%s/paced_%%02d.png", e->d.dir);
+	snprintf(stats, sizeof stats, "%s/paced.jsonl", e->d.dir);
+	FILE *f = fopen(fl, "w");
+	assert_non_null(f);
+	fprintf(f, "lat,lon,alt,heading,pitch\n20,30,3000,0,-30\n20,30.01,3000,0,-30\n");
+	assert_int_equal(fclose(f), 0);
+	char *argv[] = { exe, "--connect", e->d.sock, "--planet", "procedural", "--flight", fl,
+			 "--steps", "10", "--fps", "5", "--size", "160x120", "-o", png, "--stats",
+			 stats, NULL };
+	double t0 = mono_s();
+	int rc = daemon_env_run(argv, out, sizeof out);
+	double took = mono_s() - t0;
+	if (rc != 0)
+		fprintf(stderr, "%s\n", out);
+	assert_int_equal(rc, 0);
+	assert_true(took >= 1.9);
+	f = fopen(stats, "r");
+	assert_non_null(f);
+	char line[1024];
+	int frames = 0, tiles = 0, last_llast = -1;
+	while (fgets(line, sizeof line, f)) {
+		const char *p = strstr(line, "\"tiles_received\":");
+		const char *q = strstr(line, "\"llast\":");
+		assert_non_null(p);
+		assert_non_null(q);
+		tiles += atoi(p + strlen("\"tiles_received\":"));
+		last_llast = atoi(q + strlen("\"llast\":"));
+		frames++;
+	}
+	fclose(f);
+	assert_int_equal(frames, 11);
+	assert_true(tiles > 0);
+	assert_true(last_llast >= 0);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(connect_equals_local),
+		cmocka_unit_test(paced_flight_takes_tiles_between_frames),
 		cmocka_unit_test(unknown_planet_is_exit_1),
 		cmocka_unit_test(bad_socket_is_exit_1_naming_it),
 	};
