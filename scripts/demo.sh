@@ -88,8 +88,8 @@ flight() {
 rm -f "$OUT"/frames/*.png
 echo "rendering the flights ($SIZE, every frame complete) ..."
 flight earth-orbit earth earth-orbit.csv --sun 100,60
-flight himalaya earth himalaya.csv --sun 110,12 --exaggerate 3
-flight andes earth andes.csv --sun 290,15 --exaggerate 3
+flight himalaya earth himalaya.csv --sun 120,30 --exaggerate 2
+flight andes earth andes.csv --sun 285,30 --exaggerate 2
 flight moon-orbit moon moon-orbit.csv --haze 0 --sun 250,30
 
 # One contact sheet: the frames at the camera keys, one flight a row (six at most).
@@ -120,5 +120,5 @@ echo
 echo "To watch from another machine, run clipmapd with a TCP listener it can reach and a token"
 echo "(in its config: [listen] tcp = 0.0.0.0:$PORT, token_file = /etc/clipmap/token), then there:"
 echo "  clipmapview --connect $HOST:$PORT --planet earth --token-file TOKEN_FILE \\"
-echo "      --camera 27.9,86.9,20000,0,-15 -o everest.png"
+echo "      --camera 26.3,86.9,120000,4,-22 -o everest.png"
 echo "(this demo's daemon listened on 127.0.0.1:$PORT only and has stopped.)"

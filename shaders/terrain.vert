@@ -108,8 +108,13 @@ void main()
 	air /= 1.0 + (u_exag - 1.0) * cz * cz;      // exaggerated verticals hold no more air
 	vec3 beta = (vec3(5.8e-6, 13.5e-6, 33.1e-6) + 2.0e-6) * (0.45 * u_haze.y);
 	v_tr = exp(-beta * air);
-	float day = smoothstep(-0.1, 0.1, dot(n, u_sun));
-	v_in = (1.0 - v_tr) * vec3(1.0, 0.96, 0.90) * (0.03 + 0.97 * day) * 0.7;
+	// Light scattered into the ray: single scattering of the sunlight that reaches the air
+	// (less under a low sun, whose light crosses more air first), about a quarter of what a
+	// white ground under the same sun would send back.
+	float mu = dot(n, u_sun);
+	float day = smoothstep(-0.1, 0.1, mu);
+	v_in = (1.0 - v_tr) * vec3(1.0, 0.96, 0.90) * (0.03 + 0.97 * day) *
+	       (0.12 + 0.23 * sqrt(max(mu, 0.0)));
 #endif
 	gl_Position = u_vp * vec4(pos, 1.0);
 }
