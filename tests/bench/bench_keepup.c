@@ -174,7 +174,7 @@ static int daemon_start(struct daemon *d, const char *bindir, const char *planet
 	FILE *f = fopen(d->conf, "w");
 	if (!f)
 		return -errno;
-	fprintf(f, "[listen]\nunix = %s\ntcp =\n[engine]\nplanets = %s\nworkers = 0\ncache_mb = 3072\n"
+	fprintf(f, "[listen]\nunix = %s\ntcp =\n[engine]\nplanets = %s\nworkers = 0\ncache_mb = 1024\n"
 		   "[session]\nmax_rate = 0\n[log]\nlevel = warn\n",
 		d->sock, planets);
 	fclose(f);
@@ -721,12 +721,14 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 	r->alt = seed[i].alt;
 	r->seed_v = seed[i].vel;
 	double t0 = now_s();
-	double lo = 0, hi = INFINITY, v = (fine ? 10 : 2) * seed[i].vel;
+	/* From the target (10× the seed) up or down by doubling, then bisection down to a
+	 * 19 % step: the table says on which side of the target each row falls. */
+	double lo = 0, hi = INFINITY, v = 10 * seed[i].vel;
 	const char *fixed = getenv("KEEPUP_V"); /* one trial at this multiple of the seed's */
 	if (fixed && atof(fixed) > 0)
 		v = atof(fixed) * seed[i].vel;
 	double cap = (prefetch ? 40 : 160) * seed[i].vel, floor_v = seed[i].vel / 16;
-	double stop_ratio = fine ? 1.19 : 1.42;
+	double stop_ratio = fine ? 1.09 : 1.19;
 	while (r->trials < MAX_TRIALS) {
 		struct trial tr;
 		int rc = run_trial(x, planet, seed[i].alt, v, prefetch, &tr);
