@@ -51,7 +51,8 @@ bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_q
 bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t);
 
 /* The want-set for the current targets: every missing tile of every target quad, coarse
- * levels first, then (prefetch) the missing ring tiles, then the missing look-ahead tiles
+ * levels first, then (prefetch) the missing ring tiles — while the camera moves
+ * (view_clipmap_motion) only those on the side it moves to — then the missing look-ahead tiles
  * (class VIEW_CLASS_AHEAD, at most 96). Returns the count (≤ cap). */
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
 			  size_t cap);

@@ -1,7 +1,7 @@
 /* view_clipmap look-ahead (view_clipmap_motion): a camera moving east gets the lines of tiles
  * beyond the ring on the levels it crosses quickly, ranked after every quad and ring tile;
  * the tiles it got ahead make the next quad complete without asking again; reversing drops
- * them. A synthetic source delivers every wanted tile at once (zeros). Needs a GL context
+ * them. While it moves, the ring is asked for only on the side it moves to. A synthetic source delivers every wanted tile at once (zeros). Needs a GL context
  * (llvmpipe); skipped without one.
  */
 #include <stdarg.h>
@@ -116,6 +116,23 @@ static size_t ask(struct view_clipmap *cm, struct src *s, struct view_want *w)
 	return n;
 }
 
+/* Which lines of level l's ring the want-set asks for (prefetch class): the column west of
+ * the quad (behind an eastward camera), the rows north and south of it. */
+static void ring_lines(const struct view_clipmap *cm, const struct view_want *w, size_t n, int l,
+		       bool *west, bool *north, bool *south)
+{
+	const struct grid_quad *q = view_clipmap_target_of(cm, l);
+	assert_non_null(q);
+	*west = *north = *south = false;
+	for (size_t i = 0; i < n; i++) {
+		if (w[i].key.ly != l || w[i].cls != VIEW_CLASS_PREFETCH)
+			continue;
+		*west |= w[i].key.x == grid_wrap_x(q->lx, (int64_t)q->tx[0] - 1);
+		*north |= w[i].key.y + 1 == q->ty[0];
+		*south |= w[i].key.y == q->ty[0] + 2;
+	}
+}
+
 static void look_ahead(void **state)
 {
 	(void)state;
@@ -137,6 +154,9 @@ static void look_ahead(void **state)
 	size_t n = ask(cm, s, w);
 	for (size_t i = 0; i < n; i++)
 		assert_true(w[i].cls != VIEW_CLASS_AHEAD);
+	bool west, north, south;
+	ring_lines(cm, w, n, 10, &west, &north, &south); /* at rest: the whole ring */
+	assert_true(west && north && south);
 	assert_true(view_clipmap_receive(cm) > 0);
 
 	/* Moving east at 5°/s: level 10 tiles are 360/2^11 ≈ 0.18° wide (≈ 4 crossed in 0.15 s:
@@ -168,6 +188,11 @@ static void look_ahead(void **state)
 		assert_true(w[i].key.x == e2 || (l >= 9 && w[i].key.x == e3));
 	}
 	assert_true(ahead > 0 && ahead <= 96);
+	/* Moving: the ring on the side the camera moves to — not the column behind it, and of
+	 * the rows north and south (it does not move north or south) only the nearer one. */
+	ring_lines(cm, w, n, 10, &west, &north, &south);
+	assert_false(west);
+	assert_true(north != south);
 	while (view_clipmap_receive(cm) > 0)
 		;
 
