@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "gl_context.h"
+#include "synth_source.h"
 #include "view_clipmap.h"
 #include "xalloc.h"
 
@@ -23,77 +24,12 @@
 #define LAT 0.3
 #define MAX_WANTS 2048
 
-struct src {
-	struct view_source base;
-	struct view_want *list;
-	size_t n, next;
-};
-
-static int s_want(struct view_source *vs, const struct view_want *w, size_t n,
-		  const struct view_focus *f)
+/* A planet of zeros, every wanted tile delivered at once. */
+static struct view_source *src_create(void)
 {
-	(void)f;
-	struct src *s = (struct src *)vs;
-	s->list = xrealloc(s->list, (n ? n : 1) * sizeof *w);
-	memcpy(s->list, w, n * sizeof *w);
-	s->n = n;
-	s->next = 0;
-	return 0;
-}
-
-static int s_poll(struct view_source *vs, struct view_tile *out)
-{
-	struct src *s = (struct src *)vs;
-	if (s->next >= s->n)
-		return 0;
-	const struct view_want *w = &s->list[s->next++];
-	enum pix_type f = vs->planet.layer[w->layer].format;
-	void *data = xcalloc((size_t)T * T, pix_bytes(f));
-	*out = (struct view_tile){ w->layer, w->key, f, T, data, 0, data };
-	return 1;
-}
-
-static int s_wait(struct view_source *vs, int ms)
-{
-	(void)ms;
-	struct src *s = (struct src *)vs;
-	return s->next < s->n;
-}
-
-static void s_release(struct view_source *vs, struct view_tile *t)
-{
-	(void)vs;
-	free(t->handle);
-	t->handle = NULL;
-}
-
-static void s_destroy(struct view_source *vs)
-{
-	struct src *s = (struct src *)vs;
-	free(s->list);
-	free(s);
-}
-
-static const struct view_source_ops ops = { s_want, s_poll, s_wait, s_release, s_destroy };
-
-static struct src *src_create(void)
-{
-	struct src *s = xcalloc(1, sizeof *s);
-	s->base.ops = &ops;
-	struct view_planet *p = &s->base.planet;
-	snprintf(p->name, sizeof p->name, "synth");
-	p->a = 6378137.0;
-	p->f = 1 / 298.257223563;
-	p->tile_size = T;
-	p->max_level = NLEVELS - 1;
-	p->nlayers = 3;
-	snprintf(p->layer[0].name, 32, "height");
-	p->layer[0].format = PIX_HEIGHT;
-	snprintf(p->layer[1].name, 32, "normal");
-	p->layer[1].format = PIX_NORMAL;
-	snprintf(p->layer[2].name, 32, "color");
-	p->layer[2].format = PIX_COLOR;
-	return s;
+	static const char *const names[] = { "height", "normal", "color" };
+	static const enum pix_type formats[] = { PIX_HEIGHT, PIX_NORMAL, PIX_COLOR };
+	return synth_source_create(T, NLEVELS - 1, 3, names, formats, NULL, NULL);
 }
 
 /* Targets at (lon, LAT) on every level; returns whether any changed. */
@@ -108,11 +44,11 @@ static bool aim(struct view_clipmap *cm, double lon)
 	return changed;
 }
 
-static size_t ask(struct view_clipmap *cm, struct src *s, struct view_want *w)
+static size_t ask(struct view_clipmap *cm, struct view_source *s, struct view_want *w)
 {
 	size_t n = view_clipmap_wants(cm, true, w, MAX_WANTS);
 	struct view_focus f = { 0 };
-	assert_int_equal(s->base.ops->want(&s->base, w, n, &f), 0);
+	assert_int_equal(s->ops->want(s, w, n, &f), 0);
 	return n;
 }
 
@@ -142,9 +78,9 @@ static void look_ahead(void **state)
 		printf("view_ahead: skipped (no GL: %s)\n", err);
 		skip();
 	}
-	struct src *s = src_create();
+	struct view_source *s = src_create();
 	struct view_clipmap *cm = NULL;
-	assert_int_equal(view_clipmap_create(gl_context_api(ctx), &s->base, NLEVELS, &cm, err), 0);
+	assert_int_equal(view_clipmap_create(gl_context_api(ctx), s, NLEVELS, &cm, err), 0);
 	struct view_want *w = xmalloc(MAX_WANTS * sizeof *w);
 
 	/* At rest: no look-ahead. */
@@ -230,7 +166,7 @@ static void look_ahead(void **state)
 
 	free(w);
 	view_clipmap_destroy(cm);
-	view_source_destroy(&s->base);
+	view_source_destroy(s);
 	gl_context_destroy(ctx);
 }
 

@@ -28,6 +28,7 @@
 #include "geo.h"
 #include "img.h"
 #include "gl_context.h"
+#include "synth_source.h"
 #include "view.h"
 #include "view_source_local.h"
 #include "xalloc.h"
@@ -41,13 +42,6 @@
 #define FH 180
 
 /* ---- a synthetic planet: heights 0, flat normals, colour a smooth function of the normal ---- */
-
-struct synth {
-	struct view_source base;
-	double lambda; /* the colour pattern's wavelength on the ground, metres */
-	struct view_want *list;
-	size_t n, next;
-};
 
 /* Three directions (one per channel) and phases: the pattern has no symmetry a wrong
  * longitude, a mirrored tile or a swapped axis could satisfy. */
@@ -77,10 +71,11 @@ static void normal_at(double lat, double lon, double n[3])
 	n[2] = sin(lat * DEG);
 }
 
-static void synth_fill(const struct synth *s, const struct view_want *w, void *data)
+/* The planet's tiles; ctx points at the pattern's wavelength on the ground (metres). */
+static void synth_fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type f,
+		       void *data)
 {
-	uint32_t T = s->base.planet.tile_size;
-	enum pix_type f = s->base.planet.layer[w->layer].format;
+	double lambda = *(const double *)ctx;
 	for (uint32_t j = 0; j < T; j++)
 		for (uint32_t i = 0; i < T; i++) {
 			size_t o = (size_t)j * T + i;
@@ -93,7 +88,7 @@ static void synth_fill(const struct synth *s, const struct view_want *w, void *d
 				double lon, lat, n[3], a[3];
 				grid_texel_center(&w->key, T, i, j, &lon, &lat);
 				normal_at(lat, lon, n);
-				synth_albedo(s->lambda, n, a);
+				synth_albedo(lambda, n, a);
 				unsigned char *p = (unsigned char *)data + o * 4;
 				for (int c = 0; c < 3; c++)
 					p[c] = (unsigned char)lrint(a[c] * 255);
@@ -102,74 +97,11 @@ static void synth_fill(const struct synth *s, const struct view_want *w, void *d
 		}
 }
 
-static int synth_want(struct view_source *vs, const struct view_want *w, size_t n,
-		      const struct view_focus *f)
+static struct view_source *synth_create(double *lambda)
 {
-	(void)f;
-	struct synth *s = (struct synth *)vs;
-	s->list = xrealloc(s->list, (n ? n : 1) * sizeof *s->list);
-	memcpy(s->list, w, n * sizeof *w);
-	s->n = n;
-	s->next = 0;
-	return 0;
-}
-
-static int synth_poll(struct view_source *vs, struct view_tile *out)
-{
-	struct synth *s = (struct synth *)vs;
-	if (s->next >= s->n)
-		return 0;
-	const struct view_want *w = &s->list[s->next++];
-	uint32_t T = s->base.planet.tile_size;
-	enum pix_type f = s->base.planet.layer[w->layer].format;
-	void *data = xmalloc((size_t)T * T * pix_bytes(f));
-	synth_fill(s, w, data);
-	*out = (struct view_tile){ w->layer, w->key, f, T, data, 0, data };
-	return 1;
-}
-
-static int synth_wait(struct view_source *vs, int ms)
-{
-	(void)ms;
-	struct synth *s = (struct synth *)vs;
-	return s->next < s->n;
-}
-
-static void synth_release(struct view_source *vs, struct view_tile *t)
-{
-	(void)vs;
-	free(t->handle);
-}
-
-static void synth_destroy(struct view_source *vs)
-{
-	struct synth *s = (struct synth *)vs;
-	free(s->list);
-	free(s);
-}
-
-static const struct view_source_ops synth_ops = { synth_want, synth_poll, synth_wait,
-						  synth_release, synth_destroy };
-
-static struct synth *synth_create(double lambda)
-{
-	struct synth *s = xcalloc(1, sizeof *s);
-	s->base.ops = &synth_ops;
-	s->lambda = lambda;
-	struct view_planet *p = &s->base.planet;
-	snprintf(p->name, sizeof p->name, "synth");
-	p->a = WGS_A;
-	p->f = WGS_F;
-	p->tile_size = 128;
-	p->max_level = 22;
-	p->nlayers = 3;
-	snprintf(p->layer[0].name, 32, "color");
-	p->layer[0].format = PIX_COLOR;
-	snprintf(p->layer[1].name, 32, "height");
-	p->layer[1].format = PIX_HEIGHT;
-	snprintf(p->layer[2].name, 32, "normal");
-	p->layer[2].format = PIX_NORMAL;
-	return s;
+	static const char *const names[] = { "color", "height", "normal" };
+	static const enum pix_type formats[] = { PIX_COLOR, PIX_HEIGHT, PIX_NORMAL };
+	return synth_source_create(128, 22, 3, names, formats, synth_fill, lambda);
 }
 
 /* ---- rays against the ellipsoid ---- */
@@ -606,8 +538,8 @@ static void crossing(struct ctx *c, const char *name, double lat, double lon, do
 		     double len, double alt, double pitch, int n)
 {
 	double lambda = 4 * alt;
-	struct synth *s = synth_create(lambda);
-	struct view *v = make_view(c, &s->base, true);
+	struct view_source *src = synth_create(&lambda);
+	struct view *v = make_view(c, src, true);
 	struct verdict sum = { 0 };
 	for (int k = 0; k < n; k++) {
 		double clat, clon, hdg;
@@ -619,7 +551,7 @@ static void crossing(struct ctx *c, const char *name, double lat, double lon, do
 		"colour, worst error %.3f\n", name, n, sum.inside, sum.judged, sum.max_err);
 	assert_true(sum.judged > n * FW * FH / 10);
 	view_destroy(v);
-	view_source_destroy(&s->base);
+	view_source_destroy(src);
 }
 
 static void poles_and_antimeridian(void **state)

@@ -18,6 +18,7 @@
 #include "geo.h"
 #include "img.h"
 #include "gl_context.h"
+#include "synth_source.h"
 #include "view.h"
 #include "view_source_local.h"
 #include "xalloc.h"
@@ -30,13 +31,11 @@
 
 enum synth_mode { SYNTH_PATTERN = 1, SYNTH_MARKER };
 
+/* What the tiles hold: a hash pattern of the texel coordinates, or a flat planet with a
+ * red cone marker. */
 struct synth {
-	struct view_source base;
 	enum synth_mode mode;
 	double mlat, mlon, mrad, height; /* marker: degrees, radius in metres; flat height */
-	struct view_want *list;
-	size_t n, next;
-	size_t wants_calls;
 };
 
 static float pattern_height(int lx, int ly, uint64_t u, uint64_t v)
@@ -45,10 +44,9 @@ static float pattern_height(int lx, int ly, uint64_t u, uint64_t v)
 		       0xFFFFFu);
 }
 
-static void fill(struct synth *s, const struct view_want *w, void *data)
+static void fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type f, void *data)
 {
-	uint32_t T = s->base.planet.tile_size;
-	enum pix_type f = s->base.planet.layer[w->layer].format;
+	const struct synth *s = ctx;
 	for (uint32_t j = 0; j < T; j++)
 		for (uint32_t i = 0; i < T; i++) {
 			uint64_t u = (uint64_t)w->key.x * T + i, v = (uint64_t)w->key.y * T + j;
@@ -87,75 +85,11 @@ static void fill(struct synth *s, const struct view_want *w, void *data)
 		}
 }
 
-static int synth_want(struct view_source *vs, const struct view_want *w, size_t n,
-		      const struct view_focus *f)
+static struct view_source *synth_create(struct synth *s, uint32_t T, int max_level)
 {
-	(void)f;
-	struct synth *s = (struct synth *)vs;
-	s->list = xrealloc(s->list, (n ? n : 1) * sizeof *s->list);
-	memcpy(s->list, w, n * sizeof *w);
-	s->n = n;
-	s->next = 0;
-	s->wants_calls++;
-	return 0;
-}
-
-static int synth_poll(struct view_source *vs, struct view_tile *out)
-{
-	struct synth *s = (struct synth *)vs;
-	if (s->next >= s->n)
-		return 0;
-	const struct view_want *w = &s->list[s->next++];
-	uint32_t T = s->base.planet.tile_size;
-	enum pix_type f = s->base.planet.layer[w->layer].format;
-	void *data = xmalloc((size_t)T * T * pix_bytes(f));
-	fill(s, w, data);
-	*out = (struct view_tile){ w->layer, w->key, f, T, data, 0, data };
-	return 1;
-}
-
-static int synth_wait(struct view_source *vs, int ms)
-{
-	(void)ms;
-	struct synth *s = (struct synth *)vs;
-	return s->next < s->n;
-}
-
-static void synth_release(struct view_source *vs, struct view_tile *t)
-{
-	(void)vs;
-	free(t->handle);
-}
-
-static void synth_destroy(struct view_source *vs)
-{
-	struct synth *s = (struct synth *)vs;
-	free(s->list);
-	free(s);
-}
-
-static const struct view_source_ops synth_ops = { synth_want, synth_poll, synth_wait,
-						  synth_release, synth_destroy };
-
-static struct synth *synth_create(enum synth_mode mode, uint32_t T, int max_level)
-{
-	struct synth *s = xcalloc(1, sizeof *s);
-	s->base.ops = &synth_ops;
-	s->mode = mode;
-	struct view_planet *p = &s->base.planet;
-	snprintf(p->name, sizeof p->name, "synth");
-	p->a = WGS_A;
-	p->f = WGS_F;
-	p->tile_size = T;
-	p->max_level = max_level;
-	p->nlayers = 3;
-	snprintf(p->layer[0].name, 32, "color");
-	p->layer[0].format = PIX_COLOR;
-	snprintf(p->layer[1].name, 32, "height");
-	p->layer[1].format = PIX_HEIGHT;
-	snprintf(p->layer[2].name, 32, "normal");
-	p->layer[2].format = PIX_NORMAL;
-	return s;
+	static const char *const names[] = { "color", "height", "normal" };
+	static const enum pix_type formats[] = { PIX_COLOR, PIX_HEIGHT, PIX_NORMAL };
+	return synth_source_create(T, max_level, 3, names, formats, fill, s);
 }
 
 /* ---- helpers ---- */
@@ -221,8 +155,9 @@ static void toroidal_after_moves(void **state)
 	struct gl_context *ctx = ctx_or_skip();
 	if (!ctx)
 		skip();
-	struct synth *s = synth_create(SYNTH_PATTERN, 32, 10);
-	struct view *v = make_view(ctx, &s->base, 64, 64);
+	struct synth pat = { .mode = SYNTH_PATTERN };
+	struct view_source *src = synth_create(&pat, 32, 10);
+	struct view *v = make_view(ctx, src, 64, 64);
 	uint32_t T = 32;
 	int nl = 11;
 	float *hbuf = xmalloc((size_t)T * T * nl * 4);
@@ -262,7 +197,7 @@ static void toroidal_after_moves(void **state)
 	free(hbuf);
 	free(nbuf);
 	view_destroy(v);
-	view_source_destroy(&s->base);
+	view_source_destroy(src);
 	gl_context_destroy(ctx);
 }
 
@@ -272,13 +207,10 @@ static void marker_case(struct gl_context *ctx, double lat, double lon, double a
 			double heading, double pitch, double mlat, double mlon, double mrad,
 			double height)
 {
-	struct synth *s = synth_create(SYNTH_MARKER, 64, 22);
-	s->mlat = mlat;
-	s->mlon = mlon;
-	s->mrad = mrad;
-	s->height = height;
+	struct synth mk = { SYNTH_MARKER, mlat, mlon, mrad, height };
+	struct view_source *src = synth_create(&mk, 64, 22);
 	int W = 128, H = 128;
-	struct view *v = make_view(ctx, &s->base, W, H);
+	struct view *v = make_view(ctx, src, W, H);
 	struct view_camera cam = { lat, lon, agl, heading, pitch, 60, 0, 0 };
 	struct view_frame_stats st;
 	assert_int_equal(view_frame_complete(v, &cam, 30, &st, NULL), 0);
@@ -331,7 +263,7 @@ static void marker_case(struct gl_context *ctx, double lat, double lon, double a
 	geo_body_destroy(b);
 	free(px);
 	view_destroy(v);
-	view_source_destroy(&s->base);
+	view_source_destroy(src);
 }
 
 static void marker_projects_to_predicted_pixel(void **state)
