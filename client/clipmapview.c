@@ -37,6 +37,8 @@ static void usage(FILE *f)
 		"  --timeout S         give up waiting after S seconds (default 300)\n"
 		"  --fps N             without --wait-complete: frames paced at N per second in real\n"
 		"                      time, tiles taken between them (default 30; 0: unpaced)\n"
+		"  --budget MS         real time (window, paced flights): a frame stops refining once\n"
+		"                      its texture uploads have taken MS ms (default 12; 0: never)\n"
 		"  --stats FILE        one JSON line per frame\n"
 		"  --fov DEG           vertical field of view (default 60)\n"
 		"  --sun AZ,EL         sun azimuth and elevation at the camera (default 135,35)\n"
@@ -279,12 +281,13 @@ int main(int argc, char **argv)
 	bool wait_complete = false, window = false;
 	long exit_after = 0;
 	const char *screenshot = NULL;
-	double timeout = 300, fov = 60, fps = 30;
+	double timeout = 300, fov = 60, fps = 30, budget = 12;
 	struct view_desc d = { 0 };
 	enum gl_backend backend = GL_BACKEND_AUTO;
 	enum { O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS,
 	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP,
-	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE, O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS };
+	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE, O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS,
+	       O_BUDGET };
 	static const struct option opts[] = {
 		{ "planet", required_argument, NULL, O_PLANET },
 		{ "camera", required_argument, NULL, O_CAMERA },
@@ -294,6 +297,7 @@ int main(int argc, char **argv)
 		{ "wait-complete", no_argument, NULL, O_WAIT },
 		{ "timeout", required_argument, NULL, O_TIMEOUT },
 		{ "fps", required_argument, NULL, O_FPS },
+		{ "budget", required_argument, NULL, O_BUDGET },
 		{ "stats", required_argument, NULL, O_STATS },
 		{ "fov", required_argument, NULL, O_FOV },
 		{ "sun", required_argument, NULL, O_SUN },
@@ -357,6 +361,15 @@ int main(int argc, char **argv)
 			break;
 		case O_WAIT: wait_complete = true; break;
 		case O_TIMEOUT: timeout = atof(optarg); break;
+		case O_BUDGET: {
+			char *end;
+			budget = strtod(optarg, &end);
+			if (*end || !(budget >= 0) || budget > 10000) {
+				fprintf(stderr, "clipmapview: --budget: milliseconds, 0 to 10000\n");
+				return 2;
+			}
+			break;
+		}
 		case O_FPS: {
 			char *end;
 			fps = strtod(optarg, &end);
@@ -468,6 +481,7 @@ int main(int argc, char **argv)
 			goto out;
 		}
 		gl_window_framebuffer_size(win, &d.width, &d.height);
+		d.budget_ms = budget;
 		rc = view_create(gl_window_api(win), src, &d, &v, err);
 		if (rc < 0) {
 			fprintf(stderr, "clipmapview: %s\n", err);
@@ -496,6 +510,8 @@ int main(int argc, char **argv)
 	}
 	d.width = width;
 	d.height = height;
+	/* --wait-complete pictures wait for every level; real time keeps its frames short. */
+	d.budget_ms = wait_complete ? 0 : budget;
 	rc = view_create(gl_context_api(ctx), src, &d, &v, err);
 	if (rc < 0) {
 		fprintf(stderr, "clipmapview: %s\n", err);
