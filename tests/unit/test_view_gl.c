@@ -118,6 +118,45 @@ static struct view *make_view(struct gl_context *ctx, struct view_source *src, i
 	return v;
 }
 
+/* ---- the frame's time budget (Algorithm 1) ---- */
+
+/* Without a budget a frame draws every wanted level once they are in; with one it has spent
+ * before it starts, it stops refining at the first level it can draw (a disk), and the
+ * frame is not complete. */
+static void budget_stops_refining(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = ctx_or_skip();
+	if (!ctx)
+		skip();
+	struct synth pat = { .mode = SYNTH_PATTERN };
+	struct view_camera cam = { 10, 20, 50000, 0, -30, 60, 0, 0 };
+	struct view_frame_stats st;
+	for (int b = 0; b < 2; b++) {
+		struct view_source *src = synth_create(&pat, 32, 10);
+		struct view_desc d = { .width = 64, .height = 64, .n_phi = 96, .m_rings = 12,
+				       .budget_ms = b ? 1e-9 : 0 };
+		struct view *v = NULL;
+		char err[256];
+		assert_int_equal(view_create(gl_context_api(ctx), src, &d, &v, err), 0);
+		int rc = 0;
+		for (int k = 0; k < 50; k++)
+			rc = view_frame(v, &cam, 0, &st);
+		assert_int_equal(rc, 0);
+		assert_true(st.lmax > st.lmin);
+		if (b) {
+			assert_int_equal(st.llast, st.lfirst);
+			assert_false(st.complete);
+		} else {
+			assert_int_equal(st.llast, st.lmax);
+			assert_true(st.complete);
+		}
+		view_destroy(v);
+		view_source_destroy(src);
+	}
+	gl_context_destroy(ctx);
+}
+
 /* ---- toroidal textures ---- */
 
 static void check_toroidal(struct view *v, const float *hbuf, const unsigned char *nbuf)
@@ -463,6 +502,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(toroidal_after_moves),
+		cmocka_unit_test(budget_stops_refining),
 		cmocka_unit_test(marker_projects_to_predicted_pixel),
 		cmocka_unit_test(coverage_views),
 		cmocka_unit_test(culling_keeps_pixels),
