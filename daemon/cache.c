@@ -1,5 +1,5 @@
 /* cache — see cache.h. A chained hash table (power-of-two buckets, each entry keeps its key
- * hash) under one mutex, with an LRU clock stamped on lookup and insert.
+ * hash) under one mutex, with an LRU clock and the monotonic time stamped on lookup and insert.
  *
  * Pruning ranks every tile by its distance (grid_quad_distance) to the nearest focus's quad
  * at the tile's own level, evicts the farthest first and, among equally far tiles, the least
@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "xalloc.h"
 
@@ -22,7 +23,8 @@
 struct centry {
 	struct tile *t; /* the cache's own reference */
 	uint64_t hash;
-	uint64_t stamp; /* LRU clock value of the last lookup or insert */
+	uint64_t stamp;	  /* LRU clock value of the last lookup or insert */
+	uint64_t used_ns; /* cache_now_ns() of the last lookup or insert */
 	struct centry *next;
 };
 
@@ -43,6 +45,13 @@ struct victim {
 	uint64_t stamp;
 	struct centry *e;
 };
+
+uint64_t cache_now_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
+}
 
 static void lock(struct cache *c)
 {
@@ -137,10 +146,12 @@ struct tile *cache_lookup(struct cache *c, const struct tile_key *k)
 {
 	uint64_t h = grid_key_hash(k);
 	struct tile *t = NULL;
+	uint64_t now = cache_now_ns(); /* read before locking: nothing extra under the lock */
 	lock(c);
 	struct centry *e = find(c, k, h);
 	if (e) {
 		e->stamp = ++c->clock;
+		e->used_ns = now;
 		t = tile_ref(e->t);
 		c->hits++;
 	} else {
@@ -245,15 +256,18 @@ void cache_insert(struct cache *c, struct tile *t)
 	uint64_t h = grid_key_hash(&t->key);
 	struct tile **ev = NULL;
 	size_t nev = 0;
+	uint64_t now = cache_now_ns();
 	lock(c);
 	struct centry *e = find(c, &t->key, h);
 	if (e) {
 		e->stamp = ++c->clock;
+		e->used_ns = now;
 	} else {
 		e = xmalloc(sizeof *e);
 		e->t = tile_ref(t);
 		e->hash = h;
 		e->stamp = ++c->clock;
+		e->used_ns = now;
 		e->next = c->buckets[h & (c->nbuckets - 1)];
 		c->buckets[h & (c->nbuckets - 1)] = e;
 		c->bytes += t->nbytes;
@@ -308,12 +322,13 @@ void cache_stats(struct cache *c, struct cache_stats *out)
 	unlock(c);
 }
 
-void cache_foreach(struct cache *c, int (*fn)(void *ud, const struct tile *t), void *ud)
+void cache_foreach(struct cache *c, int (*fn)(void *ud, const struct tile *t, uint64_t used_ns),
+		   void *ud)
 {
 	lock(c);
 	for (size_t b = 0; b < c->nbuckets; b++)
 		for (struct centry *e = c->buckets[b]; e; e = e->next)
-			if (fn(ud, e->t) != 0)
+			if (fn(ud, e->t, e->used_ns) != 0)
 				goto out;
 out:
 	unlock(c);

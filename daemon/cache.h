@@ -3,6 +3,8 @@
  * each level's quad and the ring around it are kept while farther tiles go first (seed 003
  * Fig. 3a); among equally far tiles the least recently used goes first.
  *
+ * Each entry remembers when it was last used (monotonic time), which listings report as age.
+ *
  * Threads: every function is thread-safe. The mutex protects the table, the LRU clock and the
  * counters; no tile data is touched under it and nothing blocks while it is held.
  * Ownership: the cache holds one reference per cached tile; lookups return a new reference.
@@ -42,9 +44,13 @@ void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, u
 /* Evicts until at most `target` bytes remain (farthest first, then least recent). */
 void cache_prune(struct cache *c, size_t target);
 void cache_stats(struct cache *c, struct cache_stats *out);
-/* Calls fn for each cached tile (under the lock: fn must be quick and must not call the
- * cache). Stops early when fn returns non-zero. */
-void cache_foreach(struct cache *c, int (*fn)(void *ud, const struct tile *t), void *ud);
+/* Calls fn for each cached tile with the time of its last use (the last lookup or insert, in
+ * cache_now_ns's clock), under the lock: fn must be quick and must not call the cache. Stops
+ * early when fn returns non-zero. */
+void cache_foreach(struct cache *c, int (*fn)(void *ud, const struct tile *t, uint64_t used_ns),
+		   void *ud);
+/* The clock of last uses: CLOCK_MONOTONIC nanoseconds. */
+uint64_t cache_now_ns(void);
 /* Drops every tile whose key.node equals node. Returns how many. */
 size_t cache_drop_node(struct cache *c, uint64_t node);
 

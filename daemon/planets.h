@@ -1,7 +1,7 @@
 /* planets — the set of planets a daemon serves: every *.ini in the planets directory, loaded
- * as one immutable, reference-counted snapshot. SIGHUP loads a new snapshot; sessions keep a
- * reference to the one they opened planets from, so nodes they want stay alive until they let
- * go. Unchanged nodes keep their content hash, so their cached tiles stay valid across reloads.
+ * as one immutable, reference-counted snapshot. SIGHUP loads a new snapshot and rebinds open
+ * sessions to it; sessions keep references to the snapshots they wanted nodes from, so nodes
+ * the scheduler may still be working on stay alive until they let go. Unchanged nodes keep their content hash, so their cached tiles stay valid across reloads.
  *
  * Threads: a snapshot is immutable; refcounts are atomic. Ownership: planet_set_load returns
  * one owned reference; planet_set_ref adds one; planet_set_unref frees at zero.

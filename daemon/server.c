@@ -471,6 +471,11 @@ void server_set_planets(struct server *srv, struct planet_set *ps)
 {
 	planet_set_unref(srv->planets);
 	srv->planets = ps;
+	struct session *next;
+	for (struct session *s = srv->sessions; s; s = next) {
+		next = session_next(s); /* s may close (a failed send): it stays readable */
+		session_reload(s, ps);
+	}
 }
 
 void server_stop(struct server *srv)

@@ -118,8 +118,10 @@ int server_run(struct server *srv);
  * queued work, sends each session ERROR shutdown + BYE, and returns from server_run once their
  * output is flushed (or after 2 s). */
 void server_stop(struct server *srv);
-/* Installs a new planet set (taken). New OPENs use it; open sessions keep the planets they
- * opened until they open them again. */
+/* Installs a new planet set (taken). New OPENs use it, and every open session is rebound to
+ * it (session_reload): its planets are replaced by the new ones of the same name and its
+ * want-set re-submitted, so changed tiles are sent again; a planet that is gone or whose
+ * layers changed is dropped from the session with an ERROR. Loop thread only. */
 void server_set_planets(struct server *srv, struct planet_set *ps);
 /* Hands a ready tile to the loop (any thread; takes t's reference). */
 void server_ready_push(struct server *srv, const struct ready_item *it);

@@ -50,8 +50,8 @@ struct wset {
 };
 
 struct sopen {
-	struct planet *p;
-	struct planet_set *set; /* reference keeping p alive */
+	struct planet *p;	/* NULL: dropped by a reload (the id may be given again) */
+	struct planet_set *set; /* reference keeping p alive; NULL with p */
 };
 
 struct session {
@@ -74,6 +74,10 @@ struct session {
 
 	struct sopen opened[MAX_OPEN];
 	int nopened;
+	/* Sets this session's earlier want lists named nodes of: the scheduler may still be
+	 * working on them after a reload rebinds the session, so they live as long as it. */
+	struct planet_set **retired;
+	size_t nretired;
 
 	struct wset ws;
 	uint32_t *heap;
@@ -83,6 +87,7 @@ struct session {
 	double lon, lat, vel[3];
 
 	struct prefetch_job **jobs;
+	struct planet_set **jobsets; /* jobsets[i]: reference keeping jobs[i]'s planet alive */
 	size_t njobs;
 
 	uint64_t tiles_sent, tiles_dropped;
@@ -308,6 +313,22 @@ static void begin_close(struct session *s)
 	flush(s);
 }
 
+/* Keeps the reference ps (taken) until the session is freed: the scheduler may still be
+ * generating tiles of nodes this session wanted from it (it has no way to say it is done). */
+static void retire(struct session *s, struct planet_set *ps)
+{
+	if (!ps)
+		return;
+	for (size_t i = 0; i < s->nretired; i++) {
+		if (s->retired[i] == ps) {
+			planet_set_unref(ps); /* one reference per set is enough */
+			return;
+		}
+	}
+	s->retired = xrealloc(s->retired, (s->nretired + 1) * sizeof *s->retired);
+	s->retired[s->nretired++] = ps;
+}
+
 /* ---- tiles ---------------------------------------------------------------------------- */
 
 static void encode_tile(struct session *s, struct went *e)
@@ -495,19 +516,21 @@ static void on_open(struct session *s, const struct proto_open *o)
 		send_error(s, PROTO_E_NOT_FOUND, PROTO_OPEN, o->req, "no planet \"%s\"", o->name);
 		return;
 	}
-	int id = 0;
-	for (int i = 0; i < s->nopened; i++)
+	int id = 0, free_slot = 0;
+	for (int i = 0; i < s->nopened; i++) {
 		if (s->opened[i].p == p)
 			id = i + 1;
+		if (!s->opened[i].p && !free_slot)
+			free_slot = i + 1;
+	}
 	if (!id) {
-		if (s->nopened == MAX_OPEN) {
+		if (!free_slot && s->nopened == MAX_OPEN) {
 			send_error(s, PROTO_E_LIMIT, PROTO_OPEN, o->req,
 				   "a session may open at most %d planets", MAX_OPEN);
 			return;
 		}
-		s->opened[s->nopened] =
-			(struct sopen){ .p = p, .set = planet_set_ref(s->srv->planets) };
-		id = ++s->nopened;
+		id = free_slot ? free_slot : ++s->nopened;
+		s->opened[id - 1] = (struct sopen){ .p = p, .set = planet_set_ref(s->srv->planets) };
 	}
 	struct proto_layer ls[PROTO_MAX_LAYERS];
 	struct proto_msg m = { .type = PROTO_OPENED,
@@ -517,9 +540,33 @@ static void on_open(struct session *s, const struct proto_open *o)
 	log_msg(LOG_DEBUG, "session %llu: opened %s as %d", (unsigned long long)s->id, p->name, id);
 }
 
+/* Rebuilds the ready heap from the want-set and gives the scheduler what is still wanted.
+ * Returns sched_req_want's result. */
+static int submit_wants(struct session *s)
+{
+	const struct wset *w = &s->ws;
+	s->nheap = 0;
+	size_t nwant = 0;
+	for (size_t i = 0; i < w->n; i++) {
+		if (w->e[i].state == W_READY)
+			heap_push(s, (uint32_t)i);
+		nwant += w->e[i].state == W_WANTED;
+	}
+	struct want *list = xmalloc((nwant ? nwant : 1) * sizeof *list);
+	size_t k = 0;
+	for (size_t i = 0; i < w->n; i++)
+		if (w->e[i].state == W_WANTED)
+			list[k++] = (struct want){ .node = w->e[i].node, .key = w->e[i].key,
+						   .cls = (enum sched_class)w->e[i].cls };
+	int rc = sched_req_want(s->req, list, k);
+	free(list);
+	return rc;
+}
+
 static void on_want(struct session *s, const struct proto_want *w)
 {
-	if (w->planet_id == 0 || w->planet_id > (uint32_t)s->nopened) {
+	if (w->planet_id == 0 || w->planet_id > (uint32_t)s->nopened ||
+	    !s->opened[w->planet_id - 1].p) {
 		send_error(s, PROTO_E_NOT_FOUND, PROTO_WANT, w->seq, "planet id %u is not open",
 			   w->planet_id);
 		return;
@@ -580,22 +627,7 @@ static void on_want(struct session *s, const struct proto_want *w)
 	free(old.e);
 	free(old.tab);
 	s->ws = nw;
-
-	s->nheap = 0;
-	size_t nwant = 0;
-	for (size_t i = 0; i < nw.n; i++) {
-		if (nw.e[i].state == W_READY)
-			heap_push(s, (uint32_t)i);
-		nwant += nw.e[i].state == W_WANTED;
-	}
-	struct want *list = xmalloc((nwant ? nwant : 1) * sizeof *list);
-	size_t k = 0;
-	for (size_t i = 0; i < nw.n; i++)
-		if (nw.e[i].state == W_WANTED)
-			list[k++] = (struct want){ .node = nw.e[i].node, .key = nw.e[i].key,
-						   .cls = (enum sched_class)nw.e[i].cls };
-	int rc = sched_req_want(s->req, list, k);
-	free(list);
+	int rc = submit_wants(s);
 	if (rc)
 		send_error(s, PROTO_E_INTERNAL, PROTO_WANT, w->seq, "scheduler: %s", strerror(-rc));
 	s->has_focus = true;
@@ -605,6 +637,94 @@ static void on_want(struct session *s, const struct proto_want *w)
 	server_update_foci(s->srv);
 	if (s->nheap)
 		pump_add(s);
+}
+
+/* -- reload -- */
+
+/* Whether a session that opened `was` may go on with `now` under the same planet id and layer
+ * indices; if not, why (for the ERROR). */
+static bool compatible(const struct planet *was, const struct planet *now, char *why, size_t n)
+{
+	if (!now) {
+		snprintf(why, n, "was removed by a reload");
+		return false;
+	}
+	bool same = now->nlayers == was->nlayers && now->tile_size == was->tile_size;
+	for (size_t i = 0; same && i < now->nlayers; i++)
+		same = now->layers[i].type == was->layers[i].type;
+	if (!same)
+		snprintf(why, n, "changed its layers (count, formats or tile size) in a reload");
+	return same;
+}
+
+void session_reload(struct session *s, struct planet_set *ps)
+{
+	if (s->dead || s->closing)
+		return;
+	bool changed = false;
+	for (int i = 0; i < s->nopened; i++) {
+		struct sopen *o = &s->opened[i];
+		if (!o->p || o->set == ps)
+			continue;
+		struct planet *np = planet_set_find(ps, o->p->name);
+		char why[96];
+		if (!compatible(o->p, np, why, sizeof why)) {
+			send_error(s, PROTO_E_NOT_FOUND, PROTO_OPEN, (uint32_t)i + 1,
+				   "planet \"%s\" (id %d) %s: its tiles are no longer sent; open it "
+				   "again", o->p->name, i + 1, why);
+			np = NULL;
+		}
+		retire(s, o->set);
+		*o = (struct sopen){ .p = np, .set = np ? planet_set_ref(ps) : NULL };
+		changed = true;
+	}
+	if (!changed)
+		return;
+
+	/* Re-resolve the want-set: same layer, the new planet's node. A key whose node hash did
+	 * not change keeps its state (sent tiles are not sent again); a changed one is wanted
+	 * afresh under its new key. Entries of dropped planets go. */
+	struct wset old = s->ws, nw = { 0 };
+	wset_reserve_table(&nw, old.n);
+	size_t regen = 0;
+	for (size_t i = 0; i < old.n; i++) {
+		struct went e = old.e[i];
+		const struct planet *p = s->opened[e.pid - 1].p;
+		struct node *nd = p ? p->layers[e.layer].node : NULL;
+		bool keep = nd != NULL;
+		if (keep && nd->hash != e.key.node) {
+			if (e.state == W_READY) {
+				tile_unref(e.t);
+				s->srv->tiles_stale++;
+			}
+			e.key.node = nd->hash;
+			e.state = W_WANTED;
+			e.t = NULL;
+			e.err = 0;
+			regen++;
+		}
+		e.node = nd;
+		if (keep && wset_add(&nw, &e))
+			continue;
+		if (e.state == W_READY) /* dropped (or a duplicate key) */
+			tile_unref(e.t);
+		if (e.state != W_SENT) {
+			s->tiles_dropped++;
+			s->srv->tiles_dropped++;
+		}
+	}
+	free(old.e);
+	free(old.tab);
+	s->ws = nw;
+	int rc = submit_wants(s);
+	if (rc)
+		send_error(s, PROTO_E_INTERNAL, 0, 0, "scheduler: %s", strerror(-rc));
+	log_msg(LOG_DEBUG, "session %llu (%s): rebound to planets generation %llu: %zu tiles "
+		"wanted again", (unsigned long long)s->id, s->name,
+		(unsigned long long)ps->generation, regen);
+	if (s->nheap)
+		pump_add(s);
+	flush(s);
 }
 
 /* -- STATS -- */
@@ -732,6 +852,7 @@ struct lsctx {
 	struct proto_cache_entry *out;
 	size_t n, limit;
 	uint64_t total;
+	uint64_t now_ns; /* cache_now_ns() when the listing started */
 };
 
 /* Great-circle distance (metres, mean Earth-like radius r) from (lon, lat) to the nearest
@@ -755,7 +876,7 @@ static double rect_distance(const struct geo_rect *rc, double lon, double lat, d
 	return 2 * r * asin(fmin(1.0, sqrt(h)));
 }
 
-static int ls_fn(void *ud, const struct tile *t)
+static int ls_fn(void *ud, const struct tile *t, uint64_t used_ns)
 {
 	struct lsctx *c = ud;
 	const struct proto_cache_ls *q = c->q;
@@ -775,10 +896,13 @@ static int ls_fn(void *ud, const struct tile *t)
 			return 0;
 	}
 	c->total++;
+	uint64_t age = c->now_ns > used_ns ? (c->now_ns - used_ns) / 1000000000ull : 0;
 	if (c->n < c->limit)
 		c->out[c->n++] = (struct proto_cache_entry){ .key = t->key, .format = (uint8_t)t->type,
 							    .tier = PROTO_TIER_MEMORY,
-							    .bytes = (uint32_t)t->nbytes };
+							    .bytes = (uint32_t)t->nbytes,
+							    .age_s = age > UINT32_MAX ? UINT32_MAX
+										      : (uint32_t)age };
 	return 0;
 }
 
@@ -807,6 +931,7 @@ static void on_cache_ls(struct session *s, const struct proto_cache_ls *q)
 	size_t cap = cs.tiles + 64 < c.limit ? cs.tiles + 64 : c.limit;
 	c.out = xmalloc((cap ? cap : 1) * sizeof *c.out);
 	c.limit = cap;
+	c.now_ns = cache_now_ns();
 	cache_foreach(s->srv->cache, ls_fn, &c);
 	size_t off = 0;
 	do {
@@ -835,8 +960,11 @@ static void send_progress(struct session *s, struct prefetch_job *j)
 
 static void job_remove(struct session *s, size_t i)
 {
-	prefetch_job_destroy(s->jobs[i]);
-	s->jobs[i] = s->jobs[--s->njobs];
+	prefetch_job_destroy(s->jobs[i]); /* stops its scheduler request first */
+	retire(s, s->jobsets[i]);
+	s->njobs--;
+	s->jobs[i] = s->jobs[s->njobs];
+	s->jobsets[i] = s->jobsets[s->njobs];
 }
 
 static void on_prefetch(struct session *s, const struct proto_prefetch *m)
@@ -860,18 +988,6 @@ static void on_prefetch(struct session *s, const struct proto_prefetch *m)
 			   srv->conf->max_jobs);
 		return;
 	}
-	/* The job borrows p: keep the set that holds it alive as long as the session. */
-	bool held = false;
-	for (int i = 0; i < s->nopened; i++)
-		held |= s->opened[i].set == srv->planets;
-	if (!held) {
-		if (s->nopened == MAX_OPEN) {
-			send_error(s, PROTO_E_LIMIT, PROTO_PREFETCH, m->id, "too many planets open");
-			return;
-		}
-		s->opened[s->nopened++] = (struct sopen){ .p = (struct planet *)p,
-							  .set = planet_set_ref(srv->planets) };
-	}
 	struct prefetch_job *j;
 	char err[256];
 	int rc = prefetch_job_create(p, m, server_now_ns(), &j, err);
@@ -883,6 +999,9 @@ static void on_prefetch(struct session *s, const struct proto_prefetch *m)
 	j->owner = s;
 	j->req = sched_req_create(srv->sched, job_ready_cb, j);
 	s->jobs = xrealloc(s->jobs, (s->njobs + 1) * sizeof *s->jobs);
+	s->jobsets = xrealloc(s->jobsets, (s->njobs + 1) * sizeof *s->jobsets);
+	/* The job borrows p: it keeps the set holding it (a reload does not move jobs). */
+	s->jobsets[s->njobs] = planet_set_ref(srv->planets);
 	s->jobs[s->njobs++] = j;
 	log_msg(LOG_INFO, "session %llu: prefetch job %u on %s: %llu tiles, levels %u-%u",
 		(unsigned long long)s->id, j->id, p->name, (unsigned long long)j->total, m->lmin,
@@ -1206,8 +1325,12 @@ void session_free(struct session *s)
 	free(s->ws.tab);
 	free(s->heap);
 	free(s->jobs);
+	free(s->jobsets);
 	for (int i = 0; i < s->nopened; i++)
 		planet_set_unref(s->opened[i].set);
+	for (size_t i = 0; i < s->nretired; i++)
+		planet_set_unref(s->retired[i]);
+	free(s->retired);
 	pbuf_fini(&s->in);
 	pbuf_fini(&s->out);
 	free(s);

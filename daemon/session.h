@@ -12,7 +12,8 @@
  *
  * Threads: loop thread only; the scheduler callback only pushes onto the server's ready
  * queue. Ownership: the server owns sessions; a session owns its fd, buffers, jobs, tile
- * references and planet-set references.
+ * references and planet-set references (one per opened planet, one per prefetch job, and
+ * those retired by reloads, released when the session is freed).
  */
 #ifndef CLIPMAP_SESSION_H
 #define CLIPMAP_SESSION_H
@@ -37,6 +38,14 @@ struct session *session_pump_next(struct session *s);
 void session_pump_readd(struct session *s);
 /* Housekeeping every 250 ms: prefetch progress, close deadlines. */
 void session_tick(struct session *s, uint64_t now_ns);
+/* A reload installed ps (borrowed; the session takes references of its own): every planet the
+ * session opened is replaced by the planet of the same name in ps when its layers are
+ * compatible (same count, formats and tile size: the planet id and layer indices stay
+ * valid), and the want-set is re-resolved against the new layers' nodes and re-submitted, so
+ * tiles whose node hash changed are generated and sent again while unchanged ones are not.
+ * A planet that is gone or incompatible is dropped with an ERROR not-found naming it. The old
+ * sets are kept until the session is freed (the scheduler may still be using their nodes). */
+void session_reload(struct session *s, struct planet_set *ps);
 /* Server shutdown: cancels its work and says ERROR shutdown + BYE, then closes after flush. */
 void session_shutdown(struct session *s);
 /* Closes now: destroys the scheduler request and jobs, unlinks from the server and moves the

@@ -1,6 +1,7 @@
 /* Tile cache tests: hit/miss accounting, the byte budget, pruning by distance to the foci's
  * quads (the quad and its ring survive, far tiles go first), LRU order without foci,
- * reference counting across eviction, invalidation by node, and concurrent use. */
+ * reference counting across eviction, invalidation by node, last-use times, and concurrent
+ * use. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -9,6 +10,7 @@
 
 #include <pthread.h>
 #include <string.h>
+#include <time.h>
 
 #include "cache.h"
 #include "grid.h"
@@ -230,9 +232,10 @@ static void evicted_tile_stays_readable(void **state)
 	cache_destroy(c);
 }
 
-static int count_node(void *ud, const struct tile *t)
+static int count_node(void *ud, const struct tile *t, uint64_t used_ns)
 {
 	size_t *n = ud;
+	(void)used_ns;
 	if (t->key.node == 7)
 		n[0]++;
 	else
@@ -314,6 +317,53 @@ static void concurrent(void **state)
 	cache_destroy(c);
 }
 
+struct used_at {
+	struct tile_key k;
+	uint64_t used_ns;
+	int seen;
+};
+
+static int find_used(void *ud, const struct tile *t, uint64_t used_ns)
+{
+	struct used_at *u = ud;
+	for (int i = 0; i < 2; i++)
+		if (grid_key_equal(&t->key, &u[i].k)) {
+			u[i].used_ns = used_ns;
+			u[i].seen++;
+		}
+	return 0;
+}
+
+/* Each tile's last use is its last lookup or insert: a tile used 1.1 s ago is that old, one
+ * looked up just now is not (what CACHE_LS reports as age). */
+static void last_use_reported(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(0);
+	struct used_at u[2] = { { .k = key(1, 1, 0, 0, 0) }, { .k = key(1, 1, 0, 1, 0) } };
+	insert_new(c, &u[0].k);
+	insert_new(c, &u[1].k);
+	uint64_t t0 = cache_now_ns();
+	struct timespec d = { 1, 100000000 };
+	while (nanosleep(&d, &d) != 0)
+		;
+	struct tile *t = cache_lookup(c, &u[1].k); /* used again now */
+	assert_non_null(t);
+	tile_unref(t);
+	uint64_t now = cache_now_ns();
+	cache_foreach(c, find_used, u);
+	assert_int_equal(u[0].seen, 1);
+	assert_int_equal(u[1].seen, 1);
+	assert_true(u[0].used_ns <= t0);
+	assert_true(now - u[0].used_ns >= 1100000000ull);
+	assert_true(u[1].used_ns > t0 + 1000000000ull && u[1].used_ns <= now);
+	/* cache_contains does not count as a use */
+	assert_true(cache_contains(c, &u[0].k));
+	cache_foreach(c, find_used, u);
+	assert_true(u[0].used_ns <= t0);
+	cache_destroy(c);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -324,6 +374,7 @@ int main(void)
 		cmocka_unit_test(budget_prune_uses_foci),
 		cmocka_unit_test(evicted_tile_stays_readable),
 		cmocka_unit_test(drop_node_and_foreach),
+		cmocka_unit_test(last_use_reported),
 		cmocka_unit_test(concurrent),
 	};
 	return cmocka_run_group_tests_name("cache", tests, NULL, NULL);

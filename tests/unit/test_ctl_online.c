@@ -110,6 +110,21 @@ static bool has_row(const char *out, const char *layer, const char *level, unsig
 	return false;
 }
 
+/* The age column of that row, as printed ("" when there is no such row). */
+static void row_age(const char *out, const char *layer, const char *level, unsigned x,
+		    unsigned y, char age[32])
+{
+	age[0] = 0;
+	for (const char *l = out; l && *l; l = strchr(l, '\n') ? strchr(l, '\n') + 1 : NULL) {
+		char name[64], lv[16];
+		unsigned rx, ry, bytes;
+		if (sscanf(l, "%63s %15s %u %u %u %31s", name, lv, &rx, &ry, &bytes, age) == 6 &&
+		    strcmp(name, layer) == 0 && strcmp(lv, level) == 0 && rx == x && ry == y)
+			return;
+	}
+	age[0] = 0;
+}
+
 static void tile_equals_render_and_is_listed(void **state)
 {
 	struct env *e = *state;
@@ -137,6 +152,11 @@ static void tile_equals_render_and_is_listed(void **state)
 	assert_true(has_row(out, "height", "2/1", 3, 0));
 	assert_true(has_row(out, "color", "2/1", 3, 0));
 	assert_true(has_row(out, "normal", "2/1", 3, 0));
+	/* the age column: seconds since the tile's last use (just used: a few at most) */
+	char age[32];
+	double secs = 99;
+	row_age(out, "height", "2/1", 3, 0, age);
+	assert_true(sscanf(age, "%lfs", &secs) == 1 && secs >= 0 && secs < 10);
 	/* the level filter keeps it (ly 1 = level 1), another level does not */
 	rc = ctl(e, out, sizeof out, "cache", "ls", "procedural", "--level", "1", "--json", NULL);
 	assert_int_equal(rc, 0);

@@ -3,7 +3,7 @@
  * planet written by the test, and a minimal client over common/proto.h. Checks what a viewer or
  * operator would notice: tile bytes equal in-process generation, coarse before fine, want-set
  * replacement, many sessions, a stalled session, malformed frames, tokens, prefetch, cache
- * listing, SIGHUP reload and SIGTERM.
+ * listing and its ages, SIGHUP reload (and sessions rebound across it) and SIGTERM.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -82,6 +82,17 @@ static char *read_log(void)
 	buf[n] = 0;
 	fclose(f);
 	return buf;
+}
+
+/* How many times the log contains `what`. */
+static int log_count(const char *what)
+{
+	char *l = read_log();
+	int c = 0;
+	for (char *p = l; (p = strstr(p, what)); p++)
+		c++;
+	free(l);
+	return c;
 }
 
 /* Waits until the log contains `what` (count-th occurrence), up to ms. */
@@ -771,6 +782,137 @@ static void test_sighup_reload(void **state)
 	cl_free(c);
 }
 
+/* A session open across reloads is rebound without reopening. A change upstream of the colour
+ * layer: that layer's tiles come again (new node hash, the new bytes, equal to in-process
+ * generation from the new file) and the height tiles do not. The planet removed: an ERROR
+ * not-found naming it, its id no longer takes WANTs, a session that opened nothing hears
+ * nothing, and once the planet is back an OPEN gives the freed id again. */
+static void test_sighup_rebind(void **state)
+{
+	(void)state;
+	enum { W = 8, H = 4 };
+	struct cl *c = cl_unix(), *idle = cl_unix();
+	cl_hello(idle, NULL);
+	cl_expect(idle, PROTO_HELLO_OK, 5000);
+	uint64_t n1[2];
+	uint32_t pid = cl_open(c, n1); /* the file holds planet_v2 (test_sighup_reload) */
+	struct proto_want_entry e[2 * W * H];
+	uint32_t n = block(e, 3, 2, 0, 0, W, H);
+	cl_want(c, pid, 1, 0, 0, e, n);
+	uint8_t *old[W * H] = { 0 };
+	for (uint32_t i = 0; i < n; i++) {
+		cl_expect(c, PROTO_TILE, 10000);
+		if (c->m.tile.layer == 1)
+			old[c->m.tile.key.y * W + c->m.tile.key.x] = tile_texels(c);
+	}
+
+	int reloads = log_count("reloaded 1 planets");
+	write_file(D.planet, planet_v1); /* the colour ramp changes back */
+	assert_int_equal(kill(D.pid, SIGHUP), 0);
+	struct planet *p;
+	char err[256];
+	assert_int_equal(planet_load(D.planet, &p, err), 0);
+	assert_int_equal(p->layers[0].node->hash, n1[0]);
+	assert_true(p->layers[1].node->hash != n1[1]);
+	struct cache *cache = cache_create(0);
+	struct sched *s = sched_create(&(struct sched_desc){ .cache = cache, .workers = 1 });
+	int got[W * H] = { 0 }, differ = 0;
+	for (int i = 0; i < W * H; i++) {
+		cl_expect(c, PROTO_TILE, 10000);
+		const struct proto_tile *t = &c->m.tile;
+		assert_int_equal(t->planet_id, pid);
+		assert_int_equal(t->layer, 1);
+		assert_int_equal(t->key.node, p->layers[1].node->hash);
+		int k = (int)(t->key.y * W + t->key.x);
+		assert_int_equal(got[k]++, 0);
+		uint8_t *px = tile_texels(c);
+		struct want w = { .node = p->layers[1].node, .key = t->key, .cls = SCHED_VISIBLE };
+		struct tile *ref = NULL;
+		assert_int_equal(sched_fetch(s, &w, 1, &ref), 0);
+		assert_int_equal(ref->nbytes, t->enc.raw_len);
+		assert_memory_equal(px, ref->data, ref->nbytes);
+		differ += memcmp(px, old[k], ref->nbytes) != 0;
+		tile_unref(ref);
+		free(px);
+	}
+	assert_true(differ >= W * H / 2); /* most tiles reach below 0 m, where the ramp changed */
+	assert_int_equal(cl_recv(c, 300), 0); /* and no height tile again */
+	assert_true(wait_log("reloaded 1 planets", reloads + 1, 5000));
+	sched_destroy(s);
+	cache_destroy(cache);
+	planet_destroy(p);
+	for (int i = 0; i < W * H; i++)
+		free(old[i]);
+
+	char off[160];
+	snprintf(off, sizeof off, "%s.off", D.planet);
+	assert_int_equal(rename(D.planet, off), 0);
+	assert_int_equal(kill(D.pid, SIGHUP), 0);
+	cl_expect(c, PROTO_ERROR, 5000);
+	assert_int_equal(c->m.error.code, PROTO_E_NOT_FOUND);
+	assert_int_equal(c->m.error.ref_type, PROTO_OPEN);
+	assert_int_equal(c->m.error.ref_id, pid);
+	assert_non_null(strstr(c->m.error.message, "\"test\""));
+	assert_non_null(strstr(c->m.error.message, "removed"));
+	cl_want(c, pid, 2, 0, 0, e, n);
+	cl_expect(c, PROTO_ERROR, 5000);
+	assert_int_equal(c->m.error.code, PROTO_E_NOT_FOUND);
+	assert_int_equal(cl_stat(c, "planets"), 0);
+	assert_int_equal(cl_recv(idle, 100), 0);
+	assert_int_equal(cl_stat(idle, "planets"), 0);
+
+	assert_int_equal(rename(off, D.planet), 0);
+	assert_int_equal(kill(D.pid, SIGHUP), 0);
+	assert_true(wait_log("reloaded 1 planets", reloads + 2, 5000));
+	struct proto_msg m = { .type = PROTO_OPEN, .open = { .req = 8, .name = "test" } };
+	cl_send(c, &m);
+	cl_expect(c, PROTO_OPENED, 5000);
+	assert_int_equal(c->m.opened.planet_id, pid);
+	cl_want(c, pid, 3, 0, 0, e, 2);
+	cl_expect(c, PROTO_TILE, 10000);
+	assert_int_equal(c->m.tile.seq, 3);
+	cl_free(c);
+	cl_free(idle);
+}
+
+/* CACHE_LS reports how long ago each tile was last used: one wanted 1.1 s ago is at least a
+ * second old, one just wanted is not. */
+static void test_cache_ls_age(void **state)
+{
+	(void)state;
+	struct cl *c = cl_unix();
+	uint32_t pid = cl_open(c, NULL);
+	struct proto_want_entry a = { .layer = 0, .cls = PROTO_CLASS_VISIBLE, .lx = 8, .ly = 7,
+				      .x = 200, .y = 50 };
+	struct proto_want_entry b = a;
+	b.x = 201;
+	cl_want(c, pid, 1, 0, 0, &a, 1);
+	cl_expect(c, PROTO_TILE, 10000);
+	struct timespec d = { 1, 100000000 };
+	while (nanosleep(&d, &d) != 0)
+		;
+	cl_want(c, pid, 2, 0, 0, &b, 1);
+	cl_expect(c, PROTO_TILE, 10000);
+	struct proto_msg ls = { .type = PROTO_CACHE_LS,
+				.cache_ls = { .req = 6, .filter = PROTO_CLS_LEVEL | PROTO_CLS_PLANET,
+					      .planet = "test", .lx = 8, .ly = 7 } };
+	cl_send(c, &ls);
+	cl_expect(c, PROTO_CACHE_ENTRIES, 5000);
+	int seen = 0;
+	for (uint32_t i = 0; i < c->m.cache_entries.count; i++) {
+		const struct proto_cache_entry *x = &c->m.cache_entries.entries[i];
+		if (x->key.y != 50 || (x->key.x != 200 && x->key.x != 201))
+			continue;
+		seen++;
+		if (x->key.x == 200)
+			assert_true(x->age_s >= 1 && x->age_s < 30);
+		else
+			assert_int_equal(x->age_s, 0);
+	}
+	assert_int_equal(seen, 2);
+	cl_free(c);
+}
+
 /* SIGTERM: every session gets ERROR shutdown and BYE, then EOF; the daemon exits 0. */
 static void test_sigterm(void **state)
 {
@@ -848,6 +990,8 @@ int main(void)
 		cmocka_unit_test(test_limits),
 		cmocka_unit_test(test_prefetch_and_cache_ls),
 		cmocka_unit_test(test_sighup_reload),
+		cmocka_unit_test(test_sighup_rebind),
+		cmocka_unit_test(test_cache_ls_age),
 		cmocka_unit_test(test_sigterm),
 		cmocka_unit_test(test_systemd_units),
 	};
