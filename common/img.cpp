@@ -1,7 +1,9 @@
 // img — the only C++ that touches OpenImageIO; see img.h. Every extern "C" function catches
 // everything: OIIO reports most failures by return value, but std::bad_alloc and friends must
 // not unwind into C. An img_cache wraps a private OIIO::ImageCache (thread-safe; OIIO keeps
-// error messages per thread, so concurrent readers do not see each other's errors).
+// error messages per thread, so concurrent readers do not see each other's errors). The
+// cache is reference counted (planets share one) and remembers, per file name, the version
+// (size, mtime, inode...) its users last saw, so a changed file is invalidated once.
 #include "img.h"
 
 #include <OpenImageIO/imagebuf.h>
@@ -11,6 +13,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -18,8 +21,10 @@
 #include <ctime>
 #include <fcntl.h>
 #include <memory>
+#include <mutex>
 #include <new>
 #include <string>
+#include <unordered_map>
 #include <sys/stat.h>
 #include <unistd.h>
 #include <vector>
@@ -28,6 +33,10 @@ using namespace OIIO;
 
 struct img_cache {
 	ImageCache *ic;
+	size_t max_mb;
+	std::atomic<int> refs{ 1 };
+	std::mutex mu; // guards versions
+	std::unordered_map<std::string, std::string> versions;
 };
 
 namespace {
@@ -314,6 +323,7 @@ extern "C" struct img_cache *img_cache_create(size_t max_mb)
 		ic->attribute("unassociatedalpha", 1); // tiles are straight alpha: keep files' own
 		img_cache *c = new img_cache;
 		c->ic = ic;
+		c->max_mb = max_mb ? max_mb : 1;
 		return c;
 	} catch (const std::bad_alloc &) {
 		oom();
@@ -322,9 +332,16 @@ extern "C" struct img_cache *img_cache_create(size_t max_mb)
 	}
 }
 
+extern "C" struct img_cache *img_cache_ref(struct img_cache *c)
+{
+	if (c)
+		c->refs.fetch_add(1, std::memory_order_relaxed);
+	return c;
+}
+
 extern "C" void img_cache_destroy(struct img_cache *c)
 {
-	if (!c)
+	if (!c || c->refs.fetch_sub(1, std::memory_order_acq_rel) != 1)
 		return;
 	try {
 		c->ic->geterror(true);
@@ -418,6 +435,54 @@ extern "C" void img_cache_invalidate(struct img_cache *c, const char *path)
 {
 	try {
 		c->ic->invalidate(ustring(path), true);
+	} catch (...) {
+	}
+}
+
+extern "C" bool img_cache_set_version(struct img_cache *c, const char *path, const void *version,
+				      size_t n)
+{
+	try {
+		std::string v(static_cast<const char *>(version), n);
+		bool changed, first;
+		{
+			std::lock_guard<std::mutex> lk(c->mu);
+			auto it = c->versions.find(path);
+			first = it == c->versions.end();
+			changed = !first && it->second != v;
+			if (first)
+				c->versions.emplace(path, std::move(v));
+			else if (changed)
+				it->second = std::move(v);
+		}
+		// First sight: whatever was cached under this name before (read without a version)
+		// goes only if OIIO sees a newer mtime; a version change goes unconditionally (mtimes
+		// in whole seconds miss a file rewritten within the second).
+		if (first || changed)
+			c->ic->invalidate(ustring(path), changed);
+		return changed;
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (...) {
+		return false;
+	}
+}
+
+extern "C" void img_cache_get_stats(struct img_cache *c, struct img_cache_stats *out)
+{
+	*out = img_cache_stats{};
+	out->max_bytes = (uint64_t)c->max_mb << 20;
+	try {
+		long long mem = 0;
+		int files = 0, created = 0, current = 0;
+		c->ic->getattribute("stat:cache_memory_used", TypeDesc::INT64, &mem);
+		c->ic->getattribute("total_files", TypeDesc::INT, &files);
+		c->ic->getattribute("stat:open_files_created", TypeDesc::INT, &created);
+		c->ic->getattribute("stat:open_files_current", TypeDesc::INT, &current);
+		out->memory_used = mem > 0 ? (uint64_t)mem : 0;
+		out->files = files;
+		out->opens = created;
+		out->open_now = current;
 	} catch (...) {
 	}
 }

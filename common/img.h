@@ -11,6 +11,7 @@
 #define CLIPMAP_IMG_H
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 
 #ifdef __cplusplus
 extern "C" {
@@ -44,10 +45,31 @@ struct img_info {
 
 /* An OIIO::ImageCache of its own (not the process-wide shared one) holding at most max_mb
  * MiB of pixels, with automip on (untiled, unmipped files get virtual MIP levels, each a 2×2
- * box of the one above). Returns an owned cache, NULL only when OIIO cannot create one. */
+ * box of the one above). Files are keyed by path string: every user of one img_cache that
+ * reads the same path shares its open handle and cached tiles. Returns a cache with one
+ * reference owned by the caller, NULL only when OIIO cannot create one. */
 struct img_cache *img_cache_create(size_t max_mb);
-/* Frees the cache and closes its files; NULL is a no-op. */
+/* Another reference (atomic; any thread). Returns c; NULL is a no-op. */
+struct img_cache *img_cache_ref(struct img_cache *c);
+/* Drops a reference; the last one frees the cache and closes its files. NULL is a no-op. */
 void img_cache_destroy(struct img_cache *c);
+
+/* Records that path is now `version` (n opaque bytes, e.g. its size, mtime and inode). When
+ * a different version was recorded before, everything cached about path is invalidated (its
+ * next read reopens the file) and true is returned; the first call for a path invalidates
+ * only what OIIO itself sees as stale (a newer mtime). Thread-safe. Readers of the old
+ * version that are still running get the new file's pixels from then on. */
+bool img_cache_set_version(struct img_cache *c, const char *path, const void *version, size_t n);
+
+struct img_cache_stats {
+	uint64_t max_bytes;   /* the budget given to img_cache_create */
+	uint64_t memory_used; /* bytes of tiles held now */
+	int files;	      /* distinct file names ever referenced */
+	int opens;	      /* times a file was opened (reopens after invalidation count) */
+	int open_now;	      /* files open now */
+};
+/* OIIO's counters for c (zeros where OIIO does not answer). */
+void img_cache_get_stats(struct img_cache *c, struct img_cache_stats *out);
 
 /* Describes the image at path. Returns 0, or -ENOENT (no such file) / -EIO (unreadable or
  * not an image) with err = OIIO's message. */

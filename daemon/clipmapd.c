@@ -16,6 +16,7 @@
 
 #include "cache.h"
 #include "conf.h"
+#include "img.h"
 #include "log.h"
 #include "planets.h"
 #include "sched.h"
@@ -44,7 +45,8 @@ static void reload(struct daemon *d)
 	sd_notify(0, "RELOADING=1\nSTATUS=reloading planets");
 	char err[256];
 	struct planet_set *ps = NULL;
-	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, &ps, err);
+	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, d->srv->planets->images, &ps,
+				 err); /* the same image cache: unchanged files stay cached */
 	if (rc) {
 		log_msg(LOG_ERROR, "reload failed, keeping the loaded planets: %s", err);
 	} else {
@@ -138,8 +140,10 @@ int main(int argc, char **argv)
 	}
 	log_set_level(d.conf.log_level);
 	struct planet_set *ps = NULL;
-	if (planet_set_load(d.conf.planets_dir, ++d.generation, &ps, err) ||
-	    check_token(&d.conf, err)) {
+	struct img_cache *images = img_cache_create(d.conf.image_cache_mb); /* the set holds it */
+	int lrc = planet_set_load(d.conf.planets_dir, ++d.generation, images, &ps, err);
+	img_cache_destroy(images);
+	if (lrc || check_token(&d.conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
 		planet_set_unref(ps);
 		conf_fini(&d.conf);

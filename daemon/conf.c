@@ -40,6 +40,7 @@ static const struct row rows[] = {
 	{ "engine", "workers", K_INT, 0, 1024, NULL },
 	{ "engine", "worker_nice", K_INT, 0, 19, NULL },
 	{ "engine", "cache_mb", K_SIZE_MB, 16, 1L << 24, NULL },
+	{ "engine", "image_cache_mb", K_SIZE_MB, 16, 1L << 20, NULL },
 	{ "session", "max_want", K_INT, 1, PROTO_MAX_WANT, NULL },
 	{ "session", "max_rate", K_INT, 0, 1000000, NULL },
 	{ "session", "max_pending_kb", K_SIZE_KB, 64, 1L << 22, NULL },
@@ -145,6 +146,7 @@ static void defaults(struct conf *c)
 	c->planets_dir = xstrdup("/etc/clipmap/planets");
 	c->worker_nice = 5;
 	c->cache_bytes = (size_t)1024 << 20;
+	c->image_cache_mb = 256; /* PLANET_IMAGE_CACHE_MB (test_conf checks they agree) */
 	c->max_want = PROTO_MAX_WANT;
 	c->max_rate = 200;
 	c->max_pending = (uint64_t)8 << 20;
@@ -243,6 +245,8 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->worker_nice = (int)n;
 	else if (strcmp(k, "cache_mb") == 0)
 		c->cache_bytes = (size_t)n << 20;
+	else if (strcmp(k, "image_cache_mb") == 0)
+		c->image_cache_mb = (size_t)n;
 	else if (strcmp(k, "max_want") == 0)
 		c->max_want = (uint32_t)n;
 	else if (strcmp(k, "max_rate") == 0)

@@ -44,6 +44,7 @@ struct conf {
 	int workers;	 /* 0: one per CPU */
 	int worker_nice; /* niceness added to workers */
 	size_t cache_bytes;
+	size_t image_cache_mb; /* the planets' shared OIIO image cache (file nodes), MiB */
 	/* [session] */
 	uint32_t max_want, max_rate, max_frame, max_jobs;
 	uint64_t max_pending;

@@ -1,7 +1,9 @@
 /* node_file — the `file` node: an image file (through OpenImageIO, common/img.h) resampled
  * onto the tile grid. Threads: the node is immutable after create; generate() runs on any
- * worker concurrently (the node's img_cache is thread-safe, buffers come from gen_scratch).
- * The node owns its path string and its img_cache.
+ * worker concurrently (the img_cache is thread-safe, buffers come from gen_scratch).
+ * The node owns its path string; it reads through its planet's img_cache (shared by every
+ * file node of the planet, and of the daemon's planet set), so two nodes on one path share
+ * the open file and its cached tiles.
  *
  * Parameters ([node NAME] with type = file):
  *   path      the image (relative paths resolve against the planet file's directory)
@@ -19,9 +21,10 @@
  *             where data is missing
  *   lon_wrap  true | false: bilinear wraps across the east/west edges (default true when the
  *             bounds span 360°; only allowed then)
- *   cache_mb  size of the node's image cache (default 256). It does not change the output,
- *             so it is not part of the content hash.
- * The file's size and mtime are hashed: a changed file gets new tile names after a reload.
+ *   cache_mb  deprecated and ignored (still checked: 1..1048576): the image cache is the
+ *             planet's, sized by clipmapd's [engine] image_cache_mb. Not hashed.
+ * The file's size, mtime and inode are hashed: a changed file gets new tile names after a
+ * reload, and the shared cache forgets the old file's pixels (img_cache_set_version).
  *
  * Resampling. A tile's texels are evenly spaced in degrees, so the texel → source pixel map
  * is separable: per output column a few (source column, weight) taps, per output row the
@@ -66,7 +69,8 @@ enum file_kind { KIND_HEIGHT, KIND_COLOR };
 
 struct file_impl {
 	char *path; /* resolved; owned */
-	struct img_cache *cache; /* owned */
+	struct img_cache *cache; /* the planet's (borrowed), or own_cache */
+	struct img_cache *own_cache; /* owned; only for a planet without an image cache */
 	struct img_info info;
 	int nlev;
 	int lw[FILE_MAX_LEVELS], lh[FILE_MAX_LEVELS]; /* MIP level sizes */
@@ -92,7 +96,7 @@ static void file_destroy(struct node *nd)
 	struct file_impl *f = nd->impl;
 	if (!f)
 		return;
-	img_cache_destroy(f->cache);
+	img_cache_destroy(f->own_cache);
 	free(f->path);
 	free(f);
 	nd->impl = NULL;
@@ -120,7 +124,9 @@ static int height_only(struct node_parse *p, const char *key)
 
 static int parse_cache_mb(struct node_parse *p, long *out)
 {
-	/* Not hashed on purpose: the cache size never changes a texel. */
+	/* Deprecated: file nodes read through their planet's shared image cache (clipmapd's
+	 * [engine] image_cache_mb). Still checked, and it sizes the node's own cache in a
+	 * hand-built planet that has none. Not hashed: the cache size never changes a texel. */
 	struct ini_entry *e = ini_find(p->sec, "cache_mb");
 	*out = 256;
 	if (!e)
@@ -250,8 +256,10 @@ static int file_create(struct node *nd, struct node_parse *p)
 	struct stat st;
 	if (stat(f->path, &st) != 0)
 		return np_error(p, "path", "cannot open %s: %s", f->path, strerror(errno));
-	int64_t stamp[3] = { (int64_t)st.st_size, (int64_t)st.st_mtim.tv_sec,
-			     (int64_t)st.st_mtim.tv_nsec };
+	/* The inode too: a file replaced by rename (img_write, clipmapctl import) within the
+	 * file system's timestamp granularity still counts as changed. */
+	int64_t stamp[4] = { (int64_t)st.st_size, (int64_t)st.st_mtim.tv_sec,
+			     (int64_t)st.st_mtim.tv_nsec, (int64_t)st.st_ino };
 	np_hash_bytes(p, "path", 5);
 	np_hash_bytes(p, f->path, strlen(f->path) + 1);
 	np_hash_bytes(p, stamp, sizeof stamp);
@@ -259,9 +267,15 @@ static int file_create(struct node *nd, struct node_parse *p)
 	long cache_mb;
 	if ((rc = parse_cache_mb(p, &cache_mb)))
 		return rc;
-	f->cache = img_cache_create((size_t)cache_mb);
-	if (!f->cache)
-		return np_error(p, "path", "cannot create an image cache");
+	f->cache = nd->planet->images;
+	if (!f->cache) {
+		f->cache = f->own_cache = img_cache_create((size_t)cache_mb);
+		if (!f->cache)
+			return np_error(p, "path", "cannot create an image cache");
+	}
+	/* The cache is shared across planets and reloads and keyed by path: if an earlier node
+	 * saw another version of this file, drop what is cached of it. */
+	img_cache_set_version(f->cache, f->path, stamp, sizeof stamp);
 	char err[256];
 	if (img_cache_info(f->cache, f->path, &f->info, err))
 		return np_error(p, "path", "cannot open %s", err);

@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "geo.h"
+#include "img.h"
 #include "node_types.h"
 #include "xalloc.h"
 
@@ -516,8 +517,8 @@ static int parse_layers(struct loader *L)
 	return 0;
 }
 
-int planet_load_types(const char *path, const struct node_type *const *types, struct planet **out,
-		      char err[256])
+int planet_load_shared(const char *path, const struct node_type *const *types,
+		       struct img_cache *images, struct planet **out, char err[256])
 {
 	char local[256];
 	if (!err)
@@ -530,6 +531,14 @@ int planet_load_types(const char *path, const struct node_type *const *types, st
 	struct planet *p = xcalloc(1, sizeof *p);
 	atomic_init(&p->refs, 1);
 	p->ini = ini;
+	p->images = images ? img_cache_ref(images) : img_cache_create(PLANET_IMAGE_CACHE_MB);
+	if (!p->images) {
+		snprintf(err, 256, "%s: cannot create an image cache", path);
+		planet_destroy(p);
+		return -ENOMEM;
+	}
+	if (!types)
+		types = node_types_all();
 	p->path = xstrdup(path);
 	const char *slash = strrchr(path, '/');
 	if (!slash) {
@@ -566,9 +575,15 @@ int planet_load_types(const char *path, const struct node_type *const *types, st
 	return 0;
 }
 
+int planet_load_types(const char *path, const struct node_type *const *types, struct planet **out,
+		      char err[256])
+{
+	return planet_load_shared(path, types, NULL, out, err);
+}
+
 int planet_load(const char *path, struct planet **out, char err[256])
 {
-	return planet_load_types(path, node_types_all(), out, err);
+	return planet_load_shared(path, NULL, NULL, out, err);
 }
 
 void planet_ref(const struct planet *p)
@@ -607,6 +622,7 @@ static void planet_free(struct planet *p)
 	for (size_t i = 0; i < p->nlayers; i++)
 		free(p->layers[i].name);
 	free(p->layers);
+	img_cache_destroy(p->images); /* after the nodes that read through it */
 	geo_body_destroy(p->body);
 	ini_free(p->ini);
 	free(p->name);

@@ -10,7 +10,8 @@
  *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
  *
  * Ownership: planet_load returns a reference-counted planet; planet_destroy drops the
- * caller's reference and the last one frees it and its nodes. A loaded planet is immutable
+ * caller's reference and the last one frees it and its nodes. Its file nodes read through
+ * one image cache (planet->images, shared with other planets when the loader is given one). A loaded planet is immutable
  * (but for its reference count) and may be shared by any number of threads.
  */
 #ifndef CLIPMAP_PLANET_H
@@ -23,6 +24,11 @@
 #include "node.h"
 
 struct geo_body;
+struct img_cache;
+
+/* The image cache a planet loaded on its own gets (MiB); clipmapd's [engine] image_cache_mb
+ * has the same default. */
+#define PLANET_IMAGE_CACHE_MB 256
 
 struct planet_layer {
 	char *name;
@@ -48,6 +54,9 @@ struct planet {
 	struct planet_layer *layers;
 	size_t nlayers;
 	struct ini_file *ini; /* kept: node parameters borrow strings from it */
+	/* The image cache every file node of the planet reads through: one reference, dropped
+	 * after the nodes. NULL only in caller-owned planets (file nodes then make their own). */
+	struct img_cache *images;
 };
 
 /* Loads and checks a planet file. Returns 0 or -errno with err filled. */
@@ -56,6 +65,13 @@ int planet_load(const char *path, struct planet **out, char err[256]);
  * planet) instead of node_types_all() — for tests and tools that add their own types. */
 int planet_load_types(const char *path, const struct node_type *const *types, struct planet **out,
 		      char err[256]);
+/* The general form: types as planet_load_types (NULL: node_types_all()); images is the
+ * image cache its file nodes share (the planet takes a reference of its own; NULL: the planet
+ * creates one of PLANET_IMAGE_CACHE_MB). A file whose size, mtime or inode differ from what
+ * an earlier load recorded in images is invalidated there, so the new planet reads the new
+ * pixels. */
+int planet_load_shared(const char *path, const struct node_type *const *types,
+		       struct img_cache *images, struct planet **out, char err[256]);
 /* Drops the caller's reference (NULL is a no-op); frees at the last. */
 void planet_destroy(struct planet *p);
 /* Another reference (for the scheduler); no-op for NULL or caller-owned planets. */

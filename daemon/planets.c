@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "img.h"
 #include "xalloc.h"
 
 static int cmp_str(const void *a, const void *b)
@@ -24,10 +25,12 @@ static void set_free(struct planet_set *s)
 	for (size_t i = 0; i < s->n; i++)
 		planet_destroy(s->planets[i]);
 	free(s->planets);
+	img_cache_destroy(s->images);
 	free(s);
 }
 
-int planet_set_load(const char *dir, uint64_t generation, struct planet_set **out, char err[256])
+int planet_set_load(const char *dir, uint64_t generation, struct img_cache *images,
+		    struct planet_set **out, char err[256])
 {
 	*out = NULL;
 	DIR *d = opendir(dir);
@@ -53,13 +56,18 @@ int planet_set_load(const char *dir, uint64_t generation, struct planet_set **ou
 	atomic_init(&s->refs, 1);
 	s->generation = generation;
 	s->planets = xcalloc(nn ? nn : 1, sizeof *s->planets);
+	s->images = images ? img_cache_ref(images) : img_cache_create(PLANET_IMAGE_CACHE_MB);
 	int rc = 0;
+	if (!s->images) {
+		snprintf(err, 256, "%s: cannot create an image cache", dir);
+		rc = -ENOMEM;
+	}
 	for (size_t i = 0; i < nn && !rc; i++) {
 		size_t pl = strlen(dir) + strlen(names[i]) + 2;
 		char *path = xmalloc(pl);
 		snprintf(path, pl, "%s/%s", dir, names[i]);
 		struct planet *p = NULL;
-		rc = planet_load(path, &p, err);
+		rc = planet_load_shared(path, NULL, s->images, &p, err);
 		free(path);
 		if (rc)
 			break;

@@ -1,7 +1,10 @@
 /* planets — the set of planets a daemon serves: every *.ini in the planets directory, loaded
  * as one immutable, reference-counted snapshot. SIGHUP loads a new snapshot and rebinds open
  * sessions to it; sessions keep references to the snapshots they wanted nodes from, so nodes
- * the scheduler may still be working on stay alive until they let go. Unchanged nodes keep their content hash, so their cached tiles stay valid across reloads.
+ * the scheduler may still be working on stay alive until they let go. Unchanged nodes keep
+ * their content hash, so their cached tiles stay valid across reloads. Every planet of a set
+ * reads its files through one image cache (the set's `images`), which a reload passes on to
+ * the next set: unchanged files stay cached, changed ones are reread.
  *
  * Threads: a snapshot is immutable; refcounts are atomic. Ownership: planet_set_load returns
  * one owned reference; planet_set_ref adds one; planet_set_unref frees at zero.
@@ -14,16 +17,23 @@
 
 #include "planet.h"
 
+struct img_cache;
+
 struct planet_set {
 	atomic_int refs;
 	uint64_t generation; /* increases with every load in this process */
 	struct planet **planets; /* sorted by name; owned */
 	size_t n;
+	struct img_cache *images; /* one reference; every planet holds one too */
 };
 
-/* Loads every "*.ini" in dir (sorted by file name). Returns 0 or -errno with err filled
- * ("file:line: key: message" for the first bad file; duplicate planet names are an error). */
-int planet_set_load(const char *dir, uint64_t generation, struct planet_set **out, char err[256]);
+/* Loads every "*.ini" in dir (sorted by file name), all reading through the image cache
+ * `images` (borrowed: the set and its planets take references; pass the previous set's on a
+ * reload. NULL: the set creates one of PLANET_IMAGE_CACHE_MB). Returns 0 or -errno with err
+ * filled ("file:line: key: message" for the first bad file; duplicate planet names are an
+ * error). */
+int planet_set_load(const char *dir, uint64_t generation, struct img_cache *images,
+		    struct planet_set **out, char err[256]);
 struct planet_set *planet_set_ref(struct planet_set *s);
 void planet_set_unref(struct planet_set *s); /* NULL is a no-op */
 /* The planet named name, or NULL (borrowed from the set). */

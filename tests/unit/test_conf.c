@@ -10,6 +10,7 @@
 #include <string.h>
 
 #include "conf.h"
+#include "planet.h"
 
 static void parse_fails(const char *text, const char *expect)
 {
@@ -31,6 +32,9 @@ static void test_defaults(void **state)
 	assert_string_equal(c.tcp[0], "127.0.0.1:7878");
 	assert_null(c.token_file);
 	assert_int_equal(c.cache_bytes, (size_t)1024 << 20);
+	/* The daemon's image cache is as large as the one a tool's planet makes by itself. */
+	assert_int_equal(c.image_cache_mb, PLANET_IMAGE_CACHE_MB);
+	assert_int_equal(c.image_cache_mb, 256);
 	assert_int_equal(c.max_want, 4096);
 	assert_int_equal(c.log_level, LOG_INFO);
 	conf_fini(&c);
@@ -46,6 +50,7 @@ static void test_shipped_file(void **state)
 		fail_msg("%s", err);
 	assert_string_equal(c.planets_dir, "/etc/clipmap/planets");
 	assert_int_equal(c.max_pending, (uint64_t)8192 << 10);
+	assert_int_equal(c.image_cache_mb, 256);
 	conf_fini(&c);
 }
 
@@ -54,7 +59,7 @@ static void test_values(void **state)
 	(void)state;
 	const char *t = "[listen]\nunix =\ntcp = 127.0.0.1:0, [::1]:9000, 10.0.0.1:7878\n"
 			"token_file = secret\nrequire_token = tcp\nunix_mode = 0600\n"
-			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\n"
+			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\nimage_cache_mb = 48\n"
 			"[session]\nmax_pending_kb = 128\nmax_rate = 0\ncompress = never\n"
 			"[log]\nlevel = debug\n";
 	struct conf c;
@@ -71,6 +76,7 @@ static void test_values(void **state)
 	assert_int_equal(c.unix_mode, 0600);
 	assert_int_equal(c.workers, 3);
 	assert_int_equal(c.cache_bytes, (size_t)64 << 20);
+	assert_int_equal(c.image_cache_mb, 48);
 	assert_int_equal(c.max_pending, 128u << 10);
 	assert_int_equal(c.compress, CONF_COMPRESS_NEVER);
 	assert_int_equal(c.log_level, LOG_DEBUG);
@@ -84,6 +90,13 @@ static void test_errors(void **state)
 	parse_fails("[server]\n", "/etc/x/d.conf:1: unknown section [server]");
 	parse_fails("[engine]\nworkers = lots\n", "d.conf:2: workers: \"lots\": expected an integer");
 	parse_fails("[engine]\ncache_mb = 1\n", "d.conf:2: cache_mb:");
+	parse_fails("[engine]\nimage_cache_mb = 8\n",
+		    "d.conf:2: image_cache_mb: \"8\": expected an integer in [16, 1048576]");
+	parse_fails("\n[engine]\nimage_cache_mb = 1G\n", "d.conf:3: image_cache_mb: \"1G\"");
+	parse_fails("[engine]\nimage_cache_mb = -256\n", "d.conf:2: image_cache_mb:");
+	parse_fails("[engine]\nimage_cache_mb = 2000000\n", "d.conf:2: image_cache_mb:");
+	parse_fails("[session]\nimage_cache_mb = 64\n",
+		    "d.conf:2: image_cache_mb: unknown key in [session]");
 	parse_fails("\n[listen]\ntcp = localhost\n", "d.conf:3: tcp: \"localhost\" is not host:port");
 	parse_fails("[listen]\ntcp = 1.2.3.4:99999\n", "is not host:port");
 	parse_fails("[listen]\ntcp = 0.0.0.0:7878\n",

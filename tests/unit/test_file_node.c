@@ -1,7 +1,9 @@
 /* test_file_node — the `file` node on synthetic images written to a temp dir: texel values
  * against the analytic function the image was made from, seams between tiles and across the
  * antimeridian, sub-region bounds with fill, filtering at coarse levels (no aliasing),
- * nodata, colour channel expansion, parameter errors with file:line, the content hash. */
+ * nodata, colour channel expansion, parameter errors with file:line, the content hash, and
+ * the image cache a planet shares between nodes (one open file per path; a changed file is
+ * reread). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -507,7 +509,7 @@ static void bad_params(void **state)
 	}
 }
 
-/* The content hash follows the parameters and the file (size, mtime), not cache_mb. */
+/* The content hash follows the parameters and the file (size, mtime, inode), not cache_mb. */
 static void content_hash(void **state)
 {
 	(void)state;
@@ -579,6 +581,75 @@ static void concurrent_generate(void **state)
 	fnode_fini(&f);
 }
 
+/* Nodes of a planet with an image cache read through it: two nodes on one path (one spelled
+ * relative, one absolute) open the file once and give the same pixels; cache_mb is accepted
+ * but does not size anything. A node on another file adds a file. */
+static void shared_cache(void **state)
+{
+	(void)state;
+	write_fn("s.tif", 360, 180, -180, -90, 180, 90);
+	write_fn("s2.tif", 36, 18, -180, -90, 180, 90);
+	struct img_cache *ic = img_cache_create(16);
+	assert_non_null(ic);
+	pl.images = ic;
+	struct fnode a, b, c;
+	fnode_ok(&a, "[node x]\ntype = file\npath = s.tif\ncache_mb = 1\n");
+	fnode_ok(&b, "[node x]\ntype = file\npath = %s\nscale = 2\n", tpath("s.tif"));
+	struct tile *ta = gen(&a, 2, 1, 1, 0, 64), *tb = gen(&b, 2, 1, 1, 0, 64);
+	for (size_t i = 0; i < 64 * 64; i++)
+		if (tile_f32(tb)[i] != 2 * tile_f32(ta)[i])
+			fail_msg("texel %zu: %g vs 2 × %g", i, tile_f32(tb)[i], tile_f32(ta)[i]);
+	struct img_cache_stats st;
+	img_cache_get_stats(ic, &st);
+	assert_int_equal(st.files, 1);
+	assert_int_equal(st.opens, 1);
+	assert_int_equal(st.max_bytes, (uint64_t)16 << 20); /* not cache_mb's 1 */
+	assert_true(st.memory_used > 0);
+	fnode_ok(&c, "[node x]\ntype = file\npath = s2.tif\n");
+	tile_unref(gen(&c, 2, 1, 1, 0, 64));
+	img_cache_get_stats(ic, &st);
+	assert_int_equal(st.files, 2);
+	assert_int_equal(st.opens, 2);
+	tile_unref(ta);
+	tile_unref(tb);
+	fnode_fini(&a);
+	fnode_fini(&b);
+	fnode_fini(&c);
+	pl.images = NULL;
+	img_cache_destroy(ic);
+}
+
+/* A node created for a file that changed since another node on the same path read it through
+ * the shared cache reads the new file, not the cached pixels. */
+static void changed_file_reread(void **state)
+{
+	(void)state;
+	struct img_cache *ic = img_cache_create(16);
+	pl.images = ic;
+	float px[8 * 4];
+	char err[256];
+	for (int i = 0; i < 8 * 4; i++)
+		px[i] = 5;
+	assert_int_equal(img_write(tpath("v.tif"), 8, 4, 1, IMG_F32, px, err), 0);
+	struct fnode a, b;
+	fnode_ok(&a, "[node x]\ntype = file\npath = v.tif\n");
+	struct tile *t = gen(&a, 1, 0, 0, 0, 64);
+	assert_true(tile_f32(t)[0] == 5.0f);
+	tile_unref(t);
+	for (int i = 0; i < 8 * 4; i++)
+		px[i] = -9;
+	assert_int_equal(img_write(tpath("v.tif"), 8, 4, 1, IMG_F32, px, err), 0);
+	fnode_ok(&b, "[node x]\ntype = file\npath = v.tif\n");
+	assert_true(a.n.hash != b.n.hash);
+	t = gen(&b, 1, 0, 0, 0, 64);
+	assert_true(tile_f32(t)[0] == -9.0f);
+	tile_unref(t);
+	fnode_fini(&a);
+	fnode_fini(&b);
+	pl.images = NULL;
+	img_cache_destroy(ic);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -591,6 +662,8 @@ int main(void)
 		cmocka_unit_test(bad_params),
 		cmocka_unit_test(content_hash),
 		cmocka_unit_test(concurrent_generate),
+		cmocka_unit_test(shared_cache),
+		cmocka_unit_test(changed_file_reread),
 	};
 	return cmocka_run_group_tests_name("file_node", tests, setup, teardown);
 }

@@ -2,6 +2,8 @@
  * class of config error with its file:line: key, the content-hash properties, dot output, the
  * node-type registry and the constant node. Graph tests use three test-only node types with
  * input slots (t_mix, t_tint, t_shade) next to the built-in ones, through planet_load_types.
+ * Planet sets: one image cache shared by every file node of every planet, and a reload with
+ * that cache after a file was rewritten reads the new pixels.
  * Fixtures live in tests/data/planets/ (CLIPMAP_TEST_DATA overrides tests/data). */
 #include <stdarg.h>
 #include <stddef.h>
@@ -17,8 +19,10 @@
 #include <unistd.h>
 
 #include "geo.h"
+#include "img.h"
 #include "node_types.h"
 #include "planet.h"
+#include "planets.h"
 #include "xalloc.h"
 
 /* ---- test-only node types ---- */
@@ -732,6 +736,156 @@ static void dot_output(void **state)
 	planet_destroy(p);
 }
 
+/* ---- planet sets and the shared image cache ---- */
+
+/* dir/name: a 16 × 8 float image, every pixel v. */
+static void write_flat(const char *dir, const char *name, float v)
+{
+	float px[16 * 8];
+	for (int i = 0; i < 16 * 8; i++)
+		px[i] = v;
+	char path[128], err[256];
+	snprintf(path, sizeof path, "%s/%s", dir, name);
+	if (img_write(path, 16, 8, 1, IMG_F32, px, err))
+		fail_msg("%s", err);
+}
+
+static void write_text(const char *dir, const char *name, const char *text)
+{
+	char path[128];
+	snprintf(path, sizeof path, "%s/%s", dir, name);
+	FILE *f = fopen(path, "w");
+	assert_non_null(f);
+	assert_true(fputs(text, f) >= 0);
+	assert_int_equal(fclose(f), 0);
+}
+
+/* The first texel of the level-(1, 0) tile (0, 0) of node `node` of planet `planet`. */
+static float texel(const struct planet_set *s, const char *planet, const char *node)
+{
+	struct planet *p = planet_set_find(s, planet);
+	assert_non_null(p);
+	struct node *n = planet_find_node(p, node);
+	assert_non_null(n);
+	struct tile_key k = { .node = n->hash, .lx = 1, .ly = 0 };
+	struct tile *t = tile_create(&k, PIX_HEIGHT, p->tile_size);
+	struct gen_ctx g = { 0 };
+	assert_int_equal(n->type->generate(n, &g, &k, NULL, 0, t), 0);
+	float v = tile_f32(t)[0];
+	tile_unref(t);
+	gen_ctx_fini(&g);
+	return v;
+}
+
+static uint64_t node_hash(const struct planet_set *s, const char *planet, const char *node)
+{
+	return planet_find_node(planet_set_find(s, planet), node)->hash;
+}
+
+static void shared_images_and_reload(void **state)
+{
+	(void)state;
+	char dir[64] = "/tmp/test_planets.XXXXXX";
+	assert_non_null(mkdtemp(dir));
+	write_flat(dir, "h.tif", 100);
+	write_flat(dir, "g.tif", 7);
+	/* Two planets, three file nodes on h.tif (cache_mb still accepted), one on g.tif. */
+	write_text(dir, "a.ini",
+		   "[planet]\nname = a\ntile_size = 64\n"
+		   "[node h]\ntype = file\npath = h.tif\ncache_mb = 4\n"
+		   "[node g]\ntype = file\npath = g.tif\n"
+		   "[layer height]\nnode = h\n");
+	write_text(dir, "b.ini",
+		   "[planet]\nname = b\ntile_size = 64\n"
+		   "[node h]\ntype = file\npath = h.tif\n"
+		   "[node h2]\ntype = file\npath = h.tif\nscale = 2\n"
+		   "[layer height]\nnode = h2\n");
+	struct img_cache *ic = img_cache_create(16);
+	assert_non_null(ic);
+	struct planet_set *s1 = NULL, *s2 = NULL, *s3 = NULL, *s4 = NULL;
+	char err[256] = "";
+	if (planet_set_load(dir, 1, ic, &s1, err))
+		fail_msg("%s", err);
+	assert_int_equal(s1->n, 2);
+	assert_ptr_equal(s1->images, ic);
+	assert_ptr_equal(s1->planets[0]->images, ic);
+	assert_ptr_equal(s1->planets[1]->images, ic);
+	assert_true(texel(s1, "a", "h") == 100.0f);
+	assert_true(texel(s1, "b", "h") == 100.0f);
+	assert_true(texel(s1, "b", "h2") == 200.0f);
+	struct img_cache_stats st;
+	img_cache_get_stats(ic, &st);
+	assert_int_equal(st.max_bytes, (uint64_t)16 << 20);
+	assert_int_equal(st.files, 2); /* h.tif and g.tif, each once for all nodes */
+	assert_int_equal(st.opens, 2);
+	assert_true(st.memory_used > 0 && st.memory_used <= st.max_bytes);
+
+	/* The file is rewritten (same size; replaced by rename); the reload reuses the cache. */
+	write_flat(dir, "h.tif", 300);
+	if (planet_set_load(dir, 2, s1->images, &s2, err))
+		fail_msg("%s", err);
+	assert_true(node_hash(s2, "a", "h") != node_hash(s1, "a", "h"));
+	assert_true(node_hash(s2, "a", "g") == node_hash(s1, "a", "g"));
+	assert_true(texel(s2, "a", "h") == 300.0f);
+	assert_true(texel(s2, "b", "h2") == 600.0f);
+	assert_true(texel(s2, "a", "g") == 7.0f);
+	img_cache_get_stats(ic, &st);
+	assert_int_equal(st.files, 2);
+	assert_int_equal(st.opens, 3); /* h.tif once more; g.tif still open */
+
+	/* Nothing changed: the same hashes, nothing reopened. */
+	if (planet_set_load(dir, 3, ic, &s3, err))
+		fail_msg("%s", err);
+	assert_true(node_hash(s3, "a", "h") == node_hash(s2, "a", "h"));
+	assert_true(texel(s3, "a", "h") == 300.0f);
+	img_cache_get_stats(ic, &st);
+	assert_int_equal(st.opens, 3);
+
+	/* Without a cache the set makes its own (tools, tests). */
+	if (planet_set_load(dir, 4, NULL, &s4, err))
+		fail_msg("%s", err);
+	assert_non_null(s4->images);
+	assert_true(s4->images != ic);
+	assert_ptr_equal(s4->planets[0]->images, s4->images);
+	assert_true(texel(s4, "b", "h2") == 600.0f);
+	img_cache_get_stats(s4->images, &st);
+	assert_int_equal(st.max_bytes, (uint64_t)PLANET_IMAGE_CACHE_MB << 20);
+
+	/* A planet held past its set and the caller's cache reference still reads. */
+	struct planet *held = planet_set_find(s3, "a");
+	planet_ref(held);
+	planet_set_unref(s1);
+	planet_set_unref(s2);
+	planet_set_unref(s3);
+	planet_set_unref(s4);
+	img_cache_destroy(ic);
+	struct node *n = planet_find_node(held, "h");
+	struct tile_key k = { .node = n->hash, .lx = 1, .ly = 0 };
+	struct tile *t = tile_create(&k, PIX_HEIGHT, held->tile_size);
+	struct gen_ctx g = { 0 };
+	assert_int_equal(n->type->generate(n, &g, &k, NULL, 0, t), 0);
+	assert_true(tile_f32(t)[0] == 300.0f);
+	tile_unref(t);
+	gen_ctx_fini(&g);
+	planet_unref(held);
+
+	/* A planet loaded alone gets a cache of its own. */
+	char path[128];
+	snprintf(path, sizeof path, "%s/a.ini", dir);
+	struct planet *p = NULL;
+	if (planet_load(path, &p, err))
+		fail_msg("%s", err);
+	assert_non_null(p->images);
+	planet_destroy(p);
+
+	static const char *const files[] = { "a.ini", "b.ini", "h.tif", "g.tif" };
+	for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+		snprintf(path, sizeof path, "%s/%s", dir, files[i]);
+		assert_int_equal(unlink(path), 0);
+	}
+	assert_int_equal(rmdir(dir), 0);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -747,6 +901,7 @@ int main(void)
 		cmocka_unit_test(node_and_layer_errors),
 		cmocka_unit_test(content_hashes),
 		cmocka_unit_test(dot_output),
+		cmocka_unit_test(shared_images_and_reload),
 	};
 	return cmocka_run_group_tests_name("planet", tests, setup, teardown);
 }
