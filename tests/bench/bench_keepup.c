@@ -153,8 +153,11 @@ static int copy_planet(const char *from, const char *dir, char *name, size_t nna
 	return fclose(b) ? -EIO : 0;
 }
 
-static int daemon_start(struct daemon *d, const char *bindir, const char *planet, char *name,
-			size_t nname, char err[256])
+/* cache_mb: cold trials run with the shipped size (1 GiB: a full cache recycles its memory as
+ * a running daemon's does); prefetched ones with a cache that holds the whole route, as an
+ * operator who prefetches a route would size it. */
+static int daemon_start(struct daemon *d, const char *bindir, const char *planet, int cache_mb,
+			char *name, size_t nname, char err[256])
 {
 	memset(d, 0, sizeof *d);
 	snprintf(d->dir, sizeof d->dir, "/tmp/bench_keepup_XXXXXX");
@@ -174,9 +177,9 @@ static int daemon_start(struct daemon *d, const char *bindir, const char *planet
 	FILE *f = fopen(d->conf, "w");
 	if (!f)
 		return -errno;
-	fprintf(f, "[listen]\nunix = %s\ntcp =\n[engine]\nplanets = %s\nworkers = 0\ncache_mb = 1024\n"
+	fprintf(f, "[listen]\nunix = %s\ntcp =\n[engine]\nplanets = %s\nworkers = 0\ncache_mb = %d\n"
 		   "[session]\nmax_rate = 0\n[log]\nlevel = warn\n",
-		d->sock, planets);
+		d->sock, planets, cache_mb);
 	fclose(f);
 	char exe[600];
 	snprintf(exe, sizeof exe, "%s/clipmapd", bindir);
@@ -530,7 +533,8 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	memset(tr, 0, sizeof *tr);
 	char err[256] = "", name[64];
 	struct daemon d;
-	int rc = daemon_start(&d, x->bindir, planet_ini, name, sizeof name, err);
+	int rc = daemon_start(&d, x->bindir, planet_ini, prefetch ? 8192 : 1024, name, sizeof name,
+			      err);
 	struct net_conn *sc = NULL;
 	struct client c = { 0 };
 	struct frame *fr = NULL;
