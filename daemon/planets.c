@@ -50,7 +50,8 @@ int planet_set_load(const char *dir, uint64_t generation, struct img_cache *imag
 		names[nn++] = xstrdup(de->d_name);
 	}
 	closedir(d);
-	qsort(names, nn, sizeof *names, cmp_str);
+	if (nn) /* qsort's base must not be NULL, even for no elements */
+		qsort(names, nn, sizeof *names, cmp_str);
 
 	struct planet_set *s = xcalloc(1, sizeof *s);
 	atomic_init(&s->refs, 1);
