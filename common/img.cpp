@@ -181,6 +181,27 @@ int publish(const std::string &tmp, const char *path, char *err)
 	return rc;
 }
 
+// The spec of a file this module writes: straight alpha; tiled (tile > 0) files zip-compressed,
+// and BigTIFF when they could pass classic TIFF's 32-bit offsets.
+ImageSpec out_spec(int width, int height, int channels, enum img_type type, int tile, bool mip,
+		   const char *desc)
+{
+	ImageSpec spec(width, height, channels, to_desc(type));
+	spec.attribute("oiio:UnassociatedAlpha", 1); // pixels are straight alpha: store as given
+	if (tile > 0) {
+		spec.tile_width = spec.tile_height = tile;
+		spec.attribute("compression", "zip");
+		// Classic TIFF offsets are 32-bit: a pyramid (4/3 of the base) near 4 GiB
+		// uncompressed needs BigTIFF (zip may not shrink noise-like data).
+		double bytes = (double)width * height * channels * (double)img_type_bytes(type);
+		if (bytes * (mip ? 4.0 / 3.0 : 1.0) > 3.5e9)
+			spec.attribute("tiff:bigtiff", 1);
+	}
+	if (desc)
+		spec.attribute("ImageDescription", desc);
+	return spec;
+}
+
 int write_impl(const char *path, int width, int height, int channels, enum img_type type,
 	       const void *pixels, int tile, bool mip, const char *desc, char *err)
 {
@@ -195,19 +216,7 @@ int write_impl(const char *path, int width, int height, int channels, enum img_t
 	if (rc)
 		return rc;
 	std::string tmp = std::string(path) + ".tmp";
-	ImageSpec spec(width, height, channels, to_desc(type));
-	spec.attribute("oiio:UnassociatedAlpha", 1); // pixels are straight alpha: store as given
-	if (tile > 0) {
-		spec.tile_width = spec.tile_height = tile;
-		spec.attribute("compression", "zip");
-		// Classic TIFF offsets are 32-bit: a pyramid (4/3 of the base) near 4 GiB
-		// uncompressed needs BigTIFF (zip may not shrink noise-like data).
-		double bytes = (double)width * height * channels * (double)img_type_bytes(type);
-		if (bytes * (mip ? 4.0 / 3.0 : 1.0) > 3.5e9)
-			spec.attribute("tiff:bigtiff", 1);
-	}
-	if (desc)
-		spec.attribute("ImageDescription", desc);
+	ImageSpec spec = out_spec(width, height, channels, type, tile, mip, desc);
 	if (fmt == std::string("openexr"))
 		spec.attribute("compression", "zip");
 	if (mip) {
@@ -904,15 +913,7 @@ int tiled_open_impl(img_tiled_out *o, const char *path, int width, int height, i
 	o->width = width, o->height = height, o->nch = channels, o->tile = tile;
 	o->px = (size_t)channels * img_type_bytes(type);
 	o->mip = mip;
-	ImageSpec spec(width, height, channels, o->td);
-	spec.attribute("oiio:UnassociatedAlpha", 1);
-	spec.tile_width = spec.tile_height = tile;
-	spec.attribute("compression", "zip");
-	double bytes = (double)width * height * channels * (double)img_type_bytes(type);
-	if (bytes * (mip ? 4.0 / 3.0 : 1.0) > 3.5e9)
-		spec.attribute("tiff:bigtiff", 1);
-	if (desc)
-		spec.attribute("ImageDescription", desc);
+	ImageSpec spec = out_spec(width, height, channels, type, tile, mip, desc);
 	if (mip) { // what make_texture adds
 		spec.attribute("planarconfig", "contig");
 		spec.attribute("wrapmodes", "black,black");
