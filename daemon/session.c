@@ -540,6 +540,21 @@ static void on_open(struct session *s, const struct proto_open *o)
 	log_msg(LOG_DEBUG, "session %llu: opened %s as %d", (unsigned long long)s->id, p->name, id);
 }
 
+static int submit_wants(struct session *s);
+
+/* Makes nw the session's want-set (the old one's entries already moved or released) and
+ * submits it; a scheduler failure is reported as an ERROR referring to (ref_type, ref_id). */
+static void install_wants(struct session *s, struct wset *old, struct wset nw, uint16_t ref_type,
+			  uint32_t ref_id)
+{
+	free(old->e);
+	free(old->tab);
+	s->ws = nw;
+	int rc = submit_wants(s);
+	if (rc)
+		send_error(s, PROTO_E_INTERNAL, ref_type, ref_id, "scheduler: %s", strerror(-rc));
+}
+
 /* Rebuilds the ready heap from the want-set and gives the scheduler what is still wanted.
  * Returns sched_req_want's result. */
 static int submit_wants(struct session *s)
@@ -624,12 +639,7 @@ static void on_want(struct session *s, const struct proto_want *w)
 		s->tiles_dropped++;
 		s->srv->tiles_dropped++;
 	}
-	free(old.e);
-	free(old.tab);
-	s->ws = nw;
-	int rc = submit_wants(s);
-	if (rc)
-		send_error(s, PROTO_E_INTERNAL, PROTO_WANT, w->seq, "scheduler: %s", strerror(-rc));
+	install_wants(s, &old, nw, PROTO_WANT, w->seq);
 	s->has_focus = true;
 	s->lon = w->lon;
 	s->lat = w->lat;
@@ -713,12 +723,7 @@ void session_reload(struct session *s, struct planet_set *ps)
 			s->srv->tiles_dropped++;
 		}
 	}
-	free(old.e);
-	free(old.tab);
-	s->ws = nw;
-	int rc = submit_wants(s);
-	if (rc)
-		send_error(s, PROTO_E_INTERNAL, 0, 0, "scheduler: %s", strerror(-rc));
+	install_wants(s, &old, nw, 0, 0);
 	log_msg(LOG_DEBUG, "session %llu (%s): rebound to planets generation %llu: %zu tiles "
 		"wanted again", (unsigned long long)s->id, s->name,
 		(unsigned long long)ps->generation, regen);
