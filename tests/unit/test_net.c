@@ -52,7 +52,7 @@ struct srv {
 	struct proto_prefetch seen_pf;
 	uint64_t seen_layers;
 	bool seen_cancel;
-	pid_t kill_pid; /* > 0: script_prefetch_sigint sends it SIGINT */
+	pid_t kill_pid; /* > 0: script_prefetch_cancel sends it SIGINT */
 };
 
 static int srv_recv(struct srv *s, struct proto_msg *m)
@@ -660,6 +660,10 @@ static int script_prefetch_cancel(struct srv *s)
 	proto_msg_fini(&m);
 	if (progress(s, id, PROTO_JOB_RUNNING, 3, 1000))
 		return -3;
+	/* With kill_pid (the real program): the client blocked SIGINT into its signalfd before it
+	 * sent PREFETCH; this is its Ctrl-C. */
+	if (s->kill_pid > 0)
+		kill(s->kill_pid, SIGINT);
 	if (srv_recv(s, &m) || m.type != PROTO_PREFETCH_CANCEL || m.prefetch_cancel.req != id) {
 		proto_msg_fini(&m);
 		return -4;
@@ -800,30 +804,6 @@ static int finish(pid_t pid, int fd, char *out, size_t n)
 	return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
 }
 
-static int script_prefetch_sigint(struct srv *s)
-{
-	if (srv_handshake(s) || open_reply(s))
-		return -1;
-	struct proto_msg m = { 0 };
-	if (srv_recv(s, &m) || m.type != PROTO_PREFETCH) {
-		proto_msg_fini(&m);
-		return -2;
-	}
-	uint32_t id = m.prefetch.id;
-	proto_msg_fini(&m);
-	if (progress(s, id, PROTO_JOB_RUNNING, 3, 1000))
-		return -3;
-	/* the client blocked SIGINT into its signalfd before it sent PREFETCH */
-	kill(s->kill_pid, SIGINT);
-	if (srv_recv(s, &m) || m.type != PROTO_PREFETCH_CANCEL || m.prefetch_cancel.req != id) {
-		proto_msg_fini(&m);
-		return -4;
-	}
-	s->seen_cancel = true;
-	proto_msg_fini(&m);
-	return progress(s, id, PROTO_JOB_CANCELLED, 4, 1000) ? -5 : srv_drain(s);
-}
-
 /* Exit codes and messages of the real program: no daemon → 1 with the hint; bad arguments
  * → 2; Ctrl-C during a prefetch → PREFETCH_CANCEL, then 130. */
 static void cli_exit_codes(void **state)
@@ -856,7 +836,7 @@ static void cli_exit_codes(void **state)
 	assert_int_equal(listen(l, 4), 0);
 	char *a3[] = { exe, "-s", sock, "prefetch", "testplanet", "--bbox", "0,0,1,1",
 		       "--levels", "0-2", NULL };
-	struct srv s = { .listen_fd = l, .script = script_prefetch_sigint };
+	struct srv s = { .listen_fd = l, .script = script_prefetch_cancel };
 	pbuf_init(&s.rb);
 	pid = spawn(a3, &fd);
 	s.kill_pid = pid;
