@@ -28,7 +28,7 @@ int daemon_env_run(char *const argv[], char *out, size_t n)
 		dup2(p[1], 2);
 		close(p[0]);
 		close(p[1]);
-		execv(argv[0], argv);
+		execvp(argv[0], argv);
 		_exit(127);
 	}
 	close(p[1]);

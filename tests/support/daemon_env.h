@@ -23,7 +23,7 @@ struct daemon_env {
 int daemon_env_setup(struct daemon_env *e, const char *tag, const char *client);
 /* SIGTERM, wait, remove the directory. */
 void daemon_env_teardown(struct daemon_env *e);
-/* Runs argv (argv[0] a path), stdout and stderr into out (NUL-terminated); returns the exit
+/* Runs argv (argv[0] a path, or a program found in $PATH), stdout and stderr into out (NUL-terminated); returns the exit
  * status, 128 + signal, or -1. */
 int daemon_env_run(char *const argv[], char *out, size_t n);
 

@@ -14,10 +14,10 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
-#include <sys/wait.h>
 #include <unistd.h>
 #include <cmocka.h>
 
+#include "daemon_env.h"
 #include "img.h"
 
 struct env {
@@ -29,42 +29,29 @@ struct env {
 	char shot[128];
 };
 
+/* daemon_env_run, with TSan told to spare the viewer's X libraries. */
 static int run_capture(char *const argv[], char *out, size_t n)
 {
-	int p[2];
-	if (pipe(p))
-		return -1;
-	pid_t pid = fork();
-	if (pid < 0)
-		return -1;
-	if (pid == 0) {
-		dup2(p[1], 1);
-		dup2(p[1], 2);
-		close(p[0]);
-		close(p[1]);
 #ifdef __SANITIZE_THREAD__
-		/* libX11/libXi (not built with TSan) take and release their display lock in
-		 * ways TSan reports as mutex misuse; only the viewer under X gets this. */
-		char opts[1024];
-		const char *old = getenv("TSAN_OPTIONS");
-		snprintf(opts, sizeof opts, "%s%sreport_mutex_bugs=0", old ? old : "",
-			 old && *old ? ":" : "");
-		setenv("TSAN_OPTIONS", opts, 1);
+	/* libX11/libXi (not built with TSan) take and release their display lock in ways TSan
+	 * reports as mutex misuse; only the viewer under X gets this. This process read its own
+	 * options at start, so only the child sees the change. */
+	const char *old = getenv("TSAN_OPTIONS");
+	char *saved = old ? strdup(old) : NULL;
+	char opts[1024];
+	snprintf(opts, sizeof opts, "%s%sreport_mutex_bugs=0", old ? old : "",
+		 old && *old ? ":" : "");
+	setenv("TSAN_OPTIONS", opts, 1);
+	int rc = daemon_env_run(argv, out, n);
+	if (saved)
+		setenv("TSAN_OPTIONS", saved, 1);
+	else
+		unsetenv("TSAN_OPTIONS");
+	free(saved);
+	return rc;
+#else
+	return daemon_env_run(argv, out, n);
 #endif
-		execvp(argv[0], argv);
-		_exit(127);
-	}
-	close(p[1]);
-	size_t len = 0;
-	ssize_t r;
-	while ((r = read(p[0], out + len, n - 1 - len)) > 0)
-		len += (size_t)r;
-	out[len] = '\0';
-	close(p[0]);
-	int st;
-	if (waitpid(pid, &st, 0) != pid)
-		return -1;
-	return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
 }
 
 static bool in_path(const char *prog)
