@@ -253,12 +253,15 @@ bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double
 				else if (moving[1 - i])
 					sd[i] = off[i] < (int64_t)L->target.T / 2 ? -1 : 1;
 		}
-		if (a[0] != L->ahead[0] || a[1] != L->ahead[1] || sd[0] != L->side[0] ||
-		    sd[1] != L->side[1]) {
-			L->ahead[0] = a[0];
-			L->ahead[1] = a[1];
+		if (sd[0] != L->side[0] || sd[1] != L->side[1]) {
+			/* what is asked for changes, not what is kept (the whole ring stays wanted) */
 			L->side[0] = sd[0];
 			L->side[1] = sd[1];
+			changed = true;
+		}
+		if (a[0] != L->ahead[0] || a[1] != L->ahead[1]) {
+			L->ahead[0] = a[0];
+			L->ahead[1] = a[1];
 			changed = true;
 			drop_unwanted(cm, L);
 		}
