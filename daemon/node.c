@@ -300,6 +300,24 @@ int node_init(struct node *n, const struct node_type *t, const char *file, struc
 	return rc;
 }
 
+void node_free_impl(struct node *n)
+{
+	free(n->impl);
+	n->impl = NULL;
+}
+
+int node_opt_height_input(const struct node *n, struct tile *const *in, int nin, uint32_t T,
+			  const struct tile **src)
+{
+	*src = NULL;
+	if (!n->in[0])
+		return 0;
+	if (nin < 1 || !in[0] || in[0]->type != PIX_HEIGHT || in[0]->size != T)
+		return -EINVAL;
+	*src = in[0];
+	return 0;
+}
+
 void node_fini(struct node *n)
 {
 	if (n->type && n->type->destroy)

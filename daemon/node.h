@@ -82,7 +82,8 @@ struct node_type {
 	 * created (n->in[i]->out is known; absent optional slots are NULL). Returns 0 or
 	 * -EINVAL with p->err filled. */
 	int (*create)(struct node *n, struct node_parse *p);
-	void (*destroy)(struct node *n); /* frees n->impl; may be NULL */
+	void (*destroy)(struct node *n); /* frees n->impl (node_free_impl: one plain
+					  * allocation); may be NULL */
 	/* The tiles generate() needs for key k, in order; returns how many (≤ NODE_MAX_DEPS) or
 	 * -errno. NULL means: key k on every present input, in slot order. */
 	int (*deps)(const struct node *n, const struct tile_key *k, struct node_dep *out);
@@ -112,6 +113,12 @@ struct node {
  * ("file:line: key: message"). */
 int node_init(struct node *n, const struct node_type *t, const char *file, struct ini_section *sec,
 	      char err[256]);
+/* The destroy of a type whose n->impl is one plain allocation: frees it. */
+void node_free_impl(struct node *n);
+/* The optional height input in[0] of a node whose first slot may be empty: *src is NULL
+ * without one. Returns 0, or -EINVAL when the tile given is not a T×T height tile. */
+int node_opt_height_input(const struct node *n, struct tile *const *in, int nin, uint32_t T,
+			  const struct tile **src);
 /* Frees what node_init and the type allocated (not n itself, nor n->name). */
 void node_fini(struct node *n);
 /* Node deps() helper: key k on every present input. */

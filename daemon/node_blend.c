@@ -57,11 +57,6 @@ static int blend_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void blend_destroy(struct node *n)
-{
-	free(n->impl);
-}
-
 static inline float weight_at(const float *mask, size_t i, float opacity)
 {
 	if (!mask)
@@ -196,6 +191,6 @@ const struct node_type node_type_blend = {
 	.slots = blend_slots,
 	.nslots = 3,
 	.create = blend_create,
-	.destroy = blend_destroy,
+	.destroy = node_free_impl,
 	.generate = blend_generate,
 };

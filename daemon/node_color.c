@@ -120,11 +120,6 @@ static int color_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void color_destroy(struct node *n)
-{
-	free(n->impl);
-}
-
 static inline uint8_t mat_row(const int16_t *m, int r, int g, int b, int a)
 {
 	int32_t v = m[0] * r + m[1] * g + m[2] * b + m[3] * a + (1 << (MAT_SHIFT - 1));
@@ -228,6 +223,6 @@ const struct node_type node_type_color_filter = {
 	.slots = color_slots,
 	.nslots = 1,
 	.create = color_create,
-	.destroy = color_destroy,
+	.destroy = node_free_impl,
 	.generate = color_generate,
 };

@@ -47,12 +47,6 @@ static int constant_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void constant_destroy(struct node *n)
-{
-	free(n->impl);
-	n->impl = NULL;
-}
-
 static int constant_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			     struct tile *const *in, int nin, struct tile *out)
 {
@@ -80,7 +74,7 @@ const struct node_type node_type_constant = {
 	.slots = NULL,
 	.nslots = 0,
 	.create = constant_create,
-	.destroy = constant_destroy,
+	.destroy = node_free_impl,
 	.deps = node_default_deps,
 	.generate = constant_generate,
 };

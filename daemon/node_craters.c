@@ -62,12 +62,6 @@ static int craters_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void craters_destroy(struct node *n)
-{
-	free(n->impl);
-	n->impl = NULL;
-}
-
 static int craters_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			    struct tile *const *in, int nin, struct tile *out)
 {
@@ -75,12 +69,9 @@ static int craters_generate(const struct node *n, struct gen_ctx *g, const struc
 	uint32_t T = out->size;
 	if (out->type != PIX_HEIGHT)
 		return -EINVAL;
-	const struct tile *src = NULL;
-	if (n->in[0]) {
-		if (nin < 1 || !in[0] || in[0]->type != PIX_HEIGHT || in[0]->size != T)
-			return -EINVAL;
-		src = in[0];
-	}
+	const struct tile *src;
+	if (node_opt_height_input(n, in, nin, T, &src))
+		return -EINVAL;
 	float *dst = tile_f32(out);
 	int rc = craters_tile(c, k, T, gen_scratch(g, craters_scratch_size(T)), dst);
 	if (rc < 0)
@@ -103,7 +94,7 @@ const struct node_type node_type_craters = {
 	.slots = slots,
 	.nslots = 1,
 	.create = craters_create,
-	.destroy = craters_destroy,
+	.destroy = node_free_impl,
 	.deps = NULL,
 	.generate = craters_generate,
 };

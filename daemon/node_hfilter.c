@@ -33,11 +33,6 @@ static int hf_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void hf_destroy(struct node *n)
-{
-	free(n->impl);
-}
-
 /* Fixed 16-texel blocks so the loop vectorises even at -O2 (T is a multiple of 16). The
  * comparisons are written so NaN fails both and passes through. */
 static void hf_run(const float *restrict src, float *restrict dst, size_t count,
@@ -77,6 +72,6 @@ const struct node_type node_type_height_filter = {
 	.slots = hf_slots,
 	.nslots = 1,
 	.create = hf_create,
-	.destroy = hf_destroy,
+	.destroy = node_free_impl,
 	.generate = hf_generate,
 };

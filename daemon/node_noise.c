@@ -75,12 +75,6 @@ static int noise_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void noise_destroy(struct node *n)
-{
-	free(n->impl);
-	n->impl = NULL;
-}
-
 static int noise_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			  struct tile *const *in, int nin, struct tile *out)
 {
@@ -88,12 +82,9 @@ static int noise_generate(const struct node *n, struct gen_ctx *g, const struct 
 	uint32_t T = out->size;
 	if (out->type != PIX_HEIGHT)
 		return -EINVAL;
-	const struct tile *src = NULL;
-	if (n->in[0]) {
-		if (nin < 1 || !in[0] || in[0]->type != PIX_HEIGHT || in[0]->size != T)
-			return -EINVAL;
-		src = in[0];
-	}
+	const struct tile *src;
+	if (node_opt_height_input(n, in, nin, T, &src))
+		return -EINVAL;
 	/* out = input + (offset + amplitude · noise), each row while it is in cache */
 	int rc = noise_tile_scaled(&im->nz, k, T, NOISE_ISA_AUTO,
 				   gen_scratch(g, noise_scratch_size(T)), src ? tile_f32(src) : NULL,
@@ -113,7 +104,7 @@ const struct node_type node_type_noise = {
 	.slots = slots,
 	.nslots = 1,
 	.create = noise_create,
-	.destroy = noise_destroy,
+	.destroy = node_free_impl,
 	.deps = NULL,
 	.generate = noise_generate,
 };

@@ -68,11 +68,6 @@ static int normal_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void normal_destroy(struct node *n)
-{
-	free(n->impl);
-}
-
 static int normal_deps(const struct node *n, const struct tile_key *k, struct node_dep *out)
 {
 	struct nbhood nb;
@@ -209,7 +204,7 @@ const struct node_type node_type_normal = {
 	.slots = normal_slots,
 	.nslots = 1,
 	.create = normal_create,
-	.destroy = normal_destroy,
+	.destroy = node_free_impl,
 	.deps = normal_deps,
 	.generate = normal_generate,
 };

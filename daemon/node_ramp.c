@@ -166,11 +166,6 @@ static int ramp_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static void ramp_destroy(struct node *n)
-{
-	free(n->impl);
-}
-
 /* d = c + t·slope, rounded (c + t·slope ∈ [0, 255]). */
 #ifdef __SSE2__
 static inline void put(uint8_t *d, const float *c, const float *sl, float t)
@@ -268,6 +263,6 @@ const struct node_type node_type_ramp = {
 	.slots = ramp_slots,
 	.nslots = 1,
 	.create = ramp_create,
-	.destroy = ramp_destroy,
+	.destroy = node_free_impl,
 	.generate = ramp_generate,
 };
