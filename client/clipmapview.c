@@ -53,6 +53,17 @@ static void usage(FILE *f)
 		"  --screenshot FILE   (window) write the last frame as PNG on exit\n");
 }
 
+/* Whether all of s is a number in [lo, hi] (then stored in *out). */
+static bool number(const char *s, double lo, double hi, double *out)
+{
+	char *end;
+	double v = strtod(s, &end);
+	if (end == s || *end || !(v >= lo && v <= hi))
+		return false;
+	*out = v;
+	return true;
+}
+
 static double mono_s(void)
 {
 	struct timespec ts;
@@ -361,24 +372,18 @@ int main(int argc, char **argv)
 			break;
 		case O_WAIT: wait_complete = true; break;
 		case O_TIMEOUT: timeout = atof(optarg); break;
-		case O_BUDGET: {
-			char *end;
-			budget = strtod(optarg, &end);
-			if (*end || !(budget >= 0) || budget > 10000) {
+		case O_BUDGET:
+			if (!number(optarg, 0, 10000, &budget)) {
 				fprintf(stderr, "clipmapview: --budget: milliseconds, 0 to 10000\n");
 				return 2;
 			}
 			break;
-		}
-		case O_FPS: {
-			char *end;
-			fps = strtod(optarg, &end);
-			if (*end || !(fps >= 0) || fps > 1000) {
+		case O_FPS:
+			if (!number(optarg, 0, 1000, &fps)) {
 				fprintf(stderr, "clipmapview: --fps: frames per second, 0 to 1000\n");
 				return 2;
 			}
 			break;
-		}
 		case O_STATS: statsp = optarg; break;
 		case O_FOV: fov = atof(optarg); break;
 		case O_SUN:
