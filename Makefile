@@ -16,9 +16,9 @@ PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 OPT     ?= -O2 -g
 WARN    := -Wall -Wextra -Wshadow -Wstrict-prototypes -Wmissing-prototypes -Wformat=2 -Wvla \
            -fno-common -Werror
-CFLAGS  += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -MMD -MP -iquote common -iquote daemon -iquote client -iquote tests/support \
+CFLAGS  += -std=c11 -D_GNU_SOURCE $(OPT) $(WARN) -pthread -MMD -MP -iquote . -iquote daemon -iquote tests \
            $(SAN)
-CXXFLAGS += -std=c++17 $(OPT) -Wall -Wextra -Werror -fPIC -pthread -MMD -MP -iquote common $(SAN) \
+CXXFLAGS += -std=c++17 $(OPT) -Wall -Wextra -Werror -fPIC -pthread -MMD -MP -iquote . $(SAN) \
            $(filter-out -I/usr/include,$(PKG_CFLAGS))
 LDFLAGS += -pthread $(SAN)
 LDLIBS  += $(PKG_LIBS) -lcmocka -lstdc++ -lm
@@ -27,39 +27,58 @@ LDLIBS  += $(PKG_LIBS) -lcmocka -lstdc++ -lm
 AVX2_FLAGS   := -mavx2 -mfma -mbmi2
 AVX512_FLAGS := -mavx512f -mavx512dq -mavx512bw -mavx512vl -mavx2 -mfma -mbmi2
 
-# Every main() lives in its own file; all other sources form the library the tests link.
-MAINS        := daemon/clipmapd.c client/clipmapctl.c client/clipmapview.c
+# The wings (docs/ARCHITECTURE.md): one static library each, so a call across a forbidden edge
+# fails to link. Every main() lives in its own file; everything else links into the tests.
+#   common   protocol, codec, grid, config parsing, image I/O, geodesy, log   (uses nothing)
+#   engine   daemon/engine/ and its nodes/: graph, cache, scheduler            (uses common)
+#   server   daemon/: clipmapd's loop, sessions, control                     (engine, common)
+#   client   client/: the protocol client                                    (common)
+#   ctl      client/ctl/: clipmapctl                                         (client, engine, common)
+#   view     client/view/: clipmapview, GL                                   (client, engine, common)
+MAINS        := daemon/clipmapd.c client/ctl/clipmapctl.c client/view/clipmapview.c
 COMMON_SRC   := $(wildcard common/*.c)
 COMMON_CXX   := $(wildcard common/*.cpp)
-DAEMON_SRC   := $(filter-out $(MAINS),$(wildcard daemon/*.c))
-CLIENT_SRC   := $(filter-out $(MAINS) client/gl_%.c client/view%.c,$(wildcard client/*.c))
-LIB_SRC      := $(COMMON_SRC) $(DAEMON_SRC) $(CLIENT_SRC)
-LIB_OBJ      := $(LIB_SRC:%.c=$(BUILD)/%.o) $(COMMON_CXX:%.cpp=$(BUILD)/%.o)
-LIB          := $(BUILD)/libclipmap.a
+ENGINE_SRC   := $(wildcard daemon/engine/*.c daemon/engine/nodes/*.c)
+SERVER_SRC   := $(filter-out $(MAINS),$(wildcard daemon/*.c))
+CLIENT_SRC   := $(wildcard client/*.c)
+CTL_SRC      := $(filter-out $(MAINS),$(wildcard client/ctl/*.c))
+VIEW_SRC     := $(filter-out $(MAINS),$(wildcard client/view/*.c))
+COMMON_LIB   := $(BUILD)/libcommon.a
+ENGINE_LIB   := $(BUILD)/libengine.a
+SERVER_LIB   := $(BUILD)/libserver.a
+CLIENT_LIB   := $(BUILD)/libclient.a
+CTL_LIB      := $(BUILD)/libctl.a
+VIEW_LIB     := $(BUILD)/libview.a
+$(COMMON_LIB): $(COMMON_SRC:%.c=$(BUILD)/%.o) $(COMMON_CXX:%.cpp=$(BUILD)/%.o)
+$(ENGINE_LIB): $(ENGINE_SRC:%.c=$(BUILD)/%.o)
+$(SERVER_LIB): $(SERVER_SRC:%.c=$(BUILD)/%.o)
+$(CLIENT_LIB): $(CLIENT_SRC:%.c=$(BUILD)/%.o)
+$(CTL_LIB): $(CTL_SRC:%.c=$(BUILD)/%.o)
+$(VIEW_LIB): $(VIEW_SRC:%.c=$(BUILD)/%.o)
+# Tests may use every wing (GL ones only in the view's tests and benches).
+TEST_LIBS    := $(SERVER_LIB) $(CTL_LIB) $(CLIENT_LIB) $(ENGINE_LIB) $(COMMON_LIB)
 
-UNIT_SRC     := $(wildcard tests/unit/test_*.c)
-UNIT_BIN     := $(UNIT_SRC:tests/unit/%.c=$(BUILD)/tests/%)
-# Test-only helpers (tests/support/) linked into every unit test program.
+TEST_SRC     := $(wildcard tests/unit/test_*.c tests/integration/test_*.c)
+UNIT_BIN     := $(patsubst %.c,$(BUILD)/tests/%,$(notdir $(TEST_SRC)))
+# Test-only helpers (tests/support/) linked into every test program.
 TEST_SUPPORT_OBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/support/*.c))
 BENCH_SRC    := $(wildcard tests/bench/bench_*.c)
 BENCH_BIN    := $(BENCH_SRC:tests/bench/%.c=$(BUILD)/tests/%)
 PROGS        := $(foreach m,$(MAINS),$(if $(wildcard $(m)),$(BUILD)/$(notdir $(basename $(m)))))
+# Programs that draw: they link the view wing and GL.
+GL_TESTS     := $(wildcard tests/unit/test_view_*.c tests/integration/test_view_*.c) tests/bench/bench_view.c tests/bench/bench_keepup.c
 
 # The viewer: GL code in its own library (EGL, GLFW linked; OSMesa dlopen'ed at run time), shaders
 # embedded as C strings generated from shaders/, every shader checked by glslangValidator.
 GL_CFLAGS    := $(shell pkg-config --cflags egl opengl glfw3 2>/dev/null)
 GL_LIBS      := $(shell pkg-config --libs egl 2>/dev/null || echo -lEGL) \
                 $(shell pkg-config --libs glfw3 2>/dev/null || echo -lglfw) -ldl
-VIEW_SRC     := $(filter-out $(MAINS),$(wildcard client/gl_*.c client/view*.c))
-VIEW_OBJ     := $(VIEW_SRC:%.c=$(BUILD)/%.o)
-VIEW_LIB     := $(BUILD)/libclipmapgl.a
 SHADERS      := $(wildcard shaders/*.vert shaders/*.frag)
 SHADER_HDR   := $(foreach s,$(SHADERS),$(BUILD)/gen/$(subst .,_,$(notdir $(s))).h)
-VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/unit/test_view_*.c tests/bench/bench_view*.c \
-                  tests/bench/bench_keepup.c)) \
-                $(BUILD)/client/clipmapview.o
+VIEW_OBJ     := $(VIEW_SRC:%.c=$(BUILD)/%.o)
+VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(GL_TESTS)) $(BUILD)/client/view/clipmapview.o
 
-.PHONY: all check test asan tsan bench bench-keepup deps clean demo data shader-check fuzz install
+.PHONY: all check test layers asan tsan bench bench-keepup deps clean demo data shader-check fuzz install
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 
@@ -76,17 +95,14 @@ $(BUILD)/%.o: %.cpp
 	@mkdir -p $(dir $@)
 	$(CXX) $(CXXFLAGS) -c $< -o $@
 
-$(LIB): $(LIB_OBJ)
+$(BUILD)/lib%.a:
 	@rm -f $@
 	ar rcs $@ $^
 
-$(BUILD)/clipmapd: $(BUILD)/daemon/clipmapd.o $(LIB)
+$(BUILD)/clipmapd: $(BUILD)/daemon/clipmapd.o $(SERVER_LIB) $(ENGINE_LIB) $(COMMON_LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
-$(BUILD)/clipmapctl: $(BUILD)/client/clipmapctl.o $(LIB)
+$(BUILD)/clipmapctl: $(BUILD)/client/ctl/clipmapctl.o $(CTL_LIB) $(CLIENT_LIB) $(ENGINE_LIB) $(COMMON_LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
-$(VIEW_LIB): $(VIEW_OBJ)
-	@rm -f $@
-	ar rcs $@ $^
 $(VIEW_OBJ) $(VIEW_TESTOBJ): CFLAGS += $(GL_CFLAGS) -iquote $(BUILD)/gen
 $(VIEW_OBJ): $(SHADER_HDR)
 $(BUILD)/gen/%_vert.h: shaders/%.vert
@@ -97,20 +113,17 @@ $(BUILD)/gen/%_frag.h: shaders/%.frag
 	@mkdir -p $(dir $@)
 	@{ echo 'static const char $(notdir $(basename $@))_src[] ='; \
 	   sed 's/\\/\\\\/g; s/"/\\"/g; s/^/"/; s/$$/\\n"/' $<; echo ';'; } > $@
-$(BUILD)/clipmapview: $(BUILD)/client/clipmapview.o $(VIEW_LIB) $(LIB)
+$(BUILD)/clipmapview: $(BUILD)/client/view/clipmapview.o $(VIEW_LIB) $(CLIENT_LIB) $(ENGINE_LIB) $(COMMON_LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
-$(BUILD)/tests/test_view_%: $(BUILD)/tests/unit/test_view_%.o $(TEST_SUPPORT_OBJ) $(VIEW_LIB) $(LIB)
-	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
-$(BUILD)/tests/bench_view $(BUILD)/tests/bench_keepup: $(BUILD)/tests/%: $(BUILD)/tests/bench/%.o $(VIEW_LIB) $(LIB)
-	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(GL_LIBS) -o $@
-$(BUILD)/tests/%: $(BUILD)/tests/unit/%.o $(TEST_SUPPORT_OBJ) $(LIB)
-	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
-$(BUILD)/tests/bench_%: $(BUILD)/tests/bench/bench_%.o $(LIB)
-	@mkdir -p $(dir $@)
-	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
+# One link rule per test and bench program: its object, the test support, every wing (and the
+# view wing and GL for the programs that draw).
+define prog_rule
+$(BUILD)/tests/$(basename $(notdir $(1))): $(BUILD)/$(1:.c=.o) $(TEST_SUPPORT_OBJ) \
+		$(if $(filter $(1),$(GL_TESTS)),$(VIEW_LIB)) $(TEST_LIBS)
+	@mkdir -p $$(dir $$@)
+	$$(CC) $$(LDFLAGS) $$^ $$(LDLIBS) $(if $(filter $(1),$(GL_TESTS)),$$(GL_LIBS)) -o $$@
+endef
+$(foreach t,$(TEST_SRC) $(BENCH_SRC),$(eval $(call prog_rule,$(t))))
 
 deps:
 	@sh scripts/deps.sh
@@ -121,11 +134,15 @@ data:
 
 check: deps
 	@$(MAKE) --no-print-directory all
-	@$(MAKE) --no-print-directory shader-check
+	@$(MAKE) --no-print-directory shader-check layers
 	@sh tests/run.sh $(BUILD)
 
-test: all shader-check
+test: all shader-check layers
 	@sh tests/run.sh $(BUILD)
+
+# The wings' include rule (docs/ARCHITECTURE.md).
+layers:
+	@sh tests/layers.sh
 
 shader-check:
 	@for s in $(SHADERS); do glslangValidator $$s >/dev/null || { glslangValidator $$s; exit 1; }; done
@@ -161,7 +178,7 @@ FUZZ_SRC := $(wildcard tests/fuzz/fuzz_*.c)
 FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/grid.c \
                common/xalloc.c common/errbuf.c
 FUZZ_FLAGS := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
-              -fno-sanitize-recover=all -iquote common -iquote daemon
+              -fno-sanitize-recover=all -iquote . -iquote daemon
 build-fuzz/%: tests/fuzz/%.c $(FUZZ_LIBSRC)
 	@mkdir -p build-fuzz
 	clang $(FUZZ_FLAGS) $^ $(shell pkg-config --libs libzstd liblz4 libxxhash) -lm -o $@

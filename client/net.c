@@ -20,7 +20,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "xalloc.h"
+#include "common/xalloc.h"
 
 #define READ_CHUNK 65536
 
@@ -532,4 +532,15 @@ int net_tile_decode(struct net_conn *c, const struct proto_tile *t, void *texels
 		seterr(err, "%s: tile (%u, %u, %u, %u) of layer %u: %s", c->peer,
 			 t->key.lx, t->key.ly, t->key.x, t->key.y, t->layer, e2);
 	return rc;
+}
+
+int net_open_planet(struct net_conn *c, const char *name, struct proto_msg *m, int timeout_ms,
+		    char err[256])
+{
+	uint32_t req = net_next_req(c);
+	struct proto_msg o = { .type = PROTO_OPEN, .open = { .req = req, .name = name } };
+	int rc = net_send(c, &o, err);
+	if (rc)
+		return rc;
+	return net_expect(c, PROTO_OPENED, m, timeout_ms, NULL, NULL, err);
 }

@@ -15,7 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "proto.h"
+#include "common/proto.h"
 
 #define NET_DEFAULT_TIMEOUT_MS 10000
 
@@ -83,5 +83,10 @@ int net_tile_decode(struct net_conn *c, const struct proto_tile *t, void *texels
  * whitespace is dropped. buf holds PROTO_MAX_TOKEN bytes. Returns 0 or -errno (-E2BIG when
  * longer than PROTO_MAX_TOKEN) with err filled. */
 int net_token_load(const char *file, uint8_t buf[PROTO_MAX_TOKEN], uint16_t *len, char err[256]);
+
+/* Sends OPEN for planet `name` and waits for OPENED into m (owned by the caller:
+ * proto_msg_fini). Returns 0 or -errno (-ENOENT: no such planet) with err filled. */
+int net_open_planet(struct net_conn *c, const char *name, struct proto_msg *m, int timeout_ms,
+		    char err[256]);
 
 #endif

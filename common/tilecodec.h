@@ -14,7 +14,7 @@
 #include <stdint.h>
 #include <sys/types.h>
 
-/* Texel formats on the wire. The numbers equal enum pix_type (daemon/tile.h):
+/* Texel formats on the wire. The numbers equal enum pix_type (daemon/engine/tile.h):
  * 1 = f32 height (PIX_HEIGHT), 2 = rgba8 colour (PIX_COLOR), 3 = rg8 normal (PIX_NORMAL). */
 enum tile_format {
 	TFMT_NONE = 0,

@@ -14,12 +14,12 @@
 #include <systemd/sd-daemon.h>
 #include <unistd.h>
 
-#include "cache.h"
+#include "engine/cache.h"
 #include "conf.h"
-#include "img.h"
-#include "log.h"
-#include "planets.h"
-#include "sched.h"
+#include "common/img.h"
+#include "common/log.h"
+#include "engine/planets.h"
+#include "engine/sched.h"
 #include "server.h"
 
 #define DEFAULT_CONF "/etc/clipmap/clipmapd.conf"

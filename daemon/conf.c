@@ -13,9 +13,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ini.h"
-#include "proto.h"
-#include "xalloc.h"
+#include "common/ini.h"
+#include "common/proto.h"
+#include "common/xalloc.h"
 
 enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG };
 

@@ -13,7 +13,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "log.h"
+#include "common/log.h"
 
 enum conf_token_policy {
 	CONF_TOKEN_AUTO = 0, /* non-loopback TCP listeners require the token */

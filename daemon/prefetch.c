@@ -11,8 +11,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "geo.h"
-#include "xalloc.h"
+#include "common/geo.h"
+#include "common/xalloc.h"
 
 struct prefetch_iter {
 	const struct planet *p;

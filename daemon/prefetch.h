@@ -15,9 +15,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "planet.h"
-#include "proto.h"
-#include "sched.h"
+#include "engine/planet.h"
+#include "common/proto.h"
+#include "engine/sched.h"
 
 #define PREFETCH_WINDOW 256	     /* wanted keys in flight per job */
 #define PREFETCH_MAX_TILES (1u << 26) /* refused above this many tiles per job */

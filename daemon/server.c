@@ -26,10 +26,10 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "log.h"
+#include "common/log.h"
 #include "session.h"
-#include "tilecodec.h"
-#include "xalloc.h"
+#include "common/tilecodec.h"
+#include "common/xalloc.h"
 
 #define UNIX_SNDBUF (4 << 20) /* bytes asked for per Unix session */
 

@@ -17,11 +17,11 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "cache.h"
+#include "engine/cache.h"
 #include "conf.h"
-#include "planets.h"
-#include "proto.h"
-#include "sched.h"
+#include "engine/planets.h"
+#include "common/proto.h"
+#include "engine/sched.h"
 
 struct session;
 

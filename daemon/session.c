@@ -19,10 +19,10 @@
 #include <sys/socket.h>
 #include <unistd.h>
 
-#include "log.h"
+#include "common/log.h"
 #include "prefetch.h"
-#include "tilecodec.h"
-#include "xalloc.h"
+#include "common/tilecodec.h"
+#include "common/xalloc.h"
 
 #define MAX_OPEN 16	       /* planets per session */
 #define PUMP_BUDGET (4u << 20) /* output bytes produced per pump call (fairness) */

@@ -10,9 +10,9 @@
 #include <string.h>
 #include <time.h>
 
-#include "proto.h"
-#include "tilecodec.h"
-#include "xalloc.h"
+#include "common/proto.h"
+#include "common/tilecodec.h"
+#include "common/xalloc.h"
 
 #define T 256
 
@@ -81,7 +81,7 @@ static void make_color(const float *h, uint8_t *c)
 		}
 }
 
-/* RG8 normals from the heights (30 m texels), as daemon/tile.h defines them. */
+/* RG8 normals from the heights (30 m texels), as daemon/engine/tile.h defines them. */
 static void make_normals(const float *h, uint8_t *n)
 {
 	for (int y = 0; y < T; y++)

@@ -11,12 +11,12 @@
 #include <string.h>
 #include <time.h>
 
-#include "img.h"
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "planet.h"
-#include "tile.h"
+#include "common/img.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
 
 #define W 8192
 #define H 4096

@@ -21,12 +21,12 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "import.h"
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "planet.h"
-#include "tile.h"
+#include "client/ctl/import.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
 
 static double now(void)
 {

@@ -3,7 +3,7 @@
  * the real one minus rasterisation: view_levels picks the levels (1280×720, 60°, 256 steps
  * around a ring, as clipmapview), view_clipmap builds the want-sets and uploads into real GL
  * textures (a tiny EGL/OSMesa context), tiles come from build/clipmapd over a Unix socket
- * (view_source_net). The frame below mirrors view_frame() (client/view.c) without the draw
+ * (view_source_net). The frame below mirrors view_frame() (client/view/view.c) without the draw
  * calls. A 60 Hz frame clock runs in real time; the camera flies a great circle at constant
  * height above the ground. A frame is "full detail" when every level visibility wants holds
  * its target quad; a velocity keeps up when ≥ 95 % of the flight's frames are full detail.
@@ -36,14 +36,14 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "ctl_prefetch.h"
-#include "gl_context.h"
-#include "img.h"
-#include "net.h"
-#include "view_clipmap.h"
-#include "view_levels.h"
-#include "view_source_net.h"
-#include "xalloc.h"
+#include "client/ctl/ctl_prefetch.h"
+#include "client/view/gl_context.h"
+#include "common/img.h"
+#include "client/net.h"
+#include "client/view/view_clipmap.h"
+#include "client/view/view_levels.h"
+#include "client/view/view_source_net.h"
+#include "common/xalloc.h"
 
 #define DEG (M_PI / 180.0)
 #define HZ 60.0

@@ -9,11 +9,11 @@
 #include <string.h>
 #include <time.h>
 
-#include "cache.h"
-#include "img.h"
-#include "planet.h"
-#include "sched.h"
-#include "xalloc.h"
+#include "engine/cache.h"
+#include "common/img.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
+#include "common/xalloc.h"
 
 #define DIR "/tmp/clipmap-bench-nodes"
 #define SIDE 8 /* an 8×8 block of tiles */

@@ -1,6 +1,6 @@
 /* bench_noise — figures for the noise synthesis: ns per sample per octave for each ISA path
  * (8-octave fBm and ridged, T = 256 and 512, one core, best of several tiles), and tiles per
- * second of the `noise` node with 1 and 2 plain threads (C11 threads: daemon/sched.h shadows
+ * second of the `noise` node with 1 and 2 plain threads (C11 threads: daemon/engine/sched.h shadows
  * the <sched.h> that <pthread.h> needs) generating distinct tiles, and ms per tile of
  * procedural.ini's three noise nodes at levels 12 and 18.
  * Runs in well under 30 s.
@@ -12,13 +12,13 @@
 #include <threads.h>
 #include <time.h>
 
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "noise.h"
-#include "planet.h"
-#include "tile.h"
-#include "xalloc.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/nodes/noise.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
+#include "common/xalloc.h"
 
 static double now(void)
 {

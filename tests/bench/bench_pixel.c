@@ -9,12 +9,12 @@
 #include <string.h>
 #include <time.h>
 
-#include "geo.h"
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "planet.h"
-#include "tile.h"
+#include "common/geo.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
 
 static double now(void)
 {

@@ -9,11 +9,11 @@
 #include <string.h>
 #include <time.h>
 
-#include "cache.h"
-#include "node.h"
-#include "planet.h"
-#include "sched.h"
-#include "tile.h"
+#include "engine/cache.h"
+#include "engine/node.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
+#include "engine/tile.h"
 
 static int gen_cheap(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 		     struct tile *const *in, int nin, struct tile *out)

@@ -18,8 +18,8 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "proto.h"
-#include "tilecodec.h"
+#include "common/proto.h"
+#include "common/tilecodec.h"
 
 static const char planet[] =
 	"[planet]\nname = b\nbody = sphere\nradius = 1000000\ntile_size = 256\nmax_level = 12\n"

@@ -9,10 +9,10 @@
 #include <stdlib.h>
 #include <sys/resource.h>
 
-#include "gl_context.h"
-#include "view.h"
-#include "view_source_local.h"
-#include "xalloc.h"
+#include "client/view/gl_context.h"
+#include "client/view/view.h"
+#include "client/view/view_source_local.h"
+#include "common/xalloc.h"
 
 /* CPU time of the whole process (every llvmpipe thread), ms: steadier than wall time on a
  * shared machine, and what the frame costs in cores. */

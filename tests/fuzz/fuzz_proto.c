@@ -17,8 +17,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "proto.h"
-#include "tilecodec.h"
+#include "common/proto.h"
+#include "common/tilecodec.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 

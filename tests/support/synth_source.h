@@ -10,7 +10,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "view_source.h"
+#include "client/view/view_source.h"
 
 /* Fills one tile (T×T texels of format f, tightly packed) for want w. */
 typedef void (*synth_fill_fn)(void *ctx, const struct view_want *w, uint32_t T, enum pix_type f,

@@ -12,9 +12,9 @@
 #include <string.h>
 #include <time.h>
 
-#include "cache.h"
-#include "grid.h"
-#include "tile.h"
+#include "engine/cache.h"
+#include "common/grid.h"
+#include "engine/tile.h"
 
 #define T 16 /* texels: 1 KiB per height tile */
 #define TILE_BYTES ((size_t)T * T * 4)

@@ -9,8 +9,8 @@
 
 #include <string.h>
 
-#include "conf.h"
-#include "planet.h"
+#include "daemon/conf.h"
+#include "engine/planet.h"
 
 static void parse_fails(const char *text, const char *expect)
 {

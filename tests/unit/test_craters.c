@@ -14,12 +14,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "craters.h"
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "planet.h"
-#include "tile.h"
+#include "engine/nodes/craters.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
 
 #define T 64
 

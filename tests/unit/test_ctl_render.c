@@ -14,10 +14,10 @@
 #include <unistd.h>
 #include <cmocka.h>
 
-#include "cache.h"
-#include "img.h"
-#include "planet.h"
-#include "sched.h"
+#include "engine/cache.h"
+#include "common/img.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
 
 #define PLANET "conf/planets/procedural.ini"
 

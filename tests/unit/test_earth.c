@@ -18,8 +18,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "planet.h"
-#include "render.h"
+#include "engine/planet.h"
+#include "client/ctl/render.h"
 
 #define PLANET "conf/planets/earth.ini"
 #define ETOPO "/usr/share/ferret-vis/data/etopo5.cdf"

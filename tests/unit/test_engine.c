@@ -12,9 +12,9 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "cache.h"
-#include "planet.h"
-#include "sched.h"
+#include "engine/cache.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
 
 #define PLANET "conf/planets/procedural.ini"
 

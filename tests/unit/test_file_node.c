@@ -18,12 +18,12 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "img.h"
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "planet.h"
-#include "tile.h"
+#include "common/img.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
 
 static char dir[64];
 static struct planet pl;

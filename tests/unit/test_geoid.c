@@ -13,9 +13,9 @@
 #include <unistd.h>
 #include <cmocka.h>
 
-#include "cache.h"
-#include "planet.h"
-#include "sched.h"
+#include "engine/cache.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
 
 #define GTX "/usr/share/proj/egm96_15.gtx"
 

@@ -10,7 +10,7 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "grid.h"
+#include "common/grid.h"
 
 #define NEAR(a, b) assert_true(fabs((a) - (b)) < 1e-9)
 

@@ -15,7 +15,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "img.h"
+#include "common/img.h"
 
 static char dir[64];
 

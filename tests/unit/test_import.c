@@ -1,4 +1,4 @@
-/* test_import — `clipmapctl import` (client/import.c) on small GeoTIFFs written with GDAL in
+/* test_import — `clipmapctl import` (client/ctl/import.c) on small GeoTIFFs written with GDAL in
  * the test: pixels and bounds survive the round trip (tiled, mipmapped, bounds in the
  * description) and the `file` node places them from the recorded bounds; a global raster
  * from 0..360° comes out starting at −180°, a south-up one north-up; integer nodata is
@@ -23,13 +23,13 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "img.h"
-#include "import.h"
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "planet.h"
-#include "tile.h"
+#include "common/img.h"
+#include "client/ctl/import.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
 
 static char dir[64];
 

@@ -12,7 +12,7 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "ini.h"
+#include "common/ini.h"
 
 static struct ini_file *parse_ok(const char *text)
 {

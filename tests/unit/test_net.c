@@ -25,14 +25,14 @@
 #include <unistd.h>
 #include <cmocka.h>
 
-#include "ctl_args.h"
-#include "ctl_cache.h"
-#include "ctl_conn.h"
-#include "ctl_prefetch.h"
-#include "ctl_status.h"
-#include "ctl_tile.h"
-#include "net.h"
-#include "xalloc.h"
+#include "client/ctl/ctl_args.h"
+#include "client/ctl/ctl_cache.h"
+#include "client/ctl/ctl_conn.h"
+#include "client/ctl/ctl_prefetch.h"
+#include "client/ctl/ctl_status.h"
+#include "client/ctl/ctl_tile.h"
+#include "client/net.h"
+#include "common/xalloc.h"
 
 /* ---- the fake server --------------------------------------------------------------------- */
 
@@ -376,7 +376,7 @@ static void server_error_message(void **state)
 	char err[256];
 	assert_int_equal(net_connect_fd(fd, "peerX", &o, &c, err), 0);
 	struct proto_msg m = { 0 };
-	int rc = ctl_open_planet(c, "pluto", &m, 5000, err);
+	int rc = net_open_planet(c, "pluto", &m, 5000, err);
 	assert_int_equal(rc, -ENOENT);
 	assert_string_equal(err, "peerX: not-found: no planet \"pluto\"");
 	net_close(c);

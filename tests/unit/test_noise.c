@@ -15,13 +15,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "noise.h"
-#include "planet.h"
-#include "tile.h"
-#include "xalloc.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/nodes/noise.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
+#include "common/xalloc.h"
 
 #define EARTH_A 6378137.0
 

@@ -15,13 +15,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "geo.h"
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "planet.h"
-#include "tile.h"
-#include "xalloc.h"
+#include "common/geo.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
+#include "common/xalloc.h"
 
 #define SPHERE_R 6371000.0
 

@@ -13,10 +13,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ini.h"
-#include "node.h"
-#include "node_types.h"
-#include "tile.h"
+#include "common/ini.h"
+#include "engine/node.h"
+#include "engine/node_types.h"
+#include "engine/tile.h"
 
 #define T 16
 #define N (T * T)

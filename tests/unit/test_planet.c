@@ -18,12 +18,12 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "geo.h"
-#include "img.h"
-#include "node_types.h"
-#include "planet.h"
-#include "planets.h"
-#include "xalloc.h"
+#include "common/geo.h"
+#include "common/img.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/planets.h"
+#include "common/xalloc.h"
 
 /* ---- test-only node types ---- */
 

@@ -12,8 +12,8 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "proto.h"
-#include "xalloc.h"
+#include "common/proto.h"
+#include "common/xalloc.h"
 
 /* A string of n bytes made of a 3-byte UTF-8 character and ASCII. */
 static char *text(size_t n)

@@ -21,11 +21,11 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "cache.h"
-#include "node.h"
-#include "planet.h"
-#include "sched.h"
-#include "tile.h"
+#include "engine/cache.h"
+#include "engine/node.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
+#include "engine/tile.h"
 
 #define T 16
 #define NCOUNT (8 * 8 * 64 * 32)

@@ -12,8 +12,8 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "tilecodec.h"
-#include "xalloc.h"
+#include "common/tilecodec.h"
+#include "common/xalloc.h"
 
 static uint32_t rng(uint64_t *s)
 {

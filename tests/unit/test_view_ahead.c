@@ -14,10 +14,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gl_context.h"
-#include "synth_source.h"
-#include "view_clipmap.h"
-#include "xalloc.h"
+#include "client/view/gl_context.h"
+#include "support/synth_source.h"
+#include "client/view/view_clipmap.h"
+#include "common/xalloc.h"
 
 #define T 16
 #define NLEVELS 11

@@ -25,13 +25,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "geo.h"
-#include "img.h"
-#include "gl_context.h"
-#include "synth_source.h"
-#include "view.h"
-#include "view_source_local.h"
-#include "xalloc.h"
+#include "common/geo.h"
+#include "common/img.h"
+#include "client/view/gl_context.h"
+#include "support/synth_source.h"
+#include "client/view/view.h"
+#include "client/view/view_source_local.h"
+#include "common/xalloc.h"
 
 #define DEG (M_PI / 180.0)
 #define WGS_A 6378137.0

@@ -11,7 +11,7 @@
 #include <string.h>
 #include <cmocka.h>
 
-#include "view_fly.h"
+#include "client/view/view_fly.h"
 
 #define R 6371000.0
 #define assert_double_equal(a, b, eps) near((a), (b), (eps), #a, __LINE__)

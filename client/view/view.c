@@ -1,0 +1,859 @@
+/* view — see view.h. Design notes:
+ * - Geometry: NR = nlevels rings of m circles of n vertices (θ̃ geometric within a ring,
+ *   halving per level, seed 000 §3.4) plus the nadir vertex; uploaded once. A level drawn as
+ *   a full disk uses its ring, the two finer rings (still finer than its texels need) and a
+ *   fan to the nadir.
+ * - Culling: each ring is split into an outer and an inner part (below), each part (and the
+ *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
+ *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
+ *   range the level's slices hold, placed in doubles as the shader does, inflated by the
+ *   patch's bulge) against the frustum's side planes, the plane behind the camera and the
+ *   horizon cap, and draws the visible ranges, contiguous ones merged. The triangle order is
+ *   the same with culling off, so the pixels are too.
+ * - Blending: over the outer part of a ring (from θ̃ = 2^(−j0/m)·R, about 0.74 R, to 0.95 R)
+ *   the height, colour and normal fade to the next coarser level, reaching it on the boundary,
+ *   so neighbouring rings share their boundary vertices (no cracks) and no level boundary
+ *   pops. The inner part shows the fine level alone and is drawn by a program variant that
+ *   samples one level: llvmpipe executes both sides of every branch, so work a pixel does not
+ *   need is compiled out rather than skipped (variants: blend, per-fragment lon/lat near the
+ *   poles, haze, exaggeration, which layers exist — compiled on first use).
+ * - Precision: the shader works with n − up (the direction from the nadir) and differences of
+ *   radii; the camera sits at the origin of its east-north-up frame.
+ */
+#include "view.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "common/xalloc.h"
+
+#include "terrain_frag.h"
+#include "terrain_vert.h"
+
+#define DEG (M_PI / 180.0)
+#define MAX_WANTS 4096
+
+enum {
+	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_FADE,
+	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_EXAG, U_COUNT
+};
+static const char *const uniform_names[U_COUNT] = {
+	"u_vp", "u_lat", "u_body", "u_a", "u_cap", "u_blend", "u_T", "u_pf", "u_vf", "u_sf", "u_pc",
+	"u_vc", "u_sc", "u_fade", "u_height", "u_normal", "u_color", "u_sun", "u_haze", "u_exag",
+};
+
+/* Program variants: the shaders' #defines (see their headers). */
+enum {
+	VAR_BLEND = 1, VAR_GEO_FRAG = 2, VAR_HAZE = 4, VAR_EXAG = 8, VAR_COLOR = 16, VAR_NORMAL = 32,
+	NVARIANT = 64
+};
+static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG", "COLOR", "NORMAL" };
+
+#define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
+
+struct frame_uniforms {
+	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4];
+};
+
+struct program {
+	unsigned id;
+	int u[U_COUNT];
+	uint64_t frame; /* the frame whose common uniforms it holds */
+};
+
+struct view {
+	const struct gl *gl;
+	struct view_source *src;
+	struct view_desc d;
+	struct view_body body;
+	struct view_clipmap *cm;
+	int nlevels, max_level;
+	uint32_t T;
+	/* geometry */
+	unsigned vao, vbo, ibo;
+	int nsec;		 /* sectors per ring part */
+	int j0;			 /* rows 0..j0-1 of a ring (from its outer edge) form its outer part */
+	size_t *sec_first;	 /* ring i part p sector s: from sec_first[(2i+p)·nsec+s] to the next */
+	size_t *fan_first;	 /* per circle-boundary k·m (k = 1..NR), n·3 indices each */
+	bool cull;
+	/* programs, by variant; the one in use */
+	struct program prog[NVARIANT];
+	struct program *cur;
+	uint64_t frame_no;
+	int frame_bits; /* this frame's variant bits that every level shares */
+	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
+	double *fade;	/* per level: this frame's fade-in (1: fully shown) */
+	int idle_tiles; /* tiles taken by view_idle since the last frame */
+	struct frame_uniforms fu;
+	/* framebuffer */
+	unsigned fbo, color_tex, depth_tex;
+	bool reversed;
+	/* state */
+	struct view_want *wants;
+	bool sent_once;
+	bool *was_usable;
+	double *ready_since;
+	struct view_camera last;
+	unsigned char bg[4];
+};
+
+static double now_ms(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
+}
+
+static unsigned compile(const struct gl *gl, GLenum type, const char *src, int bits,
+			const char *name, char err[256])
+{
+	/* The defines go after the #version line, which must come first. */
+	char head[256];
+	int n = snprintf(head, sizeof head, "#version 330 core\n");
+	for (int b = 0; b < (int)(sizeof variant_names / sizeof variant_names[0]); b++)
+		n += snprintf(head + n, sizeof head - (size_t)n, "#define %s %d\n", variant_names[b],
+			      (bits >> b) & 1);
+	const char *body = strchr(src, '\n');
+	const char *parts[2] = { head, body ? body + 1 : src };
+	unsigned s = gl->CreateShader(type);
+	gl->ShaderSource(s, 2, parts, NULL);
+	gl->CompileShader(s);
+	int ok = 0;
+	gl->GetShaderiv(s, GL_COMPILE_STATUS, &ok);
+	if (!ok) {
+		char log[200] = "";
+		gl->GetShaderInfoLog(s, sizeof log, NULL, log);
+		snprintf(err, 256, "%s (variant %d): %s", name, bits, log);
+		gl->DeleteShader(s);
+		return 0;
+	}
+	return s;
+}
+
+/* The program of variant bits, compiled and linked on first use. */
+static struct program *get_program(struct view *v, int bits, char err[256])
+{
+	struct program *p = &v->prog[bits];
+	if (p->id)
+		return p;
+	const struct gl *gl = v->gl;
+	unsigned vs = compile(gl, GL_VERTEX_SHADER, terrain_vert_src, bits, "terrain.vert", err);
+	if (!vs)
+		return NULL;
+	unsigned fs = compile(gl, GL_FRAGMENT_SHADER, terrain_frag_src, bits, "terrain.frag", err);
+	if (!fs) {
+		gl->DeleteShader(vs);
+		return NULL;
+	}
+	unsigned id = gl->CreateProgram();
+	gl->AttachShader(id, vs);
+	gl->AttachShader(id, fs);
+	gl->LinkProgram(id);
+	gl->DeleteShader(vs);
+	gl->DeleteShader(fs);
+	int ok = 0;
+	gl->GetProgramiv(id, GL_LINK_STATUS, &ok);
+	if (!ok) {
+		char log[200] = "";
+		gl->GetProgramInfoLog(id, sizeof log, NULL, log);
+		snprintf(err, 256, "terrain program (variant %d): %s", bits, log);
+		gl->DeleteProgram(id);
+		return NULL;
+	}
+	p->id = id;
+	for (int i = 0; i < U_COUNT; i++)
+		p->u[i] = gl->GetUniformLocation(id, uniform_names[i]);
+	p->frame = 0;
+	return p;
+}
+
+/* θ̃ of circle c (c = ring·m + j). */
+static double circle_theta(int c, int m)
+{
+	int i = c / m, j = c % m;
+	double r0 = view_ring_radius(i), r1 = view_ring_radius(i + 1);
+	return r0 * pow(r1 / r0, (double)j / m);
+}
+
+/* The first φ̃ step of sector s. */
+static int sector_k(const struct view *v, int s) { return s * v->d.n_phi / v->nsec; }
+
+static void build_geometry(struct view *v)
+{
+	const struct gl *gl = v->gl;
+	int n = v->d.n_phi, m = v->d.m_rings, NR = v->nlevels;
+	int ncirc = NR * m + 1;
+	size_t nvert = (size_t)ncirc * n + 1;
+	float *vert = xmalloc(nvert * 3 * sizeof *vert);
+	for (int c = 0; c < ncirc; c++) {
+		double th = circle_theta(c, m);
+		for (int k = 0; k < n; k++) {
+			double ph = 2 * M_PI * k / n;
+			float *p = vert + ((size_t)c * n + k) * 3;
+			p[0] = (float)sin(ph);
+			p[1] = (float)cos(ph);
+			p[2] = (float)th;
+		}
+	}
+	float *centre = vert + (nvert - 1) * 3;
+	centre[0] = 0;
+	centre[1] = 1;
+	centre[2] = 0;
+	size_t nidx = (size_t)NR * m * n * 6 + (size_t)NR * n * 3;
+	uint32_t *idx = xmalloc(nidx * sizeof *idx);
+	v->nsec = n < 32 ? n : 32;
+	v->j0 = m - (m * 9) / 16; /* the inner ~56 % of the rows show the fine level alone */
+	if (v->j0 < 1)
+		v->j0 = 1;
+	v->sec_first = xcalloc((size_t)NR * 2 * v->nsec + 1, sizeof *v->sec_first);
+	v->fan_first = xcalloc((size_t)NR + 1, sizeof *v->fan_first);
+	size_t q = 0;
+	for (int ip = 0; ip < NR * 2; ip++)
+		for (int sec = 0; sec < v->nsec; sec++) {
+			int i = ip / 2, c0 = i * m + (ip % 2 ? v->j0 : 0);
+			int c1 = ip % 2 ? (i + 1) * m : i * m + v->j0;
+			v->sec_first[ip * v->nsec + sec] = q;
+			for (int c = c0; c < c1; c++)
+				for (int k = sector_k(v, sec); k < sector_k(v, sec + 1); k++) {
+					uint32_t a = (uint32_t)(c * n + k);
+					uint32_t b = (uint32_t)(c * n + (k + 1) % n);
+					uint32_t a2 = a + (uint32_t)n, b2 = b + (uint32_t)n;
+					idx[q++] = a;
+					idx[q++] = b;
+					idx[q++] = b2;
+					idx[q++] = a;
+					idx[q++] = b2;
+					idx[q++] = a2;
+				}
+		}
+	v->sec_first[NR * 2 * v->nsec] = q;
+	for (int k1 = 1; k1 <= NR; k1++) {
+		v->fan_first[k1] = q;
+		int c = k1 * m;
+		for (int k = 0; k < n; k++) {
+			idx[q++] = (uint32_t)(c * n + k);
+			idx[q++] = (uint32_t)(c * n + (k + 1) % n);
+			idx[q++] = (uint32_t)(nvert - 1);
+		}
+	}
+	gl->GenVertexArrays(1, &v->vao);
+	gl->BindVertexArray(v->vao);
+	gl->GenBuffers(1, &v->vbo);
+	gl->BindBuffer(GL_ARRAY_BUFFER, v->vbo);
+	gl->BufferData(GL_ARRAY_BUFFER, (GLsizeiptr)(nvert * 3 * sizeof *vert), vert, GL_STATIC_DRAW);
+	gl->GenBuffers(1, &v->ibo);
+	gl->BindBuffer(GL_ELEMENT_ARRAY_BUFFER, v->ibo);
+	gl->BufferData(GL_ELEMENT_ARRAY_BUFFER, (GLsizeiptr)(q * sizeof *idx), idx, GL_STATIC_DRAW);
+	gl->VertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, 3 * sizeof(float), NULL);
+	gl->EnableVertexAttribArray(0);
+	gl->BindVertexArray(0);
+	free(vert);
+	free(idx);
+}
+
+static int build_fbo(struct view *v, char err[256])
+{
+	const struct gl *gl = v->gl;
+	gl->GenTextures(1, &v->color_tex);
+	gl->BindTexture(GL_TEXTURE_2D, v->color_tex);
+	gl->TexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, v->d.width, v->d.height, 0, GL_RGBA,
+		       GL_UNSIGNED_BYTE, NULL);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+	gl->GenTextures(1, &v->depth_tex);
+	gl->BindTexture(GL_TEXTURE_2D, v->depth_tex);
+	gl->TexImage2D(GL_TEXTURE_2D, 0, v->reversed ? GL_DEPTH_COMPONENT32F : GL_DEPTH_COMPONENT24,
+		       v->d.width, v->d.height, 0, GL_DEPTH_COMPONENT, GL_FLOAT, NULL);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+	gl->GenFramebuffers(1, &v->fbo);
+	gl->BindFramebuffer(GL_FRAMEBUFFER, v->fbo);
+	gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, v->color_tex, 0);
+	gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, v->depth_tex, 0);
+	GLenum st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
+	if (st != GL_FRAMEBUFFER_COMPLETE) {
+		snprintf(err, 256, "framebuffer %dx%d incomplete (0x%x)", v->d.width, v->d.height, st);
+		return -EINVAL;
+	}
+	return 0;
+}
+
+int view_create(const struct gl *gl, struct view_source *src, const struct view_desc *d,
+		struct view **out, char err[256])
+{
+	*out = NULL;
+	struct view *v = xcalloc(1, sizeof *v);
+	v->gl = gl;
+	v->src = src;
+	if (d)
+		v->d = *d;
+	if (v->d.width <= 0 || v->d.height <= 0) {
+		v->d.width = 1280;
+		v->d.height = 720;
+	}
+	if (v->d.n_phi <= 0)
+		v->d.n_phi = 256;
+	if (v->d.m_rings <= 0)
+		v->d.m_rings = 16;
+	if (v->d.sun_az == 0 && v->d.sun_el == 0) {
+		v->d.sun_az = 135;
+		v->d.sun_el = 35;
+	}
+	if (!(v->d.exaggeration > 0))
+		v->d.exaggeration = 1;
+	if (v->d.haze == 0)
+		v->d.haze = 1;
+	const struct view_planet *p = &src->planet;
+	view_body_init(&v->body, p->a, p->f);
+	v->body.hmin *= v->d.exaggeration;
+	v->body.hmax *= v->d.exaggeration;
+	v->max_level = p->max_level < GRID_MAX_LEVEL ? p->max_level : GRID_MAX_LEVEL;
+	v->nlevels = v->max_level + 1;
+	v->T = p->tile_size;
+	v->reversed = gl->ClipControl != NULL;
+	const char *nc = getenv("CLIPMAP_NO_CULL");
+	v->cull = !v->d.no_cull && !(nc && strcmp(nc, "1") == 0);
+	v->wants = xmalloc(MAX_WANTS * sizeof *v->wants);
+	v->was_usable = xcalloc((size_t)v->nlevels, sizeof *v->was_usable);
+	v->ready_since = xcalloc((size_t)v->nlevels, sizeof *v->ready_since);
+	v->floor = xcalloc((size_t)v->nlevels, sizeof *v->floor);
+	v->fade = xcalloc((size_t)v->nlevels, sizeof *v->fade);
+	int rc = view_clipmap_create(gl, src, v->nlevels, &v->cm, err);
+	if (rc == 0)
+		rc = get_program(v, NVARIANT - 1, err) ? 0 : -EINVAL; /* every feature: fail early */
+	if (rc == 0) {
+		build_geometry(v);
+		rc = build_fbo(v, err);
+	}
+	if (rc == 0) {
+		GLenum e = gl->GetError();
+		if (e != GL_NO_ERROR) {
+			snprintf(err, 256, "view setup: GL error 0x%x", e);
+			rc = -EIO;
+		}
+	}
+	if (rc < 0) {
+		view_destroy(v);
+		return rc;
+	}
+	*out = v;
+	return 0;
+}
+
+static void free_fbo(struct view *v);
+
+void view_destroy(struct view *v)
+{
+	if (!v)
+		return;
+	const struct gl *gl = v->gl;
+	view_clipmap_destroy(v->cm);
+	for (int i = 0; i < NVARIANT; i++)
+		if (v->prog[i].id)
+			gl->DeleteProgram(v->prog[i].id);
+	if (v->vao)
+		gl->DeleteVertexArrays(1, &v->vao);
+	if (v->vbo)
+		gl->DeleteBuffers(1, &v->vbo);
+	if (v->ibo)
+		gl->DeleteBuffers(1, &v->ibo);
+	free_fbo(v);
+	free(v->sec_first);
+	free(v->fan_first);
+	free(v->wants);
+	free(v->was_usable);
+	free(v->ready_since);
+	free(v->floor);
+	free(v->fade);
+	free(v);
+}
+
+/* Whether level l can be drawn out to angle r: its texture holds a window that covers it. */
+static bool usable(struct view *v, int l, double r)
+{
+	view_clipmap_update(v->cm, l);
+	const struct grid_quad *h = view_clipmap_held(v->cm, l);
+	return h && view_window_covers(h, v->last.lon, v->last.lat, r, 1.5);
+}
+
+static void level_uniforms(struct view *v, int l, int up, int uv, int us)
+{
+	const struct gl *gl = v->gl;
+	double p[6];
+	view_level_params(view_clipmap_held(v->cm, l), v->last.lon, v->last.lat, p);
+	gl->Uniform4f(up, (float)p[0], (float)p[1], (float)p[2], (float)p[3]);
+	gl->Uniform2f(uv, (float)p[4], (float)p[5]);
+	gl->Uniform1f(us, (float)l);
+}
+
+void view_set_culling(struct view *v, bool on) { v->cull = on; }
+
+/* Index ranges drawn as few calls: a range adjoining the pending one extends it. */
+struct ranges {
+	const struct gl *gl;
+	size_t first, count;
+};
+
+static void ranges_flush(struct ranges *r)
+{
+	if (r->count)
+		r->gl->DrawElements(GL_TRIANGLES, (GLsizei)r->count, GL_UNSIGNED_INT,
+				    (const void *)(r->first * sizeof(uint32_t)));
+	r->count = 0;
+}
+
+static void ranges_add(struct ranges *r, size_t first, size_t count)
+{
+	if (r->count && r->first + r->count == first) {
+		r->count += count;
+		return;
+	}
+	ranges_flush(r);
+	r->first = first;
+	r->count = count;
+}
+
+/* Draws sector s of the geometry over θ̃ ∈ [th0, th1] (indices [first, first + count)) if
+ * visible; counts its indices in *drawn or *culled. */
+static void draw_sector(struct view *v, const struct view_body *b, struct ranges *r, double th0,
+			double th1, int s, size_t first, size_t count, double cap, uint64_t *drawn,
+			uint64_t *culled)
+{
+	double ph0 = 2 * M_PI * sector_k(v, s) / v->d.n_phi;
+	double ph1 = 2 * M_PI * sector_k(v, s + 1) / v->d.n_phi;
+	if (v->cull && !view_sector_visible(b, &v->last, th0, th1, ph0, ph1, cap)) {
+		*culled += count;
+		return;
+	}
+	ranges_add(r, first, count);
+	*drawn += count;
+}
+
+/* Binds the program of variant bits for drawing level i (fine) blended towards level c
+ * (coarse): the frame's common uniforms on its first use this frame, the levels' always. */
+static int bind_program(struct view *v, int bits, int i, int c, float fade)
+{
+	const struct gl *gl = v->gl;
+	char err[256];
+	struct program *p = get_program(v, bits, err);
+	if (!p)
+		return -EINVAL;
+	gl->UseProgram(p->id);
+	v->cur = p;
+	if (p->frame != v->frame_no) {
+		const struct frame_uniforms *f = &v->fu;
+		gl->UniformMatrix4fv(p->u[U_VP], 1, GL_FALSE, f->vp);
+		gl->Uniform3f(p->u[U_LAT], f->lat[0], f->lat[1], f->lat[2]);
+		gl->Uniform4fv(p->u[U_BODY], 1, f->body);
+		gl->Uniform1f(p->u[U_A], f->a);
+		gl->Uniform1f(p->u[U_CAP], f->cap);
+		gl->Uniform1f(p->u[U_T], (float)v->T);
+		gl->Uniform1i(p->u[U_HEIGHT], 0);
+		gl->Uniform1i(p->u[U_NORMAL], 1);
+		gl->Uniform1i(p->u[U_COLOR], 2);
+		gl->Uniform3f(p->u[U_SUN], f->sun[0], f->sun[1], f->sun[2]);
+		gl->Uniform4fv(p->u[U_HAZE], 1, f->haze);
+		gl->Uniform1f(p->u[U_EXAG], v->d.exaggeration);
+		p->frame = v->frame_no;
+	}
+	level_uniforms(v, i, p->u[U_PF], p->u[U_VF], p->u[U_SF]);
+	level_uniforms(v, c, p->u[U_PC], p->u[U_VC], p->u[U_SC]);
+	double R = view_ring_radius(i);
+	gl->Uniform3f(p->u[U_BLEND], (float)R, (float)(circle_theta(i * v->d.m_rings + v->j0,
+								     v->d.m_rings) / R),
+		      (float)BLEND_END);
+	gl->Uniform1f(p->u[U_FADE], fade);
+	return 0;
+}
+
+/* Draws level i: its ring, or (ring false) the disk out to its ring's outer edge. The parts
+ * that show the fine level alone go first with the one-level program, then the blended ones;
+ * visible sectors only. Returns the triangles drawn (-EINVAL if a program failed). */
+static int64_t draw_level(struct view *v, int i, bool ring, bool first, double fade,
+			  double cap, uint64_t *culled)
+{
+	const struct gl *gl = v->gl;
+	int m = v->d.m_rings;
+	int c = (first || i == 0) ? i : i - 1;
+	bool fading = !ring && fade < 1;
+	/* Near a pole the ring's vertices' (lon, lat) cannot be interpolated (the meridian behind
+	 * the pole, lon's curvature there): per-fragment lon/lat where the level reaches 0.8 of
+	 * the way to the nearer pole. */
+	double dpole = M_PI / 2 - fabs(v->last.lat * DEG);
+	int bits = v->frame_bits | (fmin(view_ring_radius(i), cap) > 0.8 * dpole ? VAR_GEO_FRAG : 0);
+	/* Cull against the heights the two levels' slices hold (the planet's bounds until
+	 * both have them), and against the horizon of the lowest ground between the camera and
+	 * the level (the slices of this level and every finer one drawn hold all of it): a sphere
+	 * through that ground hides whatever of the level lies beyond its horizon. */
+	struct view_body b = v->body;
+	double lo[2], hi[2];
+	if (view_clipmap_height_range(v->cm, i, &lo[0], &hi[0]) == 0 &&
+	    view_clipmap_height_range(v->cm, c, &lo[1], &hi[1]) == 0) {
+		double e = v->d.exaggeration;
+		b.hmin = fmin(lo[0], lo[1]) * e;
+		b.hmax = fmax(hi[0], hi[1]) * e;
+		if (v->floor[i] < INFINITY) {
+			/* margins: a sphere of radius a stands in for the ellipsoid's curvature */
+			struct view_body occ = b;
+			double slack = 100 * e + 1e-5 * b.a;
+			occ.hmin = fmin(v->floor[i] * e, b.hmin) - slack;
+			occ.hmax = b.hmax + slack;
+			cap = fmin(cap, view_horizon_cap(&occ, v->last.alt));
+		}
+	}
+	uint64_t idx = 0, cidx = 0;
+	int last = ring ? i : (i + 2 < v->nlevels - 1 ? i + 2 : v->nlevels - 1);
+	for (int pass = 0; pass < 2; pass++) {
+		/* pass 0: one level; pass 1: blended (the outer part of ring i, all when fading) */
+		if (pass == 0 && fading)
+			continue;
+		if (pass == 1 && !fading && c == i)
+			break;
+		if (bind_program(v, bits | (pass ? VAR_BLEND : 0), i, c, ring ? 1.0f : (float)fade) < 0)
+			return -EINVAL;
+		struct ranges r = { gl, 0, 0 };
+		for (int j = i; j <= last; j++)
+			for (int part = 0; part < 2; part++) {
+				bool blended = fading || (j == i && part == 0 && c != i);
+				if (blended != (pass == 1))
+					continue;
+				double split = circle_theta(j * m + v->j0, m);
+				double th0 = part ? view_ring_radius(j + 1) : split;
+				double th1 = part ? split : view_ring_radius(j);
+				const size_t *sf = v->sec_first + (size_t)(2 * j + part) * v->nsec;
+				for (int sc = 0; sc < v->nsec; sc++)
+					draw_sector(v, &b, &r, th0, th1, sc, sf[sc], sf[sc + 1] - sf[sc],
+						    cap, &idx, &cidx);
+			}
+		if (!ring)
+			for (int sc = 0; sc < v->nsec && (pass == 1) == fading; sc++) {
+				size_t f = v->fan_first[last + 1] + (size_t)sector_k(v, sc) * 3;
+				size_t n = (size_t)(sector_k(v, sc + 1) - sector_k(v, sc)) * 3;
+				draw_sector(v, &b, &r, 0, view_ring_radius(last + 1), sc, f, n, cap,
+					    &idx, &cidx);
+			}
+		ranges_flush(&r);
+	}
+	*culled += cidx / 3;
+	return (int64_t)(idx / 3);
+}
+
+static void set_targets(struct view *v, int lmin, int lmax, bool *changed)
+{
+	for (int l = 0; l < v->nlevels; l++) {
+		if (l != 0 && (l < lmin || l > lmax)) {
+			*changed |= view_clipmap_target(v->cm, l, NULL);
+			continue;
+		}
+		const struct grid_quad *cur = view_clipmap_target_of(v->cm, l);
+		int lx = view_level_lx(l, v->last.lat, cur ? cur->lx : -1);
+		struct grid_quad q;
+		grid_quad(lx, l, v->T, v->last.lon, v->last.lat, &q);
+		*changed |= view_clipmap_target(v->cm, l, &q);
+	}
+}
+
+/* The frame's uniforms every program variant shares, and the variant bits that do not
+ * depend on the level. */
+static void frame_uniforms(struct view *v, double agl, double cap)
+{
+	struct frame_uniforms *f = &v->fu;
+	const struct view_camera *c = &v->last;
+	double sl = sin(c->lat * DEG), cl = cos(c->lat * DEG);
+	double N = view_body_n(&v->body, sl);
+	double near = fmin(fmax(agl * 0.25, 0.01), 1e5);
+	double far = sqrt(fmax(0, (v->body.a + c->alt) * (v->body.a + c->alt) -
+				       (v->body.a + v->body.hmin) * (v->body.a + v->body.hmin))) +
+		     sqrt((v->body.a + v->body.hmax) * (v->body.a + v->body.hmax) -
+			  (v->body.a + v->body.hmin) * (v->body.a + v->body.hmin)) +
+		     2 * fabs(c->alt);
+	view_camera_matrix(c, v->reversed, near, far, f->vp);
+	f->lat[0] = (float)sl;
+	f->lat[1] = (float)cl;
+	f->lat[2] = (float)(c->lat * DEG);
+	f->body[0] = (float)(N + c->alt);
+	f->body[1] = (float)c->alt;
+	f->body[2] = (float)N;
+	f->body[3] = (float)v->body.e2;
+	f->a = (float)v->body.a;
+	f->cap = (float)cap;
+	/* The sun: azimuth/elevation at the camera, in its east-north-up frame. */
+	double az = v->d.sun_az * DEG, el = v->d.sun_el * DEG;
+	f->sun[0] = (float)(sin(az) * cos(el));
+	f->sun[1] = (float)(cos(az) * cos(el));
+	f->sun[2] = (float)sin(el);
+	f->haze[0] = 8000.0f * v->d.exaggeration;
+	f->haze[1] = v->d.haze > 0 ? v->d.haze : 0.0f;
+	f->haze[2] = f->haze[3] = 0;
+	v->frame_bits = (v->d.haze > 0 ? VAR_HAZE : 0) | (v->d.exaggeration != 1 ? VAR_EXAG : 0) |
+			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
+			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
+	const struct gl *gl = v->gl;
+	for (int r = 0; r < VIEW_NROLES; r++) {
+		gl->ActiveTexture(GL_TEXTURE0 + (GLenum)r);
+		gl->BindTexture(GL_TEXTURE_2D_ARRAY, view_clipmap_texture(v->cm, (enum view_role)r));
+	}
+}
+
+int view_frame(struct view *v, const struct view_camera *cam, double now_s,
+	       struct view_frame_stats *st)
+{
+	const struct gl *gl = v->gl;
+	double t0 = now_ms();
+	struct view_frame_stats s = { .lfirst = -1, .llast = -1 };
+	struct view_clipmap_stats cs0, cs1;
+	view_clipmap_get_stats(v->cm, &cs0);
+
+	/* Camera: height above the terrain as far as the clipmap knows it. */
+	v->last = *cam;
+	v->last.width = v->d.width;
+	v->last.height = v->d.height;
+	double ground = 0;
+	view_clipmap_ground(v->cm, cam->lon, cam->lat, &ground);
+	double agl = fmax(cam->alt, 0.05);
+	v->last.alt = ground * v->d.exaggeration + agl;
+	s.ground = ground;
+	s.agl = agl;
+	s.alt = v->last.alt;
+
+	int lmin, lmax;
+	view_level_range(&v->body, &v->last, agl, v->d.n_phi, v->max_level, &lmin, &lmax);
+	s.lmin = lmin;
+	s.lmax = lmax;
+	double cap = view_horizon_cap(&v->body, v->last.alt);
+
+	/* Algorithm 1, lines 2-9: a new focus sends a new want-set. */
+	bool changed = !v->sent_once;
+	set_targets(v, lmin, lmax, &changed);
+	/* The look-ahead along the camera's motion (real time only: a frame without time —
+	 * offline rendering — has no motion). */
+	if (now_s > 0)
+		changed |= view_clipmap_motion(v->cm, cam->lon, cam->lat, now_s);
+	int rc = view_clipmap_receive(v->cm);
+	if (rc < 0)
+		return rc;
+	s.tiles_received = rc + v->idle_tiles;
+	v->idle_tiles = 0;
+	if (changed) {
+		size_t n = view_clipmap_wants(v->cm, !v->d.no_prefetch, v->wants, MAX_WANTS);
+		struct view_focus f = { cam->lon, cam->lat, v->last.alt, { 0, 0, 0 } };
+		rc = v->src->ops->want(v->src, v->wants, n, &f);
+		if (rc < 0)
+			return rc;
+		v->sent_once = true;
+		s.wants_sent = n ? n : 1;
+	}
+
+	/* Lines 10-26: coarse → fine, ring while the next level can be drawn, else disk. */
+	gl->BindFramebuffer(GL_FRAMEBUFFER, v->fbo);
+	gl->Viewport(0, 0, v->d.width, v->d.height);
+	float bg[3];
+	if (v->d.background_set) {
+		memcpy(bg, v->d.background, sizeof bg);
+	} else {
+		/* space, turning to a pale blue sky inside the atmosphere (none without air) */
+		double sky = v->d.haze > 0 ? exp(-agl / 35e3) : 0;
+		bg[0] = (float)(0.01 + 0.52 * sky);
+		bg[1] = (float)(0.01 + 0.68 * sky);
+		bg[2] = (float)(0.03 + 0.87 * sky);
+	}
+	for (int i = 0; i < 3; i++)
+		v->bg[i] = (unsigned char)lrintf(fminf(fmaxf(bg[i], 0), 1) * 255);
+	v->bg[3] = 255;
+	gl->ClearColor(v->bg[0] / 255.0f, v->bg[1] / 255.0f, v->bg[2] / 255.0f, 1);
+	if (v->reversed) {
+		gl->ClipControl(GL_LOWER_LEFT, GL_ZERO_TO_ONE);
+		gl->ClearDepth(0.0);
+		gl->DepthFunc(GL_GREATER);
+	} else {
+		gl->ClearDepth(1.0);
+		gl->DepthFunc(GL_LESS);
+	}
+	gl->Enable(GL_DEPTH_TEST);
+	gl->DepthMask(GL_TRUE);
+	gl->Clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+	gl->BindVertexArray(v->vao);
+	v->frame_no++;
+	frame_uniforms(v, agl, cap);
+
+	/* The plan: coarse → fine, ring while the next level can be drawn, else disk (the
+	 * uploads happen here, in usable()). */
+	int first = -1, last = -1;
+	for (int j = lmin; j >= 0 && first < 0; j--)
+		if (usable(v, j, fmin(view_ring_radius(j), cap)))
+			first = j;
+	bool complete = first == lmin;
+	for (int i = first; i >= 0 && i <= lmax; i++) {
+		if (!v->was_usable[i]) {
+			v->was_usable[i] = true;
+			v->ready_since[i] = now_s;
+		}
+		int next = i + 1;
+		bool more = next <= lmax &&
+			    (v->d.budget_ms <= 0 || now_ms() - t0 < v->d.budget_ms) &&
+			    usable(v, next, fmin(view_ring_radius(next), cap));
+		v->fade[i] = 1;
+		if (v->d.fade_s > 0 && i != first)
+			v->fade[i] = fmin(1, (now_s - v->ready_since[i]) / v->d.fade_s);
+		last = i;
+		if (!more)
+			break;
+	}
+
+	/* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
+	 * while any of them holds nothing yet). */
+	double fl = INFINITY;
+	bool known = true;
+	for (int l = v->nlevels - 1; l >= 0; l--) {
+		double lo, hi;
+		if (l > lmax)
+			v->floor[l] = INFINITY;
+		else if (known && view_clipmap_height_range(v->cm, l, &lo, &hi) == 0)
+			v->floor[l] = fl = fmin(fl, lo);
+		else
+			v->floor[l] = fl = INFINITY, known = false;
+	}
+
+	/* Drawn fine → coarse: the nearer ground first, so the depth test rejects what it hides
+	 * before that is shaded (llvmpipe tests depth before running the fragment shader). */
+	for (int i = last; first >= 0 && i >= first; i--) {
+		int64_t tri = draw_level(v, i, i < last, i == first, v->fade[i], cap,
+					 &s.triangles_culled);
+		if (tri < 0) {
+			gl->BindVertexArray(0);
+			return (int)tri;
+		}
+		s.triangles += (uint64_t)tri;
+	}
+	s.lfirst = first >= 0 ? first : -1;
+	s.llast = first >= 0 ? last : -1;
+	for (int l = (s.llast >= 0 ? s.llast + 1 : 0); l < v->nlevels; l++)
+		v->was_usable[l] = false;
+	if (s.llast != lmax)
+		complete = false;
+	for (int l = lmin; l <= lmax && complete; l++) {
+		const struct grid_quad *h = view_clipmap_held(v->cm, l);
+		const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
+		complete = h && t && grid_quad_equal(h, t);
+	}
+	s.complete = complete;
+	gl->BindVertexArray(0);
+	gl->Finish();
+	view_clipmap_get_stats(v->cm, &cs1);
+	s.bytes_uploaded = cs1.bytes_uploaded - cs0.bytes_uploaded;
+	s.cpu_ms = now_ms() - t0;
+	GLenum e = gl->GetError();
+	if (st)
+		*st = s;
+	return e == GL_NO_ERROR ? 0 : -EIO;
+}
+
+int view_idle(struct view *v, double seconds)
+{
+	double end = now_ms() + seconds * 1e3;
+	int got = 0;
+	for (;;) {
+		double left = end - now_ms();
+		if (left <= 0)
+			break;
+		int rc = v->src->ops->wait(v->src, (int)ceil(left));
+		if (rc == 1)
+			rc = view_clipmap_receive(v->cm);
+		if (rc < 0)
+			return rc;
+		got += rc;
+	}
+	v->idle_tiles += got;
+	return got;
+}
+
+int view_frame_complete(struct view *v, const struct view_camera *c, double timeout_s,
+			struct view_frame_stats *st, int *frames)
+{
+	double t0 = now_ms();
+	struct view_frame_stats s = { 0 };
+	int n = 0, rc = 0;
+	for (;;) {
+		rc = view_frame(v, c, 0, &s);
+		n++;
+		if (rc < 0)
+			break;
+		/* The frame used the ground height known before its uploads: settled when the
+		 * uploads did not change it. */
+		double g = 0;
+		view_clipmap_ground(v->cm, c->lon, c->lat, &g);
+		bool settled = g == s.ground;
+		if (s.complete && settled)
+			break;
+		double left = timeout_s * 1e3 - (now_ms() - t0);
+		if (left <= 0) {
+			rc = -ETIMEDOUT;
+			break;
+		}
+		/* Nothing new yet: sleep until a tile arrives (the interactive loop never does). */
+		if (!s.complete && s.tiles_received == 0 && !s.wants_sent)
+			v->src->ops->wait(v->src, (int)fmin(left, 200));
+	}
+	if (st)
+		*st = s;
+	if (frames)
+		*frames = n;
+	return rc;
+}
+
+static void free_fbo(struct view *v)
+{
+	const struct gl *gl = v->gl;
+	if (v->fbo)
+		gl->DeleteFramebuffers(1, &v->fbo);
+	if (v->color_tex)
+		gl->DeleteTextures(1, &v->color_tex);
+	if (v->depth_tex)
+		gl->DeleteTextures(1, &v->depth_tex);
+	v->fbo = v->color_tex = v->depth_tex = 0;
+}
+
+int view_resize(struct view *v, int width, int height, char err[256])
+{
+	if (width < 1 || height < 1 || width > 16384 || height > 16384) {
+		snprintf(err, 256, "framebuffer %dx%d: out of range", width, height);
+		return -EINVAL;
+	}
+	if (width == v->d.width && height == v->d.height && v->fbo)
+		return 0;
+	free_fbo(v);
+	v->d.width = width;
+	v->d.height = height;
+	return build_fbo(v, err);
+}
+
+unsigned view_framebuffer(const struct view *v) { return v->fbo; }
+
+void view_last_camera(const struct view *v, struct view_camera *out) { *out = v->last; }
+
+int view_read_rgba(struct view *v, unsigned char *out)
+{
+	const struct gl *gl = v->gl;
+	int w = v->d.width, h = v->d.height;
+	gl->BindFramebuffer(GL_FRAMEBUFFER, v->fbo);
+	gl->PixelStorei(GL_PACK_ALIGNMENT, 1);
+	gl->ReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, out);
+	/* GL's first row is the bottom one. */
+	size_t row = (size_t)w * 4;
+	unsigned char *tmp = xmalloc(row);
+	for (int y = 0; y < h / 2; y++) {
+		memcpy(tmp, out + (size_t)y * row, row);
+		memcpy(out + (size_t)y * row, out + (size_t)(h - 1 - y) * row, row);
+		memcpy(out + (size_t)(h - 1 - y) * row, tmp, row);
+	}
+	free(tmp);
+	return 0;
+}
+
+struct view_clipmap *view_get_clipmap(struct view *v) { return v->cm; }
+const struct view_body *view_get_body(const struct view *v) { return &v->body; }
+void view_background_rgba(const struct view *v, unsigned char out[4]) { memcpy(out, v->bg, 4); }

@@ -1,0 +1,538 @@
+/* view_clipmap — see view_clipmap.h. Each level keeps at most SLOTS tiles per role: the 2×2
+ * quad and the ring of 12 around it. A CPU copy of the height slices answers ground-height
+ * queries (camera height above the terrain) without reading the GPU back.
+ */
+#include "view_clipmap.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "view_levels.h"
+#include "common/xalloc.h"
+
+/* Per role: the quad (4), its ring (12) and the look-ahead (≤ 2 × AHEAD_MAX lines of 4). */
+#define AHEAD_MAX 2
+#define SLOTS (16 + 4 * 2 * AHEAD_MAX)
+#define AHEAD_LEAD_S 0.15   /* look ahead as far as the camera moves in this time */
+#define AHEAD_CAP 96	    /* look-ahead tiles per want-set, all levels and roles together */
+
+struct slot {
+	bool used;
+	struct view_tile t;
+};
+
+struct level {
+	bool has_target, has_held;
+	struct grid_quad target, held;
+	int ahead[2]; /* look-ahead lines beyond the ring: x (signed: + east), y (+ south) */
+	int side[2];  /* per axis (x, y): the side (−1 west/north, +1 east/south) whose ring
+		       * line is prefetched while the camera moves; 0: both */
+	struct slot slots[VIEW_NROLES][SLOTS];
+	float *hmirror; /* T × T heights, toroidal like the texture; NULL until first upload */
+	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
+	float hlo, hhi; /* the heights' range over the whole slice */
+};
+
+struct view_clipmap {
+	const struct gl *gl;
+	struct view_source *src;
+	uint32_t T;
+	int nlevels;
+	int layer[VIEW_NROLES]; /* source layer index per role, -1 absent */
+	unsigned tex[VIEW_NROLES];
+	unsigned char *zeros; /* a T×T tile of zeros for tiles that failed */
+	bool has_motion;       /* the camera's ground motion, smoothed: */
+	double m_lon, m_lat, m_t, v_lon, v_lat; /* last position (deg), time (s), deg/s */
+	struct level *lv;
+	struct view_clipmap_stats st;
+};
+
+static const struct {
+	const char *name;
+	enum pix_type type;
+	GLenum ifmt, fmt, gltype;
+} roles[VIEW_NROLES] = {
+	[VIEW_HEIGHT] = { "height", PIX_HEIGHT, GL_R32F, GL_RED, GL_FLOAT },
+	[VIEW_NORMAL] = { "normal", PIX_NORMAL, GL_RG8, GL_RG, GL_UNSIGNED_BYTE },
+	[VIEW_COLOR] = { "color", PIX_COLOR, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE },
+};
+
+static bool same_tile(const struct tile_key *a, const struct tile_key *b)
+{
+	return a->x == b->x && a->y == b->y && a->lx == b->lx && a->ly == b->ly;
+}
+
+int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
+			struct view_clipmap **out, char err[256])
+{
+	const struct view_planet *p = &src->planet;
+	*out = NULL;
+	if (nlevels < 1 || nlevels > VIEW_MAX_LEVELS || p->tile_size < 16 || p->tile_size > 4096) {
+		snprintf(err, 256, "bad clipmap shape: %d levels of %u", nlevels, p->tile_size);
+		return -EINVAL;
+	}
+	int layer[VIEW_NROLES];
+	for (int r = 0; r < VIEW_NROLES; r++) {
+		layer[r] = -1;
+		for (int i = 0; i < p->nlayers && layer[r] < 0; i++)
+			if (p->layer[i].format == roles[r].type && !strcmp(p->layer[i].name, roles[r].name))
+				layer[r] = i;
+		for (int i = 0; i < p->nlayers && layer[r] < 0; i++)
+			if (p->layer[i].format == roles[r].type)
+				layer[r] = i;
+	}
+	if (layer[VIEW_HEIGHT] < 0) {
+		snprintf(err, 256, "planet %s publishes no height layer", p->name);
+		return -EINVAL;
+	}
+	struct view_clipmap *cm = xcalloc(1, sizeof *cm);
+	cm->gl = gl;
+	cm->src = src;
+	cm->T = p->tile_size;
+	cm->nlevels = nlevels;
+	memcpy(cm->layer, layer, sizeof layer);
+	cm->zeros = xcalloc((size_t)cm->T * cm->T, 4);
+	cm->lv = xcalloc((size_t)nlevels, sizeof *cm->lv);
+	while (gl->GetError() != GL_NO_ERROR)
+		;
+	for (int r = 0; r < VIEW_NROLES; r++) {
+		if (layer[r] < 0)
+			continue;
+		gl->GenTextures(1, &cm->tex[r]);
+		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
+		gl->TexImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)roles[r].ifmt, (GLsizei)cm->T,
+			       (GLsizei)cm->T, nlevels, 0, roles[r].fmt, roles[r].gltype, NULL);
+		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_REPEAT);
+		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_T, GL_REPEAT);
+		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAX_LEVEL, 0);
+	}
+	GLenum e = gl->GetError();
+	if (e != GL_NO_ERROR) {
+		snprintf(err, 256, "clipmap textures (%d × %u²): GL error 0x%x", nlevels, cm->T, e);
+		view_clipmap_destroy(cm);
+		return -ENOMEM;
+	}
+	*out = cm;
+	return 0;
+}
+
+static void drop(struct view_clipmap *cm, struct slot *s)
+{
+	if (!s->used)
+		return;
+	cm->src->ops->release(cm->src, &s->t);
+	s->used = false;
+	cm->st.tiles_held--;
+}
+
+void view_clipmap_destroy(struct view_clipmap *cm)
+{
+	if (!cm)
+		return;
+	for (int l = 0; l < cm->nlevels; l++) {
+		for (int r = 0; r < VIEW_NROLES; r++)
+			for (int i = 0; i < SLOTS; i++)
+				drop(cm, &cm->lv[l].slots[r][i]);
+		free(cm->lv[l].hmirror);
+	}
+	for (int r = 0; r < VIEW_NROLES; r++)
+		if (cm->tex[r])
+			cm->gl->DeleteTextures(1, &cm->tex[r]);
+	free(cm->lv);
+	free(cm->zeros);
+	free(cm);
+}
+
+/* The look-ahead tiles of a level: lines (columns for x, rows for y) at distances 2 ..
+ * 1 + |ahead| from the quad on the side the camera moves to, each as long as the ring. */
+/* Whether a ring-line offset d ∈ {−1, 0, 1, 2} from the quad's first tile is on the side an
+ * axis prefetches (side −1: offsets −1..1, +1: 0..2, 0: all). */
+static bool on_side(int side, int64_t d)
+{
+	return side == 0 || (side < 0 ? d <= 1 : d >= 0);
+}
+
+static int ahead_tiles(const struct level *L, struct tile_key out[4 * 2 * AHEAD_MAX])
+{
+	const struct grid_quad *q = &L->target;
+	int n = 0;
+	int64_t ny = grid_tiles_y(q->ly);
+	for (int s = 2; s <= 1 + abs(L->ahead[0]); s++) {
+		int64_t x = L->ahead[0] > 0 ? (int64_t)q->tx[0] + 1 + s : (int64_t)q->tx[0] - s;
+		for (int64_t dy = -1; dy <= 2; dy++) {
+			int64_t y = (int64_t)q->ty[0] + dy;
+			if (y >= 0 && y < ny && on_side(L->side[1], dy))
+				out[n++] = (struct tile_key){ 0, grid_wrap_x(q->lx, x), (uint32_t)y, q->lx,
+							      q->ly };
+		}
+	}
+	for (int s = 2; s <= 1 + abs(L->ahead[1]); s++) {
+		int64_t y = L->ahead[1] > 0 ? (int64_t)q->ty[0] + 1 + s : (int64_t)q->ty[0] - s;
+		if (y < 0 || y >= ny)
+			continue;
+		for (int64_t dx = -1; dx <= 2; dx++)
+			if (on_side(L->side[0], dx))
+				out[n++] = (struct tile_key){ 0,
+							      grid_wrap_x(q->lx, (int64_t)q->tx[0] + dx),
+							      (uint32_t)y, q->lx, q->ly };
+	}
+	return n;
+}
+
+/* Whether level L wants tile k now: in or next to the target quad, or ahead of it. */
+static bool wanted(const struct level *L, const struct tile_key *k)
+{
+	if (!L->has_target)
+		return false;
+	if (grid_quad_distance(&L->target, k) <= 1)
+		return true;
+	struct tile_key a[4 * 2 * AHEAD_MAX];
+	int n = ahead_tiles(L, a);
+	for (int i = 0; i < n; i++)
+		if (same_tile(&a[i], k))
+			return true;
+	return false;
+}
+
+static void drop_unwanted(struct view_clipmap *cm, struct level *L)
+{
+	for (int r = 0; r < VIEW_NROLES; r++)
+		for (int i = 0; i < SLOTS; i++)
+			if (L->slots[r][i].used && !wanted(L, &L->slots[r][i].t.key))
+				drop(cm, &L->slots[r][i]);
+}
+
+bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t)
+{
+	if (cm->has_motion && t > cm->m_t) {
+		double dt = t - cm->m_t, a = fmin(1.0, dt / 0.1); /* ~0.1 s smoothing */
+		double dlon = remainder(lon - cm->m_lon, 360.0), dlat = lat - cm->m_lat;
+		cm->v_lon += a * (dlon / dt - cm->v_lon);
+		cm->v_lat += a * (dlat / dt - cm->v_lat);
+	} else if (!cm->has_motion) {
+		cm->v_lon = cm->v_lat = 0;
+	}
+	cm->has_motion = true;
+	cm->m_lon = lon;
+	cm->m_lat = lat;
+	cm->m_t = t;
+	bool changed = false;
+	for (int l = 0; l < cm->nlevels; l++) {
+		struct level *L = &cm->lv[l];
+		int a[2] = { 0, 0 };
+		if (L->has_target) {
+			/* tiles crossed in the lead time, per axis */
+			double nx = cm->v_lon * AHEAD_LEAD_S / (360.0 / ldexp(1.0, L->target.lx));
+			double ny = -cm->v_lat * AHEAD_LEAD_S / (180.0 / ldexp(1.0, L->target.ly));
+			for (int i = 0; i < 2; i++) {
+				double v = i ? ny : nx;
+				int k = (int)fmin(AHEAD_MAX, floor(fabs(v) + 0.5));
+				a[i] = v < 0 ? -k : k;
+			}
+		}
+		/* The ring is prefetched on the side the camera moves to: along an axis it moves on
+		 * (over 1/50 tile a second), the line behind is not asked for — new tiles there
+		 * would only be needed if it turned back, and the line it just left is still held.
+		 * Along an axis it does not move on while it moves on the other, the nearer side
+		 * (where the window switches tiles first). At rest, the whole ring. The swath along
+		 * a path is then three tiles wide, not four: a quarter less synthesis at speed. */
+		int sd[2] = { 0, 0 };
+		if (L->has_target) {
+			double vt[2] = { cm->v_lon / (360.0 / ldexp(1.0, L->target.lx)),
+					 -cm->v_lat / (180.0 / ldexp(1.0, L->target.ly)) };
+			int64_t off[2] = { L->target.u0 % L->target.T, L->target.v0 % L->target.T };
+			bool moving[2] = { fabs(vt[0]) > 0.02, fabs(vt[1]) > 0.02 };
+			for (int i = 0; i < 2; i++)
+				if (moving[i])
+					sd[i] = vt[i] > 0 ? 1 : -1;
+				else if (moving[1 - i])
+					sd[i] = off[i] < (int64_t)L->target.T / 2 ? -1 : 1;
+		}
+		if (sd[0] != L->side[0] || sd[1] != L->side[1]) {
+			/* what is asked for changes, not what is kept (the whole ring stays wanted) */
+			L->side[0] = sd[0];
+			L->side[1] = sd[1];
+			changed = true;
+		}
+		if (a[0] != L->ahead[0] || a[1] != L->ahead[1]) {
+			L->ahead[0] = a[0];
+			L->ahead[1] = a[1];
+			changed = true;
+			drop_unwanted(cm, L);
+		}
+	}
+	return changed;
+}
+
+bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_quad *q)
+{
+	struct level *L = &cm->lv[level];
+	if (!q) {
+		bool changed = L->has_target;
+		L->has_target = false;
+		L->ahead[0] = L->ahead[1] = 0;
+		L->side[0] = L->side[1] = 0;
+		for (int r = 0; r < VIEW_NROLES; r++)
+			for (int i = 0; i < SLOTS; i++)
+				drop(cm, &L->slots[r][i]);
+		return changed;
+	}
+	if (L->has_target && grid_quad_equal(&L->target, q))
+		return false;
+	L->target = *q;
+	L->has_target = true;
+	drop_unwanted(cm, L);
+	return true;
+}
+
+static struct slot *find(struct level *L, int role, const struct tile_key *k)
+{
+	for (int i = 0; i < SLOTS; i++)
+		if (L->slots[role][i].used && same_tile(&L->slots[role][i].t.key, k))
+			return &L->slots[role][i];
+	return NULL;
+}
+
+/* The ring around q (tiles at distance 1), deduplicated. Returns the count (≤ 12). */
+/* The ring around the quad (prefetch), less the lines behind the camera's motion
+ * (level.side). */
+static int ring_tiles(const struct level *L, struct tile_key out[16])
+{
+	const struct grid_quad *q = &L->target;
+	int n = 0;
+	int64_t ny = grid_tiles_y(q->ly);
+	for (int64_t dy = -1; dy <= 2; dy++) {
+		int64_t y = (int64_t)q->ty[0] + dy;
+		if (y < 0 || y >= ny || !on_side(L->side[1], dy))
+			continue;
+		for (int64_t dx = -1; dx <= 2; dx++) {
+			if (!on_side(L->side[0], dx))
+				continue;
+			struct tile_key k = { 0, grid_wrap_x(q->lx, (int64_t)q->tx[0] + dx),
+					      (uint32_t)y, q->lx, q->ly };
+			if (grid_quad_distance(q, &k) != 1)
+				continue;
+			bool dup = false;
+			for (int i = 0; i < n && !dup; i++)
+				dup = same_tile(&out[i], &k);
+			if (!dup && n < 16)
+				out[n++] = k;
+		}
+	}
+	return n;
+}
+
+size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
+			  size_t cap)
+{
+	size_t n = 0, ahead = 0;
+	static const enum view_class cls[3] = { VIEW_CLASS_VISIBLE, VIEW_CLASS_PREFETCH,
+						VIEW_CLASS_AHEAD };
+	for (int pass = 0; pass < (prefetch ? 3 : 1); pass++) {
+		for (int l = 0; l < cm->nlevels; l++) {
+			struct level *L = &cm->lv[l];
+			if (!L->has_target)
+				continue;
+			struct tile_key k[4 * 2 * AHEAD_MAX > 16 ? 4 * 2 * AHEAD_MAX : 16];
+			int nk = pass == 0   ? grid_quad_tiles(&L->target, 0, k)
+				 : pass == 1 ? ring_tiles(L, k)
+					     : ahead_tiles(L, k);
+			for (int r = 0; r < VIEW_NROLES; r++) {
+				if (cm->layer[r] < 0)
+					continue;
+				for (int i = 0; i < nk; i++) {
+					if (find(L, r, &k[i]) || n >= cap ||
+					    (pass == 2 && ahead >= AHEAD_CAP))
+						continue;
+					ahead += pass == 2;
+					out[n++] = (struct view_want){ (uint8_t)cm->layer[r], cls[pass],
+								       k[i] };
+				}
+			}
+		}
+	}
+	return n;
+}
+
+int view_clipmap_receive(struct view_clipmap *cm)
+{
+	int got = 0;
+	struct view_tile t;
+	int rc;
+	while ((rc = cm->src->ops->poll(cm->src, &t)) == 1) {
+		got++;
+		cm->st.tiles_received++;
+		int role = -1;
+		for (int r = 0; r < VIEW_NROLES; r++)
+			if (cm->layer[r] == t.layer)
+				role = r;
+		int l = t.key.ly;
+		struct level *L = l < cm->nlevels ? &cm->lv[l] : NULL;
+		bool keep = role >= 0 && L && wanted(L, &t.key) && !find(L, role, &t.key) &&
+			    t.size == cm->T && t.format == roles[role].type;
+		struct slot *s = NULL;
+		for (int i = 0; keep && i < SLOTS && !s; i++)
+			if (!L->slots[role][i].used)
+				s = &L->slots[role][i];
+		for (int i = 0; keep && i < SLOTS && !s; i++) /* a tile the level no longer wants */
+			if (!wanted(L, &L->slots[role][i].t.key)) {
+				drop(cm, &L->slots[role][i]);
+				s = &L->slots[role][i];
+			}
+		if (!s) {
+			cm->st.tiles_dropped++;
+			cm->src->ops->release(cm->src, &t);
+			continue;
+		}
+		if (t.err < 0 || !t.texels)
+			cm->st.tiles_failed++;
+		s->used = true;
+		s->t = t;
+		cm->st.tiles_held++;
+	}
+	return rc < 0 ? rc : got;
+}
+
+static void mirror_region(struct view_clipmap *cm, struct level *L, const struct grid_region *r,
+			  const unsigned char *src)
+{
+	uint32_t T = cm->T;
+	if (!L->hmirror)
+		L->hmirror = xcalloc((size_t)T * T, sizeof(float));
+	for (uint32_t j = 0; j < r->h; j++)
+		memcpy(L->hmirror + (size_t)(r->y + j) * T + r->x,
+		       src + ((size_t)(r->y + j) * T + r->x) * 4, (size_t)r->w * 4);
+	L->hdirty = true;
+}
+
+int view_clipmap_update(struct view_clipmap *cm, int level)
+{
+	struct level *L = &cm->lv[level];
+	if (!L->has_target)
+		return 0;
+	if (L->has_held && grid_quad_equal(&L->held, &L->target))
+		return 1;
+	struct grid_region rg[9];
+	int nr = grid_update_regions(L->has_held ? &L->held : NULL, &L->target, rg);
+	/* Every tile a region copies from must be here, for every role. */
+	for (int i = 0; i < nr; i++) {
+		struct tile_key k = { 0, L->target.tx[rg[i].qi], L->target.ty[rg[i].qj],
+				      L->target.lx, L->target.ly };
+		for (int r = 0; r < VIEW_NROLES; r++)
+			if (cm->layer[r] >= 0 && !find(L, r, &k))
+				return 0;
+	}
+	const struct gl *gl = cm->gl;
+	uint32_t T = cm->T;
+	gl->PixelStorei(GL_UNPACK_ALIGNMENT, 1);
+	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, (GLint)T);
+	for (int r = 0; r < VIEW_NROLES; r++) {
+		if (cm->layer[r] < 0)
+			continue;
+		size_t bpp = pix_bytes(roles[r].type);
+		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
+		for (int i = 0; i < nr; i++) {
+			struct tile_key k = { 0, L->target.tx[rg[i].qi], L->target.ty[rg[i].qj],
+					      L->target.lx, L->target.ly };
+			const struct slot *s = find(L, r, &k);
+			const unsigned char *base = s->t.texels ? s->t.texels : cm->zeros;
+			gl->TexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)rg[i].x, (GLint)rg[i].y, level,
+					  (GLsizei)rg[i].w, (GLsizei)rg[i].h, 1, roles[r].fmt,
+					  roles[r].gltype,
+					  base + ((size_t)rg[i].y * T + rg[i].x) * bpp);
+			cm->st.bytes_uploaded += (uint64_t)rg[i].w * rg[i].h * bpp;
+			cm->st.regions_uploaded++;
+			if (r == VIEW_HEIGHT)
+				mirror_region(cm, L, &rg[i], base);
+		}
+	}
+	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, 0);
+	L->held = L->target;
+	L->has_held = true;
+	return 1;
+}
+
+const struct grid_quad *view_clipmap_held(const struct view_clipmap *cm, int level)
+{
+	return cm->lv[level].has_held ? &cm->lv[level].held : NULL;
+}
+
+const struct grid_quad *view_clipmap_target_of(const struct view_clipmap *cm, int level)
+{
+	return cm->lv[level].has_target ? &cm->lv[level].target : NULL;
+}
+
+int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, double *h)
+{
+	uint32_t T = cm->T;
+	for (int l = cm->nlevels - 1; l >= 0; l--) {
+		const struct level *L = &cm->lv[l];
+		if (!L->has_held || !L->hmirror || !view_window_covers(&L->held, lon, lat, 0, 1))
+			continue;
+		double p[6];
+		view_level_params(&L->held, lon, lat, p);
+		double x = p[0] - 0.5, y = fmin(fmax(p[1], p[4]), p[5]) - 0.5;
+		double fx = floor(x), fy = floor(y);
+		double ax = x - fx, ay = y - fy;
+		int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
+		double v[2][2];
+		for (int j = 0; j < 2; j++)
+			for (int i = 0; i < 2; i++) {
+				int64_t xi = ((x0 + i) % T + T) % T, yj = ((y0 + j) % T + T) % T;
+				v[j][i] = L->hmirror[(size_t)yj * T + (size_t)xi];
+			}
+		*h = (1 - ay) * ((1 - ax) * v[0][0] + ax * v[0][1]) +
+		     ay * ((1 - ax) * v[1][0] + ax * v[1][1]);
+		return 0;
+	}
+	return -ENOENT;
+}
+
+unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r) { return cm->tex[r]; }
+
+int view_clipmap_read(const struct view_clipmap *cm, enum view_role r, void *out, size_t size)
+{
+	if (!cm->tex[r] || size < (size_t)cm->T * cm->T * cm->nlevels * pix_bytes(roles[r].type))
+		return -ENOENT;
+	const struct gl *gl = cm->gl;
+	gl->PixelStorei(GL_PACK_ALIGNMENT, 1);
+	gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
+	gl->GetTexImage(GL_TEXTURE_2D_ARRAY, 0, roles[r].fmt, roles[r].gltype, out);
+	return 0;
+}
+
+uint32_t view_clipmap_tile_size(const struct view_clipmap *cm) { return cm->T; }
+int view_clipmap_levels(const struct view_clipmap *cm) { return cm->nlevels; }
+
+void view_clipmap_get_stats(const struct view_clipmap *cm, struct view_clipmap_stats *out)
+{
+	*out = cm->st;
+}
+
+int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, double *hi)
+{
+	struct level *L = &cm->lv[level];
+	if (!L->has_held || !L->hmirror)
+		return -ENOENT;
+	if (L->hdirty) {
+		/* The whole slice, stale texels included: whatever the shader can sample. */
+		const float *h = L->hmirror;
+		size_t n = (size_t)cm->T * cm->T;
+		float a = h[0], b = h[0];
+		for (size_t i = 1; i < n; i++) {
+			a = h[i] < a ? h[i] : a;
+			b = h[i] > b ? h[i] : b;
+		}
+		L->hlo = a;
+		L->hhi = b;
+		L->hdirty = false;
+	}
+	*lo = L->hlo;
+	*hi = L->hhi;
+	return 0;
+}

@@ -1,0 +1,82 @@
+/* view_clipmap — the viewer's clipmap textures and the tiles in flight. Per layer role
+ * (height R32F, normal RG8, colour sRGB8_A8) one 2D texture array with a slice per clipmap
+ * level, addressed toroidally: level texel (u, v) lives at (u mod T, v mod T). Each level has
+ * a target quad (where the camera wants it) and the quad its texture holds; when every tile
+ * of the target quad has arrived, only the changed regions are copied (grid_update_regions).
+ * Tiles are kept while they are in or next to their level's target quad (the prefetch ring)
+ * or ahead of it along the camera's motion (view_clipmap_motion), released otherwise: the
+ * client never holds more than that.
+ *
+ * Threads: one thread (the GL context's). Ownership: the clipmap borrows gl and the source,
+ * owns its textures and the tiles it holds (released through the source).
+ */
+#ifndef CLIPMAP_VIEW_CLIPMAP_H
+#define CLIPMAP_VIEW_CLIPMAP_H
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gl_context.h"
+#include "common/grid.h"
+#include "view_source.h"
+
+enum view_role { VIEW_HEIGHT = 0, VIEW_NORMAL, VIEW_COLOR, VIEW_NROLES };
+
+struct view_clipmap_stats {
+	uint64_t bytes_uploaded;  /* texel bytes sent with glTexSubImage3D */
+	uint64_t regions_uploaded;
+	uint64_t tiles_received;
+	uint64_t tiles_dropped;	  /* arrived but no longer needed */
+	uint64_t tiles_failed;
+	size_t tiles_held;
+};
+
+struct view_clipmap;
+
+/* Textures for nlevels levels of the source's planet (roles found by layer name, else by
+ * format; a height layer is required). Returns 0 or -errno with err filled. */
+int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
+			struct view_clipmap **out, char err[256]);
+void view_clipmap_destroy(struct view_clipmap *cm);
+
+/* Sets level's target quad (NULL: the level is not wanted). Tiles farther than the ring
+ * around the new quad are released. Returns whether the target changed. */
+bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_quad *q);
+/* The camera's ground position (degrees) at time t (seconds, any monotonic origin), once per
+ * frame after the targets are set: its smoothed velocity sets each level's look-ahead, the
+ * lines of tiles beyond the ring that the camera reaches within ~0.15 s (up to 2 lines per
+ * axis; none on levels it crosses slowly). Returns whether a look-ahead changed — the want-set
+ * must then be sent again. Tiles that fall out of the look-ahead are released. Optional: a
+ * caller that never calls it gets no look-ahead. */
+bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t);
+
+/* The want-set for the current targets: every missing tile of every target quad, coarse
+ * levels first, then (prefetch) the missing ring tiles — while the camera moves
+ * (view_clipmap_motion) only those on the side it moves to — then the missing look-ahead tiles
+ * (class VIEW_CLASS_AHEAD, at most 96). Returns the count (≤ cap). */
+size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
+			  size_t cap);
+/* Takes every tile the source has ready. Returns how many arrived, or -errno. */
+int view_clipmap_receive(struct view_clipmap *cm);
+/* If level's target quad is complete, copies the changed regions into the textures.
+ * Returns 1 when the texture holds the target quad, 0 when tiles are missing. */
+int view_clipmap_update(struct view_clipmap *cm, int level);
+/* The quad level's texture holds, or NULL (nothing uploaded yet). */
+const struct grid_quad *view_clipmap_held(const struct view_clipmap *cm, int level);
+const struct grid_quad *view_clipmap_target_of(const struct view_clipmap *cm, int level);
+/* The ground height at (lon, lat) from the finest level that holds it. 0 or -ENOENT. */
+int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, double *h);
+
+/* The range of the heights a level's height slice holds (metres, not exaggerated): what the
+ * shader can sample there, for culling. 0, or -ENOENT before the level's first upload. */
+int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, double *hi);
+
+unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r); /* 0: absent */
+/* Reads every slice of a role's texture (T × T × nlevels texels, slice-major) into out.
+ * Returns 0 or -ENOENT. */
+int view_clipmap_read(const struct view_clipmap *cm, enum view_role r, void *out, size_t size);
+uint32_t view_clipmap_tile_size(const struct view_clipmap *cm);
+int view_clipmap_levels(const struct view_clipmap *cm);
+void view_clipmap_get_stats(const struct view_clipmap *cm, struct view_clipmap_stats *out);
+
+#endif

@@ -1,0 +1,57 @@
+/* cache — the tile cache (seed 003 §4.2): key → immutable, reference-counted tile, one mutex
+ * for the whole cache, a byte budget, and pruning by distance to the viewers' focus points:
+ * each level's quad and the ring around it are kept while farther tiles go first (seed 003
+ * Fig. 3a); among equally far tiles the least recently used goes first.
+ *
+ * Each entry remembers when it was last used (monotonic time), which listings report as age.
+ *
+ * Threads: every function is thread-safe. The mutex protects the table, the LRU clock and the
+ * counters; no tile data is touched under it and nothing blocks while it is held.
+ * Ownership: the cache holds one reference per cached tile; lookups return a new reference.
+ */
+#ifndef CLIPMAP_CACHE_H
+#define CLIPMAP_CACHE_H
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "common/grid.h"
+#include "tile.h"
+
+struct cache;
+
+struct cache_focus {
+	double lon, lat; /* degrees */
+};
+
+struct cache_stats {
+	uint64_t hits, misses, inserts, evictions;
+	size_t bytes, tiles, budget;
+};
+
+/* A cache holding at most budget_bytes of tile data (0: unlimited). */
+struct cache *cache_create(size_t budget_bytes);
+void cache_destroy(struct cache *c);
+/* A new reference to the cached tile, or NULL. Counts a hit or a miss. */
+struct tile *cache_lookup(struct cache *c, const struct tile_key *k);
+/* Whether k is cached, without counting or touching recency. */
+bool cache_contains(struct cache *c, const struct tile_key *k);
+/* Publishes t (the cache takes its own reference; the caller keeps theirs). If k is already
+ * cached the old tile stays. Prunes when over budget. */
+void cache_insert(struct cache *c, struct tile *t);
+/* Replaces the focus points pruning measures distance to (copied). */
+void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, uint32_t tile_size);
+/* Evicts until at most `target` bytes remain (farthest first, then least recent). */
+void cache_prune(struct cache *c, size_t target);
+void cache_stats(struct cache *c, struct cache_stats *out);
+/* Calls fn for each cached tile with the time of its last use (the last lookup or insert, in
+ * cache_now_ns's clock), under the lock: fn must be quick and must not call the cache. Stops
+ * early when fn returns non-zero. */
+void cache_foreach(struct cache *c, int (*fn)(void *ud, const struct tile *t, uint64_t used_ns),
+		   void *ud);
+/* The clock of last uses: CLOCK_MONOTONIC nanoseconds. */
+uint64_t cache_now_ns(void);
+/* Drops every tile whose key.node equals node. Returns how many. */
+size_t cache_drop_node(struct cache *c, uint64_t node);
+
+#endif

@@ -1,0 +1,403 @@
+/* jobtab — see jobtab.h. A chained hash map over tile keys, the job graph, and a binary
+ * min-heap that keeps every job's heap_idx current.
+ *
+ * Graph invariants: j->dep[k] is the job producing input k while it is missing (j is then in
+ * that job's dependents list once, however many slots it fills); a job the current marking
+ * pass reached has all its pending dependencies marked too, so cancelling unmarked jobs never
+ * strands a wanted one; wanters are valid only for the epoch they were recorded in.
+ */
+#include "jobtab.h"
+
+#include <errno.h>
+#include <stdlib.h>
+
+#include "planet.h"
+#include "common/xalloc.h"
+
+bool job_prio_less(const struct job_prio *a, const struct job_prio *b)
+{
+	if (a->cls != b->cls)
+		return a->cls < b->cls;
+	if (a->ly != b->ly)
+		return a->ly < b->ly;
+	if (a->lx != b->lx)
+		return a->lx < b->lx;
+	return a->order < b->order;
+}
+
+void jobmap_init(struct jobmap *m)
+{
+	m->nb = 256;
+	m->n = 0;
+	m->b = xcalloc(m->nb, sizeof *m->b);
+}
+
+void jobmap_fini(struct jobmap *m)
+{
+	free(m->b);
+	m->b = NULL;
+	m->nb = m->n = 0;
+}
+
+struct job *jobmap_find(const struct jobmap *m, const struct tile_key *k)
+{
+	uint64_t h = grid_key_hash(k);
+	for (struct job *j = m->b[h & (m->nb - 1)]; j; j = j->hnext)
+		if (j->hash == h && grid_key_equal(&j->key, k))
+			return j;
+	return NULL;
+}
+
+static void grow(struct jobmap *m)
+{
+	size_t nb = m->nb * 2;
+	struct job **b = xcalloc(nb, sizeof *b);
+	for (size_t i = 0; i < m->nb; i++) {
+		struct job *j = m->b[i];
+		while (j) {
+			struct job *next = j->hnext;
+			j->hnext = b[j->hash & (nb - 1)];
+			b[j->hash & (nb - 1)] = j;
+			j = next;
+		}
+	}
+	free(m->b);
+	m->b = b;
+	m->nb = nb;
+}
+
+void jobmap_insert(struct jobmap *m, struct job *j)
+{
+	j->hash = grid_key_hash(&j->key);
+	j->hnext = m->b[j->hash & (m->nb - 1)];
+	m->b[j->hash & (m->nb - 1)] = j;
+	if (++m->n > m->nb)
+		grow(m);
+}
+
+void jobmap_remove(struct jobmap *m, struct job *j)
+{
+	struct job **p = &m->b[j->hash & (m->nb - 1)];
+	while (*p && *p != j)
+		p = &(*p)->hnext;
+	if (*p) {
+		*p = j->hnext;
+		m->n--;
+	}
+}
+
+struct job **jobmap_list(const struct jobmap *m, size_t *n)
+{
+	struct job **out = xmalloc((m->n ? m->n : 1) * sizeof *out);
+	size_t k = 0;
+	for (size_t i = 0; i < m->nb; i++)
+		for (struct job *j = m->b[i]; j; j = j->hnext)
+			out[k++] = j;
+	*n = k;
+	return out;
+}
+
+static void free_job(struct job *j)
+{
+	for (int k = 0; k < j->nin; k++)
+		tile_unref(j->in[k]);
+	tile_unref(j->result);
+	free(j->dependents);
+	free(j->wanters);
+	planet_unref(j->node->planet);
+	free(j);
+}
+
+static void remove_dependent(struct job *dj, struct job *j)
+{
+	for (size_t i = 0; i < dj->ndependents;)
+		if (dj->dependents[i] == j)
+			dj->dependents[i] = dj->dependents[--dj->ndependents];
+		else
+			i++;
+}
+
+static void link_dep(struct job *j, int k, struct job *dj)
+{
+	bool seen = false;
+	for (int i = 0; i < k; i++)
+		seen |= j->dep[i] == dj;
+	j->dep[k] = dj;
+	j->missing++;
+	if (seen)
+		return;
+	if (dj->ndependents == dj->capdependents) {
+		dj->capdependents = dj->capdependents ? dj->capdependents * 2 : 4;
+		dj->dependents = xrealloc(dj->dependents, dj->capdependents * sizeof *dj->dependents);
+	}
+	dj->dependents[dj->ndependents++] = j;
+}
+
+struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct tile_key *key)
+{
+	struct job *j = xcalloc(1, sizeof *j);
+	j->key = *key;
+	j->node = node;
+	planet_ref(node->planet); /* the planet outlives every job on its nodes */
+	j->seq = g->seq++;
+	j->heap_idx = -1;
+	jobmap_insert(&g->map, j);
+	struct node_dep deps[NODE_MAX_DEPS];
+	int nd = node->type->deps ? node->type->deps(node, key, deps)
+				  : node_default_deps(node, key, deps);
+	if (nd < 0 || nd > NODE_MAX_DEPS) {
+		j->err = nd < 0 ? nd : -E2BIG;
+		j->mstate = JOB_SUBMITTED;
+		j->next = g->fails;
+		g->fails = j;
+		return j;
+	}
+	j->nin = nd;
+	for (int k = 0; k < nd; k++) {
+		struct job *dj = jobmap_find(&g->map, &deps[k].key);
+		if (dj) {
+			atomic_fetch_add(&g->merged, 1);
+		} else {
+			j->in[k] = cache_lookup(g->cache, &deps[k].key);
+			if (j->in[k])
+				continue;
+			dj = jobgraph_create(g, deps[k].node, &deps[k].key);
+		}
+		link_dep(j, k, dj);
+	}
+	if (j->missing == 0) {
+		j->mstate = JOB_SUBMITTED;
+		j->next = g->push;
+		g->push = j;
+	} else {
+		j->mstate = JOB_WAITING;
+		atomic_fetch_add(&g->waiting, 1);
+	}
+	return j;
+}
+
+void jobgraph_visit(struct jobgraph *g, struct job *j, const struct job_prio *p)
+{
+	if (j->mark != g->epoch) {
+		j->mark = g->epoch;
+		j->prio = *p;
+	} else if (job_prio_less(p, &j->prio)) {
+		j->prio = *p;
+	} else {
+		return;
+	}
+	for (int k = 0; k < j->nin; k++)
+		if (j->dep[k])
+			jobgraph_visit(g, j->dep[k], p);
+}
+
+void jobgraph_add_wanter(struct jobgraph *g, struct job *j, struct sched_req *r, size_t idx)
+{
+	if (j->wanters_epoch != g->epoch) {
+		j->wanters_epoch = g->epoch;
+		j->nwanters = 0;
+	}
+	if (j->nwanters == j->capwanters) {
+		j->capwanters = j->capwanters ? j->capwanters * 2 : 2;
+		j->wanters = xrealloc(j->wanters, j->capwanters * sizeof *j->wanters);
+	}
+	j->wanters[j->nwanters++] = (struct job_wanter){ r, (uint32_t)idx };
+}
+
+/* Reports j's outcome to every want entry waiting for it. */
+static void report_job(struct jobgraph *g, struct job *j, struct tile *t, int err)
+{
+	if (j->wanters_epoch != g->epoch)
+		return;
+	for (size_t i = 0; i < j->nwanters; i++)
+		g->report(g->ud, &j->wanters[i], t, err);
+	j->nwanters = 0;
+}
+
+/* Unlinks j from the jobs it waits for, drops it from the map and frees it. */
+static void drop_job(struct jobgraph *g, struct job *j)
+{
+	for (int k = 0; k < j->nin; k++)
+		if (j->dep[k])
+			remove_dependent(j->dep[k], j);
+	if (j->mstate == JOB_WAITING)
+		atomic_fetch_sub(&g->waiting, 1);
+	jobmap_remove(&g->map, j);
+	free_job(j);
+}
+
+/* j failed with err: its wanters hear of it, and so does everything that depends on it. */
+static void fail_job(struct jobgraph *g, struct job *j, int err)
+{
+	report_job(g, j, NULL, err);
+	while (j->ndependents > 0)
+		fail_job(g, j->dependents[0], err); /* unlinks itself from j */
+	drop_job(g, j);
+}
+
+void jobgraph_complete(struct jobgraph *g, struct job *j)
+{
+	struct tile *t = j->result;
+	if (!t) {
+		fail_job(g, j, j->err);
+		return;
+	}
+	report_job(g, j, t, 0);
+	for (size_t i = 0; i < j->ndependents; i++) {
+		struct job *d = j->dependents[i];
+		for (int k = 0; k < d->nin; k++) {
+			if (d->dep[k] != j)
+				continue;
+			d->dep[k] = NULL;
+			d->in[k] = tile_ref(t);
+			d->missing--;
+		}
+		if (d->missing == 0) {
+			d->mstate = JOB_SUBMITTED;
+			atomic_fetch_sub(&g->waiting, 1);
+			d->next = g->push;
+			g->push = d;
+		}
+	}
+	j->ndependents = 0;
+	drop_job(g, j);
+}
+
+
+void jobgraph_init(struct jobgraph *g, struct cache *c,
+		   void (*report)(void *ud, const struct job_wanter *w, struct tile *t, int err),
+		   void *ud)
+{
+	jobmap_init(&g->map);
+	g->cache = c;
+	g->epoch = g->seq = 0;
+	g->push = g->fails = NULL;
+	g->report = report;
+	g->ud = ud;
+	atomic_init(&g->merged, 0);
+	atomic_init(&g->waiting, 0);
+	atomic_init(&g->cancelled, 0);
+	atomic_init(&g->failed, 0);
+}
+
+void jobgraph_fini(struct jobgraph *g)
+{
+	size_t n;
+	struct job **all = jobmap_list(&g->map, &n);
+	for (size_t i = 0; i < n; i++)
+		free_job(all[i]);
+	free(all);
+	jobmap_fini(&g->map);
+}
+
+void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel)
+{
+	size_t n;
+	struct job **all = jobmap_list(&g->map, &n);
+	for (size_t i = 0; i < n; i++) {
+		struct job *j = all[i];
+		if (j->mstate == JOB_WAITING && j->mark != g->epoch) {
+			atomic_fetch_sub(&g->waiting, 1);
+			j->mstate = JOB_CANCELLED;
+			j->next = cancel;
+			cancel = j;
+		}
+	}
+	free(all);
+	/* Unlink from surviving inputs first: cancelled jobs may depend on each other. */
+	for (struct job *j = cancel; j; j = j->next) {
+		for (int k = 0; k < j->nin; k++)
+			if (j->dep[k] && j->dep[k]->mstate != JOB_CANCELLED)
+				remove_dependent(j->dep[k], j);
+		atomic_fetch_add(&g->cancelled, 1);
+	}
+	while (cancel) {
+		struct job *j = cancel;
+		cancel = j->next;
+		jobmap_remove(&g->map, j);
+		free_job(j);
+	}
+}
+
+static bool before(const struct job *a, const struct job *b)
+{
+	if (job_prio_less(&a->qprio, &b->qprio))
+		return true;
+	if (job_prio_less(&b->qprio, &a->qprio))
+		return false;
+	return a->seq < b->seq;
+}
+
+static void put(struct jobheap *h, size_t i, struct job *j)
+{
+	h->a[i] = j;
+	j->heap_idx = (ptrdiff_t)i;
+}
+
+static void sift_up(struct jobheap *h, size_t i)
+{
+	struct job *j = h->a[i];
+	while (i > 0) {
+		size_t p = (i - 1) / 2;
+		if (!before(j, h->a[p]))
+			break;
+		put(h, i, h->a[p]);
+		i = p;
+	}
+	put(h, i, j);
+}
+
+static void sift_down(struct jobheap *h, size_t i)
+{
+	struct job *j = h->a[i];
+	for (;;) {
+		size_t c = 2 * i + 1;
+		if (c >= h->n)
+			break;
+		if (c + 1 < h->n && before(h->a[c + 1], h->a[c]))
+			c++;
+		if (!before(h->a[c], j))
+			break;
+		put(h, i, h->a[c]);
+		i = c;
+	}
+	put(h, i, j);
+}
+
+void jobheap_fini(struct jobheap *h)
+{
+	free(h->a);
+	h->a = NULL;
+	h->n = h->cap = 0;
+}
+
+void jobheap_push(struct jobheap *h, struct job *j)
+{
+	if (h->n == h->cap) {
+		h->cap = h->cap ? h->cap * 2 : 64;
+		h->a = xrealloc(h->a, h->cap * sizeof *h->a);
+	}
+	put(h, h->n++, j);
+	sift_up(h, h->n - 1);
+}
+
+struct job *jobheap_pop(struct jobheap *h)
+{
+	if (h->n == 0)
+		return NULL;
+	struct job *top = h->a[0];
+	top->heap_idx = -1;
+	if (--h->n > 0) {
+		put(h, 0, h->a[h->n]);
+		sift_down(h, 0);
+	}
+	return top;
+}
+
+void jobheap_heapify(struct jobheap *h)
+{
+	for (size_t i = 0; i < h->n; i++)
+		h->a[i]->heap_idx = (ptrdiff_t)i;
+	for (size_t i = h->n / 2; i-- > 0;)
+		sift_down(h, i);
+}

@@ -1,0 +1,135 @@
+/* jobtab — the scheduler's jobs: the job record, the key → job hash map, the job graph
+ * (dependency links, depth-first creation, priority marking, completion, failure and
+ * cancellation) and the ready queue (a binary heap ordered by priority). Internal to sched.c.
+ *
+ * Threads: none of this locks. The graph, the map and the manager-only fields of a job belong
+ * to the manager thread; the heap and the fields marked "queue" are protected by the
+ * scheduler's queue mutex; a job's node, key, inputs and result move between threads only
+ * through that mutex or the manager's inbox mutex (see sched.c).
+ * Ownership: the graph allocates and frees jobs; the map and heap only point at them.
+ */
+#ifndef CLIPMAP_JOBTAB_H
+#define CLIPMAP_JOBTAB_H
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "cache.h"
+#include "common/grid.h"
+#include "node.h"
+#include "tile.h"
+
+struct sched_req;
+
+/* Smaller is more urgent: class, then level (ly, then lx; coarse first), then want order. */
+struct job_prio {
+	uint8_t cls, ly, lx;
+	uint32_t order;
+};
+
+/* One entry of a want list that waits for a job: request and index in its list. */
+struct job_wanter {
+	struct sched_req *r;
+	uint32_t idx;
+};
+
+enum job_mstate {
+	JOB_WAITING = 1, /* some inputs still missing */
+	JOB_SUBMITTED,	 /* handed to the ready queue (queued, running or done, not yet seen) */
+	JOB_CANCELLED,
+};
+
+struct job {
+	struct tile_key key;
+	struct node *node; /* borrowed */
+	uint64_t seq;	   /* creation order: the last tie-break */
+	uint64_t hash;
+	struct job *hnext; /* map chain */
+
+	/* Manager only. */
+	enum job_mstate mstate;
+	uint64_t mark; /* epoch of the last marking pass that reached it */
+	struct job_prio prio;
+	int nin, missing;
+	struct tile *in[NODE_MAX_DEPS];	 /* held inputs (owned references) */
+	struct job *dep[NODE_MAX_DEPS];	 /* pending input jobs (NULL once held) */
+	struct job **dependents;	 /* jobs with this one in their dep[] */
+	size_t ndependents, capdependents;
+	struct job_wanter *wanters; /* want entries waiting for it, valid for wanters_epoch */
+	size_t nwanters, capwanters;
+	uint64_t wanters_epoch;
+	struct job *next; /* manager's scratch lists */
+
+	/* Queue (under the queue mutex). */
+	struct job_prio qprio;
+	ptrdiff_t heap_idx; /* -1 when not in the heap */
+
+	/* Worker → manager, published through the inbox mutex. */
+	struct tile *result; /* owned reference, NULL on error */
+	int err;
+	struct job *next_done;
+};
+
+bool job_prio_less(const struct job_prio *a, const struct job_prio *b);
+
+struct jobmap {
+	struct job **b;
+	size_t nb, n;
+};
+
+void jobmap_init(struct jobmap *m);
+void jobmap_fini(struct jobmap *m); /* frees the table, not the jobs */
+struct job *jobmap_find(const struct jobmap *m, const struct tile_key *k);
+/* Adds j (j->key set, not present yet); sets j->hash. */
+void jobmap_insert(struct jobmap *m, struct job *j);
+void jobmap_remove(struct jobmap *m, struct job *j);
+/* Every job into a new array (owned by the caller); *n = how many. */
+struct job **jobmap_list(const struct jobmap *m, size_t *n);
+
+/* The manager's job graph. Every live job is in the map until it completes, fails or is
+ * cancelled. */
+struct jobgraph {
+	struct jobmap map;
+	struct cache *cache; /* borrowed: dependency lookups */
+	uint64_t epoch;	     /* of the current marking pass */
+	uint64_t seq;
+	struct job *push;  /* jobs that became ready, linked by next, for the caller to queue */
+	struct job *fails; /* jobs whose deps() failed, linked by next, for jobgraph_complete */
+	/* Tells one waiting want entry about its job: t borrowed, NULL with err < 0 on failure. */
+	void (*report)(void *ud, const struct job_wanter *w, struct tile *t, int err);
+	void *ud;
+	atomic_uint_fast64_t merged, waiting, cancelled, failed;
+};
+
+void jobgraph_init(struct jobgraph *g, struct cache *c,
+		   void (*report)(void *ud, const struct job_wanter *w, struct tile *t, int err),
+		   void *ud);
+/* Frees every job still in the graph (threads stopped). */
+void jobgraph_fini(struct jobgraph *g);
+/* A new job for (node, key), its missing dependencies created depth-first (cached ones are
+ * held as tile references). Ready jobs go on g->push, failed ones on g->fails. */
+struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct tile_key *key);
+/* Marks j and its pending dependencies for this epoch with priority p, keeping the best. */
+void jobgraph_visit(struct jobgraph *g, struct job *j, const struct job_prio *p);
+/* Records that want entry (r, idx) waits for j (valid for this epoch). */
+void jobgraph_add_wanter(struct jobgraph *g, struct job *j, struct sched_req *r, size_t idx);
+/* j finished with j->result (owned) or j->err: reports to its wanters, hands the tile to its
+ * dependents (those now ready go on g->push) or fails them, and frees j. */
+void jobgraph_complete(struct jobgraph *g, struct job *j);
+/* Cancels and frees `cancel` (jobs taken out of the heap, linked by next, mstate
+ * JOB_CANCELLED) and every waiting job this epoch's pass did not mark. */
+void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel);
+
+struct jobheap {
+	struct job **a;
+	size_t n, cap;
+};
+
+void jobheap_fini(struct jobheap *h);
+void jobheap_push(struct jobheap *h, struct job *j); /* orders by j->qprio, then j->seq */
+struct job *jobheap_pop(struct jobheap *h);	     /* NULL when empty */
+/* Restores heap order after any qprio changed or entries were replaced in place. */
+void jobheap_heapify(struct jobheap *h);
+
+#endif

@@ -1,0 +1,196 @@
+/* node_blend — `blend`: combines inputs a and b (same pixel type; the output has a's type),
+ * optionally weighted per texel by `mask` (heights read as a 0..1 weight, clamped).
+ *   over      colour: b over a (straight alpha), b's alpha × opacity × mask;
+ *             heights/normals: lerp(a, b, opacity × mask); a NaN height in b keeps a, a NaN in
+ *             a takes b (NaN is "no data").
+ *   mask      lerp(a, b, clamp(mask, 0, 1) × opacity) on every channel (needs `mask`).
+ *   add       heights only: a + b × weight × opacity × mask.
+ *   multiply  colour only: rgb = lerp(a, a·b/255, opacity × mask); alpha stays a's.
+ * Thread-safety: parameters are set in create and only read by generate.
+ */
+#include <errno.h>
+#include <stdint.h>
+#include <stdlib.h>
+
+#include "engine/node_types.h"
+#include "common/xalloc.h"
+
+enum blend_mode { BLEND_OVER, BLEND_MASK, BLEND_ADD, BLEND_MULTIPLY };
+
+static const char *const blend_modes[] = { "over", "mask", "add", "multiply", NULL };
+
+struct blend {
+	int mode;
+	float opacity, weight;
+	uint32_t kb[256]; /* over, colour, no mask: b's weight in 1/65536 by b's alpha */
+};
+
+enum { SLOT_A, SLOT_B, SLOT_MASK };
+
+static int blend_create(struct node *n, struct node_parse *p)
+{
+	int mode, rc;
+	double opacity, weight;
+	if ((rc = np_enum(p, "mode", blend_modes, BLEND_OVER, &mode)) ||
+	    (rc = np_double(p, "opacity", 1, 0, 1, &opacity)) ||
+	    (rc = np_double(p, "weight", 1, -1e6, 1e6, &weight)))
+		return rc;
+	enum pix_type ta = n->in[SLOT_A]->out, tb = n->in[SLOT_B]->out;
+	if (ta != tb)
+		return np_error(p, "b", "node \"%s\" gives %s tiles but a (\"%s\") gives %s; blend "
+				"needs both of one type", n->in[SLOT_B]->name, pix_type_name(tb),
+				n->in[SLOT_A]->name, pix_type_name(ta));
+	if (mode == BLEND_MASK && !n->in[SLOT_MASK])
+		return np_error(p, "mode", "mode mask needs input \"mask\"");
+	if (mode == BLEND_ADD && ta != PIX_HEIGHT)
+		return np_error(p, "mode", "add works on heights, not %s", pix_type_name(ta));
+	if (mode == BLEND_MULTIPLY && ta != PIX_COLOR)
+		return np_error(p, "mode", "multiply works on colours, not %s", pix_type_name(ta));
+	struct blend *b = xmalloc(sizeof *b);
+	b->mode = mode;
+	b->opacity = (float)opacity;
+	b->weight = (float)weight;
+	for (int a = 0; a < 256; a++)
+		b->kb[a] = (uint32_t)(a * b->opacity * (65536.0f / 255) + 0.5f);
+	n->impl = b;
+	n->out = ta;
+	return 0;
+}
+
+static inline float weight_at(const float *mask, size_t i, float opacity)
+{
+	if (!mask)
+		return opacity;
+	float m = mask[i];
+	m = m > 0.0f ? m : 0.0f; /* NaN → 0 */
+	m = m < 1.0f ? m : 1.0f;
+	return m * opacity;
+}
+
+static inline uint8_t u8(float v)
+{
+	return (uint8_t)(int)(v + 0.5f); /* v ∈ [0, 255] */
+}
+
+static void blend_heights(const struct blend *bl, const float *a, const float *b,
+			  const float *mask, float *o, size_t count)
+{
+	for (size_t i = 0; i < count; i++) {
+		float w = weight_at(mask, i, bl->opacity);
+		float x = a[i], y = b[i];
+		switch (bl->mode) {
+		case BLEND_ADD:
+			o[i] = x + y * (bl->weight * w);
+			break;
+		default: /* over, mask */
+			o[i] = y != y ? x : x != x ? y : x + (y - x) * w;
+			break;
+		}
+	}
+}
+
+/* b over a, straight alpha, b's alpha scaled by w. */
+static inline void over_general(const uint8_t *x, const uint8_t *y, float w, uint8_t *d)
+{
+	float ab = y[3] * (w * (1.0f / 255)), aa = x[3] * (1.0f / 255);
+	float ao = ab + aa * (1 - ab);
+	if (ao <= 0) {
+		d[0] = d[1] = d[2] = d[3] = 0;
+		return;
+	}
+	float ka = aa * (1 - ab) / ao, kb = ab / ao;
+	for (int c = 0; c < 3; c++)
+		d[c] = u8(x[c] * ka + y[c] * kb);
+	d[3] = u8(ao * 255);
+}
+
+/* over on colours without a mask: the opaque-base fast path with b's weight from a table. */
+static void over_color(const struct blend *bl, const uint8_t *a, const uint8_t *b, uint8_t *o,
+		       size_t count)
+{
+	for (size_t i = 0; i < count; i++) {
+		const uint8_t *x = a + 4 * i, *y = b + 4 * i;
+		uint8_t *d = o + 4 * i;
+		if (x[3] != 255) {
+			over_general(x, y, bl->opacity, d);
+			continue;
+		}
+		uint32_t kb = bl->kb[y[3]], ka = 65536 - kb;
+		d[0] = (uint8_t)((x[0] * ka + y[0] * kb + 32768) >> 16);
+		d[1] = (uint8_t)((x[1] * ka + y[1] * kb + 32768) >> 16);
+		d[2] = (uint8_t)((x[2] * ka + y[2] * kb + 32768) >> 16);
+		d[3] = 255;
+	}
+}
+
+/* Colour (RGBA8) and normal (RG8: ch = 2) texels. */
+static void blend_bytes(const struct blend *bl, const uint8_t *a, const uint8_t *b,
+			const float *mask, uint8_t *o, size_t count, int ch)
+{
+	for (size_t i = 0; i < count; i++) {
+		const uint8_t *x = a + ch * i, *y = b + ch * i;
+		uint8_t *d = o + ch * i;
+		float w = weight_at(mask, i, bl->opacity);
+		if (bl->mode == BLEND_OVER && ch == 4 && x[3] == 255) {
+			/* opaque base (the usual case): a lerp in 16-bit fixed point, no division */
+			uint32_t kb = mask ? (uint32_t)(y[3] * w * (65536.0f / 255) + 0.5f)
+					   : bl->kb[y[3]];
+			uint32_t ka = 65536 - kb;
+			for (int c = 0; c < 3; c++)
+				d[c] = (uint8_t)((x[c] * ka + y[c] * kb + 32768) >> 16);
+			d[3] = 255;
+		} else if (bl->mode == BLEND_OVER && ch == 4) {
+			over_general(x, y, w, d);
+		} else if (bl->mode == BLEND_MULTIPLY) {
+			for (int c = 0; c < 3; c++) {
+				float prod = x[c] * (float)y[c] * (1.0f / 255);
+				d[c] = u8(x[c] + (prod - x[c]) * w);
+			}
+			d[3] = x[3];
+		} else { /* mask, or over on normals */
+			for (int c = 0; c < ch; c++)
+				d[c] = u8(x[c] + (float)(y[c] - x[c]) * w);
+		}
+	}
+}
+
+static int blend_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
+			  struct tile *const *in, int nin, struct tile *out)
+{
+	(void)g;
+	(void)k;
+	const struct blend *bl = n->impl;
+	int want = n->in[SLOT_MASK] ? 3 : 2;
+	if (nin < want)
+		return -EINVAL;
+	for (int i = 0; i < want; i++)
+		if (in[i]->size != out->size || in[i]->type != (i == 2 ? PIX_HEIGHT : out->type))
+			return -EINVAL;
+	const float *mask = want == 3 ? tile_f32(in[2]) : NULL;
+	size_t count = (size_t)out->size * out->size;
+	if (out->type == PIX_HEIGHT)
+		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
+	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && !mask)
+		over_color(bl, in[0]->data, in[1]->data, out->data, count);
+	else
+		blend_bytes(bl, in[0]->data, in[1]->data, mask, out->data, count,
+			    (int)pix_bytes(out->type));
+	return 0;
+}
+
+static const struct node_slot blend_slots[] = {
+	{ .name = "a", .type = PIX_NONE },
+	{ .name = "b", .type = PIX_NONE },
+	{ .name = "mask", .type = PIX_HEIGHT, .optional = true },
+};
+
+const struct node_type node_type_blend = {
+	.name = "blend",
+	.doc = "combine two inputs: over, mask, add (heights), multiply (colours)",
+	.version = 1,
+	.slots = blend_slots,
+	.nslots = 3,
+	.create = blend_create,
+	.destroy = node_free_impl,
+	.generate = blend_generate,
+};

@@ -1,0 +1,110 @@
+/* node_noise — the `noise` node type: seeded fBm or ridged multifractal simplex noise on the
+ * sphere (noise.h) as a height source, or as detail added to an input height.
+ *
+ * Parameters (planet file, [node NAME] with type = noise):
+ *   seed           integer 0..4294967295 (default 0): different seeds, unrelated fields
+ *   kind           fbm | ridged (default fbm)
+ *   octaves        1..24 (default 8): most octaves a tile evaluates; coarse levels evaluate
+ *                  fewer (an octave whose wavelength is under 2 texels is skipped, the one
+ *                  between 2 and 4 texels fades in)
+ *   wavelength     metres of the first octave (default 4e6)
+ *   lacunarity     wavelength ratio between octaves, 1.5..3 (default 2)
+ *   gain           amplitude ratio between octaves, 0..1 (default 0.5)
+ *   amplitude      metres per unit of noise (default 1000); the fractal is roughly in [-1, 1]
+ *   offset         metres added (default 0)
+ *   ridge_offset   ridged: signal = (ridge_offset − |n|)², 0..2 (default 1)
+ *   ridge_gain     ridged: next octave's weight = clamp(signal · ridge_gain, 0, 1), 0..16
+ *                  (default 2)
+ *   max_wavelength metres (default: wavelength): only octaves with a wavelength ≤ this
+ *                  contribute — with an input, the "detail below the data's resolution"
+ *   input          optional height node: output = input + offset + amplitude · noise
+ * Output: height (f32 metres). Thread-safety: the impl is immutable after create.
+ */
+#include <errno.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "engine/node_types.h"
+#include "noise.h"
+#include "engine/planet.h"
+#include "common/xalloc.h"
+
+struct noise_impl {
+	struct noise nz;
+	float amplitude, offset;
+};
+
+static const struct node_slot slots[] = {
+	{ .name = "input", .type = PIX_HEIGHT, .optional = true },
+};
+
+static int noise_create(struct node *n, struct node_parse *p)
+{
+	static const char *const kinds[] = { "fbm", "ridged", NULL };
+	struct noise_params np = { 0 };
+	long seed, octaves;
+	int kind, rc;
+	double amplitude, offset;
+	if ((rc = np_int(p, "seed", 0, 0, 4294967295L, &seed)) ||
+	    (rc = np_enum(p, "kind", kinds, 0, &kind)) ||
+	    (rc = np_int(p, "octaves", 8, 1, NOISE_MAX_OCTAVES, &octaves)) ||
+	    (rc = np_double(p, "wavelength", 4e6, 1e-3, 1e10, &np.wavelength)) ||
+	    (rc = np_double(p, "lacunarity", 2.0, 1.5, 3.0, &np.lacunarity)) ||
+	    (rc = np_double(p, "gain", 0.5, 0.0, 1.0, &np.gain)) ||
+	    (rc = np_double(p, "amplitude", 1000.0, -1e7, 1e7, &amplitude)) ||
+	    (rc = np_double(p, "offset", 0.0, -1e7, 1e7, &offset)) ||
+	    (rc = np_double(p, "ridge_offset", 1.0, 0.0, 2.0, &np.ridge_offset)) ||
+	    (rc = np_double(p, "ridge_gain", 2.0, 0.0, 16.0, &np.ridge_gain)) ||
+	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)))
+		return rc;
+	if (!n->planet || !(n->planet->a > 0))
+		return np_error(p, NULL, "noise node \"%s\": the planet has no radius", n->name);
+	np.seed = (uint32_t)seed;
+	np.kind = kind == 1 ? NOISE_RIDGED : NOISE_FBM;
+	np.octaves = (int)octaves;
+	np.radius = n->planet->a;
+	struct noise_impl *im = xmalloc(sizeof *im);
+	if (noise_init(&im->nz, &np)) {
+		free(im);
+		return np_error(p, NULL, "noise node \"%s\": invalid parameters", n->name);
+	}
+	im->amplitude = (float)amplitude;
+	im->offset = (float)offset;
+	n->impl = im;
+	n->out = PIX_HEIGHT;
+	return 0;
+}
+
+static int noise_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
+			  struct tile *const *in, int nin, struct tile *out)
+{
+	const struct noise_impl *im = n->impl;
+	uint32_t T = out->size;
+	if (out->type != PIX_HEIGHT)
+		return -EINVAL;
+	const struct tile *src;
+	if (node_opt_height_input(n, in, nin, T, &src))
+		return -EINVAL;
+	/* out = input + (offset + amplitude · noise), each row while it is in cache */
+	int rc = noise_tile_scaled(&im->nz, k, T, NOISE_ISA_AUTO,
+				   gen_scratch(g, noise_scratch_size(T)), src ? tile_f32(src) : NULL,
+				   im->amplitude, im->offset, tile_f32(out));
+	if (rc < 0)
+		return rc;
+	return 0;
+}
+
+const struct node_type node_type_noise = {
+	.name = "noise",
+	.doc = "seeded fBm/ridged simplex noise on the sphere (seed, kind=fbm|ridged, octaves, "
+	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
+	       "max_wavelength m), band-limited per level; optional input height gets the "
+	       "octaves with wavelength <= max_wavelength added",
+	.version = 3, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice */
+	.slots = slots,
+	.nslots = 1,
+	.create = noise_create,
+	.destroy = node_free_impl,
+	.deps = NULL,
+	.generate = noise_generate,
+};

@@ -1,0 +1,210 @@
+/* node_normal — `normal`: heights → unit surface normals (RG8: east and north components in the
+ * local tangent frame, up implied), by central differences with metric texel spacing from the
+ * body's ellipsoid: per row, east spacing N(φ)·cos φ·Δλ and north spacing M(φ)·Δφ.
+ *
+ * Seamless: deps() asks for the tile and its four edge neighbours (central differences never
+ * touch the diagonal ones), so border texels difference across tile borders, the antimeridian
+ * (x wraps) and the poles (the neighbour is the tile on the far side with its rows reversed; at
+ * lx = 0 that is the tile itself, half a turn round). NaN heights give a straight-up normal.
+ * Thread-safety: parameters are set in create; generate uses only the worker's scratch.
+ */
+#include <errno.h>
+#include <math.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
+#include "common/geo.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "common/xalloc.h"
+
+struct normal {
+	double exaggeration;
+};
+
+/* The tiles a normal tile reads, by role; deps are those keys without duplicates. */
+enum { NB_C, NB_W, NB_E, NB_N, NB_S, NB_COUNT };
+
+struct nbhood {
+	struct tile_key key[NB_COUNT];
+	bool flip[NB_COUNT]; /* across a pole: rows run the other way */
+	int dep[NB_COUNT];   /* which dependency holds the role's tile */
+	int ndeps;
+};
+
+static void nbhood(const struct node *n, const struct tile_key *k, struct nbhood *nb)
+{
+	static const int d[NB_COUNT][2] = { { 0, 0 }, { -1, 0 }, { 1, 0 }, { 0, -1 }, { 0, 1 } };
+	nb->ndeps = 0;
+	for (int r = 0; r < NB_COUNT; r++) {
+		grid_neighbor(k, d[r][0], d[r][1], &nb->key[r], &nb->flip[r]);
+		nb->key[r].node = n->in[0]->hash;
+		nb->dep[r] = -1;
+		for (int q = 0; q < r; q++)
+			if (grid_key_equal(&nb->key[q], &nb->key[r]))
+				nb->dep[r] = nb->dep[q];
+		if (nb->dep[r] < 0)
+			nb->dep[r] = nb->ndeps++;
+	}
+}
+
+static int normal_create(struct node *n, struct node_parse *p)
+{
+	double ex;
+	int rc = np_double(p, "exaggeration", 1, -1e4, 1e4, &ex);
+	if (rc)
+		return rc;
+	if (!n->planet || !n->planet->body)
+		return np_error(p, NULL, "node \"%s\": the planet has no body (ellipsoid)", n->name);
+	struct normal *nm = xmalloc(sizeof *nm);
+	nm->exaggeration = ex;
+	n->impl = nm;
+	n->out = PIX_NORMAL;
+	return 0;
+}
+
+static int normal_deps(const struct node *n, const struct tile_key *k, struct node_dep *out)
+{
+	struct nbhood nb;
+	nbhood(n, k, &nb);
+	for (int r = 0; r < NB_COUNT; r++) {
+		out[nb.dep[r]].node = n->in[0];
+		out[nb.dep[r]].key = nb.key[r];
+	}
+	return nb.ndeps;
+}
+
+/* One output row. row[0..T+1]: the row with its west and east neighbours at each end; up/dn:
+ * the rows north and south. fx, fy: exaggeration / (2 · spacing). */
+static void normal_row_scalar(const float *restrict row, const float *restrict up,
+			      const float *restrict dn, float fx, float fy, uint8_t *restrict out,
+			      uint32_t from, uint32_t T)
+{
+	for (uint32_t i = from; i < T; i++) {
+		float gx = (row[i + 2] - row[i]) * fx;
+		float gy = (up[i] - dn[i]) * fy;
+		gx = gx == gx ? gx : 0.0f;
+		gy = gy == gy ? gy : 0.0f;
+		float inv = 1.0f / sqrtf(gx * gx + gy * gy + 1.0f);
+		/* round((c + 1)·127.5) = floor(c·127.5 + 128) and the argument is ≥ 0.5 */
+		out[2 * i] = (uint8_t)(int)(-gx * inv * 127.5f + 128.0f);
+		out[2 * i + 1] = (uint8_t)(int)(-gy * inv * 127.5f + 128.0f);
+	}
+}
+
+#ifdef __SSE2__
+/* The same arithmetic, 8 texels at a time (SSE2 is baseline on x86-64; results are identical
+ * to the scalar code: sqrt and division are correctly rounded in both). */
+static void normal_row(const float *restrict row, const float *restrict up,
+		       const float *restrict dn, float fx, float fy, uint8_t *restrict out, uint32_t T)
+{
+	const __m128 vfx = _mm_set1_ps(fx), vfy = _mm_set1_ps(fy), one = _mm_set1_ps(1.0f);
+	const __m128 k = _mm_set1_ps(-127.5f), bias = _mm_set1_ps(128.0f);
+	uint32_t i = 0;
+	for (; i + 8 <= T; i += 8) {
+		__m128i e[2], nn[2];
+		for (int h = 0; h < 2; h++) {
+			uint32_t o = i + 4 * (uint32_t)h;
+			__m128 gx = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(row + o + 2),
+							  _mm_loadu_ps(row + o)), vfx);
+			__m128 gy = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(up + o), _mm_loadu_ps(dn + o)),
+					       vfy);
+			gx = _mm_and_ps(gx, _mm_cmpord_ps(gx, gx));
+			gy = _mm_and_ps(gy, _mm_cmpord_ps(gy, gy));
+			__m128 s = _mm_add_ps(_mm_add_ps(_mm_mul_ps(gx, gx), _mm_mul_ps(gy, gy)), one);
+			__m128 inv = _mm_div_ps(one, _mm_sqrt_ps(s));
+			e[h] = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_mul_ps(gx, inv), k), bias));
+			nn[h] = _mm_cvttps_epi32(_mm_add_ps(_mm_mul_ps(_mm_mul_ps(gy, inv), k), bias));
+		}
+		__m128i eb = _mm_packs_epi32(e[0], e[1]), nb = _mm_packs_epi32(nn[0], nn[1]);
+		eb = _mm_packus_epi16(eb, eb);
+		nb = _mm_packus_epi16(nb, nb);
+		_mm_storeu_si128((__m128i *)(void *)(out + 2 * i), _mm_unpacklo_epi8(eb, nb));
+	}
+	normal_row_scalar(row, up, dn, fx, fy, out, i, T);
+}
+#else
+static void normal_row(const float *restrict row, const float *restrict up,
+		       const float *restrict dn, float fx, float fy, uint8_t *restrict out, uint32_t T)
+{
+	normal_row_scalar(row, up, dn, fx, fy, out, 0, T);
+}
+#endif
+
+/* Row r of tile t (t's own orientation), rotated by half a turn when `half` (lx = 0 across a
+ * pole: the far side is the same tile, T/2 columns round). */
+static const float *pole_row(const struct tile *t, uint32_t r, bool half, float *buf)
+{
+	uint32_t T = t->size;
+	const float *src = tile_f32(t) + (size_t)r * T;
+	if (!half)
+		return src;
+	memcpy(buf, src + T / 2, T / 2 * sizeof *buf);
+	memcpy(buf + T / 2, src, T / 2 * sizeof *buf);
+	return buf;
+}
+
+static int normal_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
+			   struct tile *const *in, int nin, struct tile *out)
+{
+	const struct normal *nm = n->impl;
+	const uint32_t T = out->size;
+	struct nbhood nb;
+	nbhood(n, k, &nb);
+	if (nin != nb.ndeps || !n->planet || !n->planet->body)
+		return -EINVAL;
+	const struct tile *t[NB_COUNT];
+	for (int r = 0; r < NB_COUNT; r++) {
+		t[r] = in[nb.dep[r]];
+		if (t[r]->type != PIX_HEIGHT || t[r]->size != T)
+			return -EINVAL;
+	}
+	float *rowbuf = gen_scratch(g, (size_t)(3 * T + 16) * sizeof(float));
+	float *northbuf = rowbuf + T + 8, *southbuf = northbuf + T;
+	const float *c = tile_f32(t[NB_C]), *w = tile_f32(t[NB_W]), *e = tile_f32(t[NB_E]);
+	const bool half = k->lx == 0;
+	const float *north = nb.flip[NB_N] ? pole_row(t[NB_N], 0, half, northbuf)
+					   : pole_row(t[NB_N], T - 1, false, northbuf);
+	const float *south = nb.flip[NB_S] ? pole_row(t[NB_S], T - 1, half, southbuf)
+					   : pole_row(t[NB_S], 0, false, southbuf);
+
+	const double dlam = 2 * M_PI / ((double)grid_tiles_x(k->lx) * T);
+	const double dphi = M_PI / ((double)grid_tiles_y(k->ly) * T);
+	for (uint32_t j = 0; j < T; j++) {
+		double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5);
+		double mrad, nrad;
+		geo_radii(n->planet->body, lat, &mrad, &nrad);
+		double dx = nrad * cos(lat * (M_PI / 180.0)) * dlam, dy = mrad * dphi;
+		float fx = (float)(nm->exaggeration / (2 * dx));
+		float fy = (float)(nm->exaggeration / (2 * dy));
+		const float *crow = c + (size_t)j * T;
+		rowbuf[0] = w[(size_t)j * T + T - 1];
+		memcpy(rowbuf + 1, crow, T * sizeof *rowbuf);
+		rowbuf[T + 1] = e[(size_t)j * T];
+		const float *up = j > 0 ? crow - T : north;
+		const float *dn = j + 1 < T ? crow + T : south;
+		normal_row(rowbuf, up, dn, fx, fy, out->data + (size_t)j * T * 2, T);
+	}
+	return 0;
+}
+
+static const struct node_slot normal_slots[] = {
+	{ .name = "input", .type = PIX_HEIGHT },
+};
+
+const struct node_type node_type_normal = {
+	.name = "normal",
+	.doc = "surface normals from heights (metric spacing on the ellipsoid, seamless)",
+	.version = 1,
+	.slots = normal_slots,
+	.nslots = 1,
+	.create = normal_create,
+	.destroy = node_free_impl,
+	.deps = normal_deps,
+	.generate = normal_generate,
+};

@@ -1,0 +1,633 @@
+/* noise — tile driver (per-tile double-precision set-up, band limiting, fractal sums), the
+ * run-time ISA dispatch, the scalar row kernel and the double-precision oracle. See noise.h.
+ *
+ * Bit-identity: only the row kernel differs between ISAs; it performs the same float
+ * operations in the same order in every path (fmaf here where the vector code uses FMA), and
+ * everything else (set-up, fractal sums) is this file's code for all paths.
+ */
+#include "noise.h"
+#include "noise_sums.h"
+
+#include <errno.h>
+#include <math.h>
+#include <stdatomic.h>
+#include <string.h>
+
+/* ---- scalar kernel ---- */
+
+static inline float flip_sign(float v, uint32_t bit31)
+{
+	uint32_t u;
+	memcpy(&u, &v, sizeof u);
+	u ^= bit31;
+	memcpy(&v, &u, sizeof v);
+	return v;
+}
+
+static inline float corner(uint32_t h, float x, float y, float z)
+{
+	h *= NOISE_HMUL;
+	uint32_t g = h >> 28;
+	float u = g < 8 ? x : y;
+	float v = g < 4 ? y : ((g & 13) == 12 ? x : z);
+	float grad = flip_sign(u, g << 31) + flip_sign(v, (g & 2) << 30);
+	float t = fmaf(-x, x, 0.5f);
+	t = fmaf(-y, y, t);
+	t = fmaf(-z, z, t);
+	t = t > 0.0f ? t : 0.0f;
+	float t2 = t * t;
+	float t4 = t2 * t2;
+	return t4 * grad;
+}
+
+void noise_row_scalar(const struct noise_row *o, const float *dx, const float *dy, const float *dz,
+		      float *out, uint32_t n)
+{
+	const float G3 = NOISE_G3, G3x2 = 2.0f * NOISE_G3, G3x3 = 3.0f * NOISE_G3;
+	for (uint32_t i = 0; i < n; i++) {
+		float x = fmaf(dx[i], o->f, o->cx);
+		float y = fmaf(dy[i], o->f, o->cy);
+		float z = fmaf(dz[i], o->f, o->cz);
+		float s = ((x + y) + z) * NOISE_F3;
+		float fi = floorf(x + s), fj = floorf(y + s), fk = floorf(z + s);
+		float t = ((fi + fj) + fk) * G3;
+		float x0 = (x - fi) + t, y0 = (y - fj) + t, z0 = (z - fk) + t;
+		int xy = x0 >= y0, yz = y0 >= z0, xz = x0 >= z0;
+		int i1 = xy & xz, j1 = (!xy) & yz, k1 = (!xz) & (!yz);
+		int i2 = xy | xz, j2 = (!xy) | yz, k2 = !(xz & yz);
+		float x1 = (x0 - (i1 ? 1.0f : 0.0f)) + G3;
+		float y1 = (y0 - (j1 ? 1.0f : 0.0f)) + G3;
+		float z1 = (z0 - (k1 ? 1.0f : 0.0f)) + G3;
+		float x2 = (x0 - (i2 ? 1.0f : 0.0f)) + G3x2;
+		float y2 = (y0 - (j2 ? 1.0f : 0.0f)) + G3x2;
+		float z2 = (z0 - (k2 ? 1.0f : 0.0f)) + G3x2;
+		float x3 = (x0 - 1.0f) + G3x3;
+		float y3 = (y0 - 1.0f) + G3x3;
+		float z3 = (z0 - 1.0f) + G3x3;
+		uint32_t hx = o->hx + (uint32_t)(int32_t)fi * NOISE_PX;
+		uint32_t hy = o->hy + (uint32_t)(int32_t)fj * NOISE_PY;
+		uint32_t hz = o->hz + (uint32_t)(int32_t)fk * NOISE_PZ;
+		float n0 = corner(o->seed ^ hx ^ hy ^ hz, x0, y0, z0);
+		float n1 = corner(o->seed ^ (hx + (i1 ? NOISE_PX : 0)) ^ (hy + (j1 ? NOISE_PY : 0)) ^
+					  (hz + (k1 ? NOISE_PZ : 0)),
+				  x1, y1, z1);
+		float n2 = corner(o->seed ^ (hx + (i2 ? NOISE_PX : 0)) ^ (hy + (j2 ? NOISE_PY : 0)) ^
+					  (hz + (k2 ? NOISE_PZ : 0)),
+				  x2, y2, z2);
+		float n3 = corner(o->seed ^ (hx + NOISE_PX) ^ (hy + NOISE_PY) ^ (hz + NOISE_PZ), x3,
+				  y3, z3);
+		out[i] = (((n0 + n1) + n2) + n3) * NOISE_SCALE;
+	}
+}
+
+/* ---- double-precision oracle ---- */
+
+static double corner_ref(uint32_t h, double x, double y, double z)
+{
+	h *= NOISE_HMUL;
+	uint32_t g = h >> 28;
+	double u = g < 8 ? x : y;
+	double v = g < 4 ? y : ((g & 13) == 12 ? x : z);
+	double grad = ((g & 1) ? -u : u) + ((g & 2) ? -v : v);
+	double t = 0.5 - x * x - y * y - z * z;
+	if (t <= 0)
+		return 0;
+	return t * t * t * t * grad;
+}
+
+double noise_simplex_ref(double x, double y, double z, uint32_t seed)
+{
+	double s = (x + y + z) / 3.0;
+	double fi = floor(x + s), fj = floor(y + s), fk = floor(z + s);
+	double t = (fi + fj + fk) / 6.0;
+	double x0 = x - fi + t, y0 = y - fj + t, z0 = z - fk + t;
+	int xy = x0 >= y0, yz = y0 >= z0, xz = x0 >= z0;
+	int i1 = xy & xz, j1 = (!xy) & yz, k1 = (!xz) & (!yz);
+	int i2 = xy | xz, j2 = (!xy) | yz, k2 = !(xz & yz);
+	uint32_t hx = (uint32_t)(int64_t)fi * NOISE_PX;
+	uint32_t hy = (uint32_t)(int64_t)fj * NOISE_PY;
+	uint32_t hz = (uint32_t)(int64_t)fk * NOISE_PZ;
+	double n = corner_ref(seed ^ hx ^ hy ^ hz, x0, y0, z0);
+	n += corner_ref(seed ^ (hx + (i1 ? NOISE_PX : 0)) ^ (hy + (j1 ? NOISE_PY : 0)) ^
+				(hz + (k1 ? NOISE_PZ : 0)),
+			x0 - i1 + 1.0 / 6, y0 - j1 + 1.0 / 6, z0 - k1 + 1.0 / 6);
+	n += corner_ref(seed ^ (hx + (i2 ? NOISE_PX : 0)) ^ (hy + (j2 ? NOISE_PY : 0)) ^
+				(hz + (k2 ? NOISE_PZ : 0)),
+			x0 - i2 + 2.0 / 6, y0 - j2 + 2.0 / 6, z0 - k2 + 2.0 / 6);
+	n += corner_ref(seed ^ (hx + NOISE_PX) ^ (hy + NOISE_PY) ^ (hz + NOISE_PZ), x0 - 0.5,
+			y0 - 0.5, z0 - 0.5);
+	return n * NOISE_SCALE;
+}
+
+/* ---- ISA dispatch ---- */
+
+/* The best ISA + 1, 0 until detected. Detection is idempotent, so concurrent first calls
+ * may both run it and store the same value. (pthread_once is not used: daemon/engine/sched.h shadows
+ * the system <sched.h> that <pthread.h> includes.) */
+static atomic_int isa_cached;
+
+static enum noise_isa isa_detect(void)
+{
+	__builtin_cpu_init();
+	if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512dq") &&
+	    __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512vl") &&
+	    __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+		return NOISE_ISA_AVX512;
+	if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma") &&
+	    __builtin_cpu_supports("bmi2"))
+		return NOISE_ISA_AVX2;
+	return NOISE_ISA_SCALAR;
+}
+
+enum noise_isa noise_isa_best(void)
+{
+	int v = atomic_load_explicit(&isa_cached, memory_order_relaxed);
+	if (v == 0) {
+		v = (int)isa_detect() + 1;
+		atomic_store_explicit(&isa_cached, v, memory_order_relaxed);
+	}
+	return (enum noise_isa)(v - 1);
+}
+
+int noise_isa_supported(enum noise_isa isa)
+{
+	switch (isa) {
+	case NOISE_ISA_AUTO:
+	case NOISE_ISA_SCALAR:
+		return 1;
+	case NOISE_ISA_AVX2:
+		return noise_isa_best() >= NOISE_ISA_AVX2;
+	case NOISE_ISA_AVX512:
+		return noise_isa_best() >= NOISE_ISA_AVX512;
+	}
+	return 0;
+}
+
+const char *noise_isa_name(enum noise_isa isa)
+{
+	switch (isa) {
+	case NOISE_ISA_AUTO:
+		return "auto";
+	case NOISE_ISA_SCALAR:
+		return "scalar";
+	case NOISE_ISA_AVX2:
+		return "avx2";
+	case NOISE_ISA_AVX512:
+		return "avx512";
+	}
+	return "?";
+}
+
+/* ---- set-up ---- */
+
+static uint32_t mix32(uint32_t h)
+{
+	h ^= h >> 16;
+	h *= 0x7feb352du;
+	h ^= h >> 15;
+	h *= 0x846ca68bu;
+	h ^= h >> 16;
+	return h;
+}
+
+double noise_texel_size(double a, int ly, uint32_t T)
+{
+	return M_PI * a / (ldexp(1.0, ly) * T);
+}
+
+double noise_band_weight(double lambda, double s)
+{
+	double w = log2(lambda / (2.0 * s));
+	return w <= 0 ? 0 : w >= 1 ? 1 : w;
+}
+
+/* Expected weighted ridged signal per octave, from a fixed sample of simplex values used as
+ * independent octaves: centring with it keeps the mean of a coarse tile (fewer octaves) equal
+ * to that of its children. Deterministic: depends only on the parameters. */
+static void ridged_means(struct noise *nz, int k0)
+{
+	enum { N = 2048 };
+	static const double R3[3] = { 0.8191725133961645, 0.6710436067037893, 0.5497004779019703 };
+	float vals[N];
+	for (int j = 0; j < N; j++) {
+		double x = fmod(0.5 + R3[0] * (j + 1), 1.0) * 97.0;
+		double y = fmod(0.5 + R3[1] * (j + 1), 1.0) * 97.0;
+		double z = fmod(0.5 + R3[2] * (j + 1), 1.0) * 97.0;
+		vals[j] = (float)noise_simplex_ref(x, y, z, 0x5eedu);
+	}
+	double sum[NOISE_MAX_OCTAVES] = { 0 };
+	for (int j = 0; j < N; j++) {
+		double w = 1.0;
+		for (int k = k0; k < nz->p.octaves; k++) {
+			double n = vals[(unsigned)(j * 1237 + k * 613) % N];
+			double s = nz->p.ridge_offset - fabs(n);
+			s = s * s * w;
+			w = s * nz->p.ridge_gain;
+			w = w < 0 ? 0 : w > 1 ? 1 : w;
+			sum[k] += s;
+		}
+	}
+	for (int k = k0; k < nz->p.octaves; k++)
+		nz->oct[k].mean = sum[k] / N;
+}
+
+/* A rotation from three hashed uniforms (Shoemake's uniform random quaternion). */
+static void octave_rotation(uint32_t seed, double r[3][3])
+{
+	double u1 = mix32(seed ^ 0x1b873593u) / 4294967296.0;
+	double u2 = mix32(seed ^ 0xcc9e2d51u) / 4294967296.0 * 2 * M_PI;
+	double u3 = mix32(seed ^ 0xe6546b64u) / 4294967296.0 * 2 * M_PI;
+	double a = sqrt(1 - u1), b = sqrt(u1);
+	double w = a * sin(u2), x = a * cos(u2), y = b * sin(u3), z = b * cos(u3);
+	r[0][0] = 1 - 2 * (y * y + z * z);
+	r[0][1] = 2 * (x * y - z * w);
+	r[0][2] = 2 * (x * z + y * w);
+	r[1][0] = 2 * (x * y + z * w);
+	r[1][1] = 1 - 2 * (x * x + z * z);
+	r[1][2] = 2 * (y * z - x * w);
+	r[2][0] = 2 * (x * z - y * w);
+	r[2][1] = 2 * (y * z + x * w);
+	r[2][2] = 1 - 2 * (x * x + y * y);
+}
+
+static void rotate(const double r[3][3], const double v[3], double out[3])
+{
+	for (int a = 0; a < 3; a++)
+		out[a] = r[a][0] * v[0] + r[a][1] * v[1] + r[a][2] * v[2];
+}
+
+static bool included(const struct noise *nz, int k)
+{
+	return !(nz->p.max_wavelength > 0 && nz->oct[k].lambda > nz->p.max_wavelength * (1 + 1e-9));
+}
+
+int noise_init(struct noise *nz, const struct noise_params *p)
+{
+	if (p->octaves < 1 || p->octaves > NOISE_MAX_OCTAVES || !(p->wavelength > 0) ||
+	    !(p->lacunarity > 1) || !(p->gain >= 0) || !(p->radius > 0) ||
+	    !isfinite(p->wavelength) || !isfinite(p->radius) || !isfinite(p->gain) ||
+	    !(p->max_wavelength >= 0) || !isfinite(p->ridge_offset) || !isfinite(p->ridge_gain))
+		return -EINVAL;
+	memset(nz, 0, sizeof *nz);
+	nz->p = *p;
+	double total = 0;
+	for (int k = 0; k < p->octaves; k++)
+		total += pow(p->gain, k);
+	for (int k = 0; k < p->octaves; k++) {
+		struct noise_octave *o = &nz->oct[k];
+		o->lambda = p->wavelength / pow(p->lacunarity, k);
+		o->freq = (double)(float)(p->radius / o->lambda);
+		o->amp = pow(p->gain, k) / total * (p->kind == NOISE_RIDGED ? 2.0 : 1.0);
+		o->seed = mix32(p->seed ^ mix32((uint32_t)k * 0x9e3779b9u + 0x632be5abu));
+		octave_rotation(o->seed, o->rot);
+	}
+	if (p->kind == NOISE_RIDGED) {
+		int k0 = 0;
+		while (k0 < p->octaves && !included(nz, k0))
+			k0++;
+		ridged_means(nz, k0);
+	}
+	return 0;
+}
+
+/* Octaves a tile of level ly evaluates, with their band weights; returns how many. */
+static int active_octaves(const struct noise *nz, int ly, uint32_t T, int idx[], float w[])
+{
+	double s = noise_texel_size(nz->p.radius, ly, T);
+	int m = 0;
+	for (int k = 0; k < nz->p.octaves; k++) {
+		if (!included(nz, k))
+			continue;
+		double bw = noise_band_weight(nz->oct[k].lambda, s);
+		if (bw <= 0)
+			break;
+		idx[m] = k;
+		w[m] = (float)bw;
+		m++;
+	}
+	return m;
+}
+
+
+/* Lattice of a tile: M = T/h + 5 points across and down (2 beyond each edge, the one at the
+ * far edge included), stored row-major in P floats (M² rounded up to 16). */
+static uint32_t lattice_m(uint32_t T)
+{
+	return T / NOISE_MR_STRIDE + 5;
+}
+
+static size_t lattice_p(uint32_t T)
+{
+	size_t m = lattice_m(T);
+	return (m * m + NOISE_LATTICE_PAD(m) + 15) / 16 * 16;
+}
+
+/* Floats of one interpolated lattice row (and of its slopes). */
+static size_t lattice_row(uint32_t T)
+{
+	return (lattice_m(T) + NOISE_ROW_PAD + 15) / 16 * 16;
+}
+
+size_t noise_scratch_size(uint32_t T)
+{
+	/* texel rows: 2 double + 8 float arrays of T; lattice: 8 + NOISE_MAX_OCTAVES float
+	 * arrays of P (M² and a pad); per coarse octave one interpolated lattice row and its
+	 * slopes: 2 float arrays of M and a pad */
+	return (size_t)T * (2 * sizeof(double) + 8 * sizeof(float)) +
+	       lattice_p(T) * (8 + NOISE_MAX_OCTAVES) * sizeof(float) +
+	       lattice_row(T) * 2 * NOISE_MAX_OCTAVES * sizeof(float) + 64;
+}
+
+/* Active octaves 0..mc-1 have a wavelength of at least NOISE_MR_MIN_TEXELS texels of the
+ * level, measured along the equator in longitude (the larger texel side anywhere). The
+ * sphere itself (the map from texels to points) varies on the scale of its circumference, so
+ * a level whose circumference is shorter than that many texels gets no lattice at all. */
+static int coarse_count(const struct noise *nz, int lx, uint32_t T, const int idx[], int m)
+{
+	if (nz->p.exact)
+		return 0;
+	double circ = 2.0 * M_PI * nz->p.radius, su = circ / (ldexp(1.0, lx) * T);
+	int mc = 0;
+	while (mc < m && fmin(nz->oct[idx[mc]].lambda, circ) >= NOISE_MR_MIN_TEXELS * su)
+		mc++;
+	return mc;
+}
+
+int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T)
+{
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	int m = active_octaves(nz, ly, T, idx, w);
+	return coarse_count(nz, lx, T, idx, m);
+}
+
+static noise_row_fn *kernel_for(enum noise_isa isa)
+{
+	switch (isa) {
+	case NOISE_ISA_SCALAR:
+		return noise_row_scalar;
+	case NOISE_ISA_AVX2:
+		return noise_row_avx2;
+	case NOISE_ISA_AVX512:
+		return noise_row_avx512;
+	case NOISE_ISA_AUTO:
+		break;
+	}
+	return NULL;
+}
+
+static void unit_vector(double lon_deg, double lat_deg, double v[3])
+{
+	double lon = lon_deg * (M_PI / 180.0), lat = lat_deg * (M_PI / 180.0);
+	v[0] = cos(lat) * cos(lon);
+	v[1] = cos(lat) * sin(lon);
+	v[2] = sin(lat);
+}
+
+/* The octave's lattice origin and texel-independent offset for a tile centred at pc (in the
+ * octave's rotated frame). */
+static void octave_row(const struct noise_octave *oc, const double pc0[3], struct noise_row *r)
+{
+	double q[3], O[3], pc[3];
+	int64_t I0[3];
+	rotate(oc->rot, pc0, pc);
+	for (int a = 0; a < 3; a++)
+		q[a] = pc[a] * oc->freq;
+	double sk = (q[0] + q[1] + q[2]) * (1.0 / 3.0);
+	for (int a = 0; a < 3; a++)
+		I0[a] = (int64_t)floor(q[a] + sk);
+	double ut = (double)(I0[0] + I0[1] + I0[2]) * (1.0 / 6.0);
+	for (int a = 0; a < 3; a++)
+		O[a] = (double)I0[a] - ut;
+	r->f = (float)oc->freq;
+	r->cx = (float)(q[0] - O[0]);
+	r->cy = (float)(q[1] - O[1]);
+	r->cz = (float)(q[2] - O[2]);
+	r->hx = (uint32_t)I0[0] * NOISE_PX;
+	r->hy = (uint32_t)I0[1] * NOISE_PY;
+	r->hz = (uint32_t)I0[2] * NOISE_PZ;
+	r->seed = oc->seed;
+}
+
+/* The fractal sums (noise_sums.h) run at each ISA's width; the per-row set-up below uses
+ * GCC vector extensions too (SSE2 in a baseline build): elementwise IEEE operations give the
+ * same bits at any width. */
+typedef double v2d __attribute__((vector_size(16)));
+typedef float v2f __attribute__((vector_size(8)));
+
+const struct noise_sums noise_sums_scalar = NOISE_SUMS_INIT;
+
+static const struct noise_sums *sums_for(enum noise_isa isa)
+{
+	switch (isa) {
+	case NOISE_ISA_AVX2:
+		return &noise_sums_avx2;
+	case NOISE_ISA_AVX512:
+		return &noise_sums_avx512;
+	default:
+		return &noise_sums_scalar;
+	}
+}
+
+/* Cubic Hermite basis at t = q/h, q = 0..h-1 (from double, so the same bits on every path):
+ * value = h00·f0 + h10·m0 + h01·f1 + h11·m1 with slopes m per lattice step. */
+static void hermite_basis(float b[4][NOISE_MR_STRIDE])
+{
+	for (int q = 0; q < NOISE_MR_STRIDE; q++) {
+		double t = (double)q / NOISE_MR_STRIDE, t2 = t * t, t3 = t2 * t;
+		b[0][q] = (float)(2 * t3 - 3 * t2 + 1);
+		b[1][q] = (float)(t3 - 2 * t2 + t);
+		b[2][q] = (float)(3 * t2 - 2 * t3);
+		b[3][q] = (float)(t3 - t2);
+	}
+}
+
+/* The octaves mc..m-1 of texel row j, evaluated at every texel and added into row (wt: the
+ * ridged weights so far). tmp: 7 float arrays of T (dx, dy, dz, rx, ry, rz, nb). */
+static void full_res_row(const struct noise *nz, const struct noise_sums *ns, noise_row_fn *row_fn,
+			 const struct tile_key *k, uint32_t T, uint32_t j, const double pc[3],
+			 const double *ccos, const double *csin, const struct noise_row *rows,
+			 const float (*rot)[9], const float *amp, const float *mean, int mc, int m,
+			 float *row, float *wt, float *const tmp[7])
+{
+	float *dx = tmp[0], *dy = tmp[1], *dz = tmp[2], *rx = tmp[3], *ry = tmp[4], *rz = tmp[5];
+	float *nb = tmp[6];
+	const float ro = (float)nz->p.ridge_offset, rg = (float)nz->p.ridge_gain;
+	const bool ridged = nz->p.kind == NOISE_RIDGED;
+	double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5) * (M_PI / 180.0);
+	double cl = cos(lat), sl = sin(lat);
+	const v2d vcl = { cl, cl }, vpx = { pc[0], pc[0] }, vpy = { pc[1], pc[1] };
+	const float fz = (float)(sl - pc[2]);
+	for (uint32_t i = 0; i < T; i += 2) {
+		v2d c2, s2;
+		memcpy(&c2, ccos + i, sizeof c2);
+		memcpy(&s2, csin + i, sizeof s2);
+		v2f x2 = __builtin_convertvector(vcl * c2 - vpx, v2f);
+		v2f y2 = __builtin_convertvector(vcl * s2 - vpy, v2f);
+		memcpy(dx + i, &x2, sizeof x2);
+		memcpy(dy + i, &y2, sizeof y2);
+		dz[i] = dz[i + 1] = fz;
+	}
+	for (int o = mc; o < m; o++) {
+		ns->rotate_row(rot[o], dx, dy, dz, rx, ry, rz, T);
+		row_fn(&rows[o], rx, ry, rz, nb, T);
+		if (!ridged)
+			ns->acc_fbm(row, nb, amp[o], T);
+		else
+			ns->acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, o == 0, T);
+	}
+}
+
+static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		    enum noise_isa isa, void *scratch, bool scale, const float *base, float amplitude,
+		    float offset, float *out)
+{
+	if (!grid_key_valid(k) || T < 16 || T > 4096 || T % 16)
+		return -EINVAL;
+	if (isa == NOISE_ISA_AUTO)
+		isa = noise_isa_best();
+	if (!noise_isa_supported(isa))
+		return -ENOTSUP;
+	noise_row_fn *row_fn = kernel_for(isa);
+	const struct noise_sums *ns = sums_for(isa);
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	int m = active_octaves(nz, k->ly, T, idx, w);
+	int mc = coarse_count(nz, k->lx, T, idx, m);
+
+	const uint32_t M = lattice_m(T), P = (uint32_t)lattice_p(T), MP = (uint32_t)lattice_row(T);
+	double *ccos = scratch, *csin = ccos + T;
+	float *dx = (float *)(csin + T), *dy = dx + T, *dz = dy + T, *nb = dz + T, *wt = nb + T;
+	float *rx = wt + T, *ry = rx + T, *rz = ry + T;
+	float *ldx = rz + T, *ldy = ldx + P, *ldz = ldy + P, *lrx = ldz + P, *lry = lrx + P;
+	float *lrz = lry + P, *lnb = lrz + P, *ls = lnb + P, *ln = ls + P; /* ln: mc × P */
+	float *tc = ln + (size_t)NOISE_MAX_OCTAVES * P, *td = tc + (size_t)NOISE_MAX_OCTAVES * MP;
+	if (m == 0) {
+		memset(out, 0, (size_t)T * T * sizeof *out);
+		for (uint32_t j = 0; scale && j < T; j++)
+			ns->finish(out + (size_t)j * T, base ? base + (size_t)j * T : NULL, amplitude,
+				   offset, T);
+		return 0;
+	}
+	double pc[3];
+	unit_vector(grid_u_to_lon(k->lx, T, (double)k->x * T + T / 2),
+		    grid_v_to_lat(k->ly, T, (double)k->y * T + T / 2), pc);
+	struct noise_row rows[NOISE_MAX_OCTAVES];
+	float amp[NOISE_MAX_OCTAVES], mean[NOISE_MAX_OCTAVES], rot[NOISE_MAX_OCTAVES][9];
+	for (int o = 0; o < m; o++) {
+		octave_row(&nz->oct[idx[o]], pc, &rows[o]);
+		for (int a = 0; a < 9; a++)
+			rot[o][a] = (float)nz->oct[idx[o]].rot[a / 3][a % 3];
+		amp[o] = (float)(nz->oct[idx[o]].amp * w[o]);
+		mean[o] = (float)nz->oct[idx[o]].mean;
+	}
+	const float ro = (float)nz->p.ridge_offset, rg = (float)nz->p.ridge_gain;
+	const bool ridged = nz->p.kind == NOISE_RIDGED;
+	float hb[4][NOISE_MR_STRIDE];
+	if (mc > 0) {
+		/* The coarse octaves at the lattice points (texel centres of level texels whose
+		 * u and v are multiples of h), as one flat array through the row kernel. */
+		const double h = NOISE_MR_STRIDE;
+		for (uint32_t a = 0; a < M; a++) {
+			double u = (double)k->x * T + ((double)a - 2) * h + 0.5;
+			double lon = grid_u_to_lon(k->lx, T, u) * (M_PI / 180.0);
+			ccos[a] = cos(lon);
+			csin[a] = sin(lon);
+		}
+		for (uint32_t r = 0; r < M; r++) {
+			double v = (double)k->y * T + ((double)r - 2) * h + 0.5;
+			double lat = grid_v_to_lat(k->ly, T, v) * (M_PI / 180.0);
+			double cl = cos(lat), sl = sin(lat);
+			float fz = (float)(sl - pc[2]);
+			for (uint32_t a = 0; a < M; a++) {
+				ldx[r * M + a] = (float)(cl * ccos[a] - pc[0]);
+				ldy[r * M + a] = (float)(cl * csin[a] - pc[1]);
+				ldz[r * M + a] = fz;
+			}
+		}
+		for (uint32_t q = M * M; q < P; q++)
+			ldx[q] = ldy[q] = ldz[q] = 0;
+		/* fBm: their weighted sum; ridged: each octave's raw noise (smooth, unlike the
+		 * creased signal), put through the ridge per texel after interpolation. */
+		memset(ls, 0, P * sizeof *ls);
+		for (int o = 0; o < mc; o++) {
+			ns->rotate_row(rot[o], ldx, ldy, ldz, lrx, lry, lrz, P);
+			if (!ridged) {
+				row_fn(&rows[o], lrx, lry, lrz, lnb, P);
+				ns->acc_fbm(ls, lnb, amp[o], P);
+			} else {
+				row_fn(&rows[o], lrx, lry, lrz, ln + (size_t)o * P, P);
+			}
+		}
+		hermite_basis(hb);
+	}
+	if (mc < m)
+		for (uint32_t i = 0; i < T; i++) {
+			double lon = grid_u_to_lon(k->lx, T, (double)k->x * T + i + 0.5) *
+				     (M_PI / 180.0);
+			ccos[i] = cos(lon);
+			csin[i] = sin(lon);
+		}
+	for (uint32_t j = 0; j < T; j++) {
+		float *row = out + (size_t)j * T;
+		if (mc > 0 && !ridged) {
+			ns->interp_cols(ls, M, j, hb, tc);
+			ns->interp_slopes(tc, M, td);
+			ns->interp_row(tc, td, M, hb, row);
+		} else if (mc > 0) {
+			for (int o = 0; o < mc; o++)
+				ns->interp_cols(ln + (size_t)o * P, M, j, hb, tc + (size_t)o * MP);
+			for (int o = 0; o < mc; o++)
+				ns->interp_slopes(tc + (size_t)o * MP, M, td + (size_t)o * MP);
+			ns->ridged_coarse(row, wt, mc, tc, td, MP, M, hb, amp, mean, ro, rg);
+		} else {
+			memset(row, 0, T * sizeof *row);
+		}
+		if (mc < m)
+			full_res_row(nz, ns, row_fn, k, T, j, pc, ccos, csin, rows, rot, amp, mean, mc,
+				     m, row, wt, (float *[7]){ dx, dy, dz, rx, ry, rz, nb });
+		if (scale)
+			ns->finish(row, base ? base + (size_t)j * T : NULL, amplitude, offset, T);
+	}
+	return m;
+}
+
+
+int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enum noise_isa isa,
+	       void *scratch, float *out)
+{
+	return tile_sum(nz, k, T, isa, scratch, false, NULL, 1, 0, out);
+}
+
+int noise_tile_scaled(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		      enum noise_isa isa, void *scratch, const float *base, float amplitude,
+		      float offset, float *out)
+{
+	return tile_sum(nz, k, T, isa, scratch, true, base, amplitude, offset, out);
+}
+
+double noise_point(const struct noise *nz, double lon, double lat, int ly, uint32_t T)
+{
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	int m = active_octaves(nz, ly, T, idx, w);
+	double p0[3], p[3], sum = 0, wt = 1;
+	unit_vector(lon, lat, p0);
+	for (int o = 0; o < m; o++) {
+		const struct noise_octave *oc = &nz->oct[idx[o]];
+		rotate(oc->rot, p0, p);
+		double n = noise_simplex_ref(p[0] * oc->freq, p[1] * oc->freq, p[2] * oc->freq,
+					     oc->seed);
+		double a = oc->amp * w[o];
+		if (nz->p.kind == NOISE_FBM) {
+			sum += a * n;
+			continue;
+		}
+		double s = nz->p.ridge_offset - fabs(n);
+		s = s * s * wt;
+		wt = s * nz->p.ridge_gain;
+		wt = wt < 0 ? 0 : wt > 1 ? 1 : wt;
+		sum += (s - oc->mean) * a;
+	}
+	return sum;
+}

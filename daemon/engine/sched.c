@@ -1,0 +1,712 @@
+/* sched — see sched.h. Design note:
+ *
+ * Locks (never nested; none is held across generation, callbacks or a cache call):
+ *   in_mu  the manager's inbox: pending want lists, destroy requests, finished jobs, stop.
+ *          Requesters and workers only post under it and never wait on generation.
+ *   q_mu   the ready heap, per-class queued counts, running count, worker stop flag.
+ *   cache  taken by the manager (lookups) and workers (inserts) with neither lock above held.
+ * The manager owns everything else (job map, active requests, want lists and their entry
+ * states, dependency links) and touches it without locks. A job moves to a worker through
+ * q_mu (the worker reads only node, key and inputs) and back through in_mu (result, err).
+ *
+ * Manager iteration: snapshot the inbox; install new want lists and apply destroys; when any
+ * changed, recompute (an epoch-stamped marking pass over every active list: report cached
+ * keys, find or create jobs depth-first, propagate the best priority to dependencies, record
+ * which want entries wait on each job; then cancel queued and waiting jobs the pass did not
+ * reach); process finished jobs incrementally (report to the waiting entries, hand the tile
+ * to dependents); push newly ready jobs; run the callbacks with no lock held; finally free
+ * destroyed requests and wake whoever waits in sched_req_destroy.
+ */
+#include "sched.h"
+
+#include <errno.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdbool.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "jobtab.h"
+#include "planet.h"
+#include "common/xalloc.h"
+
+enum entry_state { ENTRY_NEW = 0, ENTRY_PENDING, ENTRY_REPORTED, ENTRY_DUP };
+
+struct sched_req {
+	struct sched *s;
+	sched_ready_fn fn;
+	void *ud;
+
+	/* Under s->in_mu. */
+	struct want *pending;
+	size_t npending;
+	bool has_pending, destroy, in_changes;
+	bool *ack; /* the destroyer's flag; NULL when destroyed on the manager thread */
+	struct sched_req *next_change;
+
+	/* Manager only. */
+	struct want *pend_m; /* snapshot of the inbox fields above */
+	size_t npend_m;
+	bool has_pend_m, destroy_m;
+	bool *ack_m;
+	struct sched_req *next_change_m;
+	struct want *list; /* the installed want list; callbacks get pointers into it */
+	size_t n;
+	uint8_t *st;	 /* enum entry_state per entry */
+	uint32_t *first; /* index of the first entry with the same key */
+	bool active, dead;
+	struct sched_req *prev, *next; /* active list */
+};
+
+struct report {
+	struct sched_req *r;
+	const struct want *w;
+	struct tile *t; /* owned reference or NULL */
+	int err;
+};
+
+struct sched {
+	struct cache *cache;
+	int nworkers, nice;
+	pthread_t manager;
+	pthread_t *workers;
+
+	pthread_mutex_t in_mu;
+	pthread_cond_t in_cv;  /* the manager waits for work */
+	pthread_cond_t ack_cv; /* destroyers wait for the manager */
+	struct sched_req *changes;
+	struct job *done;
+	bool in_stop;
+
+	pthread_mutex_t q_mu;
+	pthread_cond_t q_cv; /* workers wait for ready jobs */
+	struct jobheap heap;
+	uint64_t queued[SCHED_NCLASS], running;
+	bool q_stop;
+
+	/* Manager only. */
+	struct jobgraph g;
+	struct sched_req *reqs; /* active requests */
+	struct report *batch;	/* callbacks to run at the end of the iteration */
+	size_t nbatch, capbatch;
+
+	atomic_uint_fast64_t generated;
+	atomic_int nice_err;
+};
+
+static void die(const char *what, int rc)
+{
+	fprintf(stderr, "sched: %s: %s\n", what, strerror(rc));
+	abort();
+}
+
+static void lock(pthread_mutex_t *m)
+{
+	int rc = pthread_mutex_lock(m);
+	if (rc)
+		die("pthread_mutex_lock", rc);
+}
+
+static void unlock(pthread_mutex_t *m)
+{
+	int rc = pthread_mutex_unlock(m);
+	if (rc)
+		die("pthread_mutex_unlock", rc);
+}
+
+static void cond_wait(pthread_cond_t *c, pthread_mutex_t *m)
+{
+	int rc = pthread_cond_wait(c, m);
+	if (rc)
+		die("pthread_cond_wait", rc);
+}
+
+static void cond_signal(pthread_cond_t *c, bool all)
+{
+	int rc = all ? pthread_cond_broadcast(c) : pthread_cond_signal(c);
+	if (rc)
+		die("pthread_cond_signal", rc);
+}
+
+static uint64_t now_ns(void)
+{
+	struct timespec ts;
+	clock_gettime(CLOCK_MONOTONIC, &ts);
+	return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
+}
+
+/* first[i] = index of the first entry with w[i]'s key. Returns how many distinct keys. */
+static size_t dedupe(const struct want *w, size_t n, uint32_t *first)
+{
+	size_t cap = 16;
+	while (cap < 2 * n)
+		cap *= 2;
+	uint32_t *tab = xmalloc(cap * sizeof *tab);
+	memset(tab, 0xff, cap * sizeof *tab);
+	size_t distinct = 0;
+	for (size_t i = 0; i < n; i++) {
+		size_t h = grid_key_hash(&w[i].key) & (cap - 1);
+		first[i] = (uint32_t)i;
+		while (tab[h] != UINT32_MAX) {
+			if (grid_key_equal(&w[tab[h]].key, &w[i].key)) {
+				first[i] = tab[h];
+				break;
+			}
+			h = (h + 1) & (cap - 1);
+		}
+		if (first[i] == i) {
+			tab[h] = (uint32_t)i;
+			distinct++;
+		}
+	}
+	free(tab);
+	return distinct;
+}
+
+/* ---- manager: requests ---- */
+
+static void add_report(struct sched *s, struct sched_req *r, size_t idx, struct tile *t, int err)
+{
+	if (s->nbatch == s->capbatch) {
+		s->capbatch = s->capbatch ? s->capbatch * 2 : 64;
+		s->batch = xrealloc(s->batch, s->capbatch * sizeof *s->batch);
+	}
+	r->st[idx] = ENTRY_REPORTED;
+	s->batch[s->nbatch++] = (struct report){ r, &r->list[idx], t, err };
+}
+
+/* The graph's report hook: queues the callback unless the entry was already reported. */
+static void report_entry(void *ud, const struct job_wanter *w, struct tile *t, int err)
+{
+	struct sched *s = ud;
+	struct sched_req *r = w->r;
+	if (!r->dead && w->idx < r->n && r->st[w->idx] == ENTRY_PENDING)
+		add_report(s, r, w->idx, t ? tile_ref(t) : NULL, err);
+}
+
+static void activate(struct sched *s, struct sched_req *r)
+{
+	r->active = true;
+	r->prev = NULL;
+	r->next = s->reqs;
+	if (s->reqs)
+		s->reqs->prev = r;
+	s->reqs = r;
+}
+
+static void deactivate(struct sched *s, struct sched_req *r)
+{
+	if (!r->active)
+		return;
+	if (r->prev)
+		r->prev->next = r->next;
+	else
+		s->reqs = r->next;
+	if (r->next)
+		r->next->prev = r->prev;
+	r->active = false;
+}
+
+/* Installs new lists and applies destroys from the snapshot ch. Returns whether any did. */
+static bool apply_changes(struct sched *s, struct sched_req *ch)
+{
+	bool changed = false;
+	for (struct sched_req *r = ch; r; r = r->next_change_m) {
+		if (r->destroy_m) {
+			deactivate(s, r);
+			r->dead = true;
+			free(r->pend_m);
+			r->pend_m = NULL;
+			changed = true;
+			continue;
+		}
+		if (!r->has_pend_m)
+			continue;
+		free(r->list);
+		free(r->st);
+		free(r->first);
+		r->list = r->pend_m;
+		r->n = r->npend_m;
+		r->pend_m = NULL;
+		r->st = xcalloc(r->n ? r->n : 1, 1);
+		r->first = xmalloc((r->n ? r->n : 1) * sizeof *r->first);
+		dedupe(r->list, r->n, r->first);
+		for (size_t i = 0; i < r->n; i++)
+			if (r->first[i] != i)
+				r->st[i] = ENTRY_DUP;
+		if (!r->active)
+			activate(s, r);
+		changed = true;
+	}
+	return changed;
+}
+
+/* The marking pass over every active want list, then cancellation of what it missed. */
+static void recompute(struct sched *s)
+{
+	s->g.epoch++;
+	for (struct sched_req *r = s->reqs; r; r = r->next) {
+		for (size_t i = 0; i < r->n; i++) {
+			const struct want *w = &r->list[i];
+			struct job_prio p = { (uint8_t)w->cls, w->key.ly, w->key.lx, (uint32_t)i };
+			if (r->st[i] == ENTRY_REPORTED)
+				continue;
+			if (r->st[i] == ENTRY_DUP) {
+				/* Reported with its first entry, but its class may be better. */
+				if (r->st[r->first[i]] == ENTRY_PENDING)
+					jobgraph_visit(&s->g, jobmap_find(&s->g.map, &w->key), &p);
+				continue;
+			}
+			struct job *j = jobmap_find(&s->g.map, &w->key);
+			if (j) {
+				if (r->st[i] == ENTRY_NEW)
+					atomic_fetch_add(&s->g.merged, 1);
+			} else {
+				struct tile *t = cache_lookup(s->cache, &w->key);
+				if (t) {
+					add_report(s, r, i, t, 0);
+					continue;
+				}
+				j = jobgraph_create(&s->g, w->node, &w->key);
+			}
+			r->st[i] = ENTRY_PENDING;
+			jobgraph_visit(&s->g, j, &p);
+			jobgraph_add_wanter(&s->g, j, r, i);
+		}
+	}
+
+	/* Queued jobs the pass did not reach leave the heap; the rest take their new priority.
+	 * Running jobs are not in the heap and finish regardless. */
+	struct job *cancel = NULL;
+	lock(&s->q_mu);
+	size_t kept = 0;
+	for (size_t i = 0; i < s->heap.n; i++) {
+		struct job *j = s->heap.a[i];
+		if (j->mark != s->g.epoch) {
+			j->heap_idx = -1;
+			j->mstate = JOB_CANCELLED;
+			j->next = cancel;
+			cancel = j;
+		} else {
+			j->qprio = j->prio;
+			s->heap.a[kept++] = j;
+		}
+	}
+	s->heap.n = kept;
+	jobheap_heapify(&s->heap);
+	memset(s->queued, 0, sizeof s->queued);
+	for (size_t i = 0; i < s->heap.n; i++)
+		s->queued[s->heap.a[i]->qprio.cls]++;
+	unlock(&s->q_mu);
+
+	jobgraph_cancel_unmarked(&s->g, cancel);
+}
+
+static void submit(struct sched *s)
+{
+	if (!s->g.push)
+		return;
+	int pushed = 0;
+	lock(&s->q_mu);
+	while (s->g.push) {
+		struct job *j = s->g.push;
+		s->g.push = j->next;
+		j->qprio = j->prio;
+		jobheap_push(&s->heap, j);
+		s->queued[j->qprio.cls]++;
+		pushed++;
+	}
+	cond_signal(&s->q_cv, pushed > 1);
+	unlock(&s->q_mu);
+}
+
+static void deliver(struct sched *s)
+{
+	for (size_t i = 0; i < s->nbatch; i++) {
+		struct report *e = &s->batch[i];
+		if (!e->r->dead)
+			e->r->fn(e->r->ud, e->w, e->t, e->err);
+		tile_unref(e->t);
+	}
+	s->nbatch = 0;
+}
+
+static void free_req(struct sched_req *r)
+{
+	free(r->pending);
+	free(r->pend_m);
+	free(r->list);
+	free(r->st);
+	free(r->first);
+	free(r);
+}
+
+static void *manager_main(void *arg)
+{
+	struct sched *s = arg;
+	lock(&s->in_mu);
+	for (;;) {
+		while (!s->in_stop && !s->changes && !s->done)
+			cond_wait(&s->in_cv, &s->in_mu);
+		if (s->in_stop)
+			break;
+		struct sched_req *ch = s->changes;
+		s->changes = NULL;
+		for (struct sched_req *r = ch; r; r = r->next_change) {
+			r->in_changes = false;
+			r->next_change_m = r->next_change;
+			free(r->pend_m);
+			r->pend_m = r->pending;
+			r->npend_m = r->npending;
+			r->has_pend_m = r->has_pending;
+			r->destroy_m = r->destroy;
+			r->ack_m = r->ack;
+			r->pending = NULL;
+			r->has_pending = false;
+		}
+		struct job *done = s->done;
+		s->done = NULL;
+		unlock(&s->in_mu);
+
+		if (apply_changes(s, ch))
+			recompute(s);
+		while (s->g.fails) {
+			struct job *j = s->g.fails;
+			s->g.fails = j->next;
+			atomic_fetch_add(&s->g.failed, 1);
+			jobgraph_complete(&s->g, j);
+		}
+		while (done) {
+			struct job *j = done;
+			done = j->next_done;
+			jobgraph_complete(&s->g, j);
+		}
+		submit(s);
+		deliver(s);
+
+		lock(&s->in_mu);
+		bool acked = false;
+		for (struct sched_req *r = ch, *next; r; r = next) {
+			next = r->next_change_m;
+			if (!r->destroy_m)
+				continue;
+			if (r->ack_m) {
+				*r->ack_m = true;
+				acked = true;
+			}
+			free_req(r);
+		}
+		if (acked)
+			cond_signal(&s->ack_cv, true);
+	}
+	unlock(&s->in_mu);
+	return NULL;
+}
+
+/* ---- workers ---- */
+
+struct worker_arg {
+	struct sched *s;
+	int idx;
+};
+
+static void lower_priority(struct sched *s)
+{
+	if (s->nice <= 0)
+		return;
+	id_t tid = (id_t)syscall(SYS_gettid);
+	int err = 0;
+	errno = 0;
+	int cur = getpriority(PRIO_PROCESS, tid);
+	if (cur == -1 && errno != 0)
+		err = -errno;
+	else if (setpriority(PRIO_PROCESS, tid, cur + s->nice) != 0 && errno != EPERM &&
+		 errno != EACCES)
+		err = -errno;
+	int zero = 0;
+	if (err)
+		atomic_compare_exchange_strong(&s->nice_err, &zero, err);
+}
+
+static void generate(struct sched *s, struct gen_ctx *g, struct job *j)
+{
+	const struct node *n = j->node;
+	struct tile *t = tile_create(&j->key, n->out, n->planet->tile_size);
+	uint64_t t0 = now_ns();
+	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
+	uint64_t dt = now_ns() - t0;
+	if (rc == 0) {
+		cache_insert(s->cache, t);
+		atomic_fetch_add(&j->node->generated, 1);
+		atomic_fetch_add(&j->node->gen_ns, dt);
+		atomic_fetch_add(&s->generated, 1);
+		j->result = t;
+		j->err = 0;
+	} else {
+		tile_unref(t);
+		atomic_fetch_add(&s->g.failed, 1);
+		j->result = NULL;
+		j->err = rc < 0 ? rc : -EIO;
+	}
+}
+
+static void *worker_main(void *arg)
+{
+	struct worker_arg *wa = arg;
+	struct sched *s = wa->s;
+	struct gen_ctx g = { .worker = wa->idx };
+	free(wa);
+	lower_priority(s);
+	lock(&s->q_mu);
+	for (;;) {
+		while (!s->q_stop && s->heap.n == 0)
+			cond_wait(&s->q_cv, &s->q_mu);
+		if (s->q_stop)
+			break;
+		struct job *j = jobheap_pop(&s->heap);
+		s->queued[j->qprio.cls]--;
+		s->running++;
+		unlock(&s->q_mu);
+
+		generate(s, &g, j);
+
+		lock(&s->in_mu);
+		j->next_done = s->done;
+		s->done = j;
+		cond_signal(&s->in_cv, false);
+		unlock(&s->in_mu);
+
+		lock(&s->q_mu);
+		s->running--;
+	}
+	unlock(&s->q_mu);
+	gen_ctx_fini(&g);
+	return NULL;
+}
+
+/* ---- public ---- */
+
+struct sched *sched_create(const struct sched_desc *d)
+{
+	struct sched *s = xcalloc(1, sizeof *s);
+	s->cache = d->cache;
+	s->nworkers = d->workers;
+	if (s->nworkers <= 0) {
+		long n = sysconf(_SC_NPROCESSORS_ONLN);
+		s->nworkers = n > 0 ? (int)n : 1;
+	}
+	s->nice = d->worker_nice == 0 ? 5 : d->worker_nice;
+	int rc;
+	if ((rc = pthread_mutex_init(&s->in_mu, NULL)) || (rc = pthread_mutex_init(&s->q_mu, NULL)) ||
+	    (rc = pthread_cond_init(&s->in_cv, NULL)) || (rc = pthread_cond_init(&s->ack_cv, NULL)) ||
+	    (rc = pthread_cond_init(&s->q_cv, NULL)))
+		die("pthread init", rc);
+	jobgraph_init(&s->g, s->cache, report_entry, s);
+	if ((rc = pthread_create(&s->manager, NULL, manager_main, s)))
+		die("pthread_create (manager)", rc);
+	s->workers = xcalloc((size_t)s->nworkers, sizeof *s->workers);
+	for (int i = 0; i < s->nworkers; i++) {
+		struct worker_arg *wa = xmalloc(sizeof *wa);
+		wa->s = s;
+		wa->idx = i;
+		if ((rc = pthread_create(&s->workers[i], NULL, worker_main, wa)))
+			die("pthread_create (worker)", rc);
+	}
+	return s;
+}
+
+void sched_destroy(struct sched *s)
+{
+	if (!s)
+		return;
+	int rc;
+	lock(&s->in_mu);
+	s->in_stop = true;
+	cond_signal(&s->in_cv, true);
+	unlock(&s->in_mu);
+	if ((rc = pthread_join(s->manager, NULL)))
+		die("pthread_join (manager)", rc);
+	lock(&s->q_mu);
+	s->q_stop = true;
+	cond_signal(&s->q_cv, true);
+	unlock(&s->q_mu);
+	for (int i = 0; i < s->nworkers; i++)
+		if ((rc = pthread_join(s->workers[i], NULL)))
+			die("pthread_join (worker)", rc);
+	jobgraph_fini(&s->g); /* every job, finished or not, is still in it */
+	/* Requests should be gone already; free what a careless caller left (a request may be
+	 * both active and queued as a change). */
+	for (struct sched_req *r = s->reqs, *next; r; r = next) {
+		next = r->next;
+		if (!r->in_changes)
+			free_req(r);
+	}
+	for (struct sched_req *r = s->changes, *next; r; r = next) {
+		next = r->next_change;
+		free_req(r);
+	}
+	for (size_t i = 0; i < s->nbatch; i++)
+		tile_unref(s->batch[i].t);
+	free(s->batch);
+	jobheap_fini(&s->heap);
+	free(s->workers);
+	pthread_mutex_destroy(&s->in_mu);
+	pthread_mutex_destroy(&s->q_mu);
+	pthread_cond_destroy(&s->in_cv);
+	pthread_cond_destroy(&s->ack_cv);
+	pthread_cond_destroy(&s->q_cv);
+	free(s);
+}
+
+struct sched_req *sched_req_create(struct sched *s, sched_ready_fn fn, void *ud)
+{
+	struct sched_req *r = xcalloc(1, sizeof *r);
+	r->s = s;
+	r->fn = fn;
+	r->ud = ud;
+	return r;
+}
+
+/* Queues r for the manager's next iteration. Needs s->in_mu. */
+static void post_change(struct sched *s, struct sched_req *r)
+{
+	if (!r->in_changes) {
+		r->in_changes = true;
+		r->next_change = s->changes;
+		s->changes = r;
+	}
+	cond_signal(&s->in_cv, false);
+}
+
+int sched_req_want(struct sched_req *r, const struct want *w, size_t n)
+{
+	for (size_t i = 0; i < n; i++) {
+		const struct node *nd = w[i].node;
+		if (!nd || !nd->type || !nd->type->generate || !nd->planet ||
+		    w[i].key.node != nd->hash || !grid_key_valid(&w[i].key) ||
+		    w[i].cls <= SCHED_NONE || w[i].cls >= SCHED_NCLASS)
+			return -EINVAL;
+	}
+	struct want *copy = NULL;
+	if (n) {
+		copy = xmalloc(n * sizeof *copy);
+		memcpy(copy, w, n * sizeof *copy);
+	}
+	struct sched *s = r->s;
+	lock(&s->in_mu);
+	struct want *old = r->pending;
+	r->pending = copy;
+	r->npending = n;
+	r->has_pending = true;
+	post_change(s, r);
+	unlock(&s->in_mu);
+	free(old);
+	return 0;
+}
+
+void sched_req_destroy(struct sched_req *r)
+{
+	if (!r)
+		return;
+	struct sched *s = r->s;
+	bool done = false;
+	bool on_manager = pthread_equal(pthread_self(), s->manager);
+	lock(&s->in_mu);
+	r->destroy = true;
+	r->ack = on_manager ? NULL : &done;
+	/* Called from a callback: the manager is this thread, so mark the request dead now
+	 * (no further callbacks in this batch) and let the next iteration free it. */
+	if (on_manager)
+		r->dead = true;
+	post_change(s, r);
+	while (!on_manager && !done)
+		cond_wait(&s->ack_cv, &s->in_mu);
+	unlock(&s->in_mu);
+}
+
+struct fetch {
+	pthread_mutex_t mu;
+	pthread_cond_t cv;
+	size_t left;
+	struct sched_req *r;
+	struct tile **out;
+	int *err;
+};
+
+/* Runs on the manager thread, which owns r->list: w's index is its offset in it. */
+static void fetch_ready(void *ud, const struct want *w, struct tile *t, int err)
+{
+	struct fetch *f = ud;
+	size_t i = (size_t)(w - f->r->list);
+	f->out[i] = t ? tile_ref(t) : NULL;
+	f->err[i] = t ? 0 : (err < 0 ? err : -EIO);
+	lock(&f->mu);
+	if (--f->left == 0)
+		cond_signal(&f->cv, false);
+	unlock(&f->mu);
+}
+
+int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **out)
+{
+	if (n == 0)
+		return 0;
+	struct fetch f = { .out = out };
+	uint32_t *first = xmalloc(n * sizeof *first);
+	f.err = xcalloc(n, sizeof *f.err);
+	f.left = dedupe(w, n, first);
+	for (size_t i = 0; i < n; i++)
+		out[i] = NULL;
+	int rc;
+	if ((rc = pthread_mutex_init(&f.mu, NULL)) || (rc = pthread_cond_init(&f.cv, NULL)))
+		die("pthread init", rc);
+	f.r = sched_req_create(s, fetch_ready, &f);
+	rc = sched_req_want(f.r, w, n);
+	if (rc == 0) {
+		lock(&f.mu);
+		while (f.left > 0)
+			cond_wait(&f.cv, &f.mu);
+		unlock(&f.mu);
+	}
+	sched_req_destroy(f.r);
+	if (rc == 0) {
+		for (size_t i = 0; i < n; i++) {
+			if (first[i] != i) {
+				out[i] = out[first[i]] ? tile_ref(out[first[i]]) : NULL;
+				f.err[i] = f.err[first[i]];
+			}
+			if (f.err[i] && rc == 0)
+				rc = f.err[i];
+		}
+	}
+	pthread_mutex_destroy(&f.mu);
+	pthread_cond_destroy(&f.cv);
+	free(first);
+	free(f.err);
+	return rc;
+}
+
+void sched_get_stats(struct sched *s, struct sched_stats *out)
+{
+	memset(out, 0, sizeof *out);
+	lock(&s->q_mu);
+	for (int c = 0; c < SCHED_NCLASS; c++)
+		out->queued[c] = s->queued[c];
+	out->running = s->running;
+	unlock(&s->q_mu);
+	out->waiting = atomic_load(&s->g.waiting);
+	out->generated = atomic_load(&s->generated);
+	out->merged = atomic_load(&s->g.merged);
+	out->cancelled = atomic_load(&s->g.cancelled);
+	out->failed = atomic_load(&s->g.failed);
+	out->workers = s->nworkers;
+}
+
+int sched_worker_nice_error(struct sched *s)
+{
+	return atomic_load(&s->nice_err);
+}
