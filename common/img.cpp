@@ -348,7 +348,7 @@ extern "C" struct img_cache *img_cache_ref(struct img_cache *c)
 	return c;
 }
 
-extern "C" void img_cache_destroy(struct img_cache *c)
+extern "C" void img_cache_unref(struct img_cache *c)
 {
 	if (!c || c->refs.fetch_sub(1, std::memory_order_acq_rel) != 1)
 		return;

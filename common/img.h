@@ -52,7 +52,7 @@ struct img_cache *img_cache_create(size_t max_mb);
 /* Another reference (atomic; any thread). Returns c; NULL is a no-op. */
 struct img_cache *img_cache_ref(struct img_cache *c);
 /* Drops a reference; the last one frees the cache and closes its files. NULL is a no-op. */
-void img_cache_destroy(struct img_cache *c);
+void img_cache_unref(struct img_cache *c);
 
 /* Records that path is now `version` (n opaque bytes, e.g. its size, mtime and inode). When
  * a different version was recorded before, everything cached about path is invalidated (its

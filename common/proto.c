@@ -459,7 +459,7 @@ static void decode_planet(struct rd *r, struct proto_planet *p)
 		l[i].name = rd_str(r, PROTO_MAX_NAME, true, "layer name");
 		l[i].format = rd_u8(r, "layer format");
 		l[i].node = rd_u64(r, "layer node");
-		if (!r->err && (l[i].format == TFMT_NONE || l[i].format >= TFMT_COUNT))
+		if (!r->err && (l[i].format == PIX_NONE || l[i].format >= PIX_COUNT))
 			rd_fail(r, PROTO_ERR_FIELD, "layer %s: unknown format %u", l[i].name,
 				l[i].format);
 	}
@@ -644,7 +644,7 @@ static void decode_cache_entries(struct rd *r, struct proto_cache_entries *c)
 		e[i].bytes = rd_u32(r, "bytes");
 		e[i].age_s = rd_u32(r, "age");
 		rd_key(r, &e[i].key, false);
-		if (!r->err && (e[i].format == TFMT_NONE || e[i].format >= TFMT_COUNT))
+		if (!r->err && (e[i].format == PIX_NONE || e[i].format >= PIX_COUNT))
 			rd_fail(r, PROTO_ERR_FIELD, "entry %u: format %u", i, e[i].format);
 		if (!r->err && (e[i].tier < PROTO_TIER_MEMORY || e[i].tier > PROTO_TIER_REMOTE))
 			rd_fail(r, PROTO_ERR_FIELD, "entry %u: tier %u", i, e[i].tier);

@@ -149,7 +149,7 @@ struct proto_error {
 
 struct proto_layer {
 	const char *name;
-	uint8_t format; /* enum tile_format */
+	uint8_t format; /* enum pix_type */
 	uint64_t node;	/* content hash of the layer's node: part of every tile key */
 };
 
@@ -260,7 +260,7 @@ enum proto_tier { PROTO_TIER_NONE = 0, PROTO_TIER_MEMORY = 1, PROTO_TIER_DISK = 
 
 struct proto_cache_entry {
 	struct tile_key key;
-	uint8_t format; /* enum tile_format */
+	uint8_t format; /* enum pix_type */
 	uint8_t tier;	/* enum proto_tier */
 	uint32_t bytes;
 	uint32_t age_s; /* seconds since last use */

@@ -29,22 +29,10 @@ struct tilecodec {
 	ZSTD_DCtx *dctx;
 };
 
-static const char *const format_names[TFMT_COUNT] = { NULL, "f32", "rgba8", "rg8" };
-static const unsigned char format_bytes[TFMT_COUNT] = { 0, 4, 4, 2 };
 static const char *const codec_names[TCODEC_COUNT] = { "none", "lz4", "zstd" };
 static const char *const filter_names[TFILTER_COUNT] = { "none", "planes", "delta", "grad",
 							 "xor" };
 
-
-size_t tilecodec_texel_bytes(enum tile_format f)
-{
-	return (unsigned)f < TFMT_COUNT ? format_bytes[f] : 0;
-}
-
-const char *tilecodec_format_name(enum tile_format f)
-{
-	return (unsigned)f < TFMT_COUNT ? format_names[f] : NULL;
-}
 
 const char *tilecodec_codec_name(enum tcodec c)
 {
@@ -64,15 +52,15 @@ int tilecodec_codec_parse(const char *s)
 	return -EINVAL;
 }
 
-enum tfilter tilecodec_default_filter(enum tile_format f)
+enum tfilter tilecodec_default_filter(enum pix_type f)
 {
 	/* Measured by tests/bench/bench_codec.c (see docs/PROTOCOL.md). */
 	switch (f) {
-	case TFMT_F32:
+	case PIX_HEIGHT:
 		return TFILTER_GRAD;
-	case TFMT_RGBA8:
+	case PIX_COLOR:
 		return TFILTER_DELTA;
-	case TFMT_RG8:
+	case PIX_NORMAL:
 		return TFILTER_DELTA;
 	default:
 		return TFILTER_NONE;
@@ -91,7 +79,7 @@ static bool pow2_size(uint32_t t)
 
 int tilecodec_hdr_check(const struct tilecodec_hdr *h, char err[256])
 {
-	if (h->format == TFMT_NONE || h->format >= TFMT_COUNT) {
+	if (!pix_valid(h->format)) {
 		err_set(err, "unknown tile format %u", h->format);
 		return -EINVAL;
 	}
@@ -108,10 +96,10 @@ int tilecodec_hdr_check(const struct tilecodec_hdr *h, char err[256])
 		       TILECODEC_MAX_SIZE);
 		return -EINVAL;
 	}
-	size_t raw = (size_t)h->size * h->size * format_bytes[h->format];
+	size_t raw = (size_t)h->size * h->size * pix_bytes(h->format);
 	if (h->raw_len != raw) {
 		err_set(err, "raw length %u does not match a %u×%u %s tile (%zu bytes)", h->raw_len,
-		       h->size, h->size, format_names[h->format], raw);
+		       h->size, h->size, pix_format_name(h->format), raw);
 		return -EINVAL;
 	}
 	return 0;
@@ -289,42 +277,42 @@ static inline __attribute__((always_inline)) void unfilter_u8(uint32_t T, unsign
 	}
 }
 
-static int filter_args(enum tile_format format, uint32_t size, enum tfilter filter)
+static int filter_args(enum pix_type format, uint32_t size, enum tfilter filter)
 {
-	if (format == TFMT_NONE || (unsigned)format >= TFMT_COUNT || !pow2_size(size) ||
+	if (!pix_valid(format) || !pow2_size(size) ||
 	    (unsigned)filter >= TFILTER_COUNT)
 		return -EINVAL;
 	return 0;
 }
 
-int tilecodec_filter(enum tile_format format, uint32_t size, enum tfilter filter,
+int tilecodec_filter(enum pix_type format, uint32_t size, enum tfilter filter,
 		     const void *texels, void *filtered)
 {
 	int rc = filter_args(format, size, filter);
 	if (rc)
 		return rc;
 	if (filter == TFILTER_NONE)
-		memcpy(filtered, texels, (size_t)size * size * format_bytes[format]);
-	else if (format == TFMT_F32)
+		memcpy(filtered, texels, (size_t)size * size * pix_bytes(format));
+	else if (format == PIX_HEIGHT)
 		filter_f32(size, filter, texels, filtered);
-	else if (format == TFMT_RGBA8)
+	else if (format == PIX_COLOR)
 		filter_u8(size, 4, filter, texels, filtered);
 	else
 		filter_u8(size, 2, filter, texels, filtered);
 	return 0;
 }
 
-int tilecodec_unfilter(enum tile_format format, uint32_t size, enum tfilter filter,
+int tilecodec_unfilter(enum pix_type format, uint32_t size, enum tfilter filter,
 		       const void *filtered, void *texels)
 {
 	int rc = filter_args(format, size, filter);
 	if (rc)
 		return rc;
 	if (filter == TFILTER_NONE)
-		memcpy(texels, filtered, (size_t)size * size * format_bytes[format]);
-	else if (format == TFMT_F32)
+		memcpy(texels, filtered, (size_t)size * size * pix_bytes(format));
+	else if (format == PIX_HEIGHT)
 		unfilter_f32(size, filter, filtered, texels);
-	else if (format == TFMT_RGBA8)
+	else if (format == PIX_COLOR)
 		unfilter_u8(size, 4, filter, filtered, texels);
 	else
 		unfilter_u8(size, 2, filter, filtered, texels);
@@ -346,13 +334,13 @@ static size_t compress(struct tilecodec *tc, enum tcodec codec, int level, const
 	return ZSTD_isError(r) ? 0 : r;
 }
 
-ssize_t tilecodec_encode(struct tilecodec *tc, enum tile_format format, uint32_t size,
+ssize_t tilecodec_encode(struct tilecodec *tc, enum pix_type format, uint32_t size,
 			 enum tcodec codec, enum tfilter filter, int level, const void *texels,
 			 struct tilecodec_hdr *h, void *out, size_t cap)
 {
 	if (filter_args(format, size, filter) || (unsigned)codec >= TCODEC_COUNT)
 		return -EINVAL;
-	size_t raw = (size_t)size * size * format_bytes[format];
+	size_t raw = (size_t)size * size * pix_bytes(format);
 	if (cap < tilecodec_bound(codec, raw))
 		return -ENOSPC;
 	*h = (struct tilecodec_hdr){ .format = (uint8_t)format, .size = size,

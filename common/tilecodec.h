@@ -14,15 +14,7 @@
 #include <stdint.h>
 #include <sys/types.h>
 
-/* Texel formats on the wire. The numbers equal enum pix_type (daemon/engine/tile.h):
- * 1 = f32 height (PIX_HEIGHT), 2 = rgba8 colour (PIX_COLOR), 3 = rg8 normal (PIX_NORMAL). */
-enum tile_format {
-	TFMT_NONE = 0,
-	TFMT_F32 = 1,
-	TFMT_RGBA8 = 2,
-	TFMT_RG8 = 3,
-	TFMT_COUNT
-};
+#include "pixfmt.h"
 
 /* Codecs; capability bit for codec c is (1u << c). */
 enum tcodec {
@@ -49,7 +41,7 @@ enum tfilter {
 
 /* What a receiver needs to decode a tile payload (the TILE message carries all of it). */
 struct tilecodec_hdr {
-	uint8_t format;	   /* enum tile_format */
+	uint8_t format;	   /* enum pix_type */
 	uint8_t codec;	   /* enum tcodec */
 	uint8_t filter;	   /* enum tfilter */
 	uint32_t size;	   /* T: a power of two, 1 ≤ T ≤ TILECODEC_MAX_SIZE */
@@ -57,14 +49,12 @@ struct tilecodec_hdr {
 	uint64_t checksum; /* XXH3_64bits of the raw texels */
 };
 
-size_t tilecodec_texel_bytes(enum tile_format f); /* 4, 4, 2; 0 when invalid */
-const char *tilecodec_format_name(enum tile_format f); /* "f32", "rgba8", "rg8"; NULL if invalid */
 const char *tilecodec_codec_name(enum tcodec c);       /* "none", "lz4", "zstd"; NULL if invalid */
 const char *tilecodec_filter_name(enum tfilter f);     /* "none", "planes", "delta", "grad", "xor" */
 /* Parses a codec name; returns the codec or -EINVAL. */
 int tilecodec_codec_parse(const char *s);
 /* The filter that compressed best for each format in tests/bench/bench_codec.c. */
-enum tfilter tilecodec_default_filter(enum tile_format f);
+enum tfilter tilecodec_default_filter(enum pix_type f);
 /* XXH3_64bits of n bytes. */
 uint64_t tilecodec_checksum(const void *p, size_t n);
 
@@ -84,7 +74,7 @@ void tilecodec_destroy(struct tilecodec *tc); /* NULL is a no-op */
  * was used. Fills h (format, size, codec, filter, raw_len, checksum) and writes the payload
  * into out[0 .. cap). Returns payload bytes, -EINVAL (bad arguments) or -ENOSPC (cap smaller
  * than tilecodec_bound(codec, raw_len) — always enough). */
-ssize_t tilecodec_encode(struct tilecodec *tc, enum tile_format format, uint32_t size,
+ssize_t tilecodec_encode(struct tilecodec *tc, enum pix_type format, uint32_t size,
 			 enum tcodec codec, enum tfilter filter, int level, const void *texels,
 			 struct tilecodec_hdr *h, void *out, size_t cap);
 
@@ -96,9 +86,9 @@ int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const 
 
 /* The filter alone (exposed for tests and benchmarks): filtered[] ← filter(texels[]) and its
  * inverse. Both buffers hold T·T·texel bytes and must not overlap. Return 0 or -EINVAL. */
-int tilecodec_filter(enum tile_format format, uint32_t size, enum tfilter filter,
+int tilecodec_filter(enum pix_type format, uint32_t size, enum tfilter filter,
 		     const void *texels, void *filtered);
-int tilecodec_unfilter(enum tile_format format, uint32_t size, enum tfilter filter,
+int tilecodec_unfilter(enum pix_type format, uint32_t size, enum tfilter filter,
 		       const void *filtered, void *texels);
 
 #endif

@@ -142,7 +142,7 @@ int main(int argc, char **argv)
 	struct planet_set *ps = NULL;
 	struct img_cache *images = img_cache_create(d.conf.image_cache_mb); /* the set holds it */
 	int lrc = planet_set_load(d.conf.planets_dir, ++d.generation, images, &ps, err);
-	img_cache_destroy(images);
+	img_cache_unref(images);
 	if (lrc || check_token(&d.conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
 		planet_set_unref(ps);

@@ -347,7 +347,7 @@ static void encode_tile(struct session *s, struct went *e)
 		return;
 	}
 	const struct tile *t = e->t;
-	enum tile_format fmt = (enum tile_format)t->type;
+	enum pix_type fmt = t->type;
 	enum tcodec codec = (enum tcodec)s->codec;
 	enum tfilter filt = codec == TCODEC_NONE ? TFILTER_NONE : tilecodec_default_filter(fmt);
 	size_t bound = tilecodec_bound(codec, t->nbytes);

@@ -213,7 +213,7 @@ static int cmd_render(int argc, char **argv)
 	rc = render_layer(p, pos[1], &rg, &ro, &im, err);
 	if (rc) {
 		fprintf(stderr, "clipmapctl render: %s\n", err);
-		planet_destroy(p);
+		planet_unref(p);
 		return rc == -EINVAL || rc == -ENOENT || rc == -E2BIG ? 2 : 1;
 	}
 	rc = render_write(&im, outpath, note, err);
@@ -228,7 +228,7 @@ static int cmd_render(int argc, char **argv)
 			printf("%s\n", note);
 	}
 	render_image_free(&im);
-	planet_destroy(p);
+	planet_unref(p);
 	return rc ? 1 : 0;
 }
 
@@ -243,7 +243,7 @@ static int cmd_graph(int argc, char **argv)
 	if (rc)
 		return rc;
 	rc = planet_write_dot(p, stdout);
-	planet_destroy(p);
+	planet_unref(p);
 	if (rc || fflush(stdout)) {
 		fprintf(stderr, "clipmapctl graph: writing: %s\n", strerror(rc ? -rc : errno));
 		return 1;
@@ -271,7 +271,7 @@ static int cmd_layers(int argc, char **argv)
 		printf("node  %-14s %-13s -> %-6s %016llx\n", p->nodes[i]->name,
 		       p->nodes[i]->type->name, pix_type_name(p->nodes[i]->out),
 		       (unsigned long long)p->nodes[i]->hash);
-	planet_destroy(p);
+	planet_unref(p);
 	return 0;
 }
 

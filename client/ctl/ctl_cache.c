@@ -61,7 +61,7 @@ int ctl_cache_print(struct proto_cache_entry *e, size_t n, uint64_t total,
 				"\"x\": %u, \"y\": %u, \"format\": \"%s\", \"tier\": \"%s\", "
 				"\"bytes\": %u, \"age_s\": %u}", x->key.node, x->key.lx, x->key.ly,
 				x->key.x, x->key.y,
-				tilecodec_format_name(x->format) ? tilecodec_format_name(x->format) : "?",
+				pix_valid(x->format) ? pix_format_name(x->format) : "?",
 				tier_name(x->tier), x->bytes, x->age_s);
 		}
 		fprintf(out, "%s]}\n", n ? "\n" : "");

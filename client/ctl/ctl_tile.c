@@ -12,17 +12,17 @@
 #include "ctl_conn.h"
 #include "common/xalloc.h"
 
-int ctl_tile_image(enum tile_format format, uint32_t T, const void *texels,
+int ctl_tile_image(enum pix_type format, uint32_t T, const void *texels,
 		   struct render_image *out)
 {
 	memset(out, 0, sizeof *out);
 	size_t n = (size_t)T * T;
-	if (T == 0 || !tilecodec_texel_bytes(format))
+	if (T == 0 || !pix_bytes(format))
 		return -EINVAL;
 	out->width = out->height = (int)T;
 	out->hmin = INFINITY;
 	out->hmax = -INFINITY;
-	if (format == TFMT_F32) {
+	if (format == PIX_HEIGHT) {
 		out->channels = 1;
 		out->is_float = 1;
 		float *px = xmalloc(n * sizeof *px);
@@ -34,7 +34,7 @@ int ctl_tile_image(enum tile_format format, uint32_t T, const void *texels,
 				out->hmax = px[i];
 		}
 		out->pixels = px;
-	} else if (format == TFMT_RGBA8) {
+	} else if (format == PIX_COLOR) {
 		out->channels = 4;
 		out->pixels = xmalloc(n * 4);
 		memcpy(out->pixels, texels, n * 4);

@@ -20,7 +20,7 @@ struct ctl_tile_req {
  * one tile: f32 heights (hmin/hmax over the non-NaN texels), RGBA8 colour, RG8 normals
  * expanded to RGB with up = sqrt(1 − e² − n²). *out is owned (render_image_free). Returns 0
  * or -EINVAL (bad format). */
-int ctl_tile_image(enum tile_format format, uint32_t T, const void *texels,
+int ctl_tile_image(enum pix_type format, uint32_t T, const void *texels,
 		   struct render_image *out);
 /* Fetches the tile and fills *out (owned). Returns 0, or -errno with err filled:
  * -ENOENT (no such planet or layer), -EINVAL (key outside the level), -EIO (the daemon

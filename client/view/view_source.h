@@ -14,7 +14,7 @@
 #include <stdint.h>
 
 #include "common/grid.h"
-#include "engine/tile.h"
+#include "common/pixfmt.h"
 
 #define VIEW_MAX_LAYERS 8
 

@@ -153,7 +153,7 @@ static void local_destroy(struct view_source *s)
 	free(l->q);
 	free(l->wbuf);
 	cache_destroy(l->cache);
-	planet_destroy(l->p);
+	planet_unref(l->p);
 	pthread_cond_destroy(&l->cond);
 	pthread_mutex_destroy(&l->lock);
 	free(l);
@@ -181,7 +181,7 @@ int view_source_local_create(const char *planet_path, const struct view_source_l
 	if (p->nlayers > VIEW_MAX_LAYERS) {
 		snprintf(err, 256, "%s: %zu layers, at most %d", planet_path, p->nlayers,
 			 VIEW_MAX_LAYERS);
-		planet_destroy(p);
+		planet_unref(p);
 		return -EINVAL;
 	}
 	struct local *l = xcalloc(1, sizeof *l);

@@ -82,7 +82,7 @@ static int ns_poll(struct view_source *s, struct view_tile *out)
 				buf = NULL;
 			}
 			*out = (struct view_tile){ .layer = m.tile.layer, .key = m.tile.key,
-						   .format = (enum pix_type)m.tile.enc.format,
+						   .format = m.tile.enc.format,
 						   .size = m.tile.enc.size, .texels = buf, .err = rc,
 						   .handle = buf };
 			proto_msg_fini(&m);
@@ -124,7 +124,7 @@ static void ns_release(struct view_source *s, struct view_tile *t)
 {
 	struct net_source *ns = ns_of(s);
 	if (t->handle) {
-		size_t len = (size_t)t->size * t->size * tilecodec_texel_bytes((enum tile_format)t->format);
+		size_t len = (size_t)t->size * t->size * pix_bytes(t->format);
 		if (len && ns->nspare < (int)(sizeof ns->spare / sizeof ns->spare[0]) &&
 		    (ns->nspare == 0 || len == ns->spare_len)) {
 			ns->spare_len = len;
@@ -179,7 +179,7 @@ int view_source_net_create(const struct net_opts *o, const char *planet, struct 
 	vp->nlayers = pp->nlayers < VIEW_MAX_LAYERS ? pp->nlayers : VIEW_MAX_LAYERS;
 	for (int i = 0; i < vp->nlayers; i++) {
 		snprintf(vp->layer[i].name, sizeof vp->layer[i].name, "%s", pp->layers[i].name);
-		vp->layer[i].format = (enum pix_type)pp->layers[i].format;
+		vp->layer[i].format = pp->layers[i].format;
 	}
 	proto_msg_fini(&m);
 	*out = &ns->base;

@@ -57,7 +57,7 @@ struct node_parse {
 };
 int np_double(struct node_parse *p, const char *key, double def, double lo, double hi, double *out);
 int np_int(struct node_parse *p, const char *key, long def, long lo, long hi, long *out);
-/* A string; *out borrows from the ini data (valid until planet_destroy: the loader keeps it). */
+/* A string; *out borrows from the ini data (valid until planet_unref: the loader keeps it). */
 int np_string(struct node_parse *p, const char *key, const char *def, const char **out);
 /* One of `names` (NULL-terminated); *out is its index. */
 int np_enum(struct node_parse *p, const char *key, const char *const *names, int def, int *out);

@@ -492,10 +492,7 @@ static int parse_layers(struct loader *L)
 			return cfg_error(L, en->line, "node", "unknown node \"%s\"", en->value);
 		struct ini_entry *ef = ini_find(s, "format");
 		if (ef) {
-			enum pix_type t = PIX_NONE;
-			for (int k = PIX_HEIGHT; k <= PIX_NORMAL; k++)
-				if (strcmp(ef->value, pix_format_name((enum pix_type)k)) == 0)
-					t = (enum pix_type)k;
+			enum pix_type t = pix_format_parse(ef->value);
 			if (t == PIX_NONE)
 				return cfg_error(L, ef->line, "format",
 						 "\"%s\" is not one of: f32, rgba8, rg8", ef->value);
@@ -534,7 +531,7 @@ int planet_load_shared(const char *path, const struct node_type *const *types,
 	p->images = images ? img_cache_ref(images) : img_cache_create(PLANET_IMAGE_CACHE_MB);
 	if (!p->images) {
 		snprintf(err, 256, "%s: cannot create an image cache", path);
-		planet_destroy(p);
+		planet_unref(p);
 		return -ENOMEM;
 	}
 	if (!types)
@@ -568,7 +565,7 @@ int planet_load_shared(const char *path, const struct node_type *const *types,
 		rc = parse_layers(&L);
 	free(L.ln);
 	if (rc) {
-		planet_destroy(p);
+		planet_unref(p);
 		return rc;
 	}
 	*out = p;
@@ -603,11 +600,6 @@ void planet_unref(const struct planet *p)
 		planet_free(m);
 }
 
-void planet_destroy(struct planet *p)
-{
-	planet_unref(p);
-}
-
 static void planet_free(struct planet *p)
 {
 	/* Users before their inputs: a type's destroy may still look at its inputs. */
@@ -622,7 +614,7 @@ static void planet_free(struct planet *p)
 	for (size_t i = 0; i < p->nlayers; i++)
 		free(p->layers[i].name);
 	free(p->layers);
-	img_cache_destroy(p->images); /* after the nodes that read through it */
+	img_cache_unref(p->images); /* after the nodes that read through it */
 	geo_body_destroy(p->body);
 	ini_free(p->ini);
 	free(p->name);

@@ -9,7 +9,7 @@
  *   [node NAME]     type = <node type>, its input slots naming other nodes, its parameters
  *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
  *
- * Ownership: planet_load returns a reference-counted planet; planet_destroy drops the
+ * Ownership: planet_load returns a reference-counted planet; planet_unref drops the
  * caller's reference and the last one frees it and its nodes. Its file nodes read through
  * one image cache (planet->images, shared with other planets when the loader is given one). A loaded planet is immutable
  * (but for its reference count) and may be shared by any number of threads.
@@ -72,11 +72,10 @@ int planet_load_types(const char *path, const struct node_type *const *types, st
  * pixels. */
 int planet_load_shared(const char *path, const struct node_type *const *types,
 		       struct img_cache *images, struct planet **out, char err[256]);
-/* Drops the caller's reference (NULL is a no-op); frees at the last. */
-void planet_destroy(struct planet *p);
 /* Another reference (for the scheduler); no-op for NULL or caller-owned planets. */
 void planet_ref(const struct planet *p);
-/* Drops a reference taken with planet_ref. */
+/* Drops a reference: planet_load's or one taken with planet_ref (NULL is a no-op); the last
+ * one frees the planet and its nodes. */
 void planet_unref(const struct planet *p);
 struct node *planet_find_node(const struct planet *p, const char *name);
 const struct planet_layer *planet_find_layer(const struct planet *p, const char *name);

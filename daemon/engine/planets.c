@@ -23,9 +23,9 @@ static int cmp_planet(const void *a, const void *b)
 static void set_free(struct planet_set *s)
 {
 	for (size_t i = 0; i < s->n; i++)
-		planet_destroy(s->planets[i]);
+		planet_unref(s->planets[i]);
 	free(s->planets);
-	img_cache_destroy(s->images);
+	img_cache_unref(s->images);
 	free(s);
 }
 
@@ -75,7 +75,7 @@ int planet_set_load(const char *dir, uint64_t generation, struct img_cache *imag
 		if (planet_set_find(s, p->name)) {
 			snprintf(err, 256, "%s: planet \"%s\" is defined twice in %s", p->path, p->name,
 				 dir);
-			planet_destroy(p);
+			planet_unref(p);
 			rc = -EINVAL;
 			break;
 		}

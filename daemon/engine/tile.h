@@ -13,20 +13,7 @@
 #include <stdint.h>
 
 #include "common/grid.h"
-
-/* What a node produces. 0 is invalid so a zeroed struct is "unset". */
-enum pix_type {
-	PIX_NONE = 0,
-	PIX_HEIGHT, /* float32 metres above the body's ellipsoid */
-	PIX_COLOR,  /* RGBA8, sRGB, straight (not premultiplied) alpha */
-	PIX_NORMAL, /* RG8: east and north components of the unit normal in the local tangent
-		     * frame, each mapped [-1, 1] → [0, 255] as round((c + 1) · 127.5); up = sqrt(1-e²-n²) */
-};
-
-size_t pix_bytes(enum pix_type t);	      /* bytes per texel: 4, 4, 2 */
-const char *pix_type_name(enum pix_type t);   /* "height", "color", "normal" */
-enum pix_type pix_type_parse(const char *s);  /* PIX_NONE when unknown */
-const char *pix_format_name(enum pix_type t); /* wire/layer format: "f32", "rgba8", "rg8" */
+#include "common/pixfmt.h"
 
 struct tile {
 	atomic_int refs;

@@ -96,10 +96,10 @@ static void make_normals(const float *h, uint8_t *n)
 		}
 }
 
-static void bench_one(struct tilecodec *tc, const char *layer, enum tile_format fmt,
+static void bench_one(struct tilecodec *tc, const char *layer, enum pix_type fmt,
 		      const void *texels, enum tfilter filt, enum tcodec codec, int level)
 {
-	size_t raw = (size_t)T * T * tilecodec_texel_bytes(fmt);
+	size_t raw = (size_t)T * T * pix_bytes(fmt);
 	size_t cap = tilecodec_bound(codec, raw);
 	unsigned char *out = xmalloc(cap), *back = xmalloc(raw);
 	struct tilecodec_hdr h;
@@ -174,10 +174,10 @@ int main(void)
 	struct tilecodec *tc = tilecodec_create();
 	const struct {
 		const char *name;
-		enum tile_format fmt;
+		enum pix_type fmt;
 		const void *data;
-	} layers[] = { { "height", TFMT_F32, h }, { "color", TFMT_RGBA8, c },
-		       { "normal", TFMT_RG8, n } };
+	} layers[] = { { "height", PIX_HEIGHT, h }, { "color", PIX_COLOR, c },
+		       { "normal", PIX_NORMAL, n } };
 	for (size_t l = 0; l < 3; l++) {
 		bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, TFILTER_NONE,
 			  TCODEC_NONE, 0);

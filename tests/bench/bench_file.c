@@ -42,7 +42,7 @@ static void ensure_image(const char *path, enum img_type type)
 	struct img_info info;
 	bool ok = c && img_cache_info(c, path, &info, err) == 0 && info.width == W &&
 		  info.height == H && info.type == type && info.tiled && info.tile_width == 256;
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	if (ok)
 		return;
 	double t0 = now();
@@ -175,7 +175,7 @@ static double read_only(const char *path, uint32_t T, int passes)
 			best = dt;
 	}
 	free(buf);
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	return bytes / best;
 }
 

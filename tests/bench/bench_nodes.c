@@ -147,7 +147,7 @@ static int run_case(const struct bcase *c, uint32_t T)
 	printf("node %-26s T=%-3u  1 worker %7.0f tiles/s (%5.2f ns/texel)   2 workers %7.0f tiles/s"
 	       " (%5.2f ns/texel/worker)\n",
 	       c->name, T, rate[1], 1e9 / (rate[1] * texels), rate[2], 2e9 / (rate[2] * texels));
-	planet_destroy(p);
+	planet_unref(p);
 	return 0;
 }
 

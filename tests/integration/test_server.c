@@ -424,7 +424,7 @@ static void test_tiles_match_inprocess(void **state)
 	assert_int_equal(cl_recv(c, 200), 0);
 	sched_destroy(s);
 	cache_destroy(cache);
-	planet_destroy(p);
+	planet_unref(p);
 	cl_free(c);
 }
 
@@ -840,7 +840,7 @@ static void test_sighup_rebind(void **state)
 	assert_true(wait_log("reloaded 1 planets", reloads + 1, 5000));
 	sched_destroy(s);
 	cache_destroy(cache);
-	planet_destroy(p);
+	planet_unref(p);
 	for (int i = 0; i < W * H; i++)
 		free(old[i]);
 

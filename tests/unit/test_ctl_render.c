@@ -59,7 +59,7 @@ static int teardown(void **state)
 		fprintf(stderr, "could not remove %s\n", e->dir);
 	sched_destroy(e->s);
 	cache_destroy(e->c);
-	planet_destroy(e->p);
+	planet_unref(e->p);
 	free(e);
 	return 0;
 }

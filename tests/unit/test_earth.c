@@ -50,7 +50,7 @@ static int setup(void **state)
 static int teardown(void **state)
 {
 	(void)state;
-	planet_destroy(pl);
+	planet_unref(pl);
 	GDALClose(etopo);
 	return 0;
 }

@@ -43,7 +43,7 @@ static int teardown(void **state)
 	struct env *e = *state;
 	sched_destroy(e->s);
 	cache_destroy(e->c);
-	planet_destroy(e->p);
+	planet_unref(e->p);
 	free(e);
 	return 0;
 }

@@ -616,7 +616,7 @@ static void shared_cache(void **state)
 	fnode_fini(&b);
 	fnode_fini(&c);
 	pl.images = NULL;
-	img_cache_destroy(ic);
+	img_cache_unref(ic);
 }
 
 /* A node created for a file that changed since another node on the same path read it through
@@ -647,7 +647,7 @@ static void changed_file_reread(void **state)
 	fnode_fini(&a);
 	fnode_fini(&b);
 	pl.images = NULL;
-	img_cache_destroy(ic);
+	img_cache_unref(ic);
 }
 
 int main(void)

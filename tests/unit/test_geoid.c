@@ -103,7 +103,7 @@ static void known_places(void **state)
 	tile_unref(t[1]);
 	sched_destroy(s);
 	cache_destroy(c);
-	planet_destroy(p);
+	planet_unref(p);
 	/* sign = -1 goes from the ellipsoid back to the geoid */
 	assert_int_equal(load("sign = -1\n", &p, err), 0);
 	c = cache_create(64u << 20);
@@ -111,7 +111,7 @@ static void known_places(void **state)
 	assert_true(fabs(at(s, p, 4.75, 78.75) - 106.99) < 0.3);
 	sched_destroy(s);
 	cache_destroy(c);
-	planet_destroy(p);
+	planet_unref(p);
 }
 
 static void errors(void **state)

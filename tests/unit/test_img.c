@@ -167,8 +167,8 @@ static void missing_and_corrupt(void **state)
 	assert_int_equal(img_cache_read(c, tpath("text.tif"), 0, 1, 1, 0, 1, 0, 1, IMG_U8, v, 0,
 					err),
 			 -EINVAL);
-	img_cache_destroy(c);
-	img_cache_destroy(NULL);
+	img_cache_unref(c);
+	img_cache_unref(NULL);
 }
 
 /* Region reads: sub-rectangles, a row stride, channel subsets, MIP levels of a tiled TIFF. */
@@ -214,7 +214,7 @@ static void cache_regions_and_mips(void **state)
 	assert_int_equal(img_cache_read(c, p, 1, 10, 12, 20, 22, 1, 2, IMG_F32, g, 0, err), 0);
 	for (int i = 0; i < 4; i++)
 		assert_float_equal(g[i], 30000.0 / 65535.0, 1e-4);
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	free(px);
 }
 
@@ -250,7 +250,7 @@ static void cache_edge_tiles(void **state)
 	}
 	free(out);
 	free(px);
-	img_cache_destroy(c);
+	img_cache_unref(c);
 }
 
 /* An untiled, unmipped PNG gets automip levels. */
@@ -273,7 +273,7 @@ static void automip_png(void **state)
 	assert_int_equal(img_cache_read(c, p, 3, 0, 12, 0, 6, 0, 1, IMG_U8, v, 0, err), 0);
 	for (int i = 0; i < 12 * 6; i++)
 		assert_in_range(v[i], 149, 151);
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	free(px);
 }
 
@@ -322,7 +322,7 @@ static void concurrent_reads(void **state)
 		assert_int_equal(pthread_join(th[i], NULL), 0);
 		assert_int_equal(r[i].bad, 0);
 	}
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	free(px);
 }
 

@@ -107,7 +107,7 @@ static void read_back(const char *path, int w, int h, int16_t **px, char desc[25
 	assert_int_equal(img_cache_info(c, path, &ci, err), 0);
 	assert_true(ci.mip_levels > 1);
 	assert_int_equal(img_cache_description(c, path, desc, 256, err), 0);
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	*px = p;
 }
 
@@ -249,7 +249,7 @@ static int read_levels(const char *path, int16_t *lv[16], int lw[16], int lh[16]
 		if (img_cache_read(c, path, m, 0, lw[m], 0, lh[m], 0, 1, IMG_I16, lv[m], 0, err))
 			fail_msg("%s", err);
 	}
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	return ci.mip_levels;
 }
 
@@ -303,7 +303,7 @@ static void streaming_bands(void **state)
 	assert_int_equal(r.shifted_cols, 36);
 	struct img_cache *c = img_cache_create(16);
 	assert_int_equal(img_cache_description(c, tpath("s_out.tif"), desc, sizeof desc, err), 0);
-	img_cache_destroy(c);
+	img_cache_unref(c);
 	assert_string_equal(desc, "clipmap:bounds=-180,-90,180,90");
 	assert_int_equal(access(tpath("s_out.tif.tmp"), F_OK), -1);
 

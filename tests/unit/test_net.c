@@ -171,9 +171,9 @@ static int srv_drain(struct srv *s)
 /* ---- canned data ------------------------------------------------------------------------ */
 
 static const struct proto_layer test_layers[] = {
-	{ .name = "height", .format = TFMT_F32, .node = 0x1111 },
-	{ .name = "color", .format = TFMT_RGBA8, .node = 0x2222 },
-	{ .name = "normal", .format = TFMT_RG8, .node = 0x3333 },
+	{ .name = "height", .format = PIX_HEIGHT, .node = 0x1111 },
+	{ .name = "color", .format = PIX_COLOR, .node = 0x2222 },
+	{ .name = "normal", .format = PIX_NORMAL, .node = 0x3333 },
 };
 static const struct proto_planet test_planet = { .name = "testplanet", .description = "fake",
 						 .a = 6378137.0, .f = 0, .tile_size = 8,
@@ -510,7 +510,7 @@ static int script_tile(struct srv *s)
 	uint8_t payload[4096];
 	struct tilecodec_hdr h;
 	uint8_t rgba[64 * 4] = { 0 };
-	ssize_t n = tilecodec_encode(tc, TFMT_RGBA8, 8, TCODEC_NONE, TFILTER_NONE, 0, rgba, &h,
+	ssize_t n = tilecodec_encode(tc, PIX_COLOR, 8, TCODEC_NONE, TFILTER_NONE, 0, rgba, &h,
 				     payload, sizeof payload);
 	struct proto_msg t = { .type = PROTO_TILE,
 			       .tile = { .seq = seq, .planet_id = 9, .layer = 1,
@@ -518,7 +518,7 @@ static int script_tile(struct srv *s)
 					 .enc = h, .payload = payload,
 					 .payload_len = (uint32_t)n } };
 	int rc = srv_send(s, &t);
-	n = tilecodec_encode(tc, TFMT_F32, 8, TCODEC_ZSTD, TFILTER_GRAD, 1, tile_heights, &h,
+	n = tilecodec_encode(tc, PIX_HEIGHT, 8, TCODEC_ZSTD, TFILTER_GRAD, 1, tile_heights, &h,
 			     payload, sizeof payload);
 	t.tile.layer = 0;
 	t.tile.key.node = 0x1111;
@@ -980,11 +980,11 @@ static void cache_listing(void **state)
 {
 	(void)state;
 	struct proto_cache_entry e[3] = {
-		{ .key = { .node = 0x2222, .lx = 3, .ly = 2, .x = 1, .y = 0 }, .format = TFMT_RGBA8,
+		{ .key = { .node = 0x2222, .lx = 3, .ly = 2, .x = 1, .y = 0 }, .format = PIX_COLOR,
 		  .tier = PROTO_TIER_MEMORY, .bytes = 262144, .age_s = 75 },
-		{ .key = { .node = 0x1111, .lx = 3, .ly = 2, .x = 5, .y = 2 }, .format = TFMT_F32,
+		{ .key = { .node = 0x1111, .lx = 3, .ly = 2, .x = 5, .y = 2 }, .format = PIX_HEIGHT,
 		  .tier = PROTO_TIER_MEMORY, .bytes = 262144, .age_s = 3 },
-		{ .key = { .node = 0xabcdef, .lx = 1, .ly = 0, .x = 0, .y = 0 }, .format = TFMT_F32,
+		{ .key = { .node = 0xabcdef, .lx = 1, .ly = 0, .x = 0, .y = 0 }, .format = PIX_HEIGHT,
 		  .tier = PROTO_TIER_DISK, .bytes = 262144, .age_s = 4000 },
 	};
 	FILE *f;
@@ -1018,7 +1018,7 @@ static void tile_to_picture(void **state)
 	/* normals: flat (128,128) → up 1 → blue 255; tilted (255,128) → up 0 → blue 128 */
 	uint8_t rg[2 * 4] = { 128, 128, 255, 128, 0, 128, 128, 0 };
 	struct render_image im;
-	assert_int_equal(ctl_tile_image(TFMT_RG8, 2, rg, &im), 0);
+	assert_int_equal(ctl_tile_image(PIX_NORMAL, 2, rg, &im), 0);
 	assert_int_equal(im.channels, 3);
 	const uint8_t *p = im.pixels;
 	assert_int_equal(p[0], 128);
@@ -1027,12 +1027,12 @@ static void tile_to_picture(void **state)
 	assert_int_equal(p[5], 128);
 	render_image_free(&im);
 	uint8_t rgba[16] = { 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16 };
-	assert_int_equal(ctl_tile_image(TFMT_RGBA8, 2, rgba, &im), 0);
+	assert_int_equal(ctl_tile_image(PIX_COLOR, 2, rgba, &im), 0);
 	assert_int_equal(im.channels, 4);
 	assert_false(im.is_float);
 	assert_memory_equal(im.pixels, rgba, 16);
 	render_image_free(&im);
-	assert_int_equal(ctl_tile_image(TFMT_NONE, 2, rgba, &im), -EINVAL);
+	assert_int_equal(ctl_tile_image(PIX_NONE, 2, rgba, &im), -EINVAL);
 }
 
 int main(void)

@@ -372,8 +372,8 @@ static void earth(void **state)
 	assert_memory_equal(t->data + 4 * 1000, ((uint8_t[]){ 34, 139, 34, 255 }), 4);
 	tile_unref(t);
 	gen_ctx_fini(&g);
-	planet_destroy(p);
-	planet_destroy(NULL);
+	planet_unref(p);
+	planet_unref(NULL);
 }
 
 static void sphere_and_custom(void **state)
@@ -390,7 +390,7 @@ static void sphere_and_custom(void **state)
 	assert_true(geo_body_a(p->body) == 1737400.0 && geo_body_f(p->body) == 0.0);
 	assert_int_equal(p->tile_size, 256);
 	assert_int_equal(p->max_level, 20);
-	planet_destroy(p);
+	planet_unref(p);
 
 	fixture("mars.ini", path);
 	if (planet_load(path, &p, err))
@@ -399,14 +399,14 @@ static void sphere_and_custom(void **state)
 	assert_true(p->a == 3396190.0);
 	assert_true(fabs(p->f - 1 / 169.894447) < 1e-15);
 	assert_true(fabs(geo_body_f(p->body) - 1 / 169.894447) < 1e-15);
-	planet_destroy(p);
+	planet_unref(p);
 
 	/* Defaults: no [planet] section at all is WGS84, named after the file. */
 	p = load_ok("[node z]\ntype = constant\nheight = 0\n[layer h]\nnode = z\n");
 	assert_string_equal(p->name, "p");
 	assert_string_equal(p->description, "");
 	assert_true(p->a == GEO_WGS84_A && p->f == GEO_WGS84_F);
-	planet_destroy(p);
+	planet_unref(p);
 
 	/* body = sphere with its radius; radius + flattening without body is custom. */
 	p = load_ok("[planet]\nbody = sphere\nradius = 6371000\ntile_size = 64\nmax_level = 29\n"
@@ -414,12 +414,12 @@ static void sphere_and_custom(void **state)
 	assert_true(p->a == 6371000.0 && p->f == 0.0);
 	assert_int_equal(p->tile_size, 64);
 	assert_int_equal(p->max_level, 29);
-	planet_destroy(p);
+	planet_unref(p);
 	p = load_ok("[planet]\nradius = 1000\nflattening = 0.25\ntile_size = 1024\n"
 		    "[node z]\ntype = constant\nheight = 0\n[layer h]\nnode = z\n");
 	assert_true(p->a == 1000.0 && p->f == 0.25);
 	assert_int_equal(p->tile_size, 1024);
-	planet_destroy(p);
+	planet_unref(p);
 }
 
 static void graph_order(void **state)
@@ -458,8 +458,8 @@ static void graph_order(void **state)
 				   "[node m]\ntype = t_mix\na = b\n[layer h]\nnode = m\n");
 	assert_non_null(planet_find_node(q, "m")->in[0]);
 	assert_null(planet_find_node(q, "m")->in[1]);
-	planet_destroy(q);
-	planet_destroy(p);
+	planet_unref(q);
+	planet_unref(p);
 }
 
 /* ---- errors ---- */
@@ -609,7 +609,7 @@ static void hashes(const char *text, uint64_t out[NHASH])
 	struct planet *p = load_ok(text);
 	for (int i = 0; i < NHASH; i++)
 		out[i] = hash_of(p, hash_nodes[i]);
-	planet_destroy(p);
+	planet_unref(p);
 }
 
 static void content_hashes(void **state)
@@ -733,7 +733,7 @@ static void dot_output(void **state)
 	assert_int_equal(boxes, 4);
 	assert_int_equal(shapes, 2);
 	free(buf);
-	planet_destroy(p);
+	planet_unref(p);
 }
 
 /* ---- planet sets and the shared image cache ---- */
@@ -858,7 +858,7 @@ static void shared_images_and_reload(void **state)
 	planet_set_unref(s2);
 	planet_set_unref(s3);
 	planet_set_unref(s4);
-	img_cache_destroy(ic);
+	img_cache_unref(ic);
 	struct node *n = planet_find_node(held, "h");
 	struct tile_key k = { .node = n->hash, .lx = 1, .ly = 0 };
 	struct tile *t = tile_create(&k, PIX_HEIGHT, held->tile_size);
@@ -876,7 +876,7 @@ static void shared_images_and_reload(void **state)
 	if (planet_load(path, &p, err))
 		fail_msg("%s", err);
 	assert_non_null(p->images);
-	planet_destroy(p);
+	planet_unref(p);
 
 	static const char *const files[] = { "a.ini", "b.ini", "h.tif", "g.tif" };
 	for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {

@@ -125,13 +125,13 @@ static struct fixture *fixture_create(void)
 		.tile = { .seq = 77, .planet_id = 1, .layer = PROTO_MAX_LAYERS - 1,
 			  .key = { .node = 0x0123456789abcdefull, .lx = 31 - 1, .ly = 30,
 				   .x = (1u << 30) - 1, .y = (1u << 30) - 1 },
-			  .enc = { .format = TFMT_RGBA8, .codec = TCODEC_NONE, .size = 64,
+			  .enc = { .format = PIX_COLOR, .codec = TCODEC_NONE, .size = 64,
 				   .raw_len = sizeof(f->payload), .checksum = UINT64_MAX },
 			  .payload = f->payload, .payload_len = sizeof(f->payload) } };
 	*m++ = (struct proto_msg){
 		.type = PROTO_TILE,
 		.tile = { .seq = 78, .planet_id = 1, .layer = 0, .key = { .lx = 0, .ly = 0 },
-			  .enc = { .format = TFMT_F32, .codec = TCODEC_ZSTD,
+			  .enc = { .format = PIX_HEIGHT, .codec = TCODEC_ZSTD,
 				   .filter = TFILTER_GRAD, .size = 1024,
 				   .raw_len = 1024 * 1024 * 4, .checksum = 1 },
 			  .payload = f->payload, .payload_len = 1 } };

@@ -21,11 +21,11 @@ static uint32_t rng(uint64_t *s)
 	return (uint32_t)(*s >> 33);
 }
 
-static void *make_tile(enum tile_format fmt, uint32_t T, int kind)
+static void *make_tile(enum pix_type fmt, uint32_t T, int kind)
 {
 	size_t n = (size_t)T * T;
 	uint64_t s = 12345 + (uint64_t)kind;
-	if (fmt == TFMT_F32) {
+	if (fmt == PIX_HEIGHT) {
 		float *h = xmalloc(n * 4);
 		for (uint32_t y = 0; y < T; y++)
 			for (uint32_t x = 0; x < T; x++) {
@@ -44,12 +44,12 @@ static void *make_tile(enum tile_format fmt, uint32_t T, int kind)
 		}
 		return h;
 	}
-	size_t bpp = tilecodec_texel_bytes(fmt);
+	size_t bpp = pix_bytes(fmt);
 	uint8_t *p = xmalloc(n * bpp);
 	for (uint32_t y = 0; y < T; y++)
 		for (uint32_t x = 0; x < T; x++) {
 			uint8_t *t = p + ((size_t)y * T + x) * bpp;
-			if (fmt == TFMT_RGBA8) { /* gradient with a little noise */
+			if (fmt == PIX_COLOR) { /* gradient with a little noise */
 				t[0] = (uint8_t)(x * 255 / (T > 1 ? T - 1 : 1) + rng(&s) % 2);
 				t[1] = (uint8_t)(y * 200 / (T > 1 ? T - 1 : 1));
 				t[2] = (uint8_t)(64 + (x + y) % 32);
@@ -67,11 +67,11 @@ static void round_trip_all(void **state)
 	(void)state;
 	struct tilecodec *tc = tilecodec_create();
 	const uint32_t sizes[] = { 1, 2, 64, 256 };
-	for (int fmt = TFMT_F32; fmt < TFMT_COUNT; fmt++)
-		for (int kind = 0; kind < (fmt == TFMT_F32 ? 3 : 1); kind++)
+	for (int fmt = PIX_HEIGHT; fmt < PIX_COUNT; fmt++)
+		for (int kind = 0; kind < (fmt == PIX_HEIGHT ? 3 : 1); kind++)
 			for (size_t si = 0; si < 4; si++) {
 				uint32_t T = sizes[si];
-				size_t raw = (size_t)T * T * tilecodec_texel_bytes(fmt);
+				size_t raw = (size_t)T * T * pix_bytes(fmt);
 				void *tex = make_tile(fmt, T, kind);
 				void *back = xmalloc(raw);
 				for (int c = 0; c < TCODEC_COUNT; c++)
@@ -92,7 +92,7 @@ static void round_trip_all(void **state)
 									  raw, err);
 						if (rc)
 							fail_msg("%s T=%u %s+%s: %s",
-								 tilecodec_format_name(fmt), T,
+								 pix_format_name(fmt), T,
 								 tilecodec_filter_name(f),
 								 tilecodec_codec_name(c), err);
 						assert_memory_equal(back, tex, raw);
@@ -123,9 +123,9 @@ static void filters_random_bits(void **state)
 	for (int rep = 0; rep < 20; rep++) {
 		for (size_t i = 0; i < sizeof(in); i++)
 			in[i] = (uint8_t)rng(&s);
-		for (int fmt = TFMT_F32; fmt < TFMT_COUNT; fmt++)
+		for (int fmt = PIX_HEIGHT; fmt < PIX_COUNT; fmt++)
 			for (int f = 0; f < TFILTER_COUNT; f++) {
-				size_t raw = (size_t)T * T * tilecodec_texel_bytes(fmt);
+				size_t raw = (size_t)T * T * pix_bytes(fmt);
 				assert_int_equal(tilecodec_filter(fmt, T, f, in, mid), 0);
 				assert_int_equal(tilecodec_unfilter(fmt, T, f, mid, out), 0);
 				assert_memory_equal(in, out, raw);
@@ -139,36 +139,36 @@ static void compression_pays(void **state)
 	(void)state;
 	struct tilecodec *tc = tilecodec_create();
 	const uint32_t T = 256;
-	float *h = make_tile(TFMT_F32, T, 0);
+	float *h = make_tile(PIX_HEIGHT, T, 0);
 	size_t raw = (size_t)T * T * 4;
 	size_t cap = tilecodec_bound(TCODEC_LZ4, raw) > tilecodec_bound(TCODEC_ZSTD, raw)
 			     ? tilecodec_bound(TCODEC_LZ4, raw)
 			     : tilecodec_bound(TCODEC_ZSTD, raw);
 	void *out = xmalloc(cap);
 	struct tilecodec_hdr hd;
-	ssize_t plain = tilecodec_encode(tc, TFMT_F32, T, TCODEC_ZSTD, TFILTER_NONE, 1, h, &hd,
+	ssize_t plain = tilecodec_encode(tc, PIX_HEIGHT, T, TCODEC_ZSTD, TFILTER_NONE, 1, h, &hd,
 					 out, cap);
-	ssize_t grad = tilecodec_encode(tc, TFMT_F32, T, TCODEC_ZSTD,
-					tilecodec_default_filter(TFMT_F32), 1, h, &hd, out, cap);
+	ssize_t grad = tilecodec_encode(tc, PIX_HEIGHT, T, TCODEC_ZSTD,
+					tilecodec_default_filter(PIX_HEIGHT), 1, h, &hd, out, cap);
 	assert_int_equal(hd.codec, TCODEC_ZSTD);
 	assert_true(grad > 0 && plain > 0);
 	assert_true((double)raw / (double)grad > 1.3); /* smooth heights: ≥ 1.3× */
 	assert_true(grad < plain);		      /* and the filter helps */
 
-	uint8_t *nrm = make_tile(TFMT_RG8, T, 0); /* random: cannot compress */
-	ssize_t n = tilecodec_encode(tc, TFMT_RG8, T, TCODEC_LZ4, TFILTER_PLANES, 0, nrm, &hd, out,
+	uint8_t *nrm = make_tile(PIX_NORMAL, T, 0); /* random: cannot compress */
+	ssize_t n = tilecodec_encode(tc, PIX_NORMAL, T, TCODEC_LZ4, TFILTER_PLANES, 0, nrm, &hd, out,
 				     cap);
 	assert_int_equal(n, (ssize_t)T * T * 2);
 	assert_int_equal(hd.codec, TCODEC_NONE);
 	assert_int_equal(hd.filter, TFILTER_NONE);
 	assert_memory_equal(out, nrm, (size_t)n);
 
-	uint8_t *col = make_tile(TFMT_RGBA8, T, 0);
-	n = tilecodec_encode(tc, TFMT_RGBA8, T, TCODEC_LZ4, tilecodec_default_filter(TFMT_RGBA8),
+	uint8_t *col = make_tile(PIX_COLOR, T, 0);
+	n = tilecodec_encode(tc, PIX_COLOR, T, TCODEC_LZ4, tilecodec_default_filter(PIX_COLOR),
 			     0, col, &hd, out, cap);
 	assert_int_equal(hd.codec, TCODEC_LZ4);
 	assert_true((double)(T * T * 4) / (double)n > 4); /* gradient */
-	ssize_t none = tilecodec_encode(tc, TFMT_RGBA8, T, TCODEC_LZ4, TFILTER_NONE, 0, col, &hd,
+	ssize_t none = tilecodec_encode(tc, PIX_COLOR, T, TCODEC_LZ4, TFILTER_NONE, 0, col, &hd,
 					out, cap);
 	assert_true(none > 2 * n); /* the filter is what makes it pay */
 	free(col);
@@ -183,7 +183,7 @@ static void corruption_detected(void **state)
 	(void)state;
 	struct tilecodec *tc = tilecodec_create();
 	const uint32_t T = 64;
-	float *h = make_tile(TFMT_F32, T, 0);
+	float *h = make_tile(PIX_HEIGHT, T, 0);
 	size_t raw = (size_t)T * T * 4;
 	float *back = xmalloc(raw);
 	char err[256];
@@ -191,7 +191,7 @@ static void corruption_detected(void **state)
 		size_t cap = tilecodec_bound(c, raw);
 		uint8_t *out = xmalloc(cap);
 		struct tilecodec_hdr hd;
-		ssize_t n = tilecodec_encode(tc, TFMT_F32, T, c, TFILTER_DELTA, 0, h, &hd, out, cap);
+		ssize_t n = tilecodec_encode(tc, PIX_HEIGHT, T, c, TFILTER_DELTA, 0, h, &hd, out, cap);
 		assert_true(n > 0);
 		assert_int_equal(hd.codec, c); /* smooth: every codec pays */
 
@@ -229,7 +229,7 @@ static void corruption_detected(void **state)
 		bad.raw_len -= 4;
 		assert_int_equal(tilecodec_decode(tc, &bad, out, (size_t)n, back, raw, err), -EINVAL);
 		bad = hd;
-		bad.format = TFMT_RGBA8; /* same byte count: decodes, then fails the checksum */
+		bad.format = PIX_COLOR; /* same byte count: decodes, then fails the checksum */
 		assert_int_equal(tilecodec_decode(tc, &bad, out, (size_t)n, back, raw, err),
 				 -EILSEQ);
 		bad = hd;
@@ -243,7 +243,7 @@ static void corruption_detected(void **state)
 				 -EINVAL);
 		/* output buffer too small for the encoder */
 		if (c != TCODEC_NONE)
-			assert_int_equal(tilecodec_encode(tc, TFMT_F32, T, c, 0, 0, h, &hd, out,
+			assert_int_equal(tilecodec_encode(tc, PIX_HEIGHT, T, c, 0, 0, h, &hd, out,
 							  raw),
 					 -ENOSPC);
 		free(out);
@@ -253,7 +253,7 @@ static void corruption_detected(void **state)
 	uint64_t s = 5;
 	for (size_t i = 0; i < sizeof(junk); i++)
 		junk[i] = (uint8_t)rng(&s);
-	struct tilecodec_hdr g = { .format = TFMT_F32, .codec = TCODEC_LZ4, .size = T,
+	struct tilecodec_hdr g = { .format = PIX_HEIGHT, .codec = TCODEC_LZ4, .size = T,
 				   .raw_len = (uint32_t)raw };
 	assert_int_equal(tilecodec_decode(tc, &g, junk, sizeof(junk), back, raw, err), -EBADMSG);
 	g.codec = TCODEC_ZSTD;
@@ -261,9 +261,9 @@ static void corruption_detected(void **state)
 	/* bad arguments to the encoder */
 	struct tilecodec_hdr hd;
 	uint8_t o[64];
-	assert_int_equal(tilecodec_encode(tc, TFMT_F32, 3, 0, 0, 0, h, &hd, o, sizeof(o)), -EINVAL);
-	assert_int_equal(tilecodec_encode(tc, TFMT_NONE, 2, 0, 0, 0, h, &hd, o, sizeof(o)), -EINVAL);
-	assert_int_equal(tilecodec_encode(tc, TFMT_F32, 2, 3, 0, 0, h, &hd, o, sizeof(o)), -EINVAL);
+	assert_int_equal(tilecodec_encode(tc, PIX_HEIGHT, 3, 0, 0, 0, h, &hd, o, sizeof(o)), -EINVAL);
+	assert_int_equal(tilecodec_encode(tc, PIX_NONE, 2, 0, 0, 0, h, &hd, o, sizeof(o)), -EINVAL);
+	assert_int_equal(tilecodec_encode(tc, PIX_HEIGHT, 2, 3, 0, 0, h, &hd, o, sizeof(o)), -EINVAL);
 	free(back);
 	free(h);
 	tilecodec_destroy(tc);
@@ -275,9 +275,10 @@ static void names(void **state)
 	assert_string_equal(tilecodec_codec_name(TCODEC_ZSTD), "zstd");
 	assert_int_equal(tilecodec_codec_parse("lz4"), TCODEC_LZ4);
 	assert_int_equal(tilecodec_codec_parse("gzip"), -EINVAL);
-	assert_string_equal(tilecodec_format_name(TFMT_RG8), "rg8");
-	assert_null(tilecodec_format_name(TFMT_COUNT));
-	assert_int_equal(tilecodec_texel_bytes(TFMT_RGBA8), 4);
+	assert_string_equal(pix_format_name(PIX_NORMAL), "rg8");
+	assert_false(pix_valid(PIX_COUNT));
+	assert_string_equal(pix_format_name(PIX_COUNT), "none");
+	assert_int_equal(pix_bytes(PIX_COLOR), 4);
 	assert_int_equal(tilecodec_bound(TCODEC_NONE, 100), 100);
 	assert_true(tilecodec_bound(TCODEC_LZ4, 100) >= 100);
 	assert_int_equal(tilecodec_bound(TCODEC_COUNT, 100), 0);

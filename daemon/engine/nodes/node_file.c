@@ -96,7 +96,7 @@ static void file_destroy(struct node *nd)
 	struct file_impl *f = nd->impl;
 	if (!f)
 		return;
-	img_cache_destroy(f->own_cache);
+	img_cache_unref(f->own_cache);
 	free(f->path);
 	free(f);
 	nd->impl = NULL;
