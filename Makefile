@@ -175,7 +175,7 @@ demo: deps
 # libFuzzer targets (clang): each tests/fuzz/fuzz_NAME.c runs FUZZ_SECONDS on its corpus.
 FUZZ_SECONDS ?= 60
 FUZZ_SRC := $(wildcard tests/fuzz/fuzz_*.c)
-FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/grid.c \
+FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/pixfmt.c common/grid.c \
                common/xalloc.c common/errbuf.c
 FUZZ_FLAGS := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
               -fno-sanitize-recover=all -iquote . -iquote daemon
