@@ -179,192 +179,255 @@ static void enc_tile_head(struct wr *w, const struct proto_tile *t)
 	w64(w, t->enc.checksum);
 }
 
+/* One encoder per message kind: the fields in wire order (docs/PROTOCOL.md). */
+
+static void enc_hello(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_hello *h = &m->hello;
+	w8(w, h->ver_min);
+	w8(w, h->ver_max);
+	w32(w, h->codecs);
+	wbytes(w, h->token, h->token_len, "token");
+	wstr(w, h->name, "client name");
+}
+
+static void enc_hello_ok(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_hello_ok *h = &m->hello_ok;
+	w8(w, h->version);
+	w32(w, h->codecs);
+	w64(w, h->session);
+	w32(w, h->limits.max_want);
+	w32(w, h->limits.max_rate);
+	w64(w, h->limits.max_pending);
+	w32(w, h->limits.max_frame);
+	wstr(w, h->name, "server name");
+}
+
+static void enc_error(struct wr *w, const struct proto_msg *m)
+{
+	w16(w, m->error.code);
+	w16(w, m->error.ref_type);
+	w32(w, m->error.ref_id);
+	wstr(w, m->error.message, "message");
+}
+
+/* LIST_PLANETS, STATS_REQ and PREFETCH_CANCEL: the same struct proto_req in all three. */
+static void enc_req(struct wr *w, const struct proto_msg *m)
+{
+	w32(w, m->list_planets.req);
+}
+
+static void enc_planets(struct wr *w, const struct proto_msg *m)
+{
+	w32(w, m->planets.req);
+	w16(w, m->planets.count);
+	if (!wcount(w, m->planets.count, PROTO_MAX_PLANETS, "planets"))
+		return;
+	for (uint16_t i = 0; i < m->planets.count; i++)
+		enc_planet(w, &m->planets.planets[i]);
+}
+
+static void enc_open(struct wr *w, const struct proto_msg *m)
+{
+	w32(w, m->open.req);
+	wstr(w, m->open.name, "planet name");
+}
+
+static void enc_opened(struct wr *w, const struct proto_msg *m)
+{
+	w32(w, m->opened.req);
+	w32(w, m->opened.planet_id);
+	enc_planet(w, &m->opened.planet);
+}
+
+static void enc_want(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_want *q = &m->want;
+	w32(w, q->planet_id);
+	w32(w, q->seq);
+	wf64(w, q->lon);
+	wf64(w, q->lat);
+	wf64(w, q->alt);
+	for (int i = 0; i < 3; i++)
+		wf64(w, q->vel[i]);
+	w32(w, q->count);
+	if (!wcount(w, q->count, PROTO_MAX_WANT, "want entries"))
+		return;
+	for (uint32_t i = 0; i < q->count; i++) {
+		const struct proto_want_entry *e = &q->entries[i];
+		uint8_t b[12] = { e->layer, e->cls, e->lx, e->ly };
+		for (int k = 0; k < 4; k++) {
+			b[4 + k] = (uint8_t)(e->x >> 8 * k);
+			b[8 + k] = (uint8_t)(e->y >> 8 * k);
+		}
+		put(w, b, sizeof(b));
+	}
+}
+
+static void enc_tile(struct wr *w, const struct proto_msg *m)
+{
+	if (m->tile.payload_len && !m->tile.payload) {
+		err_set(w->errbuf, "TILE without its payload");
+		w->err = -EINVAL;
+		return;
+	}
+	enc_tile_head(w, &m->tile);
+	put(w, m->tile.payload, m->tile.payload_len);
+}
+
+static void enc_tile_fail(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_tile_fail *t = &m->tile_fail;
+	w32(w, t->seq);
+	w32(w, t->planet_id);
+	w8(w, t->layer);
+	w8(w, t->key.lx);
+	w8(w, t->key.ly);
+	w32(w, t->key.x);
+	w32(w, t->key.y);
+	w64(w, t->key.node);
+	w16(w, t->code);
+	wstr(w, t->message, "message");
+}
+
+static void enc_stat(struct wr *w, const struct proto_stat *s)
+{
+	wstr(w, s->key, "stat key");
+	w8(w, s->kind);
+	if (s->kind == PROTO_STAT_U64)
+		w64(w, s->u);
+	else if (s->kind == PROTO_STAT_F64)
+		wf64(w, s->f);
+	else if (s->kind == PROTO_STAT_STR)
+		wstr(w, s->s, "stat value");
+}
+
+static void enc_stats(struct wr *w, const struct proto_msg *m)
+{
+	w32(w, m->stats.req);
+	w16(w, m->stats.count);
+	if (!wcount(w, m->stats.count, PROTO_MAX_STATS, "stats"))
+		return;
+	for (uint16_t i = 0; i < m->stats.count; i++)
+		enc_stat(w, &m->stats.items[i]);
+}
+
+static void enc_cache_ls(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_cache_ls *c = &m->cache_ls;
+	w32(w, c->req);
+	w8(w, c->filter);
+	wstr(w, c->planet, "planet");
+	w8(w, c->lx);
+	w8(w, c->ly);
+	wf64(w, c->lon);
+	wf64(w, c->lat);
+	wf64(w, c->radius_m);
+	w32(w, c->limit);
+}
+
+static void enc_cache_entry(struct wr *w, const struct proto_cache_entry *e)
+{
+	w64(w, e->key.node);
+	w8(w, e->key.lx);
+	w8(w, e->key.ly);
+	w8(w, e->format);
+	w8(w, e->tier);
+	w32(w, e->key.x);
+	w32(w, e->key.y);
+	w32(w, e->bytes);
+	w32(w, e->age_s);
+}
+
+static void enc_cache_entries(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_cache_entries *c = &m->cache_entries;
+	w32(w, c->req);
+	w8(w, c->more);
+	w64(w, c->total);
+	w32(w, c->count);
+	if (!wcount(w, c->count, PROTO_MAX_CACHE_ENTRIES, "cache entries"))
+		return;
+	for (uint32_t i = 0; i < c->count; i++)
+		enc_cache_entry(w, &c->entries[i]);
+}
+
+static void enc_prefetch(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_prefetch *p = &m->prefetch;
+	w32(w, p->id);
+	wstr(w, p->planet, "planet");
+	w64(w, p->layers);
+	w8(w, p->shape);
+	w8(w, p->lmin);
+	w8(w, p->lmax);
+	if (p->shape == PROTO_SHAPE_BBOX) {
+		wf64(w, p->bbox.west);
+		wf64(w, p->bbox.south);
+		wf64(w, p->bbox.east);
+		wf64(w, p->bbox.north);
+	} else if (p->shape == PROTO_SHAPE_PATH) {
+		wf64(w, p->width_m);
+		w32(w, p->npoints);
+		if (!wcount(w, p->npoints, PROTO_MAX_PATH, "path points"))
+			return;
+		for (uint32_t i = 0; i < p->npoints; i++) {
+			wf64(w, p->points[i].lon);
+			wf64(w, p->points[i].lat);
+		}
+	}
+}
+
+static void enc_prefetch_progress(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_prefetch_progress *p = &m->prefetch_progress;
+	w32(w, p->id);
+	w8(w, p->state);
+	w64(w, p->done);
+	w64(w, p->total);
+	wf64(w, p->rate);
+}
+
+typedef void enc_fn(struct wr *w, const struct proto_msg *m);
+
+/* The body encoder of every message type; NULL: no body (BYE). */
+static const struct {
+	uint16_t type;
+	enc_fn *enc;
+} encoders[] = {
+	{ PROTO_HELLO, enc_hello },
+	{ PROTO_HELLO_OK, enc_hello_ok },
+	{ PROTO_BYE, NULL },
+	{ PROTO_ERROR, enc_error },
+	{ PROTO_LIST_PLANETS, enc_req },
+	{ PROTO_PLANETS, enc_planets },
+	{ PROTO_OPEN, enc_open },
+	{ PROTO_OPENED, enc_opened },
+	{ PROTO_WANT, enc_want },
+	{ PROTO_TILE, enc_tile },
+	{ PROTO_TILE_FAIL, enc_tile_fail },
+	{ PROTO_STATS_REQ, enc_req },
+	{ PROTO_STATS, enc_stats },
+	{ PROTO_CACHE_LS, enc_cache_ls },
+	{ PROTO_CACHE_ENTRIES, enc_cache_entries },
+	{ PROTO_PREFETCH, enc_prefetch },
+	{ PROTO_PREFETCH_PROGRESS, enc_prefetch_progress },
+	{ PROTO_PREFETCH_CANCEL, enc_req },
+};
+
+/* m's payload; its type is known (proto_type_name gave it a name). */
 static void enc_body(struct wr *w, const struct proto_msg *m)
 {
-	switch (m->type) {
-	case PROTO_HELLO: {
-		const struct proto_hello *h = &m->hello;
-		w8(w, h->ver_min);
-		w8(w, h->ver_max);
-		w32(w, h->codecs);
-		wbytes(w, h->token, h->token_len, "token");
-		wstr(w, h->name, "client name");
-		break;
-	}
-	case PROTO_HELLO_OK: {
-		const struct proto_hello_ok *h = &m->hello_ok;
-		w8(w, h->version);
-		w32(w, h->codecs);
-		w64(w, h->session);
-		w32(w, h->limits.max_want);
-		w32(w, h->limits.max_rate);
-		w64(w, h->limits.max_pending);
-		w32(w, h->limits.max_frame);
-		wstr(w, h->name, "server name");
-		break;
-	}
-	case PROTO_BYE:
-		break;
-	case PROTO_ERROR:
-		w16(w, m->error.code);
-		w16(w, m->error.ref_type);
-		w32(w, m->error.ref_id);
-		wstr(w, m->error.message, "message");
-		break;
-	case PROTO_LIST_PLANETS:
-	case PROTO_STATS_REQ:
-	case PROTO_PREFETCH_CANCEL:
-		w32(w, m->list_planets.req); /* the same struct proto_req in all three */
-		break;
-	case PROTO_PLANETS:
-		w32(w, m->planets.req);
-		w16(w, m->planets.count);
-		if (wcount(w, m->planets.count, PROTO_MAX_PLANETS, "planets"))
-			for (uint16_t i = 0; i < m->planets.count; i++)
-				enc_planet(w, &m->planets.planets[i]);
-		break;
-	case PROTO_OPEN:
-		w32(w, m->open.req);
-		wstr(w, m->open.name, "planet name");
-		break;
-	case PROTO_OPENED:
-		w32(w, m->opened.req);
-		w32(w, m->opened.planet_id);
-		enc_planet(w, &m->opened.planet);
-		break;
-	case PROTO_WANT: {
-		const struct proto_want *q = &m->want;
-		w32(w, q->planet_id);
-		w32(w, q->seq);
-		wf64(w, q->lon);
-		wf64(w, q->lat);
-		wf64(w, q->alt);
-		for (int i = 0; i < 3; i++)
-			wf64(w, q->vel[i]);
-		w32(w, q->count);
-		if (!wcount(w, q->count, PROTO_MAX_WANT, "want entries"))
-			break;
-		for (uint32_t i = 0; i < q->count; i++) {
-			const struct proto_want_entry *e = &q->entries[i];
-			uint8_t b[12] = { e->layer, e->cls, e->lx, e->ly };
-			for (int k = 0; k < 4; k++) {
-				b[4 + k] = (uint8_t)(e->x >> 8 * k);
-				b[8 + k] = (uint8_t)(e->y >> 8 * k);
-			}
-			put(w, b, sizeof(b));
+	for (size_t i = 0; i < sizeof(encoders) / sizeof(encoders[0]); i++) {
+		if (encoders[i].type == m->type) {
+			if (encoders[i].enc)
+				encoders[i].enc(w, m);
+			return;
 		}
-		break;
 	}
-	case PROTO_TILE:
-		if (m->tile.payload_len && !m->tile.payload) {
-			err_set(w->errbuf, "TILE without its payload");
-			w->err = -EINVAL;
-			break;
-		}
-		enc_tile_head(w, &m->tile);
-		put(w, m->tile.payload, m->tile.payload_len);
-		break;
-	case PROTO_TILE_FAIL: {
-		const struct proto_tile_fail *t = &m->tile_fail;
-		w32(w, t->seq);
-		w32(w, t->planet_id);
-		w8(w, t->layer);
-		w8(w, t->key.lx);
-		w8(w, t->key.ly);
-		w32(w, t->key.x);
-		w32(w, t->key.y);
-		w64(w, t->key.node);
-		w16(w, t->code);
-		wstr(w, t->message, "message");
-		break;
-	}
-	case PROTO_STATS:
-		w32(w, m->stats.req);
-		w16(w, m->stats.count);
-		if (!wcount(w, m->stats.count, PROTO_MAX_STATS, "stats"))
-			break;
-		for (uint16_t i = 0; i < m->stats.count; i++) {
-			const struct proto_stat *s = &m->stats.items[i];
-			wstr(w, s->key, "stat key");
-			w8(w, s->kind);
-			if (s->kind == PROTO_STAT_U64)
-				w64(w, s->u);
-			else if (s->kind == PROTO_STAT_F64)
-				wf64(w, s->f);
-			else if (s->kind == PROTO_STAT_STR)
-				wstr(w, s->s, "stat value");
-		}
-		break;
-	case PROTO_CACHE_LS: {
-		const struct proto_cache_ls *c = &m->cache_ls;
-		w32(w, c->req);
-		w8(w, c->filter);
-		wstr(w, c->planet, "planet");
-		w8(w, c->lx);
-		w8(w, c->ly);
-		wf64(w, c->lon);
-		wf64(w, c->lat);
-		wf64(w, c->radius_m);
-		w32(w, c->limit);
-		break;
-	}
-	case PROTO_CACHE_ENTRIES: {
-		const struct proto_cache_entries *c = &m->cache_entries;
-		w32(w, c->req);
-		w8(w, c->more);
-		w64(w, c->total);
-		w32(w, c->count);
-		if (!wcount(w, c->count, PROTO_MAX_CACHE_ENTRIES, "cache entries"))
-			break;
-		for (uint32_t i = 0; i < c->count; i++) {
-			const struct proto_cache_entry *e = &c->entries[i];
-			w64(w, e->key.node);
-			w8(w, e->key.lx);
-			w8(w, e->key.ly);
-			w8(w, e->format);
-			w8(w, e->tier);
-			w32(w, e->key.x);
-			w32(w, e->key.y);
-			w32(w, e->bytes);
-			w32(w, e->age_s);
-		}
-		break;
-	}
-	case PROTO_PREFETCH: {
-		const struct proto_prefetch *p = &m->prefetch;
-		w32(w, p->id);
-		wstr(w, p->planet, "planet");
-		w64(w, p->layers);
-		w8(w, p->shape);
-		w8(w, p->lmin);
-		w8(w, p->lmax);
-		if (p->shape == PROTO_SHAPE_BBOX) {
-			wf64(w, p->bbox.west);
-			wf64(w, p->bbox.south);
-			wf64(w, p->bbox.east);
-			wf64(w, p->bbox.north);
-		} else if (p->shape == PROTO_SHAPE_PATH) {
-			wf64(w, p->width_m);
-			w32(w, p->npoints);
-			if (!wcount(w, p->npoints, PROTO_MAX_PATH, "path points"))
-				break;
-			for (uint32_t i = 0; i < p->npoints; i++) {
-				wf64(w, p->points[i].lon);
-				wf64(w, p->points[i].lat);
-			}
-		}
-		break;
-	}
-	case PROTO_PREFETCH_PROGRESS: {
-		const struct proto_prefetch_progress *p = &m->prefetch_progress;
-		w32(w, p->id);
-		w8(w, p->state);
-		w64(w, p->done);
-		w64(w, p->total);
-		wf64(w, p->rate);
-		break;
-	}
-	}
+	err_set(w->errbuf, "no encoder for message type %u", m->type);
+	w->err = -EINVAL;
 }
 
 static void put_header(struct wr *w, uint16_t type, uint32_t length)

@@ -7,6 +7,7 @@
 #include <fcntl.h>
 #include <malloc.h>
 #include <signal.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,6 +17,7 @@
 
 #include "engine/cache.h"
 #include "conf.h"
+#include "common/errbuf.h"
 #include "common/img.h"
 #include "common/log.h"
 #include "engine/planets.h"
@@ -98,30 +100,30 @@ static int check_token(const struct conf *c, char err[256])
 		return 0;
 	int fd = open(c->token_file, O_RDONLY | O_CLOEXEC);
 	if (fd < 0) {
-		snprintf(err, 256, "%s: token_file %s: %s", c->path, c->token_file, strerror(errno));
+		err_set(err, "%s: token_file %s: %s", c->path, c->token_file, strerror(errno));
 		return -EINVAL;
 	}
 	char b[8];
 	ssize_t n = read(fd, b, sizeof b);
 	close(fd);
 	if (n <= 0 || (n == 1 && b[0] == '\n')) {
-		snprintf(err, 256, "%s: token_file %s is empty or unreadable", c->path, c->token_file);
+		err_set(err, "%s: token_file %s is empty or unreadable", c->path, c->token_file);
 		return -EINVAL;
 	}
 	return 0;
 }
 
-int main(int argc, char **argv)
+/* The command line into *cfg and *check. Returns -1 to go on, else the exit status (0:
+ * --help). */
+static int parse_args(int argc, char **argv, const char **cfg, bool *check)
 {
-	const char *cfg = DEFAULT_CONF;
-	int check = 0;
 	for (int i = 1; i < argc; i++) {
 		if ((!strcmp(argv[i], "-c") || !strcmp(argv[i], "--config")) && i + 1 < argc) {
-			cfg = argv[++i];
+			*cfg = argv[++i];
 		} else if (!strncmp(argv[i], "--config=", 9)) {
-			cfg = argv[i] + 9;
+			*cfg = argv[i] + 9;
 		} else if (!strcmp(argv[i], "--check-config")) {
-			check = 1;
+			*check = true;
 		} else if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 			usage(stdout);
 			return 0;
@@ -131,74 +133,67 @@ int main(int argc, char **argv)
 			return 2;
 		}
 	}
+	return -1;
+}
 
-	struct daemon d = { .sigfd = -1 };
+/* The configuration cfg into d->conf and the planet files it names into *ps (returned
+ * owned), the token file checked. Returns 0, or 2 after saying what is wrong (nothing left
+ * to free). */
+static int configure(struct daemon *d, const char *cfg, struct planet_set **ps)
+{
 	char err[256];
-	if (conf_load(cfg, &d.conf, err)) {
+	if (conf_load(cfg, &d->conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
 		return 2;
 	}
-	log_set_level(d.conf.log_level);
-	struct planet_set *ps = NULL;
-	struct img_cache *images = img_cache_create(d.conf.image_cache_mb); /* the set holds it */
-	int lrc = planet_set_load(d.conf.planets_dir, ++d.generation, images, &ps, err);
+	log_set_level(d->conf.log_level);
+	*ps = NULL;
+	struct img_cache *images = img_cache_create(d->conf.image_cache_mb); /* the set holds it */
+	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, images, ps, err);
 	img_cache_unref(images);
-	if (lrc || check_token(&d.conf, err)) {
+	if (rc || check_token(&d->conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
-		planet_set_unref(ps);
-		conf_fini(&d.conf);
+		planet_set_unref(*ps);
+		*ps = NULL;
+		conf_fini(&d->conf);
 		return 2;
 	}
-	if (check) {
-		printf("%s: OK (%zu planets in %s)\n", cfg, ps->n, d.conf.planets_dir);
-		planet_set_unref(ps);
-		conf_fini(&d.conf);
-		return 0;
-	}
+	return 0;
+}
 
+/* SIGTERM, SIGINT and SIGHUP blocked (in this thread and the ones it starts) and readable
+ * from d->sigfd; SIGPIPE ignored. Returns 0 or -errno. */
+static int take_signals(struct daemon *d)
+{
 	sigset_t mask;
 	sigemptyset(&mask);
 	sigaddset(&mask, SIGTERM);
 	sigaddset(&mask, SIGINT);
 	sigaddset(&mask, SIGHUP);
 	signal(SIGPIPE, SIG_IGN);
-	if (pthread_sigmask(SIG_BLOCK, &mask, NULL) ||
-	    (d.sigfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC)) < 0) {
-		fprintf(stderr, "clipmapd: signalfd: %s\n", strerror(errno));
-		return 1;
-	}
+	int rc = pthread_sigmask(SIG_BLOCK, &mask, NULL);
+	if (rc)
+		return -rc;
+	d->sigfd = signalfd(-1, &mask, SFD_NONBLOCK | SFD_CLOEXEC);
+	return d->sigfd < 0 ? -errno : 0;
+}
 
-	/* Tiles are 64 KiB to 1 MiB. By default glibc maps each one afresh (or trims its heaps
-	 * back to the system when the cache frees them), and the kernel zeroes every page on its
-	 * first touch: a quarter of the daemon's time in the keep-up bench went to those page
-	 * faults and to munmap. Keep tiles in the heap and keep freed memory for the next ones —
-	 * the cache's budget bounds how much that is. */
-	size_t keep = d.conf.cache_bytes < ((size_t)1 << 30) ? d.conf.cache_bytes : (size_t)1 << 30;
+/* Tiles are 64 KiB to 1 MiB. By default glibc maps each one afresh (or trims its heaps back
+ * to the system when the cache frees them), and the kernel zeroes every page on its first
+ * touch: a quarter of the daemon's time in the keep-up bench went to those page faults and to
+ * munmap. Keep tiles in the heap and keep freed memory for the next ones — the cache's budget
+ * (cache_bytes) bounds how much that is. */
+static void keep_tiles_in_heap(size_t cache_bytes)
+{
+	size_t keep = cache_bytes < ((size_t)1 << 30) ? cache_bytes : (size_t)1 << 30;
 	if (!mallopt(M_MMAP_THRESHOLD, 32 << 20) || !mallopt(M_TRIM_THRESHOLD, (int)keep))
 		log_msg(LOG_WARN, "mallopt failed: tiles will be mapped afresh");
+}
 
-	/* Threads start after the mask is set, so they inherit it and signals reach the fd. */
-	struct cache *cache = cache_create(d.conf.cache_bytes);
-	struct sched *sched = sched_create(&(struct sched_desc){
-		.cache = cache, .workers = d.conf.workers, .worker_nice = d.conf.worker_nice });
-	int rc = server_create(&d.conf, sched, cache, ps, &d.srv, err);
-	if (rc) {
-		log_msg(LOG_ERROR, "%s", err);
-		planet_set_unref(ps);
-		sched_destroy(sched);
-		cache_destroy(cache);
-		conf_fini(&d.conf);
-		return rc == -EINVAL ? 2 : 1;
-	}
-	if ((rc = server_watch_fd(d.srv, d.sigfd, on_signal, &d))) {
-		log_msg(LOG_ERROR, "signalfd: %s", strerror(-rc));
-		return 1;
-	}
-	if (sd_watchdog_enabled(0, &d.watchdog_usec) <= 0)
-		d.watchdog_usec = 0;
-	server_set_tick(d.srv, on_tick, &d);
+static void log_ready(const struct daemon *d, struct sched *sched)
+{
 	const struct listener *ls;
-	size_t nls = server_listeners(d.srv, &ls);
+	size_t nls = server_listeners(d->srv, &ls);
 	for (size_t i = 0; i < nls; i++)
 		log_msg(LOG_INFO, "listening on %s%s%s", ls[i].name,
 			ls[i].need_token ? " (token required)" : "",
@@ -206,16 +201,75 @@ int main(int argc, char **argv)
 	struct sched_stats ss;
 	sched_get_stats(sched, &ss);
 	log_msg(LOG_INFO, "clipmapd ready: %zu planets, %d workers, cache %zu MiB",
-		d.srv->planets->n, ss.workers, d.conf.cache_bytes >> 20);
-	sd_notify(0, "READY=1\nSTATUS=serving");
+		d->srv->planets->n, ss.workers, d->conf.cache_bytes >> 20);
+}
 
-	rc = server_run(d.srv);
+/* The cache, the workers and the server over the planets ps (taken), run until a signal
+ * stops them. Returns the exit status. */
+static int serve(struct daemon *d, struct planet_set *ps)
+{
+	char err[256];
+	/* Threads start after the mask is set, so they inherit it and signals reach the fd. */
+	struct cache *cache = cache_create(d->conf.cache_bytes);
+	struct sched *sched = sched_create(&(struct sched_desc){
+		.cache = cache, .workers = d->conf.workers, .worker_nice = d->conf.worker_nice });
+	int rc = server_create(&d->conf, sched, cache, ps, &d->srv, err);
+	if (rc) {
+		log_msg(LOG_ERROR, "%s", err);
+		planet_set_unref(ps);
+		sched_destroy(sched);
+		cache_destroy(cache);
+		return rc == -EINVAL ? 2 : 1;
+	}
+	bool ran = false;
+	if ((rc = server_watch_fd(d->srv, d->sigfd, on_signal, d))) {
+		log_msg(LOG_ERROR, "signalfd: %s", strerror(-rc));
+		goto out;
+	}
+	if (sd_watchdog_enabled(0, &d->watchdog_usec) <= 0)
+		d->watchdog_usec = 0;
+	server_set_tick(d->srv, on_tick, d);
+	log_ready(d, sched);
+	sd_notify(0, "READY=1\nSTATUS=serving");
+	rc = server_run(d->srv);
+	ran = true;
 	sd_notify(0, "STOPPING=1");
-	server_destroy(d.srv);
+out:
+	server_destroy(d->srv);
 	sched_destroy(sched);
 	cache_destroy(cache);
+	if (ran)
+		log_msg(LOG_INFO, "clipmapd stopped");
+	return rc ? 1 : 0;
+}
+
+int main(int argc, char **argv)
+{
+	const char *cfg = DEFAULT_CONF;
+	bool check = false;
+	int status = parse_args(argc, argv, &cfg, &check);
+	if (status >= 0)
+		return status;
+	struct daemon d = { .sigfd = -1 };
+	struct planet_set *ps;
+	if ((status = configure(&d, cfg, &ps)))
+		return status;
+	if (check) {
+		printf("%s: OK (%zu planets in %s)\n", cfg, ps->n, d.conf.planets_dir);
+		planet_set_unref(ps);
+		conf_fini(&d.conf);
+		return 0;
+	}
+	int rc = take_signals(&d);
+	if (rc) {
+		fprintf(stderr, "clipmapd: signalfd: %s\n", strerror(-rc));
+		planet_set_unref(ps);
+		conf_fini(&d.conf);
+		return 1;
+	}
+	keep_tiles_in_heap(d.conf.cache_bytes);
+	status = serve(&d, ps);
 	close(d.sigfd);
 	conf_fini(&d.conf);
-	log_msg(LOG_INFO, "clipmapd stopped");
-	return rc ? 1 : 0;
+	return status;
 }

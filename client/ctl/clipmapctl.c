@@ -10,7 +10,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "ctl_args.h"
@@ -20,6 +19,8 @@
 #include "ctl_status.h"
 #include "ctl_tile.h"
 #include "import_cli.h"
+#include "common/clock.h"
+#include "common/errbuf.h"
 #include "engine/planet.h"
 #include "planet_path.h"
 #include "render.h"
@@ -82,15 +83,213 @@ static int parse_u32(const char *s, const char *what, long max, uint32_t *out)
 	return 0;
 }
 
+/* ---- options -------------------------------------------------------------------------- */
+
+/* Options every online command takes (also before the command). Returns 1 if c was one. */
+static int global_opt(int c, struct ctl_target *t)
+{
+	switch (c) {
+	case 'S': t->socket_path = optarg; return 1;
+	case 'H': t->hostport = optarg; return 1;
+	case 'T': t->token_file = optarg; return 1;
+	case 'W': {
+		uint64_t v;
+		char err[256];
+		if (ctl_parse_uint(optarg, "--timeout", 86400, &v, err) || v == 0) {
+			fprintf(stderr, "clipmapctl: --timeout wants seconds in [1, 86400], got \"%s\"\n",
+				optarg);
+			return -1;
+		}
+		t->timeout_ms = (int)(v * 1000);
+		return 1;
+	}
+	default: return 0;
+	}
+}
+
+#define GLOBAL_OPTS                                                                          \
+	{ "socket", required_argument, NULL, 'S' }, { "host", required_argument, NULL, 'H' },   \
+	{ "token-file", required_argument, NULL, 'T' },                                          \
+	{ "timeout", required_argument, NULL, 'W' }, { "help", no_argument, NULL, 'h' }
+
+/* The next option for a command to handle (getopt_long over shorts and longs), after the
+ * ones every command shares: with t (an online command) the global options go into t (-s is
+ * --socket); --help prints the usage. Returns the option ('?' for an unknown one), -1 at the
+ * end, or OPT_EXIT with *status the exit status (0 after --help, 2 after a bad global
+ * option). */
+#define OPT_EXIT (-2)
+static int next_opt(int argc, char **argv, const char *shorts, const struct option *longs,
+		    struct ctl_target *t, int *status)
+{
+	int c;
+	while ((c = getopt_long(argc, argv, shorts, longs, NULL)) != -1) {
+		int g = t ? global_opt(c == 's' ? 'S' : c, t) : 0;
+		if (g < 0) {
+			*status = 2;
+			return OPT_EXIT;
+		}
+		if (g)
+			continue;
+		if (c == 'h') {
+			usage(stdout);
+			*status = 0;
+			return OPT_EXIT;
+		}
+		return c;
+	}
+	return -1;
+}
+
+/* ---- offline commands ----------------------------------------------------------------- */
+
 static void progress(void *ud, size_t done, size_t total)
 {
-	const struct timespec *t0 = ud;
-	struct timespec now;
-	clock_gettime(CLOCK_MONOTONIC, &now);
-	double el = (double)(now.tv_sec - t0->tv_sec) + (now.tv_nsec - t0->tv_nsec) * 1e-9;
+	const double *t0 = ud;
+	double el = clock_now_s() - *t0;
 	fprintf(stderr, "\r  %zu/%zu tiles  %.1f tiles/s", done, total, el > 0 ? done / el : 0.0);
 	if (done == total)
 		fputc('\n', stderr);
+}
+
+/* `clipmapctl render`'s options. */
+struct render_args {
+	const char *outpath;
+	long level; /* --level; -1: a tile given as LX LY X Y */
+	bool world, at, quiet;
+	double lat, lon; /* --at */
+	uint32_t ntiles; /* --tiles */
+	struct render_opts ro;
+};
+
+static bool parse_at(const char *s, struct render_args *ra)
+{
+	char *end;
+	ra->lat = strtod(s, &end);
+	if (*end == ',')
+		ra->lon = strtod(end + 1, &end);
+	if (*end || end == s || ra->lat < -90 || ra->lat > 90 || ra->lon < -180 || ra->lon > 180) {
+		fprintf(stderr, "clipmapctl render: --at wants LAT,LON in degrees "
+			"(-90..90, -180..180), got \"%s\"\n", s);
+		return false;
+	}
+	ra->at = true;
+	return true;
+}
+
+/* Takes render option c with its argument s into ra. Returns false on a bad one (after
+ * saying so). */
+static bool render_option(int c, const char *s, struct render_args *ra)
+{
+	uint32_t v;
+	switch (c) {
+	case 'o': ra->outpath = s; return true;
+	case 'l':
+		if (parse_u32(s, "--level", GRID_MAX_LEVEL - 1, &v))
+			return false;
+		ra->level = v;
+		return true;
+	case 'w': ra->world = true; return true;
+	case 'a': return parse_at(s, ra);
+	case 't':
+		if (parse_u32(s, "--tiles", 64, &v))
+			return false;
+		if (v == 0) {
+			fprintf(stderr, "clipmapctl render: --tiles must be at least 1\n");
+			return false;
+		}
+		ra->ntiles = v;
+		return true;
+	case 'j':
+		if (parse_u32(s, "--workers", 256, &v))
+			return false;
+		ra->ro.workers = (int)v;
+		return true;
+	case 'c':
+		if (parse_u32(s, "--cache-mb", 1 << 20, &v))
+			return false;
+		ra->ro.cache_mb = v;
+		return true;
+	case 's': ra->ro.shade = 1; return true;
+	case 'q': ra->quiet = true; return true;
+	default: usage(stderr); return false;
+	}
+}
+
+/* What the positional arguments and the options ask to render. Returns 0 or 2 (after
+ * saying why). */
+static int render_region_of(const struct render_args *ra, int npos, char **pos,
+			    struct render_region *rg)
+{
+	if (ra->level >= 0) {
+		if (npos != 2) {
+			fprintf(stderr, "clipmapctl render: with --level give PLANET LAYER only\n");
+			return 2;
+		}
+		if (ra->world == ra->at) {
+			fprintf(stderr, "clipmapctl render: --level needs --world (the whole level) or "
+				"--at LAT,LON (tiles around a place)\n");
+			return 2;
+		}
+		int lx = (int)ra->level + 1, ly = (int)ra->level;
+		if (ra->world)
+			render_region_level(lx, ly, rg);
+		else
+			render_region_around(lx, ly, ra->lat, ra->lon, ra->ntiles, rg);
+		return 0;
+	}
+	if (ra->world || ra->at) {
+		fprintf(stderr, "clipmapctl render: --world and --at go with --level\n");
+		return 2;
+	}
+	if (npos != 6) {
+		usage(stderr);
+		return 2;
+	}
+	uint32_t lx, ly, x, y;
+	if (parse_u32(pos[2], "LX", GRID_MAX_LEVEL, &lx) ||
+	    parse_u32(pos[3], "LY", GRID_MAX_LEVEL, &ly) ||
+	    parse_u32(pos[4], "X", 0x7fffffff, &x) || parse_u32(pos[5], "Y", 0x7fffffff, &y))
+		return 2;
+	*rg = (struct render_region){ .lx = (int)lx, .ly = (int)ly, .x = x, .y = y, .cols = 1,
+				      .rows = 1 };
+	return 0;
+}
+
+/* Evaluates rg of layer on planet (a file or a name) and writes the picture. Returns the
+ * exit status. */
+static int render_to_file(const struct render_args *ra, const char *planet, const char *layer,
+			  const struct render_region *rg)
+{
+	struct planet *p;
+	int rc = load(planet, &p);
+	if (rc)
+		return rc;
+	double t0 = clock_now_s();
+	struct render_opts ro = ra->ro;
+	if (!ra->quiet && ra->level >= 0 && isatty(STDERR_FILENO)) {
+		ro.progress = progress;
+		ro.ud = &t0;
+	}
+	struct render_image im;
+	char err[256], note[256];
+	rc = render_layer(p, layer, rg, &ro, &im, err);
+	if (rc) {
+		fprintf(stderr, "clipmapctl render: %s\n", err);
+		planet_unref(p);
+		return rc == -EINVAL || rc == -ENOENT || rc == -E2BIG ? 2 : 1;
+	}
+	rc = render_write(&im, ra->outpath, note, err);
+	if (rc) {
+		fprintf(stderr, "clipmapctl render: %s\n", err);
+	} else if (!ra->quiet) {
+		printf("wrote %s (%dx%d) in %.2f s\n", ra->outpath, im.width, im.height,
+		       clock_now_s() - t0);
+		if (note[0])
+			printf("%s\n", note);
+	}
+	render_image_free(&im);
+	planet_unref(p);
+	return rc ? 1 : 0;
 }
 
 static int cmd_render(int argc, char **argv)
@@ -103,133 +302,24 @@ static int cmd_render(int argc, char **argv)
 		{ "at", required_argument, NULL, 'a' },	    { "tiles", required_argument, NULL, 't' },
 		{ 0, 0, 0, 0 },
 	};
-	const char *outpath = NULL;
-	long level = -1;
-	int world = 0, quiet = 0, at = 0;
-	double lat = 0, lon = 0;
-	uint32_t ntiles = 3;
-	struct render_opts ro = { 0 };
-	int c;
+	struct render_args ra = { .level = -1, .ntiles = 3 };
+	int c, status;
 	optind = 0; /* 0: glibc re-initialises (main parsed with "+") */
-	while ((c = getopt_long(argc, argv, "o:l:wj:c:sqh", opts, NULL)) != -1) {
-		uint32_t v;
-		switch (c) {
-		case 'o': outpath = optarg; break;
-		case 'l':
-			if (parse_u32(optarg, "--level", GRID_MAX_LEVEL - 1, &v))
-				return 2;
-			level = v;
-			break;
-		case 'w': world = 1; break;
-		case 'a': {
-			char *end;
-			lat = strtod(optarg, &end);
-			if (*end == ',')
-				lon = strtod(end + 1, &end);
-			if (*end || end == optarg || lat < -90 || lat > 90 || lon < -180 || lon > 180) {
-				fprintf(stderr, "clipmapctl render: --at wants LAT,LON in degrees "
-					"(-90..90, -180..180), got \"%s\"\n", optarg);
-				return 2;
-			}
-			at = 1;
-			break;
-		}
-		case 't':
-			if (parse_u32(optarg, "--tiles", 64, &v) || v == 0) {
-				if (v == 0)
-					fprintf(stderr, "clipmapctl render: --tiles must be at least 1\n");
-				return 2;
-			}
-			ntiles = v;
-			break;
-		case 'j':
-			if (parse_u32(optarg, "--workers", 256, &v))
-				return 2;
-			ro.workers = (int)v;
-			break;
-		case 'c':
-			if (parse_u32(optarg, "--cache-mb", 1 << 20, &v))
-				return 2;
-			ro.cache_mb = v;
-			break;
-		case 's': ro.shade = 1; break;
-		case 'q': quiet = 1; break;
-		case 'h': usage(stdout); return 0;
-		default: usage(stderr); return 2;
-		}
+	while ((c = next_opt(argc, argv, "o:l:wj:c:sqh", opts, NULL, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		if (!render_option(c, optarg, &ra))
+			return 2;
 	}
-	int npos = argc - optind;
-	char **pos = argv + optind;
-	if (!outpath) {
+	if (!ra.outpath) {
 		fprintf(stderr, "clipmapctl render: -o FILE is required\n");
 		return 2;
 	}
-	uint32_t lx, ly, x = 0, y = 0;
+	char **pos = argv + optind;
 	struct render_region rg;
-	if (level >= 0) {
-		if (npos != 2) {
-			fprintf(stderr, "clipmapctl render: with --level give PLANET LAYER only\n");
-			return 2;
-		}
-		if (world == at) {
-			fprintf(stderr, "clipmapctl render: --level needs --world (the whole level) or "
-				"--at LAT,LON (tiles around a place)\n");
-			return 2;
-		}
-		lx = (uint32_t)level + 1;
-		ly = (uint32_t)level;
-		if (world)
-			render_region_level((int)lx, (int)ly, &rg);
-		else
-			render_region_around((int)lx, (int)ly, lat, lon, ntiles, &rg);
-	} else {
-		if (world || at) {
-			fprintf(stderr, "clipmapctl render: --world and --at go with --level\n");
-			return 2;
-		}
-		if (npos != 6) {
-			usage(stderr);
-			return 2;
-		}
-		if (parse_u32(pos[2], "LX", GRID_MAX_LEVEL, &lx) ||
-		    parse_u32(pos[3], "LY", GRID_MAX_LEVEL, &ly) ||
-		    parse_u32(pos[4], "X", 0x7fffffff, &x) || parse_u32(pos[5], "Y", 0x7fffffff, &y))
-			return 2;
-		rg = (struct render_region){ .lx = (int)lx, .ly = (int)ly, .x = x, .y = y, .cols = 1,
-					     .rows = 1 };
-	}
-	struct planet *p;
-	int rc = load(pos[0], &p);
-	if (rc)
-		return rc;
-	struct timespec t0;
-	clock_gettime(CLOCK_MONOTONIC, &t0);
-	if (!quiet && level >= 0 && isatty(STDERR_FILENO)) {
-		ro.progress = progress;
-		ro.ud = &t0;
-	}
-	struct render_image im;
-	char err[256], note[256];
-	rc = render_layer(p, pos[1], &rg, &ro, &im, err);
-	if (rc) {
-		fprintf(stderr, "clipmapctl render: %s\n", err);
-		planet_unref(p);
-		return rc == -EINVAL || rc == -ENOENT || rc == -E2BIG ? 2 : 1;
-	}
-	rc = render_write(&im, outpath, note, err);
-	if (rc) {
-		fprintf(stderr, "clipmapctl render: %s\n", err);
-	} else if (!quiet) {
-		struct timespec t1;
-		clock_gettime(CLOCK_MONOTONIC, &t1);
-		double el = (double)(t1.tv_sec - t0.tv_sec) + (t1.tv_nsec - t0.tv_nsec) * 1e-9;
-		printf("wrote %s (%dx%d) in %.2f s\n", outpath, im.width, im.height, el);
-		if (note[0])
-			printf("%s\n", note);
-	}
-	render_image_free(&im);
-	planet_unref(p);
-	return rc ? 1 : 0;
+	if ((status = render_region_of(&ra, argc - optind, pos, &rg)))
+		return status;
+	return render_to_file(&ra, pos[0], pos[1], &rg);
 }
 
 static int cmd_graph(int argc, char **argv)
@@ -278,33 +368,6 @@ static int cmd_layers(int argc, char **argv)
 
 /* ---- online commands ------------------------------------------------------------------ */
 
-/* Options every online command takes (also before the command). Returns 1 if c was one. */
-static int global_opt(int c, struct ctl_target *t)
-{
-	switch (c) {
-	case 'S': t->socket_path = optarg; return 1;
-	case 'H': t->hostport = optarg; return 1;
-	case 'T': t->token_file = optarg; return 1;
-	case 'W': {
-		uint64_t v;
-		char err[256];
-		if (ctl_parse_uint(optarg, "--timeout", 86400, &v, err) || v == 0) {
-			fprintf(stderr, "clipmapctl: --timeout wants seconds in [1, 86400], got \"%s\"\n",
-				optarg);
-			return -1;
-		}
-		t->timeout_ms = (int)(v * 1000);
-		return 1;
-	}
-	default: return 0;
-	}
-}
-
-#define GLOBAL_OPTS                                                                          \
-	{ "socket", required_argument, NULL, 'S' }, { "host", required_argument, NULL, 'H' },   \
-	{ "token-file", required_argument, NULL, 'T' },                                          \
-	{ "timeout", required_argument, NULL, 'W' }, { "help", no_argument, NULL, 'h' }
-
 /* The exit code for a failed online command: request errors the user can fix are usage. */
 static int fail(const char *cmd, int rc, const char *err)
 {
@@ -332,23 +395,16 @@ static int cmd_status(int argc, char **argv, struct ctl_target *t)
 	static const struct option opts[] = { GLOBAL_OPTS, { "json", no_argument, NULL, 'j' },
 					      { 0, 0, 0, 0 } };
 	bool json = false;
-	int c;
+	int c, status;
 	optind = 0; /* 0: glibc re-initialises (main parsed with "+") */
-	while ((c = getopt_long(argc, argv, "s:H:h", opts, NULL)) != -1) {
-		int g = global_opt(c == 's' ? 'S' : c, t);
-		if (g < 0)
-			return 2;
-		if (g)
-			continue;
-		if (c == 'j')
-			json = true;
-		else if (c == 'h') {
-			usage(stdout);
-			return 0;
-		} else {
+	while ((c = next_opt(argc, argv, "s:H:h", opts, t, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		if (c != 'j') {
 			usage(stderr);
 			return 2;
 		}
+		json = true;
 	}
 	if (optind != argc) {
 		fprintf(stderr, "clipmapctl status: unexpected argument \"%s\"\n", argv[optind]);
@@ -369,22 +425,16 @@ static int cmd_tile(int argc, char **argv, struct ctl_target *t)
 					      { "quiet", no_argument, NULL, 'q' }, { 0, 0, 0, 0 } };
 	const char *outpath = NULL;
 	bool quiet = false;
-	int c;
+	int c, status;
 	optind = 0; /* 0: glibc re-initialises (main parsed with "+") */
-	while ((c = getopt_long(argc, argv, "s:H:o:qh", opts, NULL)) != -1) {
-		int g = global_opt(c == 's' ? 'S' : c, t);
-		if (g < 0)
-			return 2;
-		if (g)
-			continue;
+	while ((c = next_opt(argc, argv, "s:H:o:qh", opts, t, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
 		if (c == 'o')
 			outpath = optarg;
 		else if (c == 'q')
 			quiet = true;
-		else if (c == 'h') {
-			usage(stdout);
-			return 0;
-		} else {
+		else {
 			usage(stderr);
 			return 2;
 		}
@@ -423,6 +473,37 @@ static int cmd_tile(int argc, char **argv, struct ctl_target *t)
 	return 0;
 }
 
+/* Takes `cache ls` option c with its argument s into o. Returns 0, or the exit status after
+ * saying what is wrong. */
+static int cache_option(int c, const char *s, struct ctl_cache_opts *o)
+{
+	char err[256];
+	uint64_t v;
+	switch (c) {
+	case 'n':
+		if (ctl_parse_latlon(s, &o->lat, &o->lon, err))
+			return fail("cache ls --near", -EINVAL, err);
+		o->near = true;
+		return 0;
+	case 'r':
+		if (ctl_parse_km(s, "--radius", &o->radius_m, err))
+			return fail("cache ls", -EINVAL, err);
+		return 0;
+	case 'l':
+		if (ctl_parse_uint(s, "--level", GRID_MAX_LEVEL - 1, &v, err))
+			return fail("cache ls", -EINVAL, err);
+		o->level = (int)v;
+		return 0;
+	case 'm':
+		if (ctl_parse_uint(s, "--limit", UINT32_MAX, &v, err))
+			return fail("cache ls", -EINVAL, err);
+		o->limit = (uint32_t)v;
+		return 0;
+	case 'j': o->json = true; return 0;
+	default: usage(stderr); return 2;
+	}
+}
+
 static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 {
 	static const struct option opts[] = {
@@ -438,40 +519,13 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 	argc--;
 	argv++;
 	struct ctl_cache_opts o = { .level = -1 };
-	char err[256];
-	int c;
+	int c, status;
 	optind = 0; /* 0: glibc re-initialises (main parsed with "+") */
-	while ((c = getopt_long(argc, argv, "s:H:h", opts, NULL)) != -1) {
-		int g = global_opt(c == 's' ? 'S' : c, t);
-		uint64_t v;
-		if (g < 0)
-			return 2;
-		if (g)
-			continue;
-		switch (c) {
-		case 'n':
-			if (ctl_parse_latlon(optarg, &o.lat, &o.lon, err))
-				return fail("cache ls --near", -EINVAL, err);
-			o.near = true;
-			break;
-		case 'r':
-			if (ctl_parse_km(optarg, "--radius", &o.radius_m, err))
-				return fail("cache ls", -EINVAL, err);
-			break;
-		case 'l':
-			if (ctl_parse_uint(optarg, "--level", GRID_MAX_LEVEL - 1, &v, err))
-				return fail("cache ls", -EINVAL, err);
-			o.level = (int)v;
-			break;
-		case 'm':
-			if (ctl_parse_uint(optarg, "--limit", UINT32_MAX, &v, err))
-				return fail("cache ls", -EINVAL, err);
-			o.limit = (uint32_t)v;
-			break;
-		case 'j': o.json = true; break;
-		case 'h': usage(stdout); return 0;
-		default: usage(stderr); return 2;
-		}
+	while ((c = next_opt(argc, argv, "s:H:h", opts, t, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		if ((status = cache_option(c, optarg, &o)))
+			return status;
 	}
 	if (argc - optind != 1) {
 		fprintf(stderr, "clipmapctl cache ls: want PLANET\n");
@@ -481,12 +535,76 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 	struct net_conn *conn;
 	if (connect_or_complain(t, &conn))
 		return 1;
+	char err[256];
 	int rc = ctl_cache_ls(conn, &o, timeout_of(t), stdout, err);
 	net_close(conn);
 	return rc ? fail("cache ls", rc, err) : 0;
 }
 
-static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
+/* `clipmapctl prefetch`'s options: what ctl_prefetch_run takes, and what was given. */
+struct prefetch_args {
+	struct ctl_prefetch_opts o;
+	struct proto_lonlat *pts; /* --path, owned (free()) */
+	bool levels, width;
+};
+
+/* Takes prefetch option c with its argument s into pa. Returns 0, or the exit status after
+ * saying what is wrong. */
+static int prefetch_option(int c, const char *s, struct prefetch_args *pa)
+{
+	struct ctl_prefetch_opts *o = &pa->o;
+	char err[256];
+	switch (c) {
+	case 'b':
+	case 'p':
+		if (o->shape) {
+			err_set(err, "give one --bbox or one --path");
+			return fail("prefetch", -EINVAL, err);
+		}
+		if (c == 'b' ? ctl_parse_bbox(s, &o->bbox, err)
+			     : ctl_parse_path(s, &pa->pts, &o->npoints, err))
+			return fail("prefetch", -EINVAL, err);
+		o->shape = c == 'b' ? PROTO_SHAPE_BBOX : PROTO_SHAPE_PATH;
+		return 0;
+	case 'w':
+		if (ctl_parse_km(s, "--width", &o->width_m, err))
+			return fail("prefetch", -EINVAL, err);
+		pa->width = true;
+		return 0;
+	case 'l':
+		if (ctl_parse_levels(s, GRID_MAX_LEVEL - 1, &o->lmin, &o->lmax, err))
+			return fail("prefetch", -EINVAL, err);
+		pa->levels = true;
+		return 0;
+	case 'y': o->layers = s; return 0;
+	default: usage(stderr); return 2;
+	}
+}
+
+/* The options that go together. Returns 0 or 2 (after saying why). */
+static int check_prefetch_args(const struct prefetch_args *pa, int npos)
+{
+	const char *why = NULL;
+	if (npos != 1)
+		why = "want PLANET and --bbox or --path";
+	else if (!pa->o.shape)
+		why = "give --bbox W,S,E,N or --path LAT,LON:LAT,LON";
+	else if (!pa->levels)
+		why = "--levels A-B is required";
+	else if (pa->o.shape == PROTO_SHAPE_PATH && !pa->width)
+		why = "--path needs --width KM";
+	else if (pa->o.shape == PROTO_SHAPE_BBOX && pa->width)
+		why = "--width goes with --path";
+	if (!why)
+		return 0;
+	fprintf(stderr, "clipmapctl prefetch: %s\n", why);
+	return 2;
+}
+
+/* The command line of `prefetch` into pa (pa->pts returned owned, also on failure). Returns
+ * -1 to go on, else the exit status. */
+static int parse_prefetch_args(int argc, char **argv, struct ctl_target *t,
+			       struct prefetch_args *pa)
 {
 	static const struct option opts[] = {
 		GLOBAL_OPTS,
@@ -494,102 +612,57 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 		{ "width", required_argument, NULL, 'w' },  { "levels", required_argument, NULL, 'l' },
 		{ "layers", required_argument, NULL, 'y' }, { 0, 0, 0, 0 },
 	};
-	struct ctl_prefetch_opts o = { 0 };
-	struct proto_lonlat *pts = NULL;
-	bool levels = false, width = false;
-	char err[256];
-	int c, rc = 0;
+	*pa = (struct prefetch_args){ 0 };
+	int c, status;
 	optind = 0; /* 0: glibc re-initialises (main parsed with "+") */
-	while (rc == 0 && (c = getopt_long(argc, argv, "s:H:h", opts, NULL)) != -1) {
-		int g = global_opt(c == 's' ? 'S' : c, t);
-		if (g < 0) {
-			rc = 2;
-			break;
-		}
-		if (g)
-			continue;
-		switch (c) {
-		case 'b':
-			if (o.shape || ctl_parse_bbox(optarg, &o.bbox, err)) {
-				if (o.shape)
-					snprintf(err, sizeof err, "give one --bbox or one --path");
-				rc = fail("prefetch", -EINVAL, err);
-			}
-			o.shape = PROTO_SHAPE_BBOX;
-			break;
-		case 'p':
-			if (o.shape || ctl_parse_path(optarg, &pts, &o.npoints, err)) {
-				if (o.shape)
-					snprintf(err, sizeof err, "give one --bbox or one --path");
-				rc = fail("prefetch", -EINVAL, err);
-			}
-			o.shape = PROTO_SHAPE_PATH;
-			break;
-		case 'w':
-			if (ctl_parse_km(optarg, "--width", &o.width_m, err))
-				rc = fail("prefetch", -EINVAL, err);
-			width = true;
-			break;
-		case 'l':
-			if (ctl_parse_levels(optarg, GRID_MAX_LEVEL - 1, &o.lmin, &o.lmax, err))
-				rc = fail("prefetch", -EINVAL, err);
-			levels = true;
-			break;
-		case 'y': o.layers = optarg; break;
-		case 'h': usage(stdout); free(pts); return 0;
-		default: usage(stderr); rc = 2; break;
-		}
+	while ((c = next_opt(argc, argv, "s:H:h", opts, t, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		if ((status = prefetch_option(c, optarg, pa)))
+			return status;
 	}
-	if (rc == 0 && argc - optind != 1) {
-		fprintf(stderr, "clipmapctl prefetch: want PLANET and --bbox or --path\n");
-		rc = 2;
-	} else if (rc == 0 && !o.shape) {
-		fprintf(stderr, "clipmapctl prefetch: give --bbox W,S,E,N or --path LAT,LON:LAT,LON\n");
-		rc = 2;
-	} else if (rc == 0 && !levels) {
-		fprintf(stderr, "clipmapctl prefetch: --levels A-B is required\n");
-		rc = 2;
-	} else if (rc == 0 && o.shape == PROTO_SHAPE_PATH && !width) {
-		fprintf(stderr, "clipmapctl prefetch: --path needs --width KM\n");
-		rc = 2;
-	} else if (rc == 0 && o.shape == PROTO_SHAPE_BBOX && width) {
-		fprintf(stderr, "clipmapctl prefetch: --width goes with --path\n");
-		rc = 2;
-	}
-	if (rc) {
-		free(pts);
-		return rc;
-	}
-	o.planet = argv[optind];
-	o.points = pts;
+	if ((status = check_prefetch_args(pa, argc - optind)))
+		return status;
+	pa->o.planet = argv[optind];
+	pa->o.points = pa->pts;
+	return -1;
+}
 
-	struct net_conn *conn;
-	if (connect_or_complain(t, &conn)) {
-		free(pts);
-		return 1;
-	}
-	/* Ctrl-C arrives as a readable signalfd: no work in any handler. */
+/* SIGINT and SIGTERM blocked and readable from the returned signalfd, so that Ctrl-C does no
+ * work in any handler. Returns the fd or -errno. */
+static int stop_signals_fd(void)
+{
 	sigset_t set;
 	sigemptyset(&set);
 	sigaddset(&set, SIGINT);
 	sigaddset(&set, SIGTERM);
-	int sfd = -1;
-	if (sigprocmask(SIG_BLOCK, &set, NULL) == 0)
-		sfd = signalfd(-1, &set, SFD_CLOEXEC);
+	if (sigprocmask(SIG_BLOCK, &set, NULL) != 0)
+		return -errno;
+	int fd = signalfd(-1, &set, SFD_CLOEXEC);
+	return fd < 0 ? -errno : fd;
+}
+
+/* Runs the prefetch job o through the daemon until it ends or Ctrl-C. Returns the exit
+ * status. */
+static int prefetch(const struct ctl_target *t, const struct ctl_prefetch_opts *o)
+{
+	struct net_conn *conn;
+	if (connect_or_complain(t, &conn))
+		return 1;
+	int sfd = stop_signals_fd();
 	if (sfd < 0) {
-		fprintf(stderr, "clipmapctl prefetch: signalfd: %s\n", strerror(errno));
+		fprintf(stderr, "clipmapctl prefetch: signalfd: %s\n", strerror(-sfd));
 		net_close(conn);
-		free(pts);
 		return 1;
 	}
 	struct ctl_prefetch_ui ui = { .progress = stderr, .tty = isatty(STDERR_FILENO) == 1,
 				      .summary = stdout, .stop_fd = sfd,
 				      .timeout_ms = t->timeout_ms };
 	struct proto_prefetch_progress fin;
-	rc = ctl_prefetch_run(conn, &o, &ui, &fin, err);
+	char err[256];
+	int rc = ctl_prefetch_run(conn, o, &ui, &fin, err);
 	net_close(conn);
 	close(sfd);
-	free(pts);
 	if (rc == -ECANCELED) {
 		fprintf(stderr, "clipmapctl prefetch: %s\n", err);
 		return 130;
@@ -597,48 +670,36 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 	return rc ? fail("prefetch", rc, err) : 0;
 }
 
-int main(int argc, char **argv)
+static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 {
-	static const struct option opts[] = { GLOBAL_OPTS, { 0, 0, 0, 0 } };
-	struct ctl_target t = { 0 };
-	int c;
-	/* global options before the command ("+": stop at the command) */
-	while ((c = getopt_long(argc, argv, "+s:H:h", opts, NULL)) != -1) {
-		int g = global_opt(c == 's' ? 'S' : c, &t);
-		if (g < 0)
-			return 2;
-		if (g)
-			continue;
-		if (c == 'h') {
-			usage(stdout);
-			return 0;
-		}
-		usage(stderr);
-		return 2;
-	}
-	argc -= optind - 1;
-	argv += optind - 1;
-	if (argc < 2) {
-		usage(stderr);
-		return 2;
-	}
-	const char *cmd = argv[1];
+	struct prefetch_args pa;
+	int status = parse_prefetch_args(argc, argv, t, &pa);
+	if (status < 0)
+		status = prefetch(t, &pa.o);
+	free(pa.pts);
+	return status;
+}
+
+/* The command named argv[0], with t from the global options. */
+static int run_command(int argc, char **argv, struct ctl_target *t)
+{
+	const char *cmd = argv[0];
 	if (strcmp(cmd, "status") == 0)
-		return cmd_status(argc - 1, argv + 1, &t);
+		return cmd_status(argc, argv, t);
 	if (strcmp(cmd, "tile") == 0)
-		return cmd_tile(argc - 1, argv + 1, &t);
+		return cmd_tile(argc, argv, t);
 	if (strcmp(cmd, "cache") == 0)
-		return cmd_cache(argc - 1, argv + 1, &t);
+		return cmd_cache(argc, argv, t);
 	if (strcmp(cmd, "prefetch") == 0)
-		return cmd_prefetch(argc - 1, argv + 1, &t);
+		return cmd_prefetch(argc, argv, t);
 	if (strcmp(cmd, "render") == 0)
-		return cmd_render(argc - 1, argv + 1);
+		return cmd_render(argc, argv);
 	if (strcmp(cmd, "graph") == 0)
-		return cmd_graph(argc - 1, argv + 1);
+		return cmd_graph(argc, argv);
 	if (strcmp(cmd, "layers") == 0)
-		return cmd_layers(argc - 1, argv + 1);
+		return cmd_layers(argc, argv);
 	if (strcmp(cmd, "import") == 0)
-		return import_cli(argc - 1, argv + 1);
+		return import_cli(argc, argv);
 	if (strcmp(cmd, "help") == 0 || strcmp(cmd, "--help") == 0 || strcmp(cmd, "-h") == 0) {
 		usage(stdout);
 		return 0;
@@ -646,4 +707,23 @@ int main(int argc, char **argv)
 	fprintf(stderr, "clipmapctl: unknown command \"%s\"\n", cmd);
 	usage(stderr);
 	return 2;
+}
+
+int main(int argc, char **argv)
+{
+	static const struct option opts[] = { GLOBAL_OPTS, { 0, 0, 0, 0 } };
+	struct ctl_target t = { 0 };
+	int c, status;
+	/* global options before the command ("+": stop at the command) */
+	while ((c = next_opt(argc, argv, "+s:H:h", opts, &t, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		usage(stderr);
+		return 2;
+	}
+	if (argc - optind < 1) {
+		usage(stderr);
+		return 2;
+	}
+	return run_command(argc - optind, argv + optind, &t);
 }

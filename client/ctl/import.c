@@ -18,8 +18,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
-#include <time.h>
 
+#include "common/clock.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 #define IMPORT_MAX_PIXELS ((int64_t)1 << 34) /* 16 Gpx: more would not fit OIIO's int sizes */
@@ -29,13 +30,6 @@ static pthread_once_t reg_once = PTHREAD_ONCE_INIT;
 static void reg(void)
 {
 	GDALAllRegister();
-}
-
-static double now_s(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + t.tv_nsec * 1e-9;
 }
 
 int import_parse_bounds(const char *s, double b[4])
@@ -146,20 +140,20 @@ static int georef(GDALDatasetH ds, const char *src, int64_t w, int64_t h,
 	if (!r->georeferenced)
 		return 0;
 	if (gt[2] != 0 || gt[4] != 0) {
-		snprintf(err, 256, "%s: rotated or sheared georeferencing is not supported "
+		err_set(err, "%s: rotated or sheared georeferencing is not supported "
 			 "(warp it north-up first)", src);
 		return -EINVAL;
 	}
 	OGRSpatialReferenceH srs = GDALGetSpatialRef(ds);
 	if (srs && OSRIsProjected(srs)) {
-		snprintf(err, 256, "%s: projected coordinates (%s) are not supported: the grid is "
+		err_set(err, "%s: projected coordinates (%s) are not supported: the grid is "
 			 "geographic (reproject to EPSG:4326 first)", src,
 			 OSRGetAttrValue(srs, "PROJCS", 0) ? OSRGetAttrValue(srs, "PROJCS", 0) : "?");
 		return -EINVAL;
 	}
 	double dx = fabs(gt[1]), dy = fabs(gt[5]);
 	if (!(dx > 0) || !(dy > 0)) {
-		snprintf(err, 256, "%s: georeferencing has a zero pixel size", src);
+		err_set(err, "%s: georeferencing has a zero pixel size", src);
 		return -EINVAL;
 	}
 	if (fabs((double)w * dx - 360) < 0.1 * dx)
@@ -180,206 +174,263 @@ static int georef(GDALDatasetH ds, const char *src, int64_t w, int64_t h,
 	return 0;
 }
 
+/* One import: the source, what is read from it, and how it is turned. */
+struct job {
+	const char *src;
+	GDALDatasetH ds;
+	int64_t w, h;
+	int bands[4], nch;	/* the 1-based bands read, in output channel order */
+	GDALDataType read_as;	/* what GDAL converts the samples to */
+	enum img_type type;	/* what the output stores */
+	bool has_nd;
+	double nd;		/* the first band's nodata value */
+	bool colflip;		/* the source runs east→west */
+	int64_t c0;		/* columns rotated left by c0 (a global raster starts at −180°) */
+	struct import_result r;
+};
+
+/* Opens j->src with GDAL (into j->ds) and takes its size. Returns 0 or -errno with err
+ * filled. */
+static int open_source(struct job *j, char *err)
+{
+	j->ds = GDALOpenEx(j->src, GDAL_OF_RASTER | GDAL_OF_READONLY, NULL, NULL, NULL);
+	if (!j->ds) {
+		err_set(err, "%s: not a raster GDAL can read: %s", j->src, gdal_msg());
+		return -EINVAL;
+	}
+	j->w = GDALGetRasterXSize(j->ds);
+	j->h = GDALGetRasterYSize(j->ds);
+	if (GDALGetRasterCount(j->ds) == 0) {
+		char **sub = GDALGetMetadata(j->ds, "SUBDATASETS");
+		err_set(err, "%s: no raster bands%s%s", j->src,
+			sub && sub[0] ? "; it has subdatasets, e.g. " : "",
+			sub && sub[0] && strchr(sub[0], '=') ? strchr(sub[0], '=') + 1 : "");
+		return -EINVAL;
+	}
+	if (j->w <= 0 || j->h <= 0 || j->w * j->h > IMPORT_MAX_PIXELS || j->w > INT32_MAX / 8 ||
+	    j->h > INT32_MAX / 8) {
+		err_set(err, "%s: %lldx%lld pixels is beyond what import handles", j->src,
+			(long long)j->w, (long long)j->h);
+		return -EFBIG;
+	}
+	return 0;
+}
+
+/* The bands to read (--band, or all of at most 4), the sample type they share and the
+ * nodata value. Returns 0 or -EINVAL with err filled. */
+static int choose_bands(struct job *j, const struct import_opts *o, char *err)
+{
+	int nb = GDALGetRasterCount(j->ds);
+	if (o->band) {
+		if (o->band < 1 || o->band > nb) {
+			err_set(err, "%s: has %d band%s, there is no band %d", j->src, nb,
+				nb == 1 ? "" : "s", o->band);
+			return -EINVAL;
+		}
+		j->bands[0] = o->band;
+		j->nch = 1;
+	} else {
+		if (nb > 4) {
+			err_set(err, "%s: has %d bands; pick one with --band N", j->src, nb);
+			return -EINVAL;
+		}
+		for (int i = 0; i < nb; i++)
+			j->bands[i] = i + 1;
+		j->nch = nb;
+	}
+	GDALRasterBandH b0 = GDALGetRasterBand(j->ds, j->bands[0]);
+	j->type = out_type(GDALGetRasterDataType(b0), &j->read_as);
+	for (int i = 1; i < j->nch; i++) {
+		GDALDataType t2;
+		GDALRasterBandH b = GDALGetRasterBand(j->ds, j->bands[i]);
+		if (out_type(GDALGetRasterDataType(b), &t2) != j->type) {
+			err_set(err, "%s: bands have different sample types; import one with "
+				"--band N", j->src);
+			return -EINVAL;
+		}
+	}
+	int has_nd = 0;
+	j->nd = GDALGetRasterNoDataValue(b0, &has_nd);
+	j->has_nd = has_nd;
+	return 0;
+}
+
+/* Where the raster lies: its bounds (the georeferencing, --bounds or the whole globe) and
+ * the column order. Every decision about them comes from the georeferencing alone, so it is
+ * made (and refused) before a pixel is read. Returns 0 or -EINVAL with err filled. */
+static int place(struct job *j, const struct import_opts *o, char *err)
+{
+	struct import_result *r = &j->r;
+	int rc = georef(j->ds, j->src, j->w, j->h, r, err);
+	if (rc)
+		return rc;
+	j->colflip = r->shifted_cols == -1;
+	r->shifted_cols = 0;
+	if (o->has_bounds) {
+		r->west = o->bounds[0], r->south = o->bounds[1];
+		r->east = o->bounds[2], r->north = o->bounds[3];
+	} else if (!r->georeferenced) {
+		r->west = -180, r->south = -90, r->east = 180, r->north = 90;
+	}
+	double span = r->east - r->west;
+	if (r->georeferenced && !o->has_bounds && fabs(span - 360) < 1e-9 * 360) {
+		double dx = span / (double)j->w;
+		/* west' in [-180 - dx/2, -180 + dx/2): a raster already there stays put */
+		j->c0 = (int64_t)ceil((-180 - r->west) / dx - 0.5 - 1e-9) % j->w;
+		if (j->c0 < 0)
+			j->c0 += j->w;
+		if (j->c0) {
+			r->shifted_cols = (int)j->c0;
+			r->west += (double)j->c0 * dx;
+			while (r->west > -180 + dx)
+				r->west -= 360;
+			r->east = r->west + 360;
+		}
+	} else if (r->west >= 180) {
+		r->west -= 360;
+		r->east -= 360;
+	}
+	if (!(r->west < r->east && r->east - r->west <= 360 + 1e-9 && r->west >= -360 &&
+	      r->east <= 360 && r->south < r->north && r->south >= -91 && r->north <= 91)) {
+		err_set(err, "%s: bounds W=%g S=%g E=%g N=%g are not geographic degrees "
+			"(give --bounds W,S,E,N)", j->src, r->west, r->south, r->east, r->north);
+		return -EINVAL;
+	}
+	if (j->has_nd && j->type != IMG_F32) {
+		r->has_nodata = true;
+		r->nodata = j->nd;
+	}
+	return 0;
+}
+
+/* The ImageDescription that records r's bounds (and nodata) for the `file` node. */
+static void describe(const struct import_result *r, char desc[256])
+{
+	int dl = snprintf(desc, 256, "clipmap:bounds=%.17g,%.17g,%.17g,%.17g", r->west,
+			  r->south, r->east, r->north);
+	if (r->has_nodata)
+		snprintf(desc + dl, 256 - (size_t)dl, " clipmap:nodata=%.17g", r->nodata);
+}
+
+/* Rows read at a time: whole tile rows, several when rows are short (up to ~32 MiB and 16
+ * tile rows), or o->band_rows rounded up to a tile; at most the height. */
+static int band_height(const struct job *j, const struct import_opts *o, size_t row, int tile)
+{
+	int64_t k = ((int64_t)32 << 20) / ((int64_t)row * tile);
+	int band = tile * (int)(k < 1 ? 1 : k > 16 ? 16 : k);
+	if (o->band_rows > 0)
+		band = (o->band_rows + tile - 1) / tile * tile;
+	return band > j->h ? (int)j->h : band;
+}
+
+/* Reads output rows y0 .. y0 + n - 1 into buf (pixel-interleaved, rows of `row` bytes,
+ * pixels of px, samples of sz) and turns them north-up, west→east, starting at −180°, with
+ * float nodata as NaN. Returns 0 or -EIO with err filled. */
+static int read_rows(struct job *j, int64_t y0, int n, unsigned char *buf, size_t sz,
+		     char *err)
+{
+	size_t px = sz * (size_t)j->nch, row = px * (size_t)j->w;
+	/* a south→north source is read from the bottom up */
+	int64_t sy = j->r.flipped_rows ? j->h - y0 - n : y0;
+	GDALRasterIOExtraArg extra;
+	INIT_RASTERIO_EXTRA_ARG(extra);
+	double t0 = clock_now_s();
+	CPLErrorReset();
+	if (GDALDatasetRasterIOEx(j->ds, GF_Read, 0, (int)sy, (int)j->w, n, buf, (int)j->w, n,
+				  j->read_as, j->nch, j->bands, (GSpacing)px, (GSpacing)row,
+				  (GSpacing)sz, &extra) != CE_None) {
+		err_set(err, "%s: read failed at rows %lld..%lld of %lld: %s", j->src,
+			(long long)sy, (long long)sy + n - 1, (long long)j->h, gdal_msg());
+		return -EIO;
+	}
+	GDALFlushCache(j->ds); /* drop the blocks just read: GDAL's cache would keep them */
+	j->r.read_s += clock_now_s() - t0;
+	if (j->has_nd && j->type == IMG_F32) {
+		float *f = (float *)(void *)buf, ndf = (float)j->nd;
+		size_t cnt = (size_t)j->w * (size_t)n * (size_t)j->nch;
+		for (size_t i = 0; i < cnt; i++)
+			if (f[i] == ndf)
+				f[i] = NAN;
+	}
+	if (j->r.flipped_rows)
+		flip_rows(buf, n, row);
+	if (j->colflip)
+		flip_cols(buf, j->w, n, px);
+	if (j->c0)
+		rotate_cols(buf, j->w, n, px, j->c0);
+	return 0;
+}
+
+/* Stream: bands of whole tile rows read in output order and handed to the tiled writer,
+ * which builds the MIP levels as the rows pass. Returns 0 or -errno with err filled (then
+ * neither dst nor dst.tmp is left). */
+static int write_tiled(struct job *j, const struct import_opts *o, const char *dst,
+		       char *err)
+{
+	char desc[256];
+	describe(&j->r, desc);
+	size_t sz = img_type_bytes(j->type), row = sz * (size_t)j->nch * (size_t)j->w;
+	int tile = o->tile ? o->tile : 256;
+	int band = band_height(j, o, row, tile);
+	unsigned char *buf = xmalloc(row * (size_t)band);
+	struct img_tiled_out *tw = NULL;
+	int rc = img_tiled_open(&tw, dst, (int)j->w, (int)j->h, j->nch, j->type, tile,
+				!o->no_mip, desc, err);
+	for (int64_t y0 = 0; rc == 0 && y0 < j->h; y0 += band) {
+		int n = (int)(j->h - y0 < band ? j->h - y0 : band);
+		if ((rc = read_rows(j, y0, n, buf, sz, err)))
+			break;
+		double t0 = clock_now_s();
+		rc = img_tiled_rows(tw, buf, n, err);
+		j->r.write_s += clock_now_s() - t0;
+	}
+	free(buf);
+	if (rc) {
+		img_tiled_abort(tw);
+		return rc;
+	}
+	double t1 = clock_now_s();
+	rc = img_tiled_finish(tw, err);
+	j->r.write_s += clock_now_s() - t1;
+	return rc;
+}
+
 int import_raster(const char *src, const char *dst, const struct import_opts *o,
 		  struct import_result *res, char err[256])
 {
 	static const struct import_opts defaults = { 0 };
-	struct import_result r;
 	char ebuf[256];
 	if (!err)
 		err = ebuf;
 	err[0] = 0;
 	if (!o)
 		o = &defaults;
-	memset(&r, 0, sizeof r);
 	pthread_once(&reg_once, reg);
 
 	struct stat st;
 	if (stat(src, &st) != 0 && strchr(src, ':') == NULL) {
 		int e = errno;
-		snprintf(err, 256, "%s: cannot open: %s", src, strerror(e));
+		err_set(err, "%s: cannot open: %s", src, strerror(e));
 		return -e;
 	}
 	CPLPushErrorHandler(CPLQuietErrorHandler);
 	CPLErrorReset();
-	unsigned char *buf = NULL;
-	struct img_tiled_out *tw = NULL;
-	int rc = 0;
-	GDALDatasetH ds = GDALOpenEx(src, GDAL_OF_RASTER | GDAL_OF_READONLY, NULL, NULL, NULL);
-	if (!ds) {
-		snprintf(err, 256, "%s: not a raster GDAL can read: %s", src, gdal_msg());
-		rc = -EINVAL;
-		goto out;
+	struct job j = { .src = src };
+	int rc = open_source(&j, err);
+	if (!rc)
+		rc = choose_bands(&j, o, err);
+	if (!rc)
+		rc = place(&j, o, err);
+	if (!rc)
+		rc = write_tiled(&j, o, dst, err);
+	if (!rc) {
+		j.r.width = (int)j.w, j.r.height = (int)j.h, j.r.channels = j.nch;
+		j.r.type = j.type;
+		if (res)
+			*res = j.r;
 	}
-	int64_t w = GDALGetRasterXSize(ds), h = GDALGetRasterYSize(ds);
-	int nb = GDALGetRasterCount(ds);
-	if (nb == 0) {
-		char **sub = GDALGetMetadata(ds, "SUBDATASETS");
-		snprintf(err, 256, "%s: no raster bands%s%s", src,
-			 sub && sub[0] ? "; it has subdatasets, e.g. " : "",
-			 sub && sub[0] && strchr(sub[0], '=') ? strchr(sub[0], '=') + 1 : "");
-		rc = -EINVAL;
-		goto out;
-	}
-	if (w <= 0 || h <= 0 || w * h > IMPORT_MAX_PIXELS || w > INT32_MAX / 8 ||
-	    h > INT32_MAX / 8) {
-		snprintf(err, 256, "%s: %lldx%lld pixels is beyond what import handles", src,
-			 (long long)w, (long long)h);
-		rc = -EFBIG;
-		goto out;
-	}
-	int bands[4], nch;
-	if (o->band) {
-		if (o->band < 1 || o->band > nb) {
-			snprintf(err, 256, "%s: has %d band%s, there is no band %d", src, nb,
-				 nb == 1 ? "" : "s", o->band);
-			rc = -EINVAL;
-			goto out;
-		}
-		bands[0] = o->band;
-		nch = 1;
-	} else {
-		if (nb > 4) {
-			snprintf(err, 256, "%s: has %d bands; pick one with --band N", src, nb);
-			rc = -EINVAL;
-			goto out;
-		}
-		for (int i = 0; i < nb; i++)
-			bands[i] = i + 1;
-		nch = nb;
-	}
-	GDALRasterBandH b0 = GDALGetRasterBand(ds, bands[0]);
-	GDALDataType rt;
-	enum img_type type = out_type(GDALGetRasterDataType(b0), &rt);
-	for (int i = 1; i < nch; i++) {
-		GDALDataType t2;
-		if (out_type(GDALGetRasterDataType(GDALGetRasterBand(ds, bands[i])), &t2) != type) {
-			snprintf(err, 256, "%s: bands have different sample types; import one with "
-				 "--band N", src);
-			rc = -EINVAL;
-			goto out;
-		}
-	}
-	int has_nd = 0;
-	double nd = GDALGetRasterNoDataValue(b0, &has_nd);
-
-	if ((rc = georef(ds, src, w, h, &r, err)))
-		goto out;
-	bool colflip = r.shifted_cols == -1;
-	r.shifted_cols = 0;
-	if (o->has_bounds) {
-		r.west = o->bounds[0], r.south = o->bounds[1];
-		r.east = o->bounds[2], r.north = o->bounds[3];
-	} else if (!r.georeferenced) {
-		r.west = -180, r.south = -90, r.east = 180, r.north = 90;
-	}
-
-	/* Every decision about bounds and column order comes from the georeferencing alone, so
-	 * it is made (and refused) before a pixel is read. */
-	double span = r.east - r.west;
-	int64_t c0 = 0;
-	if (r.georeferenced && !o->has_bounds && fabs(span - 360) < 1e-9 * 360) {
-		double dx = span / (double)w;
-		/* west' in [-180 - dx/2, -180 + dx/2): a raster already there stays put */
-		c0 = (int64_t)ceil((-180 - r.west) / dx - 0.5 - 1e-9) % w;
-		if (c0 < 0)
-			c0 += w;
-		if (c0) {
-			r.shifted_cols = (int)c0;
-			r.west += (double)c0 * dx;
-			while (r.west > -180 + dx)
-				r.west -= 360;
-			r.east = r.west + 360;
-		}
-	} else if (r.west >= 180) {
-		r.west -= 360;
-		r.east -= 360;
-	}
-	if (!(r.west < r.east && r.east - r.west <= 360 + 1e-9 && r.west >= -360 &&
-	      r.east <= 360 && r.south < r.north && r.south >= -91 && r.north <= 91)) {
-		snprintf(err, 256, "%s: bounds W=%g S=%g E=%g N=%g are not geographic degrees "
-			 "(give --bounds W,S,E,N)", src, r.west, r.south, r.east, r.north);
-		rc = -EINVAL;
-		goto out;
-	}
-	if (has_nd && type != IMG_F32) {
-		r.has_nodata = true;
-		r.nodata = nd;
-	}
-
-	char desc[256];
-	int dl = snprintf(desc, sizeof desc, "clipmap:bounds=%.17g,%.17g,%.17g,%.17g", r.west,
-			  r.south, r.east, r.north);
-	if (r.has_nodata)
-		snprintf(desc + dl, sizeof desc - (size_t)dl, " clipmap:nodata=%.17g", r.nodata);
-
-	/* Stream: bands of whole tile rows (several when rows are short, up to ~32 MiB), read
-	 * in output order (a south→north source from the bottom up), turned north-up and
-	 * west→east in place, and handed to the tiled writer, which builds the MIP levels as
-	 * the rows pass. */
-	size_t sz = img_type_bytes(type), px = sz * (size_t)nch;
-	size_t row = px * (size_t)w;
-	int tile = o->tile ? o->tile : 256;
-	int64_t k = ((int64_t)32 << 20) / ((int64_t)row * tile);
-	int band = tile * (int)(k < 1 ? 1 : k > 16 ? 16 : k);
-	if (o->band_rows > 0)
-		band = (o->band_rows + tile - 1) / tile * tile;
-	if (band > h)
-		band = (int)h;
-	buf = xmalloc(row * (size_t)band);
-	if ((rc = img_tiled_open(&tw, dst, (int)w, (int)h, nch, type, tile, !o->no_mip, desc,
-				 err)))
-		goto out;
-	GDALRasterIOExtraArg extra;
-	INIT_RASTERIO_EXTRA_ARG(extra);
-	for (int64_t y0 = 0; y0 < h; y0 += band) {
-		int n = (int)(h - y0 < band ? h - y0 : band);
-		int64_t sy = r.flipped_rows ? h - y0 - n : y0;
-		double t0 = now_s();
-		CPLErrorReset();
-		if (GDALDatasetRasterIOEx(ds, GF_Read, 0, (int)sy, (int)w, n, buf, (int)w, n, rt,
-					  nch, bands, (GSpacing)px, (GSpacing)row, (GSpacing)sz,
-					  &extra) != CE_None) {
-			snprintf(err, 256, "%s: read failed at rows %lld..%lld of %lld: %s", src,
-				 (long long)sy, (long long)sy + n - 1, (long long)h, gdal_msg());
-			rc = -EIO;
-			goto out;
-		}
-		GDALFlushCache(ds); /* drop the blocks just read: GDAL's cache would keep them */
-		r.read_s += now_s() - t0;
-		if (has_nd && type == IMG_F32) {
-			float *f = (float *)(void *)buf, ndf = (float)nd;
-			size_t cnt = (size_t)w * (size_t)n * (size_t)nch;
-			for (size_t i = 0; i < cnt; i++)
-				if (f[i] == ndf)
-					f[i] = NAN;
-		}
-		if (r.flipped_rows)
-			flip_rows(buf, n, row);
-		if (colflip)
-			flip_cols(buf, w, n, px);
-		if (c0)
-			rotate_cols(buf, w, n, px, c0);
-		t0 = now_s();
-		rc = img_tiled_rows(tw, buf, n, err);
-		r.write_s += now_s() - t0;
-		if (rc)
-			goto out;
-	}
-	double t1 = now_s();
-	rc = img_tiled_finish(tw, err);
-	tw = NULL;
-	r.write_s += now_s() - t1;
-	if (rc)
-		goto out;
-	r.width = (int)w, r.height = (int)h, r.channels = nch, r.type = type;
-	if (res)
-		*res = r;
-out:
-	img_tiled_abort(tw); /* a failed import leaves neither dst nor dst.tmp behind */
-	free(buf);
-	if (ds)
-		GDALClose(ds);
+	if (j.ds)
+		GDALClose(j.ds);
 	CPLPopErrorHandler();
 	return rc;
 }

@@ -4,6 +4,7 @@
 
 #include <errno.h>
 #include <getopt.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -21,7 +22,36 @@ static const char *type_name(enum img_type t)
 	}
 }
 
-int import_cli(int argc, char **argv)
+#define USAGE                                                                                \
+	"usage: clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N] [--tile N] "    \
+	"[--no-mip] [--quiet]\n"
+
+/* `import`'s command line. */
+struct import_args {
+	struct import_opts o;
+	const char *src, *dst;
+	bool quiet;
+};
+
+/* --band N or --tile N (which: 'n' or 't') into n. Returns false on a bad one (after saying
+ * so). */
+static bool parse_band_or_tile(int which, const char *s, int *n)
+{
+	char *end;
+	errno = 0;
+	long v = strtol(s, &end, 10);
+	if (end == s || *end || errno || v < 1 || v > 65536 || (which == 't' && v % 16)) {
+		fprintf(stderr, "clipmapctl import: --%s wants %s, got \"%s\"\n",
+			which == 'n' ? "band" : "tile",
+			which == 'n' ? "a band number from 1" : "a multiple of 16", s);
+		return false;
+	}
+	*n = (int)v;
+	return true;
+}
+
+/* The command line into a. Returns -1 to go on, else the exit status (0: --help). */
+static int parse_import_args(int argc, char **argv, struct import_args *a)
 {
 	static const struct option opts[] = {
 		{ "output", required_argument, NULL, 'o' }, { "bounds", required_argument, NULL, 'b' },
@@ -29,69 +59,69 @@ int import_cli(int argc, char **argv)
 		{ "no-mip", no_argument, NULL, 'm' },	    { "quiet", no_argument, NULL, 'q' },
 		{ "help", no_argument, NULL, 'h' },	    { 0, 0, 0, 0 },
 	};
-	struct import_opts o = { 0 };
-	const char *dst = NULL;
-	int quiet = 0, c;
+	*a = (struct import_args){ 0 };
+	int c;
 	optind = 0; /* 0: glibc re-initialises (main parsed its options with "+") */
 	while ((c = getopt_long(argc, argv, "o:qh", opts, NULL)) != -1) {
-		char *end;
-		long v;
 		switch (c) {
-		case 'o': dst = optarg; break;
+		case 'o': a->dst = optarg; break;
 		case 'b':
-			if (import_parse_bounds(optarg, o.bounds)) {
+			if (import_parse_bounds(optarg, a->o.bounds)) {
 				fprintf(stderr, "clipmapctl import: --bounds wants W,S,E,N in degrees "
 					"(W < E, S < N, -90..90), got \"%s\"\n", optarg);
 				return 2;
 			}
-			o.has_bounds = true;
+			a->o.has_bounds = true;
 			break;
 		case 'n':
-		case 't':
-			errno = 0;
-			v = strtol(optarg, &end, 10);
-			if (end == optarg || *end || errno || v < 1 || v > 65536 ||
-			    (c == 't' && v % 16)) {
-				fprintf(stderr, "clipmapctl import: --%s wants %s, got \"%s\"\n",
-					c == 'n' ? "band" : "tile",
-					c == 'n' ? "a band number from 1" : "a multiple of 16", optarg);
+			if (!parse_band_or_tile(c, optarg, &a->o.band))
 				return 2;
-			}
-			if (c == 'n')
-				o.band = (int)v;
-			else
-				o.tile = (int)v;
 			break;
-		case 'm': o.no_mip = true; break;
-		case 'q': quiet = 1; break;
-		case 'h':
-			printf("usage: clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N] "
-			       "[--tile N] [--no-mip] [--quiet]\n");
-			return 0;
+		case 't':
+			if (!parse_band_or_tile(c, optarg, &a->o.tile))
+				return 2;
+			break;
+		case 'm': a->o.no_mip = true; break;
+		case 'q': a->quiet = true; break;
+		case 'h': printf(USAGE); return 0;
 		default: return 2;
 		}
 	}
-	if (argc - optind != 1 || !dst) {
-		fprintf(stderr, "usage: clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] "
-			"[--band N] [--tile N] [--no-mip] [--quiet]\n");
+	if (argc - optind != 1 || !a->dst) {
+		fprintf(stderr, USAGE);
 		return 2;
 	}
+	a->src = argv[optind];
+	return -1;
+}
+
+/* The line saying what was written. */
+static void report(const struct import_args *a, const struct import_result *r)
+{
+	printf("wrote %s: %dx%d, %d channel%s %s, bounds %.6f,%.6f,%.6f,%.6f%s%s", a->dst,
+	       r->width, r->height, r->channels, r->channels == 1 ? "" : "s", type_name(r->type),
+	       r->west, r->south, r->east, r->north,
+	       r->georeferenced ? " (georeferenced)" : a->o.has_bounds ? " (given)" : " (global)",
+	       r->flipped_rows ? ", rows flipped north-up" : "");
+	if (r->shifted_cols)
+		printf(", columns shifted by %d", r->shifted_cols);
+	printf("; read %.2f s, write %.2f s\n", r->read_s, r->write_s);
+}
+
+int import_cli(int argc, char **argv)
+{
+	struct import_args a;
+	int status = parse_import_args(argc, argv, &a);
+	if (status >= 0)
+		return status;
 	struct import_result r;
 	char err[256];
-	int rc = import_raster(argv[optind], dst, &o, &r, err);
+	int rc = import_raster(a.src, a.dst, &a.o, &r, err);
 	if (rc) {
 		fprintf(stderr, "clipmapctl import: %s\n", err);
 		return rc == -EIO || rc == -ENOMEM ? 1 : 2;
 	}
-	if (!quiet) {
-		printf("wrote %s: %dx%d, %d channel%s %s, bounds %.6f,%.6f,%.6f,%.6f%s%s", dst,
-		       r.width, r.height, r.channels, r.channels == 1 ? "" : "s",
-		       type_name(r.type), r.west, r.south, r.east, r.north,
-		       r.georeferenced ? " (georeferenced)" : o.has_bounds ? " (given)" : " (global)",
-		       r.flipped_rows ? ", rows flipped north-up" : "");
-		if (r.shifted_cols)
-			printf(", columns shifted by %d", r.shifted_cols);
-		printf("; read %.2f s, write %.2f s\n", r.read_s, r.write_s);
-	}
+	if (!a.quiet)
+		report(&a, &r);
 	return 0;
 }

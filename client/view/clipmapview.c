@@ -10,10 +10,11 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "gl_context.h"
 #include "gl_window.h"
+#include "common/clock.h"
+#include "common/errbuf.h"
 #include "common/img.h"
 #include "view.h"
 #include "view_fly.h"
@@ -53,6 +54,20 @@ static void usage(FILE *f)
 		"  --screenshot FILE   (window) write the last frame as PNG on exit\n");
 }
 
+/* What the command line asks for (parse_args). */
+struct args {
+	const char *planet, *connect_to, *token_file;
+	const char *camera, *flight; /* one of them, or neither with --window */
+	const char *outp;	     /* -o: a path, or for a flight a frame-number pattern */
+	const char *statsp, *screenshot;
+	int width, height, steps, workers;
+	bool wait_complete, window;
+	long exit_after;
+	double timeout, fov, fps, budget;
+	struct view_desc d; /* --sun, --rings, --exaggerate, --haze, --no-prefetch */
+	enum gl_backend backend;
+};
+
 /* Whether all of s is a number in [lo, hi] (then stored in *out). */
 static bool number(const char *s, double lo, double hi, double *out)
 {
@@ -64,12 +79,423 @@ static bool number(const char *s, double lo, double hi, double *out)
 	return true;
 }
 
-static double mono_s(void)
+/* ---- -o for a flight: one frame-number conversion ------------------------------------- */
+
+/* The length of the printf conversion at p (p[0] == '%') when it is one an int frame number
+ * may fill: up to 4 flags, a width and a precision of up to 3 digits, then d or i ("%d",
+ * "%04d"; at most 13 characters); 0 for any other. */
+static size_t frame_conversion(const char *p)
 {
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+	size_t flags = strspn(p + 1, "-+ 0");
+	if (flags > 4)
+		return 0;
+	size_t i = 1 + flags;
+	size_t digits = strspn(p + i, "0123456789");
+	if (digits > 3)
+		return 0; /* a width that long makes no file name */
+	i += digits;
+	if (p[i] == '.') {
+		digits = strspn(p + i + 1, "0123456789");
+		if (digits > 3)
+			return 0;
+		i += 1 + digits;
+	}
+	return p[i] == 'd' || p[i] == 'i' ? i + 1 : 0;
 }
+
+/* Whether pat takes a frame number safely: at most one frame_conversion, any other '%'
+ * only as "%%". */
+static bool frame_pattern_ok(const char *pat)
+{
+	int conversions = 0;
+	for (const char *p = pat; (p = strchr(p, '%'));) {
+		if (p[1] == '%') {
+			p += 2;
+			continue;
+		}
+		size_t n = frame_conversion(p);
+		if (!n || ++conversions > 1)
+			return false;
+		p += n;
+	}
+	return true;
+}
+
+/* pat (checked by frame_pattern_ok) with frame f in it, into out[n]. Returns false when the
+ * path does not fit. */
+static bool frame_path(const char *pat, int f, char *out, size_t n)
+{
+	size_t len = 0;
+	for (const char *p = pat; *p && len < n;) {
+		if (*p != '%') {
+			out[len++] = *p++;
+		} else if (p[1] == '%') {
+			out[len++] = '%';
+			p += 2;
+		} else {
+			char spec[16];
+			size_t sl = frame_conversion(p);
+			memcpy(spec, p, sl);
+			spec[sl] = '\0';
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wformat-nonliteral"
+			/* spec is one int conversion, checked by frame_conversion */
+			int w = snprintf(out + len, n - len, spec, f);
+#pragma GCC diagnostic pop
+			len += w > 0 ? (size_t)w : 0;
+			p += sl;
+		}
+	}
+	if (len >= n)
+		return false;
+	out[len] = '\0';
+	return true;
+}
+
+/* ---- arguments ------------------------------------------------------------------------ */
+
+static bool parse_size(const char *s, struct args *a)
+{
+	if (sscanf(s, "%dx%d", &a->width, &a->height) != 2 || a->width < 16 || a->height < 16 ||
+	    a->width > 16384 || a->height > 16384) {
+		fprintf(stderr, "clipmapview: --size: expected WxH\n");
+		return false;
+	}
+	return true;
+}
+
+static bool parse_exaggerate(const char *s, struct view_desc *d)
+{
+	d->exaggeration = strtof(s, NULL);
+	if (!(d->exaggeration >= 0.1f && d->exaggeration <= 100)) {
+		fprintf(stderr, "clipmapview: --exaggerate: 0.1 to 100\n");
+		return false;
+	}
+	return true;
+}
+
+static bool parse_haze(const char *s, struct view_desc *d)
+{
+	float hz = strtof(s, NULL);
+	if (!(hz >= 0 && hz <= 100)) {
+		fprintf(stderr, "clipmapview: --haze: 0 to 100\n");
+		return false;
+	}
+	d->haze = hz > 0 ? hz : -1;
+	return true;
+}
+
+static bool parse_sun(const char *s, struct view_desc *d)
+{
+	if (sscanf(s, "%f,%f", &d->sun_az, &d->sun_el) != 2) {
+		fprintf(stderr, "clipmapview: --sun: expected AZ,EL\n");
+		return false;
+	}
+	return true;
+}
+
+static bool parse_rings(const char *s, struct view_desc *d)
+{
+	if (sscanf(s, "%d,%d", &d->n_phi, &d->m_rings) != 2 || d->n_phi < 8 || d->m_rings < 1 ||
+	    d->n_phi > 4096 || d->m_rings > 64) {
+		fprintf(stderr, "clipmapview: --rings: expected N,M\n");
+		return false;
+	}
+	return true;
+}
+
+static bool parse_backend(const char *s, enum gl_backend *b)
+{
+	if (!strcmp(s, "egl"))
+		*b = GL_BACKEND_EGL;
+	else if (!strcmp(s, "osmesa"))
+		*b = GL_BACKEND_OSMESA;
+	else {
+		fprintf(stderr, "clipmapview: --backend: egl or osmesa\n");
+		return false;
+	}
+	return true;
+}
+
+static bool parse_exit_after(const char *s, long *frames)
+{
+	char *end;
+	*frames = strtol(s, &end, 10);
+	if (*end || *frames < 1) {
+		fprintf(stderr, "clipmapview: --exit-after: a number of frames >= 1\n");
+		return false;
+	}
+	return true;
+}
+
+enum {
+	O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS, O_FOV,
+	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
+	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET
+};
+
+static const struct option long_opts[] = {
+	{ "planet", required_argument, NULL, O_PLANET },
+	{ "camera", required_argument, NULL, O_CAMERA },
+	{ "flight", required_argument, NULL, O_FLIGHT },
+	{ "steps", required_argument, NULL, O_STEPS },
+	{ "size", required_argument, NULL, O_SIZE },
+	{ "wait-complete", no_argument, NULL, O_WAIT },
+	{ "timeout", required_argument, NULL, O_TIMEOUT },
+	{ "fps", required_argument, NULL, O_FPS },
+	{ "budget", required_argument, NULL, O_BUDGET },
+	{ "stats", required_argument, NULL, O_STATS },
+	{ "fov", required_argument, NULL, O_FOV },
+	{ "sun", required_argument, NULL, O_SUN },
+	{ "rings", required_argument, NULL, O_RINGS },
+	{ "backend", required_argument, NULL, O_BACKEND },
+	{ "workers", required_argument, NULL, O_WORKERS },
+	{ "no-prefetch", no_argument, NULL, O_NOPF },
+	{ "help", no_argument, NULL, O_HELP },
+	{ "connect", required_argument, NULL, O_CONNECT },
+	{ "token-file", required_argument, NULL, O_TOKEN },
+	{ "exaggerate", required_argument, NULL, O_EXAG },
+	{ "haze", required_argument, NULL, O_HAZE },
+	{ "window", no_argument, NULL, O_WINDOW },
+	{ "exit-after", required_argument, NULL, O_EXIT_AFTER },
+	{ "screenshot", required_argument, NULL, O_SCREENSHOT },
+	{ NULL, 0, NULL, 0 },
+};
+
+/* Takes option c (getopt_long's answer) with its argument s into a. Returns false on a bad
+ * value (after saying so). */
+static bool take_option(int c, const char *s, struct args *a)
+{
+	switch (c) {
+	case O_PLANET: a->planet = s; return true;
+	case O_CONNECT: a->connect_to = s; return true;
+	case O_TOKEN: a->token_file = s; return true;
+	case O_EXAG: return parse_exaggerate(s, &a->d);
+	case O_HAZE: return parse_haze(s, &a->d);
+	case O_WINDOW: a->window = true; return true;
+	case O_EXIT_AFTER: return parse_exit_after(s, &a->exit_after);
+	case O_SCREENSHOT: a->screenshot = s; return true;
+	case O_CAMERA: a->camera = s; return true;
+	case O_FLIGHT: a->flight = s; return true;
+	case O_STEPS: a->steps = atoi(s); return true;
+	case 'o': a->outp = s; return true;
+	case O_SIZE: return parse_size(s, a);
+	case O_WAIT: a->wait_complete = true; return true;
+	case O_TIMEOUT: a->timeout = atof(s); return true;
+	case O_BUDGET:
+		if (!number(s, 0, 10000, &a->budget)) {
+			fprintf(stderr, "clipmapview: --budget: milliseconds, 0 to 10000\n");
+			return false;
+		}
+		return true;
+	case O_FPS:
+		if (!number(s, 0, 1000, &a->fps)) {
+			fprintf(stderr, "clipmapview: --fps: frames per second, 0 to 1000\n");
+			return false;
+		}
+		return true;
+	case O_STATS: a->statsp = s; return true;
+	case O_FOV: a->fov = atof(s); return true;
+	case O_SUN: return parse_sun(s, &a->d);
+	case O_RINGS: return parse_rings(s, &a->d);
+	case O_BACKEND: return parse_backend(s, &a->backend);
+	case O_WORKERS: a->workers = atoi(s); return true;
+	case O_NOPF: a->d.no_prefetch = true; return true;
+	default: usage(stderr); return false;
+	}
+}
+
+/* The options that only make sense together (or apart). Returns 0 or 2 (after saying why). */
+static int check_args(const struct args *a)
+{
+	if (a->window && (a->flight || a->outp || a->wait_complete)) {
+		fprintf(stderr, "clipmapview: --window flies interactively: no --flight, -o or "
+				"--wait-complete (use --screenshot)\n");
+		return 2;
+	}
+	if (!a->window && (a->exit_after || a->screenshot)) {
+		fprintf(stderr, "clipmapview: --exit-after and --screenshot need --window\n");
+		return 2;
+	}
+	if (!a->planet || (!a->window && !a->camera == !a->flight) || a->steps < 1 ||
+	    a->fov <= 1 || a->fov >= 170) {
+		usage(stderr);
+		return 2;
+	}
+	if (a->flight && a->outp && !frame_pattern_ok(a->outp)) {
+		fprintf(stderr, "clipmapview: -o: \"%s\": a flight's pattern takes one %%d-style "
+				"frame number (e.g. f/%%05d.png); write %%%% for a literal %%\n", a->outp);
+		return 2;
+	}
+	return 0;
+}
+
+/* The command line into a. Returns -1 to go on, else the exit status (0: --help). */
+static int parse_args(int argc, char **argv, struct args *a)
+{
+	*a = (struct args){ .width = 1280, .height = 720, .steps = 1, .timeout = 300,
+			    .fov = 60, .fps = 30, .budget = 12, .backend = GL_BACKEND_AUTO };
+	int c;
+	while ((c = getopt_long(argc, argv, "o:h", long_opts, NULL)) != -1) {
+		if (c == O_HELP || c == 'h') {
+			usage(stdout);
+			return 0;
+		}
+		if (!take_option(c, optarg, a))
+			return 2;
+	}
+	int rc = check_args(a);
+	return rc ? rc : -1;
+}
+
+/* ---- camera keys ---------------------------------------------------------------------- */
+
+struct key {
+	double v[5]; /* lat, lon, alt, heading, pitch */
+};
+
+static int parse_camera(const char *s, struct key *k)
+{
+	char *end;
+	const char *p = s;
+	for (int i = 0; i < 5; i++) {
+		k->v[i] = strtod(p, &end);
+		if (end == p)
+			return -EINVAL;
+		p = end;
+		if (i < 4) {
+			if (*p != ',')
+				return -EINVAL;
+			p++;
+		}
+	}
+	while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')
+		p++;
+	return *p ? -EINVAL : 0;
+}
+
+/* The keys of a flight file into *out (returned owned), saying what is wrong if anything.
+ * Returns 0 or -errno. */
+static int read_flight(const char *path, struct key **out, size_t *n)
+{
+	FILE *f = fopen(path, "r");
+	if (!f) {
+		int rc = -errno;
+		fprintf(stderr, "clipmapview: %s: %s\n", path, strerror(-rc));
+		return rc;
+	}
+	char line[512];
+	size_t cap = 0, ln = 0;
+	*out = NULL;
+	*n = 0;
+	while (fgets(line, sizeof line, f)) {
+		ln++;
+		char *s = line;
+		while (*s == ' ' || *s == '\t')
+			s++;
+		if (*s == '#' || *s == '\n' || *s == '\r' || !*s || (*s >= 'a' && *s <= 'z'))
+			continue; /* comments, blank lines, a header */
+		struct key k;
+		if (parse_camera(s, &k) < 0) {
+			fprintf(stderr, "%s:%zu: camera: expected lat,lon,alt,heading,pitch\n", path, ln);
+			fclose(f);
+			free(*out);
+			*out = NULL;
+			return -EINVAL;
+		}
+		if (*n == cap) {
+			cap = cap ? 2 * cap : 64;
+			*out = xrealloc(*out, cap * sizeof **out);
+		}
+		(*out)[(*n)++] = k;
+	}
+	fclose(f);
+	if (!*n) {
+		fprintf(stderr, "clipmapview: %s: no camera keys\n", path);
+		return -EINVAL;
+	}
+	return 0;
+}
+
+/* --camera (one key) or --flight (a file of them) into *keys (returned owned; NULL when
+ * neither). Returns 0 or 2. */
+static int load_keys(const struct args *a, struct key **keys, size_t *nkeys)
+{
+	*keys = NULL;
+	*nkeys = 0;
+	if (a->camera) {
+		*keys = xmalloc(sizeof **keys);
+		*nkeys = 1;
+		if (parse_camera(a->camera, *keys) < 0) {
+			fprintf(stderr, "clipmapview: --camera: expected LAT,LON,ALT,HEADING,PITCH\n");
+			free(*keys);
+			*keys = NULL;
+			return 2;
+		}
+	} else if (a->flight) {
+		if (read_flight(a->flight, keys, nkeys) < 0)
+			return 2;
+	}
+	return 0;
+}
+
+static double lerp_angle(double a, double b, double t)
+{
+	double d = fmod(b - a + 540.0, 360.0) - 180.0;
+	return a + d * t;
+}
+
+/* Frame f of the flight: steps frames from each key to the next, lat, alt and pitch
+ * interpolated linearly, lon and heading the short way round. */
+static struct view_camera flight_camera(const struct key *keys, size_t nkeys, int steps,
+					double fov, size_t f)
+{
+	size_t k = f / (size_t)steps;
+	double t = (double)(f % (size_t)steps) / steps;
+	const struct key *a = &keys[k], *b = &keys[k + 1 < nkeys ? k + 1 : k];
+	struct view_camera cam = {
+		.lat = a->v[0] + (b->v[0] - a->v[0]) * t,
+		.lon = lerp_angle(a->v[1], b->v[1], t),
+		.alt = a->v[2] + (b->v[2] - a->v[2]) * t,
+		.heading = lerp_angle(a->v[3], b->v[3], t),
+		.pitch = a->v[4] + (b->v[4] - a->v[4]) * t,
+		.fov_y = fov,
+	};
+	if (cam.lon >= 180)
+		cam.lon -= 360;
+	if (cam.lon < -180)
+		cam.lon += 360;
+	return cam;
+}
+
+/* ---- output --------------------------------------------------------------------------- */
+
+static void stats_line(FILE *f, int frame, const struct view_frame_stats *s)
+{
+	fprintf(f,
+		"{\"frame\":%d,\"ms\":%.3f,\"lmin\":%d,\"lmax\":%d,\"lfirst\":%d,\"llast\":%d,"
+		"\"triangles\":%llu,\"bytes_uploaded\":%llu,\"tiles_received\":%d,"
+		"\"wants_sent\":%zu,\"complete\":%s,\"alt\":%.3f,\"agl\":%.3f}\n",
+		frame, s->cpu_ms, s->lmin, s->lmax, s->lfirst, s->llast,
+		(unsigned long long)s->triangles, (unsigned long long)s->bytes_uploaded,
+		s->tiles_received, s->wants_sent, s->complete ? "true" : "false", s->alt, s->agl);
+}
+
+/* The picture v shows as PNG at path (pix: scratch of width × height × 4 bytes). Returns 0
+ * or 1 (after saying why). */
+static int write_picture(struct view *v, const char *path, int width, int height,
+			 unsigned char *pix)
+{
+	char err[256];
+	view_read_rgba(v, pix);
+	if (img_write(path, width, height, 4, IMG_U8, pix, err) < 0) {
+		fprintf(stderr, "clipmapview: %s\n", err);
+		return 1;
+	}
+	return 0;
+}
+
+/* ---- window mode ---------------------------------------------------------------------- */
 
 struct window_opts {
 	const char *title;
@@ -100,7 +526,34 @@ static void fly_input(const struct gl_window_input *in, struct view_fly_input *f
 	f->reset = in->reset;
 }
 
-static void stats_line(FILE *f, int frame, const struct view_frame_stats *s);
+/* The HUD in the window title: rates over the frames since it was last refreshed. */
+struct hud {
+	double since; /* clock_now_s of the last refresh */
+	long frames, tiles;
+	uint64_t bytes;
+};
+
+/* Counts frame st in; twice a second refreshes the title. */
+static void hud_frame(struct hud *h, struct gl_window *w, const char *title,
+		      const struct view_frame_stats *st, const struct view_camera *cam)
+{
+	h->frames++;
+	h->tiles += st->tiles_received;
+	h->bytes += st->bytes_uploaded;
+	double now = clock_now_s();
+	if (now - h->since < 0.5)
+		return;
+	double dt = now - h->since;
+	char text[256];
+	snprintf(text, sizeof text,
+		 "%s | %.1f fps | levels %d-%d of %d-%d%s | %.0f tiles/s | %.2f MB/s"
+		 " | %.4f, %.4f, %.0f m",
+		 title, h->frames / dt, st->lfirst, st->llast, st->lmin, st->lmax,
+		 st->complete ? " ready" : "", h->tiles / dt, h->bytes / dt / 1e6, cam->lat,
+		 cam->lon, st->agl);
+	gl_window_set_title(w, text);
+	*h = (struct hud){ .since = now };
+}
 
 /* The interactive loop: input → camera → view_frame → blit → swap, paced to 60 Hz (vsync
  * when the system gives it, else a clock). The title carries the HUD, refreshed twice a
@@ -111,10 +564,9 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 	struct view_fly fly;
 	view_fly_init(&fly, home, radius);
 	const double period = 1.0 / 60;
-	double t_start = mono_s(), t_prev = t_start, t_hud = t_start;
-	long frames = 0, hud_frames = 0;
-	uint64_t hud_bytes = 0;
-	long hud_tiles = 0;
+	double t_start = clock_now_s(), t_prev = t_start;
+	struct hud hud = { .since = t_start };
+	long frames = 0;
 	char err[256];
 	for (;;) {
 		struct gl_window_input in;
@@ -127,7 +579,7 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 			fprintf(stderr, "clipmapview: %s\n", err);
 			return 1;
 		}
-		double t = mono_s();
+		double t = clock_now_s();
 		struct view_fly_input fi;
 		fly_input(&in, &fi);
 		struct view_camera last;
@@ -146,30 +598,12 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 			stats_line(o->stats, (int)frames, &st);
 		gl_window_present(w, view_framebuffer(v), fw, fh);
 		frames++;
-		hud_frames++;
-		hud_tiles += st.tiles_received;
-		hud_bytes += st.bytes_uploaded;
-		double now = mono_s();
-		if (now - t_hud >= 0.5) {
-			double dt = now - t_hud;
-			char title[256];
-			snprintf(title, sizeof title,
-				 "%s | %.1f fps | levels %d-%d of %d-%d%s | %.0f tiles/s | %.2f MB/s"
-				 " | %.4f, %.4f, %.0f m",
-				 o->title, hud_frames / dt, st.lfirst, st.llast, st.lmin, st.lmax,
-				 st.complete ? " ready" : "", hud_tiles / dt, hud_bytes / dt / 1e6,
-				 fly.cam.lat, fly.cam.lon, st.agl);
-			gl_window_set_title(w, title);
-			t_hud = now;
-			hud_frames = 0;
-			hud_tiles = 0;
-			hud_bytes = 0;
-		}
+		hud_frame(&hud, w, o->title, &st, &fly.cam);
 		if (o->exit_after > 0 && frames >= o->exit_after)
 			break;
 		/* 60 Hz (vsync already waited when the frame took a full period); tiles that
 		 * arrive meanwhile are taken now and uploaded by the next frame. */
-		double left = period - (mono_s() - t);
+		double left = period - (clock_now_s() - t);
 		rc = left > 0 ? view_idle(v, left) : 0;
 		if (rc < 0) {
 			fprintf(stderr, "clipmapview: after frame %ld: %s\n", frames, strerror(-rc));
@@ -180,90 +614,141 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 		struct view_camera last;
 		view_last_camera(v, &last);
 		unsigned char *pix = xmalloc((size_t)last.width * last.height * 4);
-		view_read_rgba(v, pix);
-		int rc = img_write(o->screenshot, last.width, last.height, 4, IMG_U8, pix, err);
+		int status = write_picture(v, o->screenshot, last.width, last.height, pix);
 		free(pix);
-		if (rc < 0) {
-			fprintf(stderr, "clipmapview: %s\n", err);
-			return 1;
-		}
+		return status;
 	}
 	return 0;
 }
 
-struct key {
-	double v[5];
-};
-
-static int parse_camera(const char *s, struct key *k)
+/* --window: the views of src in a window, starting at the first key (or above the whole
+ * planet). Returns the exit status. */
+static int run_window(const struct args *a, struct view_source *src, const struct key *keys,
+		      FILE *stats)
 {
-	char *end;
-	const char *p = s;
-	for (int i = 0; i < 5; i++) {
-		k->v[i] = strtod(p, &end);
-		if (end == p)
-			return -EINVAL;
-		p = end;
-		if (i < 4) {
-			if (*p != ',')
-				return -EINVAL;
-			p++;
+	char title[128], err[256];
+	struct gl_window *win = NULL;
+	struct view *v = NULL;
+	struct view_desc d = a->d;
+	int status = 1;
+	snprintf(title, sizeof title, "clipmapview %s", src->planet.name);
+	if (gl_window_create(a->width, a->height, title, &win, err) < 0) {
+		fprintf(stderr, "clipmapview: --window: %s\n", err);
+		goto out;
+	}
+	gl_window_framebuffer_size(win, &d.width, &d.height);
+	d.budget_ms = a->budget;
+	if (view_create(gl_window_api(win), src, &d, &v, err) < 0) {
+		fprintf(stderr, "clipmapview: %s\n", err);
+		goto out;
+	}
+	double radius = src->planet.a * (1 - src->planet.f / 3);
+	/* default: the whole planet from above, north up */
+	struct view_camera home = { .lat = 20, .lon = 0, .alt = 2.2 * radius, .heading = 0,
+				    .pitch = -90, .fov_y = a->fov, .width = d.width,
+				    .height = d.height };
+	if (keys) {
+		home.lat = keys->v[0];
+		home.lon = keys->v[1];
+		home.alt = keys->v[2];
+		home.heading = keys->v[3];
+		home.pitch = keys->v[4];
+	}
+	struct window_opts wo = { title, a->width, a->height, a->exit_after, a->screenshot,
+				  stats };
+	status = window_loop(win, v, &home, radius, &wo);
+out:
+	view_destroy(v);
+	gl_window_destroy(win);
+	return status;
+}
+
+/* ---- offline mode --------------------------------------------------------------------- */
+
+/* Renders the frames of the keys (one camera, or a flight) into v, writing each picture
+ * when -o asks, in real time (--fps) or complete (--wait-complete). Returns the exit status. */
+static int render_frames(const struct args *a, struct view *v, const struct key *keys,
+			 size_t nkeys, FILE *stats)
+{
+	unsigned char *pix = xmalloc((size_t)a->width * a->height * 4);
+	size_t nframes = nkeys == 1 ? 1 : (nkeys - 1) * (size_t)a->steps + 1;
+	double t_start = clock_now_s();
+	int status = 1;
+	for (size_t f = 0; f < nframes; f++) {
+		struct view_camera cam = flight_camera(keys, nkeys, a->steps, a->fov, f);
+		struct view_frame_stats st;
+		int rc;
+		if (a->wait_complete)
+			rc = view_frame_complete(v, &cam, a->timeout, &st, NULL);
+		else
+			rc = view_frame(v, &cam,
+					a->fps > 0 ? clock_now_s() - t_start : (double)f / 30.0, &st);
+		if (rc == -ETIMEDOUT)
+			fprintf(stderr, "clipmapview: frame %zu: not complete after %.0f s\n", f,
+				a->timeout);
+		else if (rc < 0) {
+			fprintf(stderr, "clipmapview: frame %zu: %s\n", f, strerror(-rc));
+			goto out;
+		}
+		if (stats)
+			stats_line(stats, (int)f, &st);
+		if (a->outp) {
+			char path[4096];
+			if (!a->flight)
+				snprintf(path, sizeof path, "%s", a->outp);
+			else if (!frame_path(a->outp, (int)f, path, sizeof path)) {
+				fprintf(stderr, "clipmapview: -o: frame %zu: path too long\n", f);
+				goto out;
+			}
+			if (write_picture(v, path, a->width, a->height, pix))
+				goto out;
+		}
+		/* Real time: the next frame is due at (f + 1) / fps; tiles come in meanwhile. */
+		double left = t_start + (double)(f + 1) / a->fps - clock_now_s();
+		if (!a->wait_complete && a->fps > 0 && f + 1 < nframes && left > 0) {
+			rc = view_idle(v, left);
+			if (rc < 0) {
+				fprintf(stderr, "clipmapview: %s\n", strerror(-rc));
+				goto out;
+			}
 		}
 	}
-	while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')
-		p++;
-	return *p ? -EINVAL : 0;
+	status = 0;
+out:
+	free(pix);
+	return status;
 }
 
-static int read_flight(const char *path, struct key **out, size_t *n)
+/* Offline: an OpenGL context without a display, a view of src in it, the frames. Returns the
+ * exit status. */
+static int run_offline(const struct args *a, struct view_source *src, const struct key *keys,
+		       size_t nkeys, FILE *stats)
 {
-	FILE *f = fopen(path, "r");
-	if (!f)
-		return -errno;
-	char line[512];
-	size_t cap = 0, ln = 0;
-	*out = NULL;
-	*n = 0;
-	while (fgets(line, sizeof line, f)) {
-		ln++;
-		char *s = line;
-		while (*s == ' ' || *s == '\t')
-			s++;
-		if (*s == '#' || *s == '\n' || *s == '\r' || !*s || (*s >= 'a' && *s <= 'z'))
-			continue; /* comments, blank lines, a header */
-		struct key k;
-		if (parse_camera(s, &k) < 0) {
-			fprintf(stderr, "%s:%zu: camera: expected lat,lon,alt,heading,pitch\n", path, ln);
-			fclose(f);
-			free(*out);
-			return -EINVAL;
-		}
-		if (*n == cap) {
-			cap = cap ? 2 * cap : 64;
-			*out = xrealloc(*out, cap * sizeof **out);
-		}
-		(*out)[(*n)++] = k;
+	char err[256];
+	struct gl_context *ctx = NULL;
+	struct view *v = NULL;
+	int status = 1;
+	if (gl_context_create(a->backend, &ctx, err) < 0) {
+		fprintf(stderr, "clipmapview: no OpenGL context: %s\n", err);
+		goto out;
 	}
-	fclose(f);
-	return *n ? 0 : -EINVAL;
+	struct view_desc d = a->d;
+	d.width = a->width;
+	d.height = a->height;
+	/* --wait-complete pictures wait for every level; real time keeps its frames short. */
+	d.budget_ms = a->wait_complete ? 0 : a->budget;
+	if (view_create(gl_context_api(ctx), src, &d, &v, err) < 0) {
+		fprintf(stderr, "clipmapview: %s\n", err);
+		goto out;
+	}
+	status = render_frames(a, v, keys, nkeys, stats);
+out:
+	view_destroy(v);
+	gl_context_destroy(ctx);
+	return status;
 }
 
-static double lerp_angle(double a, double b, double t)
-{
-	double d = fmod(b - a + 540.0, 360.0) - 180.0;
-	return a + d * t;
-}
-
-static void stats_line(FILE *f, int frame, const struct view_frame_stats *s)
-{
-	fprintf(f,
-		"{\"frame\":%d,\"ms\":%.3f,\"lmin\":%d,\"lmax\":%d,\"lfirst\":%d,\"llast\":%d,"
-		"\"triangles\":%llu,\"bytes_uploaded\":%llu,\"tiles_received\":%d,"
-		"\"wants_sent\":%zu,\"complete\":%s,\"alt\":%.3f,\"agl\":%.3f}\n",
-		frame, s->cpu_ms, s->lmin, s->lmax, s->lfirst, s->llast,
-		(unsigned long long)s->triangles, (unsigned long long)s->bytes_uploaded,
-		s->tiles_received, s->wants_sent, s->complete ? "true" : "false", s->alt, s->agl);
-}
+/* ---- the source of tiles -------------------------------------------------------------- */
 
 /* A TARGET with a colon and no slash is HOST:PORT, anything else a Unix socket path. */
 static int open_net(const char *target, const char *token_file, const char *planet,
@@ -281,317 +766,59 @@ static int open_net(const char *target, const char *token_file, const char *plan
 		hint = " \xe2\x80\x94 is clipmapd running and listening there? (--connect)";
 	else if (rc == -EACCES)
 		hint = " (--token-file)";
-	snprintf(err, 256, "%.180s%s", e2, hint);
+	err_set(err, "%.180s%s", e2, hint);
 	return rc;
+}
+
+/* The daemon's planet (--connect) or the planet file evaluated here. Returns 0, or the exit
+ * status after saying why not: 1 when the daemon fails, 2 for a bad planet file. */
+static int open_source(const struct args *a, struct view_source **src)
+{
+	char err[256] = "";
+	if (a->connect_to) {
+		if (open_net(a->connect_to, a->token_file, a->planet, src, err) < 0) {
+			fprintf(stderr, "clipmapview: %s\n", err);
+			return 1;
+		}
+		return 0;
+	}
+	if (view_source_local_create(a->planet,
+				     &(struct view_source_local_opts){ a->workers, 0 }, src,
+				     err) < 0) {
+		fprintf(stderr, "clipmapview: %s\n", err);
+		return 2;
+	}
+	return 0;
 }
 
 int main(int argc, char **argv)
 {
-	const char *planet = NULL, *connect_to = NULL, *token_file = NULL, *camera = NULL, *flight = NULL, *outp = NULL, *statsp = NULL;
-	int width = 1280, height = 720, steps = 1, workers = 0;
-	bool wait_complete = false, window = false;
-	long exit_after = 0;
-	const char *screenshot = NULL;
-	double timeout = 300, fov = 60, fps = 30, budget = 12;
-	struct view_desc d = { 0 };
-	enum gl_backend backend = GL_BACKEND_AUTO;
-	enum { O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS,
-	       O_FOV, O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP,
-	       O_CONNECT, O_TOKEN, O_EXAG, O_HAZE, O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS,
-	       O_BUDGET };
-	static const struct option opts[] = {
-		{ "planet", required_argument, NULL, O_PLANET },
-		{ "camera", required_argument, NULL, O_CAMERA },
-		{ "flight", required_argument, NULL, O_FLIGHT },
-		{ "steps", required_argument, NULL, O_STEPS },
-		{ "size", required_argument, NULL, O_SIZE },
-		{ "wait-complete", no_argument, NULL, O_WAIT },
-		{ "timeout", required_argument, NULL, O_TIMEOUT },
-		{ "fps", required_argument, NULL, O_FPS },
-		{ "budget", required_argument, NULL, O_BUDGET },
-		{ "stats", required_argument, NULL, O_STATS },
-		{ "fov", required_argument, NULL, O_FOV },
-		{ "sun", required_argument, NULL, O_SUN },
-		{ "rings", required_argument, NULL, O_RINGS },
-		{ "backend", required_argument, NULL, O_BACKEND },
-		{ "workers", required_argument, NULL, O_WORKERS },
-		{ "no-prefetch", no_argument, NULL, O_NOPF },
-		{ "help", no_argument, NULL, O_HELP },
-		{ "connect", required_argument, NULL, O_CONNECT },
-		{ "token-file", required_argument, NULL, O_TOKEN },
-		{ "exaggerate", required_argument, NULL, O_EXAG },
-		{ "haze", required_argument, NULL, O_HAZE },
-		{ "window", no_argument, NULL, O_WINDOW },
-		{ "exit-after", required_argument, NULL, O_EXIT_AFTER },
-		{ "screenshot", required_argument, NULL, O_SCREENSHOT },
-		{ NULL, 0, NULL, 0 },
-	};
-	int c;
-	while ((c = getopt_long(argc, argv, "o:h", opts, NULL)) != -1) {
-		switch (c) {
-		case O_PLANET: planet = optarg; break;
-		case O_CONNECT: connect_to = optarg; break;
-		case O_TOKEN: token_file = optarg; break;
-		case O_EXAG:
-			d.exaggeration = strtof(optarg, NULL);
-			if (!(d.exaggeration >= 0.1f && d.exaggeration <= 100)) {
-				fprintf(stderr, "clipmapview: --exaggerate: 0.1 to 100\n");
-				return 2;
-			}
-			break;
-		case O_HAZE: {
-			float hz = strtof(optarg, NULL);
-			if (!(hz >= 0 && hz <= 100)) {
-				fprintf(stderr, "clipmapview: --haze: 0 to 100\n");
-				return 2;
-			}
-			d.haze = hz > 0 ? hz : -1;
-			break;
-		}
-		case O_WINDOW: window = true; break;
-		case O_EXIT_AFTER: {
-			char *end;
-			exit_after = strtol(optarg, &end, 10);
-			if (*end || exit_after < 1) {
-				fprintf(stderr, "clipmapview: --exit-after: a number of frames >= 1\n");
-				return 2;
-			}
-			break;
-		}
-		case O_SCREENSHOT: screenshot = optarg; break;
-		case O_CAMERA: camera = optarg; break;
-		case O_FLIGHT: flight = optarg; break;
-		case O_STEPS: steps = atoi(optarg); break;
-		case 'o': outp = optarg; break;
-		case O_SIZE:
-			if (sscanf(optarg, "%dx%d", &width, &height) != 2 || width < 16 ||
-			    height < 16 || width > 16384 || height > 16384) {
-				fprintf(stderr, "clipmapview: --size: expected WxH\n");
-				return 2;
-			}
-			break;
-		case O_WAIT: wait_complete = true; break;
-		case O_TIMEOUT: timeout = atof(optarg); break;
-		case O_BUDGET:
-			if (!number(optarg, 0, 10000, &budget)) {
-				fprintf(stderr, "clipmapview: --budget: milliseconds, 0 to 10000\n");
-				return 2;
-			}
-			break;
-		case O_FPS:
-			if (!number(optarg, 0, 1000, &fps)) {
-				fprintf(stderr, "clipmapview: --fps: frames per second, 0 to 1000\n");
-				return 2;
-			}
-			break;
-		case O_STATS: statsp = optarg; break;
-		case O_FOV: fov = atof(optarg); break;
-		case O_SUN:
-			if (sscanf(optarg, "%f,%f", &d.sun_az, &d.sun_el) != 2) {
-				fprintf(stderr, "clipmapview: --sun: expected AZ,EL\n");
-				return 2;
-			}
-			break;
-		case O_RINGS:
-			if (sscanf(optarg, "%d,%d", &d.n_phi, &d.m_rings) != 2 || d.n_phi < 8 ||
-			    d.m_rings < 1 || d.n_phi > 4096 || d.m_rings > 64) {
-				fprintf(stderr, "clipmapview: --rings: expected N,M\n");
-				return 2;
-			}
-			break;
-		case O_BACKEND:
-			if (!strcmp(optarg, "egl"))
-				backend = GL_BACKEND_EGL;
-			else if (!strcmp(optarg, "osmesa"))
-				backend = GL_BACKEND_OSMESA;
-			else {
-				fprintf(stderr, "clipmapview: --backend: egl or osmesa\n");
-				return 2;
-			}
-			break;
-		case O_WORKERS: workers = atoi(optarg); break;
-		case O_NOPF: d.no_prefetch = true; break;
-		case O_HELP:
-		case 'h': usage(stdout); return 0;
-		default: usage(stderr); return 2;
-		}
-	}
-	if (window && (flight || outp || wait_complete)) {
-		fprintf(stderr, "clipmapview: --window flies interactively: no --flight, -o or "
-				"--wait-complete (use --screenshot)\n");
-		return 2;
-	}
-	if (!window && (exit_after || screenshot)) {
-		fprintf(stderr, "clipmapview: --exit-after and --screenshot need --window\n");
-		return 2;
-	}
-	if (!planet || (!window && !camera == !flight) || steps < 1 || fov <= 1 || fov >= 170) {
-		usage(stderr);
-		return 2;
-	}
-	struct key *keys = NULL;
-	size_t nkeys = 0;
-	if (camera) {
-		keys = xmalloc(sizeof *keys);
-		nkeys = 1;
-		if (parse_camera(camera, keys) < 0) {
-			fprintf(stderr, "clipmapview: --camera: expected LAT,LON,ALT,HEADING,PITCH\n");
-			free(keys);
-			return 2;
-		}
-	} else if (flight) {
-		int rc = read_flight(flight, &keys, &nkeys);
-		if (rc < 0) {
-			if (rc != -EINVAL)
-				fprintf(stderr, "clipmapview: %s: %s\n", flight, strerror(-rc));
-			else if (!nkeys)
-				fprintf(stderr, "clipmapview: %s: no camera keys\n", flight);
-			return 2;
-		}
-	}
-	char err[256] = "";
-	int status = 1;
-	struct gl_context *ctx = NULL;
-	struct gl_window *win = NULL;
+	struct args a;
+	int status = parse_args(argc, argv, &a);
+	if (status >= 0)
+		return status;
+	struct key *keys;
+	size_t nkeys;
+	if ((status = load_keys(&a, &keys, &nkeys)))
+		return status;
 	struct view_source *src = NULL;
-	struct view *v = NULL;
-	FILE *sf = NULL;
-	unsigned char *pix = NULL;
-	int rc;
-	if (connect_to) {
-		rc = open_net(connect_to, token_file, planet, &src, err);
-		if (rc < 0) {
-			fprintf(stderr, "clipmapview: %s\n", err);
-			goto out;
-		}
-	} else {
-		rc = view_source_local_create(planet, &(struct view_source_local_opts){ workers, 0 },
-					      &src, err);
-		if (rc < 0) {
-			fprintf(stderr, "clipmapview: %s\n", err);
-			status = 2;
-			goto out;
-		}
-	}
-	if (statsp && !(sf = fopen(statsp, "w"))) {
-		fprintf(stderr, "clipmapview: %s: %s\n", statsp, strerror(errno));
+	FILE *stats = NULL;
+	if ((status = open_source(&a, &src)))
+		goto out;
+	status = 1;
+	if (a.statsp && !(stats = fopen(a.statsp, "w"))) {
+		fprintf(stderr, "clipmapview: %s: %s\n", a.statsp, strerror(errno));
 		goto out;
 	}
-	if (window) {
-		char title[128];
-		snprintf(title, sizeof title, "clipmapview %s", src->planet.name);
-		rc = gl_window_create(width, height, title, &win, err);
-		if (rc < 0) {
-			fprintf(stderr, "clipmapview: --window: %s\n", err);
-			goto out;
-		}
-		gl_window_framebuffer_size(win, &d.width, &d.height);
-		d.budget_ms = budget;
-		rc = view_create(gl_window_api(win), src, &d, &v, err);
-		if (rc < 0) {
-			fprintf(stderr, "clipmapview: %s\n", err);
-			goto out;
-		}
-		double radius = src->planet.a * (1 - src->planet.f / 3);
-		/* default: the whole planet from above, north up */
-		struct view_camera home = { .lat = 20, .lon = 0, .alt = 2.2 * radius,
-					    .heading = 0, .pitch = -90, .fov_y = fov,
-					    .width = d.width, .height = d.height };
-		if (keys) {
-			home.lat = keys->v[0];
-			home.lon = keys->v[1];
-			home.alt = keys->v[2];
-			home.heading = keys->v[3];
-			home.pitch = keys->v[4];
-		}
-		struct window_opts wo = { title, width, height, exit_after, screenshot, sf };
-		status = window_loop(win, v, &home, radius, &wo);
-		goto out;
-	}
-	rc = gl_context_create(backend, &ctx, err);
-	if (rc < 0) {
-		fprintf(stderr, "clipmapview: no OpenGL context: %s\n", err);
-		goto out;
-	}
-	d.width = width;
-	d.height = height;
-	/* --wait-complete pictures wait for every level; real time keeps its frames short. */
-	d.budget_ms = wait_complete ? 0 : budget;
-	rc = view_create(gl_context_api(ctx), src, &d, &v, err);
-	if (rc < 0) {
-		fprintf(stderr, "clipmapview: %s\n", err);
-		goto out;
-	}
-	pix = xmalloc((size_t)width * height * 4);
-	size_t nframes = nkeys == 1 ? 1 : (nkeys - 1) * (size_t)steps + 1;
-	double t_start = mono_s();
-	for (size_t f = 0; f < nframes; f++) {
-		size_t k = f / (size_t)steps;
-		double t = (double)(f % (size_t)steps) / steps;
-		const struct key *a = &keys[k], *b = &keys[k + 1 < nkeys ? k + 1 : k];
-		struct view_camera cam = {
-			.lat = a->v[0] + (b->v[0] - a->v[0]) * t,
-			.lon = lerp_angle(a->v[1], b->v[1], t),
-			.alt = a->v[2] + (b->v[2] - a->v[2]) * t,
-			.heading = lerp_angle(a->v[3], b->v[3], t),
-			.pitch = a->v[4] + (b->v[4] - a->v[4]) * t,
-			.fov_y = fov,
-		};
-		if (cam.lon >= 180)
-			cam.lon -= 360;
-		if (cam.lon < -180)
-			cam.lon += 360;
-		struct view_frame_stats st;
-		if (wait_complete)
-			rc = view_frame_complete(v, &cam, timeout, &st, NULL);
-		else
-			rc = view_frame(v, &cam, fps > 0 ? mono_s() - t_start : (double)f / 30.0, &st);
-		if (rc == -ETIMEDOUT)
-			fprintf(stderr, "clipmapview: frame %zu: not complete after %.0f s\n", f,
-				timeout);
-		else if (rc < 0) {
-			fprintf(stderr, "clipmapview: frame %zu: %s\n", f, strerror(-rc));
-			goto out;
-		}
-		if (sf)
-			stats_line(sf, (int)f, &st);
-		if (outp) {
-			char path[4096];
-			if (flight) {
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wformat-nonliteral"
-				snprintf(path, sizeof path, outp, (int)f);
-#pragma GCC diagnostic pop
-			} else {
-				snprintf(path, sizeof path, "%s", outp);
-			}
-			view_read_rgba(v, pix);
-			rc = img_write(path, width, height, 4, IMG_U8, pix, err);
-			if (rc < 0) {
-				fprintf(stderr, "clipmapview: %s\n", err);
-				goto out;
-			}
-		}
-		/* Real time: the next frame is due at (f + 1) / fps; tiles come in meanwhile. */
-		double left = t_start + (double)(f + 1) / fps - mono_s();
-		if (!wait_complete && fps > 0 && f + 1 < nframes && left > 0) {
-			rc = view_idle(v, left);
-			if (rc < 0) {
-				fprintf(stderr, "clipmapview: %s\n", strerror(-rc));
-				goto out;
-			}
-		}
-	}
-	status = 0;
+	if (a.window)
+		status = run_window(&a, src, keys, stats);
+	else
+		status = run_offline(&a, src, keys, nkeys, stats);
 out:
-	if (sf && fclose(sf) != 0 && status == 0) {
-		fprintf(stderr, "clipmapview: %s: %s\n", statsp, strerror(errno));
+	if (stats && fclose(stats) != 0 && status == 0) {
+		fprintf(stderr, "clipmapview: %s: %s\n", a.statsp, strerror(errno));
 		status = 1;
 	}
-	free(pix);
-	view_destroy(v);
-	gl_context_destroy(ctx);
-	gl_window_destroy(win);
 	view_source_destroy(src);
 	free(keys);
 	return status;
