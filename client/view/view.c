@@ -54,6 +54,9 @@ enum {
 static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG", "COLOR", "NORMAL" };
 
 #define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
+/* A camera step longer than this many heights above the ground between two frames is a jump,
+ * not flight (view_fly moves about one height a frame at most). */
+#define JUMP_HEIGHTS 10.0
 
 struct frame_uniforms {
 	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4];
@@ -86,6 +89,7 @@ struct view {
 	uint64_t frame_no;
 	int frame_bits; /* this frame's variant bits that every level shares */
 	int *drawn;	/* this frame's levels drawn, coarse → fine */
+	double last_agl; /* the last frame's camera height above the ground */
 	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
 	double *fade;	/* per level: this frame's fade-in (1: fully shown) */
 	int idle_tiles; /* tiles taken by view_idle since the last frame */
@@ -632,13 +636,27 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	struct view_clipmap_stats cs0, cs1;
 	view_clipmap_get_stats(v->cm, &cs0);
 
+	/* A jump leaves no velocity behind: else the look-ahead would ask for tiles along it, the
+	 * prefetch ring only on its far side, and the want-set would change again frame after
+	 * frame while the smoothed speed decays. */
+	double agl = fmax(cam->alt, 0.05);
+	if (v->frame_no > 0 && now_s > 0) {
+		double p0 = v->last.lat * DEG, p1 = cam->lat * DEG;
+		double dl = remainder(cam->lon - v->last.lon, 360.0) * DEG;
+		double h = sin((p1 - p0) / 2) * sin((p1 - p0) / 2) +
+			   cos(p0) * cos(p1) * sin(dl / 2) * sin(dl / 2);
+		double step = 2 * v->body.a * asin(fmin(1, sqrt(h)));
+		if (step > JUMP_HEIGHTS * fmax(agl, v->last_agl))
+			view_clipmap_motion_reset(v->cm);
+	}
+	v->last_agl = agl;
+
 	/* Camera: height above the terrain as far as the clipmap knows it. */
 	v->last = *cam;
 	v->last.width = v->d.width;
 	v->last.height = v->d.height;
 	double ground = 0;
 	view_clipmap_ground(v->cm, cam->lon, cam->lat, &ground);
-	double agl = fmax(cam->alt, 0.05);
 	v->last.alt = ground * v->d.exaggeration + agl;
 	s.ground = ground;
 	s.agl = agl;

@@ -1,10 +1,11 @@
 /* The viewer in real time after a jump (seed 003 Algorithm 1): the tiles of the new place come
  * in over many frames, and taking them is slow on some frames (a network source decodes them
  * as it polls), past the frame's time budget. A still camera never draws fewer levels than the
- * frame before, never fewer than are resident, and reaches the complete picture; before the
- * new place's levels arrive, the level-0 stand-in puts the horizon where it belongs. A
- * synthetic flat planet (every texel zero) behind a throttle that hands out a few tiles on
- * every other frame. Needs a GL context (llvmpipe); skipped without one.
+ * frame before, never fewer than are resident, and reaches the complete picture; the jump is
+ * no motion (one want-set, no look-ahead along it); before the new place's levels arrive, the
+ * level-0 stand-in puts the horizon where it belongs. A synthetic flat planet (every texel
+ * zero) behind a throttle that hands out a few tiles on every other frame. Needs a GL context
+ * (llvmpipe); skipped without one.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -32,6 +33,7 @@ struct throttle {
 	int quota;
 	double slow_ms;
 	bool slowed; /* this refill's slow poll has happened */
+	size_t wants, ahead; /* want-sets received; look-ahead entries in them */
 };
 
 static struct throttle *th_of(struct view_source *s) { return (struct throttle *)s; }
@@ -39,7 +41,11 @@ static struct throttle *th_of(struct view_source *s) { return (struct throttle *
 static int th_want(struct view_source *s, const struct view_want *w, size_t n,
 		   const struct view_focus *f)
 {
-	return th_of(s)->in->ops->want(th_of(s)->in, w, n, f);
+	struct throttle *t = th_of(s);
+	t->wants++;
+	for (size_t i = 0; i < n; i++)
+		t->ahead += w[i].cls == VIEW_CLASS_AHEAD;
+	return t->in->ops->want(t->in, w, n, f);
 }
 
 static int th_poll(struct view_source *s, struct view_tile *out)
@@ -170,6 +176,7 @@ static void still_after_jump_keeps_levels(void **state)
 	}
 
 	struct view_frame_stats st, prev = { .lfirst = -1, .llast = -1 };
+	t->wants = t->ahead = 0;
 	int complete_at = -1, slow_frames = 0, most_uploads = 0;
 	for (int f = 0; f < 400 && complete_at < 0; f++) {
 		bool slow = f % 2 == 0;
@@ -206,6 +213,10 @@ static void still_after_jump_keeps_levels(void **state)
 		fail_msg("not complete 400 frames after the jump (last drew %d..%d of %d..%d)",
 			 st.lfirst, st.llast, st.lmin, st.lmax);
 	assert_true(slow_frames >= 3); /* the slow frames did happen */
+	/* A jump is no motion: one want-set for the new place, no look-ahead along the jump. */
+	if (t->wants != 1 || t->ahead != 0)
+		fail_msg("%zu want-sets after the jump, %zu look-ahead tiles asked for", t->wants,
+			 t->ahead);
 	/* A slow frame uploads one level; a quick one may upload more. */
 	assert_true(most_uploads >= 1);
 	/* at rest once complete: every level stays */
