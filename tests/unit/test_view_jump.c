@@ -34,6 +34,9 @@ struct throttle {
 	double slow_ms;
 	bool slowed; /* this refill's slow poll has happened */
 	size_t wants, ahead; /* want-sets received; look-ahead entries in them */
+	int hold;	     /* tiles of this level are kept back (-1: none) */
+	struct view_tile kept[64];
+	int nkept;
 };
 
 static struct throttle *th_of(struct view_source *s) { return (struct throttle *)s; }
@@ -53,7 +56,16 @@ static int th_poll(struct view_source *s, struct view_tile *out)
 	struct throttle *t = th_of(s);
 	if (t->quota <= 0)
 		return 0;
-	int rc = t->in->ops->poll(t->in, out);
+	int rc;
+	if (t->hold < 0 && t->nkept > 0) {
+		*out = t->kept[--t->nkept];
+		rc = 1;
+	} else {
+		while ((rc = t->in->ops->poll(t->in, out)) == 1 && out->key.ly == t->hold) {
+			assert_true(t->nkept < 64);
+			t->kept[t->nkept++] = *out;
+		}
+	}
 	if (rc != 1)
 		return rc;
 	t->quota--;
@@ -80,6 +92,9 @@ static void th_release(struct view_source *s, struct view_tile *tile)
 
 static void th_destroy(struct view_source *s)
 {
+	struct throttle *t = th_of(s);
+	while (t->nkept > 0)
+		t->in->ops->release(t->in, &t->kept[--t->nkept]);
 	view_source_destroy(th_of(s)->in);
 	free(s);
 }
@@ -95,6 +110,7 @@ static struct throttle *throttle_create(void)
 	t->in = synth_source_create(32, 12, 3, names, formats, NULL, NULL);
 	t->base.ops = &th_ops;
 	t->base.planet = t->in->planet;
+	t->hold = -1;
 	return t;
 }
 
@@ -232,6 +248,79 @@ static void still_after_jump_keeps_levels(void **state)
 	gl_context_destroy(ctx);
 }
 
+/* ---- a level missing between resident ones ---- */
+
+/* The pixels that show the background colour. */
+static size_t background_mask(const unsigned char *px, int w, int h, bool *mask)
+{
+	size_t n = 0;
+	for (size_t i = 0; i < (size_t)w * h; i++) {
+		const unsigned char *p = px + i * 4;
+		mask[i] = p[0] > 200 && p[1] < 50 && p[2] > 200;
+		n += mask[i];
+	}
+	return n;
+}
+
+/* After a jump one level's tiles are late (the rest have all come): every other level is
+ * drawn, the next coarser one over the late level's rings, without a hole (on a flat planet
+ * the picture is the complete one); then the late level comes in and the picture completes.
+ * (Before the fix the plan stopped at the late level: everything finer stayed hidden.) */
+static void late_level_hides_nothing(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = ctx_or_skip();
+	if (!ctx)
+		skip();
+	enum { W = 64, H = 64 };
+	struct throttle *t = throttle_create();
+	struct view *v = make_view(ctx, t, W, H, 0);
+	struct view_camera a = { 20, 10, 5000, 0, -20, 60, 0, 0 };
+	struct view_camera b = { -30, 100, 5000, 0, -20, 60, 0, 0 };
+	double now = 1;
+	settle(v, t, &a, &now);
+	struct view_frame_stats st;
+	refill(t, 1 << 20, 0);
+	now += 1.0 / 30;
+	assert_int_equal(view_frame(v, &b, now, &st), 0); /* asks for the new place */
+	int lmin = st.lmin, lmax = st.lmax;
+	assert_true(lmax - lmin >= 4);
+	int late = lmin + 4; /* a level whose ring takes much of the picture */
+	t->hold = late;
+	for (int k = 0; k < 10; k++) {
+		refill(t, 1 << 20, 0);
+		now += 1.0 / 30;
+		assert_int_equal(view_frame(v, &b, now, &st), 0);
+	}
+	assert_true(t->nkept > 0);
+	assert_int_equal(st.lfirst, lmin);
+	assert_int_equal(st.llast, lmax);
+	assert_int_equal(st.levels_drawn, lmax - lmin);
+	assert_false(st.complete);
+	unsigned char *px = xmalloc((size_t)W * H * 4);
+	bool *gap = xmalloc((size_t)W * H), *full = xmalloc((size_t)W * H);
+	view_read_rgba(v, px);
+	size_t ngap = background_mask(px, W, H, gap);
+	t->hold = -1;
+	settle(v, t, &b, &now);
+	view_read_rgba(v, px);
+	size_t nfull = background_mask(px, W, H, full);
+	size_t diff = 0;
+	for (size_t i = 0; i < (size_t)W * H; i++)
+		diff += gap[i] != full[i];
+	if (diff > 8)
+		fail_msg("%zu pixels differ in coverage (%zu background with level %d late, %zu "
+			 "complete)",
+			 diff, ngap, late, nfull);
+	assert_true(nfull < (size_t)W * H);
+	free(px);
+	free(gap);
+	free(full);
+	view_destroy(v);
+	view_source_destroy(&t->base);
+	gl_context_destroy(ctx);
+}
+
 /* ---- the stand-in while the new place's levels are missing ---- */
 
 /* The mean over the columns of the first row from the top that is not background. */
@@ -295,6 +384,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(still_after_jump_keeps_levels),
+		cmocka_unit_test(late_level_hides_nothing),
 		cmocka_unit_test(level0_stand_in_has_horizon),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
