@@ -62,6 +62,14 @@ static int th_poll(struct view_source *s, struct view_tile *out)
 		rc = 1;
 	} else {
 		while ((rc = t->in->ops->poll(t->in, out)) == 1 && out->key.ly == t->hold) {
+			bool dup = false; /* asked for again by a later want-set */
+			for (int i = 0; i < t->nkept && !dup; i++)
+				dup = t->kept[i].layer == out->layer && t->kept[i].key.x == out->key.x &&
+				      t->kept[i].key.y == out->key.y && t->kept[i].key.lx == out->key.lx;
+			if (dup) {
+				t->in->ops->release(t->in, out);
+				continue;
+			}
 			assert_true(t->nkept < 64);
 			t->kept[t->nkept++] = *out;
 		}
@@ -321,6 +329,44 @@ static void late_level_hides_nothing(void **state)
 	gl_context_destroy(ctx);
 }
 
+/* ---- climbing: a coarser level becomes wanted ---- */
+
+/* The camera climbs until it wants a coarser level than it holds; no tile comes meanwhile.
+ * Every level it held and still wants is drawn, level 0 standing in over the new coarsest
+ * level's rings. (Before the fix the plan stopped at the missing level: level 0 alone.) */
+static void climb_keeps_levels(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = ctx_or_skip();
+	if (!ctx)
+		skip();
+	struct throttle *t = throttle_create();
+	struct view *v = make_view(ctx, t, 64, 64, 0);
+	struct view_camera c = { 20, 10, 30e3, 0, -20, 60, 0, 0 };
+	double now = 1;
+	settle(v, t, &c, &now);
+	struct view_frame_stats st;
+	assert_int_equal(view_frame(v, &c, now, &st), 0);
+	int lmin0 = st.lmin, lmax0 = st.lmax;
+	assert_true(lmin0 >= 2);
+	refill(t, 0, 0);
+	for (int k = 0; k < 40 && st.lmin == lmin0; k++) {
+		c.alt *= 1.25;
+		now += 1.0 / 30;
+		assert_int_equal(view_frame(v, &c, now, &st), 0);
+	}
+	assert_int_equal(st.lmin, lmin0 - 1);
+	assert_true(st.lmax <= lmax0);
+	assert_int_equal(st.lfirst, 0);
+	assert_int_equal(st.llast, st.lmax);
+	assert_int_equal(st.levels_drawn, 1 + st.lmax - lmin0 + 1);
+	assert_false(st.complete);
+	settle(v, t, &c, &now);
+	view_destroy(v);
+	view_source_destroy(&t->base);
+	gl_context_destroy(ctx);
+}
+
 /* ---- the stand-in while the new place's levels are missing ---- */
 
 /* The mean over the columns of the first row from the top that is not background. */
@@ -385,6 +431,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(still_after_jump_keeps_levels),
 		cmocka_unit_test(late_level_hides_nothing),
+		cmocka_unit_test(climb_keeps_levels),
 		cmocka_unit_test(level0_stand_in_has_horizon),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
