@@ -2,7 +2,11 @@
  * - Geometry: NR = nlevels rings of m circles of n vertices (θ̃ geometric within a ring,
  *   halving per level, seed 000 §3.4) plus the nadir vertex; uploaded once. A level drawn as
  *   a full disk uses its ring, the two finer rings (still finer than its texels need) and a
- *   fan to the nadir.
+ *   fan to the nadir; a level drawn where finer ones are missing (after a jump, a late tile)
+ *   takes their rings too, so the ground keeps its shape and the picture has no hole.
+ * - Plan (seed 003 Algorithm 1): every level whose texture covers its ring is drawn each
+ *   frame; the time budget only holds back uploads of new quads (the frame's first always
+ *   goes ahead).
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
  *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
  *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
