@@ -34,6 +34,7 @@ struct throttle {
 	double slow_ms;
 	bool slowed; /* this refill's slow poll has happened */
 	size_t wants, ahead; /* want-sets received; look-ahead entries in them */
+	bool disordered;     /* a want-set put a finer quad, or a ring tile, before a quad */
 	int hold;	     /* tiles of this level are kept back (-1: none) */
 	struct view_tile kept[64];
 	int nkept;
@@ -46,8 +47,12 @@ static int th_want(struct view_source *s, const struct view_want *w, size_t n,
 {
 	struct throttle *t = th_of(s);
 	t->wants++;
-	for (size_t i = 0; i < n; i++)
+	for (size_t i = 0; i < n; i++) {
 		t->ahead += w[i].cls == VIEW_CLASS_AHEAD;
+		if (i > 0 && w[i].cls == VIEW_CLASS_VISIBLE &&
+		    (w[i - 1].cls != VIEW_CLASS_VISIBLE || w[i - 1].key.ly > w[i].key.ly))
+			t->disordered = true;
+	}
 	return t->in->ops->want(t->in, w, n, f);
 }
 
@@ -237,10 +242,12 @@ static void still_after_jump_keeps_levels(void **state)
 		fail_msg("not complete 400 frames after the jump (last drew %d..%d of %d..%d)",
 			 st.lfirst, st.llast, st.lmin, st.lmax);
 	assert_true(slow_frames >= 3); /* the slow frames did happen */
-	/* A jump is no motion: one want-set for the new place, no look-ahead along the jump. */
+	/* A jump is no motion: one want-set for the new place, its quads coarse first, no
+	 * look-ahead along the jump. */
 	if (t->wants != 1 || t->ahead != 0)
 		fail_msg("%zu want-sets after the jump, %zu look-ahead tiles asked for", t->wants,
 			 t->ahead);
+	assert_false(t->disordered);
 	/* A slow frame uploads one level; a quick one may upload more. */
 	assert_true(most_uploads >= 1);
 	/* at rest once complete: every level stays */
