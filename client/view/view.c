@@ -5,8 +5,8 @@
  *   fan to the nadir; a level drawn where finer ones are missing (after a jump, a late tile)
  *   takes their rings too, so the ground keeps its shape and the picture has no hole.
  * - Plan (seed 003 Algorithm 1): every level whose texture covers its ring is drawn each
- *   frame; the time budget only holds back uploads of new quads (the frame's first always
- *   goes ahead).
+ *   frame; the time budget counts the frame's texture uploads and only holds back further
+ *   uploads of new quads (taking tiles, drawing: not the plan's to stop).
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
  *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
  *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
@@ -383,17 +383,17 @@ void view_destroy(struct view *v)
 	free(v);
 }
 
-/* The frame's uploads (Algorithm 1's time limit): the first always goes ahead, so the
- * picture improves even when taking the tiles alone has spent the budget; further ones while
- * the budget lasts. */
+/* The frame's uploads against its time budget (Algorithm 1's time limit): what they have
+ * taken, not the whole frame — taking the tiles (a network source decodes them) and drawing
+ * are not the plan's to limit, and the first upload of a frame always goes ahead. */
 struct uploads {
-	double t0;    /* when the frame began, ms */
-	int done;     /* levels uploaded this frame */
+	double spent_ms; /* in view_clipmap_update this frame */
+	int done;	 /* levels uploaded this frame */
 };
 
 static bool may_upload(const struct view *v, const struct uploads *u)
 {
-	return v->d.budget_ms <= 0 || u->done == 0 || now_ms() - u->t0 < v->d.budget_ms;
+	return v->d.budget_ms <= 0 || u->spent_ms < v->d.budget_ms;
 }
 
 /* Whether level l can be drawn out to angle r: its texture holds a window that covers it.
@@ -403,9 +403,12 @@ static bool usable(struct view *v, int l, double r, struct uploads *u)
 {
 	const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
 	const struct grid_quad *h = view_clipmap_held(v->cm, l);
-	if (t && !(h && grid_quad_equal(h, t)) && may_upload(v, u) &&
-	    view_clipmap_update(v->cm, l) == 1)
-		u->done++;
+	if (t && !(h && grid_quad_equal(h, t)) && may_upload(v, u)) {
+		double t0 = now_ms();
+		if (view_clipmap_update(v->cm, l) == 1)
+			u->done++;
+		u->spent_ms += now_ms() - t0;
+	}
 	h = view_clipmap_held(v->cm, l);
 	return h && view_window_covers(h, v->last.lon, v->last.lat, r, 1.5);
 }
@@ -732,7 +735,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	 * a jump, or when a level's tiles are late): every resident level is drawn, the budget
 	 * limits only the uploads of new quads (in usable()), and a still camera never loses a
 	 * level. */
-	struct uploads up = { t0, 0 };
+	struct uploads up = { 0, 0 };
 	int first = -1, last = -1, nd = 0;
 	for (int j = lmin; j >= 0 && first < 0; j--)
 		if (usable(v, j, fmin(view_ring_radius(j), cap), &up))

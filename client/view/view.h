@@ -4,7 +4,8 @@
  * Each frame: compute the levels the camera needs (view_levels.h); when a level's target quad
  * moves, send the new want-set (quads coarse first, then the ring around them); take the tiles
  * that arrived; then for each level coarse → fine, update its textures if its quad is complete
- * (the time budget limits these uploads: the frame's first always, more while time remains)
+ * (the time budget limits these uploads: the frame's first always, more while they have
+ * taken less than the budget)
  * and draw it as a ring when the next level can be drawn (its texture covers its ring, new or
  * resident), else as a full disk, and stop. What is resident is drawn every frame, so a still
  * camera never loses a level. It never waits for a tile.
@@ -29,8 +30,9 @@ struct view_desc {
 	int m_rings;	    /* rings per level; 0: 16 */
 	bool no_prefetch;   /* want only the visible quads */
 	double fade_s;	    /* a level that becomes drawable fades in over this long (0: at once) */
-	double budget_ms;   /* upload no more new quads once a frame has taken this long (its
-			     * first upload always; resident levels are drawn anyway; 0: no limit) */
+	double budget_ms;   /* upload no more new quads once a frame's uploads have taken this
+			     * long (its first always; resident levels are drawn anyway; 0: no
+			     * limit) */
 	bool background_set;
 	float background[3]; /* the clear colour (linear 0..1); default: space, sky near ground */
 	float sun_az, sun_el; /* degrees, at the camera; default 135, 35 */

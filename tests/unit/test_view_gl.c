@@ -121,9 +121,9 @@ static struct view *make_view(struct gl_context *ctx, struct view_source *src, i
 /* ---- the frame's time budget (Algorithm 1) ---- */
 
 /* The budget limits refining, never what is drawn. Without one the second frame (the first
- * takes the tiles) uploads and draws every wanted level. With one it has spent before it
- * starts, a frame still uploads one level, the coarsest missing, and draws every level
- * resident: the levels drawn grow by one a frame, never shrink, and the picture completes. */
+ * takes the tiles) uploads and draws every wanted level. With one that any upload spends, a
+ * frame still uploads one level, the coarsest missing, and draws every level resident: the
+ * levels drawn grow by one a frame, never shrink, and the picture completes. */
 static void budget_stops_refining(void **state)
 {
 	(void)state;

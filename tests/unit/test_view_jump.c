@@ -1,6 +1,6 @@
 /* The viewer in real time after a jump (seed 003 Algorithm 1): the tiles of the new place come
  * in over many frames, and taking them is slow on some frames (a network source decodes them
- * as it polls), past the frame's time budget. A still camera never draws fewer levels than the
+ * as it polls), longer than the frame's time budget. A still camera never draws fewer levels than the
  * frame before, never fewer than are resident, and reaches the complete picture; the jump is
  * no motion (one want-set, no look-ahead along it); before the new place's levels arrive, the
  * level-0 stand-in puts the horizon where it belongs. A synthetic flat planet (every texel
@@ -25,7 +25,7 @@
 #include "support/synth_source.h"
 
 /* ---- a throttled source: at most `quota` tiles until the test refills it; the poll that
- * hands out a frame's first tile takes `slow_ms` (a decode that spends the budget) ---- */
+ * hands out a frame's first tile takes `slow_ms` (a decode longer than the budget) ---- */
 
 struct throttle {
 	struct view_source base;
@@ -182,9 +182,10 @@ static bool resident(struct view *v, int l)
 
 /* ---- a still camera after a jump ---- */
 
-/* Tiles trickle in, 8 on every other frame, and the frames that take them spend the budget
- * doing so. The levels drawn only grow, every resident level is drawn, and the picture
- * completes. (Before the fix the frames that took tiles drew their first level alone.) */
+/* Tiles trickle in, 8 on every other frame, and taking them takes longer than the budget
+ * (which the plan once counted from the frame's start). The levels drawn only grow, every
+ * resident level is drawn, and the picture completes. (Before the fix the frames that took
+ * tiles drew their first level alone.) */
 static void still_after_jump_keeps_levels(void **state)
 {
 	(void)state;
@@ -258,6 +259,36 @@ static void still_after_jump_keeps_levels(void **state)
 		assert_int_equal(st.lfirst, st.lmin);
 		assert_int_equal(st.llast, st.lmax);
 	}
+	view_destroy(v);
+	view_source_destroy(&t->base);
+	gl_context_destroy(ctx);
+}
+
+/* The budget counts the frame's uploads, not the time it took to take the tiles: a frame
+ * whose tiles took longer than the budget to come in (all of the new place's, at once)
+ * uploads every level. (Before the fix it uploaded one and drew that one alone.) */
+static void slow_tiles_leave_the_budget(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = ctx_or_skip();
+	if (!ctx)
+		skip();
+	struct throttle *t = throttle_create();
+	struct view *v = make_view(ctx, t, 64, 64, 200);
+	struct view_camera a = { 20, 10, 5000, 0, -20, 60, 0, 0 };
+	struct view_camera b = { -30, 100, 5000, 0, -20, 60, 0, 0 };
+	double now = 1;
+	settle(v, t, &a, &now);
+	struct view_frame_stats st;
+	refill(t, 0, 0);
+	now += 1.0 / 30;
+	assert_int_equal(view_frame(v, &b, now, &st), 0); /* asks for the new place */
+	refill(t, 1 << 20, 250);
+	now += 1.0 / 30;
+	assert_int_equal(view_frame(v, &b, now, &st), 0);
+	assert_true(st.tiles_received > 0);
+	assert_int_equal(st.levels_uploaded, st.lmax - st.lmin + 1);
+	assert_true(st.complete);
 	view_destroy(v);
 	view_source_destroy(&t->base);
 	gl_context_destroy(ctx);
@@ -437,6 +468,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(still_after_jump_keeps_levels),
+		cmocka_unit_test(slow_tiles_leave_the_budget),
 		cmocka_unit_test(late_level_hides_nothing),
 		cmocka_unit_test(climb_keeps_levels),
 		cmocka_unit_test(level0_stand_in_has_horizon),
