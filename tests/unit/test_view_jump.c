@@ -1,11 +1,12 @@
 /* The viewer in real time after a jump (seed 003 Algorithm 1): the tiles of the new place come
  * in over many frames, and taking them is slow on some frames (a network source decodes them
- * as it polls), longer than the frame's time budget. A still camera never draws fewer levels than the
- * frame before, never fewer than are resident, and reaches the complete picture; the jump is
- * no motion (one want-set, no look-ahead along it); before the new place's levels arrive, the
- * level-0 stand-in puts the horizon where it belongs. A synthetic flat planet (every texel
- * zero) behind a throttle that hands out a few tiles on every other frame. Needs a GL context
- * (llvmpipe); skipped without one.
+ * as it polls), longer than the frame's time budget. A still camera never draws fewer levels
+ * than the frame before, never fewer than are resident, and reaches the complete picture; the
+ * budget counts uploads, not the time taken to receive; the jump is no motion (one want-set,
+ * quads coarse first, no look-ahead along it); a late level or a newly wanted coarser one
+ * hides none of the levels held; before the new place's levels arrive, the level-0 stand-in
+ * puts the horizon where it belongs. A synthetic flat planet (every texel zero) behind a
+ * throttle. Needs a GL context (llvmpipe); skipped without one.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -17,6 +18,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "client/view/gl_context.h"
 #include "client/view/view.h"
@@ -83,9 +85,13 @@ static int th_poll(struct view_source *s, struct view_tile *out)
 		return rc;
 	t->quota--;
 	if (!t->slowed && t->slow_ms > 0) {
+		/* the time a decode would take (sleeping: the machine's cores are shared) */
 		uint64_t end = clock_now_ns() + (uint64_t)(t->slow_ms * 1e6);
-		while (clock_now_ns() < end)
-			;
+		for (uint64_t now; (now = clock_now_ns()) < end;) {
+			struct timespec ts = { (time_t)((end - now) / 1000000000u),
+					       (long)((end - now) % 1000000000u) };
+			nanosleep(&ts, NULL);
+		}
 		t->slowed = true;
 	}
 	return 1;
