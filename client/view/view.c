@@ -775,10 +775,10 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	 * before that is shaded (llvmpipe tests depth before running the fragment shader). */
 	for (int k = nd - 1; k >= 0; k--) {
 		int i = v->drawn[k];
-		/* A disk's geometry: its ring and the two finer ones, then a fan to the nadir. A disk
-		 * coarser than lmin (level 0 after a jump, while the new place's levels come in) takes
-		 * the rings as far as a disk of lmin would: inside its own fan, a cone, the horizon
-		 * would be misplaced. */
+		/* A disk's geometry: its ring and the two finer ones, then a fan to the
+		 * nadir. A disk coarser than lmin (level 0 after a jump, while the new place's
+		 * levels come in) takes the rings as far as a disk of lmin would: inside its
+		 * own fan, a cone, the horizon would be misplaced. */
 		int to = k + 1 < nd ? v->drawn[k + 1] - 1 : (i > lmin ? i : lmin) + 2;
 		if (to > v->nlevels - 1)
 			to = v->nlevels - 1;

@@ -70,9 +70,11 @@ static int th_poll(struct view_source *s, struct view_tile *out)
 	} else {
 		while ((rc = t->in->ops->poll(t->in, out)) == 1 && out->key.ly == t->hold) {
 			bool dup = false; /* asked for again by a later want-set */
-			for (int i = 0; i < t->nkept && !dup; i++)
-				dup = t->kept[i].layer == out->layer && t->kept[i].key.x == out->key.x &&
-				      t->kept[i].key.y == out->key.y && t->kept[i].key.lx == out->key.lx;
+			for (int i = 0; i < t->nkept && !dup; i++) {
+				const struct view_tile *k = &t->kept[i];
+				dup = k->layer == out->layer && k->key.x == out->key.x &&
+				      k->key.y == out->key.y && k->key.lx == out->key.lx;
+			}
 			if (dup) {
 				t->in->ops->release(t->in, out);
 				continue;
@@ -227,8 +229,8 @@ static void still_after_jump_keeps_levels(void **state)
 			assert_int_equal(st.lmin, prev.lmin);
 			assert_int_equal(st.lmax, prev.lmax);
 			if (st.llast < prev.llast || st.levels_drawn < prev.levels_drawn)
-				fail_msg("frame %d after the jump drew levels %d..%d, the frame before "
-					 "%d..%d (%d tiles received)",
+				fail_msg("frame %d after the jump drew levels %d..%d, the frame "
+					 "before %d..%d (%d tiles received)",
 					 f, st.lfirst, st.llast, prev.lfirst, prev.llast,
 					 st.tiles_received);
 		}
