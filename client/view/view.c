@@ -2,7 +2,11 @@
  * - Geometry: NR = nlevels rings of m circles of n vertices (θ̃ geometric within a ring,
  *   halving per level, seed 000 §3.4) plus the nadir vertex; uploaded once. A level drawn as
  *   a full disk uses its ring, the two finer rings (still finer than its texels need) and a
- *   fan to the nadir.
+ *   fan to the nadir; a level drawn where finer ones are missing (after a jump, a late tile)
+ *   takes their rings too, so the ground keeps its shape and the picture has no hole.
+ * - Plan (seed 003 Algorithm 1): every level whose texture covers its ring is drawn each
+ *   frame; the time budget counts the frame's texture uploads and only holds back further
+ *   uploads of new quads (taking tiles, drawing: not the plan's to stop).
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
  *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
  *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
@@ -54,6 +58,9 @@ enum {
 static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG", "COLOR", "NORMAL" };
 
 #define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
+/* A camera step longer than this many heights above the ground between two frames is a jump,
+ * not flight (view_fly moves about one height a frame at most). */
+#define JUMP_HEIGHTS 10.0
 
 struct frame_uniforms {
 	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4];
@@ -85,6 +92,8 @@ struct view {
 	struct program *cur;
 	uint64_t frame_no;
 	int frame_bits; /* this frame's variant bits that every level shares */
+	int *drawn;	/* this frame's levels drawn, coarse → fine */
+	double last_agl; /* the last frame's camera height above the ground */
 	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
 	double *fade;	/* per level: this frame's fade-in (1: fully shown) */
 	int idle_tiles; /* tiles taken by view_idle since the last frame */
@@ -322,6 +331,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->ready_since = xcalloc((size_t)v->nlevels, sizeof *v->ready_since);
 	v->floor = xcalloc((size_t)v->nlevels, sizeof *v->floor);
 	v->fade = xcalloc((size_t)v->nlevels, sizeof *v->fade);
+	v->drawn = xcalloc((size_t)v->nlevels, sizeof *v->drawn);
 	int rc = view_clipmap_create(gl, src, v->nlevels, &v->cm, err);
 	if (rc == 0)
 		rc = get_program(v, NVARIANT - 1, err) ? 0 : -EINVAL; /* every feature: fail early */
@@ -369,14 +379,37 @@ void view_destroy(struct view *v)
 	free(v->ready_since);
 	free(v->floor);
 	free(v->fade);
+	free(v->drawn);
 	free(v);
 }
 
-/* Whether level l can be drawn out to angle r: its texture holds a window that covers it. */
-static bool usable(struct view *v, int l, double r)
+/* The frame's uploads against its time budget (Algorithm 1's time limit): what they have
+ * taken, not the whole frame — taking the tiles (a network source decodes them) and drawing
+ * are not the plan's to limit, and the first upload of a frame always goes ahead. */
+struct uploads {
+	double spent_ms; /* in view_clipmap_update this frame */
+	int done;	 /* levels uploaded this frame */
+};
+
+static bool may_upload(const struct view *v, const struct uploads *u)
 {
-	view_clipmap_update(v->cm, l);
+	return v->d.budget_ms <= 0 || u->spent_ms < v->d.budget_ms;
+}
+
+/* Whether level l can be drawn out to angle r: its texture holds a window that covers it.
+ * What is resident is drawable whatever the time; only copying in the level's new quad
+ * (when complete) waits for the budget. */
+static bool usable(struct view *v, int l, double r, struct uploads *u)
+{
+	const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
 	const struct grid_quad *h = view_clipmap_held(v->cm, l);
+	if (t && !(h && grid_quad_equal(h, t)) && may_upload(v, u)) {
+		double t0 = now_ms();
+		if (view_clipmap_update(v->cm, l) == 1)
+			u->done++;
+		u->spent_ms += now_ms() - t0;
+	}
+	h = view_clipmap_held(v->cm, l);
 	return h && view_window_covers(h, v->last.lon, v->last.lat, r, 1.5);
 }
 
@@ -470,16 +503,19 @@ static int bind_program(struct view *v, int bits, int i, int c, float fade)
 	return 0;
 }
 
-/* Draws level i: its ring, or (ring false) the disk out to its ring's outer edge. The parts
- * that show the fine level alone go first with the one-level program, then the blended ones;
- * visible sectors only. Returns the triangles drawn (-EINVAL if a program failed). */
-static int64_t draw_level(struct view *v, int i, bool ring, bool first, double fade,
+/* Draws level i over the geometry of rings i..last (more than its own ring where finer
+ * levels are missing, down to the next level drawn), and with disk, a fan to the nadir
+ * inside ring last; its ring's outer part blends towards level c, the next coarser level
+ * drawn (c = i: none). The parts that show the fine level alone go first with the one-level
+ * program, then the blended ones; visible sectors only. Returns the triangles drawn (-EINVAL
+ * if a program failed). */
+static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, double fade,
 			  double cap, uint64_t *culled)
 {
 	const struct gl *gl = v->gl;
 	int m = v->d.m_rings;
-	int c = (first || i == 0) ? i : i - 1;
-	bool fading = !ring && fade < 1;
+	bool ring = !disk;
+	bool fading = disk && fade < 1;
 	/* Near a pole the ring's vertices' (lon, lat) cannot be interpolated (the meridian behind
 	 * the pole, lon's curvature there): per-fragment lon/lat where the level reaches 0.8 of
 	 * the way to the nearer pole. */
@@ -506,7 +542,6 @@ static int64_t draw_level(struct view *v, int i, bool ring, bool first, double f
 		}
 	}
 	uint64_t idx = 0, cidx = 0;
-	int last = ring ? i : (i + 2 < v->nlevels - 1 ? i + 2 : v->nlevels - 1);
 	for (int pass = 0; pass < 2; pass++) {
 		/* pass 0: one level; pass 1: blended (the outer part of ring i, all when fading) */
 		if (pass == 0 && fading)
@@ -608,13 +643,27 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	struct view_clipmap_stats cs0, cs1;
 	view_clipmap_get_stats(v->cm, &cs0);
 
+	/* A jump leaves no velocity behind: else the look-ahead would ask for tiles along it, the
+	 * prefetch ring only on its far side, and the want-set would change again frame after
+	 * frame while the smoothed speed decays. */
+	double agl = fmax(cam->alt, 0.05);
+	if (v->frame_no > 0 && now_s > 0) {
+		double p0 = v->last.lat * DEG, p1 = cam->lat * DEG;
+		double dl = remainder(cam->lon - v->last.lon, 360.0) * DEG;
+		double h = sin((p1 - p0) / 2) * sin((p1 - p0) / 2) +
+			   cos(p0) * cos(p1) * sin(dl / 2) * sin(dl / 2);
+		double step = 2 * v->body.a * asin(fmin(1, sqrt(h)));
+		if (step > JUMP_HEIGHTS * fmax(agl, v->last_agl))
+			view_clipmap_motion_reset(v->cm);
+	}
+	v->last_agl = agl;
+
 	/* Camera: height above the terrain as far as the clipmap knows it. */
 	v->last = *cam;
 	v->last.width = v->d.width;
 	v->last.height = v->d.height;
 	double ground = 0;
 	view_clipmap_ground(v->cm, cam->lon, cam->lat, &ground);
-	double agl = fmax(cam->alt, 0.05);
 	v->last.alt = ground * v->d.exaggeration + agl;
 	s.ground = ground;
 	s.agl = agl;
@@ -680,29 +729,33 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	v->frame_no++;
 	frame_uniforms(v, agl, cap);
 
-	/* The plan: coarse → fine, ring while the next level can be drawn, else disk (the
-	 * uploads happen here, in usable()). */
-	int first = -1, last = -1;
+	/* The plan: coarse → fine, each level that can be drawn (its texture's window covers its
+	 * ring). The first is the finest that reaches the horizon; the last is drawn as a disk,
+	 * the others as rings, each stretched over the rings of the levels missing below it (after
+	 * a jump, or when a level's tiles are late): every resident level is drawn, the budget
+	 * limits only the uploads of new quads (in usable()), and a still camera never loses a
+	 * level. */
+	struct uploads up = { 0, 0 };
+	int first = -1, last = -1, nd = 0;
 	for (int j = lmin; j >= 0 && first < 0; j--)
-		if (usable(v, j, fmin(view_ring_radius(j), cap)))
+		if (usable(v, j, fmin(view_ring_radius(j), cap), &up))
 			first = j;
-	bool complete = first == lmin;
 	for (int i = first; i >= 0 && i <= lmax; i++) {
+		if (i != first && !usable(v, i, fmin(view_ring_radius(i), cap), &up)) {
+			v->was_usable[i] = false;
+			continue;
+		}
 		if (!v->was_usable[i]) {
 			v->was_usable[i] = true;
 			v->ready_since[i] = now_s;
 		}
-		int next = i + 1;
-		bool more = next <= lmax &&
-			    (v->d.budget_ms <= 0 || now_ms() - t0 < v->d.budget_ms) &&
-			    usable(v, next, fmin(view_ring_radius(next), cap));
 		v->fade[i] = 1;
 		if (v->d.fade_s > 0 && i != first)
 			v->fade[i] = fmin(1, (now_s - v->ready_since[i]) / v->d.fade_s);
+		v->drawn[nd++] = i;
 		last = i;
-		if (!more)
-			break;
 	}
+	bool complete = first == lmin && nd == lmax - lmin + 1;
 
 	/* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
 	 * while any of them holds nothing yet). */
@@ -720,21 +773,29 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 
 	/* Drawn fine → coarse: the nearer ground first, so the depth test rejects what it hides
 	 * before that is shaded (llvmpipe tests depth before running the fragment shader). */
-	for (int i = last; first >= 0 && i >= first; i--) {
-		int64_t tri = draw_level(v, i, i < last, i == first, v->fade[i], cap,
-					 &s.triangles_culled);
+	for (int k = nd - 1; k >= 0; k--) {
+		int i = v->drawn[k];
+		/* A disk's geometry: its ring and the two finer ones, then a fan to the
+		 * nadir. A disk coarser than lmin (level 0 after a jump, while the new place's
+		 * levels come in) takes the rings as far as a disk of lmin would: inside its
+		 * own fan, a cone, the horizon would be misplaced. */
+		int to = k + 1 < nd ? v->drawn[k + 1] - 1 : (i > lmin ? i : lmin) + 2;
+		if (to > v->nlevels - 1)
+			to = v->nlevels - 1;
+		int64_t tri = draw_level(v, i, k > 0 ? v->drawn[k - 1] : i, to, k + 1 == nd,
+					 v->fade[i], cap, &s.triangles_culled);
 		if (tri < 0) {
 			gl->BindVertexArray(0);
 			return (int)tri;
 		}
 		s.triangles += (uint64_t)tri;
 	}
-	s.lfirst = first >= 0 ? first : -1;
-	s.llast = first >= 0 ? last : -1;
-	for (int l = (s.llast >= 0 ? s.llast + 1 : 0); l < v->nlevels; l++)
-		v->was_usable[l] = false;
-	if (s.llast != lmax)
-		complete = false;
+	s.lfirst = first;
+	s.llast = last;
+	s.levels_drawn = nd;
+	for (int l = 0; l < v->nlevels; l++)
+		if (l < first || l > last)
+			v->was_usable[l] = false;
 	for (int l = lmin; l <= lmax && complete; l++) {
 		const struct grid_quad *h = view_clipmap_held(v->cm, l);
 		const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
@@ -745,6 +806,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	gl->Finish();
 	view_clipmap_get_stats(v->cm, &cs1);
 	s.bytes_uploaded = cs1.bytes_uploaded - cs0.bytes_uploaded;
+	s.levels_uploaded = up.done;
 	s.cpu_ms = now_ms() - t0;
 	GLenum e = gl->GetError();
 	if (st)

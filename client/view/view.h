@@ -4,8 +4,11 @@
  * Each frame: compute the levels the camera needs (view_levels.h); when a level's target quad
  * moves, send the new want-set (quads coarse first, then the ring around them); take the tiles
  * that arrived; then for each level coarse → fine, update its textures if its quad is complete
- * and draw it as a ring when the next level can be drawn, else as a full disk, and stop. It
- * never waits for a tile.
+ * (the time budget limits these uploads: the frame's first always, more while they have
+ * taken less than the budget)
+ * and draw it as a ring when the next level can be drawn (its texture covers its ring, new or
+ * resident), else as a full disk, and stop. What is resident is drawn every frame, so a still
+ * camera never loses a level. It never waits for a tile.
  *
  * Threads: the GL context's thread only. Ownership: borrows gl and the source (both must
  * outlive the view); owns its GL objects and clipmap.
@@ -27,7 +30,9 @@ struct view_desc {
 	int m_rings;	    /* rings per level; 0: 16 */
 	bool no_prefetch;   /* want only the visible quads */
 	double fade_s;	    /* a level that becomes drawable fades in over this long (0: at once) */
-	double budget_ms;   /* stop refining when a frame has taken this long (0: no limit) */
+	double budget_ms;   /* upload no more new quads once a frame's uploads have taken this
+			     * long (its first always; resident levels are drawn anyway; 0: no
+			     * limit) */
 	bool background_set;
 	float background[3]; /* the clear colour (linear 0..1); default: space, sky near ground */
 	float sun_az, sun_el; /* degrees, at the camera; default 135, 35 */
@@ -39,10 +44,13 @@ struct view_desc {
 struct view_frame_stats {
 	double cpu_ms;	      /* the frame's CPU time including glFinish */
 	int lmin, lmax;	      /* levels the camera wants */
-	int lfirst, llast;    /* levels drawn (-1: none) */
+	int lfirst, llast;    /* the coarsest and finest level drawn (-1: none) */
+	int levels_drawn;     /* how many (levels between them whose texture is not ready are
+			       * left out, the coarser level drawn over their rings) */
 	uint64_t triangles;	   /* drawn */
 	uint64_t triangles_culled; /* in the drawn levels' geometry, left out by frustum culling */
 	uint64_t bytes_uploaded; /* this frame */
+	int levels_uploaded;	 /* levels whose new quad was copied in this frame */
 	int tiles_received;	 /* this frame */
 	size_t wants_sent;	 /* entries in the want-set sent this frame (0: none sent) */
 	bool complete;		 /* every wanted level drawn at its target quad */

@@ -269,6 +269,12 @@ bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double
 	return changed;
 }
 
+void view_clipmap_motion_reset(struct view_clipmap *cm)
+{
+	cm->has_motion = false;
+	cm->v_lon = cm->v_lat = 0;
+}
+
 bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_quad *q)
 {
 	struct level *L = &cm->lv[level];

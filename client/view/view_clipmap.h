@@ -49,6 +49,9 @@ bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_q
  * must then be sent again. Tiles that fall out of the look-ahead are released. Optional: a
  * caller that never calls it gets no look-ahead. */
 bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t);
+/* Forgets the camera's motion (it jumped: the step is no velocity); the next
+ * view_clipmap_motion starts from rest. */
+void view_clipmap_motion_reset(struct view_clipmap *cm);
 
 /* The want-set for the current targets: every missing tile of every target quad, coarse
  * levels first, then (prefetch) the missing ring tiles — while the camera moves

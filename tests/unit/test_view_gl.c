@@ -120,37 +120,49 @@ static struct view *make_view(struct gl_context *ctx, struct view_source *src, i
 
 /* ---- the frame's time budget (Algorithm 1) ---- */
 
-/* Without a budget a frame draws every wanted level once they are in; with one it has spent
- * before it starts, it stops refining at the first level it can draw (a disk), and the
- * frame is not complete. */
+/* The budget limits refining, never what is drawn. Without one the second frame (the first
+ * takes the tiles) uploads and draws every wanted level. With one that any upload spends, a
+ * frame still uploads one level, the coarsest missing, and draws every level resident: the
+ * levels drawn grow by one a frame, never shrink, and the picture completes. */
 static void budget_stops_refining(void **state)
 {
 	(void)state;
 	struct gl_context *ctx = ctx_or_skip();
 	if (!ctx)
 		skip();
-	struct synth pat = { .mode = SYNTH_PATTERN };
+	/* flat: the levels wanted stay the same as the ground height becomes known */
+	struct synth flat = { .mode = SYNTH_MARKER, .mrad = 1 };
 	struct view_camera cam = { 10, 20, 50000, 0, -30, 60, 0, 0 };
 	struct view_frame_stats st;
 	for (int b = 0; b < 2; b++) {
-		struct view_source *src = synth_create(&pat, 32, 10);
+		struct view_source *src = synth_create(&flat, 32, 10);
 		struct view_desc d = { .width = 64, .height = 64, .n_phi = 96, .m_rings = 12,
 				       .budget_ms = b ? 1e-9 : 0 };
 		struct view *v = NULL;
 		char err[256];
 		assert_int_equal(view_create(gl_context_api(ctx), src, &d, &v, err), 0);
-		int rc = 0;
-		for (int k = 0; k < 50; k++)
-			rc = view_frame(v, &cam, 0, &st);
-		assert_int_equal(rc, 0);
-		assert_true(st.lmax > st.lmin);
-		if (b) {
-			assert_int_equal(st.llast, st.lfirst);
-			assert_false(st.complete);
-		} else {
-			assert_int_equal(st.llast, st.lmax);
-			assert_true(st.complete);
+		assert_int_equal(view_frame(v, &cam, 0, &st), 0);
+		assert_int_equal(st.llast, -1); /* nothing yet */
+		int prev = -1, complete_at = -1;
+		for (int k = 1; k < 50; k++) {
+			assert_int_equal(view_frame(v, &cam, 0, &st), 0);
+			assert_true(st.lmax > st.lmin);
+			if (b) {
+				assert_true(st.levels_uploaded <= 1);
+				assert_true(st.llast >= prev);
+				assert_true(st.llast <= (prev < 0 ? st.lmin : prev + 1));
+			} else {
+				assert_int_equal(st.llast, st.lmax);
+			}
+			if (st.llast >= 0)
+				assert_int_equal(st.lfirst, st.lmin);
+			prev = st.llast;
+			if (st.complete && complete_at < 0)
+				complete_at = k;
 		}
+		assert_true(st.complete);
+		assert_int_equal(st.llast, st.lmax);
+		assert_int_equal(complete_at, b ? 1 + st.lmax - st.lmin : 1);
 		view_destroy(v);
 		view_source_destroy(src);
 	}
