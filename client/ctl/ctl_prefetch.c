@@ -12,6 +12,7 @@
 
 #include "ctl_args.h"
 #include "ctl_conn.h"
+#include "common/errbuf.h"
 
 static double now_s(void)
 {
@@ -81,14 +82,14 @@ static int handle(struct run *r, const struct proto_msg *m, char err[256])
 	case PROTO_JOB_DONE: show(r, true); return 1;
 	case PROTO_JOB_CANCELLED:
 		show(r, true);
-		ctl_errf(err, "%s: the prefetch job was cancelled by the daemon",
-			 net_peer(r->c));
+		err_set(err, "%s: the prefetch job was cancelled by the daemon",
+			net_peer(r->c));
 		return -EIO;
 	case PROTO_JOB_FAILED:
 		show(r, true);
-		ctl_errf(err, "%s: the prefetch job failed after %llu of %llu tiles",
-			 net_peer(r->c), (unsigned long long)r->last.done,
-			 (unsigned long long)r->last.total);
+		err_set(err, "%s: the prefetch job failed after %llu of %llu tiles",
+			net_peer(r->c), (unsigned long long)r->last.done,
+			(unsigned long long)r->last.total);
 		/* an ERROR with the reason should follow; take it if it comes at once */
 		{
 			struct proto_msg e = { 0 };
@@ -131,8 +132,8 @@ static int cancel(struct run *r, char err[256])
 				break;
 		}
 	}
-	ctl_errf(err, "prefetch interrupted after %llu of %llu tiles",
-		 (unsigned long long)r->last.done, (unsigned long long)r->last.total);
+	err_set(err, "prefetch interrupted after %llu of %llu tiles",
+		(unsigned long long)r->last.done, (unsigned long long)r->last.total);
 	return -ECANCELED;
 }
 
@@ -167,8 +168,8 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	uint64_t mask = 0;
 	rc = ctl_parse_layers(o->layers, &op.opened.planet, &mask, err);
 	if (rc == 0 && o->lmax > op.opened.planet.max_level) {
-		ctl_errf(err, "--levels %u-%u: planet %.64s has levels 0-%u", o->lmin, o->lmax,
-			 o->planet, op.opened.planet.max_level);
+		err_set(err, "--levels %u-%u: planet %.64s has levels 0-%u", o->lmin, o->lmax,
+			o->planet, op.opened.planet.max_level);
 		rc = -EINVAL;
 	}
 	proto_msg_fini(&op);
@@ -195,15 +196,15 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		int np = ui->stop_fd >= 0 ? 2 : 1;
 		int left = (int)((last_msg + stall / 1000.0 - now_s()) * 1000);
 		if (left <= 0) {
-			ctl_errf(err, "%s: no progress from the daemon for %d s", net_peer(c),
-				 stall / 1000);
+			err_set(err, "%s: no progress from the daemon for %d s", net_peer(c),
+				stall / 1000);
 			rc = -ETIMEDOUT;
 			break;
 		}
 		int pr = poll(p, (nfds_t)np, left < 1000 ? left : 1000);
 		if (pr < 0 && errno != EINTR) {
 			rc = -errno;
-			ctl_errf(err, "poll: %s", strerror(errno));
+			err_set(err, "poll: %s", strerror(errno));
 			break;
 		}
 		if (pr > 0 && np == 2 && (p[1].revents & POLLIN)) {

@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "common/geo.h"
+#include "common/errbuf.h"
 #include "common/img.h"
 #include "node_types.h"
 #include "common/xalloc.h"
@@ -41,19 +42,10 @@ struct loader {
 static int __attribute__((format(printf, 4, 5)))
 cfg_error(struct loader *L, int line, const char *key, const char *fmt, ...)
 {
-	int n;
-	if (line > 0)
-		n = snprintf(L->err, 256, "%s:%d: ", L->path, line);
-	else
-		n = snprintf(L->err, 256, "%s: ", L->path);
-	if (n >= 0 && n < 256 && key)
-		n += snprintf(L->err + n, (size_t)(256 - n), "%s: ", key);
-	if (n >= 0 && n < 256) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(L->err + n, (size_t)(256 - n), fmt, ap);
-		va_end(ap);
-	}
+	va_list ap;
+	va_start(ap, fmt);
+	err_vset_at(L->err, L->path, line, key, fmt, ap);
+	va_end(ap);
 	return -EINVAL;
 }
 
@@ -530,7 +522,7 @@ int planet_load_shared(const char *path, const struct node_type *const *types,
 	p->ini = ini;
 	p->images = images ? img_cache_ref(images) : img_cache_create(PLANET_IMAGE_CACHE_MB);
 	if (!p->images) {
-		snprintf(err, 256, "%s: cannot create an image cache", path);
+		err_set(err, "%s: cannot create an image cache", path);
 		planet_unref(p);
 		return -ENOMEM;
 	}
