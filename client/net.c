@@ -16,9 +16,9 @@
 #include <string.h>
 #include <sys/socket.h>
 #include <sys/un.h>
-#include <time.h>
 #include <unistd.h>
 
+#include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
 
@@ -36,25 +36,18 @@ struct net_conn {
 	struct tilecodec *tc; /* created on first tile */
 };
 
-static int64_t now_ms(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
-
 /* Milliseconds left until deadline (-1: no deadline), never negative. */
 static int left_ms(int64_t deadline)
 {
 	if (deadline < 0)
 		return -1;
-	int64_t l = deadline - now_ms();
+	int64_t l = deadline - (int64_t)(clock_now_ns() / 1000000u);
 	return l < 0 ? 0 : l > 0x7fffffff ? 0x7fffffff : (int)l;
 }
 
 static int64_t deadline_of(int timeout_ms)
 {
-	return timeout_ms < 0 ? -1 : now_ms() + timeout_ms;
+	return timeout_ms < 0 ? -1 : (int64_t)(clock_now_ns() / 1000000u) + timeout_ms;
 }
 
 /* Waits for events on fd until deadline. Returns 1 ready, 0 timed out, -errno. */

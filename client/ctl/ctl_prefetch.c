@@ -7,19 +7,12 @@
 #include <poll.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "ctl_args.h"
 #include "ctl_conn.h"
+#include "common/clock.h"
 #include "common/errbuf.h"
-
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
 
 struct run {
 	struct net_conn *c;
@@ -36,7 +29,7 @@ static void show(struct run *r, bool force)
 	FILE *f = r->ui->progress;
 	if (!f || !r->have)
 		return;
-	double t = now_s();
+	double t = clock_now_s();
 	char line[256];
 	if (r->ui->tty) {
 		if (!force && t - r->last_print < 0.1)
@@ -111,9 +104,9 @@ static int cancel(struct run *r, char err[256])
 	end_line(r);
 	if (rc == 0) {
 		int wait = r->ui->cancel_wait_ms ? r->ui->cancel_wait_ms : 3000;
-		double deadline = now_s() + wait / 1000.0;
+		double deadline = clock_now_s() + wait / 1000.0;
 		for (;;) {
-			double left = deadline - now_s();
+			double left = deadline - clock_now_s();
 			if (left <= 0)
 				break;
 			struct proto_msg a = { 0 };
@@ -148,7 +141,7 @@ static int drain(struct net_conn *c, struct run *r, double *last_msg, char err[2
 			return 0;
 		if (g)
 			return g;
-		*last_msg = now_s();
+		*last_msg = clock_now_s();
 		g = handle(r, &m, err);
 		proto_msg_fini(&m);
 		if (g)
@@ -176,7 +169,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	if (rc)
 		return rc;
 
-	struct run r = { .c = c, .ui = ui, .id = net_next_req(c), .t0 = now_s() };
+	struct run r = { .c = c, .ui = ui, .id = net_next_req(c), .t0 = clock_now_s() };
 	struct proto_msg pf = { .type = PROTO_PREFETCH,
 				.prefetch = { .id = r.id, .planet = o->planet, .layers = mask,
 					      .shape = o->shape, .lmin = o->lmin, .lmax = o->lmax,
@@ -186,7 +179,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	if (rc)
 		return rc;
 	int stall = ui->stall_ms ? ui->stall_ms : 30000;
-	double last_msg = now_s();
+	double last_msg = clock_now_s();
 	while (rc == 0) {
 		/* everything already buffered first */
 		if ((rc = drain(c, &r, &last_msg, err)))
@@ -194,7 +187,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		struct pollfd p[2] = { { .fd = net_fd(c), .events = POLLIN },
 				       { .fd = ui->stop_fd, .events = POLLIN } };
 		int np = ui->stop_fd >= 0 ? 2 : 1;
-		int left = (int)((last_msg + stall / 1000.0 - now_s()) * 1000);
+		int left = (int)((last_msg + stall / 1000.0 - clock_now_s()) * 1000);
 		if (left <= 0) {
 			err_set(err, "%s: no progress from the daemon for %d s", net_peer(c),
 				stall / 1000);
@@ -227,7 +220,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	if (final)
 		*final = r.last;
 	if (rc == 0 && ui->summary) {
-		double el = now_s() - r.t0;
+		double el = clock_now_s() - r.t0;
 		char d[32];
 		ctl_fmt_duration(el, d, sizeof d);
 		fprintf(ui->summary, "prefetch %s: %llu of %llu tiles in %s (%.1f tiles/s)\n",
