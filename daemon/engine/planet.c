@@ -118,6 +118,18 @@ static bool section_kind(const char *s, const char *kind, const char **name)
 	return true;
 }
 
+/* How many sections of ini are of kind (see section_kind). */
+static size_t count_sections(const struct ini_file *ini, const char *kind)
+{
+	size_t n = 0;
+	for (size_t i = 0; i < ini->n; i++) {
+		const char *name;
+		if (section_kind(ini->sections[i].name, kind, &name))
+			n++;
+	}
+	return n;
+}
+
 /* Unknown sections, keys outside any section, duplicate keys (almost always a mistake in a
  * planet file, and ini_find would silently take the last). */
 static int check_syntax(struct loader *L)
@@ -292,12 +304,7 @@ static int find_lnode(const struct loader *L, const char *name)
 static int collect_nodes(struct loader *L)
 {
 	struct ini_file *ini = L->p->ini;
-	size_t cap = 0;
-	for (size_t i = 0; i < ini->n; i++) {
-		const char *name;
-		if (section_kind(ini->sections[i].name, "node", &name))
-			cap++;
-	}
+	size_t cap = count_sections(ini, "node");
 	L->ln = xcalloc(cap ? cap : 1, sizeof *L->ln);
 	L->p->nodes = xcalloc(cap ? cap : 1, sizeof *L->p->nodes);
 	for (size_t i = 0; i < ini->n; i++) {
@@ -452,12 +459,7 @@ static int parse_layers(struct loader *L)
 {
 	struct planet *p = L->p;
 	struct ini_file *ini = p->ini;
-	size_t cap = 0;
-	for (size_t i = 0; i < ini->n; i++) {
-		const char *name;
-		if (section_kind(ini->sections[i].name, "layer", &name))
-			cap++;
-	}
+	size_t cap = count_sections(ini, "layer");
 	p->layers = xcalloc(cap ? cap : 1, sizeof *p->layers);
 	for (size_t i = 0; i < ini->n; i++) {
 		struct ini_section *s = &ini->sections[i];
