@@ -62,6 +62,20 @@ void oiio_err(char *err, const char *fmt, const char *a, const std::string &b)
 	std::abort();
 }
 
+// Runs f (returning 0 or -errno) under the extern "C" contract: running out of memory aborts,
+// any other exception is -EIO with err naming path. Nothing unwinds into C.
+template <typename F> int guarded(const char *path, char *err, F f)
+{
+	try {
+		return f();
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (const std::exception &e) {
+		oiio_err(err, "%s: %s", path, e.what());
+		return -EIO;
+	}
+}
+
 TypeDesc to_desc(enum img_type t)
 {
 	switch (t) {
@@ -362,7 +376,7 @@ extern "C" void img_cache_unref(struct img_cache *c)
 extern "C" int img_cache_info(struct img_cache *c, const char *path, struct img_info *out,
 			      char err[256])
 {
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec spec;
 		ustring name(path);
 		if (!c->ic->get_imagespec(name, spec, 0, 0, true)) {
@@ -376,18 +390,13 @@ extern "C" int img_cache_info(struct img_cache *c, const char *path, struct img_
 			out->mip_levels = levels;
 		c->ic->geterror(true);
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_cache_level_size(struct img_cache *c, const char *path, int miplevel,
 				    int *width, int *height, char err[256])
 {
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec spec;
 		if (!c->ic->get_imagespec(ustring(path), spec, 0, miplevel, false)) {
 			oiio_err(err, "%s: %s", path, c->ic->geterror());
@@ -398,12 +407,7 @@ extern "C" int img_cache_level_size(struct img_cache *c, const char *path, int m
 		*width = spec.width;
 		*height = spec.height;
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1,
@@ -416,7 +420,7 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 			x0, x1, y0, y1, chbegin, chend);
 		return -EINVAL;
 	}
-	try {
+	return guarded(path, err, [&] {
 		size_t px = img_type_bytes(type) * (size_t)(chend - chbegin);
 		size_t row = dst_stride ? dst_stride : px * (size_t)(x1 - x0);
 		ustring name(path);
@@ -430,12 +434,7 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 			return missing_or(path, -EIO);
 		}
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" void img_cache_invalidate(struct img_cache *c, const char *path)
@@ -497,33 +496,17 @@ extern "C" void img_cache_get_stats(struct img_cache *c, struct img_cache_stats 
 extern "C" int img_write(const char *path, int width, int height, int channels,
 			 enum img_type type, const void *pixels, char err[256])
 {
-	try {
+	return guarded(path, err, [&] {
 		return write_impl(path, width, height, channels, type, pixels, 0, false, nullptr, err);
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_write_tiled(const char *path, int width, int height, int channels,
 			       enum img_type type, const void *pixels, int tile, bool mip,
 			       char err[256])
 {
-	if (tile <= 0 || tile % 16) {
-		err_set(err, "%s: tile size %d is not a positive multiple of 16",
-			path, tile);
-		return -EINVAL;
-	}
-	try {
-		return write_impl(path, width, height, channels, type, pixels, tile, mip, nullptr, err);
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	return img_write_tiled_desc(path, width, height, channels, type, pixels, tile, mip,
+				    nullptr, err);
 }
 
 extern "C" int img_write_tiled_desc(const char *path, int width, int height, int channels,
@@ -535,15 +518,10 @@ extern "C" int img_write_tiled_desc(const char *path, int width, int height, int
 			path, tile);
 		return -EINVAL;
 	}
-	try {
+	return guarded(path, err, [&] {
 		return write_impl(path, width, height, channels, type, pixels, tile, mip,
 				  description, err);
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_cache_description(struct img_cache *c, const char *path, char *buf, size_t n,
@@ -551,7 +529,7 @@ extern "C" int img_cache_description(struct img_cache *c, const char *path, char
 {
 	if (n)
 		buf[0] = 0;
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec spec;
 		if (!c->ic->get_imagespec(ustring(path), spec, 0, 0, false)) {
 			oiio_err(err, "%s: %s", path, c->ic->geterror());
@@ -563,19 +541,14 @@ extern "C" int img_cache_description(struct img_cache *c, const char *path, char
 		if (n)
 			snprintf(buf, n, "%s", d.c_str());
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_read(const char *path, enum img_type type, void **pixels,
 			struct img_info *info, char err[256])
 {
 	*pixels = nullptr;
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec config;
 		config.attribute("oiio:UnassociatedAlpha", 1);
 		std::unique_ptr<ImageInput> in = ImageInput::open(path, &config);
@@ -603,12 +576,7 @@ extern "C" int img_read(const char *path, enum img_type type, void **pixels,
 			*info = inf;
 		*pixels = buf;
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		oiio_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 // ---- streaming tiled writer (img_tiled_*) ----
