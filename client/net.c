@@ -11,15 +11,15 @@
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
 #include <sys/un.h>
-#include <time.h>
 #include <unistd.h>
 
+#include "common/clock.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 #define READ_CHUNK 65536
@@ -36,37 +36,18 @@ struct net_conn {
 	struct tilecodec *tc; /* created on first tile */
 };
 
-/* vsnprintf through a function so messages that name long peers may be cut at 255 bytes
- * (gcc's -Wformat-truncation would refuse each direct snprintf). err may be NULL. */
-__attribute__((format(printf, 2, 3))) static void seterr(char *err, const char *fmt, ...)
-{
-	if (!err)
-		return;
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(err, 256, fmt, ap);
-	va_end(ap);
-}
-
-static int64_t now_ms(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
-
 /* Milliseconds left until deadline (-1: no deadline), never negative. */
 static int left_ms(int64_t deadline)
 {
 	if (deadline < 0)
 		return -1;
-	int64_t l = deadline - now_ms();
+	int64_t l = deadline - (int64_t)(clock_now_ns() / 1000000u);
 	return l < 0 ? 0 : l > 0x7fffffff ? 0x7fffffff : (int)l;
 }
 
 static int64_t deadline_of(int timeout_ms)
 {
-	return timeout_ms < 0 ? -1 : now_ms() + timeout_ms;
+	return timeout_ms < 0 ? -1 : (int64_t)(clock_now_ns() / 1000000u) + timeout_ms;
 }
 
 /* Waits for events on fd until deadline. Returns 1 ready, 0 timed out, -errno. */
@@ -104,8 +85,8 @@ int net_code_errno(uint16_t code)
 void net_error_text(const struct net_conn *c, const struct proto_error *e, char err[256])
 {
 	const char *name = proto_code_name(e->code);
-	seterr(err, "%s: %s: %s", c->peer, name ? name : "internal",
-		 e->message && e->message[0] ? e->message : "(no message)");
+	err_set(err, "%s: %s: %s", c->peer, name ? name : "internal",
+		e->message && e->message[0] ? e->message : "(no message)");
 }
 
 int net_token_load(const char *file, uint8_t buf[PROTO_MAX_TOKEN], uint16_t *len, char err[256])
@@ -116,7 +97,7 @@ int net_token_load(const char *file, uint8_t buf[PROTO_MAX_TOKEN], uint16_t *len
 		FILE *f = fopen(file, "rb");
 		if (!f) {
 			int e = errno;
-			seterr(err, "token file %s: %s", file, strerror(e));
+			err_set(err, "token file %s: %s", file, strerror(e));
 			return -e;
 		}
 		uint8_t tmp[PROTO_MAX_TOKEN + 2];
@@ -124,15 +105,15 @@ int net_token_load(const char *file, uint8_t buf[PROTO_MAX_TOKEN], uint16_t *len
 		int bad = ferror(f);
 		fclose(f);
 		if (bad) {
-			seterr(err, "token file %s: read error", file);
+			err_set(err, "token file %s: read error", file);
 			return -EIO;
 		}
 		while (n && (tmp[n - 1] == '\n' || tmp[n - 1] == '\r' || tmp[n - 1] == ' ' ||
 			     tmp[n - 1] == '\t'))
 			n--;
 		if (n > PROTO_MAX_TOKEN) {
-			seterr(err, "token file %s: longer than %d bytes", file,
-				 PROTO_MAX_TOKEN);
+			err_set(err, "token file %s: longer than %d bytes", file,
+				PROTO_MAX_TOKEN);
 			return -E2BIG;
 		}
 		memcpy(buf, tmp, n);
@@ -143,8 +124,8 @@ int net_token_load(const char *file, uint8_t buf[PROTO_MAX_TOKEN], uint16_t *len
 			while (n && (s[n - 1] == '\n' || s[n - 1] == ' '))
 				n--;
 			if (n > PROTO_MAX_TOKEN) {
-				seterr(err, "$CLIPMAP_TOKEN is longer than %d bytes",
-					 PROTO_MAX_TOKEN);
+				err_set(err, "$CLIPMAP_TOKEN is longer than %d bytes",
+					PROTO_MAX_TOKEN);
 				return -E2BIG;
 			}
 			memcpy(buf, s, n);
@@ -170,17 +151,17 @@ static int write_all(struct net_conn *c, const uint8_t *p, size_t n, int64_t dea
 		if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
 			int r = wait_fd(c->fd, POLLOUT, deadline);
 			if (r == 0) {
-				seterr(err, "%s: timed out sending", c->peer);
+				err_set(err, "%s: timed out sending", c->peer);
 				return -ETIMEDOUT;
 			}
 			if (r < 0) {
-				seterr(err, "%s: poll: %s", c->peer, strerror(-r));
+				err_set(err, "%s: poll: %s", c->peer, strerror(-r));
 				return r;
 			}
 			continue;
 		}
 		int e = w < 0 ? errno : EPIPE;
-		seterr(err, "%s: sending: %s", c->peer, strerror(e));
+		err_set(err, "%s: sending: %s", c->peer, strerror(e));
 		return -e;
 	}
 	return 0;
@@ -194,7 +175,7 @@ int net_send(struct net_conn *c, const struct proto_msg *m, char err[256])
 	ssize_t n = proto_encode(&b, m, e2);
 	if (n < 0) {
 		const char *t = proto_type_name(m->type);
-		seterr(err, "cannot encode %s for %s: %s", t ? t : "message", c->peer, e2);
+		err_set(err, "cannot encode %s for %s: %s", t ? t : "message", c->peer, e2);
 		pbuf_fini(&b);
 		return (int)n;
 	}
@@ -219,7 +200,7 @@ int net_recv(struct net_conn *c, struct proto_msg *m, int timeout_ms, char err[2
 			return 0;
 		}
 		if (r < 0) {
-			seterr(err, "%s: bad message from server: %s", c->peer, e2);
+			err_set(err, "%s: bad message from server: %s", c->peer, e2);
 			return (int)r;
 		}
 		size_t want = need > READ_CHUNK ? need : READ_CHUNK;
@@ -231,31 +212,31 @@ int net_recv(struct net_conn *c, struct proto_msg *m, int timeout_ms, char err[2
 		}
 		if (n == 0) {
 			if (c->rd.len)
-				seterr(err, "%s: connection closed by the server in the middle "
-					 "of a message (%zu bytes of it received)", c->peer, c->rd.len);
+				err_set(err, "%s: connection closed by the server in the middle "
+					"of a message (%zu bytes of it received)", c->peer, c->rd.len);
 			else
-				seterr(err, "%s: connection closed by the server", c->peer);
+				err_set(err, "%s: connection closed by the server", c->peer);
 			return -ECONNRESET;
 		}
 		if (errno == EINTR)
 			continue;
 		if (errno != EAGAIN && errno != EWOULDBLOCK) {
 			int e = errno;
-			seterr(err, "%s: receiving: %s", c->peer, strerror(e));
+			err_set(err, "%s: receiving: %s", c->peer, strerror(e));
 			return -e;
 		}
 		if (timeout_ms == 0) {
-			seterr(err, "%s: no complete message yet", c->peer);
+			err_set(err, "%s: no complete message yet", c->peer);
 			return -EAGAIN;
 		}
 		int w = wait_fd(c->fd, POLLIN, deadline);
 		if (w == 0) {
-			seterr(err, "%s: no answer from the server within %.1f s", c->peer,
-				 timeout_ms / 1000.0);
+			err_set(err, "%s: no answer from the server within %.1f s", c->peer,
+				timeout_ms / 1000.0);
 			return -ETIMEDOUT;
 		}
 		if (w < 0) {
-			seterr(err, "%s: poll: %s", c->peer, strerror(-w));
+			err_set(err, "%s: poll: %s", c->peer, strerror(-w));
 			return w;
 		}
 	}
@@ -268,8 +249,8 @@ int net_expect(struct net_conn *c, uint16_t type, struct proto_msg *m, int timeo
 	for (;;) {
 		int rc = net_recv(c, m, deadline < 0 ? -1 : left_ms(deadline), err);
 		if (rc == -EAGAIN) { /* timeout_ms was 0 or the deadline passed */
-			seterr(err, "%s: no answer from the server within %.1f s", c->peer,
-				 timeout_ms / 1000.0);
+			err_set(err, "%s: no answer from the server within %.1f s", c->peer,
+				timeout_ms / 1000.0);
 			return -ETIMEDOUT;
 		}
 		if (rc)
@@ -290,13 +271,13 @@ int net_expect(struct net_conn *c, uint16_t type, struct proto_msg *m, int timeo
 			continue;
 		}
 		if (m->type == PROTO_BYE) {
-			seterr(err, "%s: the server ended the session", c->peer);
+			err_set(err, "%s: the server ended the session", c->peer);
 			proto_msg_fini(m);
 			return -ECONNRESET;
 		}
 		const char *got = proto_type_name(m->type), *exp = proto_type_name(type);
-		seterr(err, "%s: expected %s, got %s", c->peer, exp ? exp : "?",
-			 got ? got : "?");
+		err_set(err, "%s: expected %s, got %s", c->peer, exp ? exp : "?",
+			got ? got : "?");
 		proto_msg_fini(m);
 		return -EPROTO;
 	}
@@ -323,16 +304,16 @@ static int handshake(struct net_conn *c, const struct net_opts *o, char err[256]
 		return rc;
 	if (m.type == PROTO_ERROR) {
 		const char *name = proto_code_name(m.error.code);
-		seterr(err, "%s refused the connection: %s: %s", c->peer,
-			 name ? name : "internal", m.error.message ? m.error.message : "");
+		err_set(err, "%s refused the connection: %s: %s", c->peer,
+			name ? name : "internal", m.error.message ? m.error.message : "");
 		rc = -net_code_errno(m.error.code);
 	} else if (m.type != PROTO_HELLO_OK) {
 		const char *t = proto_type_name(m.type);
-		seterr(err, "%s: expected HELLO_OK, got %s", c->peer, t ? t : "?");
+		err_set(err, "%s: expected HELLO_OK, got %s", c->peer, t ? t : "?");
 		rc = -EPROTO;
 	} else if (m.hello_ok.version != PROTO_VERSION || (m.hello_ok.codecs & ~codecs)) {
-		seterr(err, "%s: server chose version %u and codecs 0x%x, we offered %u and "
-			 "0x%x", c->peer, m.hello_ok.version, m.hello_ok.codecs, PROTO_VERSION, codecs);
+		err_set(err, "%s: server chose version %u and codecs 0x%x, we offered %u and "
+			"0x%x", c->peer, m.hello_ok.version, m.hello_ok.codecs, PROTO_VERSION, codecs);
 		rc = -EPROTO;
 	} else {
 		c->hello = m.hello_ok;
@@ -368,15 +349,15 @@ static int connect_unix(const char *path, int64_t deadline, int *fd, char err[25
 {
 	struct sockaddr_un a = { .sun_family = AF_UNIX };
 	if (strlen(path) >= sizeof a.sun_path) {
-		seterr(err, "cannot connect to %s: socket path longer than %zu bytes", path,
-			 sizeof a.sun_path - 1);
+		err_set(err, "cannot connect to %s: socket path longer than %zu bytes", path,
+			sizeof a.sun_path - 1);
 		return -ENAMETOOLONG;
 	}
 	memcpy(a.sun_path, path, strlen(path) + 1);
 	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
 	if (s < 0) {
 		int e = errno;
-		seterr(err, "cannot connect to %s: socket: %s", path, strerror(e));
+		err_set(err, "cannot connect to %s: socket: %s", path, strerror(e));
 		return -e;
 	}
 	(void)deadline; /* a Unix connect does not wait for the peer */
@@ -384,7 +365,7 @@ static int connect_unix(const char *path, int64_t deadline, int *fd, char err[25
 		if (errno == EINTR)
 			continue;
 		int e = errno;
-		seterr(err, "cannot connect to %s: %s", path, strerror(e));
+		err_set(err, "cannot connect to %s: %s", path, strerror(e));
 		close(s);
 		return -e;
 	}
@@ -423,14 +404,14 @@ static int connect_tcp(const char *hp, int64_t deadline, int *fd, char err[256])
 {
 	char host[256], port[32];
 	if (split_hostport(hp, host, sizeof host, port, sizeof port)) {
-		seterr(err, "cannot connect to %s: want HOST:PORT or [ADDR]:PORT", hp);
+		err_set(err, "cannot connect to %s: want HOST:PORT or [ADDR]:PORT", hp);
 		return -EINVAL;
 	}
 	struct addrinfo hints = { .ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM };
 	struct addrinfo *res = NULL;
 	int g = getaddrinfo(host, port, &hints, &res);
 	if (g) {
-		seterr(err, "cannot connect to %s: %s", hp, gai_strerror(g));
+		err_set(err, "cannot connect to %s: %s", hp, gai_strerror(g));
 		return g == EAI_SYSTEM ? -errno : g == EAI_NONAME ? -ENOENT : -EHOSTUNREACH;
 	}
 	int rc = -ECONNREFUSED;
@@ -474,7 +455,7 @@ static int connect_tcp(const char *hp, int64_t deadline, int *fd, char err[256])
 	}
 	freeaddrinfo(res);
 	if (rc)
-		seterr(err, "cannot connect to %s: %s", hp, strerror(-rc));
+		err_set(err, "cannot connect to %s: %s", hp, strerror(-rc));
 	return rc;
 }
 
@@ -492,7 +473,7 @@ int net_connect(const struct net_opts *o, struct net_conn **out, char err[256])
 		peer = o->socket_path;
 		rc = connect_unix(o->socket_path, deadline, &fd, err);
 	} else {
-		seterr(err, "no socket path or HOST:PORT to connect to");
+		err_set(err, "no socket path or HOST:PORT to connect to");
 		return -EINVAL;
 	}
 	if (rc)
@@ -529,8 +510,8 @@ int net_tile_decode(struct net_conn *c, const struct proto_tile *t, void *texels
 	char e2[256];
 	int rc = tilecodec_decode(c->tc, &t->enc, t->payload, t->payload_len, texels, cap, e2);
 	if (rc)
-		seterr(err, "%s: tile (%u, %u, %u, %u) of layer %u: %s", c->peer,
-			 t->key.lx, t->key.ly, t->key.x, t->key.y, t->layer, e2);
+		err_set(err, "%s: tile (%u, %u, %u, %u) of layer %u: %s", c->peer,
+			t->key.lx, t->key.ly, t->key.x, t->key.y, t->layer, e2);
 	return rc;
 }
 

@@ -2,6 +2,7 @@
 // creation, and GeographicLib's Geocentric/Geodesic objects are const-safe, so every function
 // may run on any thread.
 #include "geo.h"
+#include "errbuf.h"
 
 #include <GeographicLib/Constants.hpp>
 #include <GeographicLib/Geocentric.hpp>
@@ -23,13 +24,11 @@ struct geo_body {
 extern "C" int geo_body_create(double a, double f, struct geo_body **out, char err[256])
 {
 	if (!(a > 0) || !std::isfinite(a)) {
-		if (err)
-			snprintf(err, 256, "radius must be a positive number of metres, got %g", a);
+		err_set(err, "radius must be a positive number of metres, got %g", a);
 		return -EINVAL;
 	}
 	if (!(f >= 0 && f < 1)) {
-		if (err)
-			snprintf(err, 256, "flattening must be in [0, 1), got %g", f);
+		err_set(err, "flattening must be in [0, 1), got %g", f);
 		return -EINVAL;
 	}
 	try {
@@ -38,8 +37,7 @@ extern "C" int geo_body_create(double a, double f, struct geo_body **out, char e
 		std::fprintf(stderr, "clipmap: out of memory creating a body\n");
 		std::abort();
 	} catch (const std::exception &e) {
-		if (err)
-			snprintf(err, 256, "bad body (a=%g, f=%g): %s", a, f, e.what());
+		err_set(err, "bad body (a=%g, f=%g): %s", a, f, e.what());
 		return -EINVAL;
 	}
 	return 0;

@@ -5,6 +5,7 @@
 // cache is reference counted (planets share one) and remembers, per file name, the version
 // (size, mtime, inode...) its users last saw, so a changed file is invalidated once.
 #include "img.h"
+#include "errbuf.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
@@ -41,7 +42,8 @@ struct img_cache {
 
 namespace {
 
-void set_err(char *err, const char *fmt, const char *a, const std::string &b)
+// err_set for an OpenImageIO message b: fmt has two %s, for a and for b's first line.
+void oiio_err(char *err, const char *fmt, const char *a, const std::string &b)
 {
 	if (!err)
 		return;
@@ -51,13 +53,27 @@ void set_err(char *err, const char *fmt, const char *a, const std::string &b)
 		m.pop_back();
 	if (m.empty())
 		m = "unknown OpenImageIO error";
-	snprintf(err, 256, fmt, a, m.c_str());
+	err_set(err, fmt, a, m.c_str());
 }
 
 [[noreturn]] void oom()
 {
 	std::fprintf(stderr, "clipmap: out of memory in OpenImageIO\n");
 	std::abort();
+}
+
+// Runs f (returning 0 or -errno) under the extern "C" contract: running out of memory aborts,
+// any other exception is -EIO with err naming path. Nothing unwinds into C.
+template <typename F> int guarded(const char *path, char *err, F f)
+{
+	try {
+		return f();
+	} catch (const std::bad_alloc &) {
+		oom();
+	} catch (const std::exception &e) {
+		oiio_err(err, "%s: %s", path, e.what());
+		return -EIO;
+	}
 }
 
 TypeDesc to_desc(enum img_type t)
@@ -142,16 +158,14 @@ int pick_format(const char *path, enum img_type type, bool tiled, const char **f
 		*fmt = "openexr";
 		ok = type == IMG_F32;
 	} else {
-		if (err)
-			snprintf(err, 256, "%s: cannot write a%s image with extension \"%s\" "
-				 "(use .png, .tif or .exr)", path, tiled ? " tiled" : "n",
-				 e.c_str());
+		err_set(err, "%s: cannot write a%s image with extension \"%s\" "
+			"(use .png, .tif or .exr)", path, tiled ? " tiled" : "n",
+			e.c_str());
 		return -EINVAL;
 	}
 	if (!ok) {
-		if (err)
-			snprintf(err, 256, "%s: %s cannot hold %s pixels", path, *fmt,
-				 to_desc(type).c_str());
+		err_set(err, "%s: %s cannot hold %s pixels", path, *fmt,
+			to_desc(type).c_str());
 		return -EINVAL;
 	}
 	return 0;
@@ -175,7 +189,7 @@ int publish(const std::string &tmp, const char *path, char *err)
 	if (rc == 0 && rename(tmp.c_str(), path) != 0)
 		rc = -errno;
 	if (rc) {
-		set_err(err, "%s: %s", path, std::string("cannot publish: ") + std::strerror(-rc));
+		oiio_err(err, "%s: %s", path, std::string("cannot publish: ") + std::strerror(-rc));
 		unlink(tmp.c_str());
 	}
 	return rc;
@@ -206,9 +220,8 @@ int write_impl(const char *path, int width, int height, int channels, enum img_t
 	       const void *pixels, int tile, bool mip, const char *desc, char *err)
 {
 	if (width <= 0 || height <= 0 || channels <= 0 || !pixels) {
-		if (err)
-			snprintf(err, 256, "%s: bad image size %dx%dx%d", path, width, height,
-				 channels);
+		err_set(err, "%s: bad image size %dx%dx%d", path, width, height,
+			channels);
 		return -EINVAL;
 	}
 	const char *fmt = nullptr;
@@ -227,7 +240,7 @@ int write_impl(const char *path, int width, int height, int channels, enum img_t
 		config.attribute("maketx:fileformatname", fmt);
 		config.attribute("maketx:highlightcomp", 0);
 		if (!ImageBufAlgo::make_texture(ImageBufAlgo::MakeTxTexture, src, tmp, config)) {
-			set_err(err, "%s: cannot write: %s", path, OIIO::geterror());
+			oiio_err(err, "%s: cannot write: %s", path, OIIO::geterror());
 			unlink(tmp.c_str());
 			return -EIO;
 		}
@@ -235,17 +248,17 @@ int write_impl(const char *path, int width, int height, int channels, enum img_t
 	}
 	std::unique_ptr<ImageOutput> out = ImageOutput::create(fmt);
 	if (!out) {
-		set_err(err, "%s: %s", path, OIIO::geterror());
+		oiio_err(err, "%s: %s", path, OIIO::geterror());
 		return -EIO;
 	}
 	if (!out->open(tmp, spec) || !out->write_image(to_desc(type), pixels)) {
-		set_err(err, "%s: cannot write: %s", path, out->geterror());
+		oiio_err(err, "%s: cannot write: %s", path, out->geterror());
 		out->close();
 		unlink(tmp.c_str());
 		return -EIO;
 	}
 	if (!out->close()) {
-		set_err(err, "%s: cannot write: %s", path, out->geterror());
+		oiio_err(err, "%s: cannot write: %s", path, out->geterror());
 		unlink(tmp.c_str());
 		return -EIO;
 	}
@@ -363,11 +376,11 @@ extern "C" void img_cache_unref(struct img_cache *c)
 extern "C" int img_cache_info(struct img_cache *c, const char *path, struct img_info *out,
 			      char err[256])
 {
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec spec;
 		ustring name(path);
 		if (!c->ic->get_imagespec(name, spec, 0, 0, true)) {
-			set_err(err, "%s: %s", path, c->ic->geterror());
+			oiio_err(err, "%s: %s", path, c->ic->geterror());
 			return missing_or(path, -EIO);
 		}
 		fill_info(spec, out);
@@ -377,21 +390,16 @@ extern "C" int img_cache_info(struct img_cache *c, const char *path, struct img_
 			out->mip_levels = levels;
 		c->ic->geterror(true);
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_cache_level_size(struct img_cache *c, const char *path, int miplevel,
 				    int *width, int *height, char err[256])
 {
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec spec;
 		if (!c->ic->get_imagespec(ustring(path), spec, 0, miplevel, false)) {
-			set_err(err, "%s: %s", path, c->ic->geterror());
+			oiio_err(err, "%s: %s", path, c->ic->geterror());
 			if (miplevel > 0)
 				return -EINVAL;
 			return missing_or(path, -EIO);
@@ -399,12 +407,7 @@ extern "C" int img_cache_level_size(struct img_cache *c, const char *path, int m
 		*width = spec.width;
 		*height = spec.height;
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1,
@@ -413,12 +416,11 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 {
 	TypeDesc td = to_desc(type);
 	if (x1 <= x0 || y1 <= y0 || chbegin < 0 || chend <= chbegin || td == TypeDesc::UNKNOWN) {
-		if (err)
-			snprintf(err, 256, "%s: bad region [%d,%d)x[%d,%d) channels [%d,%d)", path,
-				 x0, x1, y0, y1, chbegin, chend);
+		err_set(err, "%s: bad region [%d,%d)x[%d,%d) channels [%d,%d)", path,
+			x0, x1, y0, y1, chbegin, chend);
 		return -EINVAL;
 	}
-	try {
+	return guarded(path, err, [&] {
 		size_t px = img_type_bytes(type) * (size_t)(chend - chbegin);
 		size_t row = dst_stride ? dst_stride : px * (size_t)(x1 - x0);
 		ustring name(path);
@@ -428,16 +430,11 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 		stride_t xs = (stride_t)px, ys = (stride_t)row;
 		if (!c->ic->get_pixels(name, 0, miplevel, x0, x1, y0, y1, 0, 1, chbegin,
 				       chend, td, dst, xs, ys, AutoStride, chbegin, chend)) {
-			set_err(err, "%s: %s", path, c->ic->geterror());
+			oiio_err(err, "%s: %s", path, c->ic->geterror());
 			return missing_or(path, -EIO);
 		}
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" void img_cache_invalidate(struct img_cache *c, const char *path)
@@ -499,34 +496,17 @@ extern "C" void img_cache_get_stats(struct img_cache *c, struct img_cache_stats 
 extern "C" int img_write(const char *path, int width, int height, int channels,
 			 enum img_type type, const void *pixels, char err[256])
 {
-	try {
+	return guarded(path, err, [&] {
 		return write_impl(path, width, height, channels, type, pixels, 0, false, nullptr, err);
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_write_tiled(const char *path, int width, int height, int channels,
 			       enum img_type type, const void *pixels, int tile, bool mip,
 			       char err[256])
 {
-	if (tile <= 0 || tile % 16) {
-		if (err)
-			snprintf(err, 256, "%s: tile size %d is not a positive multiple of 16",
-				 path, tile);
-		return -EINVAL;
-	}
-	try {
-		return write_impl(path, width, height, channels, type, pixels, tile, mip, nullptr, err);
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	return img_write_tiled_desc(path, width, height, channels, type, pixels, tile, mip,
+				    nullptr, err);
 }
 
 extern "C" int img_write_tiled_desc(const char *path, int width, int height, int channels,
@@ -534,20 +514,14 @@ extern "C" int img_write_tiled_desc(const char *path, int width, int height, int
 				    const char *description, char err[256])
 {
 	if (tile <= 0 || tile % 16) {
-		if (err)
-			snprintf(err, 256, "%s: tile size %d is not a positive multiple of 16",
-				 path, tile);
+		err_set(err, "%s: tile size %d is not a positive multiple of 16",
+			path, tile);
 		return -EINVAL;
 	}
-	try {
+	return guarded(path, err, [&] {
 		return write_impl(path, width, height, channels, type, pixels, tile, mip,
 				  description, err);
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_cache_description(struct img_cache *c, const char *path, char *buf, size_t n,
@@ -555,10 +529,10 @@ extern "C" int img_cache_description(struct img_cache *c, const char *path, char
 {
 	if (n)
 		buf[0] = 0;
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec spec;
 		if (!c->ic->get_imagespec(ustring(path), spec, 0, 0, false)) {
-			set_err(err, "%s: %s", path, c->ic->geterror());
+			oiio_err(err, "%s: %s", path, c->ic->geterror());
 			return missing_or(path, -EIO);
 		}
 		std::string d = spec.get_string_attribute("ImageDescription");
@@ -567,24 +541,19 @@ extern "C" int img_cache_description(struct img_cache *c, const char *path, char
 		if (n)
 			snprintf(buf, n, "%s", d.c_str());
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 extern "C" int img_read(const char *path, enum img_type type, void **pixels,
 			struct img_info *info, char err[256])
 {
 	*pixels = nullptr;
-	try {
+	return guarded(path, err, [&] {
 		ImageSpec config;
 		config.attribute("oiio:UnassociatedAlpha", 1);
 		std::unique_ptr<ImageInput> in = ImageInput::open(path, &config);
 		if (!in) {
-			set_err(err, "%s: %s", path, OIIO::geterror());
+			oiio_err(err, "%s: %s", path, OIIO::geterror());
 			return missing_or(path, -EIO);
 		}
 		const ImageSpec &spec = in->spec();
@@ -598,7 +567,7 @@ extern "C" int img_read(const char *path, enum img_type type, void **pixels,
 		if (!buf)
 			oom();
 		if (!in->read_image(0, 0, 0, spec.nchannels, to_desc(type), buf)) {
-			set_err(err, "%s: %s", path, in->geterror());
+			oiio_err(err, "%s: %s", path, in->geterror());
 			std::free(buf);
 			return -EIO;
 		}
@@ -607,12 +576,7 @@ extern "C" int img_read(const char *path, enum img_type type, void **pixels,
 			*info = inf;
 		*pixels = buf;
 		return 0;
-	} catch (const std::bad_alloc &) {
-		oom();
-	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
-		return -EIO;
-	}
+	});
 }
 
 // ---- streaming tiled writer (img_tiled_*) ----
@@ -711,8 +675,8 @@ int flush_band(img_tiled_out *o, img_tiled_out::level &L, char *err)
 	int rc = write_all(o->spool, L.band.data(), L.row_bytes * (size_t)L.band_n,
 			   L.off + (off_t)L.row_bytes * L.band_y0);
 	if (rc) {
-		set_err(err, "%s: %s", o->path.c_str(),
-			std::string("cannot spool MIP levels: ") + std::strerror(-rc));
+		oiio_err(err, "%s: %s", o->path.c_str(),
+			 std::string("cannot spool MIP levels: ") + std::strerror(-rc));
 		return rc;
 	}
 	L.band_y0 += L.band_n;
@@ -729,7 +693,7 @@ int emit_row(img_tiled_out *o, size_t k, char *err)
 	int y = L.rows_out++;
 	char *dst = D.band.data() + (size_t)(y - D.band_y0) * D.row_bytes;
 	if (!convert_pixel_values(TypeFloat, L.next.data(), o->td, dst, D.w * o->nch)) {
-		set_err(err, "%s: %s", o->path.c_str(), std::string("pixel conversion failed"));
+		oiio_err(err, "%s: %s", o->path.c_str(), std::string("pixel conversion failed"));
 		return -EIO;
 	}
 	D.band_n++;
@@ -781,7 +745,8 @@ int push_row(img_tiled_out *o, size_t k, const float *row, char *err)
 		if (yb > r)
 			break;
 		if (ya < r - 1) { // cannot happen: rows are consumed in order
-			set_err(err, "%s: %s", o->path.c_str(), std::string("MIP cascade out of order"));
+			oiio_err(err, "%s: %s", o->path.c_str(),
+				 std::string("MIP cascade out of order"));
 			return -EIO;
 		}
 		const float *ra = L.ring.data() + (size_t)(ya & 1) * n;
@@ -924,20 +889,20 @@ int tiled_open_impl(img_tiled_out *o, const char *path, int width, int height, i
 		if (o->lv.size() > 1) {
 			o->spool = spool_open(o->path);
 			if (o->spool < 0) {
-				set_err(err, "%s: %s", path,
-					std::string("cannot create a temporary file for the MIP "
-						    "levels: ") + std::strerror(-o->spool));
+				oiio_err(err, "%s: %s", path,
+					 std::string("cannot create a temporary file for the MIP "
+						     "levels: ") + std::strerror(-o->spool));
 				return -EIO;
 			}
 		}
 	}
 	o->out = ImageOutput::create(fmt);
 	if (!o->out) {
-		set_err(err, "%s: %s", path, OIIO::geterror());
+		oiio_err(err, "%s: %s", path, OIIO::geterror());
 		return -EIO;
 	}
 	if (!o->out->open(o->tmp, spec)) {
-		set_err(err, "%s: cannot write: %s", path, o->out->geterror());
+		oiio_err(err, "%s: cannot write: %s", path, o->out->geterror());
 		tiled_discard(o);
 		return -EIO;
 	}
@@ -947,15 +912,14 @@ int tiled_open_impl(img_tiled_out *o, const char *path, int width, int height, i
 int tiled_rows_impl(img_tiled_out *o, const void *rows, int n, char *err)
 {
 	if (n <= 0 || o->rows + n > o->height || (n % o->tile && o->rows + n != o->height)) {
-		if (err)
-			snprintf(err, 256, "%s: %d rows at row %d of %d (tile %d)", o->path.c_str(),
-				 n, o->rows, o->height, o->tile);
+		err_set(err, "%s: %d rows at row %d of %d (tile %d)", o->path.c_str(),
+			n, o->rows, o->height, o->tile);
 		return -EINVAL;
 	}
 	const char *p = (const char *)rows;
 	size_t row = (size_t)o->width * o->px;
 	if (!write_band(o, o->width, o->rows, n, p)) {
-		set_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
+		oiio_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
 		return -EIO;
 	}
 	o->rows += n;
@@ -964,7 +928,8 @@ int tiled_rows_impl(img_tiled_out *o, const void *rows, int n, char *err)
 	for (int y = 0; y < n; y++) {
 		if (!convert_pixel_values(o->td, p + (size_t)y * row, TypeFloat, o->f0.data(),
 					  o->width * o->nch)) {
-			set_err(err, "%s: %s", o->path.c_str(), std::string("pixel conversion failed"));
+			oiio_err(err, "%s: %s", o->path.c_str(),
+				 std::string("pixel conversion failed"));
 			return -EIO;
 		}
 		int rc = push_row(o, 0, o->f0.data(), err);
@@ -977,16 +942,16 @@ int tiled_rows_impl(img_tiled_out *o, const void *rows, int n, char *err)
 int tiled_finish_impl(img_tiled_out *o, char *err)
 {
 	if (o->rows != o->height) {
-		if (err)
-			snprintf(err, 256, "%s: only %d of %d rows were written", o->path.c_str(),
-				 o->rows, o->height);
+		err_set(err, "%s: only %d of %d rows were written", o->path.c_str(),
+			o->rows, o->height);
 		return -EINVAL;
 	}
 	std::vector<char> band;
 	for (size_t k = 1; o->mip && k < o->lv.size(); k++) {
 		img_tiled_out::level &L = o->lv[k];
 		if (L.band_y0 != L.h || L.band_n) { // cannot happen: the cascade ends each level
-			set_err(err, "%s: %s", o->path.c_str(), std::string("MIP level incomplete"));
+			oiio_err(err, "%s: %s", o->path.c_str(),
+				 std::string("MIP level incomplete"));
 			return -EIO;
 		}
 		ImageSpec s(L.w, L.h, o->nch, o->td);
@@ -997,7 +962,7 @@ int tiled_finish_impl(img_tiled_out *o, char *err)
 						     ? ImageOutput::AppendMIPLevel
 						     : ImageOutput::AppendSubimage;
 		if (!o->out->open(o->tmp, s, mode)) {
-			set_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
+			oiio_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
 			return -EIO;
 		}
 		band.resize(L.row_bytes * (size_t)std::min(o->tile, L.h));
@@ -1006,20 +971,20 @@ int tiled_finish_impl(img_tiled_out *o, char *err)
 			int rc = read_all(o->spool, band.data(), L.row_bytes * (size_t)n,
 					  L.off + (off_t)L.row_bytes * y0);
 			if (rc) {
-				set_err(err, "%s: %s", o->path.c_str(),
-					std::string("cannot read the spooled MIP levels: ") +
-						std::strerror(-rc));
+				oiio_err(err, "%s: %s", o->path.c_str(),
+					 std::string("cannot read the spooled MIP levels: ") +
+						 std::strerror(-rc));
 				return rc;
 			}
 			if (!write_band(o, L.w, y0, n, band.data())) {
-				set_err(err, "%s: cannot write: %s", o->path.c_str(),
-					o->out->geterror());
+				oiio_err(err, "%s: cannot write: %s", o->path.c_str(),
+					 o->out->geterror());
 				return -EIO;
 			}
 		}
 	}
 	if (!o->out->close()) {
-		set_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
+		oiio_err(err, "%s: cannot write: %s", o->path.c_str(), o->out->geterror());
 		return -EIO;
 	}
 	o->out.reset();
@@ -1037,9 +1002,8 @@ extern "C" int img_tiled_open(struct img_tiled_out **out, const char *path, int 
 {
 	*out = nullptr;
 	if (width <= 0 || height <= 0 || channels <= 0 || channels > 4 || tile <= 0 || tile % 16) {
-		if (err)
-			snprintf(err, 256, "%s: bad image size %dx%dx%d or tile %d", path, width,
-				 height, channels, tile);
+		err_set(err, "%s: bad image size %dx%dx%d or tile %d", path, width,
+			height, channels, tile);
 		return -EINVAL;
 	}
 	img_tiled_out *o = nullptr;
@@ -1057,7 +1021,7 @@ extern "C" int img_tiled_open(struct img_tiled_out **out, const char *path, int 
 	} catch (const std::bad_alloc &) {
 		oom();
 	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", path, e.what());
+		oiio_err(err, "%s: %s", path, e.what());
 		if (o) {
 			tiled_discard(o);
 			delete o;
@@ -1069,8 +1033,7 @@ extern "C" int img_tiled_open(struct img_tiled_out **out, const char *path, int 
 extern "C" int img_tiled_rows(struct img_tiled_out *o, const void *rows, int n, char err[256])
 {
 	if (o->failed) {
-		if (err)
-			snprintf(err, 256, "%s: an earlier write failed", o->path.c_str());
+		err_set(err, "%s: an earlier write failed", o->path.c_str());
 		return -EIO;
 	}
 	try {
@@ -1081,7 +1044,7 @@ extern "C" int img_tiled_rows(struct img_tiled_out *o, const void *rows, int n, 
 	} catch (const std::bad_alloc &) {
 		oom();
 	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", o->path.c_str(), e.what());
+		oiio_err(err, "%s: %s", o->path.c_str(), e.what());
 		o->failed = true;
 		return -EIO;
 	}
@@ -1093,11 +1056,11 @@ extern "C" int img_tiled_finish(struct img_tiled_out *o, char err[256])
 	try {
 		rc = o->failed ? -EIO : tiled_finish_impl(o, err);
 		if (o->failed && err)
-			snprintf(err, 256, "%s: an earlier write failed", o->path.c_str());
+			err_set(err, "%s: an earlier write failed", o->path.c_str());
 	} catch (const std::bad_alloc &) {
 		oom();
 	} catch (const std::exception &e) {
-		set_err(err, "%s: %s", o->path.c_str(), e.what());
+		oiio_err(err, "%s: %s", o->path.c_str(), e.what());
 		rc = -EIO;
 	}
 	if (rc)

@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "errbuf.h"
 #include "xalloc.h"
 
 static char *trim(char *s, char *end)
@@ -48,8 +49,7 @@ static struct ini_section *add_section(struct ini_file *f, const char *name, int
 
 static void fail(char *err, const char *path, int line, const char *msg)
 {
-	if (err)
-		snprintf(err, 256, "%s:%d: %s", path, line, msg);
+	err_set(err, "%s:%d: %s", path, line, msg);
 }
 
 int ini_parse(const char *path, const char *text, size_t len, struct ini_file **out, char err[256])
@@ -128,8 +128,7 @@ int ini_load(const char *path, struct ini_file **out, char err[256])
 	FILE *fp = fopen(path, "rb");
 	if (!fp) {
 		int e = errno;
-		if (err)
-			snprintf(err, 256, "%s: %s", path, strerror(e));
+		err_set(err, "%s: %s", path, strerror(e));
 		return -e;
 	}
 	size_t cap = 4096, len = 0;
@@ -142,8 +141,7 @@ int ini_load(const char *path, struct ini_file **out, char err[256])
 		if (len > (64u << 20)) {
 			fclose(fp);
 			free(text);
-			if (err)
-				snprintf(err, 256, "%s: larger than 64 MiB: not a config file", path);
+			err_set(err, "%s: larger than 64 MiB: not a config file", path);
 			return -EFBIG;
 		}
 	}
@@ -151,8 +149,7 @@ int ini_load(const char *path, struct ini_file **out, char err[256])
 	fclose(fp);
 	if (rerr) {
 		free(text);
-		if (err)
-			snprintf(err, 256, "%s: %s", path, strerror(rerr));
+		err_set(err, "%s: %s", path, strerror(rerr));
 		return -rerr;
 	}
 	int rc = ini_parse(path, text, len, out, err);

@@ -228,7 +228,7 @@ static bool rd_fail(struct rd *r, int code, const char *fmt, ...)
 		va_start(ap, fmt);
 		vsnprintf(tmp, sizeof(tmp), fmt, ap);
 		va_end(ap);
-		snprintf(r->errbuf, 256, "%s: %s", r->msg, tmp);
+		err_set(r->errbuf, "%s: %s", r->msg, tmp);
 	}
 	return false;
 }

@@ -9,26 +9,15 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/errbuf.h"
 #include "common/xalloc.h"
-
-void ctl_errf(char *err, const char *fmt, ...)
-{
-	if (err) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(err, 256, fmt, ap);
-		va_end(ap);
-	}
-}
 
 __attribute__((format(printf, 2, 3))) static int bad(char *err, const char *fmt, ...)
 {
-	if (err) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(err, 256, fmt, ap);
-		va_end(ap);
-	}
+	va_list ap;
+	va_start(ap, fmt);
+	err_vset(err, fmt, ap);
+	va_end(ap);
 	return -EINVAL;
 }
 

@@ -12,9 +12,6 @@
 #include "common/grid.h"
 #include "common/proto.h"
 
-/* Formats a message into err[256] (may be NULL), cut at 255 bytes. */
-__attribute__((format(printf, 2, 3))) void ctl_errf(char *err, const char *fmt, ...);
-
 /* An unsigned decimal in [0, max]. */
 int ctl_parse_uint(const char *s, const char *what, uint64_t max, uint64_t *out, char err[256]);
 /* "A-B" or "A": a ly range, 0 ≤ A ≤ B ≤ max_level. */

@@ -8,6 +8,7 @@
 
 #include "ctl_args.h"
 #include "ctl_conn.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 static const char *layer_name(const struct proto_planet *p, uint64_t node, char *buf, size_t n)
@@ -127,8 +128,8 @@ int ctl_cache_ls(struct net_conn *c, const struct ctl_cache_opts *o, int timeout
 		if (rc)
 			break;
 		if (m.cache_entries.req != req) {
-			ctl_errf(err, "%s: CACHE_ENTRIES for request %u, expected %u",
-				 net_peer(c), m.cache_entries.req, req);
+			err_set(err, "%s: CACHE_ENTRIES for request %u, expected %u",
+				net_peer(c), m.cache_entries.req, req);
 			rc = -EPROTO;
 			proto_msg_fini(&m);
 			break;
@@ -148,7 +149,7 @@ int ctl_cache_ls(struct net_conn *c, const struct ctl_cache_opts *o, int timeout
 	if (rc == 0) {
 		rc = ctl_cache_print(all, n, total, &op.opened.planet, o->json, out);
 		if (rc)
-			ctl_errf(err, "writing the listing: %s", strerror(-rc));
+			err_set(err, "writing the listing: %s", strerror(-rc));
 	}
 	free(all);
 	proto_msg_fini(&op);

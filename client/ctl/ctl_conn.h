@@ -6,7 +6,7 @@
 #define CLIPMAP_CTL_CONN_H
 #include "client/net.h"
 
-/* The socket clipmapd listens on by default (conf/clipmapd.conf, [server] listen). */
+/* The socket clipmapd listens on by default (conf/clipmapd.conf, [listen] unix). */
 #define CTL_DEFAULT_SOCKET "/run/clipmapd/clipmapd.sock"
 
 struct ctl_target {

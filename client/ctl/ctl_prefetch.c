@@ -7,18 +7,12 @@
 #include <poll.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "ctl_args.h"
 #include "ctl_conn.h"
-
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
+#include "common/clock.h"
+#include "common/errbuf.h"
 
 struct run {
 	struct net_conn *c;
@@ -35,7 +29,7 @@ static void show(struct run *r, bool force)
 	FILE *f = r->ui->progress;
 	if (!f || !r->have)
 		return;
-	double t = now_s();
+	double t = clock_now_s();
 	char line[256];
 	if (r->ui->tty) {
 		if (!force && t - r->last_print < 0.1)
@@ -81,14 +75,14 @@ static int handle(struct run *r, const struct proto_msg *m, char err[256])
 	case PROTO_JOB_DONE: show(r, true); return 1;
 	case PROTO_JOB_CANCELLED:
 		show(r, true);
-		ctl_errf(err, "%s: the prefetch job was cancelled by the daemon",
-			 net_peer(r->c));
+		err_set(err, "%s: the prefetch job was cancelled by the daemon",
+			net_peer(r->c));
 		return -EIO;
 	case PROTO_JOB_FAILED:
 		show(r, true);
-		ctl_errf(err, "%s: the prefetch job failed after %llu of %llu tiles",
-			 net_peer(r->c), (unsigned long long)r->last.done,
-			 (unsigned long long)r->last.total);
+		err_set(err, "%s: the prefetch job failed after %llu of %llu tiles",
+			net_peer(r->c), (unsigned long long)r->last.done,
+			(unsigned long long)r->last.total);
 		/* an ERROR with the reason should follow; take it if it comes at once */
 		{
 			struct proto_msg e = { 0 };
@@ -110,9 +104,9 @@ static int cancel(struct run *r, char err[256])
 	end_line(r);
 	if (rc == 0) {
 		int wait = r->ui->cancel_wait_ms ? r->ui->cancel_wait_ms : 3000;
-		double deadline = now_s() + wait / 1000.0;
+		double deadline = clock_now_s() + wait / 1000.0;
 		for (;;) {
-			double left = deadline - now_s();
+			double left = deadline - clock_now_s();
 			if (left <= 0)
 				break;
 			struct proto_msg a = { 0 };
@@ -131,8 +125,8 @@ static int cancel(struct run *r, char err[256])
 				break;
 		}
 	}
-	ctl_errf(err, "prefetch interrupted after %llu of %llu tiles",
-		 (unsigned long long)r->last.done, (unsigned long long)r->last.total);
+	err_set(err, "prefetch interrupted after %llu of %llu tiles",
+		(unsigned long long)r->last.done, (unsigned long long)r->last.total);
 	return -ECANCELED;
 }
 
@@ -147,7 +141,7 @@ static int drain(struct net_conn *c, struct run *r, double *last_msg, char err[2
 			return 0;
 		if (g)
 			return g;
-		*last_msg = now_s();
+		*last_msg = clock_now_s();
 		g = handle(r, &m, err);
 		proto_msg_fini(&m);
 		if (g)
@@ -167,15 +161,15 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	uint64_t mask = 0;
 	rc = ctl_parse_layers(o->layers, &op.opened.planet, &mask, err);
 	if (rc == 0 && o->lmax > op.opened.planet.max_level) {
-		ctl_errf(err, "--levels %u-%u: planet %.64s has levels 0-%u", o->lmin, o->lmax,
-			 o->planet, op.opened.planet.max_level);
+		err_set(err, "--levels %u-%u: planet %.64s has levels 0-%u", o->lmin, o->lmax,
+			o->planet, op.opened.planet.max_level);
 		rc = -EINVAL;
 	}
 	proto_msg_fini(&op);
 	if (rc)
 		return rc;
 
-	struct run r = { .c = c, .ui = ui, .id = net_next_req(c), .t0 = now_s() };
+	struct run r = { .c = c, .ui = ui, .id = net_next_req(c), .t0 = clock_now_s() };
 	struct proto_msg pf = { .type = PROTO_PREFETCH,
 				.prefetch = { .id = r.id, .planet = o->planet, .layers = mask,
 					      .shape = o->shape, .lmin = o->lmin, .lmax = o->lmax,
@@ -185,7 +179,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	if (rc)
 		return rc;
 	int stall = ui->stall_ms ? ui->stall_ms : 30000;
-	double last_msg = now_s();
+	double last_msg = clock_now_s();
 	while (rc == 0) {
 		/* everything already buffered first */
 		if ((rc = drain(c, &r, &last_msg, err)))
@@ -193,17 +187,17 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		struct pollfd p[2] = { { .fd = net_fd(c), .events = POLLIN },
 				       { .fd = ui->stop_fd, .events = POLLIN } };
 		int np = ui->stop_fd >= 0 ? 2 : 1;
-		int left = (int)((last_msg + stall / 1000.0 - now_s()) * 1000);
+		int left = (int)((last_msg + stall / 1000.0 - clock_now_s()) * 1000);
 		if (left <= 0) {
-			ctl_errf(err, "%s: no progress from the daemon for %d s", net_peer(c),
-				 stall / 1000);
+			err_set(err, "%s: no progress from the daemon for %d s", net_peer(c),
+				stall / 1000);
 			rc = -ETIMEDOUT;
 			break;
 		}
 		int pr = poll(p, (nfds_t)np, left < 1000 ? left : 1000);
 		if (pr < 0 && errno != EINTR) {
 			rc = -errno;
-			ctl_errf(err, "poll: %s", strerror(errno));
+			err_set(err, "poll: %s", strerror(errno));
 			break;
 		}
 		if (pr > 0 && np == 2 && (p[1].revents & POLLIN)) {
@@ -226,7 +220,7 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 	if (final)
 		*final = r.last;
 	if (rc == 0 && ui->summary) {
-		double el = now_s() - r.t0;
+		double el = clock_now_s() - r.t0;
 		char d[32];
 		ctl_fmt_duration(el, d, sizeof d);
 		fprintf(ui->summary, "prefetch %s: %llu of %llu tiles in %s (%.1f tiles/s)\n",

@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "ctl_args.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 struct row {
@@ -296,7 +297,7 @@ int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, cha
 		return rc;
 	rc = ctl_status_print(&m.stats, net_peer(c), json, out);
 	if (rc)
-		ctl_errf(err, "writing the status: %s", strerror(-rc));
+		err_set(err, "writing the status: %s", strerror(-rc));
 	proto_msg_fini(&m);
 	return rc;
 }

@@ -10,6 +10,7 @@
 
 #include "ctl_args.h"
 #include "ctl_conn.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 int ctl_tile_image(enum pix_type format, uint32_t T, const void *texels,
@@ -70,9 +71,9 @@ int ctl_tile_fetch(struct net_conn *c, const struct ctl_tile_req *r, int timeout
 	}
 	if (!grid_level_valid(r->lx, r->ly) || r->ly > p->max_level ||
 	    r->x >= grid_tiles_x(r->lx) || r->y >= grid_tiles_y(r->ly)) {
-		ctl_errf(err, "tile (%u, %u, %u, %u) is not in planet %.64s: need "
-			 "0 <= ly <= %u, 0 <= lx <= ly + 1, x < 2^lx, y < 2^ly", r->lx, r->ly,
-			 r->x, r->y, p->name, p->max_level);
+		err_set(err, "tile (%u, %u, %u, %u) is not in planet %.64s: need "
+			"0 <= ly <= %u, 0 <= lx <= ly + 1, x < 2^lx, y < 2^ly", r->lx, r->ly,
+			r->x, r->y, p->name, p->max_level);
 		proto_msg_fini(&op);
 		return -EINVAL;
 	}
@@ -105,10 +106,10 @@ int ctl_tile_fetch(struct net_conn *c, const struct ctl_tile_req *r, int timeout
 		if (m.type == PROTO_TILE_FAIL && m.tile_fail.planet_id == pid &&
 		    same_key(&m.tile_fail.key, m.tile_fail.layer, r, (uint8_t)layer)) {
 			const char *cn = proto_code_name(m.tile_fail.code);
-			ctl_errf(err, "%s: cannot make %.32s tile (%u, %u, %u, %u) of %.64s: "
-				 "%s: %.120s", net_peer(c), r->layer, r->lx, r->ly, r->x, r->y,
-				 r->planet, cn ? cn : "internal",
-				 m.tile_fail.message ? m.tile_fail.message : "");
+			err_set(err, "%s: cannot make %.32s tile (%u, %u, %u, %u) of %.64s: "
+				"%s: %.120s", net_peer(c), r->layer, r->lx, r->ly, r->x, r->y,
+				r->planet, cn ? cn : "internal",
+				m.tile_fail.message ? m.tile_fail.message : "");
 			proto_msg_fini(&m);
 			return -EIO;
 		}
@@ -118,8 +119,8 @@ int ctl_tile_fetch(struct net_conn *c, const struct ctl_tile_req *r, int timeout
 			void *tex = xmalloc(m.tile.enc.raw_len ? m.tile.enc.raw_len : 1);
 			rc = net_tile_decode(c, &m.tile, tex, m.tile.enc.raw_len, err);
 			if (rc == 0 && ctl_tile_image(m.tile.enc.format, T, tex, out)) {
-				ctl_errf(err, "%s: tile in unknown format %u", net_peer(c),
-					 m.tile.enc.format);
+				err_set(err, "%s: tile in unknown format %u", net_peer(c),
+					m.tile.enc.format);
 				rc = -EPROTO;
 			}
 			free(tex);

@@ -9,6 +9,7 @@
 #include <string.h>
 
 #include "engine/cache.h"
+#include "common/errbuf.h"
 #include "common/img.h"
 #include "engine/sched.h"
 #include "common/xalloc.h"
@@ -132,30 +133,30 @@ int render_layer(const struct planet *p, const char *layer, const struct render_
 			size_t l = strlen(names);
 			snprintf(names + l, sizeof names - l, "%s%s", i ? ", " : "", p->layers[i].name);
 		}
-		snprintf(err, 256, "planet %s has no layer \"%s\" (layers: %s)", p->name, layer, names);
+		err_set(err, "planet %s has no layer \"%s\" (layers: %s)", p->name, layer, names);
 		return -ENOENT;
 	}
 	if (!grid_level_valid(lx, ly) || ly > p->max_level) {
-		snprintf(err, 256, "level (%d, %d) is not valid for planet %s: need 0 <= ly <= %d and "
-			 "0 <= lx <= ly + 1", lx, ly, p->name, p->max_level);
+		err_set(err, "level (%d, %d) is not valid for planet %s: need 0 <= ly <= %d and "
+			"0 <= lx <= ly + 1", lx, ly, p->name, p->max_level);
 		return -EINVAL;
 	}
 	uint32_t T = p->tile_size;
 	uint32_t cols = rg->cols, rows = rg->rows;
 	if (rg->x >= grid_tiles_x(lx) || rg->y >= grid_tiles_y(ly) || rows == 0 || cols == 0 ||
 	    cols > grid_tiles_x(lx) || rg->y + rows > grid_tiles_y(ly)) {
-		snprintf(err, 256, "tiles (%u, %u) + %ux%u are outside level (%d, %d): x < %u, y < %u",
-			 rg->x, rg->y, cols, rows, lx, ly, grid_tiles_x(lx), grid_tiles_y(ly));
+		err_set(err, "tiles (%u, %u) + %ux%u are outside level (%d, %d): x < %u, y < %u",
+			rg->x, rg->y, cols, rows, lx, ly, grid_tiles_x(lx), grid_tiles_y(ly));
 		return -EINVAL;
 	}
 	if ((uint64_t)cols * T > MAX_PIXELS_WIDE) {
-		snprintf(err, 256, "level (%d, %d) is %llu pixels wide: more than %d; pick a coarser "
-			 "level or single tiles", lx, ly, (unsigned long long)cols * T, MAX_PIXELS_WIDE);
+		err_set(err, "level (%d, %d) is %llu pixels wide: more than %d; pick a coarser "
+			"level or single tiles", lx, ly, (unsigned long long)cols * T, MAX_PIXELS_WIDE);
 		return -E2BIG;
 	}
 	const struct planet_layer *NL = (o->shade && L->type == PIX_COLOR) ? normal_layer(p) : NULL;
 	if (o->shade && L->type == PIX_COLOR && !NL) {
-		snprintf(err, 256, "--shade needs a normal layer; planet %s has none", p->name);
+		err_set(err, "--shade needs a normal layer; planet %s has none", p->name);
 		return -EINVAL;
 	}
 	out->width = (int)(cols * T);
@@ -190,8 +191,8 @@ int render_layer(const struct planet *p, const char *layer, const struct render_
 		size_t nw = NL ? 2 * n : n;
 		rc = sched_fetch(s, w, nw, tiles);
 		if (rc) {
-			snprintf(err, 256, "generating %s tile (%d, %d, %u, %u) of planet %s: %s", layer,
-				 lx, ly, w[0].key.x, w[0].key.y, p->name, strerror(-rc));
+			err_set(err, "generating %s tile (%d, %d, %u, %u) of planet %s: %s", layer,
+				lx, ly, w[0].key.x, w[0].key.y, p->name, strerror(-rc));
 		} else {
 			for (size_t i = 0; i < n; i++)
 				blit(out, tiles[i], NL ? tiles[n + i] : NULL,
@@ -221,13 +222,13 @@ int render_write(const struct render_image *im, const char *path, char note[256]
 	note[0] = '\0';
 	int png = ends_with(path, ".png");
 	if (!png && !ends_with(path, ".tif") && !ends_with(path, ".tiff") && !ends_with(path, ".exr")) {
-		snprintf(err, 256, "%s: unknown picture type: use .png, .tif, .tiff or .exr", path);
+		err_set(err, "%s: unknown picture type: use .png, .tif, .tiff or .exr", path);
 		return -EINVAL;
 	}
 	if (!im->is_float) {
 		if (!png && ends_with(path, ".exr")) {
-			snprintf(err, 256, "%s: colour and normal pictures are written as .png or .tif",
-				 path);
+			err_set(err, "%s: colour and normal pictures are written as .png or .tif",
+				path);
 			return -EINVAL;
 		}
 		return img_write(path, im->width, im->height, im->channels, IMG_U8, im->pixels, err);

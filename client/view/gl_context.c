@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 /* OSMesa's constants and entry points (GL/osmesa.h would pull in GL/gl.h). */
@@ -49,18 +50,18 @@ int gl_load_table(struct gl *gl, gl_proc (*get)(void *ud, const char *name), voi
 	snprintf(name, sizeof name, "gl%s", #fname);                                           \
 	gl->fname = (type)get(ud, name);                                                     \
 	if (!gl->fname) {                                                                    \
-		snprintf(err, 256, "GL entry point %s missing", name);                         \
+		err_set(err, "GL entry point %s missing", name);                               \
 		return -ENOSYS;                                                                \
 	}
 	GL_FUNCS(GL_FUNC_LOAD)
 #undef GL_FUNC_LOAD
 	const char *v = (const char *)gl->GetString(GL_VERSION);
 	if (!v || sscanf(v, "%d.%d", &gl->major, &gl->minor) != 2) {
-		snprintf(err, 256, "cannot read GL_VERSION");
+		err_set(err, "cannot read GL_VERSION");
 		return -ENODEV;
 	}
 	if (gl->major * 10 + gl->minor < 33) {
-		snprintf(err, 256, "OpenGL %s: 3.3 core needed", v);
+		err_set(err, "OpenGL %s: 3.3 core needed", v);
 		return -ENODEV;
 	}
 	gl->ClipControl = NULL;
@@ -80,17 +81,17 @@ static int egl_create(struct gl_context *c, char err[256])
 	PFNEGLGETPLATFORMDISPLAYEXTPROC gpd =
 		(PFNEGLGETPLATFORMDISPLAYEXTPROC)eglGetProcAddress("eglGetPlatformDisplayEXT");
 	if (!gpd) {
-		snprintf(err, 256, "EGL: no eglGetPlatformDisplayEXT");
+		err_set(err, "EGL: no eglGetPlatformDisplayEXT");
 		return -ENODEV;
 	}
 	c->dpy = gpd(EGL_PLATFORM_SURFACELESS_MESA, EGL_DEFAULT_DISPLAY, NULL);
 	EGLint maj, min;
 	if (c->dpy == EGL_NO_DISPLAY || !eglInitialize(c->dpy, &maj, &min)) {
-		snprintf(err, 256, "EGL: no surfaceless display (0x%x)", (unsigned)eglGetError());
+		err_set(err, "EGL: no surfaceless display (0x%x)", (unsigned)eglGetError());
 		return -ENODEV;
 	}
 	if (!eglBindAPI(EGL_OPENGL_API)) {
-		snprintf(err, 256, "EGL: no OpenGL API");
+		err_set(err, "EGL: no OpenGL API");
 		return -ENODEV;
 	}
 	static const EGLint cfg_attr[] = { EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_SURFACE_TYPE,
@@ -105,12 +106,12 @@ static int egl_create(struct gl_context *c, char err[256])
 					   EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT, EGL_NONE };
 	c->ctx = eglCreateContext(c->dpy, cfg, EGL_NO_CONTEXT, ctx_attr);
 	if (c->ctx == EGL_NO_CONTEXT) {
-		snprintf(err, 256, "EGL: cannot create a 3.3 core context (0x%x)",
-			 (unsigned)eglGetError());
+		err_set(err, "EGL: cannot create a 3.3 core context (0x%x)",
+			(unsigned)eglGetError());
 		return -ENODEV;
 	}
 	if (!eglMakeCurrent(c->dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, c->ctx)) {
-		snprintf(err, 256, "EGL: eglMakeCurrent failed (0x%x)", (unsigned)eglGetError());
+		err_set(err, "EGL: eglMakeCurrent failed (0x%x)", (unsigned)eglGetError());
 		return -ENODEV;
 	}
 	c->backend = GL_BACKEND_EGL;
@@ -127,7 +128,7 @@ static int osmesa_create(struct gl_context *c, char err[256])
 {
 	c->osmesa_lib = dlopen("libOSMesa.so.8", RTLD_NOW | RTLD_LOCAL);
 	if (!c->osmesa_lib) {
-		snprintf(err, 256, "OSMesa: %s", dlerror());
+		err_set(err, "OSMesa: %s", dlerror());
 		return -ENODEV;
 	}
 	osmesa_create_fn create;
@@ -138,7 +139,7 @@ static int osmesa_create(struct gl_context *c, char err[256])
 	*(void **)&proc = dlsym(c->osmesa_lib, "OSMesaGetProcAddress");
 	*(void **)&c->odestroy = dlsym(c->osmesa_lib, "OSMesaDestroyContext");
 	if (!create || !make_current || !proc || !c->odestroy) {
-		snprintf(err, 256, "OSMesa: entry points missing");
+		err_set(err, "OSMesa: entry points missing");
 		return -ENODEV;
 	}
 	static const int attr[] = { OSMESA_FORMAT, OSMESA_RGBA, OSMESA_DEPTH_BITS, 24,
@@ -147,11 +148,11 @@ static int osmesa_create(struct gl_context *c, char err[256])
 				    OSMESA_CONTEXT_MINOR_VERSION, 3, 0 };
 	c->octx = create(attr, NULL);
 	if (!c->octx) {
-		snprintf(err, 256, "OSMesa: cannot create a 3.3 core context");
+		err_set(err, "OSMesa: cannot create a 3.3 core context");
 		return -ENODEV;
 	}
 	if (!make_current(c->octx, c->obuf, GL_UNSIGNED_BYTE, 4, 4)) {
-		snprintf(err, 256, "OSMesa: OSMesaMakeCurrent failed");
+		err_set(err, "OSMesa: OSMesaMakeCurrent failed");
 		return -ENODEV;
 	}
 	c->backend = GL_BACKEND_OSMESA;
@@ -194,11 +195,11 @@ int gl_context_create(enum gl_backend b, struct gl_context **out, char err[256])
 			if (e1[0]) {
 				char e2[256];
 				snprintf(e2, sizeof e2, "%s", err);
-				snprintf(err, 256, "%.120s; %.120s", e1, e2);
+				err_set(err, "%.120s; %.120s", e1, e2);
 			}
 		}
 	} else if (rc < 0) {
-		snprintf(err, 256, "%s", e1);
+		err_set(err, "%s", e1);
 	}
 	if (rc < 0) {
 		free(c);

@@ -10,6 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 struct gl_window {
@@ -35,7 +36,7 @@ static void glfw_err(const char *what, char err[256])
 {
 	const char *d = NULL;
 	int code = glfwGetError(&d);
-	snprintf(err, 256, "%s: %s (GLFW 0x%x)", what, d ? d : "unknown error", (unsigned)code);
+	err_set(err, "%s: %s (GLFW 0x%x)", what, d ? d : "unknown error", (unsigned)code);
 }
 
 static gl_proc glfw_get(void *ud, const char *name)

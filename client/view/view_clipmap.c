@@ -11,6 +11,7 @@
 #include <string.h>
 
 #include "view_levels.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 /* Per role: the quad (4), its ring (12) and the look-ahead (≤ 2 × AHEAD_MAX lines of 4). */
@@ -71,7 +72,7 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 	const struct view_planet *p = &src->planet;
 	*out = NULL;
 	if (nlevels < 1 || nlevels > VIEW_MAX_LEVELS || p->tile_size < 16 || p->tile_size > 4096) {
-		snprintf(err, 256, "bad clipmap shape: %d levels of %u", nlevels, p->tile_size);
+		err_set(err, "bad clipmap shape: %d levels of %u", nlevels, p->tile_size);
 		return -EINVAL;
 	}
 	int layer[VIEW_NROLES];
@@ -85,7 +86,7 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 				layer[r] = i;
 	}
 	if (layer[VIEW_HEIGHT] < 0) {
-		snprintf(err, 256, "planet %s publishes no height layer", p->name);
+		err_set(err, "planet %s publishes no height layer", p->name);
 		return -EINVAL;
 	}
 	struct view_clipmap *cm = xcalloc(1, sizeof *cm);
@@ -113,7 +114,7 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 	}
 	GLenum e = gl->GetError();
 	if (e != GL_NO_ERROR) {
-		snprintf(err, 256, "clipmap textures (%d × %u²): GL error 0x%x", nlevels, cm->T, e);
+		err_set(err, "clipmap textures (%d × %u²): GL error 0x%x", nlevels, cm->T, e);
 		view_clipmap_destroy(cm);
 		return -ENOMEM;
 	}

@@ -5,16 +5,18 @@
 #include "view_source_local.h"
 
 #include <errno.h>
-#include <pthread.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "engine/cache.h"
 #include "engine/planet.h"
 #include "engine/sched.h"
+#include "common/clock.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
 
 struct arrival {
 	uint8_t layer;
@@ -32,7 +34,7 @@ struct local {
 	struct want *wbuf; /* scratch for want lists */
 	size_t wcap;
 	pthread_mutex_t lock; /* protects q, qhead, qn, qcap */
-	pthread_cond_t cond;
+	pthread_cond_t cond;  /* signalled when an arrival is queued (CLOCK_MONOTONIC) */
 	struct arrival *q;
 	size_t qhead, qn, qcap;
 };
@@ -46,7 +48,7 @@ static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
 			layer = (int)i;
 	if (layer < 0)
 		return;
-	pthread_mutex_lock(&l->lock);
+	xmutex_lock(&l->lock);
 	if (l->qhead + l->qn == l->qcap) {
 		if (l->qhead > 0) {
 			memmove(l->q, l->q + l->qhead, l->qn * sizeof *l->q);
@@ -59,8 +61,8 @@ static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
 	}
 	l->q[l->qhead + l->qn++] = (struct arrival){ (uint8_t)layer, w->key, t ? tile_ref(t) : NULL,
 						     t ? 0 : (err < 0 ? err : -EIO) };
-	pthread_cond_signal(&l->cond);
-	pthread_mutex_unlock(&l->lock);
+	xcond_signal(&l->cond);
+	xmutex_unlock(&l->lock);
 }
 
 static int local_want(struct view_source *s, const struct view_want *w, size_t n,
@@ -93,16 +95,16 @@ static int local_want(struct view_source *s, const struct view_want *w, size_t n
 static int local_poll(struct view_source *s, struct view_tile *out)
 {
 	struct local *l = (struct local *)s;
-	pthread_mutex_lock(&l->lock);
+	xmutex_lock(&l->lock);
 	if (l->qn == 0) {
-		pthread_mutex_unlock(&l->lock);
+		xmutex_unlock(&l->lock);
 		return 0;
 	}
 	struct arrival a = l->q[l->qhead++];
 	l->qn--;
 	if (l->qn == 0)
 		l->qhead = 0;
-	pthread_mutex_unlock(&l->lock);
+	xmutex_unlock(&l->lock);
 	*out = (struct view_tile){ .layer = a.layer,
 				   .key = a.key,
 				   .format = l->p->layers[a.layer].type,
@@ -116,20 +118,13 @@ static int local_poll(struct view_source *s, struct view_tile *out)
 static int local_wait(struct view_source *s, int timeout_ms)
 {
 	struct local *l = (struct local *)s;
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	ts.tv_sec += timeout_ms / 1000;
-	ts.tv_nsec += (long)(timeout_ms % 1000) * 1000000L;
-	if (ts.tv_nsec >= 1000000000L) {
-		ts.tv_sec++;
-		ts.tv_nsec -= 1000000000L;
-	}
-	int rc = 0;
-	pthread_mutex_lock(&l->lock);
-	while (l->qn == 0 && rc == 0)
-		rc = pthread_cond_timedwait(&l->cond, &l->lock, &ts);
+	uint64_t deadline = clock_now_ns() + (uint64_t)(timeout_ms > 0 ? timeout_ms : 0) * 1000000u;
+	bool more = true;
+	xmutex_lock(&l->lock);
+	while (l->qn == 0 && more)
+		more = xcond_wait_until(&l->cond, &l->lock, deadline);
 	int got = l->qn > 0;
-	pthread_mutex_unlock(&l->lock);
+	xmutex_unlock(&l->lock);
 	return got ? 1 : 0;
 }
 
@@ -154,8 +149,8 @@ static void local_destroy(struct view_source *s)
 	free(l->wbuf);
 	cache_destroy(l->cache);
 	planet_unref(l->p);
-	pthread_cond_destroy(&l->cond);
-	pthread_mutex_destroy(&l->lock);
+	xcond_destroy(&l->cond);
+	xmutex_destroy(&l->lock);
 	free(l);
 }
 
@@ -179,15 +174,14 @@ int view_source_local_create(const char *planet_path, const struct view_source_l
 	if (rc < 0)
 		return rc;
 	if (p->nlayers > VIEW_MAX_LAYERS) {
-		snprintf(err, 256, "%s: %zu layers, at most %d", planet_path, p->nlayers,
-			 VIEW_MAX_LAYERS);
+		err_set(err, "%s: %zu layers, at most %d", planet_path, p->nlayers, VIEW_MAX_LAYERS);
 		planet_unref(p);
 		return -EINVAL;
 	}
 	struct local *l = xcalloc(1, sizeof *l);
 	l->p = p;
-	pthread_mutex_init(&l->lock, NULL);
-	pthread_cond_init(&l->cond, NULL);
+	xmutex_init(&l->lock);
+	xcond_init(&l->cond);
 	l->base.ops = &local_ops;
 	struct view_planet *vp = &l->base.planet;
 	snprintf(vp->name, sizeof vp->name, "%s", p->name ? p->name : "");

@@ -1,5 +1,5 @@
 /* view_source_local — a view_source over the engine in this process: a loaded planet, a tile
- * cache and the scheduler (daemon/). Used by tests and `clipmapview --planet FILE`.
+ * cache and the scheduler (daemon/engine/). Used by tests and `clipmapview --planet FILE`.
  * Threads: the scheduler's manager thread queues ready tiles under a mutex (which protects
  * only the queue); the viewer's thread drains it. Ownership: the source owns everything it
  * creates; polled tiles hold a tile reference until release.

@@ -9,13 +9,12 @@
  */
 #include "cache.h"
 
-#include <pthread.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
+#include "common/clock.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
 
 #define NLX (GRID_MAX_LEVEL + 2)
 #define NLY (GRID_MAX_LEVEL + 1)
@@ -24,7 +23,7 @@ struct centry {
 	struct tile *t; /* the cache's own reference */
 	uint64_t hash;
 	uint64_t stamp;	  /* LRU clock value of the last lookup or insert */
-	uint64_t used_ns; /* cache_now_ns() of the last lookup or insert */
+	uint64_t used_ns; /* clock_now_ns() of the last lookup or insert */
 	struct centry *next;
 };
 
@@ -46,38 +45,10 @@ struct victim {
 	struct centry *e;
 };
 
-uint64_t cache_now_ns(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
-}
-
-static void lock(struct cache *c)
-{
-	int rc = pthread_mutex_lock(&c->mu);
-	if (rc != 0) {
-		fprintf(stderr, "cache: pthread_mutex_lock: %s\n", strerror(rc));
-		abort();
-	}
-}
-
-static void unlock(struct cache *c)
-{
-	int rc = pthread_mutex_unlock(&c->mu);
-	if (rc != 0) {
-		fprintf(stderr, "cache: pthread_mutex_unlock: %s\n", strerror(rc));
-		abort();
-	}
-}
-
 struct cache *cache_create(size_t budget_bytes)
 {
 	struct cache *c = xcalloc(1, sizeof *c);
-	if (pthread_mutex_init(&c->mu, NULL) != 0) {
-		free(c);
-		return NULL;
-	}
+	xmutex_init(&c->mu);
 	c->nbuckets = 1024;
 	c->buckets = xcalloc(c->nbuckets, sizeof *c->buckets);
 	c->budget = budget_bytes;
@@ -99,7 +70,7 @@ void cache_destroy(struct cache *c)
 	}
 	free(c->buckets);
 	free(c->foci);
-	pthread_mutex_destroy(&c->mu);
+	xmutex_destroy(&c->mu);
 	free(c);
 }
 
@@ -146,8 +117,8 @@ struct tile *cache_lookup(struct cache *c, const struct tile_key *k)
 {
 	uint64_t h = grid_key_hash(k);
 	struct tile *t = NULL;
-	uint64_t now = cache_now_ns(); /* read before locking: nothing extra under the lock */
-	lock(c);
+	uint64_t now = clock_now_ns(); /* read before locking: nothing extra under the lock */
+	xmutex_lock(&c->mu);
 	struct centry *e = find(c, k, h);
 	if (e) {
 		e->stamp = ++c->clock;
@@ -157,16 +128,16 @@ struct tile *cache_lookup(struct cache *c, const struct tile_key *k)
 	} else {
 		c->misses++;
 	}
-	unlock(c);
+	xmutex_unlock(&c->mu);
 	return t;
 }
 
 bool cache_contains(struct cache *c, const struct tile_key *k)
 {
 	uint64_t h = grid_key_hash(k);
-	lock(c);
+	xmutex_lock(&c->mu);
 	bool found = find(c, k, h) != NULL;
-	unlock(c);
+	xmutex_unlock(&c->mu);
 	return found;
 }
 
@@ -256,8 +227,8 @@ void cache_insert(struct cache *c, struct tile *t)
 	uint64_t h = grid_key_hash(&t->key);
 	struct tile **ev = NULL;
 	size_t nev = 0;
-	uint64_t now = cache_now_ns();
-	lock(c);
+	uint64_t now = clock_now_ns();
+	xmutex_lock(&c->mu);
 	struct centry *e = find(c, &t->key, h);
 	if (e) {
 		e->stamp = ++c->clock;
@@ -279,7 +250,7 @@ void cache_insert(struct cache *c, struct tile *t)
 		if (c->budget && c->bytes > c->budget)
 			prune_locked(c, c->budget - c->budget / 10, &ev, &nev);
 	}
-	unlock(c);
+	xmutex_unlock(&c->mu);
 	unref_all(ev, nev);
 }
 
@@ -290,12 +261,12 @@ void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, u
 		copy = xmalloc(n * sizeof *copy);
 		memcpy(copy, foci, n * sizeof *copy);
 	}
-	lock(c);
+	xmutex_lock(&c->mu);
 	struct cache_focus *old = c->foci;
 	c->foci = copy;
 	c->nfoci = n;
 	c->tile_size = tile_size;
-	unlock(c);
+	xmutex_unlock(&c->mu);
 	free(old);
 }
 
@@ -303,15 +274,15 @@ void cache_prune(struct cache *c, size_t target)
 {
 	struct tile **ev;
 	size_t nev;
-	lock(c);
+	xmutex_lock(&c->mu);
 	prune_locked(c, target, &ev, &nev);
-	unlock(c);
+	xmutex_unlock(&c->mu);
 	unref_all(ev, nev);
 }
 
 void cache_stats(struct cache *c, struct cache_stats *out)
 {
-	lock(c);
+	xmutex_lock(&c->mu);
 	out->hits = c->hits;
 	out->misses = c->misses;
 	out->inserts = c->inserts;
@@ -319,26 +290,26 @@ void cache_stats(struct cache *c, struct cache_stats *out)
 	out->bytes = c->bytes;
 	out->tiles = c->ntiles;
 	out->budget = c->budget;
-	unlock(c);
+	xmutex_unlock(&c->mu);
 }
 
 void cache_foreach(struct cache *c, int (*fn)(void *ud, const struct tile *t, uint64_t used_ns),
 		   void *ud)
 {
-	lock(c);
+	xmutex_lock(&c->mu);
 	for (size_t b = 0; b < c->nbuckets; b++)
 		for (struct centry *e = c->buckets[b]; e; e = e->next)
 			if (fn(ud, e->t, e->used_ns) != 0)
 				goto out;
 out:
-	unlock(c);
+	xmutex_unlock(&c->mu);
 }
 
 size_t cache_drop_node(struct cache *c, uint64_t node)
 {
 	struct tile **dropped = NULL;
 	size_t n = 0, cap = 0;
-	lock(c);
+	xmutex_lock(&c->mu);
 	for (size_t b = 0; b < c->nbuckets; b++) {
 		struct centry **p = &c->buckets[b];
 		while (*p) {
@@ -358,7 +329,7 @@ size_t cache_drop_node(struct cache *c, uint64_t node)
 			free(e);
 		}
 	}
-	unlock(c);
+	xmutex_unlock(&c->mu);
 	unref_all(dropped, n);
 	return n;
 }

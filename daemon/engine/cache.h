@@ -15,6 +15,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "common/clock.h"
 #include "common/grid.h"
 #include "tile.h"
 
@@ -44,13 +45,16 @@ void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, u
 /* Evicts until at most `target` bytes remain (farthest first, then least recent). */
 void cache_prune(struct cache *c, size_t target);
 void cache_stats(struct cache *c, struct cache_stats *out);
-/* Calls fn for each cached tile with the time of its last use (the last lookup or insert, in
- * cache_now_ns's clock), under the lock: fn must be quick and must not call the cache. Stops
- * early when fn returns non-zero. */
+/* Calls fn for each cached tile with the time of its last use (the last lookup or insert, as
+ * a clock_now_ns time, common/clock.h), under the lock: fn must be quick and must not call the
+ * cache. Stops early when fn returns non-zero. */
 void cache_foreach(struct cache *c, int (*fn)(void *ud, const struct tile *t, uint64_t used_ns),
 		   void *ud);
-/* The clock of last uses: CLOCK_MONOTONIC nanoseconds. */
-uint64_t cache_now_ns(void);
+/* Temporary alias for daemon/session.c until it calls clock_now_ns itself; remove then. */
+static inline uint64_t cache_now_ns(void)
+{
+	return clock_now_ns();
+}
 /* Drops every tile whose key.node equals node. Returns how many. */
 size_t cache_drop_node(struct cache *c, uint64_t node);
 

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <xxhash.h>
 
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 void *gen_scratch(struct gen_ctx *g, size_t n)
@@ -31,13 +32,9 @@ void gen_ctx_fini(struct gen_ctx *g)
 int np_error(struct node_parse *p, const char *key, const char *fmt, ...)
 {
 	struct ini_entry *e = key ? ini_find(p->sec, key) : NULL;
-	int line = e ? e->line : p->sec->line;
-	int n = snprintf(p->err, 256, "%s:%d: %s%s", p->file, line, key ? key : "", key ? ": " : "");
-	if (n < 0 || n >= 256)
-		return -EINVAL;
 	va_list ap;
 	va_start(ap, fmt);
-	vsnprintf(p->err + n, (size_t)(256 - n), fmt, ap);
+	err_vset_at(p->err, p->file, e ? e->line : p->sec->line, key, fmt, ap);
 	va_end(ap);
 	return -EINVAL;
 }

@@ -1,5 +1,5 @@
 /* node_types — the registry of node types a planet file can name (`type = ...`). Each type
- * lives in its own daemon/node_<name>.c.
+ * lives in its own daemon/engine/nodes/node_<name>.c.
  *
  * Everything here is static const data or pure lookups: thread-safe.
  */

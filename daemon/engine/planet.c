@@ -15,6 +15,7 @@
 #include <string.h>
 
 #include "common/geo.h"
+#include "common/errbuf.h"
 #include "common/img.h"
 #include "node_types.h"
 #include "common/xalloc.h"
@@ -41,19 +42,10 @@ struct loader {
 static int __attribute__((format(printf, 4, 5)))
 cfg_error(struct loader *L, int line, const char *key, const char *fmt, ...)
 {
-	int n;
-	if (line > 0)
-		n = snprintf(L->err, 256, "%s:%d: ", L->path, line);
-	else
-		n = snprintf(L->err, 256, "%s: ", L->path);
-	if (n >= 0 && n < 256 && key)
-		n += snprintf(L->err + n, (size_t)(256 - n), "%s: ", key);
-	if (n >= 0 && n < 256) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(L->err + n, (size_t)(256 - n), fmt, ap);
-		va_end(ap);
-	}
+	va_list ap;
+	va_start(ap, fmt);
+	err_vset_at(L->err, L->path, line, key, fmt, ap);
+	va_end(ap);
 	return -EINVAL;
 }
 
@@ -124,6 +116,18 @@ static bool section_kind(const char *s, const char *kind, const char **name)
 		s++;
 	*name = s;
 	return true;
+}
+
+/* How many sections of ini are of kind (see section_kind). */
+static size_t count_sections(const struct ini_file *ini, const char *kind)
+{
+	size_t n = 0;
+	for (size_t i = 0; i < ini->n; i++) {
+		const char *name;
+		if (section_kind(ini->sections[i].name, kind, &name))
+			n++;
+	}
+	return n;
 }
 
 /* Unknown sections, keys outside any section, duplicate keys (almost always a mistake in a
@@ -300,12 +304,7 @@ static int find_lnode(const struct loader *L, const char *name)
 static int collect_nodes(struct loader *L)
 {
 	struct ini_file *ini = L->p->ini;
-	size_t cap = 0;
-	for (size_t i = 0; i < ini->n; i++) {
-		const char *name;
-		if (section_kind(ini->sections[i].name, "node", &name))
-			cap++;
-	}
+	size_t cap = count_sections(ini, "node");
 	L->ln = xcalloc(cap ? cap : 1, sizeof *L->ln);
 	L->p->nodes = xcalloc(cap ? cap : 1, sizeof *L->p->nodes);
 	for (size_t i = 0; i < ini->n; i++) {
@@ -460,12 +459,7 @@ static int parse_layers(struct loader *L)
 {
 	struct planet *p = L->p;
 	struct ini_file *ini = p->ini;
-	size_t cap = 0;
-	for (size_t i = 0; i < ini->n; i++) {
-		const char *name;
-		if (section_kind(ini->sections[i].name, "layer", &name))
-			cap++;
-	}
+	size_t cap = count_sections(ini, "layer");
 	p->layers = xcalloc(cap ? cap : 1, sizeof *p->layers);
 	for (size_t i = 0; i < ini->n; i++) {
 		struct ini_section *s = &ini->sections[i];
@@ -530,7 +524,7 @@ int planet_load_shared(const char *path, const struct node_type *const *types,
 	p->ini = ini;
 	p->images = images ? img_cache_ref(images) : img_cache_create(PLANET_IMAGE_CACHE_MB);
 	if (!p->images) {
-		snprintf(err, 256, "%s: cannot create an image cache", path);
+		err_set(err, "%s: cannot create an image cache", path);
 		planet_unref(p);
 		return -ENOMEM;
 	}

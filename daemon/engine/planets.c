@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/errbuf.h"
 #include "common/img.h"
 #include "common/xalloc.h"
 
@@ -36,7 +37,7 @@ int planet_set_load(const char *dir, uint64_t generation, struct img_cache *imag
 	DIR *d = opendir(dir);
 	if (!d) {
 		int e = -errno;
-		snprintf(err, 256, "%s: %s", dir, strerror(-e));
+		err_set(err, "%s: %s", dir, strerror(-e));
 		return e;
 	}
 	char **names = NULL;
@@ -60,7 +61,7 @@ int planet_set_load(const char *dir, uint64_t generation, struct img_cache *imag
 	s->images = images ? img_cache_ref(images) : img_cache_create(PLANET_IMAGE_CACHE_MB);
 	int rc = 0;
 	if (!s->images) {
-		snprintf(err, 256, "%s: cannot create an image cache", dir);
+		err_set(err, "%s: cannot create an image cache", dir);
 		rc = -ENOMEM;
 	}
 	for (size_t i = 0; i < nn && !rc; i++) {
@@ -73,8 +74,8 @@ int planet_set_load(const char *dir, uint64_t generation, struct img_cache *imag
 		if (rc)
 			break;
 		if (planet_set_find(s, p->name)) {
-			snprintf(err, 256, "%s: planet \"%s\" is defined twice in %s", p->path, p->name,
-				 dir);
+			err_set(err, "%s: planet \"%s\" is defined twice in %s", p->path, p->name,
+				dir);
 			planet_unref(p);
 			rc = -EINVAL;
 			break;

@@ -20,7 +20,6 @@
 #include "sched.h"
 
 #include <errno.h>
-#include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
 #include <stdio.h>
@@ -28,12 +27,13 @@
 #include <string.h>
 #include <sys/resource.h>
 #include <sys/syscall.h>
-#include <time.h>
 #include <unistd.h>
 
 #include "jobtab.h"
 #include "planet.h"
+#include "common/clock.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
 
 enum entry_state { ENTRY_NEW = 0, ENTRY_PENDING, ENTRY_REPORTED, ENTRY_DUP };
 
@@ -103,41 +103,6 @@ static void die(const char *what, int rc)
 {
 	fprintf(stderr, "sched: %s: %s\n", what, strerror(rc));
 	abort();
-}
-
-static void lock(pthread_mutex_t *m)
-{
-	int rc = pthread_mutex_lock(m);
-	if (rc)
-		die("pthread_mutex_lock", rc);
-}
-
-static void unlock(pthread_mutex_t *m)
-{
-	int rc = pthread_mutex_unlock(m);
-	if (rc)
-		die("pthread_mutex_unlock", rc);
-}
-
-static void cond_wait(pthread_cond_t *c, pthread_mutex_t *m)
-{
-	int rc = pthread_cond_wait(c, m);
-	if (rc)
-		die("pthread_cond_wait", rc);
-}
-
-static void cond_signal(pthread_cond_t *c, bool all)
-{
-	int rc = all ? pthread_cond_broadcast(c) : pthread_cond_signal(c);
-	if (rc)
-		die("pthread_cond_signal", rc);
-}
-
-static uint64_t now_ns(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
 }
 
 /* first[i] = index of the first entry with w[i]'s key. Returns how many distinct keys. */
@@ -283,7 +248,7 @@ static void recompute(struct sched *s)
 	/* Queued jobs the pass did not reach leave the heap; the rest take their new priority.
 	 * Running jobs are not in the heap and finish regardless. */
 	struct job *cancel = NULL;
-	lock(&s->q_mu);
+	xmutex_lock(&s->q_mu);
 	size_t kept = 0;
 	for (size_t i = 0; i < s->heap.n; i++) {
 		struct job *j = s->heap.a[i];
@@ -302,7 +267,7 @@ static void recompute(struct sched *s)
 	memset(s->queued, 0, sizeof s->queued);
 	for (size_t i = 0; i < s->heap.n; i++)
 		s->queued[s->heap.a[i]->qprio.cls]++;
-	unlock(&s->q_mu);
+	xmutex_unlock(&s->q_mu);
 
 	jobgraph_cancel_unmarked(&s->g, cancel);
 }
@@ -312,7 +277,7 @@ static void submit(struct sched *s)
 	if (!s->g.push)
 		return;
 	int pushed = 0;
-	lock(&s->q_mu);
+	xmutex_lock(&s->q_mu);
 	while (s->g.push) {
 		struct job *j = s->g.push;
 		s->g.push = j->next;
@@ -321,8 +286,11 @@ static void submit(struct sched *s)
 		s->queued[j->qprio.cls]++;
 		pushed++;
 	}
-	cond_signal(&s->q_cv, pushed > 1);
-	unlock(&s->q_mu);
+	if (pushed > 1)
+		xcond_broadcast(&s->q_cv);
+	else
+		xcond_signal(&s->q_cv);
+	xmutex_unlock(&s->q_mu);
 }
 
 static void deliver(struct sched *s)
@@ -349,10 +317,10 @@ static void free_req(struct sched_req *r)
 static void *manager_main(void *arg)
 {
 	struct sched *s = arg;
-	lock(&s->in_mu);
+	xmutex_lock(&s->in_mu);
 	for (;;) {
 		while (!s->in_stop && !s->changes && !s->done)
-			cond_wait(&s->in_cv, &s->in_mu);
+			xcond_wait(&s->in_cv, &s->in_mu);
 		if (s->in_stop)
 			break;
 		struct sched_req *ch = s->changes;
@@ -371,7 +339,7 @@ static void *manager_main(void *arg)
 		}
 		struct job *done = s->done;
 		s->done = NULL;
-		unlock(&s->in_mu);
+		xmutex_unlock(&s->in_mu);
 
 		if (apply_changes(s, ch))
 			recompute(s);
@@ -389,7 +357,7 @@ static void *manager_main(void *arg)
 		submit(s);
 		deliver(s);
 
-		lock(&s->in_mu);
+		xmutex_lock(&s->in_mu);
 		bool acked = false;
 		for (struct sched_req *r = ch, *next; r; r = next) {
 			next = r->next_change_m;
@@ -402,9 +370,9 @@ static void *manager_main(void *arg)
 			free_req(r);
 		}
 		if (acked)
-			cond_signal(&s->ack_cv, true);
+			xcond_broadcast(&s->ack_cv);
 	}
-	unlock(&s->in_mu);
+	xmutex_unlock(&s->in_mu);
 	return NULL;
 }
 
@@ -437,9 +405,9 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j)
 {
 	const struct node *n = j->node;
 	struct tile *t = tile_create(&j->key, n->out, n->planet->tile_size);
-	uint64_t t0 = now_ns();
+	uint64_t t0 = clock_now_ns();
 	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
-	uint64_t dt = now_ns() - t0;
+	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
 		cache_insert(s->cache, t);
 		atomic_fetch_add(&j->node->generated, 1);
@@ -462,29 +430,29 @@ static void *worker_main(void *arg)
 	struct gen_ctx g = { .worker = wa->idx };
 	free(wa);
 	lower_priority(s);
-	lock(&s->q_mu);
+	xmutex_lock(&s->q_mu);
 	for (;;) {
 		while (!s->q_stop && s->heap.n == 0)
-			cond_wait(&s->q_cv, &s->q_mu);
+			xcond_wait(&s->q_cv, &s->q_mu);
 		if (s->q_stop)
 			break;
 		struct job *j = jobheap_pop(&s->heap);
 		s->queued[j->qprio.cls]--;
 		s->running++;
-		unlock(&s->q_mu);
+		xmutex_unlock(&s->q_mu);
 
 		generate(s, &g, j);
 
-		lock(&s->in_mu);
+		xmutex_lock(&s->in_mu);
 		j->next_done = s->done;
 		s->done = j;
-		cond_signal(&s->in_cv, false);
-		unlock(&s->in_mu);
+		xcond_signal(&s->in_cv);
+		xmutex_unlock(&s->in_mu);
 
-		lock(&s->q_mu);
+		xmutex_lock(&s->q_mu);
 		s->running--;
 	}
-	unlock(&s->q_mu);
+	xmutex_unlock(&s->q_mu);
 	gen_ctx_fini(&g);
 	return NULL;
 }
@@ -501,21 +469,22 @@ struct sched *sched_create(const struct sched_desc *d)
 		s->nworkers = n > 0 ? (int)n : 1;
 	}
 	s->nice = d->worker_nice == 0 ? 5 : d->worker_nice;
+	xmutex_init(&s->in_mu);
+	xmutex_init(&s->q_mu);
+	xcond_init(&s->in_cv);
+	xcond_init(&s->ack_cv);
+	xcond_init(&s->q_cv);
 	int rc;
-	if ((rc = pthread_mutex_init(&s->in_mu, NULL)) || (rc = pthread_mutex_init(&s->q_mu, NULL)) ||
-	    (rc = pthread_cond_init(&s->in_cv, NULL)) || (rc = pthread_cond_init(&s->ack_cv, NULL)) ||
-	    (rc = pthread_cond_init(&s->q_cv, NULL)))
-		die("pthread init", rc);
 	jobgraph_init(&s->g, s->cache, report_entry, s);
-	if ((rc = pthread_create(&s->manager, NULL, manager_main, s)))
-		die("pthread_create (manager)", rc);
+	if ((rc = xthread_create(&s->manager, manager_main, s)))
+		die("pthread_create (manager)", -rc);
 	s->workers = xcalloc((size_t)s->nworkers, sizeof *s->workers);
 	for (int i = 0; i < s->nworkers; i++) {
 		struct worker_arg *wa = xmalloc(sizeof *wa);
 		wa->s = s;
 		wa->idx = i;
-		if ((rc = pthread_create(&s->workers[i], NULL, worker_main, wa)))
-			die("pthread_create (worker)", rc);
+		if ((rc = xthread_create(&s->workers[i], worker_main, wa)))
+			die("pthread_create (worker)", -rc);
 	}
 	return s;
 }
@@ -524,20 +493,17 @@ void sched_destroy(struct sched *s)
 {
 	if (!s)
 		return;
-	int rc;
-	lock(&s->in_mu);
+	xmutex_lock(&s->in_mu);
 	s->in_stop = true;
-	cond_signal(&s->in_cv, true);
-	unlock(&s->in_mu);
-	if ((rc = pthread_join(s->manager, NULL)))
-		die("pthread_join (manager)", rc);
-	lock(&s->q_mu);
+	xcond_broadcast(&s->in_cv);
+	xmutex_unlock(&s->in_mu);
+	xthread_join(s->manager);
+	xmutex_lock(&s->q_mu);
 	s->q_stop = true;
-	cond_signal(&s->q_cv, true);
-	unlock(&s->q_mu);
+	xcond_broadcast(&s->q_cv);
+	xmutex_unlock(&s->q_mu);
 	for (int i = 0; i < s->nworkers; i++)
-		if ((rc = pthread_join(s->workers[i], NULL)))
-			die("pthread_join (worker)", rc);
+		xthread_join(s->workers[i]);
 	jobgraph_fini(&s->g); /* every job, finished or not, is still in it */
 	/* Requests should be gone already; free what a careless caller left (a request may be
 	 * both active and queued as a change). */
@@ -555,11 +521,11 @@ void sched_destroy(struct sched *s)
 	free(s->batch);
 	jobheap_fini(&s->heap);
 	free(s->workers);
-	pthread_mutex_destroy(&s->in_mu);
-	pthread_mutex_destroy(&s->q_mu);
-	pthread_cond_destroy(&s->in_cv);
-	pthread_cond_destroy(&s->ack_cv);
-	pthread_cond_destroy(&s->q_cv);
+	xmutex_destroy(&s->in_mu);
+	xmutex_destroy(&s->q_mu);
+	xcond_destroy(&s->in_cv);
+	xcond_destroy(&s->ack_cv);
+	xcond_destroy(&s->q_cv);
 	free(s);
 }
 
@@ -580,7 +546,7 @@ static void post_change(struct sched *s, struct sched_req *r)
 		r->next_change = s->changes;
 		s->changes = r;
 	}
-	cond_signal(&s->in_cv, false);
+	xcond_signal(&s->in_cv);
 }
 
 int sched_req_want(struct sched_req *r, const struct want *w, size_t n)
@@ -598,13 +564,13 @@ int sched_req_want(struct sched_req *r, const struct want *w, size_t n)
 		memcpy(copy, w, n * sizeof *copy);
 	}
 	struct sched *s = r->s;
-	lock(&s->in_mu);
+	xmutex_lock(&s->in_mu);
 	struct want *old = r->pending;
 	r->pending = copy;
 	r->npending = n;
 	r->has_pending = true;
 	post_change(s, r);
-	unlock(&s->in_mu);
+	xmutex_unlock(&s->in_mu);
 	free(old);
 	return 0;
 }
@@ -616,7 +582,7 @@ void sched_req_destroy(struct sched_req *r)
 	struct sched *s = r->s;
 	bool done = false;
 	bool on_manager = pthread_equal(pthread_self(), s->manager);
-	lock(&s->in_mu);
+	xmutex_lock(&s->in_mu);
 	r->destroy = true;
 	r->ack = on_manager ? NULL : &done;
 	/* Called from a callback: the manager is this thread, so mark the request dead now
@@ -625,8 +591,8 @@ void sched_req_destroy(struct sched_req *r)
 		r->dead = true;
 	post_change(s, r);
 	while (!on_manager && !done)
-		cond_wait(&s->ack_cv, &s->in_mu);
-	unlock(&s->in_mu);
+		xcond_wait(&s->ack_cv, &s->in_mu);
+	xmutex_unlock(&s->in_mu);
 }
 
 struct fetch {
@@ -645,10 +611,10 @@ static void fetch_ready(void *ud, const struct want *w, struct tile *t, int err)
 	size_t i = (size_t)(w - f->r->list);
 	f->out[i] = t ? tile_ref(t) : NULL;
 	f->err[i] = t ? 0 : (err < 0 ? err : -EIO);
-	lock(&f->mu);
+	xmutex_lock(&f->mu);
 	if (--f->left == 0)
-		cond_signal(&f->cv, false);
-	unlock(&f->mu);
+		xcond_signal(&f->cv);
+	xmutex_unlock(&f->mu);
 }
 
 int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **out)
@@ -661,16 +627,15 @@ int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **o
 	f.left = dedupe(w, n, first);
 	for (size_t i = 0; i < n; i++)
 		out[i] = NULL;
-	int rc;
-	if ((rc = pthread_mutex_init(&f.mu, NULL)) || (rc = pthread_cond_init(&f.cv, NULL)))
-		die("pthread init", rc);
+	xmutex_init(&f.mu);
+	xcond_init(&f.cv);
 	f.r = sched_req_create(s, fetch_ready, &f);
-	rc = sched_req_want(f.r, w, n);
+	int rc = sched_req_want(f.r, w, n);
 	if (rc == 0) {
-		lock(&f.mu);
+		xmutex_lock(&f.mu);
 		while (f.left > 0)
-			cond_wait(&f.cv, &f.mu);
-		unlock(&f.mu);
+			xcond_wait(&f.cv, &f.mu);
+		xmutex_unlock(&f.mu);
 	}
 	sched_req_destroy(f.r);
 	if (rc == 0) {
@@ -683,8 +648,8 @@ int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **o
 				rc = f.err[i];
 		}
 	}
-	pthread_mutex_destroy(&f.mu);
-	pthread_cond_destroy(&f.cv);
+	xmutex_destroy(&f.mu);
+	xcond_destroy(&f.cv);
 	free(first);
 	free(f.err);
 	return rc;
@@ -693,11 +658,11 @@ int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **o
 void sched_get_stats(struct sched *s, struct sched_stats *out)
 {
 	memset(out, 0, sizeof *out);
-	lock(&s->q_mu);
+	xmutex_lock(&s->q_mu);
 	for (int c = 0; c < SCHED_NCLASS; c++)
 		out->queued[c] = s->queued[c];
 	out->running = s->running;
-	unlock(&s->q_mu);
+	xmutex_unlock(&s->q_mu);
 	out->waiting = atomic_load(&s->g.waiting);
 	out->generated = atomic_load(&s->generated);
 	out->merged = atomic_load(&s->g.merged);

@@ -11,7 +11,9 @@
  * Threads: all functions are thread-safe except where noted. Ready callbacks run on the
  * manager thread with no scheduler lock held; they must be quick and must not call back into
  * the scheduler for the same request (queue work elsewhere, e.g. write an eventfd).
- * Lock order: sched queue lock → cache lock (the manager never holds both while generating).
+ * Locks: the scheduler's two locks (inbox, ready queue) are never nested, and neither is held
+ * across generation, a callback or a cache call, so the cache's lock is never taken under them
+ * (the design note in sched.c lists what each protects).
  */
 #ifndef CLIPMAP_SCHED_H
 #define CLIPMAP_SCHED_H

@@ -10,18 +10,12 @@
 #include <string.h>
 #include <time.h>
 
+#include "common/clock.h"
 #include "common/proto.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
 
 #define T 256
-
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
 
 static uint32_t hash2(int x, int y, uint32_t seed)
 {
@@ -105,18 +99,18 @@ static void bench_one(struct tilecodec *tc, const char *layer, enum pix_type fmt
 	struct tilecodec_hdr h;
 	ssize_t n = 0;
 	int reps = 0;
-	double t0 = now_s(), t1;
+	double t0 = clock_now_s(), t1;
 	do {
 		n = tilecodec_encode(tc, fmt, T, codec, filt, level, texels, &h, out, cap);
 		reps++;
-	} while ((t1 = now_s()) - t0 < 0.15);
+	} while ((t1 = clock_now_s()) - t0 < 0.15);
 	double enc = raw * reps / (t1 - t0) / 1e6;
 	int dreps = 0, rc = 0;
-	t0 = now_s();
+	t0 = clock_now_s();
 	do {
 		rc |= tilecodec_decode(tc, &h, out, (size_t)n, back, raw, NULL);
 		dreps++;
-	} while ((t1 = now_s()) - t0 < 0.15);
+	} while ((t1 = clock_now_s()) - t0 < 0.15);
 	double dec = raw * dreps / (t1 - t0) / 1e6;
 	char cname[16];
 	snprintf(cname, sizeof(cname), "%s%s", tilecodec_codec_name(codec),
@@ -141,16 +135,16 @@ static void bench_frames(void)
 	struct pbuf b;
 	pbuf_init(&b);
 	int reps = 0;
-	double t0 = now_s(), t1;
+	double t0 = clock_now_s(), t1;
 	do {
 		b.len = 0;
 		if (proto_encode(&b, &m, NULL) < 0)
 			abort();
 		reps++;
-	} while ((t1 = now_s()) - t0 < 0.2);
+	} while ((t1 = clock_now_s()) - t0 < 0.2);
 	printf("proto/encode WANT 1024 entries: %.1f us/message\n", (t1 - t0) / reps * 1e6);
 	reps = 0;
-	t0 = now_s();
+	t0 = clock_now_s();
 	do {
 		struct proto_msg d;
 		size_t need;
@@ -158,7 +152,7 @@ static void bench_frames(void)
 			abort();
 		proto_msg_fini(&d);
 		reps++;
-	} while ((t1 = now_s()) - t0 < 0.2);
+	} while ((t1 = clock_now_s()) - t0 < 0.2);
 	printf("proto/decode WANT 1024 entries: %.1f us/message\n", (t1 - t0) / reps * 1e6);
 	pbuf_fini(&b);
 	free(e);

@@ -11,6 +11,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "common/clock.h"
 #include "common/img.h"
 #include "common/ini.h"
 #include "engine/node.h"
@@ -20,13 +21,6 @@
 
 #define W 8192
 #define H 4096
-
-static double now(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + t.tv_nsec * 1e-9;
-}
 
 static void die(const char *what, const char *err)
 {
@@ -45,7 +39,7 @@ static void ensure_image(const char *path, enum img_type type)
 	img_cache_unref(c);
 	if (ok)
 		return;
-	double t0 = now();
+	double t0 = clock_now_s();
 	size_t n = (size_t)W * H;
 	void *px = malloc(n * img_type_bytes(type));
 	if (!px)
@@ -66,7 +60,7 @@ static void ensure_image(const char *path, enum img_type type)
 	if (img_write_tiled(path, W, H, 1, type, px, 256, true, err))
 		die("img_write_tiled", err);
 	free(px);
-	printf("file/setup: wrote %s in %.1f s\n", path, now() - t0);
+	printf("file/setup: wrote %s in %.1f s\n", path, clock_now_s() - t0);
 }
 
 struct bnode {
@@ -109,7 +103,7 @@ static double run_level(struct bnode *b, int lx, int ly, uint32_t T, uint32_t y0
 	size_t bytes = 0;
 	for (int p = 0; p < passes; p++) {
 		bytes = 0;
-		double t0 = now();
+		double t0 = clock_now_s();
 		for (uint32_t y = y0; y < y1; y++) {
 			for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
 				k.x = x;
@@ -119,7 +113,7 @@ static double run_level(struct bnode *b, int lx, int ly, uint32_t T, uint32_t y0
 				bytes += t->nbytes;
 			}
 		}
-		double dt = now() - t0;
+		double dt = clock_now_s() - t0;
 		if (dt < best)
 			best = dt;
 	}
@@ -138,12 +132,12 @@ static double memcpy_bw(size_t n, size_t pool, int reps)
 	double best = 1e30;
 	size_t blocks = pool / n;
 	for (int r = 0; r < 5; r++) {
-		double t0 = now();
+		double t0 = clock_now_s();
 		for (int i = 0; i < reps; i++) {
 			memcpy(dst, src + (size_t)(i % blocks) * n, n);
 			__asm__ volatile("" : : "r"(dst) : "memory");
 		}
-		double dt = now() - t0;
+		double dt = clock_now_s() - t0;
 		if (dt < best)
 			best = dt;
 	}
@@ -162,7 +156,7 @@ static double read_only(const char *path, uint32_t T, int passes)
 	size_t bytes = 0;
 	for (int p = 0; p < passes + 1; p++) {
 		bytes = 0;
-		double t0 = now();
+		double t0 = clock_now_s();
 		for (uint32_t y = 0; y + T <= H; y += T)
 			for (uint32_t x = 0; x + T <= W; x += T) {
 				if (img_cache_read(c, path, 0, (int)x, (int)(x + T), (int)y, (int)(y + T), 0,
@@ -170,7 +164,7 @@ static double read_only(const char *path, uint32_t T, int passes)
 					die("img_cache_read", err);
 				bytes += (size_t)T * T * 4;
 			}
-		double dt = now() - t0;
+		double dt = clock_now_s() - t0;
 		if (p > 0 && dt < best) /* pass 0 warms the cache */
 			best = dt;
 	}

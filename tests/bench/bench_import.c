@@ -22,18 +22,12 @@
 #include <unistd.h>
 
 #include "client/ctl/import.h"
+#include "common/clock.h"
 #include "common/ini.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
-
-static double now(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + t.tv_nsec * 1e-9;
-}
 
 static void die(const char *what, const char *err)
 {
@@ -102,7 +96,7 @@ int main(void)
 	snprintf(src, sizeof src, "/tmp/bench_import_src_%d.tif", (int)getpid());
 	snprintf(dst, sizeof dst, "/tmp/bench_import_out_%d.tif", (int)getpid());
 
-	double t0 = now();
+	double t0 = clock_now_s();
 	fflush(stdout);
 	pid_t pid = fork();
 	if (pid < 0)
@@ -114,7 +108,7 @@ int main(void)
 	int status;
 	if (waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status))
 		die("source", "generator failed");
-	double tgen = now() - t0;
+	double tgen = clock_now_s() - t0;
 	struct stat st;
 	stat(src, &st);
 	printf("import/source %dx%d int16 striped GeoTIFF: %.0f MB written in %.1f s%s\n", w, h,
@@ -124,7 +118,7 @@ int main(void)
 	int fds[2];
 	if (pipe(fds))
 		die("pipe", strerror(errno));
-	t0 = now();
+	t0 = clock_now_s();
 	pid = fork();
 	if (pid < 0)
 		die("fork", strerror(errno));
@@ -143,7 +137,7 @@ int main(void)
 	if (wait4(pid, &status, 0, &ru) != pid || !WIFEXITED(status) || WEXITSTATUS(status) ||
 	    got != (ssize_t)sizeof r)
 		die("import", "child failed");
-	double timp = now() - t0;
+	double timp = clock_now_s() - t0;
 	stat(dst, &st);
 	printf("import/%dx%d: %.1f s (GDAL read %.1f s, tiled mipmapped write %.1f s), %.1f Mpx/s, "
 	       "output %.0f MB, import peak RSS %.0f MB (ru_maxrss of the import child)\n", w, h,
@@ -171,7 +165,7 @@ int main(void)
 	/* Random: levels 0..fine, uniform, xorshift. */
 	uint64_t s = 0x9e3779b97f4a7c15ULL;
 	int N = full ? 3000 : 2000;
-	t0 = now();
+	t0 = clock_now_s();
 	for (int i = 0; i < N; i++) {
 		s ^= s << 13, s ^= s >> 7, s ^= s << 17;
 		int ly = (int)(s % (uint64_t)(fine + 1));
@@ -184,12 +178,12 @@ int main(void)
 			die("generate", "random tile failed");
 		tile_unref(t);
 	}
-	double trand = now() - t0;
+	double trand = clock_now_s() - t0;
 	printf("import/serve random (levels 0..%d): %.0f tiles/s (%.2f ms/tile), RSS %.0f MB "
 	       "(%.0f before)\n", fine, N / trand, trand / N * 1e3, rss_mb(), rss0);
 
 	/* Flight: the 2×2 quad at the finest level moving east by half a tile per step. */
-	t0 = now();
+	t0 = clock_now_s();
 	int steps = N / 2, made = 0;
 	uint32_t y = (1u << fine) / 3;
 	for (int i = 0; i < steps; i++) {
@@ -204,7 +198,7 @@ int main(void)
 			made++;
 		}
 	}
-	double tfl = now() - t0;
+	double tfl = clock_now_s() - t0;
 	printf("import/serve flight (level %d, adjacent): %.0f tiles/s (%.2f ms/tile), RSS %.0f MB, "
 	       "serve peak RSS %.0f MB (ru_maxrss of this process)\n", fine, made / tfl, tfl / made * 1e3, rss_mb(), peak_mb());
 	gen_ctx_fini(&g);

@@ -8,12 +8,8 @@
 #include <time.h>
 #include <unistd.h>
 
-static double now(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + t.tv_nsec * 1e-9;
-}
+#include "common/clock.h"
+#include "common/xthread.h"
 
 struct job {
 	size_t n;
@@ -33,10 +29,10 @@ static void *copy_run(void *arg)
 	memset(b, 2, j->n);
 	double best = 1e9;
 	for (int r = 0; r < j->reps; r++) {
-		double t0 = now();
+		double t0 = clock_now_s();
 		memcpy(b, a, j->n);
 		__asm__ volatile("" : : "r"(b) : "memory");
-		double t = now() - t0;
+		double t = clock_now_s() - t0;
 		if (t < best)
 			best = t;
 		char *t2 = a;
@@ -55,14 +51,15 @@ static double copy_threads(size_t n, int reps, int threads)
 	struct job jobs[8];
 	for (int i = 0; i < threads; i++) {
 		jobs[i] = (struct job){ .n = n, .reps = reps };
-		if (pthread_create(&th[i], NULL, copy_run, &jobs[i])) {
-			fprintf(stderr, "bench_machine: pthread_create failed\n");
+		int rc = xthread_create(&th[i], copy_run, &jobs[i]);
+		if (rc) {
+			fprintf(stderr, "bench_machine: pthread_create: %s\n", strerror(-rc));
 			exit(1);
 		}
 	}
 	double sum = 0;
 	for (int i = 0; i < threads; i++) {
-		pthread_join(th[i], NULL);
+		xthread_join(th[i]);
 		sum += jobs[i].gbps;
 	}
 	return sum;

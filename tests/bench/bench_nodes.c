@@ -9,6 +9,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "common/clock.h"
 #include "engine/cache.h"
 #include "common/img.h"
 #include "engine/planet.h"
@@ -17,13 +18,6 @@
 
 #define DIR "/tmp/clipmap-bench-nodes"
 #define SIDE 8 /* an 8×8 block of tiles */
-
-static double now(void)
-{
-	struct timespec t;
-	clock_gettime(CLOCK_MONOTONIC, &t);
-	return (double)t.tv_sec + t.tv_nsec * 1e-9;
-}
 
 struct bcase {
 	const char *name;
@@ -129,9 +123,9 @@ static int run_case(const struct bcase *c, uint32_t T)
 		int rc = 0;
 		for (int round = 0; round < 6 && rc == 0; round++) {
 			cache_drop_node(cache, bench->hash);
-			double t0 = now();
+			double t0 = clock_now_s();
 			rc = fetch_all(s, w, n);
-			double t = now() - t0;
+			double t = clock_now_s() - t0;
 			if (round > 0 && t < el)
 				el = t;
 		}

@@ -1,31 +1,24 @@
 /* bench_noise — figures for the noise synthesis: ns per sample per octave for each ISA path
  * (8-octave fBm and ridged, T = 256 and 512, one core, best of several tiles), and tiles per
- * second of the `noise` node with 1 and 2 plain threads (C11 threads: daemon/engine/sched.h shadows
- * the <sched.h> that <pthread.h> needs) generating distinct tiles, and ms per tile of
- * procedural.ini's three noise nodes at levels 12 and 18.
+ * second of the `noise` node with 1 and 2 plain threads generating distinct tiles, and ms per
+ * tile of procedural.ini's three noise nodes at levels 12 and 18.
  * Runs in well under 30 s.
  */
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <threads.h>
 #include <time.h>
 
+#include "common/clock.h"
 #include "common/ini.h"
+#include "common/xthread.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/nodes/noise.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
 #include "common/xalloc.h"
-
-static double now(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + ts.tv_nsec * 1e-9;
-}
 
 /* A level fine enough that all 8 octaves of the default parameters are evaluated. */
 static struct tile_key bench_key(int i)
@@ -48,13 +41,13 @@ static void bench_isa(enum noise_kind kind, enum noise_isa isa, uint32_t T)
 	}
 	void *scratch = xaligned_alloc(64, noise_scratch_size(T));
 	float *out = xaligned_alloc(64, (size_t)T * T * sizeof *out);
-	double best = 1e30, budget = isa == NOISE_ISA_SCALAR ? 0.4 : 0.3, t0 = now();
+	double best = 1e30, budget = isa == NOISE_ISA_SCALAR ? 0.4 : 0.3, t0 = clock_now_s();
 	int oct = 0;
-	for (int i = 0; i < 200 && (i < 3 || now() - t0 < budget); i++) {
+	for (int i = 0; i < 200 && (i < 3 || clock_now_s() - t0 < budget); i++) {
 		struct tile_key k = bench_key(i);
-		double a = now();
+		double a = clock_now_s();
 		oct = noise_tile(&nz, &k, T, isa, scratch, out);
-		double dt = now() - a;
+		double dt = clock_now_s() - a;
 		if (oct < 0) {
 			printf("noise %s: %s\n", noise_isa_name(isa), strerror(-oct));
 			goto out;
@@ -86,17 +79,17 @@ static void bench_planet(const char *name, enum noise_kind kind, int octaves, do
 	}
 	void *scratch = xaligned_alloc(64, noise_scratch_size(T));
 	float *out = xaligned_alloc(64, (size_t)T * T * sizeof *out);
-	double best = 1e30, t0 = now();
+	double best = 1e30, t0 = clock_now_s();
 	int oct = 0;
 	/* Tiles near lat -68, lon -9. */
 	uint32_t x0 = (uint32_t)((180.0 - 9.0) / 360.0 * (double)(1u << (ly + 1)));
 	uint32_t y0 = (uint32_t)((90.0 + 68.0) / 180.0 * (double)(1u << ly));
-	for (int i = 0; i < 200 && (i < 3 || now() - t0 < 0.3); i++) {
+	for (int i = 0; i < 200 && (i < 3 || clock_now_s() - t0 < 0.3); i++) {
 		struct tile_key k = { .lx = (uint8_t)(ly + 1), .ly = (uint8_t)ly,
 				      .x = x0 + (uint32_t)i, .y = y0 };
-		double a = now();
+		double a = clock_now_s();
 		oct = noise_tile(&nz, &k, T, NOISE_ISA_AUTO, scratch, out);
-		double dt = now() - a;
+		double dt = clock_now_s() - a;
 		if (oct < 0) {
 			printf("noise %s: %s\n", name, strerror(-oct));
 			break;
@@ -120,12 +113,12 @@ struct worker {
 	int rc;
 };
 
-static int run_worker(void *arg)
+static void *run_worker(void *arg)
 {
 	struct worker *w = arg;
 	struct gen_ctx g = { .worker = w->id };
-	double t0 = now();
-	for (int i = w->id; now() - t0 < w->seconds; i += w->nthreads) {
+	double t0 = clock_now_s();
+	for (int i = w->id; clock_now_s() - t0 < w->seconds; i += w->nthreads) {
 		struct tile_key k = bench_key(i);
 		k.node = w->n->hash;
 		struct tile *t = tile_create(&k, PIX_HEIGHT, w->T);
@@ -138,7 +131,7 @@ static int run_worker(void *arg)
 		w->tiles++;
 	}
 	gen_ctx_fini(&g);
-	return 0;
+	return NULL;
 }
 
 static void bench_node(uint32_t T, int nthreads)
@@ -156,27 +149,27 @@ static void bench_node(uint32_t T, int nthreads)
 		return;
 	}
 	struct worker w[2];
-	thrd_t th[2];
-	double seconds = 1.0, t0 = now();
+	pthread_t th[2];
+	double seconds = 1.0, t0 = clock_now_s();
 	int started = 0, rc = 0;
 	for (int i = 0; i < nthreads; i++) {
 		w[i] = (struct worker){ .n = &n, .T = T, .id = i, .nthreads = nthreads,
 					.seconds = seconds };
-		rc = thrd_create(&th[i], run_worker, &w[i]);
-		if (rc != thrd_success) {
-			printf("noise node: thrd_create failed\n");
+		rc = xthread_create(&th[i], run_worker, &w[i]);
+		if (rc) {
+			printf("noise node: pthread_create: %s\n", strerror(-rc));
 			break;
 		}
 		started++;
 	}
 	long tiles = 0;
 	for (int i = 0; i < started; i++) {
-		thrd_join(th[i], NULL);
+		xthread_join(th[i]);
 		tiles += w[i].tiles;
 		if (w[i].rc)
 			printf("noise node: generate: %s\n", strerror(-w[i].rc));
 	}
-	double dt = now() - t0;
+	double dt = clock_now_s() - t0;
 	if (!rc)
 		printf("noise node fbm8 T=%u %d thread%s: %.1f tiles/s (%s)\n", T, nthreads,
 		       nthreads > 1 ? "s" : "", tiles / dt, noise_isa_name(noise_isa_best()));

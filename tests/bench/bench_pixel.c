@@ -9,19 +9,13 @@
 #include <string.h>
 #include <time.h>
 
+#include "common/clock.h"
 #include "common/geo.h"
 #include "common/ini.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
-
-static double now(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
 
 static uint32_t rng(uint32_t *s)
 {
@@ -71,13 +65,13 @@ static double measure(const struct bnode *b, const struct tile_key *k, struct ti
 	double best = 1e30;
 	int reps = 1;
 	for (int batch = 0; batch < 6; batch++) {
-		double t0 = now();
+		double t0 = clock_now_s();
 		for (int r = 0; r < reps; r++)
 			if (b->n.type->generate(&b->n, &g, k, in, nin, out)) {
 				fprintf(stderr, "generate failed\n");
 				exit(1);
 			}
-		double dt = now() - t0;
+		double dt = clock_now_s() - t0;
 		if (batch > 0 && dt / reps < best)
 			best = dt / reps;
 		if (dt < 0.05) /* aim for ≥ 50 ms per batch */

@@ -9,6 +9,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "common/clock.h"
+#include "common/xthread.h"
 #include "engine/cache.h"
 #include "engine/node.h"
 #include "engine/planet.h"
@@ -32,30 +34,23 @@ struct counter {
 	uint64_t t_ready; /* ns, when the last callback ran */
 };
 
-static uint64_t now_ns(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000u + (uint64_t)ts.tv_nsec;
-}
-
 static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
 {
 	(void)w, (void)t, (void)err;
 	struct counter *c = ud;
-	pthread_mutex_lock(&c->mu);
-	c->t_ready = now_ns();
+	xmutex_lock(&c->mu);
+	c->t_ready = clock_now_ns();
 	if (++c->n >= c->target)
-		pthread_cond_signal(&c->cv);
-	pthread_mutex_unlock(&c->mu);
+		xcond_signal(&c->cv);
+	xmutex_unlock(&c->mu);
 }
 
 static void wait_count(struct counter *c)
 {
-	pthread_mutex_lock(&c->mu);
+	xmutex_lock(&c->mu);
 	while (c->n < c->target)
-		pthread_cond_wait(&c->cv, &c->mu);
-	pthread_mutex_unlock(&c->mu);
+		xcond_wait(&c->cv, &c->mu);
+	xmutex_unlock(&c->mu);
 }
 
 static void node_setup(struct node *n, struct planet *p, uint64_t hash)
@@ -93,10 +88,10 @@ static void throughput(uint32_t T, int workers, int ly)
 			w[i++] = (struct want){ .node = &n, .key = k, .cls = SCHED_BULK };
 		}
 	struct counter cnt = { .target = total };
-	pthread_mutex_init(&cnt.mu, NULL);
-	pthread_cond_init(&cnt.cv, NULL);
+	xmutex_init(&cnt.mu);
+	xcond_init(&cnt.cv);
 	struct sched_req *r = sched_req_create(s, on_ready, &cnt);
-	uint64_t t0 = now_ns();
+	uint64_t t0 = clock_now_ns();
 	if (sched_req_want(r, w, total) != 0) {
 		fprintf(stderr, "bench_sched: want refused\n");
 		exit(1);
@@ -108,8 +103,8 @@ static void throughput(uint32_t T, int workers, int ly)
 	sched_req_destroy(r);
 	sched_destroy(s);
 	cache_destroy(c);
-	pthread_mutex_destroy(&cnt.mu);
-	pthread_cond_destroy(&cnt.cv);
+	xmutex_destroy(&cnt.mu);
+	xcond_destroy(&cnt.cv);
 	free(w);
 }
 
@@ -135,8 +130,8 @@ static void cached_latency(int rounds)
 	tile_unref(t);
 	struct want w = { .node = &n, .key = k, .cls = SCHED_VISIBLE };
 	struct counter cnt = { .target = 0 };
-	pthread_mutex_init(&cnt.mu, NULL);
-	pthread_cond_init(&cnt.cv, NULL);
+	xmutex_init(&cnt.mu);
+	xcond_init(&cnt.cv);
 	struct sched_req *r = sched_req_create(s, on_ready, &cnt);
 	uint64_t *lat = malloc((size_t)rounds * sizeof *lat);
 	if (!lat || !s || !c) {
@@ -144,10 +139,10 @@ static void cached_latency(int rounds)
 		exit(1);
 	}
 	for (int i = 0; i < rounds; i++) {
-		pthread_mutex_lock(&cnt.mu);
+		xmutex_lock(&cnt.mu);
 		cnt.target++;
-		pthread_mutex_unlock(&cnt.mu);
-		uint64_t t0 = now_ns();
+		xmutex_unlock(&cnt.mu);
+		uint64_t t0 = clock_now_ns();
 		if (sched_req_want(r, &w, 1) != 0) {
 			fprintf(stderr, "bench_sched: want refused\n");
 			exit(1);
@@ -161,8 +156,8 @@ static void cached_latency(int rounds)
 	sched_req_destroy(r);
 	sched_destroy(s);
 	cache_destroy(c);
-	pthread_mutex_destroy(&cnt.mu);
-	pthread_cond_destroy(&cnt.cv);
+	xmutex_destroy(&cnt.mu);
+	xcond_destroy(&cnt.cv);
 	free(lat);
 }
 

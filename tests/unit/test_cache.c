@@ -13,7 +13,9 @@
 #include <time.h>
 
 #include "engine/cache.h"
+#include "common/clock.h"
 #include "common/grid.h"
+#include "common/xthread.h"
 #include "engine/tile.h"
 
 #define T 16 /* texels: 1 KiB per height tile */
@@ -303,10 +305,10 @@ static void concurrent(void **state)
 	struct worker_arg a[8];
 	for (int i = 0; i < 8; i++) {
 		a[i] = (struct worker_arg){ c, (unsigned)i + 1, 0 };
-		assert_int_equal(pthread_create(&th[i], NULL, hammer, &a[i]), 0);
+		assert_int_equal(xthread_create(&th[i], hammer, &a[i]), 0);
 	}
 	for (int i = 0; i < 8; i++) {
-		assert_int_equal(pthread_join(th[i], NULL), 0);
+		xthread_join(th[i]);
 		assert_int_equal(a[i].bad, 0);
 	}
 	struct cache_stats st;
@@ -343,14 +345,14 @@ static void last_use_reported(void **state)
 	struct used_at u[2] = { { .k = key(1, 1, 0, 0, 0) }, { .k = key(1, 1, 0, 1, 0) } };
 	insert_new(c, &u[0].k);
 	insert_new(c, &u[1].k);
-	uint64_t t0 = cache_now_ns();
+	uint64_t t0 = clock_now_ns();
 	struct timespec d = { 1, 100000000 };
 	while (nanosleep(&d, &d) != 0)
 		;
 	struct tile *t = cache_lookup(c, &u[1].k); /* used again now */
 	assert_non_null(t);
 	tile_unref(t);
-	uint64_t now = cache_now_ns();
+	uint64_t now = clock_now_ns();
 	cache_foreach(c, find_used, u);
 	assert_int_equal(u[0].seen, 1);
 	assert_int_equal(u[1].seen, 1);

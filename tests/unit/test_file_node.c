@@ -20,6 +20,7 @@
 
 #include "common/img.h"
 #include "common/ini.h"
+#include "common/xthread.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
@@ -569,10 +570,10 @@ static void concurrent_generate(void **state)
 	pthread_t th[2];
 	for (int i = 0; i < 2; i++) {
 		jobs[i].f = &f;
-		assert_int_equal(pthread_create(&th[i], NULL, job_main, &jobs[i]), 0);
+		assert_int_equal(xthread_create(&th[i], job_main, &jobs[i]), 0);
 	}
 	for (int i = 0; i < 2; i++) {
-		assert_int_equal(pthread_join(th[i], NULL), 0);
+		xthread_join(th[i]);
 		assert_int_equal(jobs[i].bad, 0);
 		gen_ctx_fini(&jobs[i].g);
 	}

@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "common/img.h"
+#include "common/xthread.h"
 
 static char dir[64];
 
@@ -317,9 +318,9 @@ static void concurrent_reads(void **state)
 	struct reader r[3] = { { c, p, 0 }, { c, p, 0 }, { c, p, 0 } };
 	pthread_t th[3];
 	for (int i = 0; i < 3; i++)
-		assert_int_equal(pthread_create(&th[i], NULL, reader_main, &r[i]), 0);
+		assert_int_equal(xthread_create(&th[i], reader_main, &r[i]), 0);
 	for (int i = 0; i < 3; i++) {
-		assert_int_equal(pthread_join(th[i], NULL), 0);
+		xthread_join(th[i]);
 		assert_int_equal(r[i].bad, 0);
 	}
 	img_cache_unref(c);

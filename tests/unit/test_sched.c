@@ -21,6 +21,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "common/clock.h"
+#include "common/xthread.h"
 #include "engine/cache.h"
 #include "engine/node.h"
 #include "engine/planet.h"
@@ -62,18 +64,18 @@ static struct tile_key key_at(const struct node *n, int ly, uint32_t x, uint32_t
 
 static void pass_gate(struct tstate *st, const struct tile_key *k)
 {
-	pthread_mutex_lock(&st->mu);
+	xmutex_lock(&st->mu);
 	if (st->nlog < LOGMAX)
 		st->log[st->nlog++] = *k;
 	st->nice_seen = getpriority(PRIO_PROCESS, (id_t)syscall(SYS_gettid));
 	if (st->gate_closed) {
 		st->at_gate++;
-		pthread_cond_broadcast(&st->cv);
+		xcond_broadcast(&st->cv);
 		while (st->gate_closed)
-			pthread_cond_wait(&st->cv, &st->mu);
+			xcond_wait(&st->cv, &st->mu);
 		st->at_gate--;
 	}
-	pthread_mutex_unlock(&st->mu);
+	xmutex_unlock(&st->mu);
 	atomic_fetch_add(&st->counts[count_idx(k)], 1);
 }
 
@@ -197,8 +199,8 @@ static struct world *world_new(int workers, size_t budget)
 	w->planet.max_level = 6;
 	w->st = calloc(1, sizeof *w->st);
 	assert_non_null(w->st);
-	pthread_mutex_init(&w->st->mu, NULL);
-	pthread_cond_init(&w->st->cv, NULL);
+	xmutex_init(&w->st->mu);
+	xcond_init(&w->st->cv);
 	for (int i = 0; i < NCOUNT; i++)
 		atomic_init(&w->st->counts[i], 0);
 	mknode(w, &w->a, &t_count, 1, NULL, NULL);
@@ -219,8 +221,8 @@ static void world_free(struct world *w)
 {
 	sched_destroy(w->sched);
 	cache_destroy(w->cache);
-	pthread_mutex_destroy(&w->st->mu);
-	pthread_cond_destroy(&w->st->cv);
+	xmutex_destroy(&w->st->mu);
+	xcond_destroy(&w->st->cv);
 	free(w->st);
 	free(w);
 }
@@ -231,39 +233,36 @@ static int count_of(struct world *w, const struct node *n, int ly, uint32_t x, u
 	return atomic_load(&w->st->counts[count_idx(&k)]);
 }
 
-static struct timespec deadline(void)
+static uint64_t deadline(void)
 {
-	struct timespec ts;
-	clock_gettime(CLOCK_REALTIME, &ts);
-	ts.tv_sec += WAIT_S;
-	return ts;
+	return clock_now_ns() + WAIT_S * 1000000000ull;
 }
 
 static void gate_close(struct world *w)
 {
-	pthread_mutex_lock(&w->st->mu);
+	xmutex_lock(&w->st->mu);
 	w->st->gate_closed = true;
-	pthread_mutex_unlock(&w->st->mu);
+	xmutex_unlock(&w->st->mu);
 }
 
 static void gate_open(struct world *w)
 {
-	pthread_mutex_lock(&w->st->mu);
+	xmutex_lock(&w->st->mu);
 	w->st->gate_closed = false;
-	pthread_cond_broadcast(&w->st->cv);
-	pthread_mutex_unlock(&w->st->mu);
+	xcond_broadcast(&w->st->cv);
+	xmutex_unlock(&w->st->mu);
 }
 
 /* Waits until n generations are blocked at the gate. */
 static void gate_wait(struct world *w, int n)
 {
-	struct timespec dl = deadline();
-	int rc = 0;
-	pthread_mutex_lock(&w->st->mu);
-	while (w->st->at_gate < n && rc == 0)
-		rc = pthread_cond_timedwait(&w->st->cv, &w->st->mu, &dl);
+	uint64_t dl = deadline();
+	bool more = true;
+	xmutex_lock(&w->st->mu);
+	while (w->st->at_gate < n && more)
+		more = xcond_wait_until(&w->st->cv, &w->st->mu, dl);
 	int got = w->st->at_gate;
-	pthread_mutex_unlock(&w->st->mu);
+	xmutex_unlock(&w->st->mu);
 	assert_int_equal(got, n);
 }
 
@@ -280,20 +279,20 @@ struct rec {
 static void rec_init(struct rec *r)
 {
 	memset(r, 0, sizeof *r);
-	pthread_mutex_init(&r->mu, NULL);
-	pthread_cond_init(&r->cv, NULL);
+	xmutex_init(&r->mu);
+	xcond_init(&r->cv);
 }
 
 static void rec_fini(struct rec *r)
 {
-	pthread_mutex_destroy(&r->mu);
-	pthread_cond_destroy(&r->cv);
+	xmutex_destroy(&r->mu);
+	xcond_destroy(&r->cv);
 }
 
 static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
 {
 	struct rec *r = ud;
-	pthread_mutex_lock(&r->mu);
+	xmutex_lock(&r->mu);
 	if (r->closed || (t && !tile_ok(w->node, t, &w->key)) || (!t && err >= 0))
 		r->bad++;
 	if (r->n < LOGMAX) {
@@ -301,8 +300,8 @@ static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
 		r->errs[r->n] = err;
 		r->n++;
 	}
-	pthread_cond_broadcast(&r->cv);
-	pthread_mutex_unlock(&r->mu);
+	xcond_broadcast(&r->cv);
+	xmutex_unlock(&r->mu);
 }
 
 static int rec_find(struct rec *r, const struct tile_key *k)
@@ -317,13 +316,14 @@ static int rec_find(struct rec *r, const struct tile_key *k)
 /* Waits for a callback about k; returns its err. */
 static int rec_wait(struct rec *r, const struct tile_key *k)
 {
-	struct timespec dl = deadline();
-	int rc = 0, i;
-	pthread_mutex_lock(&r->mu);
-	while ((i = rec_find(r, k)) < 0 && rc == 0)
-		rc = pthread_cond_timedwait(&r->cv, &r->mu, &dl);
+	uint64_t dl = deadline();
+	bool more = true;
+	int i;
+	xmutex_lock(&r->mu);
+	while ((i = rec_find(r, k)) < 0 && more)
+		more = xcond_wait_until(&r->cv, &r->mu, dl);
 	int err = i >= 0 ? r->errs[i] : 1;
-	pthread_mutex_unlock(&r->mu);
+	xmutex_unlock(&r->mu);
 	assert_true(i >= 0);
 	return err;
 }
@@ -443,7 +443,7 @@ static void priority_order(void **state)
 	gate_open(w);
 	for (int i = 0; i < 9; i++)
 		assert_int_equal(rec_wait(&r, &list[order[i]].key), 0);
-	pthread_mutex_lock(&w->st->mu);
+	xmutex_lock(&w->st->mu);
 	assert_int_equal(w->st->nlog, 9);
 	assert_true(grid_key_equal(&w->st->log[0], &bw.key));
 	int k = 1;
@@ -453,7 +453,7 @@ static void priority_order(void **state)
 		assert_true(grid_key_equal(&w->st->log[k], &list[order[i]].key));
 		k++;
 	}
-	pthread_mutex_unlock(&w->st->mu);
+	xmutex_unlock(&w->st->mu);
 	assert_int_equal(r.bad, 0);
 	assert_int_equal(r.n, 9); /* the duplicate entry is reported once */
 	sched_req_destroy(req);
@@ -487,7 +487,7 @@ static void duplicates_merged(void **state)
 	gate_close(w);
 	struct fetch_arg fa = { .w = w, .want = mkwant(&w->s, 2, 1, 1, SCHED_VISIBLE) };
 	pthread_t th;
-	assert_int_equal(pthread_create(&th, NULL, fetch_thread, &fa), 0);
+	assert_int_equal(xthread_create(&th, fetch_thread, &fa), 0);
 	gate_wait(w, 1); /* the fetch's first input is running, the rest wait */
 	struct rec r1, r2;
 	rec_init(&r1);
@@ -509,7 +509,7 @@ static void duplicates_merged(void **state)
 	assert_int_equal(rec_wait(&r1, &l1[1].key), 0);
 	assert_int_equal(rec_wait(&r2, &l2[0].key), 0);
 	assert_int_equal(rec_wait(&r2, &l2[1].key), 0);
-	assert_int_equal(pthread_join(th, NULL), 0);
+	xthread_join(th);
 	assert_int_equal(fa.rc, 0);
 	assert_true(fa.ok);
 	assert_int_equal(r1.bad + r2.bad, 0);
@@ -577,10 +577,10 @@ static void cancellation(void **state)
 	}
 	sched_get_stats(w->sched, &st);
 	assert_int_equal(st.generated, 1 + 6 + 1);
-	pthread_mutex_lock(&r.mu);
+	xmutex_lock(&r.mu);
 	assert_int_equal(r.n, 2 + 4); /* two sync markers and the four kept keys */
 	assert_int_equal(r.bad, 0);
-	pthread_mutex_unlock(&r.mu);
+	xmutex_unlock(&r.mu);
 	sched_req_destroy(req);
 	sched_req_destroy(blocker);
 	world_free(w);
@@ -634,9 +634,9 @@ static void *destroy_thread(void *p)
 	struct destroy_arg *a = p;
 	sched_req_destroy(a->req);
 	a->waited = atomic_load(a->cb_done);
-	pthread_mutex_lock(&a->r->mu);
+	xmutex_lock(&a->r->mu);
 	a->r->closed = true;
-	pthread_mutex_unlock(&a->r->mu);
+	xmutex_unlock(&a->r->mu);
 	return NULL;
 }
 
@@ -651,13 +651,13 @@ static void on_ready_slow(void *ud, const struct want *wt, struct tile *t, int e
 	struct slow_cb *c = ud;
 	on_ready(&c->rec, wt, t, err);
 	atomic_store(&c->in_cb, true);
-	pthread_mutex_lock(&c->rec.mu);
-	pthread_cond_broadcast(&c->rec.cv);
-	struct timespec dl = deadline();
+	xmutex_lock(&c->rec.mu);
+	xcond_broadcast(&c->rec.cv);
+	uint64_t dl = deadline();
 	while (!atomic_load(&c->release))
-		if (pthread_cond_timedwait(&c->rec.cv, &c->rec.mu, &dl) != 0)
+		if (!xcond_wait_until(&c->rec.cv, &c->rec.mu, dl))
 			break;
-	pthread_mutex_unlock(&c->rec.mu);
+	xmutex_unlock(&c->rec.mu);
 	atomic_store(&c->cb_done, true);
 }
 
@@ -676,9 +676,9 @@ static void destroy_stops_callbacks(void **state)
 	assert_int_equal(sched_req_want(req, l, 3), 0);
 	gate_wait(w, 2);
 	sched_req_destroy(req);
-	pthread_mutex_lock(&r.mu);
+	xmutex_lock(&r.mu);
 	r.closed = true;
-	pthread_mutex_unlock(&r.mu);
+	xmutex_unlock(&r.mu);
 	gate_open(w);
 	struct tile *out[3];
 	assert_int_equal(sched_fetch(w->sched, l, 3, out), 0);
@@ -695,23 +695,23 @@ static void destroy_stops_callbacks(void **state)
 	struct sched_req *q = sched_req_create(w->sched, on_ready_slow, c);
 	struct want m = sync_marker(w, 1);
 	assert_int_equal(sched_req_want(q, &m, 1), 0);
-	pthread_mutex_lock(&c->rec.mu);
-	struct timespec dl = deadline();
+	xmutex_lock(&c->rec.mu);
+	uint64_t dl = deadline();
 	while (!atomic_load(&c->in_cb))
-		if (pthread_cond_timedwait(&c->rec.cv, &c->rec.mu, &dl) != 0)
+		if (!xcond_wait_until(&c->rec.cv, &c->rec.mu, dl))
 			break;
-	pthread_mutex_unlock(&c->rec.mu);
+	xmutex_unlock(&c->rec.mu);
 	assert_true(atomic_load(&c->in_cb));
 	struct destroy_arg da = { .req = q, .r = &c->rec, .cb_done = &c->cb_done };
 	pthread_t th;
-	assert_int_equal(pthread_create(&th, NULL, destroy_thread, &da), 0);
+	assert_int_equal(xthread_create(&th, destroy_thread, &da), 0);
 	struct timespec pause = { 0, 30 * 1000 * 1000 }; /* let destroy reach its wait */
 	nanosleep(&pause, NULL);
-	pthread_mutex_lock(&c->rec.mu);
+	xmutex_lock(&c->rec.mu);
 	atomic_store(&c->release, true);
-	pthread_cond_broadcast(&c->rec.cv);
-	pthread_mutex_unlock(&c->rec.mu);
-	assert_int_equal(pthread_join(th, NULL), 0);
+	xcond_broadcast(&c->rec.cv);
+	xmutex_unlock(&c->rec.mu);
+	xthread_join(th);
 	assert_true(da.waited);
 	assert_int_equal(c->rec.bad, 0);
 	rec_fini(&c->rec);
@@ -796,13 +796,6 @@ struct stress_arg {
 	int lists;
 };
 
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return ts.tv_sec + ts.tv_nsec * 1e-9;
-}
-
 static struct want random_want(struct world *w, uint64_t *s)
 {
 	*s = *s * 6364136223846793005u + 1442695040888963407u;
@@ -825,8 +818,8 @@ static void *stress_thread(void *p)
 	uint64_t s = a->seed * 0x9e3779b97f4a7c15u + 7;
 	struct sched_req *req = sched_req_create(a->w->sched, on_ready, &a->rec);
 	struct want list[48];
-	double end = now_s() + 1.5;
-	while (now_s() < end) {
+	double end = clock_now_s() + 1.5;
+	while (clock_now_s() < end) {
 		s = s * 6364136223846793005u + 1442695040888963407u;
 		size_t n = (s >> 40) % 48;
 		for (size_t i = 0; i < n; i++)
@@ -856,11 +849,11 @@ static void stress(void **state)
 		a[i].seed = (unsigned)i + 11;
 		a[i].lists = 0;
 		rec_init(&a[i].rec);
-		assert_int_equal(pthread_create(&th[i], NULL, stress_thread, &a[i]), 0);
+		assert_int_equal(xthread_create(&th[i], stress_thread, &a[i]), 0);
 	}
 	int lists = 0, reports = 0;
 	for (int i = 0; i < 8; i++) {
-		assert_int_equal(pthread_join(th[i], NULL), 0);
+		xthread_join(th[i]);
 		assert_int_equal(a[i].rec.bad, 0);
 		lists += a[i].lists;
 		reports += a[i].rec.n;

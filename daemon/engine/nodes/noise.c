@@ -122,8 +122,7 @@ double noise_simplex_ref(double x, double y, double z, uint32_t seed)
 /* ---- ISA dispatch ---- */
 
 /* The best ISA + 1, 0 until detected. Detection is idempotent, so concurrent first calls
- * may both run it and store the same value. (pthread_once is not used: daemon/engine/sched.h shadows
- * the system <sched.h> that <pthread.h> includes.) */
+ * may both run it and store the same value: a relaxed atomic is all it needs. */
 static atomic_int isa_cached;
 
 static enum noise_isa isa_detect(void)
