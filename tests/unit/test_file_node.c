@@ -376,6 +376,13 @@ static void nodata(void **state)
 				if (deep) {
 					assert_float_equal(v, -7, 0);
 					fills++;
+				} else if (far && px_x > 6 && px_x < 170 &&
+					   (px_y < 0.5 || px_y > 179.5)) {
+					/* Past an edge row's centre: towards the pole, which
+					 * holds the row's mean (100 + 179.5). */
+					double u = fabs(90 - px_y) / 0.5 - 179;
+					assert_float_equal(v, (1 - u) * (100 + px_x - 0.5) + u * 279.5,
+							   2.0);
 				} else if (far && px_x > 6 && px_x < 170) {
 					assert_float_equal(v, 100 + px_x - 0.5, 2.0);
 					exact++;
