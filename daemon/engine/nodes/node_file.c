@@ -56,10 +56,11 @@
  *
  * The poles. A global image's rows are areas (pixel-is-point grids like ETOPO5 aside, whose
  * edge rows are centred on the poles): the edge row's pixels are wedges meeting at the pole,
- * which therefore holds the row's mean, and samples between the row's centre and the pole
- * blend linearly towards it (pole_taps; the row is read whole at the level in use). So the
- * texels nearest a pole do not depend on longitude, at every level, and the viewer's pole
- * (one point, reached from every meridian) is one value.
+ * which therefore holds the row's mean. Between the last row centre short of a pole and the
+ * pole (a polar cap) samples blend from that row to a plane through the pole (its first
+ * harmonic) and the mean (pole_taps; the rows are read whole at the level in use). So the
+ * texels nearest a pole do not depend on longitude, at every level, the viewer's pole (one
+ * point, reached from every meridian) is one value, and no crease converges on it.
  *
  * Missing data. A texel whose centre is outside the bounds gets the fill. Inside, nodata
  * (and NaN) samples get weight 0 and the others are renormalised: the texel keeps the
@@ -329,24 +330,24 @@ static int file_create(struct node *nd, struct node_parse *p)
 
 /* ---- generation ---- */
 
-/* Tap indices a latitude table holds for the virtual pole rows until axis_build rebases it
- * (then: the rows just after the buffer's, bh for the north pole, bh + 1 for the south). */
-#define TAP_POLE_N INT32_MIN
-#define TAP_POLE_S (INT32_MIN + 1)
+/* Tap indices a latitude table holds for the virtual rows of the polar caps until axis_build
+ * rebases them to the rows just after the buffer's: bh + (index - TAP_VIRTUAL). */
+#define TAP_VIRTUAL INT32_MIN
+enum { VROW_MEAN_N, VROW_MEAN_S, VROW_HARM_N, VROW_HARM_S, VROWS };
 
 /* The per-axis resampling table: output texel i reads taps idx[i·K + k] (relative to the
- * buffer's first source pixel `lo`) with weights w[i·K + k], K = 2n. */
+ * buffer's first source pixel `lo`) with weights w[i·K + k], K = taps·n. */
 struct axis {
-	int n, K;
+	int n, K, taps;
 	int32_t *idx;
 	float *w;
 	uint8_t *in; /* texel centre inside the bounds */
 	int64_t lo, hi;	 /* source pixels the buffer holds (unwrapped when wrapping) */
 	bool any, all; /* some / every texel inside */
-	/* Latitude axis of a global image whose edge rows are areas ending at a pole: where
-	 * the pole lies in sample coordinates (row i's centre at i; NAN: no such pole, clamp),
-	 * and whether some tap reads the virtual row there. See pole_taps. */
-	double pole_n, pole_s;
+	/* Latitude axis of a global image, the polar caps (pole_taps): in sample coordinates
+	 * (row i's centre at i) the last row centre short of each pole and the pole (NAN: no
+	 * cap in this tile's reach: clamp); whether some tap reads a cap's virtual rows. */
+	double cap_n, cap_s, pole_n, pole_s;
 	bool use_n, use_s;
 };
 
@@ -358,37 +359,45 @@ static int subtaps(double r)
 	return n > FILE_MAX_SUBTAPS ? FILE_MAX_SUBTAPS : (int)n;
 }
 
-/* Past the centre of the row nearest a pole, towards the pole itself. The rows of a global
- * plate-carrée image are areas; the last one's pixels are wedges that all meet at the pole,
- * so the pole, the one point they share, has no longitude: its value is the row's mean, and
- * between the row's centre and the pole a sample blends linearly towards it (a virtual row
- * at the pole). Clamping to the edge row instead makes the texels nearest the pole copy the
- * row's longitude variation into a point: radial streaks converging on the pole and, for
- * heights, a pole that is not one point. Returns whether s is in that stretch (taps filled:
- * the edge row and the virtual row). */
-static bool pole_taps(struct axis *a, double s, int size, int64_t t[2], double w[2])
+/* Between the last row centre short of a pole (the cap row, at a distance ρ1 from the pole)
+ * and the pole itself. The rows of a global plate-carrée image are areas: the edge row's
+ * pixels are wedges that all meet at the pole, which has no longitude — its value P is the
+ * edge row's mean (for a pixel-is-point grid like ETOPO5, whose edge row is centred on the
+ * pole, the same). Clamping to the edge row instead made the texels next to the pole copy the
+ * row's longitude variation into a point (radial streaks in colour, a pole of many heights);
+ * a linear blend towards P (h = P + t·(R(λ) - P), t = ρ/ρ1) is a cone whose east slope
+ * R'(λ)/ρ1 keeps every kink of the cap row R between its columns down to the pole: creases
+ * converging on it. So the cap is P + t·R1(λ) + t²·(R(λ) - P - R1(λ)) with R1 the first
+ * harmonic of R (the plane through the pole that best fits the row): a plane at the pole
+ * (one slope, no creases: the kinks fade as t²), R exactly at the cap row, and exactly the
+ * plane where R is one. In taps: the cap row with t², the mean row with 1 - t², the harmonic
+ * row with t - t². Returns whether s is in a cap (taps filled). */
+static bool pole_taps(struct axis *a, double s, int64_t t[3], double w[3])
 {
 	double u;
-	if (!isnan(a->pole_s) && s > size - 1) {
-		u = (s - (size - 1)) / (a->pole_s - (size - 1));
-		t[0] = size - 1, t[1] = TAP_POLE_S;
+	if (!isnan(a->cap_s) && s > a->cap_s) {
+		u = (s - a->cap_s) / (a->pole_s - a->cap_s);
+		t[0] = (int64_t)a->cap_s;
+		t[1] = TAP_VIRTUAL + VROW_MEAN_S, t[2] = TAP_VIRTUAL + VROW_HARM_S;
 		a->use_s = true;
-	} else if (!isnan(a->pole_n) && s < 0) {
-		u = s / a->pole_n;
-		t[0] = 0, t[1] = TAP_POLE_N;
+	} else if (!isnan(a->cap_n) && s < a->cap_n) {
+		u = (a->cap_n - s) / (a->cap_n - a->pole_n);
+		t[0] = (int64_t)a->cap_n;
+		t[1] = TAP_VIRTUAL + VROW_MEAN_N, t[2] = TAP_VIRTUAL + VROW_HARM_N;
 		a->use_n = true;
 	} else {
 		return false;
 	}
-	u = u < 1 ? u : 1;
-	w[0] = 1 - u, w[1] = u;
+	double r = 1 - (u < 1 ? u : 1); /* ρ/ρ1 */
+	w[0] = r * r, w[1] = 1 - r * r, w[2] = r - r * r;
 	return true;
 }
 
-/* The bilinear taps of a sample at s (pixel i's centre at s = i). */
-static void bilinear_taps(struct axis *a, double s, int size, bool wrap, int64_t t[2], double w[2])
+/* The taps (a->taps of them: bilinear, and a third of weight 0 where caps are in reach) of a
+ * sample at s (pixel i's centre at s = i). */
+static void sample_taps(struct axis *a, double s, int size, bool wrap, int64_t t[3], double w[3])
 {
-	if (pole_taps(a, s, size, t, w))
+	if (a->taps == 3 && pole_taps(a, s, t, w))
 		return;
 	double fl = floor(s), fr = s - fl;
 	if (fr < 1e-6) {
@@ -402,14 +411,14 @@ static void bilinear_taps(struct axis *a, double s, int size, bool wrap, int64_t
 		i0 = i0 < 0 ? 0 : i0 >= size ? size - 1 : i0;
 		i1 = i1 < 0 ? 0 : i1 >= size ? size - 1 : i1;
 	}
-	t[0] = i0, t[1] = i1;
-	w[0] = 1 - fr, w[1] = fr;
+	t[0] = i0, t[1] = i1, t[2] = i0;
+	w[0] = 1 - fr, w[1] = fr, w[2] = 0;
 }
 
 /* c[i]: texel i's centre in source pixel units (edges at integers), NAN when outside. */
 static void axis_build(struct axis *a, const double *c, uint32_t T, double r, int size, bool wrap)
 {
-	int n = a->n, K = a->K;
+	int n = a->n, K = a->K, nt = a->taps;
 	int64_t lo = INT64_MAX, hi = INT64_MIN;
 	a->any = false;
 	a->all = true;
@@ -422,13 +431,13 @@ static void axis_build(struct axis *a, const double *c, uint32_t T, double r, in
 			continue;
 		}
 		for (int t = 0; t < n; t++) {
-			int64_t tp[2];
-			double wt[2];
-			bilinear_taps(a, c[i] + ((t + 0.5) / n - 0.5) * r - 0.5, size, wrap, tp, wt);
-			for (int q = 0; q < 2; q++) {
-				ix[2 * t + q] = (int32_t)tp[q];
-				w[2 * t + q] = (float)(wt[q] / n);
-				if (tp[q] == TAP_POLE_N || tp[q] == TAP_POLE_S)
+			int64_t tp[3];
+			double wt[3];
+			sample_taps(a, c[i] + ((t + 0.5) / n - 0.5) * r - 0.5, size, wrap, tp, wt);
+			for (int q = 0; q < nt; q++) {
+				ix[nt * t + q] = (int32_t)tp[q];
+				w[nt * t + q] = (float)(wt[q] / n);
+				if (tp[q] >= TAP_VIRTUAL && tp[q] < TAP_VIRTUAL + VROWS)
 					continue;
 				lo = tp[q] < lo ? tp[q] : lo;
 				hi = tp[q] + 1 > hi ? tp[q] + 1 : hi;
@@ -445,8 +454,8 @@ static void axis_build(struct axis *a, const double *c, uint32_t T, double r, in
 			if (!a->in[i]) {
 				a->idx[q] = 0;
 				a->w[q] = 0;
-			} else if (v == TAP_POLE_N || v == TAP_POLE_S) {
-				a->idx[q] = (int32_t)(hi - lo) + (v == TAP_POLE_S);
+			} else if (v >= TAP_VIRTUAL && v < TAP_VIRTUAL + VROWS) {
+				a->idx[q] = (int32_t)(hi - lo) + (v - TAP_VIRTUAL);
 			} else {
 				a->idx[q] = (int32_t)(v - lo);
 			}
@@ -792,7 +801,7 @@ struct file_gen {
 	double *cx, *cy;     /* texel centres, level-m pixel units */
 	void *raw;	     /* the region as read */
 	float *src, *mask;   /* ... as float (sv: src, or raw itself for float files) */
-	float *tmp, *tmpm;   /* horizontal pass: bh rows + 2 pole rows of T texels */
+	float *tmp, *tmpm;   /* horizontal pass: bh rows + VROWS virtual rows of T texels */
 	float *row;	     /* one output row (and its weights) */
 	void *praw;	     /* one whole level-m row, for a pole's mean */
 	float *pv, *pm;
@@ -801,6 +810,30 @@ struct file_gen {
 	size_t bw, bh;
 	bool missing; /* some sample read is missing: masks are live */
 };
+
+/* The polar caps in this tile's reach (pole_taps): sample coordinates of each pole and of
+ * the last row centre short of it (the edge row for area rows, the one before it when the
+ * edge row is centred on the pole). With a cap, latitude taps come in threes. */
+static void plan_caps(struct file_gen *q, double spany)
+{
+	const struct file_impl *f = q->f;
+	struct axis *a = &q->ay;
+	double k = q->hm / spany;
+	double ps = (f->north + 90) * k - 0.5, pn = (f->north - 90) * k - 0.5;
+	/* The samples the tile's texels take lie between its edges. */
+	double smin = (f->north - q->r.north) * k - 0.5, smax = (f->north - q->r.south) * k - 0.5;
+	double cs = ceil(ps - 1e-6) - 1, cn = floor(pn + 1e-6) + 1;
+	if (f->south <= -90 && cs >= 0 && cs <= q->hm - 1 && smax > cs) {
+		a->cap_s = cs;
+		a->pole_s = ps;
+	}
+	if (f->north >= 90 && cn >= 0 && cn <= q->hm - 1 && smin < cn) {
+		a->cap_n = cn;
+		a->pole_n = pn;
+	}
+	if (!isnan(a->cap_s) || !isnan(a->cap_n))
+		a->taps = 3;
+}
 
 /* The level, the per-axis tap counts and the region bounds. Returns 0 or -EFBIG. */
 static int gen_plan(struct file_gen *q, const struct file_impl *f, const struct tile_key *k,
@@ -819,20 +852,12 @@ static int gen_plan(struct file_gen *q, const struct file_impl *f, const struct 
 	double spanx = f->east - f->west, spany = f->north - f->south;
 	q->rx = q->dlon * q->wm / spanx;
 	q->ry = q->dlat * q->hm / spany;
-	q->ax = (struct axis){ .n = subtaps(q->rx), .pole_n = NAN, .pole_s = NAN };
-	q->ay = (struct axis){ .n = subtaps(q->ry), .pole_n = NAN, .pole_s = NAN };
-	q->ax.K = 2 * q->ax.n;
-	q->ay.K = 2 * q->ay.n;
-	if (spanx == 360) { /* exact: parse_bounds snaps near-360 spans */
-		/* Sample coordinates of the poles; a virtual row only where the edge row's
-		 * centre is short of its pole (not for pixel-is-point grids like ETOPO5). */
-		double ps = (f->north + 90) * (q->hm / spany) - 0.5;
-		double pn = (f->north - 90) * (q->hm / spany) - 0.5;
-		if (f->south <= -90 && ps > q->hm - 1 + 1e-6)
-			q->ay.pole_s = ps;
-		if (f->north >= 90 && pn < -1e-6)
-			q->ay.pole_n = pn;
-	}
+	q->ax = (struct axis){ .n = subtaps(q->rx), .taps = 2, .cap_n = NAN, .cap_s = NAN };
+	q->ay = (struct axis){ .n = subtaps(q->ry), .taps = 2, .cap_n = NAN, .cap_s = NAN };
+	if (spanx == 360) /* exact: parse_bounds snaps near-360 spans */
+		plan_caps(q, spany);
+	q->ax.K = q->ax.taps * q->ax.n;
+	q->ay.K = q->ay.taps * q->ay.n;
 	region_bounds(f, q->m, q->rx, q->ry, T, &q->bwmax, &q->bhmax);
 	if (q->bwmax * q->bhmax > FILE_MAX_REGION)
 		return -EFBIG; /* only a file with a truncated MIP pyramid, at a very coarse level */
@@ -844,7 +869,7 @@ static int gen_plan(struct file_gen *q, const struct file_impl *f, const struct 
 static void gen_buffers(struct file_gen *q, struct gen_ctx *g)
 {
 	size_t T = q->T, C = (size_t)q->C, bwh = q->bwmax * q->bhmax, wm = (size_t)q->wm;
-	size_t rows = q->bhmax + 2;
+	size_t rows = q->bhmax + VROWS;
 	size_t s_coord = align64(2 * T * sizeof(double));
 	size_t s_tabx = align64(T * q->ax.K * 8), s_taby = align64(T * q->ay.K * 8);
 	size_t s_in = align64(2 * T);
@@ -933,20 +958,37 @@ static bool gen_aligned(struct file_gen *q, struct tile *out, int *rc)
 	return true;
 }
 
-/* The mean of level m's row `y` over its whole width into the horizontal-pass row `dst`
- * (T copies; heights missing samples: sum of the valid / width, their share in dstm, like
- * every row of a pass with masks). Returns whether a sample was missing, or -EIO. */
-static int pole_row(struct file_gen *q, int64_t y, float *dst, float *dstm)
+/* Reads level m's row y whole as float (q->pv; masks in q->pm). Returns whether a sample
+ * was missing, or -EIO. */
+static int read_row(struct file_gen *q, int64_t y, float **v)
 {
 	const struct file_impl *f = q->f;
 	struct axis cols = { .lo = 0, .hi = q->wm }, rows = { .lo = y, .hi = y + 1 };
-	size_t wm = (size_t)q->wm, C = (size_t)q->C;
+	size_t wm = (size_t)q->wm;
 	if (read_region(f, q->m, &cols, &rows, q->praw, 0))
 		return -EIO;
-	float *v = f->rtype == IMG_F32 ? (float *)q->praw : q->pv;
-	bool missing = f->kind == KIND_HEIGHT && to_float(f, q->praw, v, q->pm, wm);
-	if (f->kind != KIND_HEIGHT)
-		to_float(f, q->praw, v, NULL, wm * C);
+	*v = f->rtype == IMG_F32 ? (float *)q->praw : q->pv;
+	if (f->kind != KIND_HEIGHT) {
+		to_float(f, q->praw, *v, NULL, wm * q->C);
+		return 0;
+	}
+	return to_float(f, q->praw, *v, q->pm, wm);
+}
+
+/* A cap's virtual rows (pole_taps) in the horizontal pass's rows `mean` and `harm` (T texels
+ * each; with masks, like every row of a pass with masks: valid sum / width, and the valid
+ * share in meanm, harmm): the edge row's mean, and the first harmonic of the cap row at each
+ * texel's longitude (none where the cap row misses samples). Returns whether a sample was
+ * missing, or -EIO. */
+static int cap_rows(struct file_gen *q, int64_t edge, int64_t cap, float *mean, float *meanm,
+		    float *harm, float *harmm)
+{
+	const struct file_impl *f = q->f;
+	size_t wm = (size_t)q->wm, C = (size_t)q->C;
+	float *v;
+	int missing = read_row(q, edge, &v);
+	if (missing < 0)
+		return missing;
 	double sum[4] = { 0, 0, 0, 0 }, valid = 0;
 	for (size_t i = 0; i < wm; i++) {
 		for (size_t c = 0; c < C; c++)
@@ -955,10 +997,29 @@ static int pole_row(struct file_gen *q, int64_t y, float *dst, float *dstm)
 	}
 	for (uint32_t i = 0; i < q->T; i++)
 		for (size_t c = 0; c < C; c++)
-			dst[i * C + c] = (float)(sum[c] / wm);
-	if (dstm)
+			mean[i * C + c] = (float)(sum[c] / wm);
+	if (cap != edge) {
+		int rc = read_row(q, cap, &v);
+		if (rc < 0)
+			return rc;
+		missing |= rc;
+	}
+	double ca[4] = { 0, 0, 0, 0 }, sa[4] = { 0, 0, 0, 0 };
+	for (size_t i = 0; i < wm && !missing; i++) {
+		double lam = (f->west + (i + 0.5) * 360.0 / wm) * (M_PI / 180);
+		double cl = cos(lam), sl = sin(lam);
+		for (size_t c = 0; c < C; c++)
+			ca[c] += v[i * C + c] * cl, sa[c] += v[i * C + c] * sl;
+	}
+	for (uint32_t i = 0; i < q->T; i++) {
+		double lam = (q->r.west + (i + 0.5) * q->dlon) * (M_PI / 180);
+		double cl = cos(lam), sl = sin(lam);
+		for (size_t c = 0; c < C; c++)
+			harm[i * C + c] = (float)(2 * (ca[c] * cl + sa[c] * sl) / wm);
+	}
+	if (meanm)
 		for (uint32_t i = 0; i < q->T; i++)
-			dstm[i] = (float)(valid / wm);
+			meanm[i] = (float)(valid / wm), harmm[i] = 0;
 	return missing;
 }
 
@@ -983,15 +1044,17 @@ static int gen_read(struct file_gen *q)
 	} else {
 		to_float(f, q->raw, q->sv, NULL, nsrc);
 	}
-	/* The pole rows after the region's bh rows of the horizontal pass. */
-	size_t TC = (size_t)q->T * q->C;
+	/* The caps' virtual rows after the region's bh rows of the horizontal pass. */
+	size_t TC = (size_t)q->T * q->C, T = q->T;
 	bool pole_missing = false;
 	for (int p = 0; p < 2; p++) {
 		if (!(p ? q->ay.use_s : q->ay.use_n))
 			continue;
-		size_t at = q->bh + (size_t)p;
-		int rc = pole_row(q, p ? q->hm - 1 : 0, q->tmp + at * TC,
-				  q->tmpm ? q->tmpm + at * q->T : NULL);
+		size_t mr = q->bh + (p ? VROW_MEAN_S : VROW_MEAN_N);
+		size_t hr = q->bh + (p ? VROW_HARM_S : VROW_HARM_N);
+		int rc = cap_rows(q, p ? q->hm - 1 : 0, (int64_t)(p ? q->ay.cap_s : q->ay.cap_n),
+				  q->tmp + mr * TC, q->tmpm ? q->tmpm + mr * T : NULL,
+				  q->tmp + hr * TC, q->tmpm ? q->tmpm + hr * T : NULL);
 		if (rc < 0)
 			return rc;
 		pole_missing |= rc > 0;
@@ -1075,7 +1138,7 @@ static void gen_vpass(const struct file_gen *q, struct tile *out)
 		}
 		const int32_t *iy = q->ay.idx + (size_t)j * Ky;
 		const float *wy = q->ay.w + (size_t)j * Ky;
-		const float *rows[2 * FILE_MAX_SUBTAPS];
+		const float *rows[3 * FILE_MAX_SUBTAPS];
 		for (int k = 0; k < Ky; k++)
 			rows[k] = q->tmp + (size_t)iy[k] * TC;
 		if (f->kind == KIND_HEIGHT && !q->missing) {
@@ -1098,7 +1161,7 @@ static void gen_vpass(const struct file_gen *q, struct tile *out)
 			}
 			continue;
 		}
-		const float *mrows[2 * FILE_MAX_SUBTAPS];
+		const float *mrows[3 * FILE_MAX_SUBTAPS];
 		for (int k = 0; k < Ky; k++)
 			mrows[k] = q->tmpm + (size_t)iy[k] * T;
 		wsum(rowm, mrows, wy, Ky, T, 1, 0);
