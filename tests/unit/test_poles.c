@@ -44,8 +44,9 @@ static const struct pole_case cases[] = {
  * every longitude: level-0 pixels, bilinear in latitude between row centres. An image whose
  * last row is an area ending at the pole (its centre short of it) means, between that centre
  * and the pole, a blend towards the row's mean: the wedges of the row meet at the pole, the
- * one point they share. Extremes lie at the band's ends or on row centres inside it, on some
- * column. */
+ * one point they share. (The node's cap, pole_taps, is a smoother blend of the same scale: a
+ * reference for how much a pole row may vary, not for its values.) Extremes lie at the
+ * band's ends or on row centres inside it, on some column. */
 static void source_range(struct img_cache *ic, const struct pole_case *pc, double lat_a,
 			 double lat_b, double lo[3], double hi[3])
 {
