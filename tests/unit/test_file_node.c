@@ -377,6 +377,21 @@ static void nodata(void **state)
 				if (deep) {
 					assert_float_equal(v, -7, 0);
 					fills++;
+				} else if (far && px_x > 6 && px_x < 170 &&
+					   (px_y < 0.5 || px_y > 179.5)) {
+					/* Past an edge row's centre, the polar cap: r² of the
+					 * row, 1 - r² of its mean (100 + 179.5) and r - r² of
+					 * its first harmonic, r = ρ / ρ1 (node_file.c, pole_taps). */
+					double r = 180 - fabs(90 - px_y) / 0.5;
+					double ca = 0, sa = 0, lam = (px_x - 180) * M_PI / 180;
+					for (int k = 0; k < 360; k++) {
+						ca += (100 + k) * cos((k + 0.5 - 180) * M_PI / 180);
+						sa += (100 + k) * sin((k + 0.5 - 180) * M_PI / 180);
+					}
+					double harm = 2 * (ca * cos(lam) + sa * sin(lam)) / 360;
+					assert_float_equal(v, r * r * (100 + px_x - 0.5) +
+								      (1 - r * r) * 279.5 + (r - r * r) * harm,
+							   2.0);
 				} else if (far && px_x > 6 && px_x < 170) {
 					assert_float_equal(v, 100 + px_x - 0.5, 2.0);
 					exact++;
@@ -399,8 +414,15 @@ static void nodata(void **state)
 	fnode_ok(&f, "[node x]\ntype = file\npath = nan.exr\nfill = -1\n");
 	struct tile *t = gen(&f, 0, 0, 0, 0, 64); /* 64×64 over 64×32: 1:1 in x, 2× in y */
 	for (int j = 0; j < 64; j++)
-		for (int i = 0; i < 64; i++)
-			assert_float_equal(tile_f32(t)[j * 64 + i], (i >= 16 && i < 24) ? -1 : 5, 0);
+		for (int i = 0; i < 64; i++) {
+			float v = tile_f32(t)[j * 64 + i];
+			/* In the polar caps (the outer texel rows, within half a source row of a
+			 * pole) the pole's value, the mean of the edge row's valid samples, may
+			 * carry a missing column's texel. */
+			if ((j == 0 || j == 63) && i >= 16 && i < 24 && v == 5)
+				continue;
+			assert_float_equal(v, (i >= 16 && i < 24) ? -1 : 5, 0);
+		}
 	tile_unref(t);
 	t = gen(&f, 1, 0, 0, 0, 32); /* 1:1 aligned */
 	for (int j = 0; j < 32; j++)

@@ -307,13 +307,20 @@ static void seamless_level(int lx, int ly, uint32_t T)
 	for (uint32_t v = 0; v < H; v++) {
 		double lat = grid_v_to_lat(ly, T, v + 0.5), m, nr;
 		geo_radii(fx.planet.body, lat, &m, &nr);
-		double dx = nr * cos(lat * M_PI / 180) * 2 * M_PI / W, dy = m * M_PI / H;
+		double r = nr * cos(lat * M_PI / 180), dlam = 2 * M_PI / W;
+		double dx = r * dlam, dy = m * M_PI / H;
+		/* The east stencil: ±1 texel, wider where texels are 8× narrower than tall (near
+		 * the poles): k = dy / 4dx texels, at most T and a quarter turn, over its chord. */
+		uint32_t kmax = W / 4 < T ? (W / 4 > 0 ? W / 4 : 1) : T, k = 1;
+		if (dy >= 8 * dx)
+			k = floor(dy / (4 * dx)) < kmax ? (uint32_t)floor(dy / (4 * dx)) : kmax;
+		double len = k == 1 ? 2 * dx : 2 * r * sin(k * dlam);
 		for (uint32_t u = 0; u < W; u++) {
 			uint32_t opp = (u + W / 2) % W; /* across a pole */
-			double hw = h[(size_t)v * W + (u + W - 1) % W], he = h[(size_t)v * W + (u + 1) % W];
+			double hw = h[(size_t)v * W + (u + W - k) % W], he = h[(size_t)v * W + (u + k) % W];
 			double hn = v > 0 ? h[(size_t)(v - 1) * W + u] : h[opp];
 			double hs = v + 1 < H ? h[(size_t)(v + 1) * W + u] : h[(size_t)(H - 1) * W + opp];
-			double gx = 1000 * (he - hw) / (2 * dx), gy = 1000 * (hn - hs) / (2 * dy);
+			double gx = 1000 * (he - hw) / len, gy = 1000 * (hn - hs) / (2 * dy);
 			double l = sqrt(1 + gx * gx + gy * gy);
 			ref[2 * ((size_t)v * W + u)] = enc(-gx / l);
 			ref[2 * ((size_t)v * W + u) + 1] = enc(-gy / l);

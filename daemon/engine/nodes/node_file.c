@@ -31,16 +31,36 @@
  * same. generate() reads the source region the tile needs (plus the bilinear border; for a
  * 360° image the columns wrap, read as two pieces when the tile straddles the image's edge)
  * once through img_cache_read, then runs a horizontal pass over those rows and a vertical
- * pass into the tile. Filtering (seed 000 §4.3): with r = texel spacing / pixel spacing, the
- * read uses MIP level m = floor(log2(min(rx, ry))) (the file's own levels or OIIO's automip,
- * each a 2×2 box of the one above), where the source is at most 2× finer than the output and
- * bilinear suffices. On anisotropic levels (lx < ly + 1, wider texels in longitude) the
- * wider axis is still up to 8× finer at level m: there n = ceil(r) bilinear sub-taps spread
- * across the texel average it (a box of bilinears), and m rises until n ≤ 8. When the tile
- * maps 1:1 onto the pixels of a level, the read is a plain copy (straight into the tile for
- * float heights with scale 1, offset 0). Known limit of the floor() choice: for 1 < r < 2,
- * content at the source's Nyquist frequency still aliases (a 0/250 1-pixel checkerboard at
- * r = 1.5 gives texels of about 94..156 instead of 125); from r = 2 on it averages out.
+ * pass into the tile. Filtering (seed 000 §4.3): with r = texel spacing / pixel spacing per
+ * axis, the read uses MIP level m = floor(log2(min(rx, ry))) (the file's own levels or OIIO's
+ * automip, each a 2×2 box of the one above): there the narrower axis is at most 2× finer than
+ * the output and bilinear suffices. The wider axis (anisotropic levels, lx < ly + 1: texels
+ * up to 2^20 times wider in longitude than tall) is averaged by n = ceil(r) bilinear sub-taps
+ * spread across the texel (a box of bilinears) at that same level; m rises only when n would
+ * pass FILE_MAX_SUBTAPS or the region FILE_REGION_BUDGET pixels.
+ * Why the narrower axis decides: a MIP level is a box in both axes at once, so reading a
+ * coarser one for the wide axis blurs the narrow one. That was the poles' bug: a polar tile
+ * at (lx 0, ly 19) is 38 m of latitude but 1.4° of longitude per texel; choosing the level
+ * until 8 taps covered the 17 ETOPO5 columns a texel spans read level 2, whose rows are
+ * 0.33° (37 km) tall, so the texels next to the pole averaged rows 9..37 km from it and
+ * varied by 68 m (230 m at the north pole) with longitude, against 0.003 m in the source
+ * over those 38 m. Measuring in metres instead would not help: along a parallel a texel and
+ * a source pixel both shrink by cos(latitude), so r in x is the same ratio on the ground as
+ * in degrees; what differs near the pole is only that texels are very anisotropic, and an
+ * anisotropic footprint needs an anisotropic filter (rows kept at the narrow axis's level,
+ * many cheap taps across: the region is then few rows high). When the tile maps 1:1 onto
+ * the pixels of a level, the read is a plain copy (straight into the tile for float heights
+ * with scale 1, offset 0). Known limit of the floor() choice: for 1 < r < 2, content at the
+ * source's Nyquist frequency still aliases (a 0/250 1-pixel checkerboard at r = 1.5 gives
+ * texels of about 94..156 instead of 125); from r = 2 on it averages out.
+ *
+ * The poles. A global image's rows are areas (pixel-is-point grids like ETOPO5 aside, whose
+ * edge rows are centred on the poles): the edge row's pixels are wedges meeting at the pole,
+ * which therefore holds the row's mean. Between the last row centre short of a pole and the
+ * pole (a polar cap) samples blend from that row to a plane through the pole (its first
+ * harmonic) and the mean (pole_taps; the rows are read whole at the level in use). So the
+ * texels nearest a pole do not depend on longitude, at every level, the viewer's pole (one
+ * point, reached from every meridian) is one value, and no crease converges on it.
  *
  * Missing data. A texel whose centre is outside the bounds gets the fill. Inside, nodata
  * (and NaN) samples get weight 0 and the others are renormalised: the texel keeps the
@@ -62,8 +82,9 @@
 #include "common/xalloc.h"
 
 #define FILE_MAX_LEVELS 32
-#define FILE_MAX_SUBTAPS 8
-#define FILE_MAX_REGION ((size_t)1 << 26) /* source pixels one tile may read */
+#define FILE_MAX_SUBTAPS 256
+#define FILE_REGION_BUDGET ((size_t)1 << 22) /* source pixels a tile reads, unless... */
+#define FILE_MAX_REGION ((size_t)1 << 26)    /* ...its level is the coarsest: then this */
 
 enum file_kind { KIND_HEIGHT, KIND_COLOR };
 
@@ -309,15 +330,25 @@ static int file_create(struct node *nd, struct node_parse *p)
 
 /* ---- generation ---- */
 
+/* Tap indices a latitude table holds for the virtual rows of the polar caps until axis_build
+ * rebases them to the rows just after the buffer's: bh + (index - TAP_VIRTUAL). */
+#define TAP_VIRTUAL INT32_MIN
+enum { VROW_MEAN_N, VROW_MEAN_S, VROW_HARM_N, VROW_HARM_S, VROWS };
+
 /* The per-axis resampling table: output texel i reads taps idx[i·K + k] (relative to the
- * buffer's first source pixel `lo`) with weights w[i·K + k], K = 2n. */
+ * buffer's first source pixel `lo`) with weights w[i·K + k], K = taps·n. */
 struct axis {
-	int n, K;
+	int n, K, taps;
 	int32_t *idx;
 	float *w;
 	uint8_t *in; /* texel centre inside the bounds */
 	int64_t lo, hi;	 /* source pixels the buffer holds (unwrapped when wrapping) */
 	bool any, all; /* some / every texel inside */
+	/* Latitude axis of a global image, the polar caps (pole_taps): in sample coordinates
+	 * (row i's centre at i) the last row centre short of each pole and the pole (NAN: no
+	 * cap in this tile's reach: clamp); whether some tap reads a cap's virtual rows. */
+	double cap_n, cap_s, pole_n, pole_s;
+	bool use_n, use_s;
 };
 
 static int subtaps(double r)
@@ -328,10 +359,66 @@ static int subtaps(double r)
 	return n > FILE_MAX_SUBTAPS ? FILE_MAX_SUBTAPS : (int)n;
 }
 
+/* Between the last row centre short of a pole (the cap row, at a distance ρ1 from the pole)
+ * and the pole itself. The rows of a global plate-carrée image are areas: the edge row's
+ * pixels are wedges that all meet at the pole, which has no longitude — its value P is the
+ * edge row's mean (for a pixel-is-point grid like ETOPO5, whose edge row is centred on the
+ * pole, the same). Clamping to the edge row instead made the texels next to the pole copy the
+ * row's longitude variation into a point (radial streaks in colour, a pole of many heights);
+ * a linear blend towards P (h = P + t·(R(λ) - P), t = ρ/ρ1) is a cone whose east slope
+ * R'(λ)/ρ1 keeps every kink of the cap row R between its columns down to the pole: creases
+ * converging on it. So the cap is P + t·R1(λ) + t²·(R(λ) - P - R1(λ)) with R1 the first
+ * harmonic of R (the plane through the pole that best fits the row): a plane at the pole
+ * (one slope, no creases: the kinks fade as t²), R exactly at the cap row, and exactly the
+ * plane where R is one. In taps: the cap row with t², the mean row with 1 - t², the harmonic
+ * row with t - t². Returns whether s is in a cap (taps filled). */
+static bool pole_taps(struct axis *a, double s, int64_t t[3], double w[3])
+{
+	double u;
+	if (!isnan(a->cap_s) && s > a->cap_s) {
+		u = (s - a->cap_s) / (a->pole_s - a->cap_s);
+		t[0] = (int64_t)a->cap_s;
+		t[1] = TAP_VIRTUAL + VROW_MEAN_S, t[2] = TAP_VIRTUAL + VROW_HARM_S;
+		a->use_s = true;
+	} else if (!isnan(a->cap_n) && s < a->cap_n) {
+		u = (a->cap_n - s) / (a->cap_n - a->pole_n);
+		t[0] = (int64_t)a->cap_n;
+		t[1] = TAP_VIRTUAL + VROW_MEAN_N, t[2] = TAP_VIRTUAL + VROW_HARM_N;
+		a->use_n = true;
+	} else {
+		return false;
+	}
+	double r = 1 - (u < 1 ? u : 1); /* ρ/ρ1 */
+	w[0] = r * r, w[1] = 1 - r * r, w[2] = r - r * r;
+	return true;
+}
+
+/* The taps (a->taps of them: bilinear, and a third of weight 0 where caps are in reach) of a
+ * sample at s (pixel i's centre at s = i). */
+static void sample_taps(struct axis *a, double s, int size, bool wrap, int64_t t[3], double w[3])
+{
+	if (a->taps == 3 && pole_taps(a, s, t, w))
+		return;
+	double fl = floor(s), fr = s - fl;
+	if (fr < 1e-6) {
+		fr = 0;
+	} else if (fr > 1 - 1e-6) {
+		fl += 1;
+		fr = 0;
+	}
+	int64_t i0 = (int64_t)fl, i1 = fr > 0 ? i0 + 1 : i0;
+	if (!wrap) {
+		i0 = i0 < 0 ? 0 : i0 >= size ? size - 1 : i0;
+		i1 = i1 < 0 ? 0 : i1 >= size ? size - 1 : i1;
+	}
+	t[0] = i0, t[1] = i1, t[2] = i0;
+	w[0] = 1 - fr, w[1] = fr, w[2] = 0;
+}
+
 /* c[i]: texel i's centre in source pixel units (edges at integers), NAN when outside. */
 static void axis_build(struct axis *a, const double *c, uint32_t T, double r, int size, bool wrap)
 {
-	int n = a->n, K = a->K;
+	int n = a->n, K = a->K, nt = a->taps;
 	int64_t lo = INT64_MAX, hi = INT64_MIN;
 	a->any = false;
 	a->all = true;
@@ -344,25 +431,17 @@ static void axis_build(struct axis *a, const double *c, uint32_t T, double r, in
 			continue;
 		}
 		for (int t = 0; t < n; t++) {
-			double s = c[i] + ((t + 0.5) / n - 0.5) * r - 0.5;
-			double fl = floor(s), fr = s - fl;
-			if (fr < 1e-6) {
-				fr = 0;
-			} else if (fr > 1 - 1e-6) {
-				fl += 1;
-				fr = 0;
+			int64_t tp[3];
+			double wt[3];
+			sample_taps(a, c[i] + ((t + 0.5) / n - 0.5) * r - 0.5, size, wrap, tp, wt);
+			for (int q = 0; q < nt; q++) {
+				ix[nt * t + q] = (int32_t)tp[q];
+				w[nt * t + q] = (float)(wt[q] / n);
+				if (tp[q] >= TAP_VIRTUAL && tp[q] < TAP_VIRTUAL + VROWS)
+					continue;
+				lo = tp[q] < lo ? tp[q] : lo;
+				hi = tp[q] + 1 > hi ? tp[q] + 1 : hi;
 			}
-			int64_t i0 = (int64_t)fl, i1 = fr > 0 ? i0 + 1 : i0;
-			if (!wrap) {
-				i0 = i0 < 0 ? 0 : i0 >= size ? size - 1 : i0;
-				i1 = i1 < 0 ? 0 : i1 >= size ? size - 1 : i1;
-			}
-			ix[2 * t] = (int32_t)i0;
-			ix[2 * t + 1] = (int32_t)i1;
-			w[2 * t] = (float)((1 - fr) / n);
-			w[2 * t + 1] = (float)(fr / n);
-			lo = i0 < lo ? i0 : lo;
-			hi = i1 + 1 > hi ? i1 + 1 : hi;
 		}
 		a->any = true;
 	}
@@ -371,11 +450,14 @@ static void axis_build(struct axis *a, const double *c, uint32_t T, double r, in
 	for (uint32_t i = 0; i < T; i++) {
 		for (int k = 0; k < K; k++) {
 			size_t q = (size_t)i * K + k;
-			if (a->in[i]) {
-				a->idx[q] = (int32_t)(a->idx[q] - lo);
-			} else {
+			int32_t v = a->idx[q];
+			if (!a->in[i]) {
 				a->idx[q] = 0;
 				a->w[q] = 0;
+			} else if (v >= TAP_VIRTUAL && v < TAP_VIRTUAL + VROWS) {
+				a->idx[q] = (int32_t)(hi - lo) + (v - TAP_VIRTUAL);
+			} else {
+				a->idx[q] = (int32_t)(v - lo);
 			}
 		}
 	}
@@ -414,15 +496,37 @@ static bool aligned_axis(double c0, double r, uint32_t T, int size, bool wrap, i
 	return true;
 }
 
-static int pick_level(const struct file_impl *f, double dlon, double dlat)
+/* The source region (columns × rows of level m) a tile with texel spacings rx × ry level-m
+ * pixels may read: (T-1)·r + r + 2 taps per axis (see axis_build), within the level. */
+static void region_bounds(const struct file_impl *f, int m, double rx, double ry, uint32_t T,
+			  size_t *bw, size_t *bh)
+{
+	*bw = (size_t)ceil(T * rx) + 4;
+	*bh = (size_t)ceil(T * ry) + 4;
+	if (!f->wrap && *bw > (size_t)f->lw[m])
+		*bw = (size_t)f->lw[m];
+	if (*bh > (size_t)f->lh[m])
+		*bh = (size_t)f->lh[m];
+}
+
+/* The MIP level a tile with texels dlon × dlat degrees reads: from the narrower axis (see
+ * "Filtering" above), coarser only when the wider one would need more than FILE_MAX_SUBTAPS
+ * taps or the region would exceed FILE_REGION_BUDGET pixels. */
+static int pick_level(const struct file_impl *f, double dlon, double dlat, uint32_t T)
 {
 	double rx = dlon * f->lw[0] / (f->east - f->west);
 	double ry = dlat * f->lh[0] / (f->north - f->south);
-	double rmin = rx < ry ? rx : ry, rmax = rx > ry ? rx : ry;
+	double rmin = rx < ry ? rx : ry;
 	int m = rmin > 1 ? (int)floor(log2(rmin) + 1e-9) : 0;
-	while (m + 1 < f->nlev && rmax / ldexp(1, m) > FILE_MAX_SUBTAPS)
-		m++;
-	return m < f->nlev ? m : f->nlev - 1;
+	m = m < f->nlev ? m : f->nlev - 1;
+	for (; m + 1 < f->nlev; m++) {
+		double rxm = rx * f->lw[m] / f->lw[0], rym = ry * f->lh[m] / f->lh[0];
+		size_t bw, bh;
+		region_bounds(f, m, rxm, rym, T, &bw, &bh);
+		if ((rxm > rym ? rxm : rym) <= FILE_MAX_SUBTAPS && bw * bh <= FILE_REGION_BUDGET)
+			break;
+	}
+	return m;
 }
 
 /* Reads source rows [ay->lo, ay->hi) × columns [ax->lo, ax->hi) (wrapping x modulo the
@@ -681,215 +785,418 @@ static size_t align64(size_t n)
 	return (n + 63) & ~(size_t)63;
 }
 
-static int file_generate(const struct node *nd, struct gen_ctx *g, const struct tile_key *k,
-			 struct tile *const *in, int nin, struct tile *out)
-{
-	(void)in;
-	(void)nin;
-	const struct file_impl *f = nd->impl;
-	uint32_t T = out->size;
+/* One tile's resampling: the level and tables, then the buffers (one gen_scratch block). */
+struct file_gen {
+	const struct file_impl *f;
+	uint32_t T;
+	int C;		 /* channels read */
+	size_t tsz;	 /* bytes per raw sample */
 	struct geo_rect r;
-	grid_tile_rect(k, &r);
-	double dlon = (r.east - r.west) / T, dlat = (r.north - r.south) / T;
-	int m = pick_level(f, dlon, dlat);
-	int wm = f->lw[m], hm = f->lh[m];
+	double dlon, dlat; /* texel size, degrees */
+	int m, wm, hm;	 /* the MIP level read and its size */
+	double rx, ry;	 /* texel spacing in level-m pixels */
+	struct axis ax, ay;
+	size_t bwmax, bhmax; /* bounds of the region read */
+	bool maskable;	     /* the source can have missing samples */
+	double *cx, *cy;     /* texel centres, level-m pixel units */
+	void *raw;	     /* the region as read */
+	float *src, *mask;   /* ... as float (sv: src, or raw itself for float files) */
+	float *tmp, *tmpm;   /* horizontal pass: bh rows + VROWS virtual rows of T texels */
+	float *row;	     /* one output row (and its weights) */
+	void *praw;	     /* one whole level-m row, for a pole's mean */
+	float *pv, *pm;
+	/* after gen_read */
+	float *sv;
+	size_t bw, bh;
+	bool missing; /* some sample read is missing: masks are live */
+};
+
+/* The polar caps in this tile's reach (pole_taps): sample coordinates of each pole and of
+ * the last row centre short of it (the edge row for area rows, the one before it when the
+ * edge row is centred on the pole). With a cap, latitude taps come in threes. */
+static void plan_caps(struct file_gen *q, double spany)
+{
+	const struct file_impl *f = q->f;
+	struct axis *a = &q->ay;
+	double k = q->hm / spany;
+	double ps = (f->north + 90) * k - 0.5, pn = (f->north - 90) * k - 0.5;
+	/* The samples the tile's texels take lie between its edges. */
+	double smin = (f->north - q->r.north) * k - 0.5, smax = (f->north - q->r.south) * k - 0.5;
+	double cs = ceil(ps - 1e-6) - 1, cn = floor(pn + 1e-6) + 1;
+	if (f->south <= -90 && cs >= 0 && cs <= q->hm - 1 && smax > cs) {
+		a->cap_s = cs;
+		a->pole_s = ps;
+	}
+	if (f->north >= 90 && cn >= 0 && cn <= q->hm - 1 && smin < cn) {
+		a->cap_n = cn;
+		a->pole_n = pn;
+	}
+	if (!isnan(a->cap_s) || !isnan(a->cap_n))
+		a->taps = 3;
+}
+
+/* The level, the per-axis tap counts and the region bounds. Returns 0 or -EFBIG. */
+static int gen_plan(struct file_gen *q, const struct file_impl *f, const struct tile_key *k,
+		    uint32_t T)
+{
+	q->f = f;
+	q->T = T;
+	q->C = f->nch;
+	q->tsz = img_type_bytes(f->rtype);
+	grid_tile_rect(k, &q->r);
+	q->dlon = (q->r.east - q->r.west) / T;
+	q->dlat = (q->r.north - q->r.south) / T;
+	q->m = pick_level(f, q->dlon, q->dlat, T);
+	q->wm = f->lw[q->m];
+	q->hm = f->lh[q->m];
 	double spanx = f->east - f->west, spany = f->north - f->south;
-	double rx = dlon * wm / spanx, ry = dlat * hm / spany;
-	struct axis ax = { .n = subtaps(rx) }, ay = { .n = subtaps(ry) };
-	ax.K = 2 * ax.n;
-	ay.K = 2 * ay.n;
-
-	/* Upper bounds of the source region (see axis_build: span (T-1)·r + r + 2 taps). */
-	size_t bwmax = (size_t)ceil(T * rx) + 4, bhmax = (size_t)ceil(T * ry) + 4;
-	if (!f->wrap && bwmax > (size_t)wm)
-		bwmax = (size_t)wm;
-	if (bhmax > (size_t)hm)
-		bhmax = (size_t)hm;
-	if (bwmax * bhmax > FILE_MAX_REGION)
+	q->rx = q->dlon * q->wm / spanx;
+	q->ry = q->dlat * q->hm / spany;
+	q->ax = (struct axis){ .n = subtaps(q->rx), .taps = 2, .cap_n = NAN, .cap_s = NAN };
+	q->ay = (struct axis){ .n = subtaps(q->ry), .taps = 2, .cap_n = NAN, .cap_s = NAN };
+	if (spanx == 360) /* exact: parse_bounds snaps near-360 spans */
+		plan_caps(q, spany);
+	q->ax.K = q->ax.taps * q->ax.n;
+	q->ay.K = q->ay.taps * q->ay.n;
+	region_bounds(f, q->m, q->rx, q->ry, T, &q->bwmax, &q->bhmax);
+	if (q->bwmax * q->bhmax > FILE_MAX_REGION)
 		return -EFBIG; /* only a file with a truncated MIP pyramid, at a very coarse level */
-	int C = f->nch;
-	bool maskable = f->has_nodata || f->rtype == IMG_F32;
-	size_t tsz = img_type_bytes(f->rtype);
-	size_t s_coord = align64(2 * (size_t)T * sizeof(double));
-	size_t s_tabx = align64((size_t)T * ax.K * 8), s_taby = align64((size_t)T * ay.K * 8);
-	size_t s_in = align64(2 * (size_t)T);
-	size_t s_raw = align64(bwmax * bhmax * C * tsz);
-	size_t s_src = align64(bwmax * bhmax * C * sizeof(float));
-	size_t s_mask = maskable ? align64(bwmax * bhmax * sizeof(float)) : 0;
-	size_t s_tmp = align64(bhmax * T * C * sizeof(float));
-	size_t s_tmpm = maskable ? align64(bhmax * T * sizeof(float)) : 0;
-	size_t s_row = align64((size_t)T * (C + 1) * sizeof(float));
-	char *sp = gen_scratch(g, s_coord + s_tabx + s_taby + s_in + s_raw + s_src + s_mask +
-					  s_tmp + s_tmpm + s_row);
-	double *cx = (double *)(void *)sp, *cy = cx + T;
-	sp += s_coord;
-	ax.idx = (int32_t *)(void *)sp;
-	ax.w = (float *)(void *)(sp + (size_t)T * ax.K * 4);
-	sp += s_tabx;
-	ay.idx = (int32_t *)(void *)sp;
-	ay.w = (float *)(void *)(sp + (size_t)T * ay.K * 4);
-	sp += s_taby;
-	ax.in = (uint8_t *)sp;
-	ay.in = ax.in + T;
-	sp += s_in;
-	void *raw = sp;
-	sp += s_raw;
-	float *src = (float *)(void *)sp;
-	sp += s_src;
-	float *mask = maskable ? (float *)(void *)sp : NULL;
-	sp += s_mask;
-	float *tmp = (float *)(void *)sp;
-	sp += s_tmp;
-	float *tmpm = maskable ? (float *)(void *)sp : NULL;
-	sp += s_tmpm;
-	float *row = (float *)(void *)sp;
+	q->maskable = f->has_nodata || f->rtype == IMG_F32;
+	return 0;
+}
 
-	/* Texel centres in source pixel units: texel 0 first, the rest once the 1:1 test has
-	 * failed. */
-	double base = 0;
+/* Carves the buffers out of the worker's scratch. */
+static void gen_buffers(struct file_gen *q, struct gen_ctx *g)
+{
+	size_t T = q->T, C = (size_t)q->C, bwh = q->bwmax * q->bhmax, wm = (size_t)q->wm;
+	size_t rows = q->bhmax + VROWS;
+	size_t s_coord = align64(2 * T * sizeof(double));
+	size_t s_tabx = align64(T * q->ax.K * 8), s_taby = align64(T * q->ay.K * 8);
+	size_t s_in = align64(2 * T);
+	size_t s_raw = align64(bwh * C * q->tsz);
+	size_t s_src = align64(bwh * C * sizeof(float));
+	size_t s_mask = q->maskable ? align64(bwh * sizeof(float)) : 0;
+	size_t s_tmp = align64(rows * T * C * sizeof(float));
+	size_t s_tmpm = q->maskable ? align64(rows * T * sizeof(float)) : 0;
+	size_t s_row = align64(T * (C + 1) * sizeof(float));
+	size_t s_praw = align64(wm * C * q->tsz), s_pv = align64(wm * C * sizeof(float));
+	size_t s_pm = q->maskable ? align64(wm * sizeof(float)) : 0;
+	char *sp = gen_scratch(g, s_coord + s_tabx + s_taby + s_in + s_raw + s_src + s_mask +
+					  s_tmp + s_tmpm + s_row + s_praw + s_pv + s_pm);
+	q->cx = (double *)(void *)sp;
+	q->cy = q->cx + T;
+	sp += s_coord;
+	q->ax.idx = (int32_t *)(void *)sp;
+	q->ax.w = (float *)(void *)(sp + T * q->ax.K * 4);
+	sp += s_tabx;
+	q->ay.idx = (int32_t *)(void *)sp;
+	q->ay.w = (float *)(void *)(sp + T * q->ay.K * 4);
+	sp += s_taby;
+	q->ax.in = (uint8_t *)sp;
+	q->ay.in = q->ax.in + T;
+	sp += s_in;
+	q->raw = sp;
+	sp += s_raw;
+	q->src = (float *)(void *)sp;
+	sp += s_src;
+	q->mask = q->maskable ? (float *)(void *)sp : NULL;
+	sp += s_mask;
+	q->tmp = (float *)(void *)sp;
+	sp += s_tmp;
+	q->tmpm = q->maskable ? (float *)(void *)sp : NULL;
+	sp += s_tmpm;
+	q->row = (float *)(void *)sp;
+	sp += s_row;
+	q->praw = sp;
+	sp += s_praw;
+	q->pv = (float *)(void *)sp;
+	sp += s_pv;
+	q->pm = q->maskable ? (float *)(void *)sp : NULL;
+}
+
+/* Texel centres in level-m pixel units: rows all, columns texel 0's only (the rest once the
+ * 1:1 test has failed). Returns texel column coordinates' base for col_coord. */
+static double gen_coords(struct file_gen *q)
+{
+	const struct file_impl *f = q->f;
+	double base = 0, spany = f->north - f->south;
 	if (f->wrap) {
-		base = fmod(r.west - f->west, 360.0);
+		base = fmod(q->r.west - f->west, 360.0);
 		if (base < 0)
 			base += 360.0;
 	}
-	cx[0] = col_coord(f, &r, dlon, wm, base, 0);
-	for (uint32_t j = 0; j < T; j++) {
-		double lat = r.north - (j + 0.5) * dlat;
-		cy[j] = lat >= f->south && lat <= f->north ? (f->north - lat) * (hm / spany) : NAN;
+	q->cx[0] = col_coord(f, &q->r, q->dlon, q->wm, base, 0);
+	for (uint32_t j = 0; j < q->T; j++) {
+		double lat = q->r.north - (j + 0.5) * q->dlat;
+		q->cy[j] = lat >= f->south && lat <= f->north ? (f->north - lat) * (q->hm / spany)
+							      : NAN;
 	}
+	return base;
+}
 
-	if (aligned_axis(cx[0], rx, T, wm, f->wrap, &ax.lo) &&
-	    aligned_axis(cy[0], ry, T, hm, false, &ay.lo)) {
-		/* 1:1 on a level: one read, no tables, no filtering; straight into the tile
-		 * when there is nothing to convert. */
-		ax.hi = ax.lo + T;
-		ay.hi = ay.lo + T;
-		bool direct = (f->kind == KIND_HEIGHT && f->rtype == IMG_F32 && !f->has_nodata) ||
-			      (f->kind == KIND_COLOR && C == 4);
-		void *dst = direct ? (void *)out->data : raw;
-		if (read_region(f, m, &ax, &ay, dst, (size_t)T * C * tsz))
-			return -EIO;
-		if (!direct || f->kind == KIND_HEIGHT)
-			copy_aligned(f, dst, out);
-		return 0;
-	}
-	for (uint32_t i = 1; i < T; i++)
-		cx[i] = col_coord(f, &r, dlon, wm, base, i);
-	axis_build(&ax, cx, T, rx, wm, f->wrap);
-	axis_build(&ay, cy, T, ry, hm, false);
-	if (!ax.any || !ay.any) {
-		fill_tile(f, out);
-		return 0;
-	}
-	size_t bw = (size_t)(ax.hi - ax.lo), bh = (size_t)(ay.hi - ay.lo);
-	if (bw > bwmax || bh > bhmax)
-		return -EFAULT; /* a bound above is wrong: never read past the scratch */
+/* Whether the tile maps 1:1 onto the pixels of level m; then reads it so: one read, no
+ * tables, no filtering, straight into the tile when there is nothing to convert. *rc: 0 or
+ * -EIO. */
+static bool gen_aligned(struct file_gen *q, struct tile *out, int *rc)
+{
+	const struct file_impl *f = q->f;
+	uint32_t T = q->T;
+	struct axis *ax = &q->ax, *ay = &q->ay;
+	if (!aligned_axis(q->cx[0], q->rx, T, q->wm, f->wrap, &ax->lo) ||
+	    !aligned_axis(q->cy[0], q->ry, T, q->hm, false, &ay->lo))
+		return false;
+	ax->hi = ax->lo + T;
+	ay->hi = ay->lo + T;
+	bool direct = (f->kind == KIND_HEIGHT && f->rtype == IMG_F32 && !f->has_nodata) ||
+		      (f->kind == KIND_COLOR && q->C == 4);
+	void *dst = direct ? (void *)out->data : q->raw;
+	*rc = 0;
+	if (read_region(f, q->m, ax, ay, dst, (size_t)T * q->C * q->tsz))
+		*rc = -EIO;
+	else if (!direct || f->kind == KIND_HEIGHT)
+		copy_aligned(f, dst, out);
+	return true;
+}
 
-	if (read_region(f, m, &ax, &ay, raw, bw * C * tsz))
+/* Reads level m's row y whole as float (q->pv; masks in q->pm). Returns whether a sample
+ * was missing, or -EIO. */
+static int read_row(struct file_gen *q, int64_t y, float **v)
+{
+	const struct file_impl *f = q->f;
+	struct axis cols = { .lo = 0, .hi = q->wm }, rows = { .lo = y, .hi = y + 1 };
+	size_t wm = (size_t)q->wm;
+	if (read_region(f, q->m, &cols, &rows, q->praw, 0))
 		return -EIO;
-	size_t nsrc = bw * bh * C;
-	float *sv = f->rtype == IMG_F32 ? (float *)raw : src;
-	bool missing = false;
-	if (f->kind == KIND_HEIGHT) {
-		bool check = f->has_nodata || has_nan(f->rtype == IMG_F32 ? (float *)raw : NULL,
-						       f->rtype == IMG_F32 ? nsrc : 0);
-		missing = to_float(f, raw, sv, check ? mask : NULL, nsrc);
-	} else {
-		to_float(f, raw, sv, NULL, nsrc);
+	*v = f->rtype == IMG_F32 ? (float *)q->praw : q->pv;
+	if (f->kind != KIND_HEIGHT) {
+		to_float(f, q->praw, *v, NULL, wm * q->C);
+		return 0;
 	}
+	return to_float(f, q->praw, *v, q->pm, wm);
+}
 
-	/* Horizontal pass: every source row → T texel columns. */
-	int Kx = ax.K, Ky = ay.K;
-	size_t y0 = 0;
-	if (C == 1 && Kx == 2 && !missing) {
-		hpass_bilinear(sv, bw, bh, ax.idx, ax.w, T, tmp);
+/* A cap's virtual rows (pole_taps) in the horizontal pass's rows `mean` and `harm` (T texels
+ * each; with masks, like every row of a pass with masks: valid sum / width, and the valid
+ * share in meanm, harmm): the edge row's mean, and the first harmonic of the cap row at each
+ * texel's longitude (none where the cap row misses samples). Returns whether a sample was
+ * missing, or -EIO. */
+static int cap_rows(struct file_gen *q, int64_t edge, int64_t cap, float *mean, float *meanm,
+		    float *harm, float *harmm)
+{
+	const struct file_impl *f = q->f;
+	size_t wm = (size_t)q->wm, C = (size_t)q->C;
+	float *v;
+	int missing = read_row(q, edge, &v);
+	if (missing < 0)
+		return missing;
+	double sum[4] = { 0, 0, 0, 0 }, valid = 0;
+	for (size_t i = 0; i < wm; i++) {
+		for (size_t c = 0; c < C; c++)
+			sum[c] += v[i * C + c];
+		valid += missing ? q->pm[i] : 1;
+	}
+	for (uint32_t i = 0; i < q->T; i++)
+		for (size_t c = 0; c < C; c++)
+			mean[i * C + c] = (float)(sum[c] / wm);
+	if (cap != edge) {
+		int rc = read_row(q, cap, &v);
+		if (rc < 0)
+			return rc;
+		missing |= rc;
+	}
+	double ca[4] = { 0, 0, 0, 0 }, sa[4] = { 0, 0, 0, 0 };
+	for (size_t i = 0; i < wm && !missing; i++) {
+		double lam = (f->west + (i + 0.5) * 360.0 / wm) * (M_PI / 180);
+		double cl = cos(lam), sl = sin(lam);
+		for (size_t c = 0; c < C; c++)
+			ca[c] += v[i * C + c] * cl, sa[c] += v[i * C + c] * sl;
+	}
+	for (uint32_t i = 0; i < q->T; i++) {
+		double lam = (q->r.west + (i + 0.5) * q->dlon) * (M_PI / 180);
+		double cl = cos(lam), sl = sin(lam);
+		for (size_t c = 0; c < C; c++)
+			harm[i * C + c] = (float)(2 * (ca[c] * cl + sa[c] * sl) / wm);
+	}
+	if (meanm)
+		for (uint32_t i = 0; i < q->T; i++)
+			meanm[i] = (float)(valid / wm), harmm[i] = 0;
+	return missing;
+}
+
+/* Reads the region the tables reach (and the pole rows they blend into) as float samples;
+ * q->missing tells whether masks are live. Returns 0 or -EIO / -EFAULT. */
+static int gen_read(struct file_gen *q)
+{
+	const struct file_impl *f = q->f;
+	q->bw = (size_t)(q->ax.hi - q->ax.lo);
+	q->bh = (size_t)(q->ay.hi - q->ay.lo);
+	if (q->bw > q->bwmax || q->bh > q->bhmax)
+		return -EFAULT; /* a bound above is wrong: never read past the scratch */
+	if (read_region(f, q->m, &q->ax, &q->ay, q->raw, q->bw * q->C * q->tsz))
+		return -EIO;
+	size_t nsrc = q->bw * q->bh * q->C;
+	q->sv = f->rtype == IMG_F32 ? (float *)q->raw : q->src;
+	q->missing = false;
+	if (f->kind == KIND_HEIGHT) {
+		bool check = f->has_nodata || has_nan(f->rtype == IMG_F32 ? (float *)q->raw : NULL,
+						       f->rtype == IMG_F32 ? nsrc : 0);
+		q->missing = to_float(f, q->raw, q->sv, check ? q->mask : NULL, nsrc);
+	} else {
+		to_float(f, q->raw, q->sv, NULL, nsrc);
+	}
+	/* The caps' virtual rows after the region's bh rows of the horizontal pass. */
+	size_t TC = (size_t)q->T * q->C, T = q->T;
+	bool pole_missing = false;
+	for (int p = 0; p < 2; p++) {
+		if (!(p ? q->ay.use_s : q->ay.use_n))
+			continue;
+		size_t mr = q->bh + (p ? VROW_MEAN_S : VROW_MEAN_N);
+		size_t hr = q->bh + (p ? VROW_HARM_S : VROW_HARM_N);
+		int rc = cap_rows(q, p ? q->hm - 1 : 0, (int64_t)(p ? q->ay.cap_s : q->ay.cap_n),
+				  q->tmp + mr * TC, q->tmpm ? q->tmpm + mr * T : NULL,
+				  q->tmp + hr * TC, q->tmpm ? q->tmpm + hr * T : NULL);
+		if (rc < 0)
+			return rc;
+		pole_missing |= rc > 0;
+	}
+	if (pole_missing && !q->missing) {
+		for (size_t i = 0; i < q->bw * q->bh; i++)
+			q->mask[i] = 1; /* the region had nothing missing */
+		q->missing = true;
+	}
+	return 0;
+}
+
+/* Horizontal pass: every source row of the region → T texel columns (and their valid
+ * weights when masks are live). */
+static void gen_hpass(struct file_gen *q)
+{
+	uint32_t T = q->T;
+	int C = q->C, Kx = q->ax.K;
+	const int32_t *idx = q->ax.idx;
+	const float *wx = q->ax.w;
+	size_t bw = q->bw, bh = q->bh, y0 = 0;
+	if (C == 1 && Kx == 2 && !q->missing) {
+		hpass_bilinear(q->sv, bw, bh, idx, wx, T, q->tmp);
 		y0 = bh;
 	}
 	for (size_t y = y0; y < bh; y++) {
-		const float *s = sv + y * bw * C;
-		float *t = tmp + y * T * C;
-		if (C == 1 && Kx == 2) {
-			for (uint32_t i = 0; i < T; i++) {
-				const int32_t *ix = ax.idx + 2 * i;
-				const float *w = ax.w + 2 * i;
-				t[i] = w[0] * s[ix[0]] + w[1] * s[ix[1]];
-			}
-		} else {
-			for (uint32_t i = 0; i < T; i++) {
-				const int32_t *ix = ax.idx + (size_t)i * Kx;
-				const float *w = ax.w + (size_t)i * Kx;
-				for (int c = 0; c < C; c++) {
-					float acc = 0;
-					for (int q = 0; q < Kx; q++)
-						acc += w[q] * s[(size_t)ix[q] * C + c];
-					t[(size_t)i * C + c] = acc;
-				}
+		const float *s = q->sv + y * bw * C;
+		float *t = q->tmp + y * T * C;
+		for (uint32_t i = 0; i < T; i++) {
+			const int32_t *ix = idx + (size_t)i * Kx;
+			const float *w = wx + (size_t)i * Kx;
+			for (int c = 0; c < C; c++) {
+				float acc = 0;
+				for (int k = 0; k < Kx; k++)
+					acc += w[k] * s[(size_t)ix[k] * C + c];
+				t[(size_t)i * C + c] = acc;
 			}
 		}
-		if (missing) {
-			const float *ms = mask + y * bw;
-			float *tm = tmpm + y * T;
+		if (q->missing) {
+			const float *ms = q->mask + y * bw;
+			float *tm = q->tmpm + y * T;
 			for (uint32_t i = 0; i < T; i++) {
-				const int32_t *ix = ax.idx + (size_t)i * Kx;
-				const float *w = ax.w + (size_t)i * Kx;
+				const int32_t *ix = idx + (size_t)i * Kx;
+				const float *w = wx + (size_t)i * Kx;
 				float acc = 0;
-				for (int q = 0; q < Kx; q++)
-					acc += w[q] * ms[ix[q]];
+				for (int k = 0; k < Kx; k++)
+					acc += w[k] * ms[ix[k]];
 				tm[i] = acc;
 			}
 		}
 	}
+}
 
-	/* Vertical pass into the tile. */
+/* Output row j, all texels the fill. */
+static void fill_row(const struct file_impl *f, struct tile *out, uint32_t j)
+{
+	uint32_t T = out->size;
+	if (f->kind == KIND_HEIGHT) {
+		float *o = tile_f32(out) + (size_t)j * T;
+		for (uint32_t i = 0; i < T; i++)
+			o[i] = f->fill_h;
+	} else {
+		for (uint32_t i = 0; i < T; i++)
+			memcpy(out->data + ((size_t)j * T + i) * 4, f->fill_c, 4);
+	}
+}
+
+/* Vertical pass: the horizontal pass's rows → the tile; heights with missing samples
+ * renormalised by their valid weight. */
+static void gen_vpass(const struct file_gen *q, struct tile *out)
+{
+	const struct file_impl *f = q->f;
+	uint32_t T = q->T;
+	int C = q->C, Ky = q->ay.K;
 	size_t TC = (size_t)T * C;
-	float *rowm = row + TC;
+	float *row = q->row, *rowm = q->row + TC;
 	for (uint32_t j = 0; j < T; j++) {
-		if (!ay.in[j]) {
-			if (f->kind == KIND_HEIGHT) {
-				float *o = tile_f32(out) + (size_t)j * T;
-				for (uint32_t i = 0; i < T; i++)
-					o[i] = f->fill_h;
-			} else {
-				for (uint32_t i = 0; i < T; i++)
-					memcpy(out->data + ((size_t)j * T + i) * 4, f->fill_c, 4);
-			}
+		if (!q->ay.in[j]) {
+			fill_row(f, out, j);
 			continue;
 		}
-		const int32_t *iy = ay.idx + (size_t)j * Ky;
-		const float *wy = ay.w + (size_t)j * Ky;
-		const float *rows[2 * FILE_MAX_SUBTAPS];
-		for (int q = 0; q < Ky; q++)
-			rows[q] = tmp + (size_t)iy[q] * TC;
-		if (f->kind == KIND_HEIGHT && !missing) {
+		const int32_t *iy = q->ay.idx + (size_t)j * Ky;
+		const float *wy = q->ay.w + (size_t)j * Ky;
+		const float *rows[3 * FILE_MAX_SUBTAPS];
+		for (int k = 0; k < Ky; k++)
+			rows[k] = q->tmp + (size_t)iy[k] * TC;
+		if (f->kind == KIND_HEIGHT && !q->missing) {
 			/* Straight into the tile; columns outside the bounds patched after. */
 			float *o = tile_f32(out) + (size_t)j * T;
 			wsum(o, rows, wy, Ky, T, f->scale, f->offset);
-			if (!ax.all)
+			if (!q->ax.all)
 				for (uint32_t i = 0; i < T; i++)
-					o[i] = ax.in[i] ? o[i] : f->fill_h;
+					o[i] = q->ax.in[i] ? o[i] : f->fill_h;
 			continue;
 		}
 		wsum(row, rows, wy, Ky, TC, 1, 0);
 		if (f->kind == KIND_COLOR) {
 			uint8_t *o = out->data + (size_t)j * T * 4;
 			for (uint32_t i = 0; i < T; i++) {
-				if (ax.in[i])
+				if (q->ax.in[i])
 					put_rgba(o + 4 * i, row + (size_t)i * C, C);
 				else
 					memcpy(o + 4 * i, f->fill_c, 4);
 			}
 			continue;
 		}
-		/* Heights with missing samples: renormalise by the valid weight. */
-		const float *mrows[2 * FILE_MAX_SUBTAPS];
-		for (int q = 0; q < Ky; q++)
-			mrows[q] = tmpm + (size_t)iy[q] * T;
+		const float *mrows[3 * FILE_MAX_SUBTAPS];
+		for (int k = 0; k < Ky; k++)
+			mrows[k] = q->tmpm + (size_t)iy[k] * T;
 		wsum(rowm, mrows, wy, Ky, T, 1, 0);
 		float *o = tile_f32(out) + (size_t)j * T;
 		float sc = f->scale, off = f->offset, fill = f->fill_h;
 		for (uint32_t i = 0; i < T; i++)
-			o[i] = ax.in[i] && rowm[i] >= 0.5f ? row[i] / rowm[i] * sc + off : fill;
+			o[i] = q->ax.in[i] && rowm[i] >= 0.5f ? row[i] / rowm[i] * sc + off : fill;
 	}
+}
+
+static int file_generate(const struct node *nd, struct gen_ctx *g, const struct tile_key *k,
+			 struct tile *const *in, int nin, struct tile *out)
+{
+	(void)in;
+	(void)nin;
+	struct file_gen q;
+	int rc = gen_plan(&q, nd->impl, k, out->size);
+	if (rc)
+		return rc;
+	gen_buffers(&q, g);
+	double base = gen_coords(&q);
+	if (gen_aligned(&q, out, &rc))
+		return rc;
+	for (uint32_t i = 1; i < q.T; i++)
+		q.cx[i] = col_coord(q.f, &q.r, q.dlon, q.wm, base, i);
+	axis_build(&q.ax, q.cx, q.T, q.rx, q.wm, q.f->wrap);
+	axis_build(&q.ay, q.cy, q.T, q.ry, q.hm, false);
+	if (!q.ax.any || !q.ay.any) {
+		fill_tile(q.f, out);
+		return 0;
+	}
+	if ((rc = gen_read(&q)))
+		return rc;
+	gen_hpass(&q);
+	gen_vpass(&q, out);
 	return 0;
 }
 

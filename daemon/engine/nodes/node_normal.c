@@ -79,14 +79,14 @@ static int normal_deps(const struct node *n, const struct tile_key *k, struct no
 	return nb.ndeps;
 }
 
-/* One output row. row[0..T+1]: the row with its west and east neighbours at each end; up/dn:
- * the rows north and south. fx, fy: exaggeration / (2 · spacing). */
-static void normal_row_scalar(const float *restrict row, const float *restrict up,
-			      const float *restrict dn, float fx, float fy, uint8_t *restrict out,
-			      uint32_t from, uint32_t T)
+/* One output row. we[i], ea[i]: the heights west and east of texel i (the stencil's ends);
+ * up/dn: the rows north and south. fx, fy: exaggeration / (the stencil's length). */
+static void normal_row_scalar(const float *restrict we, const float *restrict ea,
+			      const float *restrict up, const float *restrict dn, float fx, float fy,
+			      uint8_t *restrict out, uint32_t from, uint32_t T)
 {
 	for (uint32_t i = from; i < T; i++) {
-		float gx = (row[i + 2] - row[i]) * fx;
+		float gx = (ea[i] - we[i]) * fx;
 		float gy = (up[i] - dn[i]) * fy;
 		gx = gx == gx ? gx : 0.0f;
 		gy = gy == gy ? gy : 0.0f;
@@ -100,8 +100,9 @@ static void normal_row_scalar(const float *restrict row, const float *restrict u
 #ifdef __SSE2__
 /* The same arithmetic, 8 texels at a time (SSE2 is baseline on x86-64; results are identical
  * to the scalar code: sqrt and division are correctly rounded in both). */
-static void normal_row(const float *restrict row, const float *restrict up,
-		       const float *restrict dn, float fx, float fy, uint8_t *restrict out, uint32_t T)
+static void normal_row(const float *restrict we, const float *restrict ea,
+		       const float *restrict up, const float *restrict dn, float fx, float fy,
+		       uint8_t *restrict out, uint32_t T)
 {
 	const __m128 vfx = _mm_set1_ps(fx), vfy = _mm_set1_ps(fy), one = _mm_set1_ps(1.0f);
 	const __m128 k = _mm_set1_ps(-127.5f), bias = _mm_set1_ps(128.0f);
@@ -110,8 +111,8 @@ static void normal_row(const float *restrict row, const float *restrict up,
 		__m128i e[2], nn[2];
 		for (int h = 0; h < 2; h++) {
 			uint32_t o = i + 4 * (uint32_t)h;
-			__m128 gx = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(row + o + 2),
-							  _mm_loadu_ps(row + o)), vfx);
+			__m128 gx = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(ea + o),
+							  _mm_loadu_ps(we + o)), vfx);
 			__m128 gy = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(up + o), _mm_loadu_ps(dn + o)),
 					       vfy);
 			gx = _mm_and_ps(gx, _mm_cmpord_ps(gx, gx));
@@ -126,13 +127,14 @@ static void normal_row(const float *restrict row, const float *restrict up,
 		nb = _mm_packus_epi16(nb, nb);
 		_mm_storeu_si128((__m128i *)(void *)(out + 2 * i), _mm_unpacklo_epi8(eb, nb));
 	}
-	normal_row_scalar(row, up, dn, fx, fy, out, i, T);
+	normal_row_scalar(we, ea, up, dn, fx, fy, out, i, T);
 }
 #else
-static void normal_row(const float *restrict row, const float *restrict up,
-		       const float *restrict dn, float fx, float fy, uint8_t *restrict out, uint32_t T)
+static void normal_row(const float *restrict we, const float *restrict ea,
+		       const float *restrict up, const float *restrict dn, float fx, float fy,
+		       uint8_t *restrict out, uint32_t T)
 {
-	normal_row_scalar(row, up, dn, fx, fy, out, 0, T);
+	normal_row_scalar(we, ea, up, dn, fx, fy, out, 0, T);
 }
 #endif
 
@@ -147,6 +149,28 @@ static const float *pole_row(const struct tile *t, uint32_t r, bool half, float 
 	memcpy(buf, src + T / 2, T / 2 * sizeof *buf);
 	memcpy(buf + T / 2, src, T / 2 * sizeof *buf);
 	return buf;
+}
+
+/* The east stencil's half-width in texels for a row whose texels are dx metres apart east
+ * and dy north, and its length in metres. Near a pole dx shrinks with cos(latitude) (at
+ * (lx 0, ly 19) the row next to the pole has texels 1.8 mm apart, 0.15 m tall) and a
+ * difference of float heights over ±1 texel is rounding noise (a float's step at 2800 m is
+ * 0.24 mm): the normals next to the pole turned every way. So where dy ≥ 8·dx the stencil
+ * widens to k = dy / (4·dx) texels (the neighbour tiles are at hand: up to T, and up to a
+ * quarter turn), and its length is the chord 2·r·sin(k·Δλ) of the parallel (radius r): the
+ * chord is parallel to the east direction at the texel, so the difference over it is the
+ * exact east slope of any plane — the stencil widens without bending. Elsewhere (k = 1) the
+ * arithmetic is the plain central difference. */
+static uint32_t east_stencil(double r, double dlam, double dy, uint32_t kmax, double *len)
+{
+	double dx = r * dlam;
+	uint32_t k = 1;
+	if (dy >= 8 * dx) {
+		double kk = floor(dy / (4 * dx));
+		k = kk < kmax ? (uint32_t)kk : kmax;
+	}
+	*len = k == 1 ? 2 * dx : 2 * r * sin(k * dlam);
+	return k;
 }
 
 static int normal_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
@@ -164,8 +188,11 @@ static int normal_generate(const struct node *n, struct gen_ctx *g, const struct
 		if (t[r]->type != PIX_HEIGHT || t[r]->size != T)
 			return -EINVAL;
 	}
-	float *rowbuf = gen_scratch(g, (size_t)(3 * T + 16) * sizeof(float));
-	float *northbuf = rowbuf + T + 8, *southbuf = northbuf + T;
+	/* The widest east stencil: T texels (the neighbour tiles' width), a quarter turn. */
+	uint64_t quarter = (uint64_t)grid_tiles_x(k->lx) * T / 4;
+	uint32_t kmax = quarter < T ? (uint32_t)(quarter > 0 ? quarter : 1) : T;
+	float *rowbuf = gen_scratch(g, (size_t)(3 * T + 2 * kmax + 16) * sizeof(float));
+	float *northbuf = rowbuf + T + 2 * kmax + 8, *southbuf = northbuf + T;
 	const float *c = tile_f32(t[NB_C]), *w = tile_f32(t[NB_W]), *e = tile_f32(t[NB_E]);
 	const bool half = k->lx == 0;
 	const float *north = nb.flip[NB_N] ? pole_row(t[NB_N], 0, half, northbuf)
@@ -177,18 +204,21 @@ static int normal_generate(const struct node *n, struct gen_ctx *g, const struct
 	const double dphi = M_PI / ((double)grid_tiles_y(k->ly) * T);
 	for (uint32_t j = 0; j < T; j++) {
 		double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5);
-		double mrad, nrad;
+		double mrad, nrad, len;
 		geo_radii(n->planet->body, lat, &mrad, &nrad);
-		double dx = nrad * cos(lat * (M_PI / 180.0)) * dlam, dy = mrad * dphi;
-		float fx = (float)(nm->exaggeration / (2 * dx));
+		double dy = mrad * dphi;
+		uint32_t ks = east_stencil(nrad * cos(lat * (M_PI / 180.0)), dlam, dy, kmax, &len);
+		float fx = (float)(nm->exaggeration / len);
 		float fy = (float)(nm->exaggeration / (2 * dy));
+		/* rowbuf: kmax texels of the west neighbour, the row, kmax of the east one. */
 		const float *crow = c + (size_t)j * T;
-		rowbuf[0] = w[(size_t)j * T + T - 1];
-		memcpy(rowbuf + 1, crow, T * sizeof *rowbuf);
-		rowbuf[T + 1] = e[(size_t)j * T];
+		memcpy(rowbuf, w + (size_t)j * T + T - kmax, kmax * sizeof *rowbuf);
+		memcpy(rowbuf + kmax, crow, T * sizeof *rowbuf);
+		memcpy(rowbuf + kmax + T, e + (size_t)j * T, kmax * sizeof *rowbuf);
 		const float *up = j > 0 ? crow - T : north;
 		const float *dn = j + 1 < T ? crow + T : south;
-		normal_row(rowbuf, up, dn, fx, fy, out->data + (size_t)j * T * 2, T);
+		normal_row(rowbuf + kmax - ks, rowbuf + kmax + ks, up, dn, fx, fy,
+			   out->data + (size_t)j * T * 2, T);
 	}
 	return 0;
 }
