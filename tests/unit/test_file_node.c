@@ -381,7 +381,7 @@ static void nodata(void **state)
 					   (px_y < 0.5 || px_y > 179.5)) {
 					/* Past an edge row's centre, the polar cap: r² of the
 					 * row, 1 - r² of its mean (100 + 179.5) and r - r² of
-					 * its first harmonic, r = ρ / ρ1 (node_file.c, pole_taps). */
+					 * its first harmonic, r = ρ / ρ1 (file_plan.c, pole_taps). */
 					double r = 180 - fabs(90 - px_y) / 0.5;
 					double ca = 0, sa = 0, lam = (px_x - 180) * M_PI / 180;
 					for (int k = 0; k < 360; k++) {

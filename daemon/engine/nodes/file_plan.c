@@ -1,0 +1,345 @@
+/* file_plan — see file_plan.h; the design (why the narrower axis picks the level, the polar
+ * caps) is in file_resample.h. Coordinates: a texel's centre in source pixel units has pixel
+ * edges at integers; the taps sample at s = coordinate - 0.5, pixel i's centre at s = i.
+ * Thread-safety: pure functions of the source and the plan, which the caller owns.
+ */
+#include "file_plan.h"
+
+#include <errno.h>
+#include <math.h>
+
+#include "engine/node.h"
+
+#define FILE_REGION_BUDGET ((size_t)1 << 22) /* source pixels a tile reads, unless... */
+#define FILE_MAX_REGION ((size_t)1 << 26)    /* ...its level is the coarsest: then this */
+
+/* Tap indices a latitude table holds for the virtual rows of the polar caps until axis_build
+ * rebases them to the rows just after the buffer's: bh + (index - TAP_VIRTUAL). */
+#define TAP_VIRTUAL INT32_MIN
+
+static int subtaps(double r)
+{
+	if (r < 2)
+		return 1;
+	double n = ceil(r - 1e-9);
+	return n > FILE_MAX_SUBTAPS ? FILE_MAX_SUBTAPS : (int)n;
+}
+
+/* Between the last row centre short of a pole (the cap row, at a distance ρ1 from the pole)
+ * and the pole itself. The rows of a global plate-carrée image are areas: the edge row's
+ * pixels are wedges that all meet at the pole, which has no longitude — its value P is the
+ * edge row's mean (for a pixel-is-point grid like ETOPO5, whose edge row is centred on the
+ * pole, the same). Clamping to the edge row instead made the texels next to the pole copy the
+ * row's longitude variation into a point (radial streaks in colour, a pole of many heights);
+ * a linear blend towards P (h = P + t·(R(λ) - P), t = ρ/ρ1) is a cone whose east slope
+ * R'(λ)/ρ1 keeps every kink of the cap row R between its columns down to the pole: creases
+ * converging on it. So the cap is P + t·R1(λ) + t²·(R(λ) - P - R1(λ)) with R1 the first
+ * harmonic of R (the plane through the pole that best fits the row): a plane at the pole
+ * (one slope, no creases: the kinks fade as t²), R exactly at the cap row, and exactly the
+ * plane where R is one. In taps: the cap row with t², the mean row with 1 - t², the harmonic
+ * row with t - t². Returns whether s is in a cap (taps filled). */
+static bool pole_taps(struct file_axis *a, double s, int64_t t[3], double w[3])
+{
+	double u;
+	if (!isnan(a->cap_s) && s > a->cap_s) {
+		u = (s - a->cap_s) / (a->pole_s - a->cap_s);
+		t[0] = (int64_t)a->cap_s;
+		t[1] = TAP_VIRTUAL + VROW_MEAN_S, t[2] = TAP_VIRTUAL + VROW_HARM_S;
+		a->use_s = true;
+	} else if (!isnan(a->cap_n) && s < a->cap_n) {
+		u = (a->cap_n - s) / (a->cap_n - a->pole_n);
+		t[0] = (int64_t)a->cap_n;
+		t[1] = TAP_VIRTUAL + VROW_MEAN_N, t[2] = TAP_VIRTUAL + VROW_HARM_N;
+		a->use_n = true;
+	} else {
+		return false;
+	}
+	double r = 1 - (u < 1 ? u : 1); /* ρ/ρ1 */
+	w[0] = r * r, w[1] = 1 - r * r, w[2] = r - r * r;
+	return true;
+}
+
+/* The taps (a->taps of them: bilinear, and a third of weight 0 where caps are in reach) of a
+ * sample at s (pixel i's centre at s = i). */
+static void sample_taps(struct file_axis *a, double s, int size, bool wrap, int64_t t[3],
+			double w[3])
+{
+	if (a->taps == 3 && pole_taps(a, s, t, w))
+		return;
+	double fl = floor(s), fr = s - fl;
+	if (fr < 1e-6) {
+		fr = 0;
+	} else if (fr > 1 - 1e-6) {
+		fl += 1;
+		fr = 0;
+	}
+	int64_t i0 = (int64_t)fl, i1 = fr > 0 ? i0 + 1 : i0;
+	if (!wrap) {
+		i0 = i0 < 0 ? 0 : i0 >= size ? size - 1 : i0;
+		i1 = i1 < 0 ? 0 : i1 >= size ? size - 1 : i1;
+	}
+	t[0] = i0, t[1] = i1, t[2] = i0;
+	w[0] = 1 - fr, w[1] = fr, w[2] = 0;
+}
+
+/* c[i]: texel i's centre in source pixel units (edges at integers), NAN when outside. */
+static void axis_build(struct file_axis *a, const double *c, uint32_t T, double r, int size,
+		       bool wrap)
+{
+	int n = a->n, K = a->K, nt = a->taps;
+	int64_t lo = INT64_MAX, hi = INT64_MIN;
+	a->any = false;
+	a->all = true;
+	for (uint32_t i = 0; i < T; i++) {
+		int32_t *ix = a->idx + (size_t)i * K;
+		float *w = a->w + (size_t)i * K;
+		a->in[i] = !isnan(c[i]);
+		if (!a->in[i]) {
+			a->all = false;
+			continue;
+		}
+		for (int t = 0; t < n; t++) {
+			int64_t tp[3];
+			double wt[3];
+			sample_taps(a, c[i] + ((t + 0.5) / n - 0.5) * r - 0.5, size, wrap, tp, wt);
+			for (int q = 0; q < nt; q++) {
+				ix[nt * t + q] = (int32_t)tp[q];
+				w[nt * t + q] = (float)(wt[q] / n);
+				if (tp[q] >= TAP_VIRTUAL && tp[q] < TAP_VIRTUAL + VROWS)
+					continue;
+				lo = tp[q] < lo ? tp[q] : lo;
+				hi = tp[q] + 1 > hi ? tp[q] + 1 : hi;
+			}
+		}
+		a->any = true;
+	}
+	if (!a->any)
+		lo = hi = 0;
+	for (uint32_t i = 0; i < T; i++) {
+		for (int k = 0; k < K; k++) {
+			size_t q = (size_t)i * K + k;
+			int32_t v = a->idx[q];
+			if (!a->in[i]) {
+				a->idx[q] = 0;
+				a->w[q] = 0;
+			} else if (v >= TAP_VIRTUAL && v < TAP_VIRTUAL + VROWS) {
+				a->idx[q] = (int32_t)(hi - lo) + (v - TAP_VIRTUAL);
+			} else {
+				a->idx[q] = (int32_t)(v - lo);
+			}
+		}
+	}
+	a->lo = lo;
+	a->hi = hi;
+}
+
+/* Texel column i's centre in pixel units of a level wm wide (NAN: outside the bounds). With
+ * wrapping, coordinates run on from texel 0's (base = its offset east of the west bound) past
+ * the image's east edge: the read wraps them (file_resample.c, read_region). */
+static double col_coord(const struct file_source *f, const struct geo_rect *r, double dlon, int wm,
+			double base, uint32_t i)
+{
+	double span = f->east - f->west;
+	if (f->wrap)
+		return (base + (i + 0.5) * dlon) * (wm / span);
+	double d = fmod(r->west + (i + 0.5) * dlon - f->west, 360.0);
+	if (d < 0)
+		d += 360.0;
+	return d <= span ? d * (wm / span) : NAN;
+}
+
+/* Whether texels map 1:1 onto source pixels along an axis: spacing exactly one pixel, texel
+ * 0's centre on a pixel centre, all T texels inside [0, size) (or wrapping). *lo = the pixel
+ * under texel 0 (unwrapped). */
+static bool aligned_axis(double c0, double r, uint32_t T, int size, bool wrap, int64_t *lo)
+{
+	if (isnan(c0) || fabs(r - 1) > 1e-9)
+		return false;
+	double s0 = c0 - 0.5, i0 = nearbyint(s0);
+	if (fabs(s0 - i0) > 1e-6)
+		return false;
+	if (!wrap && (i0 < 0 || i0 + T > size))
+		return false;
+	*lo = (int64_t)i0;
+	return true;
+}
+
+/* The source region (columns × rows of level m) a tile with texel spacings rx × ry level-m
+ * pixels may read: (T-1)·r + r + 2 taps per axis (see axis_build), within the level. */
+static void region_bounds(const struct file_source *f, int m, double rx, double ry, uint32_t T,
+			  size_t *bw, size_t *bh)
+{
+	*bw = (size_t)ceil(T * rx) + 4;
+	*bh = (size_t)ceil(T * ry) + 4;
+	if (!f->wrap && *bw > (size_t)f->lw[m])
+		*bw = (size_t)f->lw[m];
+	if (*bh > (size_t)f->lh[m])
+		*bh = (size_t)f->lh[m];
+}
+
+/* The MIP level a tile with texels dlon × dlat degrees reads: from the narrower axis (see
+ * "Filtering" in file_resample.h), coarser only when the wider one would need more than
+ * FILE_MAX_SUBTAPS taps or the region would exceed FILE_REGION_BUDGET pixels. */
+static int pick_level(const struct file_source *f, double dlon, double dlat, uint32_t T)
+{
+	double rx = dlon * f->lw[0] / (f->east - f->west);
+	double ry = dlat * f->lh[0] / (f->north - f->south);
+	double rmin = rx < ry ? rx : ry;
+	int m = rmin > 1 ? (int)floor(log2(rmin) + 1e-9) : 0;
+	m = m < f->nlev ? m : f->nlev - 1;
+	for (; m + 1 < f->nlev; m++) {
+		double rxm = rx * f->lw[m] / f->lw[0], rym = ry * f->lh[m] / f->lh[0];
+		size_t bw, bh;
+		region_bounds(f, m, rxm, rym, T, &bw, &bh);
+		if ((rxm > rym ? rxm : rym) <= FILE_MAX_SUBTAPS && bw * bh <= FILE_REGION_BUDGET)
+			break;
+	}
+	return m;
+}
+
+static size_t align64(size_t n)
+{
+	return (n + 63) & ~(size_t)63;
+}
+
+/* The polar caps in this tile's reach (pole_taps): sample coordinates of each pole and of
+ * the last row centre short of it (the edge row for area rows, the one before it when the
+ * edge row is centred on the pole). With a cap, latitude taps come in threes. */
+static void plan_caps(struct file_plan *q, double spany)
+{
+	const struct file_source *f = q->f;
+	struct file_axis *a = &q->ay;
+	double k = q->hm / spany;
+	double ps = (f->north + 90) * k - 0.5, pn = (f->north - 90) * k - 0.5;
+	/* The samples the tile's texels take lie between its edges. */
+	double smin = (f->north - q->r.north) * k - 0.5, smax = (f->north - q->r.south) * k - 0.5;
+	double cs = ceil(ps - 1e-6) - 1, cn = floor(pn + 1e-6) + 1;
+	if (f->south <= -90 && cs >= 0 && cs <= q->hm - 1 && smax > cs) {
+		a->cap_s = cs;
+		a->pole_s = ps;
+	}
+	if (f->north >= 90 && cn >= 0 && cn <= q->hm - 1 && smin < cn) {
+		a->cap_n = cn;
+		a->pole_n = pn;
+	}
+	if (!isnan(a->cap_s) || !isnan(a->cap_n))
+		a->taps = 3;
+}
+
+int file_plan_init(struct file_plan *q, const struct file_source *f, const struct tile_key *k,
+		   uint32_t T)
+{
+	q->f = f;
+	q->T = T;
+	q->C = f->nch;
+	q->tsz = img_type_bytes(f->rtype);
+	grid_tile_rect(k, &q->r);
+	q->dlon = (q->r.east - q->r.west) / T;
+	q->dlat = (q->r.north - q->r.south) / T;
+	q->m = pick_level(f, q->dlon, q->dlat, T);
+	q->wm = f->lw[q->m];
+	q->hm = f->lh[q->m];
+	double spanx = f->east - f->west, spany = f->north - f->south;
+	q->rx = q->dlon * q->wm / spanx;
+	q->ry = q->dlat * q->hm / spany;
+	q->ax = (struct file_axis){ .n = subtaps(q->rx), .taps = 2, .cap_n = NAN, .cap_s = NAN };
+	q->ay = (struct file_axis){ .n = subtaps(q->ry), .taps = 2, .cap_n = NAN, .cap_s = NAN };
+	if (spanx == 360) /* exact: parse_bounds snaps near-360 spans */
+		plan_caps(q, spany);
+	q->ax.K = q->ax.taps * q->ax.n;
+	q->ay.K = q->ay.taps * q->ay.n;
+	region_bounds(f, q->m, q->rx, q->ry, T, &q->bwmax, &q->bhmax);
+	if (q->bwmax * q->bhmax > FILE_MAX_REGION)
+		return -EFBIG; /* only a file with a truncated MIP pyramid, at a very coarse level */
+	q->maskable = f->has_nodata || f->rtype == IMG_F32;
+	return 0;
+}
+
+void file_plan_buffers(struct file_plan *q, struct gen_ctx *g)
+{
+	size_t T = q->T, C = (size_t)q->C, bwh = q->bwmax * q->bhmax, wm = (size_t)q->wm;
+	size_t rows = q->bhmax + VROWS;
+	size_t s_coord = align64(2 * T * sizeof(double));
+	size_t s_tabx = align64(T * q->ax.K * 8), s_taby = align64(T * q->ay.K * 8);
+	size_t s_in = align64(2 * T);
+	size_t s_raw = align64(bwh * C * q->tsz);
+	size_t s_src = align64(bwh * C * sizeof(float));
+	size_t s_mask = q->maskable ? align64(bwh * sizeof(float)) : 0;
+	size_t s_tmp = align64(rows * T * C * sizeof(float));
+	size_t s_tmpm = q->maskable ? align64(rows * T * sizeof(float)) : 0;
+	size_t s_row = align64(T * (C + 1) * sizeof(float));
+	size_t s_praw = align64(wm * C * q->tsz), s_pv = align64(wm * C * sizeof(float));
+	size_t s_pm = q->maskable ? align64(wm * sizeof(float)) : 0;
+	char *sp = gen_scratch(g, s_coord + s_tabx + s_taby + s_in + s_raw + s_src + s_mask +
+					  s_tmp + s_tmpm + s_row + s_praw + s_pv + s_pm);
+	q->cx = (double *)(void *)sp;
+	q->cy = q->cx + T;
+	sp += s_coord;
+	q->ax.idx = (int32_t *)(void *)sp;
+	q->ax.w = (float *)(void *)(sp + T * q->ax.K * 4);
+	sp += s_tabx;
+	q->ay.idx = (int32_t *)(void *)sp;
+	q->ay.w = (float *)(void *)(sp + T * q->ay.K * 4);
+	sp += s_taby;
+	q->ax.in = (uint8_t *)sp;
+	q->ay.in = q->ax.in + T;
+	sp += s_in;
+	q->raw = sp;
+	sp += s_raw;
+	q->src = (float *)(void *)sp;
+	sp += s_src;
+	q->mask = q->maskable ? (float *)(void *)sp : NULL;
+	sp += s_mask;
+	q->tmp = (float *)(void *)sp;
+	sp += s_tmp;
+	q->tmpm = q->maskable ? (float *)(void *)sp : NULL;
+	sp += s_tmpm;
+	q->row = (float *)(void *)sp;
+	sp += s_row;
+	q->praw = sp;
+	sp += s_praw;
+	q->pv = (float *)(void *)sp;
+	sp += s_pv;
+	q->pm = q->maskable ? (float *)(void *)sp : NULL;
+}
+
+/* Columns run from texel 0's base (col_coord). */
+void file_plan_coords(struct file_plan *q)
+{
+	const struct file_source *f = q->f;
+	double base = 0, spany = f->north - f->south;
+	if (f->wrap) {
+		base = fmod(q->r.west - f->west, 360.0);
+		if (base < 0)
+			base += 360.0;
+	}
+	q->base = base;
+	q->cx[0] = col_coord(f, &q->r, q->dlon, q->wm, base, 0);
+	for (uint32_t j = 0; j < q->T; j++) {
+		double lat = q->r.north - (j + 0.5) * q->dlat;
+		q->cy[j] = lat >= f->south && lat <= f->north ? (f->north - lat) * (q->hm / spany)
+							      : NAN;
+	}
+}
+
+bool file_plan_aligned(struct file_plan *q)
+{
+	const struct file_source *f = q->f;
+	uint32_t T = q->T;
+	struct file_axis *ax = &q->ax, *ay = &q->ay;
+	if (!aligned_axis(q->cx[0], q->rx, T, q->wm, f->wrap, &ax->lo) ||
+	    !aligned_axis(q->cy[0], q->ry, T, q->hm, false, &ay->lo))
+		return false;
+	ax->hi = ax->lo + T;
+	ay->hi = ay->lo + T;
+	return true;
+}
+
+void file_plan_tables(struct file_plan *q)
+{
+	const struct file_source *f = q->f;
+	for (uint32_t i = 1; i < q->T; i++)
+		q->cx[i] = col_coord(f, &q->r, q->dlon, q->wm, q->base, i);
+	axis_build(&q->ax, q->cx, q->T, q->rx, q->wm, f->wrap);
+	axis_build(&q->ay, q->cy, q->T, q->ry, q->hm, false);
+}
