@@ -1,5 +1,7 @@
 /* conn — see conn.h. Output is compacted only once more than 1 MiB at its head has gone out
- * and it is over half the buffer, so a steady stream does not memmove on every send. */
+ * and that is over half the buffer, so a steady stream does not memmove on every send. Input
+ * is consumed frame by frame (pbuf_consume), so a partial frame simply waits for more bytes.
+ */
 #include "conn.h"
 
 #include <errno.h>

@@ -1,5 +1,8 @@
 /* control — see control.h. CACHE_LS walks the cache under its lock (cache_foreach), so the
- * filter is cheap and the entries are copied out before any reply is encoded. */
+ * filter is cheap and the entries are copied out before any reply is encoded. A job's ready
+ * reports come back through the ready queue naming the job; one finished or cancelled since
+ * is recognised by its absence from the job list.
+ */
 #include "control.h"
 
 #include <errno.h>

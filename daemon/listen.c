@@ -1,4 +1,7 @@
-/* listen — see listen.h. */
+/* listen — see listen.h. A listener's policy flags come from the address it is actually bound
+ * to (getsockname), so "tcp:0.0.0.0:…" and systemd-passed sockets are classified alike; names
+ * are what the logs and server_listeners show.
+ */
 #include "listen.h"
 
 #include <arpa/inet.h>

@@ -1,5 +1,7 @@
 /* readyq — see readyq.h. The eventfd counter is only a wake-up: `signalled` says whether a
- * write is already pending, so a burst of pushes costs one write and one read. */
+ * write is already pending, so a burst of pushes costs one write and one read. Items are handed
+ * to the loop in the order they were pushed.
+ */
 #include "readyq.h"
 
 #include <errno.h>

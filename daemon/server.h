@@ -1,14 +1,12 @@
-/* server — clipmapd's event loop. One epoll set holds the listeners (listen.h), the sessions'
- * sockets, the ready queue's eventfd (readyq.h: tiles the scheduler's manager hands over), a
- * 250 ms housekeeping timer (prefetch progress, close deadlines, the caller's tick for the
- * systemd watchdog) and any extra fds main wants watched (its signalfd). The server owns the
- * session list, the pump list (sessions with more output to produce) and the server-wide
- * STATS; sessions reach it only through the struct session_env it lends them. The loop never
- * blocks: sockets are non-blocking, generation happens on the scheduler's threads.
+/* server — clipmapd's event loop: one epoll set over the listeners (listen.h), the sessions'
+ * sockets, the ready queue's eventfd (readyq.h), a 250 ms housekeeping timer (prefetch
+ * progress, close deadlines, main's watchdog tick) and main's watched fds (its signalfd). It
+ * owns the session list, the pump list and the server-wide STATS; sessions reach it only
+ * through the struct session_env it lends them. Nothing blocks the loop.
  *
- * Threads: everything runs on the thread that calls server_run (the ready queue takes pushes
- * from any thread). Ownership: the server borrows the conf, scheduler and cache, and owns one
- * reference to the current planet set, its listeners and its sessions.
+ * Threads: everything on the thread that calls server_run (the ready queue takes pushes from
+ * any thread). Ownership: borrows the conf, scheduler and cache; owns one reference to the
+ * current planet set, its listeners and its sessions.
  */
 #ifndef CLIPMAP_SERVER_H
 #define CLIPMAP_SERVER_H

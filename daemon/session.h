@@ -1,16 +1,12 @@
-/* session — one client connection's protocol state machine: handshake, ready, closing; the
- * messages it answers (HELLO, LIST_PLANETS, OPEN, WANT, STATS, BYE; CACHE_LS and PREFETCH go
- * to control.h), its want-set (wantset.h: one scheduler request, each WANT replacing one
- * planet's part) streamed in priority order while the bounded output (conn.h) has room.
- *
- * Everything the session needs of the server comes through one borrowed struct session_env:
- * shared objects (scheduler, cache, ready queue, encoder, planets, counters) and callbacks with
- * which the server, not the session, keeps its session list, epoll set and pump list.
+/* session — one client connection's protocol state machine (handshake, ready, closing) and
+ * the messages it answers; CACHE_LS and PREFETCH go to control.h. Its want-set (wantset.h, one
+ * scheduler request) streams in priority order while the bounded output (conn.h) has room.
+ * It sees the server only through one borrowed struct session_env: shared objects, and the
+ * callbacks with which the server keeps its session list, epoll set and pump list.
  *
  * Threads: loop thread only; the scheduler's callbacks only push onto env->ready.
- * Ownership: the server owns sessions (it frees them with session_free once detached); a
- * session owns its connection, want-set, jobs, tile references and planet-set references (one
- * per opened planet, those retired by reloads, released when it is freed).
+ * Ownership: the server owns sessions (session_free once detached); a session owns its
+ * connection, want-set, jobs, tile references and planet-set references.
  */
 #ifndef CLIPMAP_SESSION_H
 #define CLIPMAP_SESSION_H
