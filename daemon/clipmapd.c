@@ -17,6 +17,7 @@
 
 #include "engine/cache.h"
 #include "conf.h"
+#include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/img.h"
 #include "common/log.h"
@@ -47,13 +48,13 @@ static void reload(struct daemon *d)
 	sd_notify(0, "RELOADING=1\nSTATUS=reloading planets");
 	char err[256];
 	struct planet_set *ps = NULL;
-	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, d->srv->planets->images, &ps,
+	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, server_planets(d->srv)->images, &ps,
 				 err); /* the same image cache: unchanged files stay cached */
 	if (rc) {
 		log_msg(LOG_ERROR, "reload failed, keeping the loaded planets: %s", err);
 	} else {
 		size_t nodes = 0, kept = 0;
-		const struct planet_set *old = d->srv->planets;
+		const struct planet_set *old = server_planets(d->srv);
 		for (size_t i = 0; i < ps->n; i++)
 			for (size_t j = 0; j < ps->planets[i]->nnodes; j++) {
 				nodes++;
@@ -87,7 +88,7 @@ static void on_tick(void *ud)
 	struct daemon *d = ud;
 	if (!d->watchdog_usec)
 		return;
-	uint64_t now = server_now_ns();
+	uint64_t now = clock_now_ns();
 	if (now - d->last_watchdog_ns >= d->watchdog_usec * 1000 / 2) {
 		sd_notify(0, "WATCHDOG=1");
 		d->last_watchdog_ns = now;
@@ -201,7 +202,7 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 	struct sched_stats ss;
 	sched_get_stats(sched, &ss);
 	log_msg(LOG_INFO, "clipmapd ready: %zu planets, %d workers, cache %zu MiB",
-		d->srv->planets->n, ss.workers, d->conf.cache_bytes >> 20);
+		server_planets(d->srv)->n, ss.workers, d->conf.cache_bytes >> 20);
 }
 
 /* The cache, the workers and the server over the planets ps (taken), run until a signal

@@ -7,10 +7,10 @@
 
 #include <errno.h>
 #include <math.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/errbuf.h"
 #include "common/geo.h"
 #include "common/xalloc.h"
 
@@ -172,12 +172,12 @@ int prefetch_iter_create(const struct planet *p, const struct proto_prefetch *m,
 {
 	*out = NULL;
 	if (m->lmax > p->max_level) {
-		snprintf(err, 256, "level %u is finer than planet %s's max_level %d", m->lmax, p->name,
-			 p->max_level);
+		err_set(err, "level %u is finer than planet %s's max_level %d", m->lmax, p->name,
+			p->max_level);
 		return -EINVAL;
 	}
 	if (m->shape != PROTO_SHAPE_BBOX && m->shape != PROTO_SHAPE_PATH) {
-		snprintf(err, 256, "unknown shape %u", m->shape);
+		err_set(err, "unknown shape %u", m->shape);
 		return -EINVAL;
 	}
 	struct prefetch_iter *it = xcalloc(1, sizeof *it);
@@ -191,8 +191,8 @@ int prefetch_iter_create(const struct planet *p, const struct proto_prefetch *m,
 		if (m->layers == 0 || (m->layers >> i) & 1)
 			it->layers[it->nlayers++] = (int)i;
 	if (m->layers >> p->nlayers || it->nlayers == 0) {
-		snprintf(err, 256, "layer mask 0x%llx names layers planet %s does not have (it has %zu)",
-			 (unsigned long long)m->layers, p->name, p->nlayers);
+		err_set(err, "layer mask 0x%llx names layers planet %s does not have (it has %zu)",
+			(unsigned long long)m->layers, p->name, p->nlayers);
 		free(it);
 		return -EINVAL;
 	}
@@ -212,7 +212,7 @@ int prefetch_iter_create(const struct planet *p, const struct proto_prefetch *m,
 	if (!rc)
 		rc = enter_level(it, it->lmin, p->body);
 	if (rc) {
-		snprintf(err, 256, "prefetch job too large: more than %u tiles", PREFETCH_MAX_TILES);
+		err_set(err, "prefetch job too large: more than %u tiles", PREFETCH_MAX_TILES);
 		prefetch_iter_destroy(it);
 		return rc;
 	}

@@ -1,41 +1,81 @@
-/* session — one client connection: the protocol state machine (handshake, ready, closing),
- * framing and decoding of what arrives (proto_decode over an accumulating buffer), the
- * want-set (one scheduler request per session; each WANT replaces the planet's previous set),
- * the bounded output queue, control requests (LIST_PLANETS, OPEN, STATS, CACHE_LS) and the
- * session's prefetch jobs.
+/* session — one client connection's protocol state machine (handshake, ready, closing) and
+ * the messages it answers; CACHE_LS and PREFETCH go to control.h. Its want-set (wantset.h, one
+ * scheduler request) streams in priority order while the bounded output (conn.h) has room.
+ * It sees the server only through one borrowed struct session_env: shared objects, and the
+ * callbacks with which the server keeps its session list, epoll set and pump list.
  *
- * Want-set: entries are kept in a hash table keyed by tile key, each WANTED (asked of the
- * scheduler), READY (generated, waiting for output room; held in a priority heap: class, then
- * level coarse first, then want order) or SENT. Ready tiles go out while the output queue holds
- * less than max_pending bytes; otherwise they wait, and a WANT that drops them frees them
- * (stale fine tiles are skipped on a slow link).
- *
- * Threads: loop thread only; the scheduler callback only pushes onto the server's ready
- * queue. Ownership: the server owns sessions; a session owns its fd, buffers, jobs, tile
- * references and planet-set references (one per opened planet, one per prefetch job, and
- * those retired by reloads, released when the session is freed).
+ * Threads: loop thread only; the scheduler's callbacks only push onto env->ready.
+ * Ownership: the server owns sessions (session_free once detached); a session owns its
+ * connection, want-set, jobs, tile references and planet-set references.
  */
 #ifndef CLIPMAP_SESSION_H
 #define CLIPMAP_SESSION_H
 #include <stdbool.h>
+#include <stddef.h>
 #include <stdint.h>
 
-#include "server.h"
+#include "common/proto.h"
+#include "common/tilecodec.h"
+#include "engine/cache.h"
+#include "engine/planets.h"
+#include "engine/sched.h"
+#include "listen.h"
+#include "readyq.h"
 
-/* Starts a session on an accepted, non-blocking socket fd (taken). Returns NULL only when
- * the fd cannot be registered with epoll (fd closed). */
-struct session *session_create(struct server *srv, int fd, const struct listener *l);
+struct session;
+struct session_link; /* the server's record of a session (opaque here) */
+
+/* Server-wide counters the sessions add to (STATS). */
+struct session_counters {
+	uint64_t tiles_sent, tiles_failed, tiles_dropped, tiles_stale, bytes_sent, errors_sent;
+};
+
+/* What the server lends every session; every pointer is borrowed and outlives the sessions. */
+struct session_env {
+	const struct proto_limits *limits;
+	uint32_t max_jobs; /* prefetch jobs per session */
+	struct sched *sched;
+	struct cache *cache;
+	struct readyq *ready;	 /* the scheduler's callbacks push here */
+	struct tilecodec *codec; /* the loop thread's encoder */
+	const uint8_t *token;	 /* the token listeners may require */
+	size_t token_len;
+	bool have_token;
+	struct planet_set *const *planets; /* the current set (replaced by reloads) */
+	struct session_counters *counters;
+
+	void *ud; /* the server: the first argument of every callback */
+	/* A new session on fd: the server registers fd for input, lists s and gives it an id.
+	 * Returns the server's record of s, or NULL (logged) when fd cannot be watched. */
+	struct session_link *(*attach)(void *ud, struct session *s, int fd, uint64_t *id);
+	/* The epoll events (EPOLLIN, EPOLLRDHUP, EPOLLOUT) the session wants now. */
+	void (*interest)(void *ud, struct session_link *l, uint32_t events);
+	/* The session has ready tiles and output room: call session_pump before the next wait. */
+	void (*pump)(void *ud, struct session_link *l);
+	/* The session closed: the server forgets its fd, unlists it and frees it (session_free)
+	 * at the end of the loop iteration. */
+	void (*detach)(void *ud, struct session_link *l);
+	/* A session's focus changed or went away (cache pruning). */
+	void (*focus_changed)(void *ud);
+	/* Server-wide STATS items, at most cap, into items (keys in keys). Returns how many. */
+	size_t (*stats)(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap);
+};
+
+/* One session's share of the server-wide figures. */
+struct session_load {
+	uint64_t pending_bytes, ready_tiles, jobs;
+};
+
+/* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed).
+ * Returns NULL only when the server cannot watch fd (fd closed). */
+struct session *session_create(const struct session_env *env, int fd, const struct listener *l);
 /* epoll events on the session's socket. */
 void session_on_event(struct session *s, uint32_t events);
 /* A ready item for this session or one of its jobs (takes the item's tile reference). */
 void session_on_ready(struct session *s, struct ready_item *it);
-/* Produces more output if there is room (called from the pump list). Returns true while the
- * session still has ready tiles and output room (stays on the pump list). */
+/* Produces more output if there is room. Returns true while the session still has ready
+ * tiles and output room (the server calls it again). */
 bool session_pump(struct session *s);
-/* Takes s off the pump list (the server is walking it) and returns the next one. */
-struct session *session_pump_next(struct session *s);
-/* Puts s back on the pump list (session_pump said it has more to do). */
-void session_pump_readd(struct session *s);
 /* Housekeeping every 250 ms: prefetch progress, close deadlines. */
 void session_tick(struct session *s, uint64_t now_ns);
 /* A reload installed ps (borrowed; the session takes references of its own): every planet the
@@ -48,16 +88,13 @@ void session_tick(struct session *s, uint64_t now_ns);
 void session_reload(struct session *s, struct planet_set *ps);
 /* Server shutdown: cancels its work and says ERROR shutdown + BYE, then closes after flush. */
 void session_shutdown(struct session *s);
-/* Closes now: destroys the scheduler request and jobs, unlinks from the server and moves the
- * session to the graveyard (freed by session_free at the end of the loop iteration). */
+/* Closes now: destroys the scheduler request and jobs, drops its ready items, detaches from
+ * the server and closes the socket. The session stays allocated until session_free. */
 void session_close(struct session *s, const char *why);
+/* Frees a closed session. NULL is a no-op. */
 void session_free(struct session *s);
-/* Frees a graveyard list (linked through the sessions' graveyard links). */
-void session_free_list(struct session *head);
 /* Whether a focus is known, and it (for cache pruning). */
 bool session_focus(const struct session *s, double *lon, double *lat, double vel[3]);
-/* The next session of the server's list (iteration). */
-struct session *session_next(const struct session *s);
-uint64_t session_pending_bytes(const struct session *s);
+void session_get_load(const struct session *s, struct session_load *out);
 
 #endif

@@ -1,0 +1,133 @@
+/* conn — see conn.h. Output is compacted only once more than 1 MiB at its head has gone out
+ * and that is over half the buffer, so a steady stream does not memmove on every send. Input
+ * is consumed frame by frame (pbuf_consume), so a partial frame simply waits for more bytes.
+ */
+#include "conn.h"
+
+#include <errno.h>
+#include <string.h>
+#include <sys/epoll.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "common/errbuf.h"
+
+#define RECV_CHUNK 65536
+
+void conn_init(struct conn *c, int fd)
+{
+	*c = (struct conn){ .fd = fd, .reading = true };
+	pbuf_init(&c->in);
+	pbuf_init(&c->out);
+}
+
+int conn_close(struct conn *c)
+{
+	if (c->fd < 0)
+		return 0;
+	int rc = close(c->fd) ? -errno : 0;
+	c->fd = -1;
+	return rc;
+}
+
+void conn_fini(struct conn *c)
+{
+	pbuf_fini(&c->in);
+	pbuf_fini(&c->out);
+}
+
+uint32_t conn_events(const struct conn *c)
+{
+	return (c->reading ? EPOLLIN | EPOLLRDHUP : 0) | (c->want_out ? EPOLLOUT : 0);
+}
+
+uint64_t conn_pending(const struct conn *c)
+{
+	return c->out.len - c->out_off;
+}
+
+ssize_t conn_recv(struct conn *c)
+{
+	int rc = pbuf_reserve(&c->in, RECV_CHUNK);
+	if (rc)
+		return rc;
+	for (;;) {
+		ssize_t n = recv(c->fd, c->in.data + c->in.len, RECV_CHUNK, MSG_DONTWAIT);
+		if (n >= 0) {
+			c->in.len += (size_t)n;
+			return n;
+		}
+		if (errno != EINTR)
+			return errno == EWOULDBLOCK ? -EAGAIN : -errno;
+	}
+}
+
+ssize_t conn_decode(struct conn *c, uint32_t max_frame, struct proto_msg *m, uint16_t *code,
+		    uint16_t *type, char err[256])
+{
+	struct proto_hdr h = { 0 };
+	size_t need = 0;
+	err[0] = '\0';
+	ssize_t r = proto_frame_check(c->in.data, c->in.len, &h, &need, err);
+	if (r >= 0 && c->in.len >= PROTO_HDR && max_frame &&
+	    (uint64_t)h.length + PROTO_HDR > max_frame) {
+		*code = PROTO_E_LIMIT;
+		*type = h.type;
+		err_set(err, "frame of %u bytes exceeds this session's limit of %u",
+			h.length + PROTO_HDR, max_frame);
+		return -EPROTO;
+	}
+	if (r == 0)
+		return 0;
+	if (r > 0)
+		r = proto_decode(c->in.data, c->in.len, m, &need, err);
+	if (r < 0) {
+		/* Malformed is `protocol` whatever the class, except a bad version. */
+		*code = r == PROTO_ERR_VERSION ? PROTO_E_VERSION
+			: r == PROTO_ERR_STATE ? PROTO_E_STATE
+					       : PROTO_E_PROTOCOL;
+		*type = c->in.len >= PROTO_HDR ? h.type : 0;
+		return -EPROTO;
+	}
+	return r;
+}
+
+void conn_consume(struct conn *c, size_t n)
+{
+	pbuf_consume(&c->in, n);
+}
+
+int conn_flush(struct conn *c, uint64_t *sent)
+{
+	while (c->out_off < c->out.len) {
+		ssize_t n = send(c->fd, c->out.data + c->out_off, c->out.len - c->out_off,
+				 MSG_NOSIGNAL | MSG_DONTWAIT);
+		if (n < 0) {
+			if (errno == EINTR)
+				continue;
+			if (errno == EAGAIN || errno == EWOULDBLOCK)
+				break;
+			return -errno;
+		}
+		c->out_off += (size_t)n;
+		*sent += (uint64_t)n;
+	}
+	if (c->out_off == c->out.len) {
+		c->out.len = c->out_off = 0;
+	} else if (c->out_off > (1u << 20) && c->out_off > c->out.len / 2) {
+		memmove(c->out.data, c->out.data + c->out_off, c->out.len - c->out_off);
+		c->out.len -= c->out_off;
+		c->out_off = 0;
+	}
+	c->want_out = c->out_off < c->out.len;
+	return 0;
+}
+
+void conn_throttle(struct conn *c, uint64_t max_pending)
+{
+	uint64_t pend = conn_pending(c);
+	if (!c->reading && pend < max_pending)
+		c->reading = true; /* resume input once the peer reads again */
+	else if (c->reading && pend > 2 * max_pending)
+		c->reading = false;
+}

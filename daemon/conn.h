@@ -1,0 +1,53 @@
+/* conn — a framed, non-blocking stream connection: input accumulates in a buffer and is cut
+ * into protocol frames (proto_decode, with the session's frame-size cap); output is one
+ * growable buffer with a read offset that the owner appends frames to and conn_flush writes
+ * out as far as the socket takes. Reading pauses while too much output is pending (a peer
+ * that does not read cannot make us queue without bound).
+ *
+ * Threads: one owner thread (the event loop). Ownership: a conn owns its fd and buffers.
+ */
+#ifndef CLIPMAP_CONN_H
+#define CLIPMAP_CONN_H
+#include <stdbool.h>
+#include <stdint.h>
+#include <sys/types.h>
+
+#include "common/proto.h"
+
+struct conn {
+	int fd;
+	struct pbuf in;	 /* received bytes not yet consumed */
+	struct pbuf out; /* frames to send: the owner appends, bytes [out_off, len) are unsent */
+	size_t out_off;
+	bool reading;  /* wants input (EPOLLIN) */
+	bool want_out; /* has unsent output (EPOLLOUT) */
+};
+
+/* Starts on fd (taken), reading. */
+void conn_init(struct conn *c, int fd);
+/* Closes the fd (once). Returns 0 or -errno. */
+int conn_close(struct conn *c);
+/* Frees the buffers (the fd must be closed). */
+void conn_fini(struct conn *c);
+/* The epoll events the connection wants now. */
+uint32_t conn_events(const struct conn *c);
+/* Unsent output bytes. */
+uint64_t conn_pending(const struct conn *c);
+/* Receives once (up to 64 KiB) into `in`. Returns the bytes read (> 0), 0 at end of stream,
+ * -EAGAIN when nothing is waiting, or another -errno. */
+ssize_t conn_recv(struct conn *c);
+/* Decodes the frame at the start of `in` into m (zeroed). Returns its size (> 0: handle m,
+ * proto_msg_fini it, then conn_consume that size), 0 when more bytes are needed, or -EPROTO
+ * when the stream cannot go on: *code is the ERROR code to answer with, *type the frame's
+ * type (0 when its header has not arrived), err the message. max_frame 0: no cap. */
+ssize_t conn_decode(struct conn *c, uint32_t max_frame, struct proto_msg *m, uint16_t *code,
+		    uint16_t *type, char err[256]);
+void conn_consume(struct conn *c, size_t n);
+/* Writes what the socket takes and updates want_out; the bytes written are added to *sent.
+ * Returns 0 or -errno (the connection failed). */
+int conn_flush(struct conn *c, uint64_t *sent);
+/* Output backpressure: stops reading above 2 × max_pending unsent bytes, resumes below
+ * max_pending. */
+void conn_throttle(struct conn *c, uint64_t max_pending);
+
+#endif

@@ -1,0 +1,36 @@
+/* listen — clipmapd's listening sockets: the fds systemd passed (socket activation) or else the
+ * conf's Unix socket and TCP addresses, each classified from its bound address (loopback or
+ * not) against the conf's token and compression policies; accepting a connection and giving
+ * it the listener's socket options.
+ *
+ * Threads: the event loop's thread only. Ownership: a listener owns its fd; the conf is
+ * borrowed.
+ */
+#ifndef CLIPMAP_LISTEN_H
+#define CLIPMAP_LISTEN_H
+#include <stdbool.h>
+
+#include "conf.h"
+
+#define LISTEN_MAX (CONF_MAX_TCP + 1)
+
+struct listener {
+	int fd; /* non-blocking; -1 once closed */
+	bool is_unix, loopback, need_token, compress;
+	char name[160]; /* "unix:/path" or "tcp:127.0.0.1:7878" */
+};
+
+/* Opens and classifies the listeners into ls (room for LISTEN_MAX), *n of them. Returns 0, or
+ * -errno with err filled and those opened so far in ls[0..*n) (listen_close them). */
+int listen_open(const struct conf *c, struct listener *ls, int *n, char err[256]);
+/* Closes l (logs a failure); a Unix socket it bound itself is removed (an activated one
+ * belongs to systemd). */
+void listen_close(const struct conf *c, struct listener *l);
+/* Accepts one connection (non-blocking, close-on-exec). Returns its fd (owned), -EAGAIN when
+ * none is waiting, or another -errno. */
+int listen_accept(const struct listener *l);
+/* Gives an accepted fd the listener's socket options (TCP_NODELAY; a larger send buffer on
+ * Unix sockets). A failure is logged and otherwise ignored. */
+void listen_tune(const struct listener *l, int fd);
+
+#endif

@@ -1,0 +1,83 @@
+/* readyq — see readyq.h. The eventfd counter is only a wake-up: `signalled` says whether a
+ * write is already pending, so a burst of pushes costs one write and one read. Items are handed
+ * to the loop in the order they were pushed.
+ */
+#include "readyq.h"
+
+#include <errno.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
+
+#include "common/xalloc.h"
+#include "common/xthread.h"
+
+int readyq_init(struct readyq *q)
+{
+	*q = (struct readyq){ .evfd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC) };
+	if (q->evfd < 0)
+		return -errno;
+	xmutex_init(&q->mu);
+	return 0;
+}
+
+void readyq_fini(struct readyq *q)
+{
+	if (q->evfd < 0)
+		return;
+	for (size_t i = 0; i < q->n; i++)
+		tile_unref(q->items[i].t);
+	free(q->items);
+	close(q->evfd);
+	xmutex_destroy(&q->mu);
+	q->evfd = -1;
+}
+
+void readyq_push(struct readyq *q, const struct ready_item *it)
+{
+	bool wake = false;
+	xmutex_lock(&q->mu);
+	if (q->n == q->cap) {
+		q->cap = q->cap ? q->cap * 2 : 256;
+		q->items = xrealloc(q->items, q->cap * sizeof *q->items);
+	}
+	q->items[q->n++] = *it;
+	if (!q->signalled)
+		wake = q->signalled = true;
+	xmutex_unlock(&q->mu);
+	if (wake) {
+		uint64_t one = 1;
+		ssize_t n = write(q->evfd, &one, sizeof one);
+		(void)n; /* EAGAIN means the counter is already non-zero: the loop wakes anyway */
+	}
+}
+
+struct ready_item *readyq_take(struct readyq *q, size_t *n)
+{
+	uint64_t v;
+	ssize_t r = read(q->evfd, &v, sizeof v);
+	(void)r; /* EAGAIN: nothing was signalled since the last take */
+	xmutex_lock(&q->mu);
+	struct ready_item *batch = q->items;
+	*n = q->n;
+	q->items = NULL;
+	q->n = q->cap = 0;
+	q->signalled = false;
+	xmutex_unlock(&q->mu);
+	return batch;
+}
+
+void readyq_purge(struct readyq *q, const struct session *s)
+{
+	xmutex_lock(&q->mu);
+	size_t k = 0;
+	for (size_t i = 0; i < q->n; i++) {
+		if (q->items[i].s == s)
+			tile_unref(q->items[i].t);
+		else
+			q->items[k++] = q->items[i];
+	}
+	q->n = k;
+	xmutex_unlock(&q->mu);
+}

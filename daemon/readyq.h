@@ -1,0 +1,49 @@
+/* readyq — the queue through which the scheduler's manager thread hands ready tiles to the
+ * event loop: a mutex-protected array plus an eventfd the loop watches, written only on the
+ * empty → non-empty transition. The loop swaps the whole array out and works without the lock.
+ *
+ * Threads: readyq_push from any thread; everything else on the loop thread. The mutex guards
+ * the array and the signalled flag only and is never held while calling out.
+ * Ownership: the queue owns the tile references of the items it holds and its eventfd.
+ */
+#ifndef CLIPMAP_READYQ_H
+#define CLIPMAP_READYQ_H
+#include <pthread.h>
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "common/grid.h"
+#include "engine/tile.h"
+
+struct session;
+struct prefetch_job;
+
+struct ready_item {
+	struct session *s;	  /* the requester (borrowed; outlives its items: readyq_purge) */
+	struct prefetch_job *job; /* the session's job that wanted it; NULL: the want-set */
+	struct tile_key key;
+	struct tile *t; /* owned reference, or NULL when err < 0 */
+	int err;
+};
+
+struct readyq {
+	int evfd; /* readable while items wait (watch it for EPOLLIN) */
+	pthread_mutex_t mu; /* protects items, n, cap, signalled */
+	struct ready_item *items;
+	size_t n, cap;
+	bool signalled;
+};
+
+/* Makes the eventfd. Returns 0 or -errno. */
+int readyq_init(struct readyq *q);
+/* Releases the queued tiles and closes the eventfd. */
+void readyq_fini(struct readyq *q);
+/* Queues *it (any thread; takes it->t's reference) and wakes the loop when needed. */
+void readyq_push(struct readyq *q, const struct ready_item *it);
+/* Takes every queued item (loop thread, after the eventfd fired). Returns them as an owned
+ * array of *n items (free it; their tile references are the caller's), NULL when empty. */
+struct ready_item *readyq_take(struct readyq *q, size_t *n);
+/* Drops the items of session s (after its scheduler requests are destroyed). */
+void readyq_purge(struct readyq *q, const struct session *s);
+
+#endif

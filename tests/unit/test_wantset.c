@@ -1,0 +1,260 @@
+/* wantset tests: the want table and ready heap alone, with hand-made nodes (only their hash
+ * and address matter) and tiles whose reference counts show what the set still holds. The
+ * order tiles leave the heap, what a WANT carries over (sent stays sent, ready stays ready),
+ * what it drops and counts, and how a reload's rebind treats changed and vanished nodes. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <stdlib.h>
+
+#include "daemon/wantset.h"
+#include "engine/node.h"
+#include "engine/sched.h"
+#include "engine/tile.h"
+
+static struct node node_a = { .hash = 0xa }, node_b = { .hash = 0xb }, node_c = { .hash = 0xc };
+
+static struct wantset_entry ent(struct node *n, uint32_t pid, int ly, uint32_t x, uint32_t y,
+				uint8_t cls, uint32_t order)
+{
+	return (struct wantset_entry){ .key = { .node = n->hash, .lx = (uint8_t)(ly + 1),
+						.ly = (uint8_t)ly, .x = x, .y = y },
+				       .node = n, .pid = pid, .seq = 7, .order = order,
+				       .cls = cls };
+}
+
+static struct tile *mk_tile(const struct tile_key *k)
+{
+	return tile_create(k, PIX_HEIGHT, 4);
+}
+
+static int refs(struct tile *t)
+{
+	return atomic_load(&t->refs);
+}
+
+static size_t nwanted(const struct wantset *ws)
+{
+	size_t n;
+	free(wantset_wants(ws, &n));
+	return n;
+}
+
+/* Tiles leave the heap by class, then level coarse first, then want order, whatever the order
+ * they became ready in. */
+static void test_ready_order(void **state)
+{
+	(void)state;
+	struct wantset ws;
+	wantset_init(&ws);
+	struct wantset_entry add[] = {
+		ent(&node_a, 1, 5, 0, 0, SCHED_VISIBLE, 0), ent(&node_a, 1, 2, 1, 0, SCHED_VISIBLE, 1),
+		ent(&node_a, 1, 2, 0, 0, SCHED_VISIBLE, 2), ent(&node_a, 1, 0, 0, 0, SCHED_PREFETCH, 3),
+		ent(&node_a, 1, 9, 0, 0, SCHED_VISIBLE, 4),
+	};
+	size_t n = sizeof add / sizeof add[0];
+	struct wantset_drops d = { 0 };
+	wantset_replace(&ws, 1, add, n, &d);
+	assert_int_equal(ws.n, n);
+	assert_int_equal(nwanted(&ws), n);
+	assert_int_equal(d.dropped, 0);
+	for (size_t i = n; i-- > 0;)
+		assert_true(wantset_ready(&ws, &add[i].key, mk_tile(&add[i].key), 0));
+	assert_int_equal(wantset_nready(&ws), n);
+	assert_int_equal(nwanted(&ws), 0);
+	const size_t expect[] = { 1, 2, 0, 4, 3 }; /* ly 2 (order 1, 2), ly 5, ly 9, prefetch */
+	for (size_t i = 0; i < n; i++) {
+		struct wantset_entry *e = wantset_pop(&ws);
+		assert_non_null(e);
+		assert_int_equal(e->order, expect[i]);
+		assert_int_equal(e->state, WS_READY);
+		wantset_sent(e);
+		assert_int_equal(e->state, WS_SENT);
+		assert_null(e->t);
+	}
+	assert_null(wantset_pop(&ws));
+	wantset_fini(&ws);
+}
+
+/* A report for a key not in the set, or a second one, is refused and its tile released. */
+static void test_ready_unknown(void **state)
+{
+	(void)state;
+	struct wantset ws;
+	wantset_init(&ws);
+	struct wantset_entry e = ent(&node_a, 1, 3, 2, 1, SCHED_VISIBLE, 0);
+	struct tile *t = mk_tile(&e.key);
+	tile_ref(t);
+	assert_false(wantset_ready(&ws, &e.key, t, 0)); /* empty set */
+	assert_int_equal(refs(t), 1);
+	struct wantset_drops d = { 0 };
+	wantset_replace(&ws, 1, &e, 1, &d);
+	tile_ref(t);
+	assert_true(wantset_ready(&ws, &e.key, t, 0));
+	tile_ref(t);
+	assert_false(wantset_ready(&ws, &e.key, t, 0)); /* repeated */
+	assert_int_equal(refs(t), 2);
+	/* A failed generation is ready too, without a tile. */
+	struct wantset_entry f = ent(&node_a, 1, 3, 3, 1, SCHED_VISIBLE, 1);
+	struct wantset_entry both[] = { e, f };
+	wantset_replace(&ws, 1, both, 2, &d);
+	assert_true(wantset_ready(&ws, &f.key, NULL, -5));
+	assert_int_equal(wantset_nready(&ws), 2);
+	wantset_fini(&ws); /* releases the ready tile */
+	assert_int_equal(refs(t), 1);
+	tile_unref(t);
+}
+
+/* A WANT replaces its planet's part: a kept key keeps its state (a sent tile is not wanted
+ * again, a ready one stays ready with its tile), what leaves unsent is dropped (ready ones
+ * also stale, their tiles released), other planets' entries stay untouched, a duplicate key
+ * counts once. */
+static void test_replace_carries_state(void **state)
+{
+	(void)state;
+	struct wantset ws;
+	wantset_init(&ws);
+	struct wantset_entry p1[] = {
+		ent(&node_a, 1, 1, 0, 0, SCHED_VISIBLE, 0), /* will be sent, stays */
+		ent(&node_a, 1, 1, 1, 0, SCHED_VISIBLE, 1), /* ready, stays */
+		ent(&node_a, 1, 1, 2, 0, SCHED_VISIBLE, 2), /* ready, leaves: stale */
+		ent(&node_a, 1, 1, 3, 0, SCHED_VISIBLE, 3), /* wanted, leaves: dropped */
+		ent(&node_a, 1, 1, 0, 1, SCHED_VISIBLE, 4), /* sent, leaves: not dropped */
+	};
+	struct wantset_entry p2 = ent(&node_b, 2, 4, 0, 0, SCHED_PREFETCH, 0);
+	struct wantset_drops d = { 0 };
+	wantset_replace(&ws, 1, p1, 5, &d);
+	wantset_replace(&ws, 2, &p2, 1, &d);
+	assert_int_equal(ws.n, 6);
+	struct tile *t[5];
+	for (int i = 0; i < 5; i++)
+		t[i] = tile_ref(mk_tile(&p1[i].key)); /* one reference for the test */
+	tile_unref(t[3]); /* never reported ready: the set never holds it */
+	for (int i = 0; i < 5; i++)
+		if (i != 3)
+			assert_true(wantset_ready(&ws, &p1[i].key, t[i], 0));
+	struct wantset_entry *e = wantset_pop(&ws);
+	assert_int_equal(e->order, 0);
+	wantset_sent(e);
+	/* pop the next two, send only the one of order 4 */
+	struct wantset_entry *a = wantset_pop(&ws), *b = wantset_pop(&ws);
+	assert_int_equal(a->order, 1);
+	assert_int_equal(b->order, 2);
+	wantset_replace(&ws, 1, p1, 5, &d); /* the same set: rebuilds the heap */
+	assert_int_equal(wantset_nready(&ws), 3);
+	while ((e = wantset_pop(&ws)) && e->order != 4)
+		;
+	assert_non_null(e);
+	wantset_sent(e);
+
+	struct wantset_entry next[] = {
+		ent(&node_a, 1, 1, 0, 0, SCHED_VISIBLE, 0), ent(&node_a, 1, 1, 1, 0, SCHED_VISIBLE, 1),
+		ent(&node_a, 1, 1, 1, 0, SCHED_VISIBLE, 2), /* duplicate */
+		ent(&node_a, 1, 2, 5, 5, SCHED_VISIBLE, 3), /* new */
+	};
+	d = (struct wantset_drops){ 0 };
+	wantset_replace(&ws, 1, next, 4, &d);
+	assert_int_equal(d.dropped, 2); /* x 2 (ready) and x 3 (wanted) */
+	assert_int_equal(d.stale, 1);	/* x 2 */
+	assert_int_equal(ws.n, 4);	/* p2's entry and three of next */
+	assert_int_equal(refs(t[0]), 1); /* sent: released */
+	assert_int_equal(refs(t[1]), 2); /* still ready, held by the set */
+	assert_int_equal(refs(t[2]), 1); /* stale: released */
+	assert_int_equal(refs(t[4]), 1);
+	long i0 = wantset_find(&ws, &next[0].key), i1 = wantset_find(&ws, &next[1].key);
+	assert_true(i0 >= 0 && i1 >= 0);
+	assert_int_equal(ws.e[i0].state, WS_SENT);
+	assert_int_equal(ws.e[i1].state, WS_READY);
+	assert_ptr_equal(ws.e[i1].t, t[1]);
+	assert_int_equal(ws.e[i1].order, 1); /* the new want order */
+	assert_int_equal(wantset_nready(&ws), 1);
+	assert_int_equal(nwanted(&ws), 2); /* the new key and p2's */
+	long j = wantset_find(&ws, &p2.key);
+	assert_true(j >= 0);
+	assert_int_equal(ws.e[j].pid, 2);
+	assert_int_equal(wantset_find(&ws, &p1[3].key), -1);
+	wantset_fini(&ws);
+	for (int i = 0; i < 5; i++) {
+		assert_int_equal(refs(t[i]), 1);
+		tile_unref(t[i]);
+	}
+}
+
+struct binding {
+	struct node *for_pid[3]; /* NULL: the planet is gone */
+};
+
+static struct node *resolve(void *ud, uint32_t pid, uint8_t layer)
+{
+	(void)layer;
+	return ((struct binding *)ud)->for_pid[pid];
+}
+
+/* A reload's rebind: a layer whose node hash is unchanged keeps its entries' state; a changed
+ * one is wanted afresh under the new key (a ready tile of the old node is stale); a planet
+ * that is gone takes its unsent entries with it (dropped). */
+static void test_rebind(void **state)
+{
+	(void)state;
+	struct wantset ws;
+	wantset_init(&ws);
+	struct wantset_entry p1[] = { ent(&node_a, 1, 2, 0, 0, SCHED_VISIBLE, 0),
+				      ent(&node_a, 1, 2, 1, 0, SCHED_VISIBLE, 1) };
+	struct wantset_entry p2[] = { ent(&node_b, 2, 2, 0, 0, SCHED_VISIBLE, 0),
+				      ent(&node_b, 2, 2, 1, 0, SCHED_VISIBLE, 1),
+				      ent(&node_b, 2, 2, 2, 0, SCHED_VISIBLE, 2) };
+	struct wantset_drops d = { 0 };
+	wantset_replace(&ws, 1, p1, 2, &d);
+	wantset_replace(&ws, 2, p2, 3, &d);
+	struct tile *t = tile_ref(mk_tile(&p1[1].key));
+	assert_true(wantset_ready(&ws, &p1[1].key, t, 0));
+	assert_true(wantset_ready(&ws, &p2[0].key, mk_tile(&p2[0].key), 0));
+	wantset_sent(wantset_pop(&ws)); /* p1's x 1 or p2's x 0: both ly 2, order 0 vs 1 */
+	/* p2's x 0 has order 0: it went; p1's x 1 is still ready */
+	long k = wantset_find(&ws, &p2[0].key);
+	assert_int_equal(ws.e[k].state, WS_SENT);
+
+	/* Planet 1's layer now reads node c (a changed hash); planet 2 is unchanged. */
+	struct binding b = { .for_pid = { NULL, &node_c, &node_b } };
+	size_t regen = wantset_rebind(&ws, resolve, &b, &d);
+	assert_int_equal(regen, 2);
+	assert_int_equal(d.stale, 1);
+	assert_int_equal(d.dropped, 0);
+	assert_int_equal(refs(t), 1);
+	assert_int_equal(wantset_nready(&ws), 0);
+	assert_int_equal(wantset_find(&ws, &p1[0].key), -1);
+	struct tile_key nk = p1[1].key;
+	nk.node = node_c.hash;
+	long i = wantset_find(&ws, &nk);
+	assert_true(i >= 0);
+	assert_ptr_equal(ws.e[i].node, &node_c);
+	assert_int_equal(ws.e[i].state, WS_WANTED);
+	k = wantset_find(&ws, &p2[0].key);
+	assert_int_equal(ws.e[k].state, WS_SENT);
+	assert_int_equal(nwanted(&ws), 4);
+
+	/* Planet 2 is gone: its two unsent entries are dropped, the sent one just leaves. */
+	b.for_pid[2] = NULL;
+	d = (struct wantset_drops){ 0 };
+	regen = wantset_rebind(&ws, resolve, &b, &d);
+	assert_int_equal(regen, 0);
+	assert_int_equal(d.dropped, 2);
+	assert_int_equal(ws.n, 2);
+	assert_int_equal(wantset_find(&ws, &p2[1].key), -1);
+	wantset_fini(&ws);
+	tile_unref(t);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_ready_order),
+		cmocka_unit_test(test_ready_unknown),
+		cmocka_unit_test(test_replace_carries_state),
+		cmocka_unit_test(test_rebind),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
