@@ -13,6 +13,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/errbuf.h"
 #include "common/ini.h"
 #include "common/proto.h"
 #include "common/xalloc.h"
@@ -53,17 +54,10 @@ static const struct row rows[] = {
 static int __attribute__((format(printf, 5, 6)))
 cerr(char *err, const char *path, int line, const char *key, const char *fmt, ...)
 {
-	if (!err)
-		return -EINVAL;
-	int n = line > 0 ? snprintf(err, 256, "%s:%d: ", path, line) : snprintf(err, 256, "%s: ", path);
-	if (n >= 0 && n < 256 && key)
-		n += snprintf(err + n, (size_t)(256 - n), "%s: ", key);
-	if (n >= 0 && n < 256) {
-		va_list ap;
-		va_start(ap, fmt);
-		vsnprintf(err + n, (size_t)(256 - n), fmt, ap);
-		va_end(ap);
-	}
+	va_list ap;
+	va_start(ap, fmt);
+	err_vset_at(err, path, line, key, fmt, ap);
+	va_end(ap);
 	return -EINVAL;
 }
 
@@ -351,7 +345,7 @@ int conf_load(const char *path, struct conf *c, char err[256])
 	if (!fp) {
 		int e = -errno;
 		if (err)
-			snprintf(err, 256, "%s: %s", path, strerror(-e));
+			err_set(err, "%s: %s", path, strerror(-e));
 		return e;
 	}
 	char *buf = NULL;
@@ -376,7 +370,7 @@ int conf_load(const char *path, struct conf *c, char err[256])
 	if (bad) {
 		free(buf);
 		if (err)
-			snprintf(err, 256, "%s: read error", path);
+			err_set(err, "%s: read error", path);
 		return -EIO;
 	}
 	int rc = conf_parse(path, buf, n, c, err);
