@@ -32,7 +32,7 @@ uniform float u_sc;
 uniform float u_fade;   // 1: the fine level fully shown; < 1 while it fades in
 uniform float u_exag;   // vertical exaggeration of the relief (1: true scale)
 uniform vec3 u_sun;     // towards the sun, ENU at the camera
-uniform vec4 u_haze;    // scale height (m, exaggerated), strength (0: no air), unused ×2
+uniform vec4 u_haze;    // scale height (m, exaggerated), extinction per m of sea-level air (rgb)
 uniform sampler2DArray u_height;
 
 out vec3 v_delta; // unit normal minus the camera's up, ENU: the fragment's up, (lon, lat)
@@ -106,8 +106,7 @@ void main()
 	float f = abs(x) < 1e-3 ? 1.0 - 0.5 * x : (1.0 - exp(-x)) / x;
 	float air = sd * exp(-max(h, 0.0) / H) * f; // metres of sea-level air
 	air /= 1.0 + (u_exag - 1.0) * cz * cz;      // exaggerated verticals hold no more air
-	vec3 beta = (vec3(5.8e-6, 13.5e-6, 33.1e-6) + 2.0e-6) * (0.45 * u_haze.y);
-	v_tr = exp(-beta * air);
+	v_tr = exp(-u_haze.yzw * air);
 	// Light scattered into the ray: single scattering of the sunlight that reaches the air
 	// (less under a low sun, whose light crosses more air first), about a quarter of what a
 	// white ground under the same sun would send back.

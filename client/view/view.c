@@ -72,10 +72,19 @@ struct program {
 	uint64_t frame; /* the frame whose common uniforms it holds */
 };
 
+/* The air the frames are drawn through (from the planet's look and view_desc.haze). */
+struct air {
+	bool on;
+	double height;	/* scale height, metres */
+	float beta[3];	/* extinction per metre of sea-level air, red, green, blue */
+	float sky[3];	/* the sky's colour at the ground (the clear colour's encoding) */
+};
+
 struct view {
 	const struct gl *gl;
 	struct view_source *src;
 	struct view_desc d;
+	struct air air;
 	struct view_body body;
 	struct view_clipmap *cm;
 	int nlevels, max_level;
@@ -291,6 +300,42 @@ static int build_fbo(struct view *v, char err[256])
 	return 0;
 }
 
+/* Earth's air: what --haze gives a planet that has none of its own. */
+static const struct view_look earth_air = { .air_density = 1, .air_height = 8000,
+					    .air_color = { 133, 173, 222 } };
+
+/* The air from the planet's look; haze (view_desc) > 0 overrides its density, < 0 removes it.
+ * The extinction's spectrum follows the cube of the sky's colour: Earth's (133, 173, 222)
+ * gives Rayleigh's λ⁻⁴ blue plus a little grey Mie (7.4, 16.4, 34.6 µ/m, 58.4 in all at
+ * density 1, as the viewer always drew it); Mars' butterscotch a red-heavy dust haze. The
+ * light the air scatters into a ray is sunlight × (1 − transmittance), so the haze takes the
+ * colour of the extinction. */
+static void air_init(struct air *air, const struct view_look *look, float haze)
+{
+	*air = (struct air){ .on = false };
+	if (haze < 0)
+		return;
+	double density = look->air_density;
+	if (!(density > 0 && look->air_height > 0)) {
+		if (haze == 0)
+			return;
+		look = &earth_air;
+	}
+	if (haze > 0)
+		density = haze;
+	double c3[3], sum = 0;
+	for (int i = 0; i < 3; i++) {
+		double c = look->air_color[i] / 255.0;
+		c3[i] = c * c * c + 1e-4;
+		sum += c3[i];
+		air->sky[i] = (float)c;
+	}
+	for (int i = 0; i < 3; i++)
+		air->beta[i] = (float)(0.45 * density * 58.4e-6 * c3[i] / sum);
+	air->height = look->air_height;
+	air->on = true;
+}
+
 int view_create(const struct gl *gl, struct view_source *src, const struct view_desc *d,
 		struct view **out, char err[256])
 {
@@ -309,14 +354,13 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	if (v->d.m_rings <= 0)
 		v->d.m_rings = 16;
 	if (v->d.sun_az == 0 && v->d.sun_el == 0) {
-		v->d.sun_az = 135;
-		v->d.sun_el = 35;
+		v->d.sun_az = VIEW_SUN_AZ;
+		v->d.sun_el = VIEW_SUN_EL;
 	}
 	if (!(v->d.exaggeration > 0))
 		v->d.exaggeration = 1;
-	if (v->d.haze == 0)
-		v->d.haze = 1;
 	const struct view_planet *p = &src->planet;
+	air_init(&v->air, &p->look, v->d.haze);
 	view_body_init(&v->body, p->a, p->f);
 	v->body.hmin *= v->d.exaggeration;
 	v->body.hmax *= v->d.exaggeration;
@@ -621,10 +665,9 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 	f->sun[0] = (float)(sin(az) * cos(el));
 	f->sun[1] = (float)(cos(az) * cos(el));
 	f->sun[2] = (float)sin(el);
-	f->haze[0] = 8000.0f * v->d.exaggeration;
-	f->haze[1] = v->d.haze > 0 ? v->d.haze : 0.0f;
-	f->haze[2] = f->haze[3] = 0;
-	v->frame_bits = (v->d.haze > 0 ? VAR_HAZE : 0) | (v->d.exaggeration != 1 ? VAR_EXAG : 0) |
+	f->haze[0] = (float)(v->air.height * v->d.exaggeration);
+	memcpy(f->haze + 1, v->air.beta, sizeof v->air.beta);
+	v->frame_bits = (v->air.on ? VAR_HAZE : 0) | (v->d.exaggeration != 1 ? VAR_EXAG : 0) |
 			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
 			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
 	const struct gl *gl = v->gl;
@@ -704,11 +747,12 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	if (v->d.background_set) {
 		memcpy(bg, v->d.background, sizeof bg);
 	} else {
-		/* space, turning to a pale blue sky inside the atmosphere (none without air) */
-		double sky = v->d.haze > 0 ? exp(-agl / 35e3) : 0;
-		bg[0] = (float)(0.01 + 0.52 * sky);
-		bg[1] = (float)(0.01 + 0.68 * sky);
-		bg[2] = (float)(0.03 + 0.87 * sky);
+		/* space, turning to the sky's colour inside the atmosphere (none without air); on
+		 * Earth the blue fades out over 35 km */
+		double sky = v->air.on ? exp(-agl / (4.375 * v->air.height)) : 0;
+		bg[0] = (float)(0.01 + v->air.sky[0] * sky);
+		bg[1] = (float)(0.01 + v->air.sky[1] * sky);
+		bg[2] = (float)(0.03 + v->air.sky[2] * sky);
 	}
 	for (int i = 0; i < 3; i++)
 		v->bg[i] = (unsigned char)lrintf(fminf(fmaxf(bg[i], 0), 1) * 255);
