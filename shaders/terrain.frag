@@ -5,7 +5,8 @@
 // fragment from the interpolated direction — needed where a ring reaches the pole, so nothing is
 // interpolated across the meridian behind it; elsewhere the vertices' (lon, lat) interpolate.
 // BLEND samples the coarser level too, HAZE applies the vertex shader's air, EXAG steepens the
-// normals by the vertical exaggeration, COLOR and NORMAL say which layers exist.
+// normals by the vertical exaggeration, COLOR and NORMAL say which layers exist, SEA draws
+// water where the vertex shader lifted the ground to sea level.
 
 #ifndef BLEND
 #define BLEND 1
@@ -25,6 +26,9 @@
 #ifndef NORMAL
 #define NORMAL 1
 #endif
+#ifndef SEA
+#define SEA 1
+#endif
 
 in vec3 v_delta;
 in vec2 v_g;
@@ -34,6 +38,10 @@ in float v_blend;
 #if HAZE
 in vec3 v_tr;
 in vec3 v_in;
+#endif
+#if SEA
+in float v_depth;
+in vec3 v_eye;
 #endif
 
 uniform vec3 u_lat;
@@ -120,11 +128,28 @@ void main()
 	E *= inversesqrt(max(dot(E, E), 1e-12));
 	vec3 Nn = cross(U, E);
 	vec3 nrm = normalize(en.x * E + en.y * Nn + up * U);
-	float diff = max(dot(nrm, u_sun), 0.0);
 	float day = smoothstep(-0.1, 0.1, dot(U, u_sun));
+#if SEA
+	// Water: flat, the floor's colour fading into deep-water blue with depth (the first few
+	// metres show the floor, a hundred hide it), and the sun's glint on top.
+	float wet = step(0.0, v_depth);
+	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7),
+				 exp(-max(v_depth, 0.0) / 30.0)), wet);
+	nrm = normalize(mix(nrm, U, wet));
+#endif
+	float diff = max(dot(nrm, u_sun), 0.0);
 	float sky = 0.5 + 0.5 * dot(nrm, U); // the open sky a slope sees
 	vec3 lit = albedo * (vec3(1.0, 0.97, 0.92) * 1.05 * diff * day +
 			     vec3(0.30, 0.38, 0.50) * 0.22 * sky * (0.1 + 0.9 * day) + 0.015);
+#if SEA
+	// The glint: Blinn-Phong around the sun's mirror direction, brighter towards grazing
+	// (a Schlick Fresnel term).
+	vec3 eye = normalize(v_eye);
+	float spec = pow(max(dot(U, normalize(eye + u_sun)), 0.0), 1500.0);
+	float fres = 0.02 + 0.98 * pow(1.0 - max(dot(eye, U), 0.0), 5.0);
+	lit += wet * day * (vec3(1.0, 0.95, 0.85) * 6.0 * spec * (0.2 + fres) +
+			    vec3(0.30, 0.38, 0.50) * 0.25 * fres);
+#endif
 #if HAZE
 	lit = lit * v_tr + v_in;
 #endif

@@ -61,7 +61,8 @@ struct view_frame_stats {
 	int tiles_received;	 /* this frame */
 	size_t wants_sent;	 /* entries in the want-set sent this frame (0: none sent) */
 	bool complete;		 /* every wanted level drawn at its target quad */
-	double alt, agl, ground; /* camera above the ellipsoid, above the ground; ground height */
+	double alt, agl, ground; /* camera above the ellipsoid, above the ground; ground height
+				  * (the water's surface where a sea covers the ground) */
 };
 
 struct view;

@@ -2,8 +2,10 @@
  * black sky and unhazed ground, Earth's air a blue sky and a bluish haze on the far ground,
  * Mars' air a butterscotch sky, --haze (view_desc.haze) overrides the planet's; the default
  * sun lights a north-up view from its upper left (a slope facing north-west is bright, one
- * facing south-east dark: craters read as bowls); and the look reaches the viewer from the
- * planet file through the in-process source. Synthetic flat grey planets, small framebuffers.
+ * facing south-east dark: craters read as bowls); a sea draws water over the ground below
+ * it (dark blue, a glint of the sun) and the camera's height is above the water; and the
+ * look reaches the viewer from the planet file through the in-process source. Synthetic flat
+ * grey planets, small framebuffers.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -30,6 +32,7 @@
 struct flat {
 	double ne[2];
 	unsigned char grey;
+	float height;
 };
 
 static void fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type f, void *data)
@@ -38,7 +41,7 @@ static void fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type
 	const struct flat *s = ctx;
 	for (size_t o = 0; o < (size_t)T * T; o++) {
 		switch (f) {
-		case PIX_HEIGHT: ((float *)data)[o] = 0; break;
+		case PIX_HEIGHT: ((float *)data)[o] = s->height; break;
 		case PIX_NORMAL:
 			for (int i = 0; i < 2; i++)
 				((unsigned char *)data)[o * 2 + i] =
@@ -58,9 +61,11 @@ static const struct view_look mars_look = { .air_density = 0.3, .air_height = 11
 					    .air_color = { 196, 150, 108 } };
 
 /* Renders the flat planet (with `look`) from cam until complete; px gets W×H RGBA, top row
- * first, bg the clear colour. Returns false when there is no GL context. */
-static bool render(const struct flat *s, const struct view_look *look, float haze,
-		   const struct view_camera *cam, unsigned char *px, unsigned char bg[4])
+ * first, bg the clear colour, *stp (may be NULL) the last frame's stats. Returns false when
+ * there is no GL context. */
+static bool render_stats(const struct flat *s, const struct view_look *look, float haze,
+			 const struct view_camera *cam, unsigned char *px, unsigned char bg[4],
+			 struct view_frame_stats *stp)
 {
 	struct gl_context *ctx = NULL;
 	char err[256] = "";
@@ -80,12 +85,20 @@ static bool render(const struct flat *s, const struct view_look *look, float haz
 		fail_msg("view_create: %s", err);
 	struct view_frame_stats st;
 	assert_int_equal(view_frame_complete(v, cam, 30, &st, NULL), 0);
+	if (stp)
+		*stp = st;
 	assert_int_equal(view_read_rgba(v, px), 0);
 	view_background_rgba(v, bg);
 	view_destroy(v);
 	view_source_destroy(src);
 	gl_context_destroy(ctx);
 	return true;
+}
+
+static bool render(const struct flat *s, const struct view_look *look, float haze,
+		   const struct view_camera *cam, unsigned char *px, unsigned char bg[4])
+{
+	return render_stats(s, look, haze, cam, px, bg, NULL);
 }
 
 static const unsigned char *at(const unsigned char *px, int x, int y)
@@ -102,7 +115,7 @@ struct horizon {
 
 static bool horizon_view(const struct view_look *look, float haze, struct horizon *h)
 {
-	struct flat s = { { 0, 0 }, 40 }; /* dark: the haze shows */
+	struct flat s = { { 0, 0 }, 40, 0 }; /* dark: the haze shows */
 	struct view_camera cam = { 0, 0, 2000, 0, -3, 12, W, H };
 	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
 	if (!render(&s, look, haze, &cam, px, bg)) {
@@ -179,7 +192,7 @@ static void mars_air(void **state)
 /* Looking straight down, north up: the mean of the frame's middle. */
 static bool slope_brightness(double e, double n, double *out)
 {
-	struct flat s = { { e, n }, 140 };
+	struct flat s = { { e, n }, 140, 0 };
 	struct view_camera cam = { 0, 0, 5000, 0, -90, 60, W, H };
 	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
 	if (!render(&s, NULL, 0, &cam, px, bg)) {
@@ -209,6 +222,40 @@ static void sun_from_upper_left(void **state)
 		se);
 	assert_true(nw > flat + 10);
 	assert_true(flat > se + 10);
+}
+
+/* A sea at 0 over a grey floor 500 m down: the camera's height is above the water, the water
+ * is dark blue where the dry floor is grey, and the sun glints on it where it mirrors the sun
+ * (which dry ground does not). */
+static void sea(void **state)
+{
+	(void)state;
+	struct flat s = { { 0, 0 }, 140, -500 };
+	struct view_look wet = { .sea = true, .sea_level = 0 }, dry = { .sea = false };
+	struct view_camera down = { 0, 0, 2000, 0, -90, 60, W, H };
+	/* towards the sun (azimuth 315), looking 35° down: the sun's mirror image in the middle */
+	struct view_camera glint = { 0, 0, 2000, 315, -35, 30, W, H };
+	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
+	struct view_frame_stats st;
+	unsigned char d_wet[4], d_dry[4], g_wet[4], g_dry[4];
+	if (!render_stats(&s, &wet, -1, &down, px, bg, &st))
+		skip();
+	memcpy(d_wet, at(px, W / 2, H / 2), 4);
+	assert_true(st.ground == 0 && fabs(st.alt - 2000) < 1e-6);
+	assert_true(render_stats(&s, &dry, -1, &down, px, bg, &st));
+	memcpy(d_dry, at(px, W / 2, H / 2), 4);
+	assert_true(st.ground == -500 && fabs(st.alt - 1500) < 1e-6);
+	assert_true(render(&s, &wet, -1, &glint, px, bg));
+	memcpy(g_wet, at(px, W / 2, H / 2), 4);
+	assert_true(render(&s, &dry, -1, &glint, px, bg));
+	memcpy(g_dry, at(px, W / 2, H / 2), 4);
+	fprintf(stderr, "down: water %u,%u,%u floor %u,%u,%u; towards the sun: water %u,%u,%u "
+		"floor %u,%u,%u\n", d_wet[0], d_wet[1], d_wet[2], d_dry[0], d_dry[1], d_dry[2],
+		g_wet[0], g_wet[1], g_wet[2], g_dry[0], g_dry[1], g_dry[2]);
+	assert_true(d_wet[2] > d_wet[0] + 15);		   /* blue */
+	assert_true(d_wet[0] + d_wet[1] + d_wet[2] < d_dry[0] + d_dry[1] + d_dry[2]); /* darker */
+	assert_true(g_wet[0] > 200 && g_wet[0] > g_dry[0] + 50); /* the glint */
+	free(px);
 }
 
 /* The look goes from the planet file to the viewer's source. */
@@ -248,6 +295,7 @@ int main(void)
 		cmocka_unit_test(earth_air),
 		cmocka_unit_test(mars_air),
 		cmocka_unit_test(sun_from_upper_left),
+		cmocka_unit_test(sea),
 		cmocka_unit_test(look_from_planet_file),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
