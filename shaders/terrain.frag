@@ -133,20 +133,23 @@ void main()
 	// Water: flat, the floor's colour fading into deep-water blue with depth (the first few
 	// metres show the floor, a hundred hide it), and the sun's glint on top.
 	float wet = step(0.0, v_depth);
-	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7),
-				 exp(-max(v_depth, 0.0) / 30.0)), wet);
-	nrm = normalize(mix(nrm, U, wet));
+	float clear = exp2(max(v_depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)
+	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7), clear),
+		     wet);
+	nrm = mix(nrm, U, wet); // wet is 0 or 1: still a unit vector
 #endif
 	float diff = max(dot(nrm, u_sun), 0.0);
 	float sky = 0.5 + 0.5 * dot(nrm, U); // the open sky a slope sees
 	vec3 lit = albedo * (vec3(1.0, 0.97, 0.92) * 1.05 * diff * day +
 			     vec3(0.30, 0.38, 0.50) * 0.22 * sky * (0.1 + 0.9 * day) + 0.015);
 #if SEA
-	// The glint: Blinn-Phong around the sun's mirror direction, brighter towards grazing
-	// (a Schlick Fresnel term).
-	vec3 eye = normalize(v_eye);
-	float spec = pow(max(dot(U, normalize(eye + u_sun)), 0.0), 1500.0);
-	float fres = 0.02 + 0.98 * pow(1.0 - max(dot(eye, U), 0.0), 5.0);
+	// The glint: Phong around the sun's mirror image, cos^375 as e^(-375 (1 - cos)) (one
+	// exp2; pow() costs llvmpipe a log2 too), brighter towards grazing (Schlick's Fresnel).
+	vec3 eye = v_eye * inversesqrt(dot(v_eye, v_eye));
+	float c = max(dot(eye, U), 0.0);
+	float spec = exp2((dot(2.0 * c * U - eye, u_sun) - 1.0) * (375.0 * 1.4427));
+	float m = 1.0 - c, m2 = m * m;
+	float fres = 0.02 + 0.98 * m2 * m2 * m;
 	lit += wet * day * (vec3(1.0, 0.95, 0.85) * 6.0 * spec * (0.2 + fres) +
 			    vec3(0.30, 0.38, 0.50) * 0.25 * fres);
 #endif
