@@ -463,13 +463,25 @@ static void decode_planet(struct rd *r, struct proto_planet *p)
 			rd_fail(r, PROTO_ERR_FIELD, "layer %s: unknown format %u", l[i].name,
 				l[i].format);
 	}
+	p->air_density = rd_range(r, 0, 100, "air_density");
+	p->air_height = rd_range(r, 0, 1e6, "air_height");
+	for (int i = 0; i < 3; i++)
+		p->air_color[i] = rd_u8(r, "air_color");
+	p->sea = rd_u8(r, "sea");
+	p->sea_level = rd_range(r, -1e5, 1e5, "sea_level");
+	if (!r->err && (p->air_density > 0 ? p->air_height < 1 : p->air_height != 0))
+		rd_fail(r, PROTO_ERR_FIELD, "air_height %g with air_density %g", p->air_height,
+			p->air_density);
+	if (!r->err && (p->sea > 1 || (!p->sea && p->sea_level != 0)))
+		rd_fail(r, PROTO_ERR_FIELD, "sea %u with sea_level %g", p->sea, p->sea_level);
 }
 
 static void decode_planets(struct rd *r, struct proto_planets *p)
 {
 	p->req = rd_u32(r, "req");
 	p->count = rd_u16(r, "planet count");
-	struct proto_planet *a = rd_array(r, p->count, PROTO_MAX_PLANETS, 27, sizeof(*a), "planets");
+	struct proto_planet *a =
+		rd_array(r, p->count, PROTO_MAX_PLANETS, 55, sizeof(*a), "planets");
 	p->planets = a;
 	for (uint16_t i = 0; i < p->count && !r->err; i++)
 		decode_planet(r, &a[i]);

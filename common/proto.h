@@ -23,7 +23,7 @@
 /* ---- framing ---------------------------------------------------------------------------- */
 
 #define PROTO_MAGIC "CLMP" /* the first 4 bytes of every frame */
-#define PROTO_VERSION 1	   /* frame layout and message set; HELLO negotiates it */
+#define PROTO_VERSION 2	   /* frame layout and message set; HELLO negotiates it */
 #define PROTO_HDR 12	   /* frame header bytes */
 #define PROTO_MAX_FRAME (16u << 20) /* payload bytes, any type */
 
@@ -161,6 +161,12 @@ struct proto_planet {
 	uint8_t max_level;  /* finest ly ≤ GRID_MAX_LEVEL */
 	uint16_t nlayers;   /* ≤ PROTO_MAX_LAYERS */
 	const struct proto_layer *layers;
+	/* The look (version 2): the air and the sea; all zero: no air, no sea. */
+	double air_density;   /* haze relative to Earth's, [0, 100]; 0: no atmosphere */
+	double air_height;    /* scale height, metres: [1, 1e6] with air, 0 without */
+	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB */
+	uint8_t sea;	      /* 1: a sea at sea_level; 0: none (sea_level 0) */
+	double sea_level;     /* metres above the ellipsoid, |x| ≤ 1e5 */
 };
 
 struct proto_req { uint32_t req; }; /* LIST_PLANETS, STATS_REQ */

@@ -159,6 +159,12 @@ static void enc_planet(struct wr *w, const struct proto_planet *p)
 		w8(w, p->layers[i].format);
 		w64(w, p->layers[i].node);
 	}
+	wf64(w, p->air_density);
+	wf64(w, p->air_height);
+	for (int i = 0; i < 3; i++)
+		w8(w, p->air_color[i]);
+	w8(w, p->sea);
+	wf64(w, p->sea_level);
 }
 
 static void enc_tile_head(struct wr *w, const struct proto_tile *t)

@@ -291,7 +291,12 @@ static void fill_planet(const struct planet *p, struct proto_planet *out, struct
 	*out = (struct proto_planet){ .name = p->name, .description = p->description, .a = p->a,
 				      .f = p->f, .tile_size = p->tile_size,
 				      .max_level = (uint8_t)p->max_level,
-				      .nlayers = (uint16_t)p->nlayers, .layers = ls };
+				      .nlayers = (uint16_t)p->nlayers, .layers = ls,
+				      .air_density = p->look.air_density,
+				      .air_height = p->look.air_height,
+				      .air_color = { p->look.air_color[0], p->look.air_color[1],
+						     p->look.air_color[2] },
+				      .sea = p->look.sea, .sea_level = p->look.sea_level };
 }
 
 static void on_hello(struct session *s, const struct proto_hello *h)

@@ -5,7 +5,8 @@
 // fragment from the interpolated direction — needed where a ring reaches the pole, so nothing is
 // interpolated across the meridian behind it; elsewhere the vertices' (lon, lat) interpolate.
 // BLEND samples the coarser level too, HAZE applies the vertex shader's air, EXAG steepens the
-// normals by the vertical exaggeration, COLOR and NORMAL say which layers exist.
+// normals by the vertical exaggeration, COLOR and NORMAL say which layers exist, SEA draws
+// water where the vertex shader lifted the ground to sea level.
 
 #ifndef BLEND
 #define BLEND 1
@@ -25,6 +26,9 @@
 #ifndef NORMAL
 #define NORMAL 1
 #endif
+#ifndef SEA
+#define SEA 1
+#endif
 
 in vec3 v_delta;
 in vec2 v_g;
@@ -34,6 +38,10 @@ in float v_blend;
 #if HAZE
 in vec3 v_tr;
 in vec3 v_in;
+#endif
+#if SEA
+in float v_depth;
+in vec3 v_eye;
 #endif
 
 uniform vec3 u_lat;
@@ -120,11 +128,31 @@ void main()
 	E *= inversesqrt(max(dot(E, E), 1e-12));
 	vec3 Nn = cross(U, E);
 	vec3 nrm = normalize(en.x * E + en.y * Nn + up * U);
-	float diff = max(dot(nrm, u_sun), 0.0);
 	float day = smoothstep(-0.1, 0.1, dot(U, u_sun));
+#if SEA
+	// Water: flat, the floor's colour fading into deep-water blue with depth (the first few
+	// metres show the floor, a hundred hide it), and the sun's glint on top.
+	float wet = step(0.0, v_depth);
+	float clear = exp2(max(v_depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)
+	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7), clear),
+		     wet);
+	nrm = mix(nrm, U, wet); // wet is 0 or 1: still a unit vector
+#endif
+	float diff = max(dot(nrm, u_sun), 0.0);
 	float sky = 0.5 + 0.5 * dot(nrm, U); // the open sky a slope sees
 	vec3 lit = albedo * (vec3(1.0, 0.97, 0.92) * 1.05 * diff * day +
 			     vec3(0.30, 0.38, 0.50) * 0.22 * sky * (0.1 + 0.9 * day) + 0.015);
+#if SEA
+	// The glint: Phong around the sun's mirror image, cos^375 as e^(-375 (1 - cos)) (one
+	// exp2; pow() costs llvmpipe a log2 too), brighter towards grazing (Schlick's Fresnel).
+	vec3 eye = v_eye * inversesqrt(dot(v_eye, v_eye));
+	float c = max(dot(eye, U), 0.0);
+	float spec = exp2((dot(2.0 * c * U - eye, u_sun) - 1.0) * (375.0 * 1.4427));
+	float m = 1.0 - c, m2 = m * m;
+	float fres = 0.02 + 0.98 * m2 * m2 * m;
+	lit += wet * day * (vec3(1.0, 0.95, 0.85) * 6.0 * spec * (0.2 + fres) +
+			    vec3(0.30, 0.38, 0.50) * 0.25 * fres);
+#endif
 #if HAZE
 	lit = lit * v_tr + v_in;
 #endif

@@ -5,13 +5,17 @@
 // height) enter as differences that float holds exactly enough at 1 m above an Earth-size body.
 // Compiled in variants (view.c prepends the #defines; the defaults below are the full one):
 // BLEND samples the coarser level too (the outer part of a ring, or a level fading in), HAZE
-// computes the air's transmittance and in-scatter here, per vertex.
+// computes the air's transmittance and in-scatter here, per vertex, SEA lifts the ground below
+// sea level to the water's surface (the depth goes to the fragment shader).
 
 #ifndef BLEND
 #define BLEND 1
 #endif
 #ifndef HAZE
 #define HAZE 1
+#endif
+#ifndef SEA
+#define SEA 1
 #endif
 
 layout(location = 0) in vec3 a_ring; // sin φ̃, cos φ̃ (φ̃ = 0: north), θ̃ (angle from the nadir)
@@ -32,7 +36,8 @@ uniform float u_sc;
 uniform float u_fade;   // 1: the fine level fully shown; < 1 while it fades in
 uniform float u_exag;   // vertical exaggeration of the relief (1: true scale)
 uniform vec3 u_sun;     // towards the sun, ENU at the camera
-uniform vec4 u_haze;    // scale height (m, exaggerated), strength (0: no air), unused ×2
+uniform vec4 u_haze;    // scale height (m, exaggerated), extinction per m of sea-level air (rgb)
+uniform vec2 u_sea;     // sea level (m, exaggerated), 1 / exaggeration
 uniform sampler2DArray u_height;
 
 out vec3 v_delta; // unit normal minus the camera's up, ENU: the fragment's up, (lon, lat)
@@ -43,6 +48,10 @@ out float v_blend;
 #if HAZE
 out vec3 v_tr;    // transmittance of the air between the camera and the point
 out vec3 v_in;    // light scattered into the ray by that air
+#endif
+#if SEA
+out float v_depth; // water above the ground, metres (< 0: dry land)
+out vec3 v_eye;    // from the point to the camera, ENU
 #endif
 
 // (Δlon, Δlat) of the direction up + d from the camera's nadir, without cancellation.
@@ -81,6 +90,10 @@ void main()
 #else
 	float h = hf * u_exag;
 #endif
+#if SEA
+	v_depth = (u_sea.x - h) * u_sea.y;
+	h = max(h, u_sea.x);
+#endif
 
 	// P - C = (Nc+hc)·d + (N-Nc + h-hc)·n - e²·(N·(s-sc) + (N-Nc)·sc)·ẑ
 	float sl = u_lat.x, cl = u_lat.y, e2 = u_body.w;
@@ -95,6 +108,9 @@ void main()
 
 	v_delta = d;
 	v_g = g;
+#if SEA
+	v_eye = -pos;
+#endif
 #if HAZE
 	// Air between the camera and the point: an exponential atmosphere integrated along the
 	// straight ray (exact for a flat one, a good fit for short rays and slant views).
@@ -106,8 +122,7 @@ void main()
 	float f = abs(x) < 1e-3 ? 1.0 - 0.5 * x : (1.0 - exp(-x)) / x;
 	float air = sd * exp(-max(h, 0.0) / H) * f; // metres of sea-level air
 	air /= 1.0 + (u_exag - 1.0) * cz * cz;      // exaggerated verticals hold no more air
-	vec3 beta = (vec3(5.8e-6, 13.5e-6, 33.1e-6) + 2.0e-6) * (0.45 * u_haze.y);
-	v_tr = exp(-beta * air);
+	v_tr = exp(-u_haze.yzw * air);
 	// Light scattered into the ray: single scattering of the sunlight that reaches the air
 	// (less under a low sun, whose light crosses more air first), about a quarter of what a
 	// white ground under the same sun would send back.

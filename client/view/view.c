@@ -20,7 +20,10 @@
  *   pops. The inner part shows the fine level alone and is drawn by a program variant that
  *   samples one level: llvmpipe executes both sides of every branch, so work a pixel does not
  *   need is compiled out rather than skipped (variants: blend, per-fragment lon/lat near the
- *   poles, haze, exaggeration, which layers exist — compiled on first use).
+ *   poles, haze, exaggeration, which layers exist, a sea — compiled on first use).
+ * - The look (the planet's, view_source.h): the air sets the sky's colour and the haze's
+ *   extinction (air_init); a sea lifts the ground below it to the water's surface in the
+ *   shader, so culling bounds and the camera's ground are taken at that surface too.
  * - Precision: the shader works with n − up (the direction from the nadir) and differences of
  *   radii; the camera sits at the origin of its east-north-up frame.
  */
@@ -43,19 +46,21 @@
 
 enum {
 	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_FADE,
-	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_EXAG, U_COUNT
+	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_EXAG, U_SEA, U_COUNT
 };
 static const char *const uniform_names[U_COUNT] = {
 	"u_vp", "u_lat", "u_body", "u_a", "u_cap", "u_blend", "u_T", "u_pf", "u_vf", "u_sf", "u_pc",
 	"u_vc", "u_sc", "u_fade", "u_height", "u_normal", "u_color", "u_sun", "u_haze", "u_exag",
+	"u_sea",
 };
 
 /* Program variants: the shaders' #defines (see their headers). */
 enum {
 	VAR_BLEND = 1, VAR_GEO_FRAG = 2, VAR_HAZE = 4, VAR_EXAG = 8, VAR_COLOR = 16, VAR_NORMAL = 32,
-	NVARIANT = 64
+	VAR_SEA = 64, NVARIANT = 128
 };
-static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG", "COLOR", "NORMAL" };
+static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE",  "EXAG",
+					     "COLOR", "NORMAL",	  "SEA" };
 
 #define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
 /* A camera step longer than this many heights above the ground between two frames is a jump,
@@ -63,7 +68,7 @@ static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG"
 #define JUMP_HEIGHTS 10.0
 
 struct frame_uniforms {
-	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4];
+	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4], sea[2];
 };
 
 struct program {
@@ -72,10 +77,19 @@ struct program {
 	uint64_t frame; /* the frame whose common uniforms it holds */
 };
 
+/* The air the frames are drawn through (from the planet's look and view_desc.haze). */
+struct air {
+	bool on;
+	double height;	/* scale height, metres */
+	float beta[3];	/* extinction per metre of sea-level air, red, green, blue */
+	float sky[3];	/* the sky's colour at the ground (the clear colour's encoding) */
+};
+
 struct view {
 	const struct gl *gl;
 	struct view_source *src;
 	struct view_desc d;
+	struct air air;
 	struct view_body body;
 	struct view_clipmap *cm;
 	int nlevels, max_level;
@@ -291,6 +305,42 @@ static int build_fbo(struct view *v, char err[256])
 	return 0;
 }
 
+/* Earth's air: what --haze gives a planet that has none of its own. */
+static const struct view_look earth_air = { .air_density = 1, .air_height = 8000,
+					    .air_color = { 133, 173, 222 } };
+
+/* The air from the planet's look; haze (view_desc) > 0 overrides its density, < 0 removes it.
+ * The extinction's spectrum follows the cube of the sky's colour: Earth's (133, 173, 222)
+ * gives Rayleigh's λ⁻⁴ blue plus a little grey Mie (7.4, 16.4, 34.6 µ/m, 58.4 in all at
+ * density 1, as the viewer always drew it); Mars' butterscotch a red-heavy dust haze. The
+ * light the air scatters into a ray is sunlight × (1 − transmittance), so the haze takes the
+ * colour of the extinction. */
+static void air_init(struct air *air, const struct view_look *look, float haze)
+{
+	*air = (struct air){ .on = false };
+	if (haze < 0)
+		return;
+	double density = look->air_density;
+	if (!(density > 0 && look->air_height > 0)) {
+		if (haze == 0)
+			return;
+		look = &earth_air;
+	}
+	if (haze > 0)
+		density = haze;
+	double c3[3], sum = 0;
+	for (int i = 0; i < 3; i++) {
+		double c = look->air_color[i] / 255.0;
+		c3[i] = c * c * c + 1e-4;
+		sum += c3[i];
+		air->sky[i] = (float)c;
+	}
+	for (int i = 0; i < 3; i++)
+		air->beta[i] = (float)(0.45 * density * 58.4e-6 * c3[i] / sum);
+	air->height = look->air_height;
+	air->on = true;
+}
+
 int view_create(const struct gl *gl, struct view_source *src, const struct view_desc *d,
 		struct view **out, char err[256])
 {
@@ -309,14 +359,13 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	if (v->d.m_rings <= 0)
 		v->d.m_rings = 16;
 	if (v->d.sun_az == 0 && v->d.sun_el == 0) {
-		v->d.sun_az = 135;
-		v->d.sun_el = 35;
+		v->d.sun_az = VIEW_SUN_AZ;
+		v->d.sun_el = VIEW_SUN_EL;
 	}
 	if (!(v->d.exaggeration > 0))
 		v->d.exaggeration = 1;
-	if (v->d.haze == 0)
-		v->d.haze = 1;
 	const struct view_planet *p = &src->planet;
+	air_init(&v->air, &p->look, v->d.haze);
 	view_body_init(&v->body, p->a, p->f);
 	v->body.hmin *= v->d.exaggeration;
 	v->body.hmax *= v->d.exaggeration;
@@ -466,6 +515,20 @@ static void draw_sector(struct view *v, const struct view_body *b, struct ranges
 	*drawn += count;
 }
 
+/* The heights level l's slice draws: what it holds, lifted to the water's surface where the
+ * planet has a sea (the vertex shader draws the sea there, not its floor). Returns 0, or
+ * -ENOENT before its first upload. */
+static int drawn_range(struct view *v, int l, double *lo, double *hi)
+{
+	int rc = view_clipmap_height_range(v->cm, l, lo, hi);
+	const struct view_look *look = &v->src->planet.look;
+	if (rc == 0 && look->sea) {
+		*lo = fmax(*lo, look->sea_level);
+		*hi = fmax(*hi, look->sea_level);
+	}
+	return rc;
+}
+
 /* Binds the program of variant bits for drawing level i (fine) blended towards level c
  * (coarse): the frame's common uniforms on its first use this frame, the levels' always. */
 static int bind_program(struct view *v, int bits, int i, int c, float fade)
@@ -491,6 +554,7 @@ static int bind_program(struct view *v, int bits, int i, int c, float fade)
 		gl->Uniform3f(p->u[U_SUN], f->sun[0], f->sun[1], f->sun[2]);
 		gl->Uniform4fv(p->u[U_HAZE], 1, f->haze);
 		gl->Uniform1f(p->u[U_EXAG], v->d.exaggeration);
+		gl->Uniform2f(p->u[U_SEA], f->sea[0], f->sea[1]);
 		p->frame = v->frame_no;
 	}
 	level_uniforms(v, i, p->u[U_PF], p->u[U_VF], p->u[U_SF]);
@@ -527,8 +591,7 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 	 * through that ground hides whatever of the level lies beyond its horizon. */
 	struct view_body b = v->body;
 	double lo[2], hi[2];
-	if (view_clipmap_height_range(v->cm, i, &lo[0], &hi[0]) == 0 &&
-	    view_clipmap_height_range(v->cm, c, &lo[1], &hi[1]) == 0) {
+	if (drawn_range(v, i, &lo[0], &hi[0]) == 0 && drawn_range(v, c, &lo[1], &hi[1]) == 0) {
 		double e = v->d.exaggeration;
 		b.hmin = fmin(lo[0], lo[1]) * e;
 		b.hmax = fmax(hi[0], hi[1]) * e;
@@ -621,10 +684,13 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 	f->sun[0] = (float)(sin(az) * cos(el));
 	f->sun[1] = (float)(cos(az) * cos(el));
 	f->sun[2] = (float)sin(el);
-	f->haze[0] = 8000.0f * v->d.exaggeration;
-	f->haze[1] = v->d.haze > 0 ? v->d.haze : 0.0f;
-	f->haze[2] = f->haze[3] = 0;
-	v->frame_bits = (v->d.haze > 0 ? VAR_HAZE : 0) | (v->d.exaggeration != 1 ? VAR_EXAG : 0) |
+	f->haze[0] = (float)(v->air.height * v->d.exaggeration);
+	memcpy(f->haze + 1, v->air.beta, sizeof v->air.beta);
+	const struct view_look *look = &v->src->planet.look;
+	f->sea[0] = (float)(look->sea_level * v->d.exaggeration);
+	f->sea[1] = 1.0f / v->d.exaggeration;
+	v->frame_bits = (look->sea ? VAR_SEA : 0) | (v->air.on ? VAR_HAZE : 0) |
+			(v->d.exaggeration != 1 ? VAR_EXAG : 0) |
 			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
 			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
 	const struct gl *gl = v->gl;
@@ -632,6 +698,17 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 		gl->ActiveTexture(GL_TEXTURE0 + (GLenum)r);
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, view_clipmap_texture(v->cm, (enum view_role)r));
 	}
+}
+
+/* The height of what the camera stands over: the ground as far as the clipmap knows it, or
+ * the water above it where the planet has a sea (altitudes are above the sea, not the sea
+ * floor). */
+static double surface_height(const struct view *v, double lon, double lat)
+{
+	double ground = 0;
+	view_clipmap_ground(v->cm, lon, lat, &ground);
+	const struct view_look *look = &v->src->planet.look;
+	return look->sea && ground < look->sea_level ? look->sea_level : ground;
 }
 
 int view_frame(struct view *v, const struct view_camera *cam, double now_s,
@@ -662,8 +739,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	v->last = *cam;
 	v->last.width = v->d.width;
 	v->last.height = v->d.height;
-	double ground = 0;
-	view_clipmap_ground(v->cm, cam->lon, cam->lat, &ground);
+	double ground = surface_height(v, cam->lon, cam->lat);
 	v->last.alt = ground * v->d.exaggeration + agl;
 	s.ground = ground;
 	s.agl = agl;
@@ -704,11 +780,12 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	if (v->d.background_set) {
 		memcpy(bg, v->d.background, sizeof bg);
 	} else {
-		/* space, turning to a pale blue sky inside the atmosphere (none without air) */
-		double sky = v->d.haze > 0 ? exp(-agl / 35e3) : 0;
-		bg[0] = (float)(0.01 + 0.52 * sky);
-		bg[1] = (float)(0.01 + 0.68 * sky);
-		bg[2] = (float)(0.03 + 0.87 * sky);
+		/* space, turning to the sky's colour inside the atmosphere (none without air); on
+		 * Earth the blue fades out over 35 km */
+		double sky = v->air.on ? exp(-agl / (4.375 * v->air.height)) : 0;
+		bg[0] = (float)(0.01 + v->air.sky[0] * sky);
+		bg[1] = (float)(0.01 + v->air.sky[1] * sky);
+		bg[2] = (float)(0.03 + v->air.sky[2] * sky);
 	}
 	for (int i = 0; i < 3; i++)
 		v->bg[i] = (unsigned char)lrintf(fminf(fmaxf(bg[i], 0), 1) * 255);
@@ -765,7 +842,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 		double lo, hi;
 		if (l > lmax)
 			v->floor[l] = INFINITY;
-		else if (known && view_clipmap_height_range(v->cm, l, &lo, &hi) == 0)
+		else if (known && drawn_range(v, l, &lo, &hi) == 0)
 			v->floor[l] = fl = fmin(fl, lo);
 		else
 			v->floor[l] = fl = INFINITY, known = false;
@@ -846,9 +923,7 @@ int view_frame_complete(struct view *v, const struct view_camera *c, double time
 			break;
 		/* The frame used the ground height known before its uploads: settled when the
 		 * uploads did not change it. */
-		double g = 0;
-		view_clipmap_ground(v->cm, c->lon, c->lat, &g);
-		bool settled = g == s.ground;
+		bool settled = surface_height(v, c->lon, c->lat) == s.ground;
 		if (s.complete && settled)
 			break;
 		double left = timeout_s * 1e3 - (now_ms() - t0);

@@ -24,6 +24,11 @@
 #include "view_levels.h"
 #include "view_source.h"
 
+/* The default sun: from the north-west, so that a north-up view is lit from its upper left
+ * (the light the eye assumes: craters read as bowls, not domes), 35° up. */
+#define VIEW_SUN_AZ 315
+#define VIEW_SUN_EL 35
+
 struct view_desc {
 	int width, height;  /* framebuffer; 0: 1280×720 */
 	int n_phi;	    /* steps around each ring; 0: 256 */
@@ -35,9 +40,11 @@ struct view_desc {
 			     * limit) */
 	bool background_set;
 	float background[3]; /* the clear colour (linear 0..1); default: space, sky near ground */
-	float sun_az, sun_el; /* degrees, at the camera; default 135, 35 */
+	float sun_az, sun_el; /* degrees, at the camera, azimuth clockwise from north; both 0:
+			       * VIEW_SUN_AZ, VIEW_SUN_EL */
 	float exaggeration;   /* vertical exaggeration of the relief; 0: 1 (true scale) */
-	float haze;	      /* atmosphere density, 1: Earth's; 0: 1; < 0: none (the Moon) */
+	float haze;	      /* atmosphere density, 1: Earth's; 0: the planet's (its look); < 0:
+			       * none. > 0 gives a planet without air Earth's */
 	bool no_cull;	      /* draw every ring sector (also: CLIPMAP_NO_CULL=1 in the env) */
 };
 
@@ -54,7 +61,8 @@ struct view_frame_stats {
 	int tiles_received;	 /* this frame */
 	size_t wants_sent;	 /* entries in the want-set sent this frame (0: none sent) */
 	bool complete;		 /* every wanted level drawn at its target quad */
-	double alt, agl, ground; /* camera above the ellipsoid, above the ground; ground height */
+	double alt, agl, ground; /* camera above the ellipsoid, above the ground; ground height
+				  * (the water's surface where a sea covers the ground) */
 };
 
 struct view;

@@ -10,6 +10,7 @@
  */
 #ifndef CLIPMAP_VIEW_SOURCE_H
 #define CLIPMAP_VIEW_SOURCE_H
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -36,12 +37,22 @@ struct view_focus {
 	double vel[3];	      /* east, north, up m/s */
 };
 
-/* What the source serves: the body and the published layers. */
+/* The planet's air and sea (docs/PLANETS.md; all zero: no air, no sea). */
+struct view_look {
+	double air_density;   /* haze relative to Earth's; 0: no atmosphere */
+	double air_height;    /* scale height, metres */
+	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB */
+	bool sea;
+	double sea_level;     /* metres above the ellipsoid */
+};
+
+/* What the source serves: the body, its look and the published layers. */
 struct view_planet {
 	char name[64];
 	double a, f;
 	uint32_t tile_size;
 	int max_level;
+	struct view_look look;
 	int nlayers;
 	struct {
 		char name[32];

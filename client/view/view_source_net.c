@@ -176,6 +176,10 @@ int view_source_net_create(const struct net_opts *o, const char *planet, struct 
 	vp->f = pp->f;
 	vp->tile_size = pp->tile_size;
 	vp->max_level = pp->max_level;
+	vp->look = (struct view_look){ .air_density = pp->air_density, .air_height = pp->air_height,
+				       .air_color = { pp->air_color[0], pp->air_color[1],
+						      pp->air_color[2] },
+				       .sea = pp->sea != 0, .sea_level = pp->sea_level };
 	vp->nlayers = pp->nlayers < VIEW_MAX_LAYERS ? pp->nlayers : VIEW_MAX_LAYERS;
 	for (int i = 0; i < vp->nlayers; i++) {
 		snprintf(vp->layer[i].name, sizeof vp->layer[i].name, "%s", pp->layers[i].name);

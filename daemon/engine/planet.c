@@ -176,10 +176,129 @@ static int check_syntax(struct loader *L)
 enum body_kind { BODY_UNSET = 0, BODY_WGS84, BODY_SPHERE, BODY_CUSTOM };
 static const char *const body_names[] = { "", "wgs84", "sphere", "custom" };
 
+/* The presets of `atmosphere =`: Earth's air (Rayleigh blue, the haze the viewer always drew);
+ * Mars' thin dusty air (a butterscotch sky, a third of Earth's haze over a deeper scale
+ * height); none (the Moon: a black sky and no haze). */
+static const struct {
+	const char *name;
+	struct planet_look look;
+} look_presets[] = {
+	{ "none", { .air_density = 0 } },
+	{ "earth", { .air_density = 1.0, .air_height = 8000, .air_color = { 133, 173, 222 } } },
+	{ "mars", { .air_density = 0.3, .air_height = 11100, .air_color = { 196, 150, 108 } } },
+};
+
+int planet_look_preset(const char *name, struct planet_look *out)
+{
+	for (size_t i = 0; i < sizeof look_presets / sizeof look_presets[0]; i++)
+		if (strcmp(name, look_presets[i].name) == 0) {
+			*out = look_presets[i].look;
+			return 0;
+		}
+	return -EINVAL;
+}
+
+/* A colour as the node parameters write it (node.h np_color) but opaque: "#rrggbb" or
+ * "r,g,b" (0-255). */
+static int parse_rgb(const char *s, uint8_t out[3])
+{
+	long v[3];
+	if (s[0] == '#') {
+		if (strlen(s) != 7)
+			return -EINVAL;
+		for (int i = 0; i < 3; i++) {
+			char hex[3] = { s[1 + 2 * i], s[2 + 2 * i], 0 };
+			char *end;
+			if (!isxdigit((unsigned char)hex[0]) || !isxdigit((unsigned char)hex[1]))
+				return -EINVAL;
+			v[i] = strtol(hex, &end, 16);
+		}
+	} else {
+		for (int i = 0; i < 3; i++) {
+			char *end;
+			while (isspace((unsigned char)*s))
+				s++;
+			if (!isdigit((unsigned char)*s))
+				return -EINVAL;
+			errno = 0;
+			v[i] = strtol(s, &end, 10);
+			if (errno || v[i] > 255)
+				return -EINVAL;
+			s = end;
+			while (isspace((unsigned char)*s))
+				s++;
+			if (i < 2 && *s++ != ',')
+				return -EINVAL;
+		}
+		if (*s)
+			return -EINVAL;
+	}
+	for (int i = 0; i < 3; i++)
+		out[i] = (uint8_t)v[i];
+	return 0;
+}
+
+/* The look: atmosphere (a preset, default earth) with its parameters overridden one by one,
+ * and the sea. */
+static int parse_look(struct loader *L, struct ini_section *s)
+{
+	struct planet_look *k = &L->p->look;
+	struct ini_entry *e_air = s ? ini_find(s, "atmosphere") : NULL;
+	struct ini_entry *e_dens = s ? ini_find(s, "atmosphere_density") : NULL;
+	struct ini_entry *e_h = s ? ini_find(s, "atmosphere_height") : NULL;
+	struct ini_entry *e_col = s ? ini_find(s, "atmosphere_color") : NULL;
+	struct ini_entry *e_sea = s ? ini_find(s, "sea_level") : NULL;
+	if (planet_look_preset(e_air ? e_air->value : "earth", k))
+		return cfg_error(L, e_air->line, "atmosphere",
+				 "\"%s\" is not one of: none, earth, mars", e_air->value);
+	if (!(k->air_density > 0)) {
+		struct ini_entry *e = e_dens ? e_dens : e_h ? e_h : e_col;
+		if (e)
+			return cfg_error(L, e->line, e->key,
+					 "atmosphere = none has no air to describe; remove it or "
+					 "name a preset (earth, mars) to start from");
+	}
+	if (e_dens && (parse_number(e_dens->value, &k->air_density) ||
+		       !(k->air_density > 0 && k->air_density <= 100)))
+		return cfg_error(L, e_dens->line, "atmosphere_density",
+				 "expected a number in (0, 100] (1: Earth's haze), got \"%s\"; "
+				 "for no air use atmosphere = none",
+				 e_dens->value);
+	if (e_h && (parse_number(e_h->value, &k->air_height) ||
+		    !(k->air_height >= 1 && k->air_height <= 1e6)))
+		return cfg_error(L, e_h->line, "atmosphere_height",
+				 "expected a scale height of 1 to 1e6 metres, got \"%s\"",
+				 e_h->value);
+	if (e_col && parse_rgb(e_col->value, k->air_color))
+		return cfg_error(L, e_col->line, "atmosphere_color",
+				 "expected \"#rrggbb\" or \"r,g,b\" (0-255), got \"%s\"",
+				 e_col->value);
+	if (e_sea) {
+		if (parse_number(e_sea->value, &k->sea_level) || fabs(k->sea_level) > 1e5)
+			return cfg_error(L, e_sea->line, "sea_level",
+					 "expected metres above the ellipsoid, |x| ≤ 1e5, got "
+					 "\"%s\"",
+					 e_sea->value);
+		k->sea = true;
+	}
+	return 0;
+}
+
 static int parse_planet(struct loader *L, struct ini_section *s)
 {
-	static const char *const keys[] = { "name",	  "description", "body",      "radius",
-					    "flattening", "tile_size",	 "max_level", NULL };
+	static const char *const keys[] = { "name",
+					    "description",
+					    "body",
+					    "radius",
+					    "flattening",
+					    "tile_size",
+					    "max_level",
+					    "atmosphere",
+					    "atmosphere_density",
+					    "atmosphere_height",
+					    "atmosphere_color",
+					    "sea_level",
+					    NULL };
 	struct planet *p = L->p;
 	for (size_t i = 0; s && i < s->n; i++) {
 		struct ini_entry *e = &s->entries[i];
@@ -189,7 +308,9 @@ static int parse_planet(struct loader *L, struct ini_section *s)
 		if (!known)
 			return cfg_error(L, e->line, e->key,
 					 "unknown key in [planet] (known: name, description, body, "
-					 "radius, flattening, tile_size, max_level)");
+					 "radius, flattening, tile_size, max_level, atmosphere, "
+					 "atmosphere_density, atmosphere_height, atmosphere_color, "
+					 "sea_level)");
 		e->used = true;
 	}
 	struct ini_entry *e_name = s ? ini_find(s, "name") : NULL;
@@ -289,7 +410,7 @@ static int parse_planet(struct loader *L, struct ini_section *s)
 					 GRID_MAX_LEVEL - 1, e_level->value);
 		p->max_level = (int)v;
 	}
-	return 0;
+	return parse_look(L, s);
 }
 
 static int find_lnode(const struct loader *L, const char *name)

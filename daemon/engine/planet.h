@@ -5,7 +5,9 @@
  *
  * File layout:
  *   [planet]        name, description, body = wgs84 | sphere | custom, radius, flattening,
- *                   tile_size (power of two, 64..1024), max_level
+ *                   tile_size (power of two, 64..1024), max_level; the look:
+ *                   atmosphere = none | earth | mars, atmosphere_density, atmosphere_height,
+ *                   atmosphere_color (overriding the preset), sea_level (absent: no sea)
  *   [node NAME]     type = <node type>, its input slots naming other nodes, its parameters
  *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
  *
@@ -16,6 +18,7 @@
  */
 #ifndef CLIPMAP_PLANET_H
 #define CLIPMAP_PLANET_H
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdatomic.h>
 #include <stdint.h>
@@ -36,6 +39,15 @@ struct planet_layer {
 	enum pix_type type;
 };
 
+/* How the planet looks beyond its layers: its air and its sea (docs/PLANETS.md). */
+struct planet_look {
+	double air_density;   /* haze relative to Earth's; 0: no atmosphere (black sky) */
+	double air_height;    /* scale height, metres (> 0 with air, 0 without) */
+	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB; its hue tints the haze */
+	bool sea;	      /* a sea at sea_level covers what lies below it */
+	double sea_level;     /* metres above the ellipsoid (0 without a sea) */
+};
+
 struct planet {
 	/* References: planet_load gives the caller one; the scheduler holds one per job on the
 	 * planet's nodes, so a planet dropped while workers still generate from it lives until
@@ -49,6 +61,7 @@ struct planet {
 	struct geo_body *body;
 	uint32_t tile_size;
 	int max_level; /* finest ly; lx ≤ max_level + 1 */
+	struct planet_look look;
 	struct node **nodes; /* topological order: every node after its inputs */
 	size_t nnodes;
 	struct planet_layer *layers;
@@ -58,6 +71,10 @@ struct planet {
 	 * after the nodes. NULL only in caller-owned planets (file nodes then make their own). */
 	struct img_cache *images;
 };
+
+/* The look of a preset atmosphere ("none", "earth", "mars"), without a sea. Returns 0, or
+ * -EINVAL for another name. */
+int planet_look_preset(const char *name, struct planet_look *out);
 
 /* Loads and checks a planet file. Returns 0 or -errno with err filled. */
 int planet_load(const char *path, struct planet **out, char err[256]);

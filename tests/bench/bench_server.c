@@ -116,8 +116,9 @@ static void cl_until(struct cl *c, uint16_t type)
 
 static uint32_t cl_open(struct cl *c)
 {
-	struct proto_msg h = { .type = PROTO_HELLO, .hello = { .ver_min = 1, .ver_max = 1,
-							       .name = "bench" } };
+	struct proto_msg h = { .type = PROTO_HELLO,
+			       .hello = { .ver_min = PROTO_VERSION, .ver_max = PROTO_VERSION,
+					  .name = "bench" } };
 	cl_send(c, &h);
 	cl_until(c, PROTO_HELLO_OK);
 	struct proto_msg o = { .type = PROTO_OPEN, .open = { .req = 1, .name = "b" } };

@@ -295,7 +295,7 @@ static void cl_expect(struct cl *c, uint16_t type, int timeout_ms)
 static void cl_hello(struct cl *c, const char *token)
 {
 	struct proto_msg m = { .type = PROTO_HELLO,
-			       .hello = { .ver_min = 1, .ver_max = 1,
+			       .hello = { .ver_min = PROTO_VERSION, .ver_max = PROTO_VERSION,
 					  .codecs = 1u << TCODEC_ZSTD | 1u << TCODEC_LZ4,
 					  .token = (const uint8_t *)token,
 					  .token_len = token ? (uint16_t)strlen(token) : 0,
@@ -592,12 +592,12 @@ static void test_malformed(void **state)
 		  .code = PROTO_E_STATE },
 	};
 	memcpy(cs[0].bytes, "XLMP\1\0\0\0\0\0\0\0", 12);
-	put_hdr(cs[1].bytes, 2, PROTO_STATS_REQ, 4);
-	put_hdr(cs[2].bytes, 1, PROTO_WANT, 1u << 20);
-	put_hdr(cs[3].bytes, 1, PROTO_OPEN, 4); /* req only, the name's length missing */
-	put_hdr(cs[4].bytes, 1, 999, 0);
-	put_hdr(cs[5].bytes, 1, PROTO_STATS_REQ, 4);
-	put_hdr(cs[6].bytes, 1, PROTO_PREFETCH_PROGRESS, 4);
+	put_hdr(cs[1].bytes, PROTO_VERSION + 1, PROTO_STATS_REQ, 4);
+	put_hdr(cs[2].bytes, PROTO_VERSION, PROTO_WANT, 1u << 20);
+	put_hdr(cs[3].bytes, PROTO_VERSION, PROTO_OPEN, 4); /* req only, no name length */
+	put_hdr(cs[4].bytes, PROTO_VERSION, 999, 0);
+	put_hdr(cs[5].bytes, PROTO_VERSION, PROTO_STATS_REQ, 4);
+	put_hdr(cs[6].bytes, PROTO_VERSION, PROTO_PREFETCH_PROGRESS, 4);
 	/* STATS_REQ before HELLO is a state error; PREFETCH_PROGRESS is a server message and its
 	 * body is too short, but the direction is checked: either way the peer must close. */
 	struct cl *good = cl_unix();

@@ -117,8 +117,8 @@ static int srv_handshake(struct srv *s)
 	uint32_t codecs = m.hello.codecs & TCODEC_ALL_MASK;
 	proto_msg_fini(&m);
 	struct proto_msg ok = { .type = PROTO_HELLO_OK,
-				.hello_ok = { .version = 1, .codecs = codecs, .session = 42,
-					      .name = "fake/1",
+				.hello_ok = { .version = PROTO_VERSION, .codecs = codecs,
+					      .session = 42, .name = "fake/1",
 					      .limits = { .max_want = 4096, .max_frame = 1 << 20 } } };
 	return srv_send(s, &ok);
 }

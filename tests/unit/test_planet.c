@@ -553,6 +553,70 @@ static void planet_errors(void **state)
 	load_fails("[planet]\nmax_level = 30\n" NODE_Z LAYER_Z, "p.ini:2: max_level: expected an integer");
 }
 
+/* The look: Earth's air and no sea by default, the presets, keys overriding a preset one by
+ * one, a sea level; and every bad value with its file:line: key. */
+static void look(void **state)
+{
+	(void)state;
+	struct planet *p = load_ok("[planet]\n" NODE_Z LAYER_Z);
+	assert_true(p->look.air_density == 1 && p->look.air_height == 8000);
+	assert_memory_equal(p->look.air_color, ((uint8_t[3]){ 133, 173, 222 }), 3);
+	assert_false(p->look.sea);
+	assert_true(p->look.sea_level == 0);
+	planet_unref(p);
+
+	p = load_ok("[planet]\natmosphere = none\nsea_level = -120.5\n" NODE_Z LAYER_Z);
+	assert_true(p->look.air_density == 0 && p->look.air_height == 0);
+	assert_true(p->look.sea && p->look.sea_level == -120.5);
+	planet_unref(p);
+
+	p = load_ok("[planet]\natmosphere = mars\n" NODE_Z LAYER_Z);
+	assert_true(p->look.air_density == 0.3 && p->look.air_height == 11100);
+	assert_memory_equal(p->look.air_color, ((uint8_t[3]){ 196, 150, 108 }), 3);
+	planet_unref(p);
+
+	p = load_ok("[planet]\natmosphere = mars\natmosphere_density = 2.5\n"
+		    "atmosphere_height = 20000\natmosphere_color = #ff8000\n" NODE_Z LAYER_Z);
+	assert_true(p->look.air_density == 2.5 && p->look.air_height == 20000);
+	assert_memory_equal(p->look.air_color, ((uint8_t[3]){ 255, 128, 0 }), 3);
+	planet_unref(p);
+	p = load_ok("[planet]\natmosphere_color = 1, 2,3\n" NODE_Z LAYER_Z);
+	assert_true(p->look.air_density == 1); /* earth's, recoloured */
+	assert_memory_equal(p->look.air_color, ((uint8_t[3]){ 1, 2, 3 }), 3);
+	planet_unref(p);
+
+	load_fails("[planet]\natmosphere = venus\n" NODE_Z LAYER_Z,
+		   "p.ini:2: atmosphere: \"venus\" is not one of: none, earth, mars");
+	load_fails("[planet]\natmosphere = none\natmosphere_density = 1\n" NODE_Z LAYER_Z,
+		   "p.ini:3: atmosphere_density: atmosphere = none has no air");
+	load_fails("[planet]\natmosphere = none\natmosphere_color = #000000\n" NODE_Z LAYER_Z,
+		   "p.ini:3: atmosphere_color: atmosphere = none has no air");
+	static const char *const bad_density[] = { "0", "-1", "101", "thick", "" };
+	for (size_t i = 0; i < sizeof bad_density / sizeof bad_density[0]; i++) {
+		char text[256];
+		snprintf(text, sizeof text, "[planet]\natmosphere_density = %s\n" NODE_Z LAYER_Z,
+			 bad_density[i]);
+		load_fails(text, "p.ini:2: atmosphere_density: expected a number in (0, 100]");
+	}
+	load_fails("[planet]\natmosphere_height = 0\n" NODE_Z LAYER_Z,
+		   "p.ini:2: atmosphere_height: expected a scale height");
+	load_fails("[planet]\natmosphere_height = 2e6\n" NODE_Z LAYER_Z,
+		   "p.ini:2: atmosphere_height: expected a scale height");
+	static const char *const bad_color[] = { "#12345", "#1234567", "#gg0000", "1,2",
+						 "1,2,3,4", "256,0,0", "-1,0,0", "blue" };
+	for (size_t i = 0; i < sizeof bad_color / sizeof bad_color[0]; i++) {
+		char text[256];
+		snprintf(text, sizeof text, "[planet]\natmosphere_color = %s\n" NODE_Z LAYER_Z,
+			 bad_color[i]);
+		load_fails(text, "p.ini:2: atmosphere_color: expected \"#rrggbb\" or \"r,g,b\"");
+	}
+	load_fails("[planet]\nsea_level = deep\n" NODE_Z LAYER_Z,
+		   "p.ini:2: sea_level: expected metres");
+	load_fails("[planet]\nsea_level = 2e5\n" NODE_Z LAYER_Z,
+		   "p.ini:2: sea_level: expected metres");
+	load_fails("[planet]\nsea = 0\n" NODE_Z LAYER_Z, "p.ini:2: sea: unknown key in [planet]");
+}
+
 static void node_and_layer_errors(void **state)
 {
 	(void)state;
@@ -898,6 +962,7 @@ int main(void)
 		cmocka_unit_test(fixture_errors),
 		cmocka_unit_test(missing_file),
 		cmocka_unit_test(planet_errors),
+		cmocka_unit_test(look),
 		cmocka_unit_test(node_and_layer_errors),
 		cmocka_unit_test(content_hashes),
 		cmocka_unit_test(dot_output),

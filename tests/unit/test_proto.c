@@ -58,11 +58,16 @@ static struct fixture *fixture_create(void)
 	f->planets[0] = (struct proto_planet){ .name = "earth", .description = "WGS84",
 					       .a = 6378137.0, .f = 1 / 298.257223563,
 					       .tile_size = 256, .max_level = 22, .nlayers = 3,
-					       .layers = f->layers + 1 };
+					       .layers = f->layers + 1, .air_density = 1,
+					       .air_height = 8000, .air_color = { 133, 173, 222 },
+					       .sea = 1, .sea_level = -12.5 };
 	f->planets[1] = (struct proto_planet){ .name = f->name, .description = f->desc,
 					       .a = 1737400.0, .f = 0, .tile_size = 1024,
 					       .max_level = GRID_MAX_LEVEL,
-					       .nlayers = PROTO_MAX_LAYERS, .layers = f->layers };
+					       .nlayers = PROTO_MAX_LAYERS, .layers = f->layers,
+					       .air_density = 100, .air_height = 1e6,
+					       .air_color = { 255, 0, 7 }, .sea = 1,
+					       .sea_level = -1e5 };
 	f->planets[2] = (struct proto_planet){ .name = "p", .a = 1, .tile_size = 1 };
 	for (int i = 0; i < PROTO_MAX_WANT; i++) {
 		uint8_t ly = (uint8_t)(i % (GRID_MAX_LEVEL + 1));
@@ -245,6 +250,21 @@ static void decoded_fields(void **state)
 	assert_string_equal(d.opened.planet.description, f->desc);
 	assert_true(d.opened.planet.layers[63].node == UINT64_MAX - 63);
 	assert_int_equal(d.opened.planet.max_level, GRID_MAX_LEVEL);
+	/* the look, at the ends of its ranges */
+	assert_true(d.opened.planet.air_density == 100 && d.opened.planet.air_height == 1e6);
+	assert_memory_equal(d.opened.planet.air_color, ((uint8_t[3]){ 255, 0, 7 }), 3);
+	assert_true(d.opened.planet.sea == 1 && d.opened.planet.sea_level == -1e5);
+	proto_msg_fini(&d);
+
+	b.len = 0;
+	assert_true(proto_encode(&b, &f->msgs[6], NULL) > 0); /* PLANETS: Earth, max, airless */
+	assert_true(proto_decode(b.data, b.len, &d, &need, NULL) > 0);
+	const struct proto_planet *e = &d.planets.planets[0], *z = &d.planets.planets[2];
+	assert_true(e->air_density == 1 && e->air_height == 8000 && e->sea_level == -12.5);
+	assert_memory_equal(e->air_color, ((uint8_t[3]){ 133, 173, 222 }), 3);
+	assert_int_equal(e->sea, 1);
+	assert_true(z->air_density == 0 && z->air_height == 0 && z->sea == 0 && z->sea_level == 0);
+	assert_string_equal(d.planets.planets[1].name, f->name);
 	proto_msg_fini(&d);
 
 	b.len = 0;
@@ -274,7 +294,7 @@ static void byte_layout(void **state)
 	struct pbuf b;
 	pbuf_init_fixed(&b, mem, sizeof(mem));
 	assert_int_equal(proto_encode(&b, &m, NULL), 20);
-	const uint8_t want[20] = { 'C', 'L', 'M', 'P', 1, 0, 18, 0, 8, 0, 0, 0,
+	const uint8_t want[20] = { 'C', 'L', 'M', 'P', 2, 0, 18, 0, 8, 0, 0, 0,
 				   4, 3, 2, 1, 2, 0, 'a', 'b' };
 	assert_memory_equal(mem, want, sizeof(want));
 
@@ -355,7 +375,7 @@ static ssize_t decode_bytes(const uint8_t *p, size_t n, char err[256])
 static void header(uint8_t *h, uint16_t type, uint32_t len)
 {
 	memcpy(h, "CLMP", 4);
-	h[4] = 1;
+	h[4] = PROTO_VERSION;
 	h[5] = 0;
 	h[6] = (uint8_t)type;
 	h[7] = (uint8_t)(type >> 8);
@@ -377,11 +397,14 @@ static void malformed_frames(void **state)
 	memcpy(f, "CLMQ", 4);
 	assert_int_equal(decode_bytes(f, 4, err), PROTO_ERR_MAGIC);
 
-	/* bad version */
+	/* bad version: a version-1 peer (before the planet's look) and a future one */
 	header(f, PROTO_BYE, 0);
-	f[4] = 2;
+	f[4] = 1;
 	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
-	assert_non_null(strstr(err, "version 2"));
+	assert_non_null(strstr(err, "version 1"));
+	f[4] = 3;
+	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
+	assert_non_null(strstr(err, "version 3"));
 
 	/* unknown flags */
 	header(f, PROTO_BYE, 0);
@@ -482,6 +505,30 @@ static void bad_fields(void **state)
 	t = f->msgs[12];
 	t.tile.enc.codec = TCODEC_COUNT;
 	assert_int_equal(proto_encode(&b, &t, err), -EINVAL);
+
+	/* the planet's look: air without a scale height, a scale height without air, too dense,
+	 * a sea flag other than 0 or 1, a sea level without a sea */
+	struct proto_msg lk = f->msgs[9]; /* OPENED */
+	lk.opened.planet.air_height = 0;
+	b.len = 0;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL);
+	assert_non_null(strstr(err, "air_height"));
+	lk = f->msgs[9];
+	lk.opened.planet.air_density = 0;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL);
+	lk = f->msgs[9];
+	lk.opened.planet.air_density = 100.5;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL);
+	assert_non_null(strstr(err, "air_density"));
+	lk = f->msgs[9];
+	lk.opened.planet.sea = 2;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL);
+	lk.opened.planet.sea = 0;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL); /* sea_level -1e5 without a sea */
+	assert_non_null(strstr(err, "sea_level"));
+	lk.opened.planet.sea_level = 0;
+	assert_true(proto_encode(&b, &lk, err) > 0);
+	b.len = 0;
 
 	struct proto_msg p = f->msgs[20]; /* PREFETCH bbox */
 	p.prefetch.lmin = 5, p.prefetch.lmax = 4;
