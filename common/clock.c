@@ -13,6 +13,11 @@ double clock_now_s(void)
 	return (double)clock_now_ns() * 1e-9;
 }
 
+double clock_now_ms(void)
+{
+	return (double)clock_now_ns() * 1e-6;
+}
+
 struct timespec clock_ts_of_ns(uint64_t ns)
 {
 	return (struct timespec){ .tv_sec = (time_t)(ns / 1000000000u),

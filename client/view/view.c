@@ -36,6 +36,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "common/clock.h"
+#include "common/errbuf.h"
 #include "common/xalloc.h"
 
 #include "terrain_frag.h"
@@ -124,13 +126,6 @@ struct view {
 	unsigned char bg[4];
 };
 
-static double now_ms(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec / 1e6;
-}
-
 static unsigned compile(const struct gl *gl, GLenum type, const char *src, int bits,
 			const char *name, char err[256])
 {
@@ -150,7 +145,7 @@ static unsigned compile(const struct gl *gl, GLenum type, const char *src, int b
 	if (!ok) {
 		char log[200] = "";
 		gl->GetShaderInfoLog(s, sizeof log, NULL, log);
-		snprintf(err, 256, "%s (variant %d): %s", name, bits, log);
+		err_set(err, "%s (variant %d): %s", name, bits, log);
 		gl->DeleteShader(s);
 		return 0;
 	}
@@ -183,7 +178,7 @@ static struct program *get_program(struct view *v, int bits, char err[256])
 	if (!ok) {
 		char log[200] = "";
 		gl->GetProgramInfoLog(id, sizeof log, NULL, log);
-		snprintf(err, 256, "terrain program (variant %d): %s", bits, log);
+		err_set(err, "terrain program (variant %d): %s", bits, log);
 		gl->DeleteProgram(id);
 		return NULL;
 	}
@@ -299,7 +294,7 @@ static int build_fbo(struct view *v, char err[256])
 	gl->FramebufferTexture2D(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_TEXTURE_2D, v->depth_tex, 0);
 	GLenum st = gl->CheckFramebufferStatus(GL_FRAMEBUFFER);
 	if (st != GL_FRAMEBUFFER_COMPLETE) {
-		snprintf(err, 256, "framebuffer %dx%d incomplete (0x%x)", v->d.width, v->d.height, st);
+		err_set(err, "framebuffer %dx%d incomplete (0x%x)", v->d.width, v->d.height, st);
 		return -EINVAL;
 	}
 	return 0;
@@ -391,7 +386,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	if (rc == 0) {
 		GLenum e = gl->GetError();
 		if (e != GL_NO_ERROR) {
-			snprintf(err, 256, "view setup: GL error 0x%x", e);
+			err_set(err, "view setup: GL error 0x%x", e);
 			rc = -EIO;
 		}
 	}
@@ -453,10 +448,10 @@ static bool usable(struct view *v, int l, double r, struct uploads *u)
 	const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
 	const struct grid_quad *h = view_clipmap_held(v->cm, l);
 	if (t && !(h && grid_quad_equal(h, t)) && may_upload(v, u)) {
-		double t0 = now_ms();
+		double t0 = clock_now_ms();
 		if (view_clipmap_update(v->cm, l) == 1)
 			u->done++;
-		u->spent_ms += now_ms() - t0;
+		u->spent_ms += clock_now_ms() - t0;
 	}
 	h = view_clipmap_held(v->cm, l);
 	return h && view_window_covers(h, v->last.lon, v->last.lat, r, 1.5);
@@ -715,7 +710,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	       struct view_frame_stats *st)
 {
 	const struct gl *gl = v->gl;
-	double t0 = now_ms();
+	double t0 = clock_now_ms();
 	struct view_frame_stats s = { .lfirst = -1, .llast = -1 };
 	struct view_clipmap_stats cs0, cs1;
 	view_clipmap_get_stats(v->cm, &cs0);
@@ -884,7 +879,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	view_clipmap_get_stats(v->cm, &cs1);
 	s.bytes_uploaded = cs1.bytes_uploaded - cs0.bytes_uploaded;
 	s.levels_uploaded = up.done;
-	s.cpu_ms = now_ms() - t0;
+	s.cpu_ms = clock_now_ms() - t0;
 	GLenum e = gl->GetError();
 	if (st)
 		*st = s;
@@ -893,10 +888,10 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 
 int view_idle(struct view *v, double seconds)
 {
-	double end = now_ms() + seconds * 1e3;
+	double end = clock_now_ms() + seconds * 1e3;
 	int got = 0;
 	for (;;) {
-		double left = end - now_ms();
+		double left = end - clock_now_ms();
 		if (left <= 0)
 			break;
 		int rc = v->src->ops->wait(v->src, (int)ceil(left));
@@ -913,7 +908,7 @@ int view_idle(struct view *v, double seconds)
 int view_frame_complete(struct view *v, const struct view_camera *c, double timeout_s,
 			struct view_frame_stats *st, int *frames)
 {
-	double t0 = now_ms();
+	double t0 = clock_now_ms();
 	struct view_frame_stats s = { 0 };
 	int n = 0, rc = 0;
 	for (;;) {
@@ -926,7 +921,7 @@ int view_frame_complete(struct view *v, const struct view_camera *c, double time
 		bool settled = surface_height(v, c->lon, c->lat) == s.ground;
 		if (s.complete && settled)
 			break;
-		double left = timeout_s * 1e3 - (now_ms() - t0);
+		double left = timeout_s * 1e3 - (clock_now_ms() - t0);
 		if (left <= 0) {
 			rc = -ETIMEDOUT;
 			break;
@@ -957,7 +952,7 @@ static void free_fbo(struct view *v)
 int view_resize(struct view *v, int width, int height, char err[256])
 {
 	if (width < 1 || height < 1 || width > 16384 || height > 16384) {
-		snprintf(err, 256, "framebuffer %dx%d: out of range", width, height);
+		err_set(err, "framebuffer %dx%d: out of range", width, height);
 		return -EINVAL;
 	}
 	if (width == v->d.width && height == v->d.height && v->fbo)
