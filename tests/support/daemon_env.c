@@ -93,20 +93,32 @@ static int write_text(const char *path, const char *text)
 	return rc;
 }
 
+int daemon_env_bindir(char *out, size_t n)
+{
+	ssize_t l = readlink("/proc/self/exe", out, n - 1);
+	if (l <= 0)
+		return l < 0 ? -errno : -ENOENT;
+	out[l] = '\0';
+	for (int up = 0; up < 2; up++) { /* build/tests/PROG -> build */
+		char *slash = strrchr(out, '/');
+		if (!slash || slash == out)
+			return -ENOENT;
+		*slash = '\0';
+	}
+	return 0;
+}
+
 int daemon_env_init(struct daemon_env *e, const char *tag)
 {
 	memset(e, 0, sizeof *e);
 	e->log_fd = -1;
-	ssize_t l = readlink("/proc/self/exe", e->bindir, sizeof e->bindir - 1);
-	if (l <= 0)
-		return -errno;
-	e->bindir[l] = '\0';
-	*strrchr(e->bindir, '/') = '\0'; /* build/tests */
-	*strrchr(e->bindir, '/') = '\0'; /* build */
+	int rc = daemon_env_bindir(e->bindir, sizeof e->bindir);
+	if (rc)
+		return rc;
 	snprintf(e->root, sizeof e->root, "%s/..", e->bindir);
 	snprintf(e->dir, sizeof e->dir, "/tmp/%s_XXXXXX", tag);
 	if (!mkdtemp(e->dir)) {
-		int rc = -errno;
+		rc = -errno;
 		e->dir[0] = '\0';
 		return rc;
 	}

@@ -47,6 +47,9 @@ struct daemon_env_conf {
 	const char *token;
 };
 
+/* The build directory: this program's directory's parent (programs live in build/tests/).
+ * Returns 0 or -errno. */
+int daemon_env_bindir(char *out, size_t n);
 /* Finds build/ and makes DIR=/tmp/TAG_XXXXXX with DIR/planets; starts nothing. Returns 0 or
  * -errno. Call daemon_env_fini afterwards even when it fails. */
 int daemon_env_init(struct daemon_env *e, const char *tag);
