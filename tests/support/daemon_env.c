@@ -387,6 +387,7 @@ static int launch(struct daemon_env *e, char *err)
 		_exit(127);
 	}
 	e->daemon = pid;
+	e->port = 0;
 	e->starts++;
 	int rc = daemon_env_wait_ready(e, DAEMON_ENV_START_MS);
 	if (rc == -ECHILD) {
