@@ -1,12 +1,13 @@
 #!/bin/sh
 # Runs every test binary in $1/tests (cmocka), each under a time limit, and ends with the
 # summary line "N passed, N failed" (CI parses it). Exit status 1 when anything failed.
-# TEST_TIMEOUT: seconds per binary (default 300). A binary that runs past it is stopped
-# (SIGTERM to its process group, which holds the daemons it started; SIGKILL 10 s later) and
-# named in a "TIMEOUT: NAME (N s)" line; one that dies of a signal in a "CRASHED: NAME (signal
-# N SIG)" line; both count as one failed test when they printed no cmocka summary.
+# TEST_TIMEOUT: seconds per binary (default 600: under TSan the GL flight tests take minutes).
+# A binary that runs past it is stopped (SIGTERM to its process group, which holds the daemons
+# it started; SIGKILL 10 s later) and named in a "TIMEOUT: NAME (N s)" line; one that dies of a
+# signal in a "CRASHED: NAME (signal N SIG)" line; each counts as one failed test when it
+# printed no cmocka summary.
 BUILD=${1:-build}
-LIMIT=${TEST_TIMEOUT:-300}
+LIMIT=${TEST_TIMEOUT:-600}
 case $LIMIT in '' | *[!0-9]* | 0)
 	echo "tests/run.sh: TEST_TIMEOUT must be a positive number of seconds, not '$LIMIT'" >&2
 	exit 2 ;;
