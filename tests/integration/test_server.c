@@ -1,9 +1,10 @@
 /* test_server — integration tests of clipmapd: a real daemon (build/clipmapd, started by
- * tests/support/daemon_env) on a temporary Unix socket and an ephemeral loopback port, a small fast test
- * planet written by the test, and a minimal client over common/proto.h. Checks what a viewer or
- * operator would notice: tile bytes equal in-process generation, coarse before fine, want-set
- * replacement, many sessions, a stalled session, malformed frames, tokens, prefetch, cache
- * listing and its ages, SIGHUP reload (and sessions rebound across it) and SIGTERM.
+ * tests/support/daemon_env) on a temporary Unix socket and an ephemeral loopback port, a small
+ * fast test planet written by the test, and a minimal client over common/proto.h. Checks what
+ * a viewer or operator would notice: tile bytes equal in-process generation, coarse before
+ * fine, want-set replacement, many sessions, a stalled session, malformed frames, tokens,
+ * prefetch, cache listing and its ages, SIGHUP reload (and sessions rebound across it) and
+ * SIGTERM.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -72,21 +73,28 @@ static void write_file(const char *path, const char *text)
 static int start_daemon(void **state)
 {
 	(void)state;
-	static const char *const set[] = {
-		"listen.tcp = 127.0.0.1:0", "listen.require_token = tcp", "engine.workers = 1",
-		"engine.cache_mb = 256",    "session.max_want = 4096",	  "session.max_rate = 1000",
-		"session.max_pending_kb = 256", "log.level = info", NULL
-	};
+	static const char *const set[] = { "listen.tcp = 127.0.0.1:0",
+					   "listen.require_token = tcp",
+					   "engine.workers = 1",
+					   "engine.cache_mb = 256",
+					   "session.max_want = 4096",
+					   "session.max_rate = 1000",
+					   "session.max_pending_kb = 256",
+					   "log.level = info",
+					   NULL };
 	const struct daemon_env_conf conf = { .set = set, .token = TOKEN };
 	char err[256];
 	if (daemon_env_init(&E, "clipmapd-test") ||
-	    daemon_env_planet_text(&E, "test.ini", planet_v1, planet_path))
-		return -1;
-	if (daemon_env_start(&E, &conf, err)) {
-		fprintf(stderr, "test_server: %s\n", err);
+	    daemon_env_planet_text(&E, "test.ini", planet_v1, planet_path)) {
+		daemon_env_fini(&E);
 		return -1;
 	}
-	return E.port > 0 ? 0 : -1;
+	if (daemon_env_start(&E, &conf, err)) {
+		fprintf(stderr, "test_server: %s\n", err);
+		daemon_env_fini(&E); /* cmocka runs no group teardown after a failed setup */
+		return -1;
+	}
+	return 0;
 }
 
 static int stop_daemon(void **state)

@@ -311,7 +311,8 @@ static bool socket_up(const char *path)
 	if (s < 0)
 		return false;
 	struct sockaddr_un a = { .sun_family = AF_UNIX };
-	bool ok = pathf(a.sun_path, sizeof a.sun_path, "%s", path) == 0 && connect(s, (struct sockaddr *)&a, sizeof a) == 0;
+	bool ok = pathf(a.sun_path, sizeof a.sun_path, "%s", path) == 0 &&
+		  connect(s, (struct sockaddr *)&a, sizeof a) == 0;
 	close(s);
 	return ok;
 }
