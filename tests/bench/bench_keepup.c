@@ -19,20 +19,13 @@
  * motion (view_clipmap_motion); KEEPUP_DRAIN=0 no reading between frames.
  * Single-threaded (the daemon is a separate process); owns everything it creates.
  */
-#include <errno.h>
-#include <fcntl.h>
-#include <limits.h>
 #include <math.h>
-#include <signal.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/socket.h>
 #include <sys/stat.h>
-#include <sys/un.h>
-#include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -44,6 +37,7 @@
 #include "client/view/view_levels.h"
 #include "client/view/view_source_net.h"
 #include "common/xalloc.h"
+#include "support/daemon_env.h"
 
 #define DEG (M_PI / 180.0)
 #define HZ 60.0
@@ -99,133 +93,28 @@ static void route_point(double a, double s, double *lat, double *lon)
 
 /* ---- the daemon ------------------------------------------------------------------------ */
 
-struct daemon {
-	char dir[64], sock[128], conf[128];
-	pid_t pid;
-};
-
-static bool socket_up(const char *path)
+/* A fresh daemon (tests/support/daemon_env) serving a copy of `planet`; name receives the
+ * planet's name. cache_mb: cold trials run with the shipped size (1 GiB: a full cache recycles
+ * its memory as a running daemon's does); prefetched ones with a cache that holds the whole
+ * route, as an operator who prefetches a route would size it. Call daemon_env_fini after,
+ * also on failure. */
+static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, char *name,
+			size_t nname, char err[256])
 {
-	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-	if (s < 0)
-		return false;
-	struct sockaddr_un a = { .sun_family = AF_UNIX };
-	snprintf(a.sun_path, sizeof a.sun_path, "%s", path);
-	bool ok = connect(s, (struct sockaddr *)&a, sizeof a) == 0;
-	close(s);
-	return ok;
-}
-
-/* Copies a planet file into dir, making relative `path =` values absolute (they resolve
- * against the original file's directory). */
-static int copy_planet(const char *from, const char *dir, char *name, size_t nname)
-{
-	char absdir[PATH_MAX];
-	if (!realpath(from, absdir))
-		return -errno;
-	*strrchr(absdir, '/') = '\0';
-	const char *base = strrchr(from, '/') ? strrchr(from, '/') + 1 : from;
-	snprintf(name, nname, "%.*s", (int)(strcspn(base, ".")), base);
-	char to[300];
-	snprintf(to, sizeof to, "%s/%s", dir, base);
-	FILE *a = fopen(from, "r"), *b = fopen(to, "w");
-	if (!a || !b) {
-		if (a)
-			fclose(a);
-		if (b)
-			fclose(b);
-		return -EIO;
+	char cache[64];
+	snprintf(cache, sizeof cache, "engine.cache_mb = %d", cache_mb);
+	const char *const set[] = { "engine.workers = 0", cache, "session.max_rate = 0", NULL };
+	int rc = daemon_env_init(d, "bench_keepup");
+	if (rc) {
+		snprintf(err, 256, "temporary directory: %s", strerror(-rc));
+		return rc;
 	}
-	char line[4096];
-	while (fgets(line, sizeof line, a)) {
-		const char *p = line + strspn(line, " \t");
-		if (strncmp(p, "path", 4) == 0 && strchr(p, '=')) {
-			const char *v = strchr(p, '=') + 1;
-			v += strspn(v, " \t");
-			if (*v != '/') {
-				fprintf(b, "path = %s/%s", absdir, v);
-				continue;
-			}
-		}
-		fputs(line, b);
+	rc = daemon_env_planet_copy(d, planet, name, nname);
+	if (rc) {
+		snprintf(err, 256, "cannot prepare %s from %s", d->planets, planet);
+		return rc;
 	}
-	fclose(a);
-	return fclose(b) ? -EIO : 0;
-}
-
-/* cache_mb: cold trials run with the shipped size (1 GiB: a full cache recycles its memory as
- * a running daemon's does); prefetched ones with a cache that holds the whole route, as an
- * operator who prefetches a route would size it. */
-static int daemon_start(struct daemon *d, const char *bindir, const char *planet, int cache_mb,
-			char *name, size_t nname, char err[256])
-{
-	memset(d, 0, sizeof *d);
-	snprintf(d->dir, sizeof d->dir, "/tmp/bench_keepup_XXXXXX");
-	if (!mkdtemp(d->dir)) {
-		snprintf(err, 256, "mkdtemp: %s", strerror(errno));
-		return -errno;
-	}
-	char planets[128], logp[128];
-	snprintf(planets, sizeof planets, "%s/planets", d->dir);
-	snprintf(d->sock, sizeof d->sock, "%s/d.sock", d->dir);
-	snprintf(d->conf, sizeof d->conf, "%s/d.conf", d->dir);
-	snprintf(logp, sizeof logp, "%s/d.log", d->dir);
-	if (mkdir(planets, 0755) || copy_planet(planet, planets, name, nname)) {
-		snprintf(err, 256, "cannot prepare %s from %s", planets, planet);
-		return -EIO;
-	}
-	FILE *f = fopen(d->conf, "w");
-	if (!f)
-		return -errno;
-	fprintf(f, "[listen]\nunix = %s\ntcp =\n[engine]\nplanets = %s\nworkers = 0\ncache_mb = %d\n"
-		   "[session]\nmax_rate = 0\n[log]\nlevel = warn\n",
-		d->sock, planets, cache_mb);
-	fclose(f);
-	char exe[600];
-	snprintf(exe, sizeof exe, "%s/clipmapd", bindir);
-	int logfd = open(logp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-	pid_t pid = fork();
-	if (pid < 0)
-		return -errno;
-	if (pid == 0) {
-		if (logfd >= 0)
-			dup2(logfd, 2);
-		execl(exe, exe, "-c", d->conf, (char *)NULL);
-		_exit(127);
-	}
-	if (logfd >= 0)
-		close(logfd);
-	d->pid = pid;
-	for (int i = 0; i < 2000 && !socket_up(d->sock); i++) {
-		int st;
-		if (waitpid(pid, &st, WNOHANG) == pid) {
-			d->pid = 0;
-			snprintf(err, 256, "clipmapd exited at start (see %s)", logp);
-			return -EIO;
-		}
-		nanosleep(&(struct timespec){ .tv_nsec = 5000000 }, NULL);
-	}
-	if (!socket_up(d->sock)) {
-		snprintf(err, 256, "clipmapd did not listen on %s", d->sock);
-		return -ETIMEDOUT;
-	}
-	return 0;
-}
-
-static void daemon_stop(struct daemon *d)
-{
-	if (d->pid > 0) {
-		kill(d->pid, SIGTERM);
-		int st;
-		waitpid(d->pid, &st, 0);
-		d->pid = 0;
-	}
-	if (d->dir[0]) {
-		char cmd[200];
-		snprintf(cmd, sizeof cmd, "rm -rf '%s'", d->dir);
-		if (system(cmd) != 0)
-			fprintf(stderr, "bench_keepup: could not remove %s\n", d->dir);
-	}
+	return daemon_env_start(d, &(struct daemon_env_conf){ .set = set }, err);
 }
 
 /* ---- daemon statistics ----------------------------------------------------------------- */
@@ -455,7 +344,6 @@ static void idle_until(struct client *c, double t, bool drain)
 /* ---- one trial ------------------------------------------------------------------------- */
 
 struct ctx {
-	char bindir[512];
 	const struct gl *gl;
 	double trial_s;
 	bool drain, ahead;
@@ -532,9 +420,8 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 {
 	memset(tr, 0, sizeof *tr);
 	char err[256] = "", name[64];
-	struct daemon d;
-	int rc = daemon_start(&d, x->bindir, planet_ini, prefetch ? 8192 : 1024, name, sizeof name,
-			      err);
+	struct daemon_env d;
+	int rc = daemon_start(&d, planet_ini, prefetch ? 8192 : 1024, name, sizeof name, err);
 	struct net_conn *sc = NULL;
 	struct client c = { 0 };
 	struct frame *fr = NULL;
@@ -673,7 +560,7 @@ out:
 	view_clipmap_destroy(c.cm);
 	view_source_destroy(c.src);
 	net_close(sc);
-	daemon_stop(&d);
+	daemon_env_fini(&d);
 	return rc;
 }
 
@@ -1030,14 +917,10 @@ int main(int argc, char **argv)
 	(void)argc;
 	(void)argv;
 	struct ctx x = { 0 };
-	ssize_t l = readlink("/proc/self/exe", x.bindir, sizeof x.bindir - 1);
-	if (l <= 0)
+	char bindir[512], exe[600];
+	if (daemon_env_bindir(bindir, sizeof bindir))
 		return 1;
-	x.bindir[l] = '\0';
-	*strrchr(x.bindir, '/') = '\0'; /* build/tests */
-	*strrchr(x.bindir, '/') = '\0'; /* build */
-	char exe[600];
-	snprintf(exe, sizeof exe, "%s/clipmapd", x.bindir);
+	snprintf(exe, sizeof exe, "%s/clipmapd", bindir);
 	if (access(exe, X_OK)) {
 		printf("keepup: skipped (%s not built)\n", exe);
 		return 0;

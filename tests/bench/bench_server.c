@@ -1,10 +1,8 @@
 /* bench_server — clipmapd over loopback TCP: round trip of a cached quad (4 tiles of 256²
  * RGBA8: WANT sent → 4th TILE decoded), p50/p99; cached-tile throughput to 1 and to 50
- * sessions. Starts build/clipmapd (next to this binary) on a temporary config.
+ * sessions. Starts build/clipmapd on a temporary config (tests/support/daemon_env).
  */
 #include <errno.h>
-#include <fcntl.h>
-#include <limits.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
@@ -13,13 +11,13 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
-#include <sys/stat.h>
 #include <sys/wait.h>
 #include <time.h>
 #include <unistd.h>
 
 #include "common/proto.h"
 #include "common/tilecodec.h"
+#include "support/daemon_env.h"
 
 static const char planet[] =
 	"[planet]\nname = b\nbody = sphere\nradius = 1000000\ntile_size = 256\nmax_level = 12\n"
@@ -38,13 +36,6 @@ static void die(const char *what)
 {
 	fprintf(stderr, "bench_server: %s\n", what);
 	exit(1);
-}
-
-static void write_file(const char *path, const char *text)
-{
-	FILE *f = fopen(path, "w");
-	if (!f || fputs(text, f) < 0 || fclose(f))
-		die(path);
 }
 
 struct cl {
@@ -154,46 +145,27 @@ static int cmp_u64(const void *a, const void *b)
 int main(void)
 {
 	signal(SIGPIPE, SIG_IGN);
-	char dir[] = "/tmp/clipmapd-bench-XXXXXX";
-	if (!mkdtemp(dir))
-		die("mkdtemp");
-	char p[512], conf[PATH_MAX], logp[PATH_MAX];
-	snprintf(p, sizeof p, "%s/planets", dir);
-	mkdir(p, 0700);
-	snprintf(p, sizeof p, "%s/planets/b.ini", dir);
-	write_file(p, planet);
-	snprintf(conf, sizeof conf, "%s/d.conf", dir);
-	snprintf(logp, sizeof logp, "%s/log", dir);
-	char exe[PATH_MAX];
-	ssize_t l = readlink("/proc/self/exe", exe, sizeof exe - 20);
-	if (l <= 0)
-		die("readlink");
-	exe[l] = 0;
-	strcpy(strrchr(exe, '/'), "/../clipmapd");
-	write_file(conf, "[listen]\nunix =\ntcp = 127.0.0.1:0\n[engine]\nplanets = planets\n"
-			 "cache_mb = 1024\n[session]\nmax_rate = 0\nmax_pending_kb = 16384\n");
-	pid_t pid = fork();
-	if (pid == 0) {
-		int fd = open(logp, O_WRONLY | O_CREAT | O_TRUNC, 0600);
-		dup2(fd, 2);
-		execl(exe, exe, "-c", conf, (char *)NULL);
-		_exit(127);
+	static const char *const keys[] = { "listen.unix =",
+					   "listen.tcp = 127.0.0.1:0",
+					   "engine.workers = 0",
+					   "engine.cache_mb = 1024",
+					   "session.max_rate = 0",
+					   "session.max_pending_kb = 16384",
+					   "log.level = info",
+					   NULL };
+	const struct daemon_env_conf conf = { .set = keys };
+	struct daemon_env d;
+	char err[256];
+	if (daemon_env_init(&d, "clipmapd-bench") ||
+	    daemon_env_planet_text(&d, "b.ini", planet, NULL)) {
+		daemon_env_fini(&d);
+		die("cannot prepare a temporary directory");
 	}
-	int port = 0;
-	for (int i = 0; i < 1000 && !port; i++) {
-		usleep(10000);
-		FILE *f = fopen(logp, "r");
-		char line[512];
-		while (f && fgets(line, sizeof line, f)) {
-			char *t = strstr(line, "listening on tcp:127.0.0.1:");
-			if (t)
-				port = atoi(t + strlen("listening on tcp:127.0.0.1:"));
-		}
-		if (f)
-			fclose(f);
+	if (daemon_env_start(&d, &conf, err)) {
+		daemon_env_fini(&d);
+		die(err);
 	}
-	if (!port)
-		die("daemon did not start");
+	int port = d.port;
 
 	/* Round trip of a cached quad: alternate between two quads so each WANT asks for 4 tiles. */
 	struct cl *c = cl_tcp(port);
@@ -294,12 +266,8 @@ int main(void)
 	printf("server/cached tiles 256² rgba8 to 50 sessions: %.0f tiles/s (%.2f GB/s)\n",
 	       tiles / dt, tiles * 262144.0 / dt * 1e-9);
 
-	kill(pid, SIGTERM);
-	int st;
-	waitpid(pid, &st, 0);
-	char cmd[128];
-	snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
-	if (system(cmd) != 0)
-		return 1;
-	return WIFEXITED(st) && WEXITSTATUS(st) == 0 ? 0 : 1;
+	int st = 0;
+	int rc = daemon_env_stop(&d, SIGTERM, &st);
+	daemon_env_fini(&d);
+	return rc == 0 && WIFEXITED(st) && WEXITSTATUS(st) == 0 ? 0 : 1;
 }

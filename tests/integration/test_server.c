@@ -1,9 +1,10 @@
-/* test_server — integration tests of clipmapd: a real daemon (build/clipmapd, found next to
- * this binary) on a temporary Unix socket and an ephemeral loopback port, a small fast test
- * planet written by the test, and a minimal client over common/proto.h. Checks what a viewer or
- * operator would notice: tile bytes equal in-process generation, coarse before fine, want-set
- * replacement, many sessions, a stalled session, malformed frames, tokens, prefetch, cache
- * listing and its ages, SIGHUP reload (and sessions rebound across it) and SIGTERM.
+/* test_server — integration tests of clipmapd: a real daemon (build/clipmapd, started by
+ * tests/support/daemon_env) on a temporary Unix socket and an ephemeral loopback port, a small
+ * fast test planet written by the test, and a minimal client over common/proto.h. Checks what
+ * a viewer or operator would notice: tile bytes equal in-process generation, coarse before
+ * fine, want-set replacement, many sessions, a stalled session, malformed frames, tokens,
+ * prefetch, cache listing and its ages, SIGHUP reload (and sessions rebound across it) and
+ * SIGTERM.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -12,7 +13,6 @@
 #include <cmocka.h>
 
 #include <errno.h>
-#include <fcntl.h>
 #include <limits.h>
 #include <netinet/in.h>
 #include <poll.h>
@@ -21,7 +21,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
-#include <sys/stat.h>
 #include <sys/un.h>
 #include <sys/wait.h>
 #include <time.h>
@@ -32,6 +31,7 @@
 #include "common/proto.h"
 #include "engine/sched.h"
 #include "common/tilecodec.h"
+#include "support/daemon_env.h"
 
 #define TOKEN "s3cret-token"
 
@@ -51,11 +51,9 @@ static const char planet_v2[] =
 	"[layer height]\nnode = base\nformat = f32\n"
 	"[layer color]\nnode = tint\nformat = rgba8\n";
 
-static struct {
-	char dir[64], sock[128], log[128], planet[128];
-	int port;
-	pid_t pid;
-} D;
+/* The daemon (tests/support/daemon_env) and the test planet's file, rewritten before SIGHUPs. */
+static struct daemon_env E;
+static char planet_path[128];
 
 static uint64_t now_ms(void)
 {
@@ -72,108 +70,40 @@ static void write_file(const char *path, const char *text)
 	assert_int_equal(fclose(f), 0);
 }
 
-static char *read_log(void)
-{
-	FILE *f = fopen(D.log, "r");
-	if (!f)
-		return strdup("");
-	char *buf = calloc(1, 1 << 22);
-	size_t n = fread(buf, 1, (1 << 22) - 1, f);
-	buf[n] = 0;
-	fclose(f);
-	return buf;
-}
-
-/* How many times the log contains `what`. */
-static int log_count(const char *what)
-{
-	char *l = read_log();
-	int c = 0;
-	for (char *p = l; (p = strstr(p, what)); p++)
-		c++;
-	free(l);
-	return c;
-}
-
-/* Waits until the log contains `what` (count-th occurrence), up to ms. */
-static bool wait_log(const char *what, int count, int ms)
-{
-	uint64_t end = now_ms() + (uint64_t)ms;
-	do {
-		char *l = read_log();
-		int c = 0;
-		for (char *p = l; (p = strstr(p, what)); p++)
-			c++;
-		free(l);
-		if (c >= count)
-			return true;
-		usleep(10000);
-	} while (now_ms() < end);
-	return false;
-}
-
-static void daemon_path(char *out, size_t n)
-{
-	char exe[PATH_MAX];
-	ssize_t l = readlink("/proc/self/exe", exe, sizeof exe - 1);
-	assert_true(l > 0 && (size_t)l + 16 < n);
-	exe[l] = 0;
-	*strrchr(exe, '/') = 0;
-	memcpy(out, exe, strlen(exe));
-	memcpy(out + strlen(exe), "/../clipmapd", 13);
-}
-
 static int start_daemon(void **state)
 {
 	(void)state;
-	snprintf(D.dir, sizeof D.dir, "/tmp/clipmapd-test-XXXXXX");
-	if (!mkdtemp(D.dir))
+	static const char *const set[] = { "listen.tcp = 127.0.0.1:0",
+					   "listen.require_token = tcp",
+					   "engine.workers = 1",
+					   "engine.cache_mb = 256",
+					   "session.max_want = 4096",
+					   "session.max_rate = 1000",
+					   "session.max_pending_kb = 256",
+					   "log.level = info",
+					   NULL };
+	const struct daemon_env_conf conf = { .set = set, .token = TOKEN };
+	char err[256];
+	if (daemon_env_init(&E, "clipmapd-test") ||
+	    daemon_env_planet_text(&E, "test.ini", planet_v1, planet_path)) {
+		daemon_env_fini(&E);
 		return -1;
-	char p[256];
-	snprintf(p, sizeof p, "%s/planets", D.dir);
-	mkdir(p, 0700);
-	snprintf(D.planet, sizeof D.planet, "%s/planets/test.ini", D.dir);
-	write_file(D.planet, planet_v1);
-	snprintf(p, sizeof p, "%s/token", D.dir);
-	write_file(p, TOKEN "\n");
-	snprintf(D.sock, sizeof D.sock, "%s/sock", D.dir);
-	snprintf(D.log, sizeof D.log, "%s/log", D.dir);
-	char conf[1024];
-	snprintf(conf, sizeof conf,
-		 "[listen]\nunix = sock\ntcp = 127.0.0.1:0\ntoken_file = token\nrequire_token = tcp\n"
-		 "[engine]\nplanets = planets\nworkers = 1\ncache_mb = 256\n"
-		 "[session]\nmax_want = 4096\nmax_rate = 1000\nmax_pending_kb = 256\n"
-		 "[log]\nlevel = info\n");
-	snprintf(p, sizeof p, "%s/clipmapd.conf", D.dir);
-	write_file(p, conf);
-	char exe[PATH_MAX];
-	daemon_path(exe, sizeof exe);
-	D.pid = fork();
-	if (D.pid == 0) {
-		int fd = open(D.log, O_WRONLY | O_CREAT | O_TRUNC, 0600);
-		dup2(fd, 2);
-		execl(exe, exe, "-c", p, (char *)NULL);
-		_exit(127);
 	}
-	if (!wait_log("clipmapd ready", 1, 10000))
+	if (daemon_env_start(&E, &conf, err)) {
+		fprintf(stderr, "test_server: %s\n", err);
+		daemon_env_fini(&E); /* cmocka runs no group teardown after a failed setup */
 		return -1;
-	char *l = read_log();
-	char *t = strstr(l, "listening on tcp:127.0.0.1:");
-	D.port = t ? atoi(t + strlen("listening on tcp:127.0.0.1:")) : 0;
-	free(l);
-	return D.port > 0 ? 0 : -1;
+	}
+	return 0;
 }
 
 static int stop_daemon(void **state)
 {
 	(void)state;
-	if (D.pid > 0) {
-		kill(D.pid, SIGKILL);
-		waitpid(D.pid, NULL, 0);
-	}
-	char cmd[128];
-	snprintf(cmd, sizeof cmd, "rm -rf %s", D.dir);
-	return system(cmd) == 0 ? 0 : -1;
+	if (E.daemon > 0)
+		daemon_env_stop(&E, SIGKILL, NULL);
+	daemon_env_fini(&E);
+	return 0;
 }
 
 /* ---- a minimal client --------------------------------------------------------------- */
@@ -190,8 +120,8 @@ static struct cl *cl_unix(void)
 	struct cl *c = calloc(1, sizeof *c);
 	c->fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
 	struct sockaddr_un sa = { .sun_family = AF_UNIX };
-	assert_true(strlen(D.sock) < sizeof sa.sun_path);
-	memcpy(sa.sun_path, D.sock, strlen(D.sock) + 1);
+	assert_true(strlen(E.sock) < sizeof sa.sun_path);
+	memcpy(sa.sun_path, E.sock, strlen(E.sock) + 1);
 	assert_int_equal(connect(c->fd, (struct sockaddr *)&sa, sizeof sa), 0);
 	pbuf_init(&c->in);
 	return c;
@@ -201,7 +131,7 @@ static struct cl *cl_tcp(void)
 {
 	struct cl *c = calloc(1, sizeof *c);
 	c->fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
-	struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons((uint16_t)D.port),
+	struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons((uint16_t)E.port),
 				  .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
 	assert_int_equal(connect(c->fd, (struct sockaddr *)&sa, sizeof sa), 0);
 	pbuf_init(&c->in);
@@ -390,7 +320,7 @@ static void test_tiles_match_inprocess(void **state)
 
 	struct planet *p;
 	char err[256];
-	assert_int_equal(planet_load(D.planet, &p, err), 0);
+	assert_int_equal(planet_load(planet_path, &p, err), 0);
 	assert_int_equal(p->layers[0].node->hash, nodes[0]);
 	assert_int_equal(p->layers[1].node->hash, nodes[1]);
 	struct cache *cache = cache_create(0);
@@ -763,9 +693,9 @@ static void test_sighup_reload(void **state)
 	uint64_t gen0 = cl_stat(c, "sched.generated");
 	cl_free(c);
 
-	write_file(D.planet, planet_v2);
-	assert_int_equal(kill(D.pid, SIGHUP), 0);
-	assert_true(wait_log("reloaded 1 planets", 1, 5000));
+	write_file(planet_path, planet_v2);
+	assert_int_equal(daemon_env_signal(&E, SIGHUP), 0);
+	assert_true(daemon_env_log_wait(&E, "reloaded 1 planets", 1, 5000));
 
 	c = cl_unix();
 	uint64_t n2[2];
@@ -806,12 +736,12 @@ static void test_sighup_rebind(void **state)
 			old[c->m.tile.key.y * W + c->m.tile.key.x] = tile_texels(c);
 	}
 
-	int reloads = log_count("reloaded 1 planets");
-	write_file(D.planet, planet_v1); /* the colour ramp changes back */
-	assert_int_equal(kill(D.pid, SIGHUP), 0);
+	int reloads = daemon_env_log_count(&E, "reloaded 1 planets");
+	write_file(planet_path, planet_v1); /* the colour ramp changes back */
+	assert_int_equal(daemon_env_signal(&E, SIGHUP), 0);
 	struct planet *p;
 	char err[256];
-	assert_int_equal(planet_load(D.planet, &p, err), 0);
+	assert_int_equal(planet_load(planet_path, &p, err), 0);
 	assert_int_equal(p->layers[0].node->hash, n1[0]);
 	assert_true(p->layers[1].node->hash != n1[1]);
 	struct cache *cache = cache_create(0);
@@ -837,7 +767,7 @@ static void test_sighup_rebind(void **state)
 	}
 	assert_true(differ >= W * H / 2); /* most tiles reach below 0 m, where the ramp changed */
 	assert_int_equal(cl_recv(c, 300), 0); /* and no height tile again */
-	assert_true(wait_log("reloaded 1 planets", reloads + 1, 5000));
+	assert_true(daemon_env_log_wait(&E, "reloaded 1 planets", reloads + 1, 5000));
 	sched_destroy(s);
 	cache_destroy(cache);
 	planet_unref(p);
@@ -845,9 +775,9 @@ static void test_sighup_rebind(void **state)
 		free(old[i]);
 
 	char off[160];
-	snprintf(off, sizeof off, "%s.off", D.planet);
-	assert_int_equal(rename(D.planet, off), 0);
-	assert_int_equal(kill(D.pid, SIGHUP), 0);
+	snprintf(off, sizeof off, "%s.off", planet_path);
+	assert_int_equal(rename(planet_path, off), 0);
+	assert_int_equal(daemon_env_signal(&E, SIGHUP), 0);
 	cl_expect(c, PROTO_ERROR, 5000);
 	assert_int_equal(c->m.error.code, PROTO_E_NOT_FOUND);
 	assert_int_equal(c->m.error.ref_type, PROTO_OPEN);
@@ -861,9 +791,9 @@ static void test_sighup_rebind(void **state)
 	assert_int_equal(cl_recv(idle, 100), 0);
 	assert_int_equal(cl_stat(idle, "planets"), 0);
 
-	assert_int_equal(rename(off, D.planet), 0);
-	assert_int_equal(kill(D.pid, SIGHUP), 0);
-	assert_true(wait_log("reloaded 1 planets", reloads + 2, 5000));
+	assert_int_equal(rename(off, planet_path), 0);
+	assert_int_equal(daemon_env_signal(&E, SIGHUP), 0);
+	assert_true(daemon_env_log_wait(&E, "reloaded 1 planets", reloads + 2, 5000));
 	struct proto_msg m = { .type = PROTO_OPEN, .open = { .req = 8, .name = "test" } };
 	cl_send(c, &m);
 	cl_expect(c, PROTO_OPENED, 5000);
@@ -923,7 +853,7 @@ static void test_sigterm(void **state)
 	static struct proto_want_entry e[4096];
 	uint32_t n = block(e, 3, 10, 0, 0, 64, 32);
 	cl_want(a, pid, 1, 0, 0, e, n);
-	assert_int_equal(kill(D.pid, SIGTERM), 0);
+	assert_int_equal(daemon_env_signal(&E, SIGTERM), 0);
 	struct cl *cs[2] = { a, b };
 	for (int i = 0; i < 2; i++) {
 		bool shut = false, bye = false;
@@ -941,10 +871,9 @@ static void test_sigterm(void **state)
 		assert_true(bye);
 	}
 	int st = 0;
-	assert_int_equal(waitpid(D.pid, &st, 0), D.pid);
-	D.pid = 0;
+	assert_int_equal(daemon_env_stop(&E, 0, &st), 0);
 	if (!WIFEXITED(st)) {
-		char *l = read_log();
+		char *l = daemon_env_log_read(&E);
 		size_t len = l ? strlen(l) : 0;
 		fprintf(stderr, "clipmapd log (end):\n%s\n", l ? l + (len > 3000 ? len - 3000 : 0) : "");
 		free(l);
@@ -962,7 +891,7 @@ static void test_systemd_units(void **state)
 	if (system("command -v systemd-analyze >/dev/null 2>&1") != 0)
 		skip();
 	char exe[PATH_MAX], cmd[PATH_MAX * 3];
-	daemon_path(exe, sizeof exe);
+	snprintf(exe, sizeof exe, "%s/clipmapd", E.bindir);
 	char *real = realpath(exe, NULL);
 	assert_non_null(real);
 	/* The unit's ExecStart names /usr/local/bin/clipmapd; verify resolves it, so point a

@@ -21,11 +21,9 @@
 #include "common/img.h"
 
 struct env {
-	char bindir[512]; /* build/ */
-	char root[600];	  /* the repository (build/..) */
+	struct daemon_env d; /* build/ and a temporary directory; no daemon */
 	char view[700];
 	char planet[700];
-	char dir[64];
 	char shot[128];
 };
 
@@ -75,28 +73,20 @@ static bool in_path(const char *prog)
 static int setup(void **state)
 {
 	struct env *e = calloc(1, sizeof *e);
-	ssize_t l = readlink("/proc/self/exe", e->bindir, sizeof e->bindir - 1);
-	if (l <= 0)
-		return -1;
-	e->bindir[l] = '\0';
-	*strrchr(e->bindir, '/') = '\0'; /* build/tests */
-	*strrchr(e->bindir, '/') = '\0'; /* build */
-	snprintf(e->root, sizeof e->root, "%s/..", e->bindir);
-	snprintf(e->view, sizeof e->view, "%s/clipmapview", e->bindir);
-	snprintf(e->planet, sizeof e->planet, "%s/conf/planets/procedural.ini", e->root);
-	snprintf(e->dir, sizeof e->dir, "/tmp/test_view_window.XXXXXX");
-	if (!mkdtemp(e->dir))
-		return -1;
-	snprintf(e->shot, sizeof e->shot, "%s/shot.png", e->dir);
 	*state = e;
+	if (!e || daemon_env_init(&e->d, "test_view_window"))
+		return -1;
+	snprintf(e->view, sizeof e->view, "%s/clipmapview", e->d.bindir);
+	snprintf(e->planet, sizeof e->planet, "%s/conf/planets/procedural.ini", e->d.root);
+	snprintf(e->shot, sizeof e->shot, "%s/shot.png", e->d.dir);
 	return 0;
 }
 
 static int teardown(void **state)
 {
 	struct env *e = *state;
-	unlink(e->shot);
-	rmdir(e->dir);
+	if (e)
+		daemon_env_fini(&e->d);
 	free(e);
 	return 0;
 }
