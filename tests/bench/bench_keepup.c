@@ -29,6 +29,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "common/errbuf.h"
+#include "common/clock.h"
 #include "client/ctl/ctl_prefetch.h"
 #include "client/view/gl_context.h"
 #include "common/img.h"
@@ -64,16 +66,9 @@ static const struct {
 #define START_LON 20.0
 #define HEADING 80.0
 
-static double now_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec * 1e-9;
-}
-
 static void sleep_until(double t)
 {
-	double d = t - now_s();
+	double d = t - clock_now_s();
 	if (d <= 0)
 		return;
 	struct timespec ts = { (time_t)d, (long)((d - floor(d)) * 1e9) };
@@ -106,12 +101,12 @@ static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, 
 	const char *const set[] = { "engine.workers = 0", cache, "session.max_rate = 0", NULL };
 	int rc = daemon_env_init(d, "bench_keepup");
 	if (rc) {
-		snprintf(err, 256, "temporary directory: %s", strerror(-rc));
+		err_set(err, "temporary directory: %s", strerror(-rc));
 		return rc;
 	}
 	rc = daemon_env_planet_copy(d, planet, name, nname);
 	if (rc) {
-		snprintf(err, 256, "cannot prepare %s from %s", d->planets, planet);
+		err_set(err, "cannot prepare %s from %s", d->planets, planet);
 		return rc;
 	}
 	return daemon_env_start(d, &(struct daemon_env_conf){ .set = set }, err);
@@ -264,7 +259,7 @@ static bool usable(struct client *c, int l, double lon, double lat, double r)
 
 static int client_frame(struct client *c, double lat, double lon, double agl, struct frame *f)
 {
-	double t0 = now_s();
+	double t0 = clock_now_s();
 	double ground = 0;
 	view_clipmap_ground(c->cm, lon, lat, &ground);
 	struct view_camera cam = { .lat = lat, .lon = lon, .alt = ground + agl, .heading = HEADING,
@@ -319,7 +314,7 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	f->lmin = lmin;
 	f->lmax = lmax;
 	f->llast = llast;
-	f->cpu_ms = (now_s() - t0) * 1e3;
+	f->cpu_ms = (clock_now_s() - t0) * 1e3;
 	return 0;
 }
 
@@ -333,7 +328,7 @@ static void idle_until(struct client *c, double t, bool drain)
 		return;
 	}
 	for (;;) {
-		double left = t - now_s();
+		double left = t - clock_now_s();
 		if (left <= 0)
 			return;
 		if (c->src->ops->wait(c->src, (int)ceil(left * 1e3)) == 1)
@@ -439,9 +434,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	levels_at(c.src, agl, &tr->lmin, &tr->lmax);
 	double warm_s = 0.25, len = v * (x->trial_s + 0.5);
 	if (prefetch) {
-		double t0 = now_s();
+		double t0 = clock_now_s();
 		rc = prefetch_route(sc, name, p->a, len, tr->lmax, &tr->prefetch_tiles, err);
-		tr->prefetch_s = now_s() - t0;
+		tr->prefetch_s = clock_now_s() - t0;
 		if (rc)
 			goto out;
 	}
@@ -455,13 +450,13 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	if (rc)
 		goto out;
 	/* Hover at the start until the view is complete (then 0.5 s more for the rings). */
-	double t0 = now_s(), done_at = -1;
+	double t0 = clock_now_s(), done_at = -1;
 	struct frame f;
 	for (int k = 0;; k++) {
 		rc = client_frame(&c, START_LAT, START_LON, agl, &f);
 		if (rc)
 			goto out;
-		double t = now_s();
+		double t = clock_now_s();
 		if (f.complete && done_at < 0)
 			done_at = t;
 		if (done_at >= 0 && t - done_at > 0.5)
@@ -473,7 +468,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		}
 		idle_until(&c, t0 + (k + 1) / HZ, x->drain);
 	}
-	tr->hover_s = now_s() - t0;
+	tr->hover_s = clock_now_s() - t0;
 	struct dstats s0, s1;
 	rc = get_stats(sc, &s0, err);
 	if (rc)
@@ -483,14 +478,14 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	int short_frames = 0, fine_only = 0;
 	fr = xcalloc((size_t)nmax, sizeof *fr);
 	double *ms = xcalloc((size_t)nmax, sizeof *ms);
-	t0 = now_s();
+	t0 = clock_now_s();
 	double tc = 0;
 	for (int k = 0; n < nmax; k++) {
-		double t = now_s() - t0;
+		double t = clock_now_s() - t0;
 		if (t >= x->trial_s + warm_s)
 			break;
 		if (t >= warm_s && tc == 0)
-			tc = now_s();
+			tc = clock_now_s();
 		double lat, lon;
 		route_point(p->a, v * t, &lat, &lon);
 		rc = client_frame(&c, lat, lon, agl, &fr[n]);
@@ -511,11 +506,11 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		}
 		n++;
 		double next = t0 + (k + 1) / HZ;
-		if (now_s() > next)
-			late++, k = (int)((now_s() - t0) * HZ); /* a missed tick is skipped */
+		if (clock_now_s() > next)
+			late++, k = (int)((clock_now_s() - t0) * HZ); /* a missed tick is skipped */
 		idle_until(&c, t0 + (k + 1) / HZ, x->drain);
 	}
-	double fly = now_s() - (tc > 0 ? tc : t0);
+	double fly = clock_now_s() - (tc > 0 ? tc : t0);
 	rc = get_stats(sc, &s1, err);
 	if (rc) {
 		free(ms);
@@ -611,7 +606,7 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 	memset(r, 0, sizeof *r);
 	r->alt = seed[i].alt;
 	r->seed_v = seed[i].vel;
-	double t0 = now_s();
+	double t0 = clock_now_s();
 	/* From the target (10× the seed) up or down by doubling, then bisection down to a
 	 * 19 % step: the table says on which side of the target each row falls. */
 	double lo = 0, hi = INFINITY, v = 10 * seed[i].vel;
@@ -662,7 +657,7 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 		}
 	}
 	r->v = lo;
-	r->seconds = now_s() - t0;
+	r->seconds = clock_now_s() - t0;
 	limiting_stage(r);
 }
 
@@ -965,7 +960,7 @@ int main(int argc, char **argv)
 	for (int k = 0; k < NCF; k++) {
 		if (!cf[k].run)
 			continue;
-		double t0 = now_s();
+		double t0 = clock_now_s();
 		for (int i = 0; i < NALT; i++) {
 			if (alts && !strchr(alts, '0' + i)) {
 				cf[k].rows[i] = (struct row){ .alt = seed[i].alt, .seed_v = seed[i].vel,
@@ -974,7 +969,7 @@ int main(int argc, char **argv)
 			}
 			search(&x, cf[k].planet, cf[k].prefetch, i, full, &cf[k].rows[i]);
 		}
-		cf[k].seconds = now_s() - t0;
+		cf[k].seconds = clock_now_s() - t0;
 		print_table(&cf[k], x.trial_s);
 		fflush(stdout);
 	}

@@ -15,6 +15,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "common/clock.h"
 #include "common/proto.h"
 #include "common/tilecodec.h"
 #include "support/daemon_env.h"
@@ -24,13 +25,6 @@ static const char planet[] =
 	"[node base]\ntype = noise\nseed = 3\noctaves = 2\nwavelength = 300000\namplitude = 500\n"
 	"[node tint]\ntype = ramp\ninput = base\nstops = -500 0 0 255, 500 255 255 255\n"
 	"[layer color]\nnode = tint\nformat = rgba8\n";
-
-static uint64_t now_ns(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
-}
 
 static void die(const char *what)
 {
@@ -182,11 +176,11 @@ int main(void)
 	enum { N = 2000 };
 	static uint64_t lat[N];
 	for (int i = 0; i < N; i++) {
-		uint64_t t0 = now_ns();
+		uint64_t t0 = clock_now_ns();
 		want(c, ++seq, i & 1 ? qb : qa, 4);
 		for (int k = 0; k < 4; k++)
 			cl_until(c, PROTO_TILE);
-		lat[i] = now_ns() - t0;
+		lat[i] = clock_now_ns() - t0;
 	}
 	qsort(lat, N, sizeof lat[0], cmp_u64);
 	printf("server/cached quad 4x256² rgba8 loopback tcp round trip: p50 %.3f ms, p99 %.3f ms\n",
@@ -201,14 +195,14 @@ int main(void)
 		for (int k = 0; k < 512; k++)
 			cl_until(c, PROTO_TILE);
 	}
-	uint64_t t0 = now_ns();
+	uint64_t t0 = clock_now_ns();
 	int rounds = 6;
 	for (int r = 0; r < rounds; r++) {
 		want(c, ++seq, big[r & 1], 512);
 		for (int k = 0; k < 512; k++)
 			cl_until(c, PROTO_TILE);
 	}
-	double dt = (now_ns() - t0) * 1e-9;
+	double dt = (clock_now_ns() - t0) * 1e-9;
 	printf("server/cached tiles 256² rgba8 to 1 session: %.0f tiles/s (%.2f GB/s)\n",
 	       rounds * 512 / dt, rounds * 512 * 262144.0 / dt * 1e-9);
 
@@ -219,7 +213,7 @@ int main(void)
 		s[i] = cl_tcp(port);
 		cl_open(s[i]);
 	}
-	t0 = now_ns();
+	t0 = clock_now_ns();
 	uint64_t tiles = 0;
 	for (int r = 0; r < 4; r++) {
 		for (int i = 0; i < NS; i++)
@@ -262,7 +256,7 @@ int main(void)
 			}
 		}
 	}
-	dt = (now_ns() - t0) * 1e-9;
+	dt = (clock_now_ns() - t0) * 1e-9;
 	printf("server/cached tiles 256² rgba8 to 50 sessions: %.0f tiles/s (%.2f GB/s)\n",
 	       tiles / dt, tiles * 262144.0 / dt * 1e-9);
 

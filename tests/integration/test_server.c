@@ -26,6 +26,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "common/clock.h"
 #include "engine/cache.h"
 #include "engine/planet.h"
 #include "common/proto.h"
@@ -54,13 +55,6 @@ static const char planet_v2[] =
 /* The daemon (tests/support/daemon_env) and the test planet's file, rewritten before SIGHUPs. */
 static struct daemon_env E;
 static char planet_path[128];
-
-static uint64_t now_ms(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (uint64_t)ts.tv_sec * 1000 + (uint64_t)ts.tv_nsec / 1000000;
-}
 
 static void write_file(const char *path, const char *text)
 {
@@ -172,7 +166,7 @@ static int cl_recv(struct cl *c, int timeout_ms)
 	proto_msg_fini(&c->m);
 	free(c->frame);
 	c->frame = NULL;
-	uint64_t end = now_ms() + (uint64_t)timeout_ms;
+	uint64_t end = (uint64_t)clock_now_ms() + (uint64_t)timeout_ms;
 	for (;;) {
 		size_t need = 0;
 		char err[256];
@@ -189,8 +183,8 @@ static int cl_recv(struct cl *c, int timeout_ms)
 				fail_msg("bad message from server: %s", err);
 			return 1;
 		}
-		int left = (int)(end - now_ms());
-		if ((int64_t)(end - now_ms()) <= 0)
+		int left = (int)(end - (uint64_t)clock_now_ms());
+		if ((int64_t)(end - (uint64_t)clock_now_ms()) <= 0)
 			return 0;
 		struct pollfd pf = { .fd = c->fd, .events = POLLIN };
 		if (poll(&pf, 1, left) <= 0)
@@ -206,9 +200,9 @@ static int cl_recv(struct cl *c, int timeout_ms)
 /* Receives until a message of `type` (skipping others); fails after timeout. */
 static void cl_expect(struct cl *c, uint16_t type, int timeout_ms)
 {
-	uint64_t end = now_ms() + (uint64_t)timeout_ms;
-	while (now_ms() < end) {
-		int r = cl_recv(c, (int)(end - now_ms()));
+	uint64_t end = (uint64_t)clock_now_ms() + (uint64_t)timeout_ms;
+	while ((uint64_t)clock_now_ms() < end) {
+		int r = cl_recv(c, (int)(end - (uint64_t)clock_now_ms()));
 		if (r < 0)
 			fail_msg("connection closed waiting for %s", proto_type_name(type));
 		if (r == 0)
@@ -461,11 +455,11 @@ static void test_stalled_session(void **state)
 	uint32_t py = cl_open(y, NULL);
 	struct proto_want_entry b[64];
 	uint32_t nb = block(b, 3, 3, 0, 0, 8, 2);
-	uint64_t t0 = now_ms();
+	uint64_t t0 = (uint64_t)clock_now_ms();
 	cl_want(y, py, 1, 0, 0, b, nb);
 	for (uint32_t i = 0; i < nb; i++)
 		cl_expect(y, PROTO_TILE, 10000);
-	uint64_t dt = now_ms() - t0;
+	uint64_t dt = (uint64_t)clock_now_ms() - t0;
 	/* Let x's tiles pile up, then look at its output queue. */
 	uint64_t sent0 = cl_stat(y, "tiles.sent");
 	usleep(500000);

@@ -27,6 +27,7 @@
 #include <unistd.h>
 #include <cmocka.h>
 
+#include "common/clock.h"
 #include "support/daemon_env.h"
 #include "common/img.h"
 
@@ -194,13 +195,6 @@ static void bad_socket_is_exit_1_naming_it(void **state)
 	assert_non_null(strstr(out, "127.0.0.1:1"));
 }
 
-static double mono_s(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
-}
-
 /* Without --wait-complete a flight is paced in real time (--fps) and the tiles that arrive
  * between frames are taken: 11 frames at 5 per second last at least 2 s, and the frames
  * show the terrain coming in (tiles received, levels drawn by the end). */
@@ -220,9 +214,9 @@ static void paced_flight_takes_tiles_between_frames(void **state)
 	char *argv[] = { exe, "--connect", e->d.sock, "--planet", "procedural", "--flight", fl,
 			 "--steps", "10", "--fps", "5", "--size", "160x120", "-o", png, "--stats",
 			 stats, NULL };
-	double t0 = mono_s();
+	double t0 = clock_now_s();
 	int rc = daemon_env_run(argv, out, sizeof out);
-	double took = mono_s() - t0;
+	double took = clock_now_s() - t0;
 	if (rc != 0)
 		fprintf(stderr, "%s\n", out);
 	assert_int_equal(rc, 0);

@@ -18,29 +18,15 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "common/errbuf.h"
+#include "common/clock.h"
+
 #define POLL_NS 10000000L
 #define STOP_MS 10000
-
-static long long now_ms(void)
-{
-	struct timespec ts;
-	clock_gettime(CLOCK_MONOTONIC, &ts);
-	return (long long)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
-}
 
 static void nap(void)
 {
 	nanosleep(&(struct timespec){ .tv_nsec = POLL_NS }, NULL);
-}
-
-static void __attribute__((format(printf, 2, 3))) say(char *err, const char *fmt, ...)
-{
-	if (!err)
-		return;
-	va_list ap;
-	va_start(ap, fmt);
-	vsnprintf(err, 256, fmt, ap);
-	va_end(ap);
 }
 
 /* snprintf into a path buffer; -ENAMETOOLONG when it does not fit. */
@@ -237,7 +223,7 @@ static int kv_line(struct kv *t, int *n, const char *line, char *err)
 {
 	const char *dot = strchr(line, '.'), *eq = strchr(line, '=');
 	if (!dot || !eq || dot > eq) {
-		say(err, "bad config line \"%s\": want section.key = value", line);
+		err_set(err, "bad config line \"%s\": want section.key = value", line);
 		return -EINVAL;
 	}
 	const char *s = line + strspn(line, " \t");
@@ -345,7 +331,7 @@ int daemon_env_wait_ready(struct daemon_env *e, int timeout_ms)
 {
 	if (e->daemon <= 0)
 		return -ESRCH;
-	long long end = now_ms() + timeout_ms;
+	long long end = (long long)clock_now_ms() + timeout_ms;
 	for (;;) {
 		int st;
 		if (waitpid(e->daemon, &st, WNOHANG) == e->daemon) {
@@ -358,7 +344,7 @@ int daemon_env_wait_ready(struct daemon_env *e, int timeout_ms)
 			e->port = e->tcp ? log_port(e) : 0;
 			return e->tcp && e->port <= 0 ? -EPROTO : 0;
 		}
-		if (now_ms() >= end)
+		if ((long long)clock_now_ms() >= end)
 			return -ETIMEDOUT;
 		nap();
 	}
@@ -373,13 +359,13 @@ static int launch(struct daemon_env *e, char *err)
 		e->log_fd = open(e->log, O_WRONLY | O_CREAT | O_APPEND | O_CLOEXEC, 0644);
 	if (e->log_fd <= 0) {
 		int rc = -errno;
-		say(err, "%s: %s", e->log, strerror(-rc));
+		err_set(err, "%s: %s", e->log, strerror(-rc));
 		return rc;
 	}
 	pid_t pid = fork();
 	if (pid < 0) {
 		int rc = -errno;
-		say(err, "fork: %s", strerror(-rc));
+		err_set(err, "fork: %s", strerror(-rc));
 		return rc;
 	}
 	if (pid == 0) {
@@ -393,13 +379,13 @@ static int launch(struct daemon_env *e, char *err)
 	int rc = daemon_env_wait_ready(e, DAEMON_ENV_START_MS);
 	if (rc == -ECHILD) {
 		print_log(e, "exited at start");
-		say(err, "clipmapd exited at start (config %s)", e->conf);
+		err_set(err, "clipmapd exited at start (config %s)", e->conf);
 	} else if (rc == -ETIMEDOUT) {
 		print_log(e, "did not get ready in time");
-		say(err, "clipmapd did not accept on %s within %d ms",
+		err_set(err, "clipmapd did not accept on %s within %d ms",
 		    e->sock[0] ? e->sock : "tcp", DAEMON_ENV_START_MS);
 	} else if (rc) {
-		say(err, "clipmapd: no TCP port in its log %s", e->log);
+		err_set(err, "clipmapd: no TCP port in its log %s", e->log);
 	}
 	return rc;
 }
@@ -413,13 +399,13 @@ int daemon_env_start(struct daemon_env *e, const struct daemon_env_conf *c, char
 		char from[700];
 		snprintf(from, sizeof from, "%s/conf/planets/procedural.ini", e->root);
 		if ((rc = daemon_env_planet_copy(e, from, NULL, 0))) {
-			say(err, "%s: %s", from, strerror(-rc));
+			err_set(err, "%s: %s", from, strerror(-rc));
 			return rc;
 		}
 	}
 	if ((rc = write_conf(e, c, err))) {
 		if (rc != -EINVAL)
-			say(err, "%s: %s", e->conf, strerror(-rc));
+			err_set(err, "%s: %s", e->conf, strerror(-rc));
 		return rc;
 	}
 	return launch(e, err);
@@ -464,10 +450,10 @@ void daemon_env_fini(struct daemon_env *e)
 {
 	if (e->daemon > 0) {
 		kill(e->daemon, SIGTERM);
-		long long end = now_ms() + STOP_MS;
+		long long end = (long long)clock_now_ms() + STOP_MS;
 		int st;
 		while (waitpid(e->daemon, &st, WNOHANG) == 0) {
-			if (now_ms() >= end) {
+			if ((long long)clock_now_ms() >= end) {
 				fprintf(stderr, "clipmapd (pid %d) ignored SIGTERM for %d s: killing it\n",
 					(int)e->daemon, STOP_MS / 1000);
 				kill(e->daemon, SIGKILL);
@@ -529,12 +515,12 @@ int daemon_env_log_count(const struct daemon_env *e, const char *what)
 
 bool daemon_env_log_wait(const struct daemon_env *e, const char *what, int count, int timeout_ms)
 {
-	long long end = now_ms() + timeout_ms;
+	long long end = (long long)clock_now_ms() + timeout_ms;
 	do {
 		if (daemon_env_log_count(e, what) >= count)
 			return true;
 		nap();
-	} while (now_ms() < end);
+	} while ((long long)clock_now_ms() < end);
 	return false;
 }
 
