@@ -1,8 +1,8 @@
 // geo — the only C++ that touches GeographicLib; see geo.h. Bodies are immutable after
 // creation, and GeographicLib's Geocentric/Geodesic objects are const-safe, so every function
 // may run on any thread.
-#include "geo.h"
 #include "errbuf.h"
+#include "geo.h"
 
 #include <GeographicLib/Constants.hpp>
 #include <GeographicLib/Geocentric.hpp>

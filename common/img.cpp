@@ -4,8 +4,8 @@
 // error messages per thread, so concurrent readers do not see each other's errors). The
 // cache is reference counted (planets share one) and remembers, per file name, the version
 // (size, mtime, inode...) its users last saw, so a changed file is invalidated once.
-#include "img.h"
 #include "errbuf.h"
+#include "img.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>

@@ -10,8 +10,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "proto.h"
 #include "errbuf.h"
+#include "proto.h"
 #include "xalloc.h"
 
 

@@ -15,14 +15,14 @@
 #include <systemd/sd-daemon.h>
 #include <unistd.h>
 
-#include "engine/cache.h"
-#include "conf.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/img.h"
 #include "common/log.h"
+#include "engine/cache.h"
 #include "engine/planets.h"
 #include "engine/sched.h"
+#include "conf.h"
 #include "server.h"
 
 #define DEFAULT_CONF "/etc/clipmap/clipmapd.conf"

@@ -15,8 +15,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "engine/planet.h"
 #include "common/proto.h"
+#include "engine/planet.h"
 #include "engine/sched.h"
 
 #define PREFETCH_WINDOW 256	     /* wanted keys in flight per job */

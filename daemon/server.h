@@ -12,10 +12,10 @@
 #define CLIPMAP_SERVER_H
 #include <stddef.h>
 
-#include "conf.h"
 #include "engine/cache.h"
 #include "engine/planets.h"
 #include "engine/sched.h"
+#include "conf.h"
 #include "listen.h"
 
 struct server;

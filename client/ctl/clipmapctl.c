@@ -12,6 +12,9 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "common/clock.h"
+#include "common/errbuf.h"
+#include "engine/planet.h"
 #include "ctl_args.h"
 #include "ctl_cache.h"
 #include "ctl_conn.h"
@@ -19,9 +22,6 @@
 #include "ctl_status.h"
 #include "ctl_tile.h"
 #include "import_cli.h"
-#include "common/clock.h"
-#include "common/errbuf.h"
-#include "engine/planet.h"
 #include "planet_path.h"
 #include "render.h"
 

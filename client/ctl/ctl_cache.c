@@ -6,10 +6,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ctl_args.h"
-#include "ctl_conn.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
+#include "ctl_args.h"
+#include "ctl_conn.h"
 
 static const char *layer_name(const struct proto_planet *p, uint64_t node, char *buf, size_t n)
 {

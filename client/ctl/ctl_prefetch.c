@@ -9,10 +9,10 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "ctl_args.h"
-#include "ctl_conn.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
+#include "ctl_args.h"
+#include "ctl_conn.h"
 
 struct run {
 	struct net_conn *c;

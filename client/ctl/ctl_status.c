@@ -8,9 +8,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ctl_args.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
+#include "ctl_args.h"
 
 struct row {
 	char section[64]; /* "" for keys without a dot */

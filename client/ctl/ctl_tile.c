@@ -8,10 +8,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "ctl_args.h"
-#include "ctl_conn.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
+#include "ctl_args.h"
+#include "ctl_conn.h"
 
 int ctl_tile_image(enum pix_type format, uint32_t T, const void *texels,
 		   struct render_image *out)

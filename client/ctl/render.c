@@ -8,11 +8,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "engine/cache.h"
 #include "common/errbuf.h"
 #include "common/img.h"
-#include "engine/sched.h"
 #include "common/xalloc.h"
+#include "engine/cache.h"
+#include "engine/sched.h"
 
 #define MAX_PIXELS_WIDE 32768
 #define BATCH 32

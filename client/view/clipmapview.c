@@ -11,16 +11,16 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gl_context.h"
-#include "gl_window.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/img.h"
+#include "common/xalloc.h"
+#include "gl_context.h"
+#include "gl_window.h"
 #include "view.h"
 #include "view_fly.h"
 #include "view_source_local.h"
 #include "view_source_net.h"
-#include "common/xalloc.h"
 
 static void usage(FILE *f)
 {

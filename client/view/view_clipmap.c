@@ -10,9 +10,9 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "view_levels.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
+#include "view_levels.h"
 
 /* Per role: the quad (4), its ring (12) and the look-ahead (≤ 2 × AHEAD_MAX lines of 4). */
 #define AHEAD_MAX 2

@@ -16,8 +16,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "gl_context.h"
 #include "common/grid.h"
+#include "gl_context.h"
 #include "view_source.h"
 
 enum view_role { VIEW_HEIGHT = 0, VIEW_NORMAL, VIEW_COLOR, VIEW_NROLES };

@@ -10,13 +10,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "engine/cache.h"
-#include "engine/planet.h"
-#include "engine/sched.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
 #include "common/xthread.h"
+#include "engine/cache.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
 
 struct arrival {
 	uint8_t layer;

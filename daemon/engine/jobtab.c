@@ -11,8 +11,8 @@
 #include <errno.h>
 #include <stdlib.h>
 
-#include "planet.h"
 #include "common/xalloc.h"
+#include "planet.h"
 
 bool job_prio_less(const struct job_prio *a, const struct job_prio *b)
 {

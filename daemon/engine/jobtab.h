@@ -15,8 +15,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
-#include "cache.h"
 #include "common/grid.h"
+#include "cache.h"
 #include "node.h"
 #include "tile.h"
 

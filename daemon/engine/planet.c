@@ -14,11 +14,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "common/geo.h"
 #include "common/errbuf.h"
+#include "common/geo.h"
 #include "common/img.h"
-#include "node_types.h"
 #include "common/xalloc.h"
+#include "node_types.h"
 
 /* Loader state for one node, in file order. */
 struct lnode {

@@ -29,11 +29,11 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
-#include "jobtab.h"
-#include "planet.h"
 #include "common/clock.h"
 #include "common/xalloc.h"
 #include "common/xthread.h"
+#include "jobtab.h"
+#include "planet.h"
 
 enum entry_state { ENTRY_NEW = 0, ENTRY_PENDING, ENTRY_REPORTED, ENTRY_DUP };
 

@@ -29,15 +29,15 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "common/errbuf.h"
-#include "common/clock.h"
 #include "client/ctl/ctl_prefetch.h"
-#include "client/view/gl_context.h"
-#include "common/img.h"
 #include "client/net.h"
+#include "client/view/gl_context.h"
 #include "client/view/view_clipmap.h"
 #include "client/view/view_levels.h"
 #include "client/view/view_source_net.h"
+#include "common/clock.h"
+#include "common/errbuf.h"
+#include "common/img.h"
 #include "common/xalloc.h"
 #include "support/daemon_env.h"
 

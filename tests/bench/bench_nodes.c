@@ -10,11 +10,11 @@
 #include <time.h>
 
 #include "common/clock.h"
-#include "engine/cache.h"
 #include "common/img.h"
+#include "common/xalloc.h"
+#include "engine/cache.h"
 #include "engine/planet.h"
 #include "engine/sched.h"
-#include "common/xalloc.h"
 
 #define DIR "/tmp/clipmap-bench-nodes"
 #define SIDE 8 /* an 8×8 block of tiles */

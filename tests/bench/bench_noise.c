@@ -12,13 +12,13 @@
 
 #include "common/clock.h"
 #include "common/ini.h"
+#include "common/xalloc.h"
 #include "common/xthread.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/nodes/noise.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
-#include "common/xalloc.h"
 
 /* A level fine enough that all 8 octaves of the default parameters are evaluated. */
 static struct tile_key bench_key(int i)

@@ -25,8 +25,8 @@
 #include <unistd.h>
 #include <cmocka.h>
 
-#include "support/daemon_env.h"
 #include "common/img.h"
+#include "support/daemon_env.h"
 
 struct env {
 	struct daemon_env d;

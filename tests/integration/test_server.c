@@ -27,11 +27,11 @@
 #include <unistd.h>
 
 #include "common/clock.h"
+#include "common/proto.h"
+#include "common/tilecodec.h"
 #include "engine/cache.h"
 #include "engine/planet.h"
-#include "common/proto.h"
 #include "engine/sched.h"
-#include "common/tilecodec.h"
 #include "support/daemon_env.h"
 
 #define TOKEN "s3cret-token"

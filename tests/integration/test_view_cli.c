@@ -16,8 +16,8 @@
 #include <unistd.h>
 #include <cmocka.h>
 
-#include "support/daemon_env.h"
 #include "common/img.h"
+#include "support/daemon_env.h"
 
 struct env {
 	char bindir[512]; /* build/ */

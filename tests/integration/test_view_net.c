@@ -28,8 +28,8 @@
 #include <cmocka.h>
 
 #include "common/clock.h"
-#include "support/daemon_env.h"
 #include "common/img.h"
+#include "support/daemon_env.h"
 
 struct env {
 	struct daemon_env d;

@@ -17,8 +17,8 @@
 #include <unistd.h>
 #include <cmocka.h>
 
-#include "support/daemon_env.h"
 #include "common/img.h"
+#include "support/daemon_env.h"
 
 struct env {
 	struct daemon_env d; /* build/ and a temporary directory; no daemon */

@@ -18,8 +18,8 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "common/errbuf.h"
 #include "common/clock.h"
+#include "common/errbuf.h"
 
 #define POLL_NS 10000000L
 #define STOP_MS 10000

@@ -12,10 +12,10 @@
 #include <string.h>
 #include <time.h>
 
-#include "engine/cache.h"
 #include "common/clock.h"
 #include "common/grid.h"
 #include "common/xthread.h"
+#include "engine/cache.h"
 #include "engine/tile.h"
 
 #define T 16 /* texels: 1 KiB per height tile */

@@ -14,10 +14,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "engine/nodes/craters.h"
 #include "common/ini.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
+#include "engine/nodes/craters.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
 

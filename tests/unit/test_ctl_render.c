@@ -14,10 +14,11 @@
 #include <unistd.h>
 #include <cmocka.h>
 
-#include "engine/cache.h"
 #include "common/img.h"
+#include "engine/cache.h"
 #include "engine/planet.h"
 #include "engine/sched.h"
+#include "support/daemon_env.h"
 
 #define PLANET "conf/planets/procedural.ini"
 
@@ -32,12 +33,10 @@ struct env {
 static int setup(void **state)
 {
 	struct env *e = calloc(1, sizeof *e);
-	char exe[4096];
-	ssize_t n = readlink("/proc/self/exe", exe, sizeof exe - 1);
-	if (n <= 0)
+	char bin[4000];
+	if (daemon_env_bindir(bin, sizeof bin))
 		return -1;
-	exe[n] = '\0';
-	snprintf(e->ctl, sizeof e->ctl, "%s/../clipmapctl", dirname(exe));
+	snprintf(e->ctl, sizeof e->ctl, "%s/clipmapctl", bin);
 	snprintf(e->dir, sizeof e->dir, "/tmp/clipmap-ctl-XXXXXX");
 	if (!mkdtemp(e->dir))
 		return -1;

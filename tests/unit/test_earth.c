@@ -18,8 +18,8 @@
 #include <string.h>
 #include <unistd.h>
 
-#include "engine/planet.h"
 #include "client/ctl/render.h"
+#include "engine/planet.h"
 
 #define PLANET "conf/planets/earth.ini"
 #define ETOPO "/usr/share/ferret-vis/data/etopo5.cdf"

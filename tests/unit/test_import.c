@@ -23,8 +23,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
-#include "common/img.h"
 #include "client/ctl/import.h"
+#include "common/img.h"
 #include "common/ini.h"
 #include "engine/node.h"
 #include "engine/node_types.h"

@@ -35,6 +35,7 @@
 #include "common/clock.h"
 #include "common/xalloc.h"
 #include "common/xthread.h"
+#include "support/daemon_env.h"
 
 /* ---- the fake server --------------------------------------------------------------------- */
 
@@ -755,17 +756,7 @@ static void prefetch_bad_levels(void **state)
 /* build/clipmapctl next to build/tests/test_net, or NULL when it was not built. */
 static const char *ctl_path(char *buf, size_t n)
 {
-	ssize_t l = readlink("/proc/self/exe", buf, n - 1);
-	if (l <= 0)
-		return NULL;
-	buf[l] = '\0';
-	for (int i = 0; i < 2; i++) {
-		char *sl = strrchr(buf, '/');
-		if (!sl)
-			return NULL;
-		*sl = '\0';
-	}
-	if (strlen(buf) + 12 >= n)
+	if (daemon_env_bindir(buf, n) || strlen(buf) + 12 >= n)
 		return NULL;
 	strcat(buf, "/clipmapctl");
 	return access(buf, X_OK) == 0 ? buf : NULL;

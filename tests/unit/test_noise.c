@@ -16,12 +16,12 @@
 #include <string.h>
 
 #include "common/ini.h"
+#include "common/xalloc.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/nodes/noise.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
-#include "common/xalloc.h"
 
 #define EARTH_A 6378137.0
 

@@ -17,11 +17,11 @@
 
 #include "common/geo.h"
 #include "common/ini.h"
+#include "common/xalloc.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
-#include "common/xalloc.h"
 
 #define SPHERE_R 6371000.0
 

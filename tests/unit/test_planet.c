@@ -20,10 +20,10 @@
 
 #include "common/geo.h"
 #include "common/img.h"
+#include "common/xalloc.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
 #include "engine/planets.h"
-#include "common/xalloc.h"
 
 /* ---- test-only node types ---- */
 

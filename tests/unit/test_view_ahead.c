@@ -15,9 +15,9 @@
 #include <string.h>
 
 #include "client/view/gl_context.h"
-#include "support/synth_source.h"
 #include "client/view/view_clipmap.h"
 #include "common/xalloc.h"
+#include "support/synth_source.h"
 
 #define T 16
 #define NLEVELS 11

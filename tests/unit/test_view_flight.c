@@ -25,13 +25,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "common/geo.h"
-#include "common/img.h"
 #include "client/view/gl_context.h"
-#include "support/synth_source.h"
 #include "client/view/view.h"
 #include "client/view/view_source_local.h"
+#include "common/geo.h"
+#include "common/img.h"
 #include "common/xalloc.h"
+#include "support/synth_source.h"
 
 #define DEG (M_PI / 180.0)
 #define WGS_A 6378137.0

@@ -20,10 +20,10 @@
 #include <unistd.h>
 
 #include "client/view/gl_context.h"
-#include "support/synth_source.h"
 #include "client/view/view.h"
 #include "client/view/view_source_local.h"
 #include "common/xalloc.h"
+#include "support/synth_source.h"
 
 #define W 64
 #define H 64

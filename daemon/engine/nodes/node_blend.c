@@ -12,8 +12,8 @@
 #include <stdint.h>
 #include <stdlib.h>
 
-#include "engine/node_types.h"
 #include "common/xalloc.h"
+#include "engine/node_types.h"
 
 enum blend_mode { BLEND_OVER, BLEND_MASK, BLEND_ADD, BLEND_MULTIPLY };
 

@@ -17,8 +17,8 @@
 #include <emmintrin.h>
 #endif
 
-#include "engine/node_types.h"
 #include "common/xalloc.h"
+#include "engine/node_types.h"
 
 #define MAT_SHIFT 12
 

@@ -7,8 +7,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "engine/node_types.h"
 #include "common/xalloc.h"
+#include "engine/node_types.h"
 
 struct constant {
 	float height;

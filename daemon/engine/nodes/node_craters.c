@@ -17,10 +17,10 @@
 #include <errno.h>
 #include <stdlib.h>
 
-#include "craters.h"
+#include "common/xalloc.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
-#include "common/xalloc.h"
+#include "craters.h"
 
 static const struct node_slot slots[] = {
 	{ .name = "input", .type = PIX_HEIGHT, .optional = true },

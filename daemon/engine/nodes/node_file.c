@@ -38,8 +38,8 @@
 #include <sys/stat.h>
 
 #include "common/img.h"
-#include "engine/planet.h"
 #include "common/xalloc.h"
+#include "engine/planet.h"
 
 #include "file_resample.h"
 

@@ -18,9 +18,9 @@
 #include <string.h>
 #include <sys/stat.h>
 
+#include "common/xalloc.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
-#include "common/xalloc.h"
 
 #define GTX_HEADER 40
 #define GTX_MAX_NODES (64u << 20)

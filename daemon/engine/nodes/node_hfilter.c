@@ -6,8 +6,8 @@
 #include <math.h>
 #include <stdlib.h>
 
-#include "engine/node_types.h"
 #include "common/xalloc.h"
+#include "engine/node_types.h"
 
 struct height_filter {
 	float scale, offset, lo, hi;

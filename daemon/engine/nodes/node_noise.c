@@ -24,10 +24,10 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "engine/node_types.h"
-#include "noise.h"
-#include "engine/planet.h"
 #include "common/xalloc.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "noise.h"
 
 struct noise_impl {
 	struct noise nz;

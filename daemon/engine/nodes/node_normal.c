@@ -19,9 +19,9 @@
 #endif
 
 #include "common/geo.h"
+#include "common/xalloc.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
-#include "common/xalloc.h"
 
 struct normal {
 	double exaggeration;

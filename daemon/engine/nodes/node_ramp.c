@@ -24,8 +24,8 @@
 #include <emmintrin.h>
 #endif
 
-#include "engine/node_types.h"
 #include "common/xalloc.h"
+#include "engine/node_types.h"
 
 #define RAMP_MAX_STOPS 64
 #define RAMP_BINS 2048
