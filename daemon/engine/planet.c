@@ -284,7 +284,8 @@ static int parse_look(struct loader *L, struct ini_section *s)
 	return 0;
 }
 
-static int parse_planet(struct loader *L, struct ini_section *s)
+/* Every key of [planet] is known (and marked used). */
+static int check_planet_keys(struct loader *L, struct ini_section *s)
 {
 	static const char *const keys[] = { "name",
 					    "description",
@@ -299,7 +300,6 @@ static int parse_planet(struct loader *L, struct ini_section *s)
 					    "atmosphere_color",
 					    "sea_level",
 					    NULL };
-	struct planet *p = L->p;
 	for (size_t i = 0; s && i < s->n; i++) {
 		struct ini_entry *e = &s->entries[i];
 		bool known = false;
@@ -313,14 +313,15 @@ static int parse_planet(struct loader *L, struct ini_section *s)
 					 "sea_level)");
 		e->used = true;
 	}
+	return 0;
+}
+
+/* name (default: the file's name without .ini) and description. */
+static int parse_name(struct loader *L, struct ini_section *s)
+{
+	struct planet *p = L->p;
 	struct ini_entry *e_name = s ? ini_find(s, "name") : NULL;
 	struct ini_entry *e_desc = s ? ini_find(s, "description") : NULL;
-	struct ini_entry *e_body = s ? ini_find(s, "body") : NULL;
-	struct ini_entry *e_radius = s ? ini_find(s, "radius") : NULL;
-	struct ini_entry *e_flat = s ? ini_find(s, "flattening") : NULL;
-	struct ini_entry *e_tile = s ? ini_find(s, "tile_size") : NULL;
-	struct ini_entry *e_level = s ? ini_find(s, "max_level") : NULL;
-
 	if (e_name) {
 		if (!e_name->value[0])
 			return cfg_error(L, e_name->line, "name", "must not be empty");
@@ -336,7 +337,16 @@ static int parse_planet(struct loader *L, struct ini_section *s)
 		p->name[len] = '\0';
 	}
 	p->description = xstrdup(e_desc ? e_desc->value : "");
+	return 0;
+}
 
+/* body, radius, flattening: the reference ellipsoid. */
+static int parse_body(struct loader *L, struct ini_section *s)
+{
+	struct planet *p = L->p;
+	struct ini_entry *e_body = s ? ini_find(s, "body") : NULL;
+	struct ini_entry *e_radius = s ? ini_find(s, "radius") : NULL;
+	struct ini_entry *e_flat = s ? ini_find(s, "flattening") : NULL;
 	enum body_kind body = BODY_UNSET;
 	if (e_body) {
 		if (strcmp(e_body->value, "wgs84") == 0)
@@ -391,7 +401,15 @@ static int parse_planet(struct loader *L, struct ini_section *s)
 	char gerr[256] = "";
 	if (geo_body_create(p->a, p->f, &p->body, gerr))
 		return cfg_error(L, body_line, "body", "%s", gerr);
+	return 0;
+}
 
+/* tile_size and max_level. */
+static int parse_grid(struct loader *L, struct ini_section *s)
+{
+	struct planet *p = L->p;
+	struct ini_entry *e_tile = s ? ini_find(s, "tile_size") : NULL;
+	struct ini_entry *e_level = s ? ini_find(s, "max_level") : NULL;
 	p->tile_size = 256;
 	if (e_tile) {
 		long v;
@@ -410,6 +428,15 @@ static int parse_planet(struct loader *L, struct ini_section *s)
 					 GRID_MAX_LEVEL - 1, e_level->value);
 		p->max_level = (int)v;
 	}
+	return 0;
+}
+
+static int parse_planet(struct loader *L, struct ini_section *s)
+{
+	int rc;
+	if ((rc = check_planet_keys(L, s)) || (rc = parse_name(L, s)) || (rc = parse_body(L, s)) ||
+	    (rc = parse_grid(L, s)))
+		return rc;
 	return parse_look(L, s);
 }
 
