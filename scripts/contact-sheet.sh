@@ -28,11 +28,11 @@ case "$W$H" in *[!0-9]*|"") echo "$0: CONTACT_CELL=$CELL: want WxH" >&2; exit 2 
 
 # The showpiece: LAT LON HEADING — the point each low view looks at (along HEADING) — the
 # orbit altitude (1.4 radii: the disc fills most of the height), the radius (metres) and the
-# density of the air (--haze: 0 on the Moon, thin on Mars).
+# density of the air (--haze: none on the Moon and Mars, whose air the viewer does not model).
 case "$PLANET" in
 earth)      SPOT="27.99 86.93 0";   ORBIT=9000000; R=6371000; HAZE=1 ;; # Everest, from the south
 moon)       SPOT="-43.3 -11.2 180"; ORBIT=2450000; R=1737400; HAZE=0 ;; # Tycho, from the north
-mars)       SPOT="-9.0 -68.0 90";   ORBIT=4800000; R=3389500; HAZE=0.3 ;; # Valles Marineris (colour; heights are synthetic)
+mars)       SPOT="-9.0 -68.0 90";   ORBIT=4800000; R=3389500; HAZE=0 ;;   # Valles Marineris (colour; heights are synthetic)
 procedural) SPOT="-2.5 -60.5 30";   ORBIT=9000000; R=6371000; HAZE=1 ;; # the range of the western continent
 *)          SPOT="30 0 0";          ORBIT=9000000; R=6371000; HAZE=1 ;;
 esac
