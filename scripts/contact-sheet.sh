@@ -12,7 +12,10 @@
 #   CONTACT_BUILD (build), CONTACT_PLANETS (conf/planets: where PLANET.ini is)
 set -eu
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-[ $# -ge 1 ] && [ $# -le 2 ] || { echo "usage: $0 PLANET [OUT.png]" >&2; exit 2; }
+if [ $# -lt 1 ] || [ $# -gt 2 ]; then
+	echo "usage: $0 PLANET [OUT.png]" >&2
+	exit 2
+fi
 PLANET=$1
 OUT=${2:-$ROOT/docs/img/contact-$PLANET.png}
 CELL=${CONTACT_CELL:-320x180}
@@ -21,7 +24,8 @@ INI=${CONTACT_PLANETS:-$ROOT/conf/planets}/$PLANET.ini
 VIEW=$BUILD/clipmapview
 [ -f "$INI" ] || { echo "$0: $INI: no such planet file" >&2; exit 2; }
 [ -x "$VIEW" ] || { echo "$0: $VIEW is missing (make -j2)" >&2; exit 1; }
-command -v oiiotool >/dev/null || { echo "$0: oiiotool is missing (openimageio-tools)" >&2; exit 1; }
+command -v oiiotool >/dev/null ||
+	{ echo "$0: oiiotool is missing (openimageio-tools)" >&2; exit 1; }
 W=${CELL%x*}
 H=${CELL#*x}
 case "$W$H" in *[!0-9]*|"") echo "$0: CONTACT_CELL=$CELL: want WxH" >&2; exit 2 ;; esac
@@ -30,12 +34,15 @@ case "$W$H" in *[!0-9]*|"") echo "$0: CONTACT_CELL=$CELL: want WxH" >&2; exit 2 
 # orbit altitude (1.4 radii: the disc fills most of the height), the radius (metres) and the
 # density of the air (--haze: none on the Moon and Mars, whose air the viewer does not model).
 case "$PLANET" in
-earth)      SPOT="27.99 86.93 0";   ORBIT=9000000; R=6371000; HAZE=1 ;; # Everest, from the south
-moon)       SPOT="-43.3 -11.2 180"; ORBIT=2450000; R=1737400; HAZE=0 ;; # Tycho, from the north
-mars)       SPOT="-9.0 -68.0 90";   ORBIT=4800000; R=3389500; HAZE=0 ;;   # Valles Marineris (colour; heights are synthetic)
-procedural) SPOT="-2.5 -60.5 30";   ORBIT=9000000; R=6371000; HAZE=1 ;; # the range of the western continent
+# Everest from the south; Tycho from the north; Valles Marineris (in the colour map: the
+# heights are synthetic); the range of the procedural planet's western continent.
+earth)      SPOT="27.99 86.93 0";   ORBIT=9000000; R=6371000; HAZE=1 ;;
+moon)       SPOT="-43.3 -11.2 180"; ORBIT=2450000; R=1737400; HAZE=0 ;;
+mars)       SPOT="-9.0 -68.0 90";   ORBIT=4800000; R=3389500; HAZE=0 ;;
+procedural) SPOT="-2.5 -60.5 30";   ORBIT=9000000; R=6371000; HAZE=1 ;;
 *)          SPOT="30 0 0";          ORBIT=9000000; R=6371000; HAZE=1 ;;
 esac
+# shellcheck disable=SC2086 # split on purpose: three numbers
 set -- $SPOT
 LAT=$1 LON=$2 HDG=$3
 
