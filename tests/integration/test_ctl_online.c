@@ -129,7 +129,8 @@ static void tile_equals_render_and_is_listed(void **state)
 {
 	struct env *e = *state;
 	NEED_DAEMON(e);
-	char out[8192], a[200], b[200];
+	/* cache ls lists the tiles of every node of the graph: room for a big one */
+	char out[65536], a[200], b[200];
 	static const struct { const char *layer, *ext; enum img_type t; } cases[] = {
 		{ "height", "tif", IMG_F32 }, { "color", "png", IMG_U8 }, { "normal", "png", IMG_U8 },
 	};
