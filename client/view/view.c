@@ -706,69 +706,93 @@ static double surface_height(const struct view *v, double lon, double lat)
 	return look->sea && ground < look->sea_level ? look->sea_level : ground;
 }
 
-int view_frame(struct view *v, const struct view_camera *cam, double now_s,
-	       struct view_frame_stats *st)
-{
-	const struct gl *gl = v->gl;
-	double t0 = clock_now_ms();
-	struct view_frame_stats s = { .lfirst = -1, .llast = -1 };
-	struct view_clipmap_stats cs0, cs1;
-	view_clipmap_get_stats(v->cm, &cs0);
+/* One frame's state, passed from step to step by view_frame. */
+struct frame {
+	double t0;			/* when the frame began, ms */
+	struct view_clipmap_stats cs0;	/* the clipmap's counters then */
+	double now_s;			/* view_frame's now_s (0: offline, no time) */
+	double agl;			/* the camera's height above the ground */
+	double cap;			/* the horizon cap at the camera (view_horizon_cap) */
+	int lmin, lmax;			/* the levels the camera wants */
+	int first, last, nd;		/* levels drawn: first..last, nd of them in v->drawn */
+	bool complete;			/* so far: every wanted level drawn */
+	struct uploads up;
+	struct view_frame_stats s;
+};
 
+/* Whether the camera jumped since the last frame (real time only): a step along the ground
+ * longer than JUMP_HEIGHTS heights above it, at the greater of the two frames' heights. */
+static bool jumped(const struct view *v, const struct view_camera *cam, double agl, double now_s)
+{
+	if (v->frame_no == 0 || !(now_s > 0))
+		return false;
+	double p0 = v->last.lat * DEG, p1 = cam->lat * DEG;
+	double dl = remainder(cam->lon - v->last.lon, 360.0) * DEG;
+	double h = sin((p1 - p0) / 2) * sin((p1 - p0) / 2) +
+		   cos(p0) * cos(p1) * sin(dl / 2) * sin(dl / 2);
+	double step = 2 * v->body.a * asin(fmin(1, sqrt(h)));
+	return step > JUMP_HEIGHTS * fmax(agl, v->last_agl);
+}
+
+/* The frame's camera: its height above the ground, the levels it wants and its horizon. */
+static void frame_camera(struct view *v, const struct view_camera *cam, struct frame *f)
+{
 	/* A jump leaves no velocity behind: else the look-ahead would ask for tiles along it, the
 	 * prefetch ring only on its far side, and the want-set would change again frame after
 	 * frame while the smoothed speed decays. */
-	double agl = fmax(cam->alt, 0.05);
-	if (v->frame_no > 0 && now_s > 0) {
-		double p0 = v->last.lat * DEG, p1 = cam->lat * DEG;
-		double dl = remainder(cam->lon - v->last.lon, 360.0) * DEG;
-		double h = sin((p1 - p0) / 2) * sin((p1 - p0) / 2) +
-			   cos(p0) * cos(p1) * sin(dl / 2) * sin(dl / 2);
-		double step = 2 * v->body.a * asin(fmin(1, sqrt(h)));
-		if (step > JUMP_HEIGHTS * fmax(agl, v->last_agl))
-			view_clipmap_motion_reset(v->cm);
-	}
-	v->last_agl = agl;
+	f->agl = fmax(cam->alt, 0.05);
+	if (jumped(v, cam, f->agl, f->now_s))
+		view_clipmap_motion_reset(v->cm);
+	v->last_agl = f->agl;
 
 	/* Camera: height above the terrain as far as the clipmap knows it. */
 	v->last = *cam;
 	v->last.width = v->d.width;
 	v->last.height = v->d.height;
 	double ground = surface_height(v, cam->lon, cam->lat);
-	v->last.alt = ground * v->d.exaggeration + agl;
-	s.ground = ground;
-	s.agl = agl;
-	s.alt = v->last.alt;
+	v->last.alt = ground * v->d.exaggeration + f->agl;
+	f->s.ground = ground;
+	f->s.agl = f->agl;
+	f->s.alt = v->last.alt;
 
-	int lmin, lmax;
-	view_level_range(&v->body, &v->last, agl, v->d.n_phi, v->max_level, &lmin, &lmax);
-	s.lmin = lmin;
-	s.lmax = lmax;
-	double cap = view_horizon_cap(&v->body, v->last.alt);
+	view_level_range(&v->body, &v->last, f->agl, v->d.n_phi, v->max_level, &f->lmin, &f->lmax);
+	f->s.lmin = f->lmin;
+	f->s.lmax = f->lmax;
+	f->cap = view_horizon_cap(&v->body, v->last.alt);
+}
 
-	/* Algorithm 1, lines 2-9: a new focus sends a new want-set. */
+/* Algorithm 1, lines 2-9: the levels' targets and the look-ahead, the tiles that arrived, and
+ * a new want-set where the focus changed. Returns 0 or -errno. */
+static int frame_receive(struct view *v, const struct view_camera *cam, struct frame *f)
+{
 	bool changed = !v->sent_once;
-	set_targets(v, lmin, lmax, &changed);
+	set_targets(v, f->lmin, f->lmax, &changed);
 	/* The look-ahead along the camera's motion (real time only: a frame without time —
 	 * offline rendering — has no motion). */
-	if (now_s > 0)
-		changed |= view_clipmap_motion(v->cm, cam->lon, cam->lat, now_s);
+	if (f->now_s > 0)
+		changed |= view_clipmap_motion(v->cm, cam->lon, cam->lat, f->now_s);
 	int rc = view_clipmap_receive(v->cm);
 	if (rc < 0)
 		return rc;
-	s.tiles_received = rc + v->idle_tiles;
+	f->s.tiles_received = rc + v->idle_tiles;
 	v->idle_tiles = 0;
-	if (changed) {
-		size_t n = view_clipmap_wants(v->cm, !v->d.no_prefetch, v->wants, MAX_WANTS);
-		struct view_focus f = { cam->lon, cam->lat, v->last.alt, { 0, 0, 0 } };
-		rc = v->src->ops->want(v->src, v->wants, n, &f);
-		if (rc < 0)
-			return rc;
-		v->sent_once = true;
-		s.wants_sent = n ? n : 1;
-	}
+	if (!changed)
+		return 0;
+	size_t n = view_clipmap_wants(v->cm, !v->d.no_prefetch, v->wants, MAX_WANTS);
+	struct view_focus foc = { cam->lon, cam->lat, v->last.alt, { 0, 0, 0 } };
+	rc = v->src->ops->want(v->src, v->wants, n, &foc);
+	if (rc < 0)
+		return rc;
+	v->sent_once = true;
+	f->s.wants_sent = n ? n : 1;
+	return 0;
+}
 
-	/* Lines 10-26: coarse → fine, ring while the next level can be drawn, else disk. */
+/* Binds the framebuffer and clears it to the background (kept in v->bg) with the depth test
+ * set for the frame's depth range; binds the geometry. */
+static void frame_clear(struct view *v, double agl)
+{
+	const struct gl *gl = v->gl;
 	gl->BindFramebuffer(GL_FRAMEBUFFER, v->fbo);
 	gl->Viewport(0, 0, v->d.width, v->d.height);
 	float bg[3];
@@ -798,39 +822,45 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	gl->DepthMask(GL_TRUE);
 	gl->Clear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
 	gl->BindVertexArray(v->vao);
-	v->frame_no++;
-	frame_uniforms(v, agl, cap);
+}
 
-	/* The plan: coarse → fine, each level that can be drawn (its texture's window covers its
-	 * ring). The first is the finest that reaches the horizon; the last is drawn as a disk,
-	 * the others as rings, each stretched over the rings of the levels missing below it (after
-	 * a jump, or when a level's tiles are late): every resident level is drawn, the budget
-	 * limits only the uploads of new quads (in usable()), and a still camera never loses a
-	 * level. */
-	struct uploads up = { 0, 0 };
+/* The plan: coarse → fine, each level that can be drawn (its texture's window covers its
+ * ring). The first is the finest that reaches the horizon; the last is drawn as a disk,
+ * the others as rings, each stretched over the rings of the levels missing below it (after
+ * a jump, or when a level's tiles are late): every resident level is drawn, the budget
+ * limits only the uploads of new quads (in usable()), and a still camera never loses a
+ * level. Fills v->drawn and v->fade, f->first, f->last, f->nd and f->complete. */
+static void frame_plan(struct view *v, struct frame *f)
+{
 	int first = -1, last = -1, nd = 0;
-	for (int j = lmin; j >= 0 && first < 0; j--)
-		if (usable(v, j, fmin(view_ring_radius(j), cap), &up))
+	for (int j = f->lmin; j >= 0 && first < 0; j--)
+		if (usable(v, j, fmin(view_ring_radius(j), f->cap), &f->up))
 			first = j;
-	for (int i = first; i >= 0 && i <= lmax; i++) {
-		if (i != first && !usable(v, i, fmin(view_ring_radius(i), cap), &up)) {
+	for (int i = first; i >= 0 && i <= f->lmax; i++) {
+		if (i != first && !usable(v, i, fmin(view_ring_radius(i), f->cap), &f->up)) {
 			v->was_usable[i] = false;
 			continue;
 		}
 		if (!v->was_usable[i]) {
 			v->was_usable[i] = true;
-			v->ready_since[i] = now_s;
+			v->ready_since[i] = f->now_s;
 		}
 		v->fade[i] = 1;
 		if (v->d.fade_s > 0 && i != first)
-			v->fade[i] = fmin(1, (now_s - v->ready_since[i]) / v->d.fade_s);
+			v->fade[i] = fmin(1, (f->now_s - v->ready_since[i]) / v->d.fade_s);
 		v->drawn[nd++] = i;
 		last = i;
 	}
-	bool complete = first == lmin && nd == lmax - lmin + 1;
+	f->first = first;
+	f->last = last;
+	f->nd = nd;
+	f->complete = first == f->lmin && nd == f->lmax - f->lmin + 1;
+}
 
-	/* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
-	 * while any of them holds nothing yet). */
+/* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
+ * while any of them holds nothing yet). */
+static void level_floors(struct view *v, int lmax)
+{
 	double fl = INFINITY;
 	bool known = true;
 	for (int l = v->nlevels - 1; l >= 0; l--) {
@@ -842,48 +872,86 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 		else
 			v->floor[l] = fl = INFINITY, known = false;
 	}
+}
 
-	/* Drawn fine → coarse: the nearer ground first, so the depth test rejects what it hides
-	 * before that is shaded (llvmpipe tests depth before running the fragment shader). */
-	for (int k = nd - 1; k >= 0; k--) {
+/* Draws the plan's levels fine → coarse: the nearer ground first, so the depth test rejects
+ * what it hides before that is shaded (llvmpipe tests depth before running the fragment
+ * shader). Returns 0, or -EINVAL if a program failed (the geometry unbound). */
+static int frame_draw(struct view *v, struct frame *f)
+{
+	for (int k = f->nd - 1; k >= 0; k--) {
 		int i = v->drawn[k];
 		/* A disk's geometry: its ring and the two finer ones, then a fan to the
 		 * nadir. A disk coarser than lmin (level 0 after a jump, while the new place's
 		 * levels come in) takes the rings as far as a disk of lmin would: inside its
 		 * own fan, a cone, the horizon would be misplaced. */
-		int to = k + 1 < nd ? v->drawn[k + 1] - 1 : (i > lmin ? i : lmin) + 2;
+		int to = k + 1 < f->nd ? v->drawn[k + 1] - 1 : (i > f->lmin ? i : f->lmin) + 2;
 		if (to > v->nlevels - 1)
 			to = v->nlevels - 1;
-		int64_t tri = draw_level(v, i, k > 0 ? v->drawn[k - 1] : i, to, k + 1 == nd,
-					 v->fade[i], cap, &s.triangles_culled);
+		int64_t tri = draw_level(v, i, k > 0 ? v->drawn[k - 1] : i, to, k + 1 == f->nd,
+					 v->fade[i], f->cap, &f->s.triangles_culled);
 		if (tri < 0) {
-			gl->BindVertexArray(0);
+			v->gl->BindVertexArray(0);
 			return (int)tri;
 		}
-		s.triangles += (uint64_t)tri;
+		f->s.triangles += (uint64_t)tri;
 	}
-	s.lfirst = first;
-	s.llast = last;
-	s.levels_drawn = nd;
+	return 0;
+}
+
+/* Ends the frame: the levels not drawn are no longer usable (their fade-in starts again when
+ * they are), the frame is complete when every wanted level was drawn at its target quad, GL
+ * has finished, and the figures are in f->s. Returns 0, or -EIO on a GL error. */
+static int frame_end(struct view *v, struct frame *f)
+{
+	const struct gl *gl = v->gl;
+	f->s.lfirst = f->first;
+	f->s.llast = f->last;
+	f->s.levels_drawn = f->nd;
 	for (int l = 0; l < v->nlevels; l++)
-		if (l < first || l > last)
+		if (l < f->first || l > f->last)
 			v->was_usable[l] = false;
-	for (int l = lmin; l <= lmax && complete; l++) {
+	bool complete = f->complete;
+	for (int l = f->lmin; l <= f->lmax && complete; l++) {
 		const struct grid_quad *h = view_clipmap_held(v->cm, l);
 		const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
 		complete = h && t && grid_quad_equal(h, t);
 	}
-	s.complete = complete;
+	f->s.complete = complete;
 	gl->BindVertexArray(0);
 	gl->Finish();
+	struct view_clipmap_stats cs1;
 	view_clipmap_get_stats(v->cm, &cs1);
-	s.bytes_uploaded = cs1.bytes_uploaded - cs0.bytes_uploaded;
-	s.levels_uploaded = up.done;
-	s.cpu_ms = clock_now_ms() - t0;
-	GLenum e = gl->GetError();
+	f->s.bytes_uploaded = cs1.bytes_uploaded - f->cs0.bytes_uploaded;
+	f->s.levels_uploaded = f->up.done;
+	f->s.cpu_ms = clock_now_ms() - f->t0;
+	return gl->GetError() == GL_NO_ERROR ? 0 : -EIO;
+}
+
+/* Seed 003 Algorithm 1: camera, want-set and tiles, the plan, drawing, figures. */
+int view_frame(struct view *v, const struct view_camera *cam, double now_s,
+	       struct view_frame_stats *st)
+{
+	struct frame f = { .t0 = clock_now_ms(), .now_s = now_s,
+			   .s = { .lfirst = -1, .llast = -1 } };
+	view_clipmap_get_stats(v->cm, &f.cs0);
+	frame_camera(v, cam, &f);
+	int rc = frame_receive(v, cam, &f);
+	if (rc < 0)
+		return rc;
+	/* Lines 10-26: coarse → fine, ring while the next level can be drawn, else disk. */
+	frame_clear(v, f.agl);
+	v->frame_no++;
+	frame_uniforms(v, f.agl, f.cap);
+	frame_plan(v, &f);
+	level_floors(v, f.lmax);
+	rc = frame_draw(v, &f);
+	if (rc < 0)
+		return rc;
+	rc = frame_end(v, &f);
 	if (st)
-		*st = s;
-	return e == GL_NO_ERROR ? 0 : -EIO;
+		*st = f.s;
+	return rc;
 }
 
 int view_idle(struct view *v, double seconds)

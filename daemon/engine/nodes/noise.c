@@ -477,6 +477,155 @@ static void full_res_row(const struct noise *nz, const struct noise_sums *ns, no
 	}
 }
 
+/* One tile's evaluation (tile_sum): its octaves' set-up, shared by its steps, and where its
+ * scratch arrays lie. */
+struct tile_eval {
+	const struct noise *nz;
+	const struct tile_key *k;
+	uint32_t T, M, P, MP; /* texels across; lattice points across, floats, floats per row */
+	noise_row_fn *row_fn;
+	const struct noise_sums *ns;
+	bool ridged;
+	float ro, rg;		/* ridge offset and gain */
+	int m, mc;		/* active octaves; the first mc of them on the coarse lattice */
+	double pc[3];		/* the tile's centre */
+	struct noise_row rows[NOISE_MAX_OCTAVES];
+	float amp[NOISE_MAX_OCTAVES], mean[NOISE_MAX_OCTAVES], rot[NOISE_MAX_OCTAVES][9];
+	float hb[4][NOISE_MR_STRIDE];
+	/* scratch (noise_scratch_size): texel columns' cos/sin and rows; the lattice; per coarse
+	 * octave its raw lattice (ridged) and interpolated lattice row and slopes */
+	double *ccos, *csin;
+	float *dx, *dy, *dz, *nb, *wt, *rx, *ry, *rz;
+	float *ldx, *ldy, *ldz, *lrx, *lry, *lrz, *lnb, *ls, *ln, *tc, *td;
+};
+
+static void scratch_layout(struct tile_eval *t, void *scratch)
+{
+	const uint32_t T = t->T, P = t->P, MP = t->MP;
+	t->ccos = scratch;
+	t->csin = t->ccos + T;
+	t->dx = (float *)(t->csin + T);
+	t->dy = t->dx + T;
+	t->dz = t->dy + T;
+	t->nb = t->dz + T;
+	t->wt = t->nb + T;
+	t->rx = t->wt + T;
+	t->ry = t->rx + T;
+	t->rz = t->ry + T;
+	t->ldx = t->rz + T;
+	t->ldy = t->ldx + P;
+	t->ldz = t->ldy + P;
+	t->lrx = t->ldz + P;
+	t->lry = t->lrx + P;
+	t->lrz = t->lry + P;
+	t->lnb = t->lrz + P;
+	t->ls = t->lnb + P;
+	t->ln = t->ls + P; /* mc × P */
+	t->tc = t->ln + (size_t)NOISE_MAX_OCTAVES * P;
+	t->td = t->tc + (size_t)NOISE_MAX_OCTAVES * MP;
+}
+
+/* The tile's centre and each active octave's lattice origin, float rotation and weighted
+ * amplitude (idx, w: active_octaves'). */
+static void octave_setup(struct tile_eval *t, const int idx[], const float w[])
+{
+	const struct noise *nz = t->nz;
+	const struct tile_key *k = t->k;
+	const uint32_t T = t->T;
+	unit_vector(grid_u_to_lon(k->lx, T, (double)k->x * T + T / 2),
+		    grid_v_to_lat(k->ly, T, (double)k->y * T + T / 2), t->pc);
+	for (int o = 0; o < t->m; o++) {
+		octave_row(&nz->oct[idx[o]], t->pc, &t->rows[o]);
+		for (int a = 0; a < 9; a++)
+			t->rot[o][a] = (float)nz->oct[idx[o]].rot[a / 3][a % 3];
+		t->amp[o] = (float)(nz->oct[idx[o]].amp * w[o]);
+		t->mean[o] = (float)nz->oct[idx[o]].mean;
+	}
+}
+
+/* The coarse octaves at the lattice points (texel centres of level texels whose u and v are
+ * multiples of h), as one flat array through the row kernel: fBm their weighted sum in ls;
+ * ridged each octave's raw noise in ln (smooth, unlike the creased signal), put through the
+ * ridge per texel after interpolation. Then the interpolation's basis. */
+static void coarse_lattice(struct tile_eval *t)
+{
+	const struct tile_key *k = t->k;
+	const struct noise_sums *ns = t->ns;
+	const uint32_t T = t->T, M = t->M, P = t->P;
+	const double *pc = t->pc;
+	double *ccos = t->ccos, *csin = t->csin;
+	float *ldx = t->ldx, *ldy = t->ldy, *ldz = t->ldz;
+	const double h = NOISE_MR_STRIDE;
+	for (uint32_t a = 0; a < M; a++) {
+		double u = (double)k->x * T + ((double)a - 2) * h + 0.5;
+		double lon = grid_u_to_lon(k->lx, T, u) * (M_PI / 180.0);
+		ccos[a] = cos(lon);
+		csin[a] = sin(lon);
+	}
+	for (uint32_t r = 0; r < M; r++) {
+		double v = (double)k->y * T + ((double)r - 2) * h + 0.5;
+		double lat = grid_v_to_lat(k->ly, T, v) * (M_PI / 180.0);
+		double cl = cos(lat), sl = sin(lat);
+		float fz = (float)(sl - pc[2]);
+		for (uint32_t a = 0; a < M; a++) {
+			ldx[r * M + a] = (float)(cl * ccos[a] - pc[0]);
+			ldy[r * M + a] = (float)(cl * csin[a] - pc[1]);
+			ldz[r * M + a] = fz;
+		}
+	}
+	for (uint32_t q = M * M; q < P; q++)
+		ldx[q] = ldy[q] = ldz[q] = 0;
+	memset(t->ls, 0, P * sizeof *t->ls);
+	for (int o = 0; o < t->mc; o++) {
+		ns->rotate_row(t->rot[o], ldx, ldy, ldz, t->lrx, t->lry, t->lrz, P);
+		if (!t->ridged) {
+			t->row_fn(&t->rows[o], t->lrx, t->lry, t->lrz, t->lnb, P);
+			ns->acc_fbm(t->ls, t->lnb, t->amp[o], P);
+		} else {
+			t->row_fn(&t->rows[o], t->lrx, t->lry, t->lrz, t->ln + (size_t)o * P, P);
+		}
+	}
+	hermite_basis(t->hb);
+}
+
+/* The longitudes' cos and sin at the texel columns' centres (for full_res_row; after
+ * coarse_lattice, whose lattice columns they replace). */
+static void texel_columns(struct tile_eval *t)
+{
+	const struct tile_key *k = t->k;
+	const uint32_t T = t->T;
+	for (uint32_t i = 0; i < T; i++) {
+		double lon = grid_u_to_lon(k->lx, T, (double)k->x * T + i + 0.5) * (M_PI / 180.0);
+		t->ccos[i] = cos(lon);
+		t->csin[i] = sin(lon);
+	}
+}
+
+/* Texel row j's coarse octaves, interpolated from the lattice into row (ridged: and their
+ * weight into wt); zeros without any. */
+static void coarse_row(struct tile_eval *t, uint32_t j, float *row)
+{
+	const struct noise_sums *ns = t->ns;
+	const uint32_t M = t->M, P = t->P, MP = t->MP;
+	const int mc = t->mc;
+	if (mc > 0 && !t->ridged) {
+		ns->interp_cols(t->ls, M, j, t->hb, t->tc);
+		ns->interp_slopes(t->tc, M, t->td);
+		ns->interp_row(t->tc, t->td, M, t->hb, row);
+	} else if (mc > 0) {
+		for (int o = 0; o < mc; o++)
+			ns->interp_cols(t->ln + (size_t)o * P, M, j, t->hb, t->tc + (size_t)o * MP);
+		for (int o = 0; o < mc; o++)
+			ns->interp_slopes(t->tc + (size_t)o * MP, M, t->td + (size_t)o * MP);
+		ns->ridged_coarse(row, t->wt, mc, t->tc, t->td, MP, M, t->hb, t->amp, t->mean,
+				  t->ro, t->rg);
+	} else {
+		memset(row, 0, t->T * sizeof *row);
+	}
+}
+
+/* The tile's sum of octaves into out (T×T), with scale put through ns->finish (base: may be
+ * NULL). Returns the active octaves' count, or -EINVAL (bad key or T), -ENOTSUP (isa). */
 static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T,
 		    enum noise_isa isa, void *scratch, bool scale, const float *base, float amplitude,
 		    float offset, float *out)
@@ -487,108 +636,41 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 		isa = noise_isa_best();
 	if (!noise_isa_supported(isa))
 		return -ENOTSUP;
-	noise_row_fn *row_fn = kernel_for(isa);
-	const struct noise_sums *ns = sums_for(isa);
+	struct tile_eval t = {
+		.nz = nz, .k = k, .T = T, .M = lattice_m(T), .P = (uint32_t)lattice_p(T),
+		.MP = (uint32_t)lattice_row(T), .row_fn = kernel_for(isa), .ns = sums_for(isa),
+		.ridged = nz->p.kind == NOISE_RIDGED, .ro = (float)nz->p.ridge_offset,
+		.rg = (float)nz->p.ridge_gain,
+	};
+	const struct noise_sums *ns = t.ns;
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
-	int m = active_octaves(nz, k->ly, T, idx, w);
-	int mc = coarse_count(nz, k->lx, T, idx, m);
-
-	const uint32_t M = lattice_m(T), P = (uint32_t)lattice_p(T), MP = (uint32_t)lattice_row(T);
-	double *ccos = scratch, *csin = ccos + T;
-	float *dx = (float *)(csin + T), *dy = dx + T, *dz = dy + T, *nb = dz + T, *wt = nb + T;
-	float *rx = wt + T, *ry = rx + T, *rz = ry + T;
-	float *ldx = rz + T, *ldy = ldx + P, *ldz = ldy + P, *lrx = ldz + P, *lry = lrx + P;
-	float *lrz = lry + P, *lnb = lrz + P, *ls = lnb + P, *ln = ls + P; /* ln: mc × P */
-	float *tc = ln + (size_t)NOISE_MAX_OCTAVES * P, *td = tc + (size_t)NOISE_MAX_OCTAVES * MP;
-	if (m == 0) {
+	t.m = active_octaves(nz, k->ly, T, idx, w);
+	t.mc = coarse_count(nz, k->lx, T, idx, t.m);
+	scratch_layout(&t, scratch);
+	if (t.m == 0) {
 		memset(out, 0, (size_t)T * T * sizeof *out);
 		for (uint32_t j = 0; scale && j < T; j++)
 			ns->finish(out + (size_t)j * T, base ? base + (size_t)j * T : NULL, amplitude,
 				   offset, T);
 		return 0;
 	}
-	double pc[3];
-	unit_vector(grid_u_to_lon(k->lx, T, (double)k->x * T + T / 2),
-		    grid_v_to_lat(k->ly, T, (double)k->y * T + T / 2), pc);
-	struct noise_row rows[NOISE_MAX_OCTAVES];
-	float amp[NOISE_MAX_OCTAVES], mean[NOISE_MAX_OCTAVES], rot[NOISE_MAX_OCTAVES][9];
-	for (int o = 0; o < m; o++) {
-		octave_row(&nz->oct[idx[o]], pc, &rows[o]);
-		for (int a = 0; a < 9; a++)
-			rot[o][a] = (float)nz->oct[idx[o]].rot[a / 3][a % 3];
-		amp[o] = (float)(nz->oct[idx[o]].amp * w[o]);
-		mean[o] = (float)nz->oct[idx[o]].mean;
-	}
-	const float ro = (float)nz->p.ridge_offset, rg = (float)nz->p.ridge_gain;
-	const bool ridged = nz->p.kind == NOISE_RIDGED;
-	float hb[4][NOISE_MR_STRIDE];
-	if (mc > 0) {
-		/* The coarse octaves at the lattice points (texel centres of level texels whose
-		 * u and v are multiples of h), as one flat array through the row kernel. */
-		const double h = NOISE_MR_STRIDE;
-		for (uint32_t a = 0; a < M; a++) {
-			double u = (double)k->x * T + ((double)a - 2) * h + 0.5;
-			double lon = grid_u_to_lon(k->lx, T, u) * (M_PI / 180.0);
-			ccos[a] = cos(lon);
-			csin[a] = sin(lon);
-		}
-		for (uint32_t r = 0; r < M; r++) {
-			double v = (double)k->y * T + ((double)r - 2) * h + 0.5;
-			double lat = grid_v_to_lat(k->ly, T, v) * (M_PI / 180.0);
-			double cl = cos(lat), sl = sin(lat);
-			float fz = (float)(sl - pc[2]);
-			for (uint32_t a = 0; a < M; a++) {
-				ldx[r * M + a] = (float)(cl * ccos[a] - pc[0]);
-				ldy[r * M + a] = (float)(cl * csin[a] - pc[1]);
-				ldz[r * M + a] = fz;
-			}
-		}
-		for (uint32_t q = M * M; q < P; q++)
-			ldx[q] = ldy[q] = ldz[q] = 0;
-		/* fBm: their weighted sum; ridged: each octave's raw noise (smooth, unlike the
-		 * creased signal), put through the ridge per texel after interpolation. */
-		memset(ls, 0, P * sizeof *ls);
-		for (int o = 0; o < mc; o++) {
-			ns->rotate_row(rot[o], ldx, ldy, ldz, lrx, lry, lrz, P);
-			if (!ridged) {
-				row_fn(&rows[o], lrx, lry, lrz, lnb, P);
-				ns->acc_fbm(ls, lnb, amp[o], P);
-			} else {
-				row_fn(&rows[o], lrx, lry, lrz, ln + (size_t)o * P, P);
-			}
-		}
-		hermite_basis(hb);
-	}
-	if (mc < m)
-		for (uint32_t i = 0; i < T; i++) {
-			double lon = grid_u_to_lon(k->lx, T, (double)k->x * T + i + 0.5) *
-				     (M_PI / 180.0);
-			ccos[i] = cos(lon);
-			csin[i] = sin(lon);
-		}
+	octave_setup(&t, idx, w);
+	if (t.mc > 0)
+		coarse_lattice(&t);
+	if (t.mc < t.m)
+		texel_columns(&t);
+	float *const tmp[7] = { t.dx, t.dy, t.dz, t.rx, t.ry, t.rz, t.nb };
 	for (uint32_t j = 0; j < T; j++) {
 		float *row = out + (size_t)j * T;
-		if (mc > 0 && !ridged) {
-			ns->interp_cols(ls, M, j, hb, tc);
-			ns->interp_slopes(tc, M, td);
-			ns->interp_row(tc, td, M, hb, row);
-		} else if (mc > 0) {
-			for (int o = 0; o < mc; o++)
-				ns->interp_cols(ln + (size_t)o * P, M, j, hb, tc + (size_t)o * MP);
-			for (int o = 0; o < mc; o++)
-				ns->interp_slopes(tc + (size_t)o * MP, M, td + (size_t)o * MP);
-			ns->ridged_coarse(row, wt, mc, tc, td, MP, M, hb, amp, mean, ro, rg);
-		} else {
-			memset(row, 0, T * sizeof *row);
-		}
-		if (mc < m)
-			full_res_row(nz, ns, row_fn, k, T, j, pc, ccos, csin, rows, rot, amp, mean, mc,
-				     m, row, wt, (float *[7]){ dx, dy, dz, rx, ry, rz, nb });
+		coarse_row(&t, j, row);
+		if (t.mc < t.m)
+			full_res_row(nz, ns, t.row_fn, k, T, j, t.pc, t.ccos, t.csin, t.rows, t.rot,
+				     t.amp, t.mean, t.mc, t.m, row, t.wt, tmp);
 		if (scale)
 			ns->finish(row, base ? base + (size_t)j * T : NULL, amplitude, offset, T);
 	}
-	return m;
+	return t.m;
 }
 
 
