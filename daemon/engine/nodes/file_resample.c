@@ -12,6 +12,7 @@
 #include <math.h>
 #include <string.h>
 
+#include "common/xthread.h"
 #include "engine/node.h"
 #include "file_plan.h"
 
@@ -300,52 +301,77 @@ static int read_row(struct file_plan *q, int64_t y, float **v)
 	return to_float(f, q->praw, *v, q->pm, wm);
 }
 
-/* A cap's virtual rows (pole_taps) in the horizontal pass's rows `mean` and `harm` (T texels
- * each; with masks, like every row of a pass with masks: valid sum / width, and the valid
- * share in meanm, harmm): the edge row's mean, and the first harmonic of the cap row at each
- * texel's longitude (none where the cap row misses samples). Returns whether a sample was
- * missing, or -EIO. */
-static int cap_rows(struct file_plan *q, int64_t edge, int64_t cap, float *mean, float *meanm,
-		    float *harm, float *harmm)
+/* The statistics of pole p (0 north, 1 south) at the plan's level: edge is the edge row,
+ * cap the last row centre short of the pole. Computed from the file once per level and
+ * pole (two threads may both compute it the first time; they get the same numbers).
+ * Returns 0, or -EIO. */
+static int pole_stats(struct file_plan *q, int p, int64_t edge, int64_t cap,
+		      struct file_pole_stats *out)
 {
 	const struct file_source *f = q->f;
+	struct file_pole_stats *st = &f->poles->s[q->m][p];
+	xmutex_lock(&f->poles->mu);
+	*out = *st;
+	xmutex_unlock(&f->poles->mu);
+	if (out->done)
+		return 0;
+	struct file_pole_stats n = { .done = true };
 	size_t wm = (size_t)q->wm, C = (size_t)q->C;
 	float *v;
 	int missing = read_row(q, edge, &v);
 	if (missing < 0)
 		return missing;
-	double sum[4] = { 0, 0, 0, 0 }, valid = 0;
 	for (size_t i = 0; i < wm; i++) {
 		for (size_t c = 0; c < C; c++)
-			sum[c] += v[i * C + c];
-		valid += missing ? q->pm[i] : 1;
+			n.sum[c] += v[i * C + c];
+		n.valid += missing ? q->pm[i] : 1;
 	}
-	for (uint32_t i = 0; i < q->T; i++)
-		for (size_t c = 0; c < C; c++)
-			mean[i * C + c] = (float)(sum[c] / wm);
 	if (cap != edge) {
 		int rc = read_row(q, cap, &v);
 		if (rc < 0)
 			return rc;
 		missing |= rc;
 	}
-	double ca[4] = { 0, 0, 0, 0 }, sa[4] = { 0, 0, 0, 0 };
 	for (size_t i = 0; i < wm && !missing; i++) {
 		double lam = (f->west + (i + 0.5) * 360.0 / wm) * (M_PI / 180);
 		double cl = cos(lam), sl = sin(lam);
 		for (size_t c = 0; c < C; c++)
-			ca[c] += v[i * C + c] * cl, sa[c] += v[i * C + c] * sl;
+			n.ca[c] += v[i * C + c] * cl, n.sa[c] += v[i * C + c] * sl;
 	}
+	n.missing = missing;
+	xmutex_lock(&f->poles->mu);
+	*st = n;
+	xmutex_unlock(&f->poles->mu);
+	*out = n;
+	return 0;
+}
+
+/* A cap's virtual rows (pole_taps) in the horizontal pass's rows `mean` and `harm` (T texels
+ * each; with masks, like every row of a pass with masks: valid sum / width, and the valid
+ * share in meanm, harmm): the edge row's mean, and the first harmonic of the cap row at each
+ * texel's longitude (none where the cap row misses samples). Returns whether a sample was
+ * missing, or -EIO. */
+static int cap_rows(struct file_plan *q, int p, int64_t edge, int64_t cap, float *mean,
+		    float *meanm, float *harm, float *harmm)
+{
+	size_t wm = (size_t)q->wm, C = (size_t)q->C;
+	struct file_pole_stats st;
+	int rc = pole_stats(q, p, edge, cap, &st);
+	if (rc < 0)
+		return rc;
+	for (uint32_t i = 0; i < q->T; i++)
+		for (size_t c = 0; c < C; c++)
+			mean[i * C + c] = (float)(st.sum[c] / wm);
 	for (uint32_t i = 0; i < q->T; i++) {
 		double lam = (q->r.west + (i + 0.5) * q->dlon) * (M_PI / 180);
 		double cl = cos(lam), sl = sin(lam);
 		for (size_t c = 0; c < C; c++)
-			harm[i * C + c] = (float)(2 * (ca[c] * cl + sa[c] * sl) / wm);
+			harm[i * C + c] = (float)(2 * (st.ca[c] * cl + st.sa[c] * sl) / wm);
 	}
 	if (meanm)
 		for (uint32_t i = 0; i < q->T; i++)
-			meanm[i] = (float)(valid / wm), harmm[i] = 0;
-	return missing;
+			meanm[i] = (float)(st.valid / wm), harmm[i] = 0;
+	return st.missing;
 }
 
 /* Reads the region the tables reach (and the pole rows they blend into) as float samples;
@@ -377,7 +403,7 @@ static int read_source(struct file_plan *q)
 			continue;
 		size_t mr = q->bh + (p ? VROW_MEAN_S : VROW_MEAN_N);
 		size_t hr = q->bh + (p ? VROW_HARM_S : VROW_HARM_N);
-		int rc = cap_rows(q, p ? q->hm - 1 : 0, (int64_t)(p ? q->ay.cap_s : q->ay.cap_n),
+		int rc = cap_rows(q, p, p ? q->hm - 1 : 0, (int64_t)(p ? q->ay.cap_s : q->ay.cap_n),
 				  q->tmp + mr * TC, q->tmpm ? q->tmpm + mr * T : NULL,
 				  q->tmp + hr * TC, q->tmpm ? q->tmpm + hr * T : NULL);
 		if (rc < 0)

@@ -51,6 +51,7 @@
  */
 #ifndef CLIPMAP_FILE_RESAMPLE_H
 #define CLIPMAP_FILE_RESAMPLE_H
+#include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -64,7 +65,24 @@ struct tile_key;
 
 enum file_kind { FILE_KIND_HEIGHT, FILE_KIND_COLOR };
 
-/* What a `file` node reads and how: filled by node_file.c's create, immutable after. */
+/* A pole of one MIP level (file_resample.c, cap_rows): the edge row's channel sums and valid
+ * samples, and the cap row's first harmonic. They depend only on the level, so each is
+ * computed once, by the first tile that needs it, instead of rereading a whole row per tile. */
+struct file_pole_stats {
+	bool done;
+	int missing; /* a sample of the edge or the cap row was missing */
+	double sum[4], valid;
+	double ca[4], sa[4];
+};
+
+/* The node's pole statistics: a cache, so mutable although the source is not. */
+struct file_poles {
+	pthread_mutex_t mu; /* protects s (never held while reading the file) */
+	struct file_pole_stats s[FILE_MAX_LEVELS][2]; /* [level][0 north, 1 south] */
+};
+
+/* What a `file` node reads and how: filled by node_file.c's create, immutable after (but
+ * for the cache behind poles). */
 struct file_source {
 	char *path; /* resolved; owned by the node */
 	struct img_cache *cache; /* the planet's (borrowed), or own_cache */
@@ -83,6 +101,7 @@ struct file_source {
 	float nodata;
 	float fill_h;
 	uint8_t fill_c[4];
+	struct file_poles *poles; /* owned by the node */
 };
 
 /* Fills out (out->size texels square, its pixel format the kind's) with tile k of f's image,

@@ -39,6 +39,7 @@
 
 #include "common/img.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
 #include "engine/planet.h"
 
 #include "file_resample.h"
@@ -53,6 +54,10 @@ static void file_destroy(struct node *nd)
 	if (!f)
 		return;
 	img_cache_unref(f->own_cache);
+	if (f->poles) {
+		xmutex_destroy(&f->poles->mu);
+		free(f->poles);
+	}
 	free(f->path);
 	free(f);
 	nd->impl = NULL;
@@ -199,6 +204,8 @@ static int file_create(struct node *nd, struct node_parse *p)
 {
 	struct file_source *f = xcalloc(1, sizeof *f);
 	nd->impl = f; /* node_init calls destroy on failure */
+	f->poles = xcalloc(1, sizeof *f->poles);
+	xmutex_init(&f->poles->mu);
 	/* Not np_string: the hash takes the resolved path, so "a.tif" and "/dir/a.tif" name
 	 * the same tiles. */
 	struct ini_entry *pe = ini_find(p->sec, "path");
