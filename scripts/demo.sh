@@ -2,7 +2,7 @@
 # make demo: starts clipmapd serving the real planets (conf/planets: Earth, the Moon, Mars and
 # the procedural planet; data/ prepared by `make data`) on a Unix socket and 127.0.0.1:PORT,
 # then shows them through clipmapview --connect: a window when a display is there (and the
-# viewer has window mode), otherwise four rendered flights (conf/demo/*.csv) as PNG frames and
+# viewer has window mode), otherwise six rendered flights (conf/demo/*.csv) as PNG frames and
 # one contact sheet. Prints where the pictures are and how to connect a viewer from another
 # machine, stops the daemon (SIGTERM) and exits 0.
 #   DEMO_OUT (out/demo), DEMO_PORT (7878), DEMO_SIZE (640x360), DEMO_STEPS (3),
@@ -91,11 +91,13 @@ flight earth-orbit earth earth-orbit.csv --sun 100,60
 flight himalaya earth himalaya.csv --sun 120,30 --exaggerate 2
 flight andes earth andes.csv --sun 285,30 --exaggerate 2
 flight moon-orbit moon moon-orbit.csv --haze 0 --sun 250,30
+flight earth-pole earth earth-pole.csv
+flight procedural-descent procedural procedural-descent.csv
 
 # One contact sheet: the frames at the camera keys, one flight a row (six at most).
 SHEET="$OUT/contact-sheet.png"
 set --
-for f in earth-orbit himalaya andes moon-orbit; do
+for f in earth-orbit himalaya andes moon-orbit earth-pole procedural-descent; do
 	k=0
 	i=0
 	for p in "$OUT/frames/$f"-*.png; do
@@ -107,13 +109,14 @@ for f in earth-orbit himalaya andes moon-orbit; do
 	done
 	while [ $k -lt 6 ]; do set -- "$@" "--pattern" "constant:color=0,0,0,1" "$SIZE" 4; k=$((k + 1)); done
 done
-oiiotool "$@" --mosaic:pad=4 6x4 --resize 50% -o "$SHEET"
+oiiotool "$@" --mosaic:pad=4 6x6 --resize 50% -o "$SHEET"
 stop
 
 HOST=$(hostname -f 2>/dev/null || hostname)
 echo
 echo "pictures: $OUT/frames/*.png ($(ls "$OUT"/frames/*.png | wc -l) frames: the whole Earth from orbit,"
-echo "  a descent onto the Himalaya, a flight along the Andes, the Moon from orbit)"
+echo "  a descent onto the Himalaya, a flight along the Andes, the Moon from orbit, over the"
+echo "  Earth's south pole, and down to 2 m on the procedural planet)"
 echo "contact sheet: $SHEET"
 echo "demo took $(( $(date +%s) - t0 )) s"
 echo
