@@ -479,7 +479,7 @@ static void culling_keeps_pixels(void **state)
 		const struct view_camera *c = &cases[i].c;
 		struct view_frame_stats s1, s0;
 		view_set_culling(v, true);
-		assert_int_equal(view_frame_complete(v, c, 60, &s1, NULL), 0);
+		assert_int_equal(view_frame_complete(v, c, 300, &s1, NULL), 0);
 		view_read_rgba(v, on);
 		view_set_culling(v, false);
 		assert_int_equal(view_frame(v, c, 0, &s0), 0);
