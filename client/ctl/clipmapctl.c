@@ -322,14 +322,20 @@ static int cmd_render(int argc, char **argv)
 	return render_to_file(&ra, pos[0], pos[1], &rg);
 }
 
-static int cmd_graph(int argc, char **argv)
+/* `COMMAND PLANET`: the one planet argument, loaded. Returns 0 or the exit status. */
+static int load_only_arg(int argc, char **argv, struct planet **p)
 {
 	if (argc != 2) {
 		usage(stderr);
 		return 2;
 	}
+	return load(argv[1], p);
+}
+
+static int cmd_graph(int argc, char **argv)
+{
 	struct planet *p;
-	int rc = load(argv[1], &p);
+	int rc = load_only_arg(argc, argv, &p);
 	if (rc)
 		return rc;
 	rc = planet_write_dot(p, stdout);
@@ -343,12 +349,8 @@ static int cmd_graph(int argc, char **argv)
 
 static int cmd_layers(int argc, char **argv)
 {
-	if (argc != 2) {
-		usage(stderr);
-		return 2;
-	}
 	struct planet *p;
-	int rc = load(argv[1], &p);
+	int rc = load_only_arg(argc, argv, &p);
 	if (rc)
 		return rc;
 	printf("planet %s: a = %.1f m, f = %.9f, tile %u, max level %d\n", p->name, p->a, p->f,
@@ -364,7 +366,6 @@ static int cmd_layers(int argc, char **argv)
 	planet_unref(p);
 	return 0;
 }
-
 
 /* ---- online commands ------------------------------------------------------------------ */
 
