@@ -137,129 +137,132 @@ int grid_neighbor(const struct tile_key *k, int dx, int dy, struct tile_key *out
 	return 0;
 }
 
-void grid_quad(int lx, int ly, uint32_t T, double lon, double lat, struct grid_quad *q)
+void grid_window(int lx, int ly, uint32_t T, uint32_t S, double lon, double lat,
+		 struct grid_quad *q)
 {
 	int64_t W = (int64_t)grid_tiles_x(lx) * T, H = (int64_t)grid_tiles_y(ly) * T;
+	int64_t w = W < S ? W : S, h = H < S ? H : S;
 	double fu = grid_lon_to_u(lx, T, lon), fv = grid_lat_to_v(ly, T, lat);
-	int64_t u0 = (int64_t)floor(fu - T / 2.0 + 0.5);
-	int64_t v0 = (int64_t)floor(fv - T / 2.0 + 0.5);
+	int64_t u0 = W <= S ? 0 : (int64_t)floor(fu - S / 2.0 + 0.5);
+	int64_t v0 = (int64_t)floor(fv - S / 2.0 + 0.5);
 	u0 %= W;
 	if (u0 < 0)
 		u0 += W;
+	if (v0 > H - h)
+		v0 = H - h;
 	if (v0 < 0)
 		v0 = 0;
-	if (v0 > H - T)
-		v0 = H - T;
 	q->lx = (uint8_t)lx;
 	q->ly = (uint8_t)ly;
 	q->T = T;
+	q->S = S;
 	q->u0 = u0;
 	q->v0 = v0;
-	q->tx[0] = (uint32_t)(u0 / T);
-	q->tx[1] = grid_wrap_x(lx, (int64_t)q->tx[0] + 1);
-	q->ty[0] = (uint32_t)(v0 / T);
-	q->ty[1] = q->ty[0] + 1 < grid_tiles_y(ly) ? q->ty[0] + 1 : q->ty[0];
+	q->w = (uint32_t)w;
+	q->h = (uint32_t)h;
+	q->tx0 = (uint32_t)(u0 / T);
+	q->ty0 = (uint32_t)(v0 / T);
+	q->ntx = (uint8_t)((u0 % T + w + T - 1) / T);
+	q->nty = (uint8_t)((v0 % T + h + T - 1) / T);
 }
 
-int grid_quad_tiles(const struct grid_quad *q, uint64_t node, struct tile_key out[4])
+void grid_quad(int lx, int ly, uint32_t T, double lon, double lat, struct grid_quad *q)
 {
-	/* A window aligned to tile borders touches one tile along that axis; a level one tile
-	 * across longitude has both cells on the same column. */
-	int ni = (q->u0 % q->T == 0 || q->tx[1] == q->tx[0]) ? 1 : 2;
-	int nj = (q->v0 % q->T == 0 || q->ty[1] == q->ty[0]) ? 1 : 2;
+	grid_window(lx, ly, T, T, lon, lat, q);
+}
+
+int grid_quad_tiles(const struct grid_quad *q, uint64_t node, struct tile_key *out)
+{
 	int n = 0;
-	for (int j = 0; j < nj; j++) {
-		for (int i = 0; i < ni; i++) {
-			out[n].node = node;
-			out[n].lx = q->lx;
-			out[n].ly = q->ly;
-			out[n].x = q->tx[i];
-			out[n].y = q->ty[j];
-			n++;
-		}
-	}
+	for (uint32_t j = 0; j < q->nty; j++)
+		for (uint32_t i = 0; i < q->ntx; i++)
+			out[n++] = (struct tile_key){ node, grid_wrap_x(q->lx, (int64_t)q->tx0 + i),
+						      q->ty0 + j, q->lx, q->ly };
 	return n;
 }
 
 bool grid_quad_equal(const struct grid_quad *a, const struct grid_quad *b)
 {
-	return a->lx == b->lx && a->ly == b->ly && a->T == b->T && a->u0 == b->u0 &&
-	       a->v0 == b->v0;
+	return a->lx == b->lx && a->ly == b->ly && a->T == b->T && a->S == b->S &&
+	       a->u0 == b->u0 && a->v0 == b->v0;
 }
 
-/* Splits [a, a+T) at the tile border inside it and at the edges of [ia, ib) (the part the old
- * window already covered, in the same unwrapped frame). Returns the cut points, ascending,
- * first = a and last = a+T; the count of intervals is (return value - 1). */
-static int cuts(int64_t a, int64_t T, int64_t ia, int64_t ib, int64_t out[5])
+/* Splits [a, a+len) at every tile border inside it and at the edges of [ia, ib) (the part
+ * the old window already covered, in the same unwrapped frame; a ≥ 0). Returns the cut points,
+ * ascending, first = a and last = a+len; the count of intervals is (return value − 1). */
+static int cuts(int64_t a, int64_t len, int64_t T, int64_t ia, int64_t ib, int64_t *out)
 {
-	int64_t pts[4] = { a, a + T, 0, 0 };
-	int n = 2;
-	int64_t border = (a / T + 1) * T; /* a ≥ 0 in every frame used here */
-	if (a % T != 0)
-		pts[n++] = border;
-	if (ia > a && ia < a + T)
-		pts[n++] = ia;
-	if (ib > a && ib < a + T)
-		pts[n++] = ib;
-	/* sort and dedupe (n ≤ 5) */
-	for (int i = 1; i < n; i++)
-		for (int j = i; j > 0 && pts[j - 1] > pts[j]; j--) {
-			int64_t t = pts[j];
-			pts[j] = pts[j - 1];
-			pts[j - 1] = t;
+	int n = 0;
+	int64_t extra[2] = { ia, ib };
+	int e = 0;
+	if (extra[0] > extra[1]) {
+		extra[0] = ib;
+		extra[1] = ia;
+	}
+	/* merge the tile borders (in order) with the two edges (in order) */
+	for (int64_t p = a;;) {
+		while (e < 2 && extra[e] <= p) {
+			if (extra[e] > a && extra[e] < a + len && (n == 0 || out[n - 1] != extra[e]))
+				out[n++] = extra[e];
+			e++;
 		}
-	int m = 0;
-	for (int i = 0; i < n; i++)
-		if (m == 0 || pts[i] != out[m - 1])
-			out[m++] = pts[i];
-	return m;
+		if (n == 0 || out[n - 1] != p)
+			out[n++] = p;
+		if (p >= a + len)
+			break;
+		int64_t next = (p / T + 1) * T;
+		p = next < a + len ? next : a + len;
+	}
+	return n;
+}
+
+/* The shortest wrapped delta from a to b on a circle of W. */
+static int64_t wrapped_delta(int64_t a, int64_t b, int64_t W)
+{
+	int64_t d = (b - a) % W;
+	if (d > W / 2)
+		d -= W;
+	if (d < -W / 2)
+		d += W;
+	return d;
 }
 
 int grid_update_regions(const struct grid_quad *prev, const struct grid_quad *next,
-			struct grid_region out[9])
+			struct grid_region *out)
 {
-	int64_t T = next->T;
+	int64_t T = next->T, S = next->S;
 	int64_t W = (int64_t)grid_tiles_x(next->lx) * T;
 	/* The old window in next's unwrapped frame: x shifted by the shortest wrapped delta. */
-	int64_t ia = 0, ib = 0, ja = 0, jb = 0;
-	bool overlap = prev && prev->lx == next->lx && prev->ly == next->ly && prev->T == next->T;
-	if (overlap) {
-		int64_t du = (next->u0 - prev->u0) % W;
-		if (du > W / 2)
-			du -= W;
-		if (du < -W / 2)
-			du += W;
+	int64_t ia = next->u0, ib = next->u0, ja = next->v0, jb = next->v0;
+	if (prev && prev->lx == next->lx && prev->ly == next->ly && prev->T == T &&
+	    prev->S == S) {
+		int64_t du = W <= S ? 0 : wrapped_delta(prev->u0, next->u0, W);
 		int64_t dv = next->v0 - prev->v0;
-		if (W == T)
-			du = 0; /* the window is the whole level: it cannot move in x */
-		if (du >= T || du <= -T || dv >= T || dv <= -T)
-			overlap = false;
-		ia = next->u0 - du;
-		ib = ia + T;
-		ja = next->v0 - dv;
-		jb = ja + T;
+		if (du < next->w && du > -(int64_t)next->w && dv < next->h &&
+		    dv > -(int64_t)next->h) {
+			ia = next->u0 - du;
+			ib = ia + next->w;
+			ja = next->v0 - dv;
+			jb = ja + next->h;
+		}
 	}
-	if (!overlap) {
-		ia = ib = next->u0;
-		ja = jb = next->v0;
-	}
-	int64_t xs[5], ys[5];
-	int nx = cuts(next->u0, T, ia, ib, xs) - 1;
-	int ny = cuts(next->v0, T, ja, jb, ys) - 1;
+	int64_t xs[GRID_WINDOW_MAX_TILES + 5], ys[GRID_WINDOW_MAX_TILES + 5];
+	int nx = cuts(next->u0, next->w, T, ia, ib, xs) - 1;
+	int ny = cuts(next->v0, next->h, T, ja, jb, ys) - 1;
 	int n = 0;
 	for (int j = 0; j < ny; j++) {
 		for (int i = 0; i < nx; i++) {
-			bool held = xs[i] >= ia && xs[i + 1] <= ib && ys[j] >= ja && ys[j + 1] <= jb &&
-				    ia < ib;
-			if (held)
-				continue;
+			if (ia < ib && xs[i] >= ia && xs[i + 1] <= ib && ys[j] >= ja && ys[j + 1] <= jb)
+				continue; /* held */
 			struct grid_region *r = &out[n++];
-			r->x = (uint32_t)(xs[i] % T);
-			r->y = (uint32_t)(ys[j] % T);
+			r->x = (uint32_t)(xs[i] % S);
+			r->y = (uint32_t)(ys[j] % S);
 			r->w = (uint32_t)(xs[i + 1] - xs[i]);
 			r->h = (uint32_t)(ys[j + 1] - ys[j]);
-			r->qi = (uint8_t)(xs[i] / T != next->u0 / T);
-			r->qj = (uint8_t)(ys[j] / T != next->v0 / T);
+			r->tx = grid_wrap_x(next->lx, xs[i] / T);
+			r->ty = (uint32_t)(ys[j] / T);
+			r->sx = (uint32_t)(xs[i] % T);
+			r->sy = (uint32_t)(ys[j] % T);
 		}
 	}
 	return n;
@@ -270,21 +273,20 @@ uint32_t grid_quad_distance(const struct grid_quad *q, const struct tile_key *k)
 	if (k->lx != q->lx || k->ly != q->ly)
 		return UINT32_MAX;
 	int64_t nx = grid_tiles_x(q->lx);
-	/* x: distance to the nearer of the two quad columns, the short way round. */
-	int64_t dx = INT64_MAX;
-	for (int i = 0; i < 2; i++) {
-		int64_t d = ((int64_t)k->x - q->tx[i]) % nx;
-		if (d < 0)
-			d += nx;
-		if (nx - d < d)
-			d = nx - d;
-		if (d < dx)
-			dx = d;
+	/* x: past the window's columns eastwards, or short of them (the short way round) */
+	int64_t d = ((int64_t)k->x - q->tx0) % nx;
+	if (d < 0)
+		d += nx;
+	int64_t dx = 0;
+	if (d >= q->ntx) {
+		dx = d - (q->ntx - 1);
+		if (nx - d < dx)
+			dx = nx - d;
 	}
-	int64_t dy = 0;
-	if (k->y < q->ty[0])
-		dy = q->ty[0] - k->y;
-	else if (k->y > q->ty[1])
-		dy = k->y - q->ty[1];
+	int64_t dy = 0, y1 = (int64_t)q->ty0 + q->nty - 1;
+	if (k->y < q->ty0)
+		dy = q->ty0 - k->y;
+	else if (k->y > y1)
+		dy = k->y - y1;
 	return (uint32_t)(dx > dy ? dx : dy);
 }

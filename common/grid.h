@@ -11,10 +11,12 @@
  * Texels are areas: texel (u, v) covers [u, u+1) × [v, v+1) and its centre is at +0.5.
  * x wraps around the antimeridian; y does not wrap.
  *
- * A quad (seed 003 §5.1) is the 2×2 tiles covering the T×T window centred on a focus point;
- * the window lives in a T×T toroidal texture where level texel (u, v) is stored at
- * (u mod T, v mod T). Because tile size = texture size, the texture's wrap lines are exactly
- * the tile borders, so each update region copies from one tile at the same offsets.
+ * A window (seed 003 §5.1's quad, grown) is the S×S texels centred on a focus point, S a
+ * power-of-two multiple of T: S = T is the quad, touching up to 2×2 tiles; the viewer's clipmap
+ * uses S = GRID_WINDOW_TILES·T (up to 5×5 tiles). Where a level is narrower or shorter than S
+ * the window is the whole level along that axis. The window lives in an S×S toroidal texture
+ * where level texel (u, v) is stored at (u mod S, v mod S). Because S is a multiple of T, the
+ * texture's wrap lines lie on tile borders, so each update region copies from one tile.
  *
  * Pure functions, no state: thread-safe.
  */
@@ -71,34 +73,49 @@ int grid_children(const struct tile_key *k, int dlx, int dly, struct tile_key ou
  * the other way. Returns 0. */
 int grid_neighbor(const struct tile_key *k, int dx, int dy, struct tile_key *out, bool *flip);
 
+/* The clipmap window of the viewer, in tiles per side: S = GRID_WINDOW_TILES·T texels. The
+ * daemon's cache ranks tiles by their distance to this window around each viewer's focus. */
+#define GRID_WINDOW_TILES 4
+#define GRID_WINDOW_MAX_TILES 8 /* S/T at most */
+/* Tiles a window touches, regions an update copies: at most. */
+#define GRID_WINDOW_MAX_KEYS ((GRID_WINDOW_MAX_TILES + 1) * (GRID_WINDOW_MAX_TILES + 1))
+#define GRID_MAX_REGIONS ((GRID_WINDOW_MAX_TILES + 3) * (GRID_WINDOW_MAX_TILES + 3))
+
 struct grid_quad {
 	uint8_t lx, ly;
-	uint32_t T;
-	int64_t u0, v0;	   /* window origin in level texels: u0 ∈ [0, W), v0 ∈ [0, H - T] */
-	uint32_t tx[2], ty[2]; /* quad cell (i, j) is tile (tx[i], ty[j]); tx wraps */
+	uint32_t T, S;	   /* tile size; window size (T · a power of two ≤ GRID_WINDOW_MAX_TILES) */
+	int64_t u0, v0;	   /* window origin in level texels: u0 ∈ [0, W), v0 ∈ [0, H - h] */
+	uint32_t w, h;	   /* the window's extent: S, or the level's width/height if smaller */
+	uint32_t tx0, ty0; /* the first tile the window touches (x wraps) */
+	uint8_t ntx, nty;  /* how many it touches per axis */
 };
 
-/* The quad whose window is centred on (lon, lat) at level (lx, ly) with tile size T. */
+/* The quad: the T×T window centred on (lon, lat) at level (lx, ly) with tile size T. */
 void grid_quad(int lx, int ly, uint32_t T, double lon, double lat, struct grid_quad *q);
-/* The distinct tiles the quad's window touches (1, 2 or 4), their node field set to `node`,
- * coarse callers first: cell order (0,0), (1,0), (0,1), (1,1). Returns the count. */
-int grid_quad_tiles(const struct grid_quad *q, uint64_t node, struct tile_key out[4]);
+/* The S×S window centred on (lon, lat). S: T times a power of two ≤ GRID_WINDOW_MAX_TILES. */
+void grid_window(int lx, int ly, uint32_t T, uint32_t S, double lon, double lat,
+		 struct grid_quad *q);
+/* The distinct tiles the window touches (ntx · nty ≤ GRID_WINDOW_MAX_KEYS), their node field
+ * set to `node`, row by row from the north-west one. Returns the count. */
+int grid_quad_tiles(const struct grid_quad *q, uint64_t node, struct tile_key *out);
 bool grid_quad_equal(const struct grid_quad *a, const struct grid_quad *b);
 
 struct grid_region {
-	uint32_t x, y, w, h; /* texels in the toroidal texture; the same offsets inside the tile */
-	uint8_t qi, qj;	     /* source: tile (q->tx[qi], q->ty[qj]) of the new quad */
+	uint32_t x, y, w, h; /* texels in the S×S toroidal texture */
+	uint32_t tx, ty;     /* source tile (at the window's level) */
+	uint32_t sx, sy;     /* where the region starts inside it */
 };
 
-/* The regions of `next`'s window that `prev` did not hold (seed 003 §5.2): at most 9 when the
- * focus jumps, up to 5 for a small diagonal move, 0 when nothing changed. prev == NULL, a
- * different level/size, or a move of a tile or more gives the full window (1, 2 or 4 regions,
- * one per source tile). Every texel of the window is in exactly one region or was in prev. */
+/* The regions of `next`'s window that `prev` did not hold (seed 003 §5.2), each inside one
+ * tile and one period of the texture: none when nothing changed, a few for a small move.
+ * prev == NULL, another level/size, or a move of the window's size or more gives the full
+ * window (one region per tile it touches). Every texel of the window is in exactly one region
+ * or was in prev. out holds GRID_MAX_REGIONS. */
 int grid_update_regions(const struct grid_quad *prev, const struct grid_quad *next,
-			struct grid_region out[9]);
+			struct grid_region *out);
 
-/* Chebyshev distance in tiles from k (at the quad's level) to the quad's 2×2 block, x
- * wrapping: 0 inside the quad, 1 for the ring around it. Keys at other levels: UINT32_MAX. */
+/* Chebyshev distance in tiles from k (at the window's level) to the tiles the window touches,
+ * x wrapping: 0 inside, 1 for the ring around it. Keys at other levels: UINT32_MAX. */
 uint32_t grid_quad_distance(const struct grid_quad *q, const struct tile_key *k);
 
 #endif

@@ -6,7 +6,8 @@
 // interpolated across the meridian behind it; elsewhere the vertices' (lon, lat) interpolate.
 // BLEND samples the coarser level too, HAZE applies the vertex shader's air, EXAG steepens the
 // normals by the vertical exaggeration, COLOR and NORMAL say which layers exist, SEA draws
-// water where the vertex shader lifted the ground to sea level.
+// water where the vertex shader lifted the ground to sea level. UNLIT writes the colour layer
+// as it is (no light, air or water: what the textures put on screen, for measuring).
 
 #ifndef BLEND
 #define BLEND 1
@@ -29,6 +30,9 @@
 #ifndef SEA
 #define SEA 1
 #endif
+#ifndef UNLIT
+#define UNLIT 0
+#endif
 
 in vec3 v_delta;
 in vec2 v_g;
@@ -46,12 +50,12 @@ in vec3 v_eye;
 
 uniform vec3 u_lat;
 uniform float u_T;
-uniform vec4 u_pf;
-uniform vec2 u_vf;
-uniform float u_sf;
-uniform vec4 u_pc;
-uniform vec2 u_vc;
-uniform float u_sc;
+uniform vec4 u_df;      // the detail level of the level drawn (its colour and normals)
+uniform vec2 u_dvf;
+uniform float u_dsf;
+uniform vec4 u_dc;      // the detail level of the coarser level it blends towards
+uniform vec2 u_dvc;
+uniform float u_dsc;
 uniform vec3 u_sun;      // towards the sun, ENU at the camera
 uniform float u_exag;    // vertical exaggeration: steepens the normals too
 uniform sampler2DArray u_color;
@@ -98,18 +102,22 @@ void main()
 	vec2 g = v_g;
 #endif
 #if COLOR
-	vec3 albedo = tex_at(u_color, g, u_pf, u_vf, u_sf);
+	vec3 albedo = tex_at(u_color, g, u_df, u_dvf, u_dsf);
 #if BLEND
-	albedo = mix(albedo, tex_at(u_color, g, u_pc, u_vc, u_sc), v_blend);
+	albedo = mix(albedo, tex_at(u_color, g, u_dc, u_dvc, u_dsc), v_blend);
+#endif
+#if UNLIT
+	o_color = vec4(albedo, 1.0);
+	return;
 #endif
 	albedo = srgb_to_linear(albedo);
 #else
 	vec3 albedo = vec3(0.5);
 #endif
 #if NORMAL
-	vec2 en = tex_at(u_normal, g, u_pf, u_vf, u_sf).rg;
+	vec2 en = tex_at(u_normal, g, u_df, u_dvf, u_dsf).rg;
 #if BLEND
-	en = mix(en, tex_at(u_normal, g, u_pc, u_vc, u_sc).rg, v_blend);
+	en = mix(en, tex_at(u_normal, g, u_dc, u_dvc, u_dsc).rg, v_blend);
 #endif
 	en = en * (255.0 / 127.5) - 1.0;
 #else

@@ -478,10 +478,10 @@ static void stats_line(FILE *f, int frame, const struct view_frame_stats *s)
 {
 	fprintf(f,
 		"{\"frame\":%d,\"ms\":%.3f,\"lmin\":%d,\"lmax\":%d,\"lfirst\":%d,\"llast\":%d,"
-		"\"triangles\":%llu,\"bytes_uploaded\":%llu,\"tiles_received\":%d,"
+		"\"levels_drawn\":%d,\"dmax\":%d,\"ldetail\":%d,\"triangles\":%llu,\"bytes_uploaded\":%llu,\"tiles_received\":%d,"
 		"\"wants_sent\":%zu,\"complete\":%s,\"alt\":%.3f,\"agl\":%.3f}\n",
-		frame, s->cpu_ms, s->lmin, s->lmax, s->lfirst, s->llast,
-		(unsigned long long)s->triangles, (unsigned long long)s->bytes_uploaded,
+		frame, s->cpu_ms, s->lmin, s->lmax, s->lfirst, s->llast, s->levels_drawn, s->dmax,
+		s->ldetail, (unsigned long long)s->triangles, (unsigned long long)s->bytes_uploaded,
 		s->tiles_received, s->wants_sent, s->complete ? "true" : "false", s->alt, s->agl);
 }
 
@@ -550,10 +550,10 @@ static void hud_frame(struct hud *h, struct gl_window *w, const char *title,
 	double dt = now - h->since;
 	char text[256];
 	snprintf(text, sizeof text,
-		 "%s | %.1f fps | levels %d-%d of %d-%d%s | %.0f tiles/s | %.2f MB/s"
-		 " | %.4f, %.4f, %.0f m",
-		 title, h->frames / dt, st->lfirst, st->llast, st->lmin, st->lmax,
-		 st->complete ? " ready" : "", h->tiles / dt, h->bytes / dt / 1e6, cam->lat,
+		 "%s | %.1f fps | levels %d-%d (%d drawn, texels %d) of %d-%d%s | %.0f tiles/s"
+		 " | %.2f MB/s | %.4f, %.4f, %.0f m",
+		 title, h->frames / dt, st->lfirst, st->llast, st->levels_drawn, st->ldetail,
+		 st->lmin, st->lmax, st->complete ? " ready" : "", h->tiles / dt, h->bytes / dt / 1e6, cam->lat,
 		 cam->lon, st->agl);
 	gl_window_set_title(w, text);
 	*h = (struct hud){ .since = now };

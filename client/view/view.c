@@ -7,6 +7,10 @@
  * - Plan (seed 003 Algorithm 1): every level whose texture covers its ring is drawn each
  *   frame; the time budget counts the frame's texture uploads and only holds back further
  *   uploads of new quads (taking tiles, drawing: not the plan's to stop).
+ * - Detail: a ring's heights come from its own level, its colour and normals from the finest
+ *   level up to VIEW_DETAIL finer whose window (VIEW_WINDOW_TILES tiles wide) covers it — a
+ *   texel about a pixel wide across the ring, where its own level's would be 4–8. Where that
+ *   level is not resident yet (after a jump), the next coarser one that is.
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
  *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
  *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
@@ -20,7 +24,7 @@
  *   pops. The inner part shows the fine level alone and is drawn by a program variant that
  *   samples one level: llvmpipe executes both sides of every branch, so work a pixel does not
  *   need is compiled out rather than skipped (variants: blend, per-fragment lon/lat near the
- *   poles, haze, exaggeration, which layers exist, a sea — compiled on first use).
+ *   poles, haze, exaggeration, which layers exist, a sea, unlit — compiled on first use).
  * - The look (the planet's, view_source.h): the air sets the sky's colour and the haze's
  *   extinction (air_init); a sea lifts the ground below it to the water's surface in the
  *   shader, so culling bounds and the camera's ground are taken at that surface too.
@@ -47,22 +51,24 @@
 #define MAX_WANTS 4096
 
 enum {
-	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_FADE,
-	U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE, U_EXAG, U_SEA, U_COUNT
+	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_DF,
+	U_DVF, U_DSF, U_DC, U_DVC, U_DSC, U_FADE, U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE,
+	U_EXAG, U_SEA, U_COUNT
 };
 static const char *const uniform_names[U_COUNT] = {
-	"u_vp", "u_lat", "u_body", "u_a", "u_cap", "u_blend", "u_T", "u_pf", "u_vf", "u_sf", "u_pc",
-	"u_vc", "u_sc", "u_fade", "u_height", "u_normal", "u_color", "u_sun", "u_haze", "u_exag",
-	"u_sea",
+	"u_vp",	 "u_lat", "u_body", "u_a",   "u_cap",	 "u_blend",  "u_T",	"u_pf",
+	"u_vf",	 "u_sf",  "u_pc",   "u_vc",  "u_sc",	 "u_df",     "u_dvf",	"u_dsf",
+	"u_dc",	 "u_dvc", "u_dsc",  "u_fade", "u_height", "u_normal", "u_color", "u_sun",
+	"u_haze", "u_exag", "u_sea",
 };
 
 /* Program variants: the shaders' #defines (see their headers). */
 enum {
 	VAR_BLEND = 1, VAR_GEO_FRAG = 2, VAR_HAZE = 4, VAR_EXAG = 8, VAR_COLOR = 16, VAR_NORMAL = 32,
-	VAR_SEA = 64, NVARIANT = 128
+	VAR_SEA = 64, VAR_UNLIT = 128, NVARIANT = 256
 };
-static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE",  "EXAG",
-					     "COLOR", "NORMAL",	  "SEA" };
+static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG",
+					     "COLOR", "NORMAL",	  "SEA",  "UNLIT" };
 
 #define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
 /* A camera step longer than this many heights above the ground between two frames is a jump,
@@ -95,7 +101,7 @@ struct view {
 	struct view_body body;
 	struct view_clipmap *cm;
 	int nlevels, max_level;
-	uint32_t T;
+	uint32_t T, S; /* tile size, texture window size */
 	/* geometry */
 	unsigned vao, vbo, ibo;
 	int nsec;		 /* sectors per ring part */
@@ -109,6 +115,7 @@ struct view {
 	uint64_t frame_no;
 	int frame_bits; /* this frame's variant bits that every level shares */
 	int *drawn;	/* this frame's levels drawn, coarse → fine */
+	int *detail;	/* per level drawn: the level its colour and normals come from */
 	double last_agl; /* the last frame's camera height above the ground */
 	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
 	double *fade;	/* per level: this frame's fade-in (1: fully shown) */
@@ -367,6 +374,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->max_level = p->max_level < GRID_MAX_LEVEL ? p->max_level : GRID_MAX_LEVEL;
 	v->nlevels = v->max_level + 1;
 	v->T = p->tile_size;
+	v->S = VIEW_WINDOW_TILES * v->T;
 	v->reversed = gl->ClipControl != NULL;
 	const char *nc = getenv("CLIPMAP_NO_CULL");
 	v->cull = !v->d.no_cull && !(nc && strcmp(nc, "1") == 0);
@@ -376,9 +384,11 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->floor = xcalloc((size_t)v->nlevels, sizeof *v->floor);
 	v->fade = xcalloc((size_t)v->nlevels, sizeof *v->fade);
 	v->drawn = xcalloc((size_t)v->nlevels, sizeof *v->drawn);
+	v->detail = xcalloc((size_t)v->nlevels, sizeof *v->detail);
 	int rc = view_clipmap_create(gl, src, v->nlevels, &v->cm, err);
 	if (rc == 0)
-		rc = get_program(v, NVARIANT - 1, err) ? 0 : -EINVAL; /* every feature: fail early */
+		/* every feature (lit): fail early */
+		rc = get_program(v, (NVARIANT - 1) & ~VAR_UNLIT, err) ? 0 : -EINVAL;
 	if (rc == 0) {
 		build_geometry(v);
 		rc = build_fbo(v, err);
@@ -424,6 +434,7 @@ void view_destroy(struct view *v)
 	free(v->floor);
 	free(v->fade);
 	free(v->drawn);
+	free(v->detail);
 	free(v);
 }
 
@@ -542,7 +553,7 @@ static int bind_program(struct view *v, int bits, int i, int c, float fade)
 		gl->Uniform4fv(p->u[U_BODY], 1, f->body);
 		gl->Uniform1f(p->u[U_A], f->a);
 		gl->Uniform1f(p->u[U_CAP], f->cap);
-		gl->Uniform1f(p->u[U_T], (float)v->T);
+		gl->Uniform1f(p->u[U_T], (float)v->S);
 		gl->Uniform1i(p->u[U_HEIGHT], 0);
 		gl->Uniform1i(p->u[U_NORMAL], 1);
 		gl->Uniform1i(p->u[U_COLOR], 2);
@@ -554,6 +565,8 @@ static int bind_program(struct view *v, int bits, int i, int c, float fade)
 	}
 	level_uniforms(v, i, p->u[U_PF], p->u[U_VF], p->u[U_SF]);
 	level_uniforms(v, c, p->u[U_PC], p->u[U_VC], p->u[U_SC]);
+	level_uniforms(v, v->detail[i], p->u[U_DF], p->u[U_DVF], p->u[U_DSF]);
+	level_uniforms(v, v->detail[c], p->u[U_DC], p->u[U_DVC], p->u[U_DSC]);
 	double R = view_ring_radius(i);
 	gl->Uniform3f(p->u[U_BLEND], (float)R, (float)(circle_theta(i * v->d.m_rings + v->j0,
 								     v->d.m_rings) / R),
@@ -635,17 +648,17 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 	return (int64_t)(idx / 3);
 }
 
-static void set_targets(struct view *v, int lmin, int lmax, bool *changed)
+static void set_targets(struct view *v, int lmin, int dmax, bool *changed)
 {
 	for (int l = 0; l < v->nlevels; l++) {
-		if (l != 0 && (l < lmin || l > lmax)) {
+		if (l != 0 && (l < lmin || l > dmax)) {
 			*changed |= view_clipmap_target(v->cm, l, NULL);
 			continue;
 		}
 		const struct grid_quad *cur = view_clipmap_target_of(v->cm, l);
 		int lx = view_level_lx(l, v->last.lat, cur ? cur->lx : -1);
 		struct grid_quad q;
-		grid_quad(lx, l, v->T, v->last.lon, v->last.lat, &q);
+		grid_window(lx, l, v->T, v->S, v->last.lon, v->last.lat, &q);
 		*changed |= view_clipmap_target(v->cm, l, &q);
 	}
 }
@@ -685,6 +698,7 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 	f->sea[0] = (float)(look->sea_level * v->d.exaggeration);
 	f->sea[1] = 1.0f / v->d.exaggeration;
 	v->frame_bits = (look->sea ? VAR_SEA : 0) | (v->air.on ? VAR_HAZE : 0) |
+			(v->d.unlit ? VAR_UNLIT : 0) |
 			(v->d.exaggeration != 1 ? VAR_EXAG : 0) |
 			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
 			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
@@ -713,7 +727,8 @@ struct frame {
 	double now_s;			/* view_frame's now_s (0: offline, no time) */
 	double agl;			/* the camera's height above the ground */
 	double cap;			/* the horizon cap at the camera (view_horizon_cap) */
-	int lmin, lmax;			/* the levels the camera wants */
+	int lmin, lmax;			/* the levels the camera wants drawn */
+	int dmax;			/* and the finest it wants for texture */
 	int first, last, nd;		/* levels drawn: first..last, nd of them in v->drawn */
 	bool complete;			/* so far: every wanted level drawn */
 	struct uploads up;
@@ -756,8 +771,10 @@ static void frame_camera(struct view *v, const struct view_camera *cam, struct f
 	f->s.alt = v->last.alt;
 
 	view_level_range(&v->body, &v->last, f->agl, v->d.n_phi, v->max_level, &f->lmin, &f->lmax);
+	f->dmax = view_detail_max(&v->body, &v->last, f->agl, v->T, f->lmax, v->max_level);
 	f->s.lmin = f->lmin;
 	f->s.lmax = f->lmax;
+	f->s.dmax = f->dmax;
 	f->cap = view_horizon_cap(&v->body, v->last.alt);
 }
 
@@ -766,7 +783,7 @@ static void frame_camera(struct view *v, const struct view_camera *cam, struct f
 static int frame_receive(struct view *v, const struct view_camera *cam, struct frame *f)
 {
 	bool changed = !v->sent_once;
-	set_targets(v, f->lmin, f->lmax, &changed);
+	set_targets(v, f->lmin, f->dmax, &changed);
 	/* The look-ahead along the camera's motion (real time only: a frame without time —
 	 * offline rendering — has no motion). */
 	if (f->now_s > 0)
@@ -836,8 +853,10 @@ static void frame_plan(struct view *v, struct frame *f)
 	for (int j = f->lmin; j >= 0 && first < 0; j--)
 		if (usable(v, j, fmin(view_ring_radius(j), f->cap), &f->up))
 			first = j;
+	bool detailed = true;
 	for (int i = first; i >= 0 && i <= f->lmax; i++) {
-		if (i != first && !usable(v, i, fmin(view_ring_radius(i), f->cap), &f->up)) {
+		double r = fmin(view_ring_radius(i), f->cap);
+		if (i != first && !usable(v, i, r, &f->up)) {
 			v->was_usable[i] = false;
 			continue;
 		}
@@ -848,13 +867,21 @@ static void frame_plan(struct view *v, struct frame *f)
 		v->fade[i] = 1;
 		if (v->d.fade_s > 0 && i != first)
 			v->fade[i] = fmin(1, (f->now_s - v->ready_since[i]) / v->d.fade_s);
+		/* Its colour and normals: the finest level up to VIEW_DETAIL finer that covers it
+		 * (coarse first, so the uploads the budget allows go to the coarser rings). */
+		int want = i + VIEW_DETAIL < f->dmax ? i + VIEW_DETAIL : f->dmax;
+		v->detail[i] = i;
+		for (int l = i + 1; l <= want; l++)
+			if (usable(v, l, r, &f->up))
+				v->detail[i] = l;
+		detailed &= v->detail[i] >= want;
 		v->drawn[nd++] = i;
 		last = i;
 	}
 	f->first = first;
 	f->last = last;
 	f->nd = nd;
-	f->complete = first == f->lmin && nd == f->lmax - f->lmin + 1;
+	f->complete = first == f->lmin && nd == f->lmax - f->lmin + 1 && detailed;
 }
 
 /* floor[l]: the lowest height held by level l and every finer one up to lmax (INFINITY
@@ -908,11 +935,12 @@ static int frame_end(struct view *v, struct frame *f)
 	f->s.lfirst = f->first;
 	f->s.llast = f->last;
 	f->s.levels_drawn = f->nd;
+	f->s.ldetail = f->nd ? v->detail[f->last] : -1;
 	for (int l = 0; l < v->nlevels; l++)
 		if (l < f->first || l > f->last)
 			v->was_usable[l] = false;
 	bool complete = f->complete;
-	for (int l = f->lmin; l <= f->lmax && complete; l++) {
+	for (int l = f->lmin; l <= f->dmax && complete; l++) {
 		const struct grid_quad *h = view_clipmap_held(v->cm, l);
 		const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
 		complete = h && t && grid_quad_equal(h, t);
@@ -933,7 +961,7 @@ int view_frame(struct view *v, const struct view_camera *cam, double now_s,
 	       struct view_frame_stats *st)
 {
 	struct frame f = { .t0 = clock_now_ms(), .now_s = now_s,
-			   .s = { .lfirst = -1, .llast = -1 } };
+			   .s = { .lfirst = -1, .llast = -1, .ldetail = -1 } };
 	view_clipmap_get_stats(v->cm, &f.cs0);
 	frame_camera(v, cam, &f);
 	int rc = frame_receive(v, cam, &f);

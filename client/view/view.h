@@ -46,14 +46,18 @@ struct view_desc {
 	float haze;	      /* atmosphere density, 1: Earth's; 0: the planet's (its look); < 0:
 			       * none. > 0 gives a planet without air Earth's */
 	bool no_cull;	      /* draw every ring sector (also: CLIPMAP_NO_CULL=1 in the env) */
+	bool unlit;	      /* the colour layer as it is: no sun, air or water (measuring what
+			       * the textures put on screen) */
 };
 
 struct view_frame_stats {
 	double cpu_ms;	      /* the frame's CPU time including glFinish */
-	int lmin, lmax;	      /* levels the camera wants */
+	int lmin, lmax;	      /* levels the camera wants drawn (geometry) */
+	int dmax;	      /* the finest level it wants for texture (lmax + VIEW_DETAIL at most) */
 	int lfirst, llast;    /* the coarsest and finest level drawn (-1: none) */
 	int levels_drawn;     /* how many (levels between them whose texture is not ready are
 			       * left out, the coarser level drawn over their rings) */
+	int ldetail;	      /* the finest level whose colour and normals are drawn (-1: none) */
 	uint64_t triangles;	   /* drawn */
 	uint64_t triangles_culled; /* in the drawn levels' geometry, left out by frustum culling */
 	uint64_t bytes_uploaded; /* this frame */

@@ -1,6 +1,7 @@
-/* view_clipmap — see view_clipmap.h. Each level keeps at most SLOTS tiles per role: the 2×2
- * quad and the ring of 12 around it. A CPU copy of the height slices answers ground-height
- * queries (camera height above the terrain) without reading the GPU back.
+/* view_clipmap — see view_clipmap.h. Each level keeps at most SLOTS tiles per role: the
+ * tiles its window touches (up to (n+1)², n = VIEW_WINDOW_TILES), the ring around them and the
+ * look-ahead. A CPU copy of the height slices answers ground-height queries (camera height
+ * above the terrain) without reading the GPU back.
  */
 #include "view_clipmap.h"
 
@@ -14,11 +15,13 @@
 #include "common/xalloc.h"
 #include "view_levels.h"
 
-/* Per role: the quad (4), its ring (12) and the look-ahead (≤ 2 × AHEAD_MAX lines of 4). */
+/* Per role: the window's tiles and their ring ((n+3)², a line of the ring n+3 long) and the
+ * look-ahead (≤ 2 × AHEAD_MAX lines). */
 #define AHEAD_MAX 2
-#define SLOTS (16 + 4 * 2 * AHEAD_MAX)
+#define LINE (VIEW_WINDOW_TILES + 3)
+#define SLOTS (LINE * LINE + LINE * 2 * AHEAD_MAX)
 #define AHEAD_LEAD_S 0.15   /* look ahead as far as the camera moves in this time */
-#define AHEAD_CAP 96	    /* look-ahead tiles per want-set, all levels and roles together */
+#define AHEAD_CAP 160	    /* look-ahead tiles per want-set, all levels and roles together */
 
 struct slot {
 	bool used;
@@ -32,7 +35,7 @@ struct level {
 	int side[2];  /* per axis (x, y): the side (−1 west/north, +1 east/south) whose ring
 		       * line is prefetched while the camera moves; 0: both */
 	struct slot slots[VIEW_NROLES][SLOTS];
-	float *hmirror; /* T × T heights, toroidal like the texture; NULL until first upload */
+	float *hmirror; /* S × S heights, toroidal like the texture; NULL until first upload */
 	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
 	float hlo, hhi; /* the heights' range over the whole slice */
 };
@@ -40,7 +43,7 @@ struct level {
 struct view_clipmap {
 	const struct gl *gl;
 	struct view_source *src;
-	uint32_t T;
+	uint32_t T, S; /* tile size, window (texture) size */
 	int nlevels;
 	int layer[VIEW_NROLES]; /* source layer index per role, -1 absent */
 	unsigned tex[VIEW_NROLES];
@@ -93,6 +96,7 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 	cm->gl = gl;
 	cm->src = src;
 	cm->T = p->tile_size;
+	cm->S = VIEW_WINDOW_TILES * cm->T;
 	cm->nlevels = nlevels;
 	memcpy(cm->layer, layer, sizeof layer);
 	cm->zeros = xcalloc((size_t)cm->T * cm->T, 4);
@@ -104,8 +108,8 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 			continue;
 		gl->GenTextures(1, &cm->tex[r]);
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
-		gl->TexImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)roles[r].ifmt, (GLsizei)cm->T,
-			       (GLsizei)cm->T, nlevels, 0, roles[r].fmt, roles[r].gltype, NULL);
+		gl->TexImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)roles[r].ifmt, (GLsizei)cm->S,
+			       (GLsizei)cm->S, nlevels, 0, roles[r].fmt, roles[r].gltype, NULL);
 		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
 		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
 		gl->TexParameteri(GL_TEXTURE_2D_ARRAY, GL_TEXTURE_WRAP_S, GL_REPEAT);
@@ -114,7 +118,7 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 	}
 	GLenum e = gl->GetError();
 	if (e != GL_NO_ERROR) {
-		err_set(err, "clipmap textures (%d × %u²): GL error 0x%x", nlevels, cm->T, e);
+		err_set(err, "clipmap textures (%d × %u²): GL error 0x%x", nlevels, cm->S, e);
 		view_clipmap_destroy(cm);
 		return -ENOMEM;
 	}
@@ -149,37 +153,36 @@ void view_clipmap_destroy(struct view_clipmap *cm)
 	free(cm);
 }
 
-/* The look-ahead tiles of a level: lines (columns for x, rows for y) at distances 2 ..
- * 1 + |ahead| from the quad on the side the camera moves to, each as long as the ring. */
-/* Whether a ring-line offset d ∈ {−1, 0, 1, 2} from the quad's first tile is on the side an
- * axis prefetches (side −1: offsets −1..1, +1: 0..2, 0: all). */
-static bool on_side(int side, int64_t d)
+/* Whether a ring-line offset d ∈ [−1, n] from the window's first tile (n tiles along that
+ * axis) is on the side an axis prefetches (side −1: offsets −1..n−1, +1: 0..n, 0: all). */
+static bool on_side(int side, int64_t d, int n)
 {
-	return side == 0 || (side < 0 ? d <= 1 : d >= 0);
+	return side == 0 || (side < 0 ? d <= n - 1 : d >= 0);
 }
 
-static int ahead_tiles(const struct level *L, struct tile_key out[4 * 2 * AHEAD_MAX])
+/* The look-ahead tiles of a level: lines (columns for x, rows for y) at distances 2 ..
+ * 1 + |ahead| from the window on the side the camera moves to, each as long as the ring. */
+static int ahead_tiles(const struct level *L, struct tile_key out[LINE * 2 * AHEAD_MAX])
 {
 	const struct grid_quad *q = &L->target;
 	int n = 0;
 	int64_t ny = grid_tiles_y(q->ly);
 	for (int s = 2; s <= 1 + abs(L->ahead[0]); s++) {
-		int64_t x = L->ahead[0] > 0 ? (int64_t)q->tx[0] + 1 + s : (int64_t)q->tx[0] - s;
-		for (int64_t dy = -1; dy <= 2; dy++) {
-			int64_t y = (int64_t)q->ty[0] + dy;
-			if (y >= 0 && y < ny && on_side(L->side[1], dy))
+		int64_t x = L->ahead[0] > 0 ? (int64_t)q->tx0 + q->ntx - 1 + s : (int64_t)q->tx0 - s;
+		for (int64_t dy = -1; dy <= q->nty; dy++) {
+			int64_t y = (int64_t)q->ty0 + dy;
+			if (y >= 0 && y < ny && on_side(L->side[1], dy, q->nty))
 				out[n++] = (struct tile_key){ 0, grid_wrap_x(q->lx, x), (uint32_t)y, q->lx,
 							      q->ly };
 		}
 	}
 	for (int s = 2; s <= 1 + abs(L->ahead[1]); s++) {
-		int64_t y = L->ahead[1] > 0 ? (int64_t)q->ty[0] + 1 + s : (int64_t)q->ty[0] - s;
+		int64_t y = L->ahead[1] > 0 ? (int64_t)q->ty0 + q->nty - 1 + s : (int64_t)q->ty0 - s;
 		if (y < 0 || y >= ny)
 			continue;
-		for (int64_t dx = -1; dx <= 2; dx++)
-			if (on_side(L->side[0], dx))
-				out[n++] = (struct tile_key){ 0,
-							      grid_wrap_x(q->lx, (int64_t)q->tx[0] + dx),
+		for (int64_t dx = -1; dx <= q->ntx; dx++)
+			if (on_side(L->side[0], dx, q->ntx))
+				out[n++] = (struct tile_key){ 0, grid_wrap_x(q->lx, (int64_t)q->tx0 + dx),
 							      (uint32_t)y, q->lx, q->ly };
 	}
 	return n;
@@ -192,7 +195,7 @@ static bool wanted(const struct level *L, const struct tile_key *k)
 		return false;
 	if (grid_quad_distance(&L->target, k) <= 1)
 		return true;
-	struct tile_key a[4 * 2 * AHEAD_MAX];
+	struct tile_key a[LINE * 2 * AHEAD_MAX];
 	int n = ahead_tiles(L, a);
 	for (int i = 0; i < n; i++)
 		if (same_tile(&a[i], k))
@@ -305,29 +308,28 @@ static struct slot *find(struct level *L, int role, const struct tile_key *k)
 	return NULL;
 }
 
-/* The ring around q (tiles at distance 1), deduplicated. Returns the count (≤ 12). */
-/* The ring around the quad (prefetch), less the lines behind the camera's motion
- * (level.side). */
-static int ring_tiles(const struct level *L, struct tile_key out[16])
+/* The ring around the window (prefetch: tiles at distance 1), less the lines behind the
+ * camera's motion (level.side), deduplicated. Returns the count. */
+static int ring_tiles(const struct level *L, struct tile_key out[LINE * LINE])
 {
 	const struct grid_quad *q = &L->target;
 	int n = 0;
 	int64_t ny = grid_tiles_y(q->ly);
-	for (int64_t dy = -1; dy <= 2; dy++) {
-		int64_t y = (int64_t)q->ty[0] + dy;
-		if (y < 0 || y >= ny || !on_side(L->side[1], dy))
+	for (int64_t dy = -1; dy <= q->nty; dy++) {
+		int64_t y = (int64_t)q->ty0 + dy;
+		if (y < 0 || y >= ny || !on_side(L->side[1], dy, q->nty))
 			continue;
-		for (int64_t dx = -1; dx <= 2; dx++) {
-			if (!on_side(L->side[0], dx))
+		for (int64_t dx = -1; dx <= q->ntx; dx++) {
+			if (!on_side(L->side[0], dx, q->ntx))
 				continue;
-			struct tile_key k = { 0, grid_wrap_x(q->lx, (int64_t)q->tx[0] + dx),
-					      (uint32_t)y, q->lx, q->ly };
+			struct tile_key k = { 0, grid_wrap_x(q->lx, (int64_t)q->tx0 + dx), (uint32_t)y,
+					      q->lx, q->ly };
 			if (grid_quad_distance(q, &k) != 1)
 				continue;
 			bool dup = false;
 			for (int i = 0; i < n && !dup; i++)
 				dup = same_tile(&out[i], &k);
-			if (!dup && n < 16)
+			if (!dup)
 				out[n++] = k;
 		}
 	}
@@ -345,7 +347,7 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
 			struct level *L = &cm->lv[l];
 			if (!L->has_target)
 				continue;
-			struct tile_key k[4 * 2 * AHEAD_MAX > 16 ? 4 * 2 * AHEAD_MAX : 16];
+			struct tile_key k[SLOTS];
 			int nk = pass == 0   ? grid_quad_tiles(&L->target, 0, k)
 				 : pass == 1 ? ring_tiles(L, k)
 					     : ahead_tiles(L, k);
@@ -405,15 +407,24 @@ int view_clipmap_receive(struct view_clipmap *cm)
 	return rc < 0 ? rc : got;
 }
 
-static void mirror_region(struct view_clipmap *cm, struct level *L, const struct grid_region *r,
-			  const unsigned char *src)
+/* The window's level is narrower than the texture (the coarsest levels): its columns repeat
+ * every W texels across it, so GL_REPEAT at S still wraps longitude. */
+static uint32_t level_period(const struct view_clipmap *cm, const struct grid_quad *q)
 {
-	uint32_t T = cm->T;
+	uint64_t W = (uint64_t)grid_tiles_x(q->lx) * cm->T;
+	return W < cm->S ? (uint32_t)W : cm->S;
+}
+
+static void mirror_region(struct view_clipmap *cm, struct level *L, const struct grid_region *r,
+			  const unsigned char *tile, uint32_t period)
+{
+	uint32_t T = cm->T, S = cm->S;
 	if (!L->hmirror)
-		L->hmirror = xcalloc((size_t)T * T, sizeof(float));
-	for (uint32_t j = 0; j < r->h; j++)
-		memcpy(L->hmirror + (size_t)(r->y + j) * T + r->x,
-		       src + ((size_t)(r->y + j) * T + r->x) * 4, (size_t)r->w * 4);
+		L->hmirror = xcalloc((size_t)S * S, sizeof(float));
+	for (uint32_t x = r->x; x < S; x += period)
+		for (uint32_t j = 0; j < r->h; j++)
+			memcpy(L->hmirror + (size_t)(r->y + j) * S + x,
+			       tile + ((size_t)(r->sy + j) * T + r->sx) * 4, (size_t)r->w * 4);
 	L->hdirty = true;
 }
 
@@ -424,18 +435,17 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 		return 0;
 	if (L->has_held && grid_quad_equal(&L->held, &L->target))
 		return 1;
-	struct grid_region rg[9];
+	struct grid_region rg[GRID_MAX_REGIONS];
 	int nr = grid_update_regions(L->has_held ? &L->held : NULL, &L->target, rg);
 	/* Every tile a region copies from must be here, for every role. */
 	for (int i = 0; i < nr; i++) {
-		struct tile_key k = { 0, L->target.tx[rg[i].qi], L->target.ty[rg[i].qj],
-				      L->target.lx, L->target.ly };
+		struct tile_key k = { 0, rg[i].tx, rg[i].ty, L->target.lx, L->target.ly };
 		for (int r = 0; r < VIEW_NROLES; r++)
 			if (cm->layer[r] >= 0 && !find(L, r, &k))
 				return 0;
 	}
 	const struct gl *gl = cm->gl;
-	uint32_t T = cm->T;
+	uint32_t T = cm->T, period = level_period(cm, &L->target);
 	gl->PixelStorei(GL_UNPACK_ALIGNMENT, 1);
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, (GLint)T);
 	for (int r = 0; r < VIEW_NROLES; r++) {
@@ -444,18 +454,19 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 		size_t bpp = pix_bytes(roles[r].type);
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
 		for (int i = 0; i < nr; i++) {
-			struct tile_key k = { 0, L->target.tx[rg[i].qi], L->target.ty[rg[i].qj],
-					      L->target.lx, L->target.ly };
+			struct tile_key k = { 0, rg[i].tx, rg[i].ty, L->target.lx, L->target.ly };
 			const struct slot *s = find(L, r, &k);
 			const unsigned char *base = s->t.texels ? s->t.texels : cm->zeros;
-			gl->TexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)rg[i].x, (GLint)rg[i].y, level,
-					  (GLsizei)rg[i].w, (GLsizei)rg[i].h, 1, roles[r].fmt,
-					  roles[r].gltype,
-					  base + ((size_t)rg[i].y * T + rg[i].x) * bpp);
-			cm->st.bytes_uploaded += (uint64_t)rg[i].w * rg[i].h * bpp;
-			cm->st.regions_uploaded++;
+			for (uint32_t x = rg[i].x; x < cm->S; x += period) {
+				gl->TexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)x, (GLint)rg[i].y, level,
+						  (GLsizei)rg[i].w, (GLsizei)rg[i].h, 1, roles[r].fmt,
+						  roles[r].gltype,
+						  base + ((size_t)rg[i].sy * T + rg[i].sx) * bpp);
+				cm->st.bytes_uploaded += (uint64_t)rg[i].w * rg[i].h * bpp;
+				cm->st.regions_uploaded++;
+			}
 			if (r == VIEW_HEIGHT)
-				mirror_region(cm, L, &rg[i], base);
+				mirror_region(cm, L, &rg[i], base, period);
 		}
 	}
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, 0);
@@ -476,7 +487,7 @@ const struct grid_quad *view_clipmap_target_of(const struct view_clipmap *cm, in
 
 int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, double *h)
 {
-	uint32_t T = cm->T;
+	int64_t S = cm->S;
 	for (int l = cm->nlevels - 1; l >= 0; l--) {
 		const struct level *L = &cm->lv[l];
 		if (!L->has_held || !L->hmirror || !view_window_covers(&L->held, lon, lat, 0, 1))
@@ -490,8 +501,8 @@ int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, d
 		double v[2][2];
 		for (int j = 0; j < 2; j++)
 			for (int i = 0; i < 2; i++) {
-				int64_t xi = ((x0 + i) % T + T) % T, yj = ((y0 + j) % T + T) % T;
-				v[j][i] = L->hmirror[(size_t)yj * T + (size_t)xi];
+				int64_t xi = ((x0 + i) % S + S) % S, yj = ((y0 + j) % S + S) % S;
+				v[j][i] = L->hmirror[(size_t)yj * (size_t)S + (size_t)xi];
 			}
 		*h = (1 - ay) * ((1 - ax) * v[0][0] + ax * v[0][1]) +
 		     ay * ((1 - ax) * v[1][0] + ax * v[1][1]);
@@ -504,7 +515,7 @@ unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r) {
 
 int view_clipmap_read(const struct view_clipmap *cm, enum view_role r, void *out, size_t size)
 {
-	if (!cm->tex[r] || size < (size_t)cm->T * cm->T * cm->nlevels * pix_bytes(roles[r].type))
+	if (!cm->tex[r] || size < (size_t)cm->S * cm->S * cm->nlevels * pix_bytes(roles[r].type))
 		return -ENOENT;
 	const struct gl *gl = cm->gl;
 	gl->PixelStorei(GL_PACK_ALIGNMENT, 1);
@@ -514,6 +525,7 @@ int view_clipmap_read(const struct view_clipmap *cm, enum view_role r, void *out
 }
 
 uint32_t view_clipmap_tile_size(const struct view_clipmap *cm) { return cm->T; }
+uint32_t view_clipmap_window_size(const struct view_clipmap *cm) { return cm->S; }
 int view_clipmap_levels(const struct view_clipmap *cm) { return cm->nlevels; }
 
 void view_clipmap_get_stats(const struct view_clipmap *cm, struct view_clipmap_stats *out)
@@ -529,7 +541,7 @@ int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, do
 	if (L->hdirty) {
 		/* The whole slice, stale texels included: whatever the shader can sample. */
 		const float *h = L->hmirror;
-		size_t n = (size_t)cm->T * cm->T;
+		size_t n = (size_t)cm->S * cm->S;
 		float a = h[0], b = h[0];
 		for (size_t i = 1; i < n; i++) {
 			a = h[i] < a ? h[i] : a;

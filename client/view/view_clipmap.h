@@ -1,9 +1,11 @@
 /* view_clipmap — the viewer's clipmap textures and the tiles in flight. Per layer role
  * (height R32F, normal RG8, colour sRGB8_A8) one 2D texture array with a slice per clipmap
- * level, addressed toroidally: level texel (u, v) lives at (u mod T, v mod T). Each level has
- * a target quad (where the camera wants it) and the quad its texture holds; when every tile
- * of the target quad has arrived, only the changed regions are copied (grid_update_regions).
- * Tiles are kept while they are in or next to their level's target quad (the prefetch ring)
+ * level, S × S texels (S = VIEW_WINDOW_TILES · T), addressed toroidally: level texel (u, v)
+ * lives at (u mod S, v mod S); a level narrower than S repeats across it. Each level has a
+ * target window (grid_window: where the camera wants it) and the window its texture holds;
+ * when every tile of the target has arrived, only the changed regions are copied
+ * (grid_update_regions). Tiles are kept while they are in or next to their level's target
+ * window (the prefetch ring)
  * or ahead of it along the camera's motion (view_clipmap_motion), released otherwise: the
  * client never holds more than that.
  *
@@ -75,10 +77,11 @@ int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, d
 int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, double *hi);
 
 unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r); /* 0: absent */
-/* Reads every slice of a role's texture (T × T × nlevels texels, slice-major) into out.
+/* Reads every slice of a role's texture (S × S × nlevels texels, slice-major) into out.
  * Returns 0 or -ENOENT. */
 int view_clipmap_read(const struct view_clipmap *cm, enum view_role r, void *out, size_t size);
 uint32_t view_clipmap_tile_size(const struct view_clipmap *cm);
+uint32_t view_clipmap_window_size(const struct view_clipmap *cm); /* S */
 int view_clipmap_levels(const struct view_clipmap *cm);
 void view_clipmap_get_stats(const struct view_clipmap *cm, struct view_clipmap_stats *out);
 

@@ -52,6 +52,21 @@ void view_level_range(const struct view_body *b, const struct view_camera *c, do
 	*lmax = hi;
 }
 
+int view_detail_max(const struct view_body *b, const struct view_camera *c, double agl,
+		    uint32_t T, int lmax, int max_level)
+{
+	double fov = (c->fov_y > 0 ? c->fov_y : 60) * DEG;
+	double px = fmax(agl, 0.05) * 2 * tan(fov / 2) / (c->height > 0 ? c->height : 720);
+	/* level L's texels are π·a / (T·2^L) metres tall: ≥ px / 2 */
+	double lim = floor(log2(2 * M_PI * b->a / ((double)T * px)));
+	int d = lmax + VIEW_DETAIL;
+	if (d > lim)
+		d = (int)lim;
+	if (d > max_level)
+		d = max_level;
+	return d < lmax ? lmax : d;
+}
+
 static double lon_extent(double lat_deg, double r)
 {
 	double colat = M_PI / 2 - fabs(lat_deg) * DEG;
@@ -62,33 +77,36 @@ static double lon_extent(double lat_deg, double r)
 
 int view_level_lx(int ly, double lat_deg, int cur_lx)
 {
-	if (ly <= 0)
-		return 0;
-	double ext = lon_extent(lat_deg, view_ring_radius(ly));
-	int lx = 0;
-	for (int cand = ly + 1; cand >= 1; cand--) {
-		double half = M_PI / (double)((uint64_t)1 << cand);
+	const double n = VIEW_WINDOW_TILES;
+	/* The coarsest candidate: a level as narrow as the window covers every longitude. */
+	int lo = 0;
+	while (lo < ly + 1 && ldexp(1.0, lo + 1) <= n)
+		lo++;
+	double ext = lon_extent(lat_deg, view_ring_radius(ly - VIEW_DETAIL));
+	int lx = lo;
+	for (int cand = ly + 1; cand > lo; cand--) {
+		double half = n * M_PI / ldexp(1.0, cand);
 		if (ext <= K_LON * half) {
 			lx = cand;
 			break;
 		}
 	}
-	if (cur_lx >= 0 && cur_lx < lx) {
-		double half = M_PI / (double)((uint64_t)1 << lx);
+	if (cur_lx >= lo && cur_lx < lx) {
+		double half = n * M_PI / ldexp(1.0, lx);
 		if (ext > K_LON_BACK * half)
 			return cur_lx;
 	}
 	return lx;
 }
 
-/* The focus's u relative to the window origin, in (-(W-T)/2, (W+T)/2]. */
+/* The focus's u relative to the window origin, in (-(W-w)/2, (W+w)/2]. */
 static double focus_rel_u(const struct grid_quad *q, double lon_deg)
 {
 	double W = (double)grid_tiles_x(q->lx) * q->T;
 	double rel = fmod(grid_lon_to_u(q->lx, q->T, lon_deg) - (double)q->u0, W);
 	if (rel < 0)
 		rel += W;
-	if (rel > (W + q->T) / 2)
+	if (rel > (W + q->w) / 2)
 		rel -= W;
 	return rel;
 }
@@ -96,29 +114,29 @@ static double focus_rel_u(const struct grid_quad *q, double lon_deg)
 bool view_window_covers(const struct grid_quad *q, double lon_deg, double lat_deg, double r,
 			double margin)
 {
-	double T = q->T;
+	double T = q->T, w = q->w, h = q->h;
 	double H = (double)grid_tiles_y(q->ly) * T, W = (double)grid_tiles_x(q->lx) * T;
 	double rd = r / DEG;
 	double vlo = lat_deg + rd >= 90 ? 0 : grid_lat_to_v(q->ly, q->T, lat_deg + rd);
 	double vhi = lat_deg - rd <= -90 ? H : grid_lat_to_v(q->ly, q->T, lat_deg - rd);
 	double alo = q->v0 == 0 ? 0 : (double)q->v0 + margin;
-	double ahi = (double)q->v0 + T >= H ? H : (double)q->v0 + T - margin;
+	double ahi = (double)q->v0 + h >= H ? H : (double)q->v0 + h - margin;
 	if (vlo < alo || vhi > ahi)
 		return false;
-	if (W <= T)
+	if (W <= w)
 		return true;
 	double ext = lon_extent(lat_deg, r);
 	if (ext >= M_PI)
 		return false;
 	double rel = focus_rel_u(q, lon_deg), du = ext * W / (2 * M_PI);
-	return rel - du >= margin && rel + du <= T - margin;
+	return rel - du >= margin && rel + du <= w - margin;
 }
 
 void view_level_params(const struct grid_quad *q, double lon_deg, double lat_deg, double p[6])
 {
 	double T = q->T;
 	double H = (double)grid_tiles_y(q->ly) * T, W = (double)grid_tiles_x(q->lx) * T;
-	double u0m = (double)(q->u0 % q->T), v0m = (double)(q->v0 % q->T);
+	double u0m = (double)(q->u0 % q->S), v0m = (double)(q->v0 % q->S);
 	p[0] = u0m + focus_rel_u(q, lon_deg);
 	p[1] = v0m + (grid_lat_to_v(q->ly, q->T, lat_deg) - (double)q->v0);
 	p[2] = W / (2 * M_PI);

@@ -18,6 +18,13 @@
 
 #define VIEW_RING_K 0.75
 #define VIEW_MAX_LEVELS (GRID_MAX_LEVEL + 1)
+/* Each level's texture window: VIEW_WINDOW_TILES × VIEW_WINDOW_TILES tiles (S = that × T
+ * texels). Ring i's geometry samples heights from level i, its colour and normals come from
+ * level i + VIEW_DETAIL (log2 of the window's tiles: that level's window is as wide in angle
+ * as level i's quad), so a texel covers about a screen pixel across the ring instead of the
+ * four to eight it would at level i (seed 000 §3.4 derives the rings from the texture). */
+#define VIEW_WINDOW_TILES GRID_WINDOW_TILES
+#define VIEW_DETAIL 2
 
 struct view_body {
 	double a, f, e2;
@@ -47,9 +54,16 @@ struct view_camera {
  * agl = the camera's height above the ground. max_level: the planet's finest ly. */
 void view_level_range(const struct view_body *b, const struct view_camera *c, double agl,
 		      int n_phi, int max_level, int *lmin, int *lmax);
+/* The finest level worth texturing with: lmax + VIEW_DETAIL, no finer than a texel of about
+ * half the pixel under the camera (finer texels would only alias), nor than max_level.
+ * T: the tile size. */
+int view_detail_max(const struct view_body *b, const struct view_camera *c, double agl,
+		    uint32_t T, int lmax, int max_level);
 
 /* The longitude grid level for clipmap level ly at the focus latitude: the finest lx ≤ ly + 1
- * whose window spans ring ly's longitude extent (lx = 0 when the ring holds a pole).
+ * whose window (VIEW_WINDOW_TILES tiles) spans the longitude extent of the widest ring it is
+ * drawn on, ring ly − VIEW_DETAIL (a window as wide as the whole level when that ring holds a
+ * pole).
  * cur_lx (or -1) adds hysteresis: a coarser current lx is kept unless the finer one fits
  * with room to spare. */
 int view_level_lx(int ly, double lat_deg, int cur_lx);
@@ -60,7 +74,7 @@ bool view_window_covers(const struct grid_quad *q, double lon_deg, double lat_de
 			double margin);
 
 /* Shader parameters of a level whose texture holds window q, for a camera at (lon, lat):
- * p[0], p[1]: the focus in toroidal-texture texels (may exceed T; GL_REPEAT wraps),
+ * p[0], p[1]: the focus in toroidal-texture texels (may exceed S; GL_REPEAT wraps),
  * p[2], p[3]: texels per radian of longitude and of latitude (v grows south),
  * p[4], p[5]: the range texture v is clamped to (half a texel inside the poles). */
 void view_level_params(const struct grid_quad *q, double lon_deg, double lat_deg, double p[6]);

@@ -1,7 +1,7 @@
 /* cache — see cache.h. A chained hash table (power-of-two buckets, each entry keeps its key
  * hash) under one mutex, with an LRU clock and the monotonic time stamped on lookup and insert.
  *
- * Pruning ranks every tile by its distance (grid_quad_distance) to the nearest focus's quad
+ * Pruning ranks every tile by its distance (grid_quad_distance) to the nearest focus's window
  * at the tile's own level, evicts the farthest first and, among equally far tiles, the least
  * recently stamped; with no foci every distance is 0, which is plain LRU. Quads are computed
  * once per (focus, level) per prune. Evicted tiles are unreferenced after the mutex is
@@ -166,7 +166,8 @@ static uint32_t focus_distance(struct cache *c, const struct tile *t, struct gri
 		/* A quad cached for another tile size is recomputed (tiles of layers whose T
 		 * differs from the foci's are rare). */
 		if (!valid[i] || quads[i].T != T) {
-			grid_quad(k->lx, k->ly, T, c->foci[f].lon, c->foci[f].lat, &quads[i]);
+			grid_window(k->lx, k->ly, T, GRID_WINDOW_TILES * T, c->foci[f].lon,
+				    c->foci[f].lat, &quads[i]);
 			valid[i] = 1;
 		}
 		uint32_t d = grid_quad_distance(&quads[i], k);

@@ -112,11 +112,17 @@ static void lru_without_foci(void **state)
 	cache_destroy(c);
 }
 
-/* Keys within Chebyshev distance ≤ 1 of the focus's quad at level (lx, ly). */
+/* The viewer's window around (lon, lat) at level (lx, ly): what the cache ranks by. */
+static void window(int lx, int ly, double lon, double lat, struct grid_quad *q)
+{
+	grid_window(lx, ly, T, GRID_WINDOW_TILES * T, lon, lat, q);
+}
+
+/* Keys within Chebyshev distance ≤ 1 of the focus's window at level (lx, ly). */
 static bool in_ring(int lx, int ly, double lon, double lat, const struct tile_key *k)
 {
 	struct grid_quad q;
-	grid_quad(lx, ly, T, lon, lat, &q);
+	window(lx, ly, lon, lat, &q);
 	return grid_quad_distance(&q, k) <= 1;
 }
 
@@ -143,7 +149,8 @@ static void prune_keeps_quad_and_ring(void **state)
 					total++;
 					ring += r;
 				}
-	assert_true(ring >= 2 * 9 && ring <= 2 * 16);
+	const int n = GRID_WINDOW_TILES;
+	assert_true(ring >= 2 * (size_t)((n + 2) * (n + 2)) && ring <= 2 * (size_t)((n + 3) * (n + 3)));
 	size_t keep = ring + 40;
 	cache_prune(c, keep * TILE_BYTES);
 	struct cache_stats st;
@@ -154,7 +161,7 @@ static void prune_keeps_quad_and_ring(void **state)
 	uint32_t max_kept = 0, min_evicted = UINT32_MAX;
 	for (int l = 0; l < 2; l++) {
 		struct grid_quad q;
-		grid_quad(lv[l][0], lv[l][1], T, lon, lat, &q);
+		window(lv[l][0], lv[l][1], lon, lat, &q);
 		for (uint32_t y = 0; y < grid_tiles_y(lv[l][1]); y++)
 			for (uint32_t x = 0; x < grid_tiles_x(lv[l][0]); x++) {
 				struct tile_key k = key(9, lv[l][0], lv[l][1], x, y);
@@ -170,18 +177,20 @@ static void prune_keeps_quad_and_ring(void **state)
 	}
 	assert_true(max_kept <= min_evicted);
 	assert_true(max_kept >= 2); /* 40 non-ring tiles: the next ring out */
-	/* Squeezing below the quads' size finally takes ring tiles, the ring before the quad. */
-	cache_prune(c, 8 * TILE_BYTES);
-	cache_stats(c, &st);
-	assert_int_equal(st.tiles, 8);
+	/* Squeezing to the windows' size finally takes ring tiles, the ring before the window. */
+	struct grid_quad q[2];
+	struct tile_key qt[2][GRID_WINDOW_MAX_KEYS];
+	int nq[2];
 	for (int l = 0; l < 2; l++) {
-		struct grid_quad q;
-		grid_quad(lv[l][0], lv[l][1], T, lon, lat, &q);
-		struct tile_key qt[4];
-		int n = grid_quad_tiles(&q, 9, qt);
-		for (int i = 0; i < n; i++)
-			assert_true(cache_contains(c, &qt[i]));
+		window(lv[l][0], lv[l][1], lon, lat, &q[l]);
+		nq[l] = grid_quad_tiles(&q[l], 9, qt[l]);
 	}
+	cache_prune(c, (size_t)(nq[0] + nq[1]) * TILE_BYTES);
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, nq[0] + nq[1]);
+	for (int l = 0; l < 2; l++)
+		for (int i = 0; i < nq[l]; i++)
+			assert_true(cache_contains(c, &qt[l][i]));
 	cache_destroy(c);
 }
 
@@ -189,7 +198,8 @@ static void budget_prune_uses_foci(void **state)
 {
 	(void)state;
 	const double lon = -120.0, lat = 45.0;
-	struct cache *c = cache_create(40 * TILE_BYTES) /* 36 after a prune ≥ 2 rings of 16 */;
+	/* 108 after a prune ≥ 2 windows of 5×5 tiles with their rings (2 × 49) */
+	struct cache *c = cache_create(120 * TILE_BYTES);
 	struct cache_focus f[2] = { { lon, lat }, { 100.0, -10.0 } };
 	cache_set_foci(c, f, 2, T);
 	const int lx = 5, ly = 4;

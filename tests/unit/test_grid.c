@@ -156,34 +156,35 @@ static void quads(void **state)
 {
 	(void)state;
 	struct grid_quad q;
-	struct tile_key keys[4];
+	struct tile_key keys[GRID_WINDOW_MAX_KEYS];
 	grid_quad(1, 0, 256, 0.0, 0.0, &q); /* level 0: the window is the whole height */
 	assert_int_equal(q.u0, 128);
 	assert_int_equal(q.v0, 0);
-	assert_int_equal(q.tx[0], 0);
-	assert_int_equal(q.tx[1], 1);
-	assert_int_equal(q.ty[0], 0);
-	assert_int_equal(q.ty[1], 0);
+	assert_int_equal(q.tx0, 0);
+	assert_int_equal(q.ntx, 2);
+	assert_int_equal(q.ty0, 0);
+	assert_int_equal(q.nty, 1);
 	assert_int_equal(grid_quad_tiles(&q, 9, keys), 2);
 	assert_int_equal(keys[1].x, 1);
 	assert_true(keys[1].node == 9);
 
 	grid_quad(2, 1, 256, 179.9, 10.0, &q); /* straddles the antimeridian */
 	assert_int_equal(q.u0, 896);
-	assert_int_equal(q.tx[0], 3);
-	assert_int_equal(q.tx[1], 0);
+	assert_int_equal(q.tx0, 3);
+	assert_int_equal(grid_quad_tiles(&q, 0, keys), 4);
+	assert_int_equal(keys[1].x, 0);
 	grid_quad(2, 1, 256, -180.0, 10.0, &q);
 	assert_int_equal(q.u0, 896);
-	assert_int_equal(q.tx[1], 0);
+	assert_int_equal(q.ntx, 2);
 
 	grid_quad(2, 1, 256, 30.0, 89.99, &q); /* north pole: clamped, no wrap in y */
 	assert_int_equal(q.v0, 0);
-	assert_int_equal(q.ty[0], 0);
-	assert_int_equal(q.ty[1], 1);
+	assert_int_equal(q.ty0, 0);
+	assert_int_equal(q.nty, 1);
 	grid_quad(2, 1, 256, 30.0, -90.0, &q); /* south pole */
 	assert_int_equal(q.v0, 256);
-	assert_int_equal(q.ty[0], 1);
-	assert_int_equal(q.ty[1], 1);
+	assert_int_equal(q.ty0, 1);
+	assert_int_equal(q.nty, 1);
 	assert_int_equal(grid_quad_tiles(&q, 0, keys), 2);
 
 	grid_quad(4, 3, 256, 10.0, 20.0, &q);
@@ -192,22 +193,76 @@ static void quads(void **state)
 	for (int i = 0; i < 4; i++)
 		assert_int_equal(grid_quad_distance(&q, &keys[i]), 0);
 	struct tile_key far = keys[0];
-	far.x = grid_wrap_x(4, (int64_t)q.tx[1] + 1);
+	far.x = grid_wrap_x(4, (int64_t)q.tx0 + 2);
 	assert_int_equal(grid_quad_distance(&q, &far), 1);
-	far.x = grid_wrap_x(4, (int64_t)q.tx[0] + 8);
+	far.x = grid_wrap_x(4, (int64_t)q.tx0 + 8);
 	assert_int_equal(grid_quad_distance(&q, &far), 7);
 	far.lx = 5;
 	assert_int_equal(grid_quad_distance(&q, &far), UINT32_MAX);
 	/* distance wraps the short way round the antimeridian */
 	grid_quad(4, 3, 256, 179.0, 0.0, &q);
-	struct tile_key w = { .lx = 4, .ly = 3, .x = 1, .y = q.ty[0] };
+	struct tile_key w = { .lx = 4, .ly = 3, .x = 1, .y = q.ty0 };
 	assert_int_equal(grid_quad_distance(&q, &w), 1);
 }
 
-/* Replays moves through a simulated T×T toroidal texture holding, per texel, the level texel
+/* Windows of 4×4 tiles: 5×5 tiles touched when unaligned, the whole level where it is smaller
+ * than the window, clamped at the poles, wrapping at the antimeridian. */
+static void windows(void **state)
+{
+	(void)state;
+	const uint32_t T = 256, S = 4 * T;
+	struct grid_quad q;
+	struct tile_key keys[GRID_WINDOW_MAX_KEYS];
+	grid_window(9, 8, T, S, 10.3, 20.7, &q);
+	assert_int_equal(q.w, S);
+	assert_int_equal(q.h, S);
+	assert_int_equal(grid_quad_tiles(&q, 0, keys), 25);
+	/* the focus is in the middle of the window */
+	double fu = grid_lon_to_u(9, T, 10.3), fv = grid_lat_to_v(8, T, 20.7);
+	assert_true(fabs(fu - (double)q.u0 - S / 2.0) <= 0.5);
+	assert_true(fabs(fv - (double)q.v0 - S / 2.0) <= 0.5);
+	for (int i = 0; i < 25; i++)
+		assert_int_equal(grid_quad_distance(&q, &keys[i]), 0);
+	struct tile_key k = keys[0];
+	k.x = grid_wrap_x(9, (int64_t)q.tx0 - 1);
+	assert_int_equal(grid_quad_distance(&q, &k), 1);
+	k.x = grid_wrap_x(9, (int64_t)q.tx0 + 5);
+	assert_int_equal(grid_quad_distance(&q, &k), 1);
+	k.x = grid_wrap_x(9, (int64_t)q.tx0 + 7);
+	assert_int_equal(grid_quad_distance(&q, &k), 3);
+
+	/* level (1, 0): 512 × 256 texels, smaller than the window both ways: all of it */
+	grid_window(1, 0, T, S, 123.0, -45.0, &q);
+	assert_int_equal(q.u0, 0);
+	assert_int_equal(q.v0, 0);
+	assert_int_equal(q.w, 512);
+	assert_int_equal(q.h, 256);
+	assert_int_equal(grid_quad_tiles(&q, 0, keys), 2);
+	/* level (2, 2): 1024 × 1024, exactly the window: all of it wherever the focus */
+	grid_window(2, 2, T, S, -170.0, 80.0, &q);
+	assert_int_equal(q.u0, 0);
+	assert_int_equal(q.v0, 0);
+	assert_int_equal(grid_quad_tiles(&q, 0, keys), 16);
+
+	/* the south pole: clamped to the last four rows */
+	grid_window(6, 5, T, S, 0.0, -89.9, &q);
+	assert_int_equal(q.v0, (int64_t)(32 - 4) * T);
+	assert_int_equal(q.nty, 4);
+	/* the antimeridian: the columns wrap */
+	grid_window(6, 5, T, S, 179.9, 0.0, &q);
+	assert_int_equal(grid_quad_tiles(&q, 0, keys), 25);
+	bool east = false, west = false;
+	for (int i = 0; i < 25; i++) {
+		east |= keys[i].x == 63;
+		west |= keys[i].x == 0;
+	}
+	assert_true(east && west);
+}
+
+/* Replays moves through a simulated S×S toroidal texture holding, per texel, the level texel
  * (u, v) it was copied from, and checks the whole window after each move. */
 struct sim {
-	uint32_t T;
+	uint32_t T, S;
 	int64_t *u, *v; /* what each texture texel holds; -1 = nothing */
 	struct grid_quad cur;
 	int have;
@@ -215,108 +270,119 @@ struct sim {
 
 static void apply(struct sim *s, const struct grid_quad *next, int64_t *copied)
 {
-	struct grid_region r[9];
+	struct grid_region r[GRID_MAX_REGIONS];
 	int n = grid_update_regions(s->have ? &s->cur : NULL, next, r);
-	assert_true(n >= 0 && n <= 9);
+	assert_true(n >= 0 && n <= GRID_MAX_REGIONS);
 	int64_t W = (int64_t)grid_tiles_x(next->lx) * s->T;
+	uint32_t S = s->S;
 	*copied = 0;
 	for (int i = 0; i < n; i++) {
-		assert_true(r[i].x + r[i].w <= s->T && r[i].y + r[i].h <= s->T);
-		uint32_t tx = next->tx[r[i].qi], ty = next->ty[r[i].qj];
-		for (uint32_t y = r[i].y; y < r[i].y + r[i].h; y++)
-			for (uint32_t x = r[i].x; x < r[i].x + r[i].w; x++) {
-				/* texel (x, y) of tile (tx, ty) is level texel (tx·T + x, ty·T + y) */
-				s->u[y * s->T + x] = (int64_t)tx * s->T + x;
-				s->v[y * s->T + x] = (int64_t)ty * s->T + y;
+		assert_true(r[i].x + r[i].w <= S && r[i].y + r[i].h <= S);
+		assert_true(r[i].sx + r[i].w <= s->T && r[i].sy + r[i].h <= s->T);
+		for (uint32_t y = 0; y < r[i].h; y++)
+			for (uint32_t x = 0; x < r[i].w; x++) {
+				/* texel (sx + x, sy + y) of tile (tx, ty) is level texel
+				 * (tx·T + sx + x, ty·T + sy + y) */
+				size_t at = (size_t)(r[i].y + y) * S + r[i].x + x;
+				s->u[at] = (int64_t)r[i].tx * s->T + r[i].sx + x;
+				s->v[at] = (int64_t)r[i].ty * s->T + r[i].sy + y;
 				(*copied)++;
 			}
 	}
 	s->cur = *next;
 	s->have = 1;
-	/* the invariant: every window texel is in the texture at (u mod T, v mod T) */
-	for (int64_t dv = 0; dv < s->T; dv++)
-		for (int64_t du = 0; du < s->T; du++) {
+	/* the invariant: every window texel is in the texture at (u mod S, v mod S) */
+	for (int64_t dv = 0; dv < next->h; dv++)
+		for (int64_t du = 0; du < next->w; du++) {
 			int64_t u = (next->u0 + du) % W, v = next->v0 + dv;
-			size_t at = (size_t)((v % s->T) * s->T + (u % s->T));
+			size_t at = (size_t)((v % S) * S + (u % S));
 			assert_int_equal(s->u[at], u);
 			assert_int_equal(s->v[at], v);
 		}
 }
 
-static int64_t overlap_1d(int64_t a, int64_t b, int64_t T, int64_t W)
+/* Texels the old and new windows share along one axis (w: the window's extent there; a
+ * window as wide as the level W never moves). */
+static int64_t overlap_1d(int64_t a, int64_t b, int64_t w, int64_t W)
 {
 	int64_t d = (b - a) % W;
 	if (d > W / 2)
 		d -= W;
 	if (d < -W / 2)
 		d += W;
-	if (W == T)
+	if (W <= w)
 		d = 0;
 	d = d < 0 ? -d : d;
-	return d >= T ? 0 : T - d;
+	return d >= w ? 0 : w - d;
+}
+
+static void replay(struct sim *s, int lx, int ly)
+{
+	uint32_t T = s->T, S = s->S;
+	int64_t W = (int64_t)grid_tiles_x(lx) * T;
+	memset(s->u, 0xff, (size_t)S * S * sizeof *s->u);
+	memset(s->v, 0xff, (size_t)S * S * sizeof *s->v);
+	s->have = 0;
+	double lon = -179.0, lat = 80.0;
+	for (int step = 0; step < 300; step++) {
+		/* mostly small moves, sometimes jumps; cross the antimeridian and poles */
+		double scale = (rand() % 10 == 0) ? 90.0 : 360.0 / W * 3;
+		lon += scale * ((rand() % 2001) / 1000.0 - 1.0);
+		lat += scale * ((rand() % 2001) / 1000.0 - 1.0);
+		if (lon >= 180) lon -= 360;
+		if (lon < -180) lon += 360;
+		if (lat > 90) lat = 90;
+		if (lat < -90) lat = -90;
+		struct grid_quad next, prev = s->cur;
+		int had = s->have;
+		grid_window(lx, ly, T, S, lon, lat, &next);
+		int64_t copied;
+		apply(s, &next, &copied);
+		int64_t all = (int64_t)next.w * next.h;
+		if (had) {
+			/* exactly the texels the old window lacked were copied */
+			int64_t keep = overlap_1d(prev.u0, next.u0, next.w, W) *
+				       overlap_1d(prev.v0, next.v0, next.h, (int64_t)1 << 62);
+			assert_int_equal(copied, all - keep);
+		} else {
+			assert_int_equal(copied, all);
+		}
+	}
 }
 
 static void toroidal_updates(void **state)
 {
 	(void)state;
 	const uint32_t T = 16;
-	struct sim s = { .T = T };
-	s.u = malloc(T * T * sizeof *s.u);
-	s.v = malloc(T * T * sizeof *s.v);
+	const int levels[][2] = { { 1, 0 }, { 3, 2 }, { 5, 4 }, { 2, 4 }, { 0, 3 }, { 7, 6 } };
 	srand(11);
-	const int levels[][2] = { { 1, 0 }, { 3, 2 }, { 5, 4 }, { 2, 4 }, { 0, 3 } };
-	for (size_t L = 0; L < sizeof levels / sizeof levels[0]; L++) {
-		int lx = levels[L][0], ly = levels[L][1];
-		int64_t W = (int64_t)grid_tiles_x(lx) * T;
-		memset(s.u, 0xff, T * T * sizeof *s.u);
-		memset(s.v, 0xff, T * T * sizeof *s.v);
-		s.have = 0;
-		double lon = -179.0, lat = 80.0;
-		for (int step = 0; step < 400; step++) {
-			/* mostly small moves, sometimes jumps; cross the antimeridian and poles */
-			double scale = (rand() % 10 == 0) ? 90.0 : 360.0 / W * 3;
-			lon += scale * ((rand() % 2001) / 1000.0 - 1.0);
-			lat += scale * ((rand() % 2001) / 1000.0 - 1.0);
-			if (lon >= 180) lon -= 360;
-			if (lon < -180) lon += 360;
-			if (lat > 90) lat = 90;
-			if (lat < -90) lat = -90;
-			struct grid_quad next, prev = s.cur;
-			int had = s.have;
-			grid_quad(lx, ly, T, lon, lat, &next);
-			int64_t copied;
-			apply(&s, &next, &copied);
-			if (had) {
-				/* exactly the texels the old window lacked were copied */
-				int64_t keep = overlap_1d(prev.u0, next.u0, T, W) *
-					       overlap_1d(prev.v0, next.v0, T, (int64_t)1 << 62);
-				assert_int_equal(copied, (int64_t)T * T - keep);
-			} else {
-				assert_int_equal(copied, (int64_t)T * T);
-			}
-		}
+	for (uint32_t S = T; S <= 4 * T; S *= 4) {
+		struct sim s = { .T = T, .S = S };
+		s.u = malloc((size_t)S * S * sizeof *s.u);
+		s.v = malloc((size_t)S * S * sizeof *s.v);
+		for (size_t L = 0; L < sizeof levels / sizeof levels[0]; L++)
+			replay(&s, levels[L][0], levels[L][1]);
+		free(s.u);
+		free(s.v);
 	}
-	/* an unchanged focus copies nothing; a one-texel diagonal move copies 2T-1 texels in
-	 * at most 5 regions (seed 003 Fig. 3b) */
-	struct grid_quad a, b;
-	struct grid_region r[9];
-	grid_quad(5, 4, T, 10.0, 10.0, &a);
-	assert_int_equal(grid_update_regions(&a, &a, r), 0);
-	b = a;
-	b.u0 += 1;
-	b.v0 += 1;
-	b.tx[0] = (uint32_t)(b.u0 / T);
-	b.tx[1] = grid_wrap_x(5, b.tx[0] + 1);
-	b.ty[0] = (uint32_t)(b.v0 / T);
-	b.ty[1] = b.ty[0] + 1;
-	int n = grid_update_regions(&a, &b, r);
-	assert_true(n >= 2 && n <= 5);
-	uint32_t area = 0;
-	for (int i = 0; i < n; i++)
-		area += r[i].w * r[i].h;
-	assert_int_equal(area, 2 * T - 1);
-	free(s.u);
-	free(s.v);
+	/* an unchanged focus copies nothing; a one-texel diagonal move copies 2S-1 texels in
+	 * a few regions (seed 003 Fig. 3b: at most 5 for the quad) */
+	for (uint32_t S = T; S <= 4 * T; S *= 4) {
+		struct grid_quad a, b;
+		struct grid_region r[GRID_MAX_REGIONS];
+		grid_window(7, 6, T, S, 10.0, 10.0, &a);
+		assert_int_equal(grid_update_regions(&a, &a, r), 0);
+		double dl = 360.0 / (128.0 * T), dp = 180.0 / (64.0 * T);
+		grid_window(7, 6, T, S, 10.0 + dl, 10.0 - dp, &b);
+		assert_int_equal(b.u0, a.u0 + 1);
+		assert_int_equal(b.v0, a.v0 + 1);
+		int n = grid_update_regions(&a, &b, r);
+		assert_true(n >= 2 && n <= (S == T ? 5 : 12));
+		uint32_t area = 0;
+		for (int i = 0; i < n; i++)
+			area += r[i].w * r[i].h;
+		assert_int_equal(area, 2 * S - 1);
+	}
 }
 
 static void key_hash(void **state)
@@ -340,6 +406,7 @@ int main(void)
 		cmocka_unit_test(tile_rects),	   cmocka_unit_test(validity_and_wrap),
 		cmocka_unit_test(texel_centres),   cmocka_unit_test(texel_nesting),
 		cmocka_unit_test(neighbours),	   cmocka_unit_test(quads),
+		cmocka_unit_test(windows),
 		cmocka_unit_test(toroidal_updates), cmocka_unit_test(key_hash),
 	};
 	return cmocka_run_group_tests_name("grid", tests, NULL, NULL);

@@ -16,6 +16,7 @@
 
 #include "client/view/gl_context.h"
 #include "client/view/view_clipmap.h"
+#include "client/view/view_levels.h"
 #include "common/xalloc.h"
 #include "support/synth_source.h"
 
@@ -38,7 +39,7 @@ static bool aim(struct view_clipmap *cm, double lon)
 	bool changed = false;
 	for (int l = 0; l < NLEVELS; l++) {
 		struct grid_quad q;
-		grid_quad(l + 1, l, T, lon, LAT, &q);
+		grid_window(l + 1, l, T, VIEW_WINDOW_TILES * T, lon, LAT, &q);
 		changed |= view_clipmap_target(cm, l, &q);
 	}
 	return changed;
@@ -63,9 +64,9 @@ static void ring_lines(const struct view_clipmap *cm, const struct view_want *w,
 	for (size_t i = 0; i < n; i++) {
 		if (w[i].key.ly != l || w[i].cls != VIEW_CLASS_PREFETCH)
 			continue;
-		*west |= w[i].key.x == grid_wrap_x(q->lx, (int64_t)q->tx[0] - 1);
-		*north |= w[i].key.y + 1 == q->ty[0];
-		*south |= w[i].key.y == q->ty[0] + 2;
+		*west |= w[i].key.x == grid_wrap_x(q->lx, (int64_t)q->tx0 - 1);
+		*north |= w[i].key.y + 1 == q->ty0;
+		*south |= w[i].key.y == q->ty0 + q->nty;
 	}
 }
 
@@ -119,11 +120,12 @@ static void look_ahead(void **state)
 		assert_true(l >= 7);
 		const struct grid_quad *q = view_clipmap_target_of(cm, l);
 		assert_non_null(q);
-		uint32_t e2 = (uint32_t)grid_wrap_x(q->lx, (int64_t)q->tx[0] + 3);
-		uint32_t e3 = (uint32_t)grid_wrap_x(q->lx, (int64_t)q->tx[0] + 4);
+		int64_t east = (int64_t)q->tx0 + q->ntx - 1; /* the window's last column */
+		uint32_t e2 = (uint32_t)grid_wrap_x(q->lx, east + 2);
+		uint32_t e3 = (uint32_t)grid_wrap_x(q->lx, east + 3);
 		assert_true(w[i].key.x == e2 || (l >= 9 && w[i].key.x == e3));
 	}
-	assert_true(ahead > 0 && ahead <= 96);
+	assert_true(ahead > 0 && ahead <= 160);
 	/* Moving: the ring on the side the camera moves to — not the column behind it, and of
 	 * the rows north and south (it does not move north or south) only the nearer one. */
 	ring_lines(cm, w, n, 10, &west, &north, &south);
@@ -136,15 +138,15 @@ static void look_ahead(void **state)
 	struct view_clipmap_stats st0, st1;
 	view_clipmap_get_stats(cm, &st0);
 	const struct grid_quad *q10 = view_clipmap_target_of(cm, 10);
-	uint32_t tx0 = q10->tx[0];
+	uint32_t tx0 = q10->tx0;
 	double step = 360.0 / (1u << 11);
-	for (int k = 0; k < 40 && view_clipmap_target_of(cm, 10)->tx[0] == tx0; k++) {
+	for (int k = 0; k < 40 && view_clipmap_target_of(cm, 10)->tx0 == tx0; k++) {
 		t += 0.01;
 		lon += step / 8;
 		aim(cm, lon);
 		view_clipmap_motion(cm, lon, LAT, t);
 	}
-	assert_int_not_equal(view_clipmap_target_of(cm, 10)->tx[0], tx0);
+	assert_int_not_equal(view_clipmap_target_of(cm, 10)->tx0, tx0);
 	assert_int_equal(view_clipmap_update(cm, 10), 1);
 	n = ask(cm, s, w);
 	for (size_t i = 0; i < n; i++)

@@ -17,6 +17,7 @@
 
 #include "client/view/gl_context.h"
 #include "client/view/view.h"
+#include "client/view/view_levels.h"
 #include "client/view/view_source_local.h"
 #include "common/geo.h"
 #include "common/img.h"
@@ -162,7 +163,8 @@ static void budget_stops_refining(void **state)
 		}
 		assert_true(st.complete);
 		assert_int_equal(st.llast, st.lmax);
-		assert_int_equal(complete_at, b ? 1 + st.lmax - st.lmin : 1);
+		/* one level a frame with the budget: lmin .. dmax (the finer ones textures only) */
+		assert_int_equal(complete_at, b ? 1 + st.dmax - st.lmin : 1);
 		view_destroy(v);
 		view_source_destroy(src);
 	}
@@ -174,27 +176,31 @@ static void budget_stops_refining(void **state)
 static void check_toroidal(struct view *v, const float *hbuf, const unsigned char *nbuf)
 {
 	struct view_clipmap *cm = view_get_clipmap(v);
-	uint32_t T = view_clipmap_tile_size(cm);
+	uint32_t T = view_clipmap_tile_size(cm), S = view_clipmap_window_size(cm);
 	int checked = 0;
 	for (int l = 0; l < view_clipmap_levels(cm); l++) {
 		const struct grid_quad *q = view_clipmap_held(cm, l);
 		if (!q)
 			continue;
 		uint64_t W = (uint64_t)grid_tiles_x(q->lx) * T;
-		const float *hs = hbuf + (size_t)l * T * T;
-		const unsigned char *ns = nbuf + (size_t)l * T * T * 2;
-		for (uint32_t j = 0; j < T; j++)
-			for (uint32_t i = 0; i < T; i++) {
-				uint64_t u = ((uint64_t)q->u0 + i) % W, vv = (uint64_t)q->v0 + j;
-				size_t o = (size_t)(vv % T) * T + (size_t)(u % T);
-				float want = pattern_height(q->lx, q->ly, u, vv);
-				if (hs[o] != want) {
-					fail_msg("level %d (%d,%d) window texel (%u,%u): height %g, want %g",
-						 l, q->lx, q->ly, i, j, hs[o], want);
+		const float *hs = hbuf + (size_t)l * S * S;
+		const unsigned char *ns = nbuf + (size_t)l * S * S * 2;
+		/* a level narrower than the texture repeats across it */
+		uint64_t period = W < S ? W : S;
+		for (uint32_t j = 0; j < q->h; j++)
+			for (uint32_t i = 0; i < q->w; i++)
+				for (uint64_t rep = 0; rep < S; rep += period) {
+					uint64_t u = ((uint64_t)q->u0 + i) % W, vv = (uint64_t)q->v0 + j;
+					size_t o = (size_t)(vv % S) * S + (size_t)((u + rep) % S);
+					float want = pattern_height(q->lx, q->ly, u, vv);
+					if (hs[o] != want) {
+						fail_msg("level %d (%d,%d) window texel (%u,%u): height "
+							 "%g, want %g",
+							 l, q->lx, q->ly, i, j, hs[o], want);
+					}
+					assert_int_equal(ns[o * 2], (unsigned char)(u * 3 + vv));
+					assert_int_equal(ns[o * 2 + 1], (unsigned char)(vv * 5 + q->ly));
 				}
-				assert_int_equal(ns[o * 2], (unsigned char)(u * 3 + vv));
-				assert_int_equal(ns[o * 2 + 1], (unsigned char)(vv * 5 + q->ly));
-			}
 		checked++;
 	}
 	assert_true(checked >= 3);
@@ -209,10 +215,10 @@ static void toroidal_after_moves(void **state)
 	struct synth pat = { .mode = SYNTH_PATTERN };
 	struct view_source *src = synth_create(&pat, 32, 10);
 	struct view *v = make_view(ctx, src, 64, 64);
-	uint32_t T = 32;
+	uint32_t S = 32 * VIEW_WINDOW_TILES;
 	int nl = 11;
-	float *hbuf = xmalloc((size_t)T * T * nl * 4);
-	unsigned char *nbuf = xmalloc((size_t)T * T * nl * 2);
+	float *hbuf = xmalloc((size_t)S * S * nl * 4);
+	unsigned char *nbuf = xmalloc((size_t)S * S * nl * 2);
 	/* Small steps (partial updates), a jump, the antimeridian, towards the pole (anisotropic
 	 * levels), and back. */
 	static const double path[][3] = {
@@ -229,22 +235,24 @@ static void toroidal_after_moves(void **state)
 		assert_int_equal(view_frame_complete(v, &cam, 20, &st, NULL), 0);
 		assert_true(st.complete);
 		assert_int_equal(view_clipmap_read(view_get_clipmap(v), VIEW_HEIGHT, hbuf,
-						   (size_t)T * T * nl * 4), 0);
+						   (size_t)S * S * nl * 4), 0);
 		assert_int_equal(view_clipmap_read(view_get_clipmap(v), VIEW_NORMAL, nbuf,
-						   (size_t)T * T * nl * 2), 0);
+						   (size_t)S * S * nl * 2), 0);
 		check_toroidal(v, hbuf, nbuf);
 		view_clipmap_get_stats(view_get_clipmap(v), &cs);
 		if (k == 1) {
 			/* A move of a few texels uploads a few strips, not whole levels. */
 			uint64_t d = cs.bytes_uploaded - prev_bytes;
 			assert_true(d > 0);
-			if (d >= (uint64_t)T * T * 10 * 3)
+			if (d >= (uint64_t)S * S * 10) /* a whole window of one level */
 				fail_msg("a small move uploaded %llu bytes", (unsigned long long)d);
 		}
 		prev_bytes = cs.bytes_uploaded;
 	}
-	/* Thin: only quads and their rings are held (16 tiles per level and role at most). */
-	assert_true(cs.tiles_held <= (size_t)nl * 3 * 16);
+	/* Thin: only windows and their rings are held ((n + 3)² tiles per level and role at
+	 * most, n = VIEW_WINDOW_TILES). */
+	const size_t ring = (VIEW_WINDOW_TILES + 3) * (VIEW_WINDOW_TILES + 3);
+	assert_true(cs.tiles_held <= (size_t)nl * 3 * ring);
 	free(hbuf);
 	free(nbuf);
 	view_destroy(v);

@@ -38,7 +38,7 @@ struct throttle {
 	size_t wants, ahead; /* want-sets received; look-ahead entries in them */
 	bool disordered;     /* a want-set put a finer quad, or a ring tile, before a quad */
 	int hold;	     /* tiles of this level are kept back (-1: none) */
-	struct view_tile kept[64];
+	struct view_tile kept[512];
 	int nkept;
 };
 
@@ -79,7 +79,7 @@ static int th_poll(struct view_source *s, struct view_tile *out)
 				t->in->ops->release(t->in, out);
 				continue;
 			}
-			assert_true(t->nkept < 64);
+			assert_true(t->nkept < 512);
 			t->kept[t->nkept++] = *out;
 		}
 	}
@@ -295,7 +295,9 @@ static void slow_tiles_leave_the_budget(void **state)
 	now += 1.0 / 30;
 	assert_int_equal(view_frame(v, &b, now, &st), 0);
 	assert_true(st.tiles_received > 0);
-	assert_int_equal(st.levels_uploaded, st.lmax - st.lmin + 1);
+	assert_true(st.levels_uploaded >= 1);
+	for (int l = st.lmin; l <= st.dmax; l++)
+		assert_true(resident(v, l));
 	assert_true(st.complete);
 	view_destroy(v);
 	view_source_destroy(&t->base);
@@ -432,7 +434,8 @@ static double horizon_row(const unsigned char *px, int w, int h)
 	return sum / w;
 }
 
-/* Right after a jump only level 0 (the whole globe) can be drawn. Its disk must still have
+/* Right after a jump only the whole-globe levels (0, and up to 2 whose 4×4-tile window is
+ * the whole level) can be drawn. The coarsest's disk must still have
  * the shape of the ground: on a flat planet, the horizon at 10 km lies on the same row as in
  * the complete picture. (Before the fix the visible ground was all in level 0's fan, a cone
  * from the nadir to the horizon cap, and the horizon sank by about 0.7°.) */
@@ -454,9 +457,11 @@ static void level0_stand_in_has_horizon(void **state)
 	refill(t, 0, 0);
 	now += 1.0 / 30;
 	assert_int_equal(view_frame(v, &b, now, &st), 0);
-	assert_int_equal(st.lfirst, 0);
-	assert_int_equal(st.llast, 0);
-	assert_true(st.lmin >= 2);
+	/* the whole-globe levels alone: level 0, and every level whose window (4×4 tiles) is the
+	 * whole level — up to level 2 */
+	assert_true(st.lfirst <= 2);
+	assert_int_equal(st.llast, st.lfirst);
+	assert_true(st.lmax >= st.lfirst + 4);
 	view_read_rgba(v, px);
 	double stand_in = horizon_row(px, W, H);
 	settle(v, t, &b, &now);
