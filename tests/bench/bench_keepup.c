@@ -266,17 +266,19 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 				   .pitch = -10, .fov_y = 60, .width = WIDTH, .height = HEIGHT };
 	int lmin, lmax;
 	view_level_range(&c->body, &cam, agl, N_PHI, c->max_level, &lmin, &lmax);
+	/* as the viewer: the levels drawn, and finer ones for their colour and normals */
+	int dmax = view_detail_max(&c->body, &cam, agl, c->T, lmax, c->max_level);
 	double cap = view_horizon_cap(&c->body, cam.alt);
 	bool changed = !c->sent_once;
 	for (int l = 0; l < c->nlevels; l++) {
-		if (l != 0 && (l < lmin || l > lmax)) {
+		if (l != 0 && (l < lmin || l > dmax)) {
 			changed |= view_clipmap_target(c->cm, l, NULL);
 			continue;
 		}
 		const struct grid_quad *cur = view_clipmap_target_of(c->cm, l);
 		int lx = view_level_lx(l, lat, cur ? cur->lx : -1);
 		struct grid_quad q;
-		grid_quad(lx, l, c->T, lon, lat, &q);
+		grid_window(lx, l, c->T, view_clipmap_window_size(c->cm), lon, lat, &q);
 		changed |= view_clipmap_target(c->cm, l, &q);
 	}
 	if (c->ahead)
@@ -305,7 +307,8 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	}
 	if (llast != lmax)
 		complete = false;
-	for (int l = lmin; l <= lmax && complete; l++) {
+	for (int l = lmin; l <= dmax && complete; l++) {
+		view_clipmap_update(c->cm, l);
 		const struct grid_quad *h = view_clipmap_held(c->cm, l);
 		const struct grid_quad *t = view_clipmap_target_of(c->cm, l);
 		complete = h && t && grid_quad_equal(h, t);

@@ -73,7 +73,7 @@ int main(int argc, char **argv)
 			fprintf(stderr, "bench_view: %s: not complete\n", views[i].name);
 		/* The in-process engine goes on with the ring around the view (prefetch): let it
 		 * finish — a daemon does that work elsewhere — so the frames time the client. */
-		for (int k = 0; k < 100 && view_idle(v, 0.3) > 0; k++)
+		for (int k = 0; k < 100 && view_idle(v, 1.0) > 0; k++)
 			view_frame(v, &views[i].c, 0, &st);
 		double c0 = cpu_ms();
 		for (int k = 0; k < N; k++) {
@@ -117,7 +117,7 @@ int main(int argc, char **argv)
 			const struct grid_quad *q = view_clipmap_held(cm, l);
 			if (!q)
 				continue;
-			struct grid_region rg[9];
+			struct grid_region rg[GRID_MAX_REGIONS];
 			int nr = grid_update_regions(had[l] ? &prev[l] : NULL, q, rg);
 			for (int r = 0; r < nr; r++)
 				minb += (uint64_t)((double)rg[r].w * rg[r].h * bpt);

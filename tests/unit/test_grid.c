@@ -249,7 +249,7 @@ static void windows(void **state)
 	assert_int_equal(q.v0, (int64_t)(32 - 4) * T);
 	assert_int_equal(q.nty, 4);
 	/* the antimeridian: the columns wrap */
-	grid_window(6, 5, T, S, 179.9, 0.0, &q);
+	grid_window(6, 5, T, S, 179.9, 0.3, &q);
 	assert_int_equal(grid_quad_tiles(&q, 0, keys), 25);
 	bool east = false, west = false;
 	for (int i = 0; i < 25; i++) {
