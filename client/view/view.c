@@ -8,7 +8,7 @@
  *   frame; the time budget counts the frame's texture uploads and only holds back further
  *   uploads of new quads (taking tiles, drawing: not the plan's to stop).
  * - Detail: a ring's heights come from its own level, its colour and normals from the finest
- *   level up to VIEW_DETAIL finer whose window (VIEW_WINDOW_TILES tiles wide) covers it — a
+ *   level up to CLIPMAP_DETAIL finer whose window (CLIPMAP_WINDOW_TILES tiles wide) covers it — a
  *   texel about a pixel wide across the ring, where its own level's would be 4–8. Where that
  *   level is not resident yet (after a jump), the next coarser one that is.
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
@@ -200,7 +200,7 @@ static struct program *get_program(struct view *v, int bits, char err[256])
 static double circle_theta(int c, int m)
 {
 	int i = c / m, j = c % m;
-	double r0 = view_ring_radius(i), r1 = view_ring_radius(i + 1);
+	double r0 = clipmap_ring_radius(i), r1 = clipmap_ring_radius(i + 1);
 	return r0 * pow(r1 / r0, (double)j / m);
 }
 
@@ -374,7 +374,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->max_level = p->max_level < GRID_MAX_LEVEL ? p->max_level : GRID_MAX_LEVEL;
 	v->nlevels = v->max_level + 1;
 	v->T = p->tile_size;
-	v->S = VIEW_WINDOW_TILES * v->T;
+	v->S = CLIPMAP_WINDOW_TILES * v->T;
 	v->reversed = gl->ClipControl != NULL;
 	const char *nc = getenv("CLIPMAP_NO_CULL");
 	v->cull = !v->d.no_cull && !(nc && strcmp(nc, "1") == 0);
@@ -567,7 +567,7 @@ static int bind_program(struct view *v, int bits, int i, int c, float fade)
 	level_uniforms(v, c, p->u[U_PC], p->u[U_VC], p->u[U_SC]);
 	level_uniforms(v, v->detail[i], p->u[U_DF], p->u[U_DVF], p->u[U_DSF]);
 	level_uniforms(v, v->detail[c], p->u[U_DC], p->u[U_DVC], p->u[U_DSC]);
-	double R = view_ring_radius(i);
+	double R = clipmap_ring_radius(i);
 	gl->Uniform3f(p->u[U_BLEND], (float)R, (float)(circle_theta(i * v->d.m_rings + v->j0,
 								     v->d.m_rings) / R),
 		      (float)BLEND_END);
@@ -592,7 +592,7 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 	 * the pole, lon's curvature there): per-fragment lon/lat where the level reaches 0.8 of
 	 * the way to the nearer pole. */
 	double dpole = M_PI / 2 - fabs(v->last.lat * DEG);
-	int bits = v->frame_bits | (fmin(view_ring_radius(i), cap) > 0.8 * dpole ? VAR_GEO_FRAG : 0);
+	int bits = v->frame_bits | (fmin(clipmap_ring_radius(i), cap) > 0.8 * dpole ? VAR_GEO_FRAG : 0);
 	/* Cull against the heights the two levels' slices hold (the planet's bounds until
 	 * both have them), and against the horizon of the lowest ground between the camera and
 	 * the level (the slices of this level and every finer one drawn hold all of it): a sphere
@@ -628,8 +628,8 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 				if (blended != (pass == 1))
 					continue;
 				double split = circle_theta(j * m + v->j0, m);
-				double th0 = part ? view_ring_radius(j + 1) : split;
-				double th1 = part ? split : view_ring_radius(j);
+				double th0 = part ? clipmap_ring_radius(j + 1) : split;
+				double th1 = part ? split : clipmap_ring_radius(j);
 				const size_t *sf = v->sec_first + (size_t)(2 * j + part) * v->nsec;
 				for (int sc = 0; sc < v->nsec; sc++)
 					draw_sector(v, &b, &r, th0, th1, sc, sf[sc], sf[sc + 1] - sf[sc],
@@ -639,7 +639,7 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 			for (int sc = 0; sc < v->nsec && (pass == 1) == fading; sc++) {
 				size_t f = v->fan_first[last + 1] + (size_t)sector_k(v, sc) * 3;
 				size_t n = (size_t)(sector_k(v, sc + 1) - sector_k(v, sc)) * 3;
-				draw_sector(v, &b, &r, 0, view_ring_radius(last + 1), sc, f, n, cap,
+				draw_sector(v, &b, &r, 0, clipmap_ring_radius(last + 1), sc, f, n, cap,
 					    &idx, &cidx);
 			}
 		ranges_flush(&r);
@@ -656,7 +656,7 @@ static void set_targets(struct view *v, int lmin, int dmax, bool *changed)
 			continue;
 		}
 		const struct grid_quad *cur = view_clipmap_target_of(v->cm, l);
-		int lx = view_level_lx(l, v->last.lat, cur ? cur->lx : -1);
+		int lx = clipmap_level_lx(l, v->last.lat, cur ? cur->lx : -1);
 		struct grid_quad q;
 		grid_window(lx, l, v->T, v->S, v->last.lon, v->last.lat, &q);
 		*changed |= view_clipmap_target(v->cm, l, &q);
@@ -851,11 +851,11 @@ static void frame_plan(struct view *v, struct frame *f)
 {
 	int first = -1, last = -1, nd = 0;
 	for (int j = f->lmin; j >= 0 && first < 0; j--)
-		if (usable(v, j, fmin(view_ring_radius(j), f->cap), &f->up))
+		if (usable(v, j, fmin(clipmap_ring_radius(j), f->cap), &f->up))
 			first = j;
 	bool detailed = true;
 	for (int i = first; i >= 0 && i <= f->lmax; i++) {
-		double r = fmin(view_ring_radius(i), f->cap);
+		double r = fmin(clipmap_ring_radius(i), f->cap);
 		if (i != first && !usable(v, i, r, &f->up)) {
 			v->was_usable[i] = false;
 			continue;
@@ -867,9 +867,9 @@ static void frame_plan(struct view *v, struct frame *f)
 		v->fade[i] = 1;
 		if (v->d.fade_s > 0 && i != first)
 			v->fade[i] = fmin(1, (f->now_s - v->ready_since[i]) / v->d.fade_s);
-		/* Its colour and normals: the finest level up to VIEW_DETAIL finer that covers it
+		/* Its colour and normals: the finest level up to CLIPMAP_DETAIL finer that covers it
 		 * (coarse first, so the uploads the budget allows go to the coarser rings). */
-		int want = i + VIEW_DETAIL < f->dmax ? i + VIEW_DETAIL : f->dmax;
+		int want = i + CLIPMAP_DETAIL < f->dmax ? i + CLIPMAP_DETAIL : f->dmax;
 		v->detail[i] = i;
 		for (int l = i + 1; l <= want; l++)
 			if (usable(v, l, r, &f->up))

@@ -53,7 +53,7 @@ struct view_desc {
 struct view_frame_stats {
 	double cpu_ms;	      /* the frame's CPU time including glFinish */
 	int lmin, lmax;	      /* levels the camera wants drawn (geometry) */
-	int dmax;	      /* the finest level it wants for texture (lmax + VIEW_DETAIL at most) */
+	int dmax;	      /* the finest level it wants for texture (lmax + CLIPMAP_DETAIL at most) */
 	int lfirst, llast;    /* the coarsest and finest level drawn (-1: none) */
 	int levels_drawn;     /* how many (levels between them whose texture is not ready are
 			       * left out, the coarser level drawn over their rings) */

@@ -1,5 +1,5 @@
 /* view_clipmap — see view_clipmap.h. Each level keeps at most SLOTS tiles per role: the
- * tiles its window touches (up to (n+1)², n = VIEW_WINDOW_TILES), the ring around them and the
+ * tiles its window touches (up to (n+1)², n = CLIPMAP_WINDOW_TILES), the ring around them and the
  * look-ahead. A CPU copy of the height slices answers ground-height queries (camera height
  * above the terrain) without reading the GPU back.
  */
@@ -18,7 +18,7 @@
 /* Per role: the window's tiles and their ring ((n+3)², a line of the ring n+3 long) and the
  * look-ahead (≤ 2 × AHEAD_MAX lines). */
 #define AHEAD_MAX 2
-#define LINE (VIEW_WINDOW_TILES + 3)
+#define LINE (CLIPMAP_WINDOW_TILES + 3)
 #define SLOTS (LINE * LINE + LINE * 2 * AHEAD_MAX)
 #define AHEAD_LEAD_S 0.15   /* look ahead as far as the camera moves in this time */
 #define AHEAD_CAP 160	    /* look-ahead tiles per want-set, all levels and roles together */
@@ -96,7 +96,7 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 	cm->gl = gl;
 	cm->src = src;
 	cm->T = p->tile_size;
-	cm->S = VIEW_WINDOW_TILES * cm->T;
+	cm->S = CLIPMAP_WINDOW_TILES * cm->T;
 	cm->nlevels = nlevels;
 	memcpy(cm->layer, layer, sizeof layer);
 	cm->zeros = xcalloc((size_t)cm->T * cm->T, 4);

@@ -1,6 +1,6 @@
 /* view_clipmap — the viewer's clipmap textures and the tiles in flight. Per layer role
  * (height R32F, normal RG8, colour sRGB8_A8) one 2D texture array with a slice per clipmap
- * level, S × S texels (S = VIEW_WINDOW_TILES · T), addressed toroidally: level texel (u, v)
+ * level, S × S texels (S = CLIPMAP_WINDOW_TILES · T), addressed toroidally: level texel (u, v)
  * lives at (u mod S, v mod S); a level narrower than S repeats across it. Each level has a
  * target window (grid_window: where the camera wants it) and the window its texture holds;
  * when every tile of the target has arrived, only the changed regions are copied

@@ -4,11 +4,6 @@
 #include <math.h>
 
 #define DEG (M_PI / 180.0)
-/* Longitude windows may be filled to 85 % of their half-width (staleness margin 15 %); a
- * coarser lx is left for a finer one only when the ring fits in 75 % (hysteresis). */
-#define K_LON 0.85
-#define K_LON_BACK 0.75
-
 void view_body_init(struct view_body *b, double a, double f)
 {
 	b->a = a;
@@ -20,19 +15,12 @@ void view_body_init(struct view_body *b, double a, double f)
 
 double view_body_n(const struct view_body *b, double s) { return b->a / sqrt(1 - b->e2 * s * s); }
 
-double view_ring_radius(int i)
-{
-	if (i <= 0)
-		return 2 * M_PI / 3;
-	return VIEW_RING_K * (M_PI / 2) / (double)((uint64_t)1 << i);
-}
-
 double view_horizon_cap(const struct view_body *b, double alt)
 {
 	double r0 = b->a + b->hmin;
 	double c1 = acos(fmin(1.0, r0 / (b->a + fmax(alt, b->hmin))));
 	double c2 = acos(r0 / (b->a + b->hmax));
-	return fmin(c1 + c2, view_ring_radius(0));
+	return fmin(c1 + c2, clipmap_ring_radius(0));
 }
 
 void view_level_range(const struct view_body *b, const struct view_camera *c, double agl,
@@ -40,13 +28,13 @@ void view_level_range(const struct view_body *b, const struct view_camera *c, do
 {
 	double cap = view_horizon_cap(b, c->alt);
 	int lo = 0;
-	while (lo < max_level && view_ring_radius(lo + 1) >= cap)
+	while (lo < max_level && clipmap_ring_radius(lo + 1) >= cap)
 		lo++;
 	double fov = (c->fov_y > 0 ? c->fov_y : 60) * DEG;
 	double s = fmax(agl, 0.5) * tan(fov / (c->height > 0 ? c->height : 720));
 	double need = s * n_phi / (2 * M_PI) / b->a;
 	int hi = lo;
-	while (hi < max_level && view_ring_radius(hi + 1) >= need)
+	while (hi < max_level && clipmap_ring_radius(hi + 1) >= need)
 		hi++;
 	*lmin = lo;
 	*lmax = hi;
@@ -59,44 +47,12 @@ int view_detail_max(const struct view_body *b, const struct view_camera *c, doub
 	double px = fmax(agl, 0.05) * 2 * tan(fov / 2) / (c->height > 0 ? c->height : 720);
 	/* level L's texels are π·a / (T·2^L) metres tall: ≥ px / 2 */
 	double lim = floor(log2(2 * M_PI * b->a / ((double)T * px)));
-	int d = lmax + VIEW_DETAIL;
+	int d = lmax + CLIPMAP_DETAIL;
 	if (d > lim)
 		d = (int)lim;
 	if (d > max_level)
 		d = max_level;
 	return d < lmax ? lmax : d;
-}
-
-static double lon_extent(double lat_deg, double r)
-{
-	double colat = M_PI / 2 - fabs(lat_deg) * DEG;
-	if (r >= colat * 0.999)
-		return M_PI; /* the disk holds a pole: every longitude */
-	return asin(fmin(1.0, sin(r) / cos(lat_deg * DEG)));
-}
-
-int view_level_lx(int ly, double lat_deg, int cur_lx)
-{
-	const double n = VIEW_WINDOW_TILES;
-	/* The coarsest candidate: a level as narrow as the window covers every longitude. */
-	int lo = 0;
-	while (lo < ly + 1 && ldexp(1.0, lo + 1) <= n)
-		lo++;
-	double ext = lon_extent(lat_deg, view_ring_radius(ly - VIEW_DETAIL));
-	int lx = lo;
-	for (int cand = ly + 1; cand > lo; cand--) {
-		double half = n * M_PI / ldexp(1.0, cand);
-		if (ext <= K_LON * half) {
-			lx = cand;
-			break;
-		}
-	}
-	if (cur_lx >= lo && cur_lx < lx) {
-		double half = n * M_PI / ldexp(1.0, lx);
-		if (ext > K_LON_BACK * half)
-			return cur_lx;
-	}
-	return lx;
 }
 
 /* The focus's u relative to the window origin, in (-(W-w)/2, (W+w)/2]. */
@@ -125,7 +81,7 @@ bool view_window_covers(const struct grid_quad *q, double lon_deg, double lat_de
 		return false;
 	if (W <= w)
 		return true;
-	double ext = lon_extent(lat_deg, r);
+	double ext = clipmap_lon_extent(lat_deg, r);
 	if (ext >= M_PI)
 		return false;
 	double rel = focus_rel_u(q, lon_deg), du = ext * W / (2 * M_PI);

@@ -1,30 +1,19 @@
-/* view_levels — the viewer's CPU-side geometry and level math (pure functions, no GL):
- * ring radii of the spherical clipmap (seed 000 §3.4), the grid level each clipmap level uses
- * (anisotropic near the poles, seed 000 §4.1), level visibility (eq. 6 and 8), whether a
- * level's texture window covers its ring, the per-level shader parameters, and the camera
- * (view and projection matrices, CPU projection of a ground point for tests).
- *
- * Conventions: clipmap level i samples grid level (lx_i, ly = i); ring i covers the view-space
- * angles θ̃ ∈ [R(i+1), R(i)] around the point under the camera, R(i) = K·(π/2)/2^i for i ≥ 1
- * (K·the window's half-height), R(0) = 2π/3 (level 0 is the whole globe in one tile).
- * Angles in radians unless named _deg. Thread-safe (no state).
+/* view_levels — the viewer's CPU-side geometry and level math (pure functions, no GL): level
+ * visibility (seed 000 eq. 6 and 8), the detail levels worth texturing with, whether a level's
+ * texture window covers its ring, the per-level shader parameters, and the camera (view and
+ * projection matrices, CPU projection of a ground point for tests). The level plan itself
+ * (ring radii, windows, lx per latitude, detail levels) is common/clipmap.h, shared with the
+ * daemon's prefetch. Angles in radians unless named _deg. Thread-safe (no state).
  */
 #ifndef CLIPMAP_VIEW_LEVELS_H
 #define CLIPMAP_VIEW_LEVELS_H
 #include <stdbool.h>
 #include <stdint.h>
 
+#include "common/clipmap.h"
 #include "common/grid.h"
 
-#define VIEW_RING_K 0.75
 #define VIEW_MAX_LEVELS (GRID_MAX_LEVEL + 1)
-/* Each level's texture window: VIEW_WINDOW_TILES × VIEW_WINDOW_TILES tiles (S = that × T
- * texels). Ring i's geometry samples heights from level i, its colour and normals come from
- * level i + VIEW_DETAIL (log2 of the window's tiles: that level's window is as wide in angle
- * as level i's quad), so a texel covers about a screen pixel across the ring instead of the
- * four to eight it would at level i (seed 000 §3.4 derives the rings from the texture). */
-#define VIEW_WINDOW_TILES GRID_WINDOW_TILES
-#define VIEW_DETAIL 2
 
 struct view_body {
 	double a, f, e2;
@@ -35,8 +24,6 @@ void view_body_init(struct view_body *b, double a, double f);
 /* Prime vertical radius of curvature N at geodetic latitude with sine s. */
 double view_body_n(const struct view_body *b, double s);
 
-/* Ring i's outer radius in view-space angle. */
-double view_ring_radius(int i);
 /* The farthest view-space angle that can be visible from height alt above the ellipsoid
  * (eq. 6, widened by the terrain's height range). */
 double view_horizon_cap(const struct view_body *b, double alt);
@@ -54,19 +41,11 @@ struct view_camera {
  * agl = the camera's height above the ground. max_level: the planet's finest ly. */
 void view_level_range(const struct view_body *b, const struct view_camera *c, double agl,
 		      int n_phi, int max_level, int *lmin, int *lmax);
-/* The finest level worth texturing with: lmax + VIEW_DETAIL, no finer than a texel of about
+/* The finest level worth texturing with: lmax + CLIPMAP_DETAIL, no finer than a texel of about
  * half the pixel under the camera (finer texels would only alias), nor than max_level.
  * T: the tile size. */
 int view_detail_max(const struct view_body *b, const struct view_camera *c, double agl,
 		    uint32_t T, int lmax, int max_level);
-
-/* The longitude grid level for clipmap level ly at the focus latitude: the finest lx ≤ ly + 1
- * whose window (VIEW_WINDOW_TILES tiles) spans the longitude extent of the widest ring it is
- * drawn on, ring ly − VIEW_DETAIL (a window as wide as the whole level when that ring holds a
- * pole).
- * cur_lx (or -1) adds hysteresis: a coarser current lx is kept unless the finer one fits
- * with room to spare. */
-int view_level_lx(int ly, double lat_deg, int cur_lx);
 
 /* Whether quad q's window holds every point within angle r of (lon, lat) with `margin`
  * texels to spare (the window's pole edges need no margin). */

@@ -276,7 +276,7 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 			continue;
 		}
 		const struct grid_quad *cur = view_clipmap_target_of(c->cm, l);
-		int lx = view_level_lx(l, lat, cur ? cur->lx : -1);
+		int lx = clipmap_level_lx(l, lat, cur ? cur->lx : -1);
 		struct grid_quad q;
 		grid_window(lx, l, c->T, view_clipmap_window_size(c->cm), lon, lat, &q);
 		changed |= view_clipmap_target(c->cm, l, &q);
@@ -297,12 +297,12 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	}
 	int first = -1, llast = -1;
 	for (int j = lmin; j >= 0 && first < 0; j--)
-		if (usable(c, j, lon, lat, fmin(view_ring_radius(j), cap)))
+		if (usable(c, j, lon, lat, fmin(clipmap_ring_radius(j), cap)))
 			first = j;
 	bool complete = first == lmin;
 	for (int i = first; i >= 0 && i <= lmax; i++) {
 		llast = i;
-		if (!(i + 1 <= lmax && usable(c, i + 1, lon, lat, fmin(view_ring_radius(i + 1), cap))))
+		if (!(i + 1 <= lmax && usable(c, i + 1, lon, lat, fmin(clipmap_ring_radius(i + 1), cap))))
 			break;
 	}
 	if (llast != lmax)

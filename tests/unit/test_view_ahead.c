@@ -39,7 +39,7 @@ static bool aim(struct view_clipmap *cm, double lon)
 	bool changed = false;
 	for (int l = 0; l < NLEVELS; l++) {
 		struct grid_quad q;
-		grid_window(l + 1, l, T, VIEW_WINDOW_TILES * T, lon, LAT, &q);
+		grid_window(l + 1, l, T, CLIPMAP_WINDOW_TILES * T, lon, LAT, &q);
 		changed |= view_clipmap_target(cm, l, &q);
 	}
 	return changed;

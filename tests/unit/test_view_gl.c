@@ -215,7 +215,7 @@ static void toroidal_after_moves(void **state)
 	struct synth pat = { .mode = SYNTH_PATTERN };
 	struct view_source *src = synth_create(&pat, 32, 10);
 	struct view *v = make_view(ctx, src, 64, 64);
-	uint32_t S = 32 * VIEW_WINDOW_TILES;
+	uint32_t S = 32 * CLIPMAP_WINDOW_TILES;
 	int nl = 11;
 	float *hbuf = xmalloc((size_t)S * S * nl * 4);
 	unsigned char *nbuf = xmalloc((size_t)S * S * nl * 2);
@@ -250,8 +250,8 @@ static void toroidal_after_moves(void **state)
 		prev_bytes = cs.bytes_uploaded;
 	}
 	/* Thin: only windows and their rings are held ((n + 3)² tiles per level and role at
-	 * most, n = VIEW_WINDOW_TILES). */
-	const size_t ring = (VIEW_WINDOW_TILES + 3) * (VIEW_WINDOW_TILES + 3);
+	 * most, n = CLIPMAP_WINDOW_TILES). */
+	const size_t ring = (CLIPMAP_WINDOW_TILES + 3) * (CLIPMAP_WINDOW_TILES + 3);
 	assert_true(cs.tiles_held <= (size_t)nl * 3 * ring);
 	free(hbuf);
 	free(nbuf);

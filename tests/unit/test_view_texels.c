@@ -8,7 +8,7 @@
  * levels (ring boundaries, the blend towards the coarser level) and sky are left out; so is
  * ground where the coordinates alias (over ~10 texels a pixel, towards the horizon).
  *
- * With detail levels (colour from VIEW_DETAIL levels finer than a ring's geometry, in windows
+ * With detail levels (colour from CLIPMAP_DETAIL levels finer than a ring's geometry, in windows
  * of 4×4 tiles) a texel covers about 2 pixels by area (the median over the picture, 1.5–2.1
  * on these views) and 3–4 along its most magnified direction, on average; with each ring's
  * own level (2×2-tile windows) it was 7–9 by area and 13–16. Why not ≤ 1.5 px everywhere:
