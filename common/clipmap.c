@@ -51,11 +51,13 @@ int clipmap_level_lx(int ly, double lat_deg, int cur_lx)
 void clipmap_level_lx_range(int ly, double lat_lo, double lat_hi, int *lx_lo, int *lx_hi)
 {
 	/* The ring's longitude extent grows with |lat|: the finest lx is the one nearest the
-	 * equator, the coarsest the one nearest a pole — or, by hysteresis, the next coarser
-	 * one (kept by a viewer that came from higher latitudes). */
+	 * equator, the coarsest the one nearest a pole — or the next coarser one where hysteresis
+	 * keeps it for a viewer that came from higher latitudes. */
 	double amin = lat_lo <= 0 && lat_hi >= 0 ? 0 : fmin(fabs(lat_lo), fabs(lat_hi));
 	double amax = fmax(fabs(lat_lo), fabs(lat_hi));
 	*lx_hi = clipmap_level_lx(ly, amin, -1);
-	int lo = clipmap_level_lx(ly, amax, -1), base = clipmap_level_lx(ly, 90, -1);
-	*lx_lo = lo > base ? lo - 1 : lo;
+	int lo = clipmap_level_lx(ly, amax, -1);
+	if (lo > 0 && clipmap_level_lx(ly, amax, lo - 1) == lo - 1)
+		lo--;
+	*lx_lo = lo;
 }

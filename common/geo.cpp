@@ -93,3 +93,9 @@ extern "C" void geo_direct(const struct geo_body *b, double lat1, double lon1, d
 {
 	b->geodesic.Direct(lat1, lon1, azi1, s12, *lat2, *lon2);
 }
+
+extern "C" void geo_direct_azi(const struct geo_body *b, double lat1, double lon1, double azi1,
+			       double s12, double *lat2, double *lon2, double *azi2)
+{
+	b->geodesic.Direct(lat1, lon1, azi1, s12, *lat2, *lon2, *azi2);
+}

@@ -36,6 +36,9 @@ void geo_inverse(const struct geo_body *b, double lat1, double lon1, double lat2
 /* Geodesic direct: the point s12 metres from (lat1, lon1) along azimuth azi1. */
 void geo_direct(const struct geo_body *b, double lat1, double lon1, double azi1, double s12,
 		double *lat2, double *lon2);
+/* The same, with the geodesic's azimuth at the destination (its bearing there). */
+void geo_direct_azi(const struct geo_body *b, double lat1, double lon1, double azi1, double s12,
+		    double *lat2, double *lon2, double *azi2);
 
 #ifdef __cplusplus
 }

@@ -626,7 +626,8 @@ static void decode_cache_ls(struct rd *r, struct proto_cache_ls *c)
 		rd_fail(r, PROTO_ERR_FIELD, "unknown filter bits 0x%x", c->filter);
 	else if ((c->filter & PROTO_CLS_PLANET) && !c->planet[0])
 		rd_fail(r, PROTO_ERR_FIELD, "planet filter without a planet");
-	else if ((c->filter & PROTO_CLS_LEVEL) && !grid_level_valid(c->lx, c->ly))
+	else if ((c->filter & PROTO_CLS_LEVEL) && c->lx != PROTO_ANY_LX &&
+		 !grid_level_valid(c->lx, c->ly))
 		rd_fail(r, PROTO_ERR_FIELD, "level %u/%u", c->lx, c->ly);
 	else if ((c->filter & PROTO_CLS_NEAR) &&
 		 !(fabs(c->lon) <= 540 && fabs(c->lat) <= 90 && c->radius_m >= 0 &&

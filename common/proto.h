@@ -250,6 +250,7 @@ struct proto_stats {
 
 #define PROTO_CLS_PLANET 1u /* cache_ls.filter bits */
 #define PROTO_CLS_LEVEL 2u
+#define PROTO_ANY_LX 255 /* CACHE_LS level filter: every lx of the ly */
 #define PROTO_CLS_NEAR 4u
 
 struct proto_cache_ls {

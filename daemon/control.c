@@ -79,7 +79,8 @@ static int ls_fn(void *ud, const struct tile *t, uint64_t used_ns)
 		if (!found)
 			return 0;
 	}
-	if ((q->filter & PROTO_CLS_LEVEL) && (t->key.lx != q->lx || t->key.ly != q->ly))
+	if ((q->filter & PROTO_CLS_LEVEL) &&
+	    ((q->lx != PROTO_ANY_LX && t->key.lx != q->lx) || t->key.ly != q->ly))
 		return 0;
 	if (q->filter & PROTO_CLS_NEAR) {
 		struct geo_rect rc;

@@ -1,8 +1,12 @@
-/* prefetch — see prefetch.h. A bbox level is enumerated arithmetically (rows of tile columns,
- * wrapping at the antimeridian). A path level is materialised as a sorted, deduplicated list:
- * points every half tile along each geodesic (GeographicLib geo_inverse / geo_direct) and
- * across the corridor, each mapped to its tile. Levels are built one at a time, so a job holds
- * one level's corridor at most (and at most PREFETCH_MAX_TILES keys in total are accepted). */
+/* prefetch — see prefetch.h. A level's tiles are what a clipmapview with its focus anywhere in
+ * the region would ask for there (common/clipmap.h): the window of CLIPMAP_WINDOW_TILES tiles
+ * centred on the focus and the ring around it, on every lx a viewer at that latitude may use.
+ * A bbox level is a list of row segments (one per row and lx: a run of columns, wrapping at the
+ * antimeridian), enumerated arithmetically. A path level is materialised as a sorted,
+ * deduplicated list of keys: focus points every tile along each geodesic (GeographicLib) and
+ * across the corridor (perpendicular to the geodesic's bearing at that point), each adding its
+ * window and ring. Levels are built one at a time, so a job holds one level at most (and at
+ * most PREFETCH_MAX_TILES keys in total are accepted). */
 #include "prefetch.h"
 
 #include <errno.h>
@@ -10,9 +14,16 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/clipmap.h"
 #include "common/errbuf.h"
 #include "common/geo.h"
 #include "common/xalloc.h"
+
+/* A run of tiles in one row: (x0 .. x0 + n − 1 wrapping, y) at level (lx, ly). */
+struct segment {
+	uint32_t x0, n, y;
+	uint8_t lx;
+};
 
 struct prefetch_iter {
 	const struct planet *p;
@@ -29,8 +40,10 @@ struct prefetch_iter {
 	uint64_t pos;	 /* tile index within the level */
 	int li;		 /* layer index within layers[] */
 	uint64_t ntiles; /* tiles at the current level */
-	/* bbox level: columns x0 .. x0+ncols-1 (wrapping), rows y0 .. y1 */
-	uint32_t x0, ncols, y0;
+	/* bbox level: its row segments; the position: segment seg, column col */
+	struct segment *segs;
+	size_t nsegs, seg;
+	uint32_t col;
 	/* path level */
 	struct tile_key *list;
 	size_t nlist;
@@ -39,6 +52,8 @@ struct prefetch_iter {
 static int cmp_key(const void *a, const void *b)
 {
 	const struct tile_key *x = a, *y = b;
+	if (x->lx != y->lx)
+		return x->lx < y->lx ? -1 : 1;
 	if (x->y != y->y)
 		return x->y < y->y ? -1 : 1;
 	if (x->x != y->x)
@@ -46,32 +61,87 @@ static int cmp_key(const void *a, const void *b)
 	return 0;
 }
 
-static uint32_t lon_to_x(int lx, double lon)
+/* Sorts and deduplicates the path list. */
+static void compact(struct prefetch_iter *it)
 {
-	double t = (lon + 180.0) / 360.0 * (double)grid_tiles_x(lx);
-	return grid_wrap_x(lx, (int64_t)floor(t));
-}
-
-static uint32_t lat_to_y(int ly, double lat)
-{
-	double t = (90.0 - lat) / 180.0 * (double)grid_tiles_y(ly);
-	int64_t y = (int64_t)floor(t);
-	int64_t max = (int64_t)grid_tiles_y(ly) - 1;
-	return (uint32_t)(y < 0 ? 0 : y > max ? max : y);
-}
-
-/* Appends the tile under (lat, lon) to the list unless it equals the last one. */
-static void add_point(struct prefetch_iter *it, size_t *cap, int ly, double lat, double lon)
-{
-	struct tile_key k = { .lx = (uint8_t)(ly + 1), .ly = (uint8_t)ly,
-			      .x = lon_to_x(ly + 1, lon), .y = lat_to_y(ly, lat) };
-	if (it->nlist && it->list[it->nlist - 1].x == k.x && it->list[it->nlist - 1].y == k.y)
+	if (it->nlist < 2)
 		return;
+	qsort(it->list, it->nlist, sizeof *it->list, cmp_key);
+	size_t n = 1;
+	for (size_t i = 1; i < it->nlist; i++)
+		if (cmp_key(&it->list[i], &it->list[n - 1]))
+			it->list[n++] = it->list[i];
+	it->nlist = n;
+}
+
+static void push_key(struct prefetch_iter *it, size_t *cap, size_t *compacted,
+		     const struct tile_key *k)
+{
 	if (it->nlist == *cap) {
-		*cap = *cap ? *cap * 2 : 1024;
-		it->list = xrealloc(it->list, *cap * sizeof *it->list);
+		/* mostly repeats of the last focus's window: compact before growing */
+		if (it->nlist > 2 * *compacted + 4096) {
+			compact(it);
+			*compacted = it->nlist;
+		}
+		if (it->nlist == *cap) {
+			*cap = *cap ? *cap * 2 : 4096;
+			it->list = xrealloc(it->list, *cap * sizeof *it->list);
+		}
 	}
-	it->list[it->nlist++] = k;
+	it->list[it->nlist++] = *k;
+}
+
+/* The rows a viewer's window and ring cover at level ly with its focus at lat: *y0 .. *y1. */
+static void window_rows(const struct prefetch_iter *it, int ly, double lat, uint32_t *y0,
+			uint32_t *y1)
+{
+	uint32_t T = it->p->tile_size;
+	struct grid_quad q;
+	grid_window(0, ly, T, CLIPMAP_WINDOW_TILES * T, 0, lat, &q);
+	*y0 = q.ty0 > 0 ? q.ty0 - 1 : 0;
+	uint32_t last = q.ty0 + q.nty; /* the ring's row below the window */
+	*y1 = last < grid_tiles_y(ly) ? last : grid_tiles_y(ly) - 1;
+}
+
+/* The columns at level lx that the windows and rings of viewers focused anywhere in
+ * longitudes [lon, lon + span] (span ≥ 0 degrees) cover: from *x0, *n of them (wrapping; all
+ * of them, from 0, where the windows go round the globe or a window is the whole level). */
+static void window_cols(const struct prefetch_iter *it, int lx, double lon, double span,
+			uint32_t *x0, uint32_t *n)
+{
+	int64_t T = it->p->tile_size, S = CLIPMAP_WINDOW_TILES * T, W = grid_tiles_x(lx);
+	/* window origins in texels (unwrapped), as grid_window places them */
+	double fw = (lon + 180.0) / 360.0 * (double)(W * T), fe = fw + span / 360.0 * (double)(W * T);
+	int64_t uw = (int64_t)floor(fw - S / 2.0 + 0.5), ue = (int64_t)floor(fe - S / 2.0 + 0.5);
+	int64_t first = (int64_t)floor((double)uw / (double)T) - 1;
+	int64_t last = (int64_t)floor((double)(ue + S - 1) / (double)T) + 1;
+	if (W * T <= S || last - first + 1 >= W) {
+		*x0 = 0;
+		*n = (uint32_t)W;
+		return;
+	}
+	*x0 = grid_wrap_x(lx, first);
+	*n = (uint32_t)(last - first + 1);
+}
+
+/* Adds the window and ring of a viewer focused at (lat, lon), on every lx it may use there. */
+static void add_focus(struct prefetch_iter *it, size_t *cap, size_t *compacted, int ly,
+		      double lat, double lon)
+{
+	int lxa, lxb;
+	clipmap_level_lx_range(ly, lat, lat, &lxa, &lxb);
+	uint32_t y0, y1;
+	window_rows(it, ly, lat, &y0, &y1);
+	for (int lx = lxa; lx <= lxb; lx++) {
+		uint32_t x0, n;
+		window_cols(it, lx, lon, 0, &x0, &n);
+		for (uint32_t y = y0; y <= y1; y++)
+			for (uint32_t i = 0; i < n; i++) {
+				struct tile_key k = { .lx = (uint8_t)lx, .ly = (uint8_t)ly, .y = y,
+						      .x = grid_wrap_x(lx, (int64_t)x0 + i) };
+				push_key(it, cap, compacted, &k);
+			}
+	}
 }
 
 /* Builds the corridor's tile list for level ly. Returns 0 or -E2BIG (too many samples). */
@@ -80,8 +150,10 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 	free(it->list);
 	it->list = NULL;
 	it->nlist = 0;
-	size_t cap = 0;
-	double tile_m = M_PI * geo_body_a(body) / (double)grid_tiles_y(ly); /* north-south */
+	size_t cap = 0, compacted = 0;
+	/* a tile north-south: the focus points are a tile apart (a window reaches two tiles and
+	 * its ring a third from its focus, so nothing between two points is missed) */
+	double tile_m = M_PI * geo_body_a(body) / (double)grid_tiles_y(ly);
 	uint64_t samples = 0;
 	for (uint32_t i = 0; i < it->npts; i++) {
 		double lat1 = it->pts[i].lat, lon1 = it->pts[i].lon;
@@ -89,68 +161,78 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 		if (i + 1 < it->npts)
 			geo_inverse(body, lat1, lon1, it->pts[i + 1].lat, it->pts[i + 1].lon, &s12,
 				    &azi1, &azi2);
-		double s = 0;
-		for (;;) {
-			double lat, lon;
+		for (double s = 0;;) {
+			double lat = lat1, lon = lon1, azi = azi1;
 			if (s > 0)
-				geo_direct(body, lat1, lon1, azi1, s, &lat, &lon);
-			else
-				lat = lat1, lon = lon1;
+				geo_direct_azi(body, lat1, lon1, azi1, s, &lat, &lon, &azi);
+			/* across: a tile of longitude is cos(lat) shorter */
 			double c = fmax(cos(lat * M_PI / 180.0), 0.02);
-			double step = tile_m * 0.5 * c;
+			double step = tile_m * c;
 			int kmax = (int)ceil(it->width * 0.5 / step);
-			add_point(it, &cap, ly, lat, lon);
+			add_focus(it, &cap, &compacted, ly, lat, lon);
 			for (int k = 1; k <= kmax; k++) {
 				double off = fmin(k * step, it->width * 0.5), la, lo;
-				geo_direct(body, lat, lon, azi1 + 90.0, off, &la, &lo);
-				add_point(it, &cap, ly, la, lo);
-				geo_direct(body, lat, lon, azi1 - 90.0, off, &la, &lo);
-				add_point(it, &cap, ly, la, lo);
+				geo_direct(body, lat, lon, azi + 90.0, off, &la, &lo);
+				add_focus(it, &cap, &compacted, ly, la, lo);
+				geo_direct(body, lat, lon, azi - 90.0, off, &la, &lo);
+				add_focus(it, &cap, &compacted, ly, la, lo);
 			}
 			samples += 1 + 2 * (uint64_t)kmax;
-			if (samples > 4 * (uint64_t)PREFETCH_MAX_TILES)
+			if (samples > (uint64_t)PREFETCH_MAX_TILES / 8)
 				return -E2BIG;
 			if (s >= s12)
 				break;
 			s = fmin(s + step, s12);
 		}
 	}
-	if (it->nlist) {
-		qsort(it->list, it->nlist, sizeof *it->list, cmp_key);
-		size_t n = 1;
-		for (size_t i = 1; i < it->nlist; i++)
-			if (cmp_key(&it->list[i], &it->list[n - 1]))
-				it->list[n++] = it->list[i];
-		it->nlist = n;
-	}
+	compact(it);
 	return 0;
+}
+
+/* Tile row y's latitude band at level ly. */
+static void row_lats(int ly, uint32_t y, double *south, double *north)
+{
+	double h = 180.0 / (double)grid_tiles_y(ly);
+	*north = 90.0 - h * y;
+	*south = *north - h;
 }
 
 static void bbox_level(struct prefetch_iter *it, int ly)
 {
-	int lx = ly + 1;
 	const struct geo_rect *b = &it->bbox;
-	uint32_t W = grid_tiles_x(lx);
-	uint32_t xa = lon_to_x(lx, b->west);
-	/* east edge: the tile holding the point just west of it */
-	double e = b->east;
-	double te = (e + 180.0) / 360.0 * W;
-	int64_t xe = (int64_t)ceil(te) - 1;
-	uint32_t xb = grid_wrap_x(lx, xe);
-	uint32_t ncols = xb >= xa ? xb - xa + 1 : W - xa + xb + 1;
-	if (b->west > b->east && ncols > W)
-		ncols = W;
-	if (b->west > b->east && xa == xb && ncols == 1 && b->west - b->east < 360.0)
-		ncols = W; /* crosses the antimeridian and covers all but a sliver */
-	it->x0 = xa;
-	it->ncols = ncols > W ? W : ncols;
-	it->y0 = lat_to_y(ly, b->north);
-	double tn = (90.0 - b->south) / 180.0 * (double)grid_tiles_y(ly);
-	int64_t ys = (int64_t)ceil(tn) - 1;
-	uint32_t y1 = ys < (int64_t)it->y0 ? it->y0 : (uint32_t)ys;
-	if (y1 >= grid_tiles_y(ly))
-		y1 = grid_tiles_y(ly) - 1;
-	it->ntiles = (uint64_t)it->ncols * (y1 - it->y0 + 1);
+	free(it->segs);
+	it->segs = NULL;
+	it->nsegs = 0;
+	it->ntiles = 0;
+	size_t cap = 0;
+	/* rows: from the northernmost viewer's window to the southernmost's */
+	uint32_t ya, yb, y0, y1;
+	window_rows(it, ly, b->north, &y0, &ya);
+	window_rows(it, ly, b->south, &yb, &y1);
+	(void)ya;
+	(void)yb;
+	double span = b->west <= b->east ? b->east - b->west : b->east + 360.0 - b->west;
+	double reach = (CLIPMAP_REACH_TILES + 1) * 180.0 / (double)grid_tiles_y(ly);
+	for (uint32_t y = y0; y <= y1; y++) {
+		/* the viewers in the bbox whose window or ring may reach row y */
+		double rs, rn;
+		row_lats(ly, y, &rs, &rn);
+		double vs = fmax(rs - reach, b->south), vn = fmin(rn + reach, b->north);
+		if (vs > vn)
+			vs = vn = rs > b->north ? b->north : b->south;
+		int lxa, lxb;
+		clipmap_level_lx_range(ly, vs, vn, &lxa, &lxb);
+		for (int lx = lxa; lx <= lxb; lx++) {
+			uint32_t x0, n;
+			window_cols(it, lx, b->west, span, &x0, &n);
+			if (it->nsegs == cap) {
+				cap = cap ? cap * 2 : 64;
+				it->segs = xrealloc(it->segs, cap * sizeof *it->segs);
+			}
+			it->segs[it->nsegs++] = (struct segment){ x0, n, y, (uint8_t)lx };
+			it->ntiles += n;
+		}
+	}
 }
 
 static int enter_level(struct prefetch_iter *it, int ly, struct geo_body *body)
@@ -158,6 +240,8 @@ static int enter_level(struct prefetch_iter *it, int ly, struct geo_body *body)
 	it->ly = ly;
 	it->pos = 0;
 	it->li = 0;
+	it->seg = 0;
+	it->col = 0;
 	if (it->shape == PROTO_SHAPE_BBOX) {
 		bbox_level(it, ly);
 		return 0;
@@ -234,11 +318,11 @@ size_t prefetch_iter_next(struct prefetch_iter *it, struct want *out, size_t n)
 		}
 		struct tile_key key;
 		if (it->shape == PROTO_SHAPE_BBOX) {
-			int lx = it->ly + 1;
-			key.lx = (uint8_t)lx;
+			const struct segment *sg = &it->segs[it->seg];
+			key.lx = sg->lx;
 			key.ly = (uint8_t)it->ly;
-			key.x = grid_wrap_x(lx, (int64_t)it->x0 + (int64_t)(it->pos % it->ncols));
-			key.y = it->y0 + (uint32_t)(it->pos / it->ncols);
+			key.x = grid_wrap_x(sg->lx, (int64_t)sg->x0 + it->col);
+			key.y = sg->y;
 		} else {
 			key = it->list[it->pos];
 		}
@@ -248,6 +332,10 @@ size_t prefetch_iter_next(struct prefetch_iter *it, struct want *out, size_t n)
 		if (++it->li == it->nlayers) {
 			it->li = 0;
 			it->pos++;
+			if (it->shape == PROTO_SHAPE_BBOX && ++it->col == it->segs[it->seg].n) {
+				it->col = 0;
+				it->seg++;
+			}
 		}
 	}
 	return k;
@@ -258,6 +346,7 @@ void prefetch_iter_destroy(struct prefetch_iter *it)
 	if (!it)
 		return;
 	free(it->list);
+	free(it->segs);
 	free(it->pts);
 	free(it);
 }

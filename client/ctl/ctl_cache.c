@@ -109,7 +109,7 @@ int ctl_cache_ls(struct net_conn *c, const struct ctl_cache_opts *o, int timeout
 					      .planet = o->planet, .limit = o->limit } };
 	if (o->level >= 0) {
 		ls.cache_ls.filter |= PROTO_CLS_LEVEL;
-		ls.cache_ls.lx = (uint8_t)(o->level + 1);
+		ls.cache_ls.lx = PROTO_ANY_LX; /* viewers use several lx per level */
 		ls.cache_ls.ly = (uint8_t)o->level;
 	}
 	if (o->near) {

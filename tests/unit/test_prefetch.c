@@ -1,0 +1,219 @@
+/* prefetch's tiles are the ones viewers ask for (issue 13): for a bbox and for a corridor, at
+ * the equator, 46°N, 70°S and over the north pole, every tile of the window and ring of a
+ * viewer focused anywhere in the region — on the lx it uses at that latitude, or the coarser
+ * one hysteresis may keep — is in the job (viewers placed every quarter tile, independently of
+ * the job's own enumeration), and the job is not much more than that. A long high-latitude
+ * corridor (Oslo → Anchorage, 100 km wide) keeps its width all along the route: viewers at
+ * 0.95 × the half-width on either side of the geodesic, placed with GeographicLib at the
+ * route's own bearing there, are covered from start to end. The procedural planet (no data).
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "common/clipmap.h"
+#include "common/geo.h"
+#include "common/xalloc.h"
+#include "engine/planet.h"
+#include "prefetch.h"
+
+struct keyset {
+	struct tile_key *k;
+	size_t n;
+};
+
+static int cmp_key(const void *a, const void *b)
+{
+	const struct tile_key *x = a, *y = b;
+	if (x->lx != y->lx)
+		return x->lx < y->lx ? -1 : 1;
+	if (x->ly != y->ly)
+		return x->ly < y->ly ? -1 : 1;
+	if (x->y != y->y)
+		return x->y < y->y ? -1 : 1;
+	if (x->x != y->x)
+		return x->x < y->x ? -1 : 1;
+	return 0;
+}
+
+/* Every key the job yields (one layer), sorted; fails on a duplicate. */
+static void job_keys(const struct planet *p, const struct proto_prefetch *m, struct keyset *ks)
+{
+	struct prefetch_iter *it;
+	uint64_t total;
+	char err[256];
+	if (prefetch_iter_create(p, m, &it, &total, err) != 0)
+		fail_msg("prefetch_iter_create: %s", err);
+	ks->k = xmalloc(total * sizeof *ks->k);
+	ks->n = 0;
+	struct want w[512];
+	size_t got;
+	while ((got = prefetch_iter_next(it, w, 512)) > 0)
+		for (size_t i = 0; i < got; i++)
+			ks->k[ks->n++] = w[i].key;
+	prefetch_iter_destroy(it);
+	assert_int_equal(ks->n, total);
+	qsort(ks->k, ks->n, sizeof *ks->k, cmp_key);
+	for (size_t i = 1; i < ks->n; i++)
+		if (cmp_key(&ks->k[i - 1], &ks->k[i]) == 0)
+			fail_msg("tile (%u,%u) of level (%u,%u) twice", ks->k[i].x, ks->k[i].y,
+				 ks->k[i].lx, ks->k[i].ly);
+}
+
+static bool has(const struct keyset *ks, const struct tile_key *k)
+{
+	struct tile_key probe = *k;
+	probe.node = 0;
+	return bsearch(&probe, ks->k, ks->n, sizeof *ks->k, cmp_key) != NULL;
+}
+
+/* What a viewer focused at (lat, lon) asks for at level ly holding lx: its window and ring.
+ * Appends the missing ones' count to *missing and the distinct tiles to *want (may be NULL). */
+static void check_viewer(const struct planet *p, const struct keyset *ks, int ly, int lx,
+			 double lat, double lon, size_t *missing, struct keyset *want)
+{
+	struct grid_quad q;
+	uint32_t T = p->tile_size;
+	grid_window(lx, ly, T, CLIPMAP_WINDOW_TILES * T, lon, lat, &q);
+	for (int64_t dy = -1; dy <= q.nty; dy++)
+		for (int64_t dx = -1; dx <= q.ntx; dx++) {
+			int64_t y = (int64_t)q.ty0 + dy;
+			if (y < 0 || y >= grid_tiles_y(ly))
+				continue;
+			struct tile_key k = { 0, grid_wrap_x(lx, (int64_t)q.tx0 + dx), (uint32_t)y,
+					      (uint8_t)lx, (uint8_t)ly };
+			if (!has(ks, &k)) {
+				if (*missing < 5)
+					printf("  missing (%u,%u) at (%d,%d) for a viewer at %.4f,%.4f\n",
+					       k.x, k.y, lx, ly, lat, lon);
+				(*missing)++;
+			}
+			if (want)
+				want->k[want->n++] = k;
+		}
+}
+
+/* The lx values a viewer at lat may hold at level ly: its own, and the coarser one that
+ * hysteresis keeps for a viewer that came from higher latitudes. */
+static int viewer_lx(int ly, double lat, int out[2])
+{
+	int lx = clipmap_level_lx(ly, lat, -1), n = 0;
+	out[n++] = lx;
+	if (lx > 0 && clipmap_level_lx(ly, lat, lx - 1) == lx - 1)
+		out[n++] = lx - 1;
+	return n;
+}
+
+static struct planet *load(void)
+{
+	struct planet *p = NULL;
+	char err[256];
+	if (planet_load("conf/planets/procedural.ini", &p, err) != 0)
+		fail_msg("%s", err);
+	return p;
+}
+
+static void bbox_covers_viewers(void **state)
+{
+	(void)state;
+	struct planet *p = load();
+	static const double places[][2] = { { 0.3, 20.0 }, { 46.5, 8.0 }, { -70.0, -60.0 },
+					    { 89.5, 30.0 } };
+	for (size_t pl = 0; pl < sizeof places / sizeof places[0]; pl++) {
+		double lat = places[pl][0], lon = places[pl][1];
+		struct proto_prefetch m = {
+			.id = 1, .layers = 1, .shape = PROTO_SHAPE_BBOX, .lmin = 4, .lmax = 11,
+			.bbox = { lon - 1, fmax(lat - 0.5, -90), lon + 1, fmin(lat + 0.5, 90) }
+		};
+		struct keyset ks;
+		job_keys(p, &m, &ks);
+		size_t missing = 0, cap = 0;
+		struct keyset want = { NULL, 0 };
+		for (int ly = m.lmin; ly <= m.lmax; ly++) {
+			double step = 45.0 / (double)grid_tiles_y(ly); /* a quarter tile */
+			for (double la = m.bbox.south; la <= m.bbox.north + 1e-9; la += step)
+				for (double lo = m.bbox.west; lo <= m.bbox.east + 1e-9; lo += step) {
+					int lxs[2];
+					int n = viewer_lx(ly, la, lxs);
+					for (int i = 0; i < n; i++) {
+						if (want.n + 128 > cap) {
+							cap = cap ? cap * 2 : 1 << 16;
+							want.k = xrealloc(want.k, cap * sizeof *want.k);
+						}
+						check_viewer(p, &ks, ly, lxs[i], la, lo, &missing, &want);
+					}
+				}
+		}
+		qsort(want.k, want.n, sizeof *want.k, cmp_key);
+		size_t distinct = want.n ? 1 : 0;
+		for (size_t i = 1; i < want.n; i++)
+			distinct += cmp_key(&want.k[i - 1], &want.k[i]) != 0;
+		printf("bbox at %.1f,%.1f: %zu tiles in the job, %zu asked for by viewers, %zu "
+		       "missing\n",
+		       lat, lon, ks.n, distinct, missing);
+		assert_int_equal(missing, 0);
+		assert_true(ks.n <= distinct + distinct / 5); /* not much more */
+		free(want.k);
+		free(ks.k);
+	}
+	planet_unref(p);
+}
+
+/* Viewers along the route and at ±0.95 of the half-width across it, every tile. */
+static void corridor_keeps_width(void **state)
+{
+	(void)state;
+	struct planet *p = load();
+	struct geo_body *body = p->body;
+	struct proto_lonlat pts[2] = { { 10.75, 59.91 }, { -149.9, 61.22 } }; /* Oslo, Anchorage */
+	const double width = 100e3;
+	const int ly = 11;
+	struct proto_prefetch m = { .id = 2, .layers = 1, .shape = PROTO_SHAPE_PATH, .lmin = ly,
+				    .lmax = ly, .width_m = width, .npoints = 2, .points = pts };
+	struct keyset ks;
+	job_keys(p, &m, &ks);
+	double s12, azi1, azi2;
+	geo_inverse(body, pts[0].lat, pts[0].lon, pts[1].lat, pts[1].lon, &s12, &azi1, &azi2);
+	double tile_m = M_PI * geo_body_a(body) / (double)grid_tiles_y(ly);
+	size_t missing = 0, viewers = 0;
+	size_t missing_late = 0; /* in the last tenth of the route */
+	for (double s = 0; s <= s12; s += tile_m) {
+		double lat, lon, azi;
+		geo_direct_azi(body, pts[0].lat, pts[0].lon, azi1, s, &lat, &lon, &azi);
+		for (int side = -1; side <= 1; side++) {
+			double la = lat, lo = lon;
+			if (side)
+				geo_direct(body, lat, lon, azi + 90.0 * side, 0.95 * width / 2, &la, &lo);
+			int lxs[2];
+			int n = viewer_lx(ly, la, lxs);
+			size_t before = missing;
+			check_viewer(p, &ks, ly, lxs[0], la, lo, &missing, NULL);
+			(void)n;
+			viewers++;
+			if (s > 0.9 * s12)
+				missing_late += missing - before;
+		}
+	}
+	printf("corridor Oslo-Anchorage, %.0f km wide, level %d: %zu tiles, %zu viewers, %zu "
+	       "tiles missing (%zu in the last tenth)\n",
+	       width / 1e3, ly, ks.n, viewers, missing, missing_late);
+	assert_int_equal(missing, 0);
+	free(ks.k);
+	planet_unref(p);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(bbox_covers_viewers),
+		cmocka_unit_test(corridor_keeps_width),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
