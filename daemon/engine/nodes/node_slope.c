@@ -1,0 +1,235 @@
+/* node_slope — `slope`: heights → the magnitude of their gradient |∇h| (rise over run: 0 flat,
+ * 1 at 45°), by central differences with metric texel spacing from the body's ellipsoid (east
+ * N(φ)·cos φ·Δλ, north M(φ)·Δφ, as the normal node). Read as a mask (through a height_filter)
+ * it drives colour by steepness and detail amplitude by local relief.
+ *
+ * `scale` (metres, default 0: every level its own texels) fixes the distance the slope is
+ * measured over: a level whose texels are finer than scale / 2 takes the slope of the finest
+ * level ls whose texels are at least that (its "source level") and interpolates it bilinearly
+ * to its texel centres. Every finer level so shows one smooth field: no colour popping from
+ * level to level, no steps along the cells of a coarse raster (whose bilinear gradient is
+ * piecewise constant).
+ *
+ * Seamless: deps() asks for the source level's tiles under the tile's footprint and two texels
+ * around it (up to 3×3: x wraps, and beyond a pole the rows continue on the far side), so a
+ * texel's value depends only on its position and the heights, never on which tile holds it.
+ * Near the poles the east spacing is held at ≥ 1/8 of the north one (the float differences
+ * over millimetre-wide texels are rounding noise), so east slopes there read low. NaN heights
+ * give no slope. Thread-safety: parameters are set in create; generate uses the worker's
+ * scratch.
+ */
+#include <errno.h>
+#include <math.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "common/geo.h"
+#include "common/xalloc.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+
+#define PAD 2 /* height texels around the footprint: the slope's own ring plus its stencil */
+
+struct slope {
+	int source_ly; /* the finest level whose texels are ≥ scale / 2; -1: every level its own */
+};
+
+/* Where tile k reads: the source level's tile holding its footprint, d levels up. */
+struct footprint {
+	struct tile_key src; /* the source tile (node = the input's hash) */
+	int d;		     /* levels between k and src */
+	uint32_t W, H;	     /* the source level's size in texels */
+	int64_t u0, v0;	     /* the source tile's first texel */
+	struct tile_key key[9];
+	int ndeps;
+};
+
+static int slope_create(struct node *n, struct node_parse *p)
+{
+	double scale;
+	int rc = np_double(p, "scale", 0, 0, 1e8, &scale);
+	if (rc)
+		return rc;
+	if (!n->planet || !n->planet->body || !n->planet->tile_size)
+		return np_error(p, NULL, "node \"%s\": the planet has no body (ellipsoid)", n->name);
+	struct slope *s = xmalloc(sizeof *s);
+	s->source_ly = -1;
+	if (scale > 0) {
+		uint32_t T = n->planet->tile_size;
+		s->source_ly = 0;
+		while (s->source_ly < 60 &&
+		       M_PI * n->planet->a / (ldexp(1.0, s->source_ly + 1) * T) >= scale / 2)
+			s->source_ly++;
+	}
+	n->impl = s;
+	n->out = PIX_HEIGHT;
+	return 0;
+}
+
+/* Global source texel (u, v), v possibly beyond a pole, → the texel it is on the sphere. */
+static void wrap_texel(const struct footprint *f, int64_t *u, int64_t *v)
+{
+	if (*v < 0 || *v >= (int64_t)f->H) {
+		*v = *v < 0 ? -1 - *v : 2 * (int64_t)f->H - 1 - *v;
+		*u += f->W / 2;
+	}
+	*u %= (int64_t)f->W;
+	if (*u < 0)
+		*u += f->W;
+}
+
+/* Index of the dependency holding source texel (u, v) (already wrapped), adding it if new. */
+static int dep_of(struct footprint *f, int64_t u, int64_t v, uint32_t T)
+{
+	struct tile_key key = f->src;
+	key.x = (uint32_t)(u / T);
+	key.y = (uint32_t)(v / T);
+	for (int i = 0; i < f->ndeps; i++)
+		if (grid_key_equal(&f->key[i], &key))
+			return i;
+	f->key[f->ndeps] = key;
+	return f->ndeps++;
+}
+
+static void footprint(const struct node *n, const struct tile_key *k, struct footprint *f)
+{
+	const struct slope *s = n->impl;
+	const uint32_t T = n->planet->tile_size;
+	int d = s->source_ly >= 0 && k->ly > s->source_ly ? k->ly - s->source_ly : 0;
+	d = d < k->lx ? d : k->lx;
+	f->d = d;
+	f->src = (struct tile_key){ .node = n->in[0]->hash, .lx = (uint8_t)(k->lx - d),
+				    .ly = (uint8_t)(k->ly - d), .x = k->x >> d, .y = k->y >> d };
+	f->W = grid_tiles_x(f->src.lx) * T;
+	f->H = grid_tiles_y(f->src.ly) * T;
+	f->u0 = (int64_t)f->src.x * T;
+	f->v0 = (int64_t)f->src.y * T;
+	f->ndeps = 0;
+	/* one texel before, the first one on and one after the tile, each way */
+	const int64_t at[3] = { -1, 0, T };
+	for (int j = 0; j < 3; j++)
+		for (int i = 0; i < 3; i++) {
+			int64_t u = f->u0 + at[i], v = f->v0 + at[j];
+			wrap_texel(f, &u, &v);
+			dep_of(f, u, v, T);
+		}
+}
+
+static int slope_deps(const struct node *n, const struct tile_key *k, struct node_dep *out)
+{
+	struct footprint f;
+	footprint(n, k, &f);
+	for (int i = 0; i < f.ndeps; i++) {
+		out[i].node = n->in[0];
+		out[i].key = f.key[i];
+	}
+	return f.ndeps;
+}
+
+/* Row r of the padded heights (source texels u0 − PAD … u0 + T + PAD − 1 of global row
+ * v0 + r − PAD), copied run by run from the tiles that hold them. */
+static void gather_row(struct footprint *f, struct tile *const *in, uint32_t T, uint32_t r,
+		       float *dst)
+{
+	const uint32_t PW = T + 2 * PAD;
+	for (uint32_t c = 0; c < PW;) {
+		int64_t u = f->u0 + (int64_t)c - PAD, v = f->v0 + (int64_t)r - PAD;
+		wrap_texel(f, &u, &v);
+		const struct tile *t = in[dep_of(f, u, v, T)];
+		uint32_t tu = (uint32_t)(u % T), run = T - tu;
+		run = run < PW - c ? run : PW - c;
+		memcpy(dst + c, tile_f32(t) + (size_t)(v % T) * T + tu, run * sizeof *dst);
+		c += run;
+	}
+}
+
+/* Slope at padded texels 1 … T + 2 of rows 1 … T + 2 (source texels −1 … T) into s. */
+static void slope_field(const struct node *n, const struct footprint *f, const float *h,
+			uint32_t T, float *s)
+{
+	const uint32_t PW = T + 2 * PAD, SW = T + 2;
+	const double dlam = 2 * M_PI / f->W, dphi = M_PI / f->H;
+	for (uint32_t r = 1; r <= T + 2; r++) {
+		int64_t v = f->v0 + (int64_t)r - PAD;
+		v = v < 0 ? -1 - v : v >= (int64_t)f->H ? 2 * (int64_t)f->H - 1 - v : v;
+		double lat = grid_v_to_lat(f->src.ly, T, (double)v + 0.5), m, nr;
+		geo_radii(n->planet->body, lat, &m, &nr);
+		double dy = m * dphi, dx = nr * cos(lat * (M_PI / 180)) * dlam;
+		dx = dx > dy / 8 ? dx : dy / 8;
+		const float fx = (float)(1 / (2 * dx)), fy = (float)(1 / (2 * dy));
+		const float *row = h + (size_t)r * PW, *up = row - PW, *dn = row + PW;
+		float *o = s + (size_t)(r - 1) * SW;
+		for (uint32_t c = 1; c <= T + 2; c++) {
+			float gx = (row[c + 1] - row[c - 1]) * fx, gy = (up[c] - dn[c]) * fy;
+			gx = gx == gx ? gx : 0.0f;
+			gy = gy == gy ? gy : 0.0f;
+			o[c - 1] = sqrtf(gx * gx + gy * gy);
+		}
+	}
+}
+
+/* Texel i of a tile d levels under the source, as a position in the slope field (whose index
+ * 0 is source texel −1): index *i0 and weight *w of *i0 + 1. */
+static void fine_to_field(uint32_t sub, int d, uint32_t T, uint32_t i, uint32_t *i0, float *w)
+{
+	double x = ((double)sub * T + i + 0.5) / ldexp(1.0, d) - 0.5 + 1;
+	double fl = floor(x);
+	*i0 = (uint32_t)fl;
+	*w = (float)(x - fl);
+}
+
+static int slope_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
+			  struct tile *const *in, int nin, struct tile *out)
+{
+	const uint32_t T = out->size;
+	if (!n->planet || !n->planet->body || T != n->planet->tile_size)
+		return -EINVAL;
+	struct footprint f;
+	footprint(n, k, &f);
+	if (nin != f.ndeps)
+		return -EINVAL;
+	for (int i = 0; i < nin; i++)
+		if (in[i]->type != PIX_HEIGHT || in[i]->size != T)
+			return -EINVAL;
+	const uint32_t PW = T + 2 * PAD, SW = T + 2;
+	float *h = gen_scratch(g, ((size_t)PW * PW + (size_t)SW * SW + 2 * (size_t)T) * sizeof *h);
+	float *s = h + (size_t)PW * PW, *wx = s + (size_t)SW * SW;
+	uint32_t *ix = (uint32_t *)(void *)(wx + T);
+	for (uint32_t r = 0; r < PW; r++)
+		gather_row(&f, in, T, r, h + (size_t)r * PW);
+	slope_field(n, &f, h, T, s);
+	const uint32_t mask = ((uint32_t)1 << f.d) - 1;
+	for (uint32_t i = 0; i < T; i++)
+		fine_to_field(k->x & mask, f.d, T, i, &ix[i], &wx[i]);
+	float *o = tile_f32(out);
+	for (uint32_t j = 0; j < T; j++) {
+		uint32_t j0;
+		float wy;
+		fine_to_field(k->y & mask, f.d, T, j, &j0, &wy);
+		const float *a = s + (size_t)j0 * SW, *b = a + SW;
+		for (uint32_t i = 0; i < T; i++) {
+			float top = a[ix[i]] + (a[ix[i] + 1] - a[ix[i]]) * wx[i];
+			float bot = b[ix[i]] + (b[ix[i] + 1] - b[ix[i]]) * wx[i];
+			o[(size_t)j * T + i] = top + (bot - top) * wy;
+		}
+	}
+	return 0;
+}
+
+static const struct node_slot slope_slots[] = {
+	{ .name = "input", .type = PIX_HEIGHT },
+};
+
+const struct node_type node_type_slope = {
+	.name = "slope",
+	.doc = "slope magnitude |grad h| of heights (metric, seamless), measured over `scale` m",
+	.version = 1,
+	.slots = slope_slots,
+	.nslots = 1,
+	.create = slope_create,
+	.destroy = node_free_impl,
+	.deps = slope_deps,
+	.generate = slope_generate,
+};
