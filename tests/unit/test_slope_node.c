@@ -141,6 +141,9 @@ static void flat_and_planes(void **state)
 	for (int f = 0; f < 3; f++) {
 		struct fixture fx;
 		assert_int_equal(setup(&fx, 32, fns[f], ""), 0);
+		/* on its own level: the tile and its four edge neighbours, as the normal node */
+		struct node_dep deps[NODE_MAX_DEPS];
+		assert_int_equal(fx.sl.type->deps(&fx.sl, &k, deps), 5);
 		struct tile *t = slope_tile(&fx, &k);
 		for (uint32_t j = 0; j < 32; j++)
 			for (uint32_t i = 1; i + 1 < 32; i++) { /* the east plane jumps at ±180° */

@@ -11,7 +11,8 @@
  * piecewise constant).
  *
  * Seamless: deps() asks for the source level's tiles under the tile's footprint and two texels
- * around it (up to 3×3: x wraps, and beyond a pole the rows continue on the far side), so a
+ * around it (up to 3×3: x wraps, and beyond a pole the rows continue on the far side; on its
+ * own level only the four edge neighbours, as the normal node, whose tiles those are), so a
  * texel's value depends only on its position and the heights, never on which tile holds it.
  * Near the poles the east spacing is held at ≥ 1/8 of the north one (the float differences
  * over millimetre-wide texels are rounding noise), so east slopes there read low. NaN heights
@@ -80,8 +81,8 @@ static void wrap_texel(const struct footprint *f, int64_t *u, int64_t *v)
 		*u += f->W;
 }
 
-/* Index of the dependency holding source texel (u, v) (already wrapped), adding it if new. */
-static int dep_of(struct footprint *f, int64_t u, int64_t v, uint32_t T)
+/* Index of the dependency holding source texel (u, v) (already wrapped), or -1. */
+static int find_dep(const struct footprint *f, int64_t u, int64_t v, uint32_t T)
 {
 	struct tile_key key = f->src;
 	key.x = (uint32_t)(u / T);
@@ -89,8 +90,18 @@ static int dep_of(struct footprint *f, int64_t u, int64_t v, uint32_t T)
 	for (int i = 0; i < f->ndeps; i++)
 		if (grid_key_equal(&f->key[i], &key))
 			return i;
-	f->key[f->ndeps] = key;
-	return f->ndeps++;
+	return -1;
+}
+
+/* Adds the tile holding source texel (u, v) (already wrapped) to the deps if new. */
+static void add_dep(struct footprint *f, int64_t u, int64_t v, uint32_t T)
+{
+	if (find_dep(f, u, v, T) >= 0)
+		return;
+	f->key[f->ndeps] = f->src;
+	f->key[f->ndeps].x = (uint32_t)(u / T);
+	f->key[f->ndeps].y = (uint32_t)(v / T);
+	f->ndeps++;
 }
 
 static void footprint(const struct node *n, const struct tile_key *k, struct footprint *f)
@@ -107,13 +118,16 @@ static void footprint(const struct node *n, const struct tile_key *k, struct foo
 	f->u0 = (int64_t)f->src.x * T;
 	f->v0 = (int64_t)f->src.y * T;
 	f->ndeps = 0;
-	/* one texel before, the first one on and one after the tile, each way */
+	/* one texel before, the first one on and one after the tile, each way; the corners
+	 * only when interpolating (on its own level no stencil reaches them) */
 	const int64_t at[3] = { -1, 0, T };
 	for (int j = 0; j < 3; j++)
 		for (int i = 0; i < 3; i++) {
+			if (d == 0 && i != 1 && j != 1)
+				continue;
 			int64_t u = f->u0 + at[i], v = f->v0 + at[j];
 			wrap_texel(f, &u, &v);
-			dep_of(f, u, v, T);
+			add_dep(f, u, v, T);
 		}
 }
 
@@ -128,30 +142,33 @@ static int slope_deps(const struct node *n, const struct tile_key *k, struct nod
 	return f.ndeps;
 }
 
-/* Row r of the padded heights (source texels u0 − PAD … u0 + T + PAD − 1 of global row
- * v0 + r − PAD), copied run by run from the tiles that hold them. */
-static void gather_row(struct footprint *f, struct tile *const *in, uint32_t T, uint32_t r,
-		       float *dst)
+/* Columns [c0, c1) of row r of the padded heights (padded texel (c, r) is source texel
+ * (u0 + c − PAD, v0 + r − PAD)), copied run by run from the tiles that hold them. Returns 0,
+ * or -EINVAL if one is not among the deps. */
+static int gather_row(const struct footprint *f, struct tile *const *in, uint32_t T, uint32_t r,
+		      uint32_t c0, uint32_t c1, float *dst)
 {
-	const uint32_t PW = T + 2 * PAD;
-	for (uint32_t c = 0; c < PW;) {
+	for (uint32_t c = c0; c < c1;) {
 		int64_t u = f->u0 + (int64_t)c - PAD, v = f->v0 + (int64_t)r - PAD;
 		wrap_texel(f, &u, &v);
-		const struct tile *t = in[dep_of(f, u, v, T)];
+		int dep = find_dep(f, u, v, T);
+		if (dep < 0)
+			return -EINVAL;
 		uint32_t tu = (uint32_t)(u % T), run = T - tu;
-		run = run < PW - c ? run : PW - c;
-		memcpy(dst + c, tile_f32(t) + (size_t)(v % T) * T + tu, run * sizeof *dst);
+		run = run < c1 - c ? run : c1 - c;
+		memcpy(dst + c, tile_f32(in[dep]) + (size_t)(v % T) * T + tu, run * sizeof *dst);
 		c += run;
 	}
+	return 0;
 }
 
-/* Slope at padded texels 1 … T + 2 of rows 1 … T + 2 (source texels −1 … T) into s. */
+/* Slope at padded texels lo … hi of rows lo … hi into s (padded texel c at index c − 1). */
 static void slope_field(const struct node *n, const struct footprint *f, const float *h,
-			uint32_t T, float *s)
+			uint32_t T, uint32_t lo, uint32_t hi, float *s)
 {
 	const uint32_t PW = T + 2 * PAD, SW = T + 2;
 	const double dlam = 2 * M_PI / f->W, dphi = M_PI / f->H;
-	for (uint32_t r = 1; r <= T + 2; r++) {
+	for (uint32_t r = lo; r <= hi; r++) {
 		int64_t v = f->v0 + (int64_t)r - PAD;
 		v = v < 0 ? -1 - v : v >= (int64_t)f->H ? 2 * (int64_t)f->H - 1 - v : v;
 		double lat = grid_v_to_lat(f->src.ly, T, (double)v + 0.5), m, nr;
@@ -161,7 +178,7 @@ static void slope_field(const struct node *n, const struct footprint *f, const f
 		const float fx = (float)(1 / (2 * dx)), fy = (float)(1 / (2 * dy));
 		const float *row = h + (size_t)r * PW, *up = row - PW, *dn = row + PW;
 		float *o = s + (size_t)(r - 1) * SW;
-		for (uint32_t c = 1; c <= T + 2; c++) {
+		for (uint32_t c = lo; c <= hi; c++) {
 			float gx = (row[c + 1] - row[c - 1]) * fx, gy = (up[c] - dn[c]) * fy;
 			gx = gx == gx ? gx : 0.0f;
 			gy = gy == gy ? gy : 0.0f;
@@ -197,13 +214,26 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 	float *h = gen_scratch(g, ((size_t)PW * PW + (size_t)SW * SW + 2 * (size_t)T) * sizeof *h);
 	float *s = h + (size_t)PW * PW, *wx = s + (size_t)SW * SW;
 	uint32_t *ix = (uint32_t *)(void *)(wx + T);
-	for (uint32_t r = 0; r < PW; r++)
-		gather_row(&f, in, T, r, h + (size_t)r * PW);
-	slope_field(n, &f, h, T, s);
+	/* On its own level the slope is needed on the tile only (padded texels PAD … PAD + T − 1),
+	 * from the heights one texel around it, corners excepted; interpolating, one texel more
+	 * each way, corners included. */
+	const uint32_t lo = f.d ? PAD - 1 : PAD, hi = PW - 1 - lo;
+	for (uint32_t r = lo - 1; r <= hi + 1; r++) {
+		bool outside = r < PAD || r >= PAD + T;
+		uint32_t c0 = outside && !f.d ? PAD : lo - 1, c1 = outside && !f.d ? PAD + T : hi + 2;
+		if (gather_row(&f, in, T, r, c0, c1, h + (size_t)r * PW))
+			return -EINVAL;
+	}
+	slope_field(n, &f, h, T, lo, hi, s);
+	float *o = tile_f32(out);
+	if (!f.d) {
+		for (uint32_t j = 0; j < T; j++)
+			memcpy(o + (size_t)j * T, s + (size_t)(j + 1) * SW + 1, T * sizeof *o);
+		return 0;
+	}
 	const uint32_t mask = ((uint32_t)1 << f.d) - 1;
 	for (uint32_t i = 0; i < T; i++)
 		fine_to_field(k->x & mask, f.d, T, i, &ix[i], &wx[i]);
-	float *o = tile_f32(out);
 	for (uint32_t j = 0; j < T; j++) {
 		uint32_t j0;
 		float wy;
