@@ -1,7 +1,8 @@
 /* Tests of the `slope` node type: zero on flat ground, the metric slope of analytic planes
  * (east spacing shrinking with cos φ), seams (every tile of a level, at its own level and
  * interpolated from a coarser one, equals one computation over the whole level: wrapping at the
- * antimeridian, reflecting across the poles), determinism and parameter errors. Heights come
+ * antimeridian, reflecting across the poles, fading to 0 on the pole rows), determinism and
+ * parameter errors. Heights come
  * from a hand-made node type that evaluates a function at texel centres. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -222,6 +223,10 @@ static void seamless_level(const char *params, int lx, int ly, int d, uint32_t T
 						}
 					double want = (c[0][0] * (1 - wu) + c[0][1] * wu) * (1 - wv) +
 						      (c[1][0] * (1 - wu) + c[1][1] * wu) * wv;
+					/* faded to 0 over the last source texel before a pole */
+					double lat = fabs(grid_v_to_lat(ly + d, T, (double)y * T + j + 0.5));
+					double fade = (90 - lat) / (180.0 / H) - 0.5;
+					want *= fade < 0 ? 0 : fade > 1 ? 1 : fade;
 					double got = tile_f32(t)[j * T + i];
 					if (fabs(got - want) > 2e-3 * big)
 						fail_msg("%s level (%d,%d)+%d tile (%u,%u) texel (%u,%u): "

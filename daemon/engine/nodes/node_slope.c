@@ -15,8 +15,10 @@
  * own level only the four edge neighbours, as the normal node, whose tiles those are), so a
  * texel's value depends only on its position and the heights, never on which tile holds it.
  * Near the poles the east spacing is held at ≥ 1/8 of the north one (the float differences
- * over millimetre-wide texels are rounding noise), so east slopes there read low. NaN heights
- * give no slope. Thread-safety: parameters are set in create; generate uses the worker's
+ * over millimetre-wide texels are rounding noise), so east slopes there read low, and the
+ * slope fades to 0 over the source level's last texel before a pole: a slope is a direction
+ * there, and the pole rows of every level must not depend on longitude. NaN heights give no
+ * slope. Thread-safety: parameters are set in create; generate uses the worker's
  * scratch.
  */
 #include <errno.h>
@@ -197,6 +199,22 @@ static void fine_to_field(uint32_t sub, int d, uint32_t T, uint32_t i, uint32_t 
 	*w = (float)(x - fl);
 }
 
+/* Rows of tile k within one source texel of a pole scaled by (distance to the pole in source
+ * texels − ½), clamped to [0, 1]: 0 on the pole row of every level. */
+static void pole_fade(const struct tile_key *k, const struct footprint *f, uint32_t T, float *o)
+{
+	const double src_texel = 180.0 / f->H;
+	for (uint32_t j = 0; j < T; j++) {
+		double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5);
+		double w = (90 - fabs(lat)) / src_texel - 0.5;
+		if (w >= 1)
+			continue;
+		float fw = w > 0 ? (float)w : 0.0f;
+		for (uint32_t i = 0; i < T; i++)
+			o[(size_t)j * T + i] *= fw;
+	}
+}
+
 static int slope_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			  struct tile *const *in, int nin, struct tile *out)
 {
@@ -229,6 +247,7 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 	if (!f.d) {
 		for (uint32_t j = 0; j < T; j++)
 			memcpy(o + (size_t)j * T, s + (size_t)(j + 1) * SW + 1, T * sizeof *o);
+		pole_fade(k, &f, T, o);
 		return 0;
 	}
 	const uint32_t mask = ((uint32_t)1 << f.d) - 1;
@@ -245,6 +264,7 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 			o[(size_t)j * T + i] = top + (bot - top) * wy;
 		}
 	}
+	pole_fade(k, &f, T, o);
 	return 0;
 }
 
