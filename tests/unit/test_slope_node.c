@@ -189,9 +189,9 @@ static double *level_slope(struct fixture *fx, int lx, int ly)
 	return s;
 }
 
-/* Every tile of level (lx + d, ly + d) against the level (lx, ly) slope interpolated
+/* Every tile of level (lx + dx, ly + d) against the level (lx, ly) slope interpolated
  * bilinearly at its texel centres (d = 0: the level's own slope). */
-static void seamless_level(const char *params, int lx, int ly, int d, uint32_t T)
+static void seamless_level(const char *params, int lx, int ly, int d, int dx, uint32_t T)
 {
 	struct fixture fx;
 	assert_int_equal(setup(&fx, T, FN_BUMPS, params), 0);
@@ -202,13 +202,13 @@ static void seamless_level(const char *params, int lx, int ly, int d, uint32_t T
 	assert_true(big > 0.05); /* the field must vary, or a wrong neighbour goes unnoticed */
 	const double step = ldexp(1.0, -d);
 	for (uint32_t y = 0; y < grid_tiles_y(ly + d); y++)
-		for (uint32_t x = 0; x < grid_tiles_x(lx + d); x++) {
-			struct tile_key k = { .lx = (uint8_t)(lx + d), .ly = (uint8_t)(ly + d),
+		for (uint32_t x = 0; x < grid_tiles_x(lx + dx); x++) {
+			struct tile_key k = { .lx = (uint8_t)(lx + dx), .ly = (uint8_t)(ly + d),
 					      .x = x, .y = y };
 			struct tile *t = slope_tile(&fx, &k);
 			for (uint32_t j = 0; j < T; j++)
 				for (uint32_t i = 0; i < T; i++) {
-					double fu = ((double)x * T + i + 0.5) * step - 0.5;
+					double fu = ((double)x * T + i + 0.5) * ldexp(1.0, -dx) - 0.5;
 					double fv = ((double)y * T + j + 0.5) * step - 0.5;
 					int u0 = (int)floor(fu), v0 = (int)floor(fv);
 					double wu = fu - u0, wv = fv - v0, c[2][2];
@@ -242,13 +242,15 @@ static void seamless_level(const char *params, int lx, int ly, int d, uint32_t T
 static void seamless(void **state)
 {
 	(void)state;
-	seamless_level("", 3, 2, 0, 32); /* isotropic, own level */
-	seamless_level("", 2, 3, 0, 16); /* anisotropic, as near the poles */
-	seamless_level("", 1, 0, 0, 32); /* two tiles: each is the other's pole neighbour */
-	seamless_level("", 0, 0, 0, 64); /* one tile: its own neighbour, half a turn round */
+	seamless_level("", 3, 2, 0, 0, 32); /* isotropic, own level */
+	seamless_level("", 2, 3, 0, 0, 16); /* anisotropic, as near the poles */
+	seamless_level("", 1, 0, 0, 0, 32); /* two tiles: each is the other's pole neighbour */
+	seamless_level("", 0, 0, 0, 0, 64); /* one tile: its own neighbour, half a turn round */
 	/* scale 600 km on T = 16: texels ≥ 300 km are level 2; levels 3 and 4 interpolate it */
-	seamless_level("scale = 600000", 3, 2, 1, 16);
-	seamless_level("scale = 600000", 3, 2, 2, 16);
+	seamless_level("scale = 600000", 3, 2, 1, 1, 16);
+	seamless_level("scale = 600000", 3, 2, 2, 2, 16);
+	/* (0, 4) next to a pole: lx 0 stays lx 0, ly 4 interpolates ly 2 */
+	seamless_level("scale = 600000", 0, 2, 2, 0, 16);
 }
 
 static void deterministic(void **state)

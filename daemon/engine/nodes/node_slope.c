@@ -6,7 +6,7 @@
  * `scale` (metres, default 0: every level its own texels) fixes the distance the slope is
  * measured over: a level whose texels are finer than scale / 2 takes the slope of the finest
  * level ls whose texels are at least that (its "source level") and interpolates it bilinearly
- * to its texel centres. Every finer level so shows one smooth field: no colour popping from
+ * to its texel centres (a tile with lx < ly − ls, near a pole, keeps lx 0 in longitude). Every finer level so shows one smooth field: no colour popping from
  * level to level, no steps along the cells of a coarse raster (whose bilinear gradient is
  * piecewise constant).
  *
@@ -42,7 +42,8 @@ struct slope {
 /* Where tile k reads: the source level's tile holding its footprint, d levels up. */
 struct footprint {
 	struct tile_key src; /* the source tile (node = the input's hash) */
-	int d;		     /* levels between k and src */
+	int d;		     /* levels between k and src in latitude (ly) */
+	int dx;		     /* and in longitude: d, or lx when lx < d (tiles near a pole) */
 	uint32_t W, H;	     /* the source level's size in texels */
 	int64_t u0, v0;	     /* the source tile's first texel */
 	struct tile_key key[9];
@@ -111,10 +112,11 @@ static void footprint(const struct node *n, const struct tile_key *k, struct foo
 	const struct slope *s = n->impl;
 	const uint32_t T = n->planet->tile_size;
 	int d = s->source_ly >= 0 && k->ly > s->source_ly ? k->ly - s->source_ly : 0;
-	d = d < k->lx ? d : k->lx;
+	int dx = d < k->lx ? d : k->lx;
 	f->d = d;
-	f->src = (struct tile_key){ .node = n->in[0]->hash, .lx = (uint8_t)(k->lx - d),
-				    .ly = (uint8_t)(k->ly - d), .x = k->x >> d, .y = k->y >> d };
+	f->dx = dx;
+	f->src = (struct tile_key){ .node = n->in[0]->hash, .lx = (uint8_t)(k->lx - dx),
+				    .ly = (uint8_t)(k->ly - d), .x = k->x >> dx, .y = k->y >> d };
 	f->W = grid_tiles_x(f->src.lx) * T;
 	f->H = grid_tiles_y(f->src.ly) * T;
 	f->u0 = (int64_t)f->src.x * T;
@@ -250,13 +252,13 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 		pole_fade(k, &f, T, o);
 		return 0;
 	}
-	const uint32_t mask = ((uint32_t)1 << f.d) - 1;
+	const uint32_t mx = ((uint32_t)1 << f.dx) - 1, my = ((uint32_t)1 << f.d) - 1;
 	for (uint32_t i = 0; i < T; i++)
-		fine_to_field(k->x & mask, f.d, T, i, &ix[i], &wx[i]);
+		fine_to_field(k->x & mx, f.dx, T, i, &ix[i], &wx[i]);
 	for (uint32_t j = 0; j < T; j++) {
 		uint32_t j0;
 		float wy;
-		fine_to_field(k->y & mask, f.d, T, j, &j0, &wy);
+		fine_to_field(k->y & my, f.d, T, j, &j0, &wy);
 		const float *a = s + (size_t)j0 * SW, *b = a + SW;
 		for (uint32_t i = 0; i < T; i++) {
 			float top = a[ix[i]] + (a[ix[i] + 1] - a[ix[i]]) * wx[i];
