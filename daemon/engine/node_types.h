@@ -26,6 +26,9 @@ extern const struct node_type node_type_blend;
 /* `normal`: input (height) → normal (RG8), metric spacing from the body's ellipsoid, seamless
  * across tile borders, the antimeridian and the poles; `exaggeration`. */
 extern const struct node_type node_type_normal;
+/* `slope`: input (height) → height: the slope magnitude |∇h| (m/m), metric, seamless like
+ * `normal`; `scale` (m) measures it over a fixed distance on every finer level. */
+extern const struct node_type node_type_slope;
 /* `file`: an equirectangular raster (global or within `bounds`) read through OpenImageIO,
  * resampled bilinearly, filtered from MIP levels when coarser than the file. */
 extern const struct node_type node_type_file;

@@ -37,6 +37,10 @@ static const struct bcase cases[] = {
 	{ "blend over (colour)", "type = blend\nmode = over\na = col\nb = col\nopacity = 0.5\n", 8 },
 	{ "blend add (height)", "type = blend\nmode = add\na = src\nb = src2\n", 8 },
 	{ "normal", "type = normal\ninput = src\n", 8 },
+	{ "slope", "type = slope\ninput = src\n", 8 },
+	{ "slope (scale: 2 levels up)", "type = slope\ninput = src\nscale = 2000\n", 12 },
+	{ "ramp + slope", "type = ramp\ninput = src\nslope = src2\nsteep_from = 0\nsteep_to = 2\n"
+			  "steep_stops = 0 1 2 3, 1000 200 200 200\n", 8 },
 	{ "file (f32, bilinear)", "type = file\npath = " DIR "/heights.tif\nkind = height\n", 5 },
 	{ "file (f32, MIP 2)", "type = file\npath = " DIR "/heights.tif\nkind = height\n", 2 },
 };

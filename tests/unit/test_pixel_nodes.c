@@ -8,6 +8,7 @@
 #include <cmocka.h>
 
 #include <errno.h>
+#include <stdbool.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -437,6 +438,78 @@ static void ramp_errors(void **state)
 	}
 }
 
+/* With a slope input: flat texels keep the ramp's colour, steep ones take steep_stops',
+ * between steep_from and steep_to they blend linearly, and snow thins on steep texels. */
+static void ramp_steep(void **state)
+{
+	(void)state;
+	static const char base[] = "stops = 0 0 100 0, 1000 0 200 0\n"
+				   "steep_stops = 0 100 100 100, 1000 200 200 200\n"
+				   "steep_from = 0.5\nsteep_to = 1\n";
+	static const float slopes[] = { 0, 0.2f, 0.5f, 0.75f, 1, 3, NAN };
+	static const uint8_t want[][3] = { { 0, 150, 0 },	  { 0, 150, 0 },     { 0, 150, 0 },
+					   { 75, 150, 75 },	  { 150, 150, 150 }, { 150, 150, 150 },
+					   { 0, 150, 0 } };
+	const int ns = (int)(sizeof slopes / sizeof *slopes);
+	char params[512];
+	for (int snow = 0; snow < 2; snow++) {
+		snprintf(params, sizeof params, "%s%s", base,
+			 snow ? "snow_equator = -100\nsnow_pole = -100\nsnow_blend = 1\n"
+				"snow_color = 255,255,255" : "");
+		struct tnode tn;
+		assert_int_equal(make(&tn, &node_type_ramp, &input_height, &input_height2, NULL,
+				      params), 0);
+		struct tile *h = height_tile(500), *sl = height_tile(0);
+		for (int i = 0; i < N; i++)
+			tile_f32(sl)[i] = slopes[i % ns];
+		struct tile *o = run1(&tn, h, sl, NULL);
+		for (int i = 0; i < N; i++) {
+			const uint8_t *d = o->data + 4 * i;
+			float w = (float)(slopes[i % ns] == slopes[i % ns] ? slopes[i % ns] : 0);
+			w = w < 0.5f ? 0 : w > 1 ? 1 : (w - 0.5f) * 2;
+			for (int c = 0; c < 3; c++) {
+				/* snow (white) covers the flat share, the steep share stays rock */
+				float e = snow ? 255 + (want[i % ns][c] - 255) * w : want[i % ns][c];
+				if (fabsf(d[c] - e) > 1)
+					fail_msg("snow %d slope %g channel %d: %d, want %g", snow,
+						 slopes[i % ns], c, d[c], e);
+			}
+			assert_int_equal(d[3], 255);
+		}
+		tile_unref(h);
+		tile_unref(sl);
+		tile_unref(o);
+		unmake(&tn);
+	}
+}
+
+static void ramp_steep_errors(void **state)
+{
+	(void)state;
+	static const struct {
+		bool slope;
+		const char *params, *want;
+	} cases[] = {
+		{ false, "steep_stops = 0 1 2 3", "test.ini:2: steep_stops: needs input \"slope\"" },
+		{ false, "steep_to = 2", "test.ini:2: steep_to: needs input \"slope\"" },
+		{ true, "steep_from = 0.5", "slope: input slope needs steep_stops" },
+		{ true, "steep_stops = 0 1 2 3\nsteep_from = 1\nsteep_to = 0.5",
+		  "test.ini:4: steep_to: steep_to (0.5) is not above steep_from (1)" },
+		{ true, "steep_stops = 0 1 2", "test.ini:2: steep_stops: item 1 \"0 1 2\"" },
+		{ true, "steep_from = -1\nsteep_stops = 0 1 2 3", "test.ini:2: steep_from:" },
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
+		struct tnode tn;
+		assert_int_equal(make(&tn, &node_type_ramp, &input_height,
+				      cases[i].slope ? &input_height2 : NULL, NULL, cases[i].params),
+				 -EINVAL);
+		if (!strstr(tn.err, cases[i].want))
+			fail_msg("\"%s\": error \"%s\" lacks \"%s\"", cases[i].params, tn.err,
+				 cases[i].want);
+		unmake(&tn);
+	}
+}
+
 static float blend_h(const char *params, float a, float b, const float *mask)
 {
 	struct tnode tn;
@@ -611,6 +684,7 @@ int main(void)
 		cmocka_unit_test(color_hue_saturation), cmocka_unit_test(color_errors),
 		cmocka_unit_test(height_filter),     cmocka_unit_test(ramp_stops),
 		cmocka_unit_test(ramp_default),	     cmocka_unit_test(ramp_errors),
+		cmocka_unit_test(ramp_steep),	     cmocka_unit_test(ramp_steep_errors),
 		cmocka_unit_test(blend_heights),     cmocka_unit_test(blend_colors),
 		cmocka_unit_test(blend_errors),	     cmocka_unit_test(hashes_differ),
 		cmocka_unit_test(color_reference),   cmocka_unit_test(ramp_reference),

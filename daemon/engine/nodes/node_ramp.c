@@ -9,6 +9,11 @@
  * shallow water first and deep water 8° further;
  * `snow_color` (default #f2f5fa).
  *
+ * Optional steepness: with input `slope` (a height node read as the slope, e.g. a `slope`
+ * node) texels whose slope exceeds `steep_from` (default 0.6) blend towards a second ramp,
+ * `steep_stops` (same form: rock and scree by height), fully from `steep_to` (default 1.2);
+ * snow thins by the same weight (it does not hold on cliffs).
+ *
  * Speed: a table of bins over [first stop, last stop] gives a lower bound on each height's
  * segment, so a texel costs a table load, (almost always) one comparison and three FMAs;
  * colours at stop heights come out exact.
@@ -16,6 +21,7 @@
  */
 #include <errno.h>
 #include <math.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -29,6 +35,8 @@
 
 #define RAMP_MAX_STOPS 64
 #define RAMP_BINS 2048
+enum { SLOT_INPUT, SLOT_SLOPE };
+
 /* "not set" for snow_equator: above any real snow line, so the default is no snow */
 #define NAN_DEFAULT 1e9
 
@@ -38,13 +46,20 @@ static const char default_stops[] =
 	"-1 140 208 222, 0 72 128 64, 300 104 152 76, 800 176 170 112, 1600 168 128 84, "
 	"2400 128 96 70, 3200 128 124 120, 4200 216 216 216, 5200 250 250 252";
 
-struct ramp {
+/* One list of stops and its lookup tables. */
+struct ramp_table {
 	int nstops;
 	float h[RAMP_MAX_STOPS + 1];	     /* stop heights + sea level, then +∞ */
 	float c[RAMP_MAX_STOPS][4];	     /* stop colours, alpha 255 */
-	float slope[RAMP_MAX_STOPS][4];     /* colour per metre from stop s to s + 1; 0 at the end */
+	float dc[RAMP_MAX_STOPS][4];	     /* colour per metre from stop s to s + 1; 0 at the end */
 	float inv_bin;			 /* bins per metre */
 	uint8_t bin_seg[RAMP_BINS];	 /* the segment where the bin starts */
+};
+
+struct ramp {
+	struct ramp_table base;
+	struct ramp_table steep; /* with a slope input */
+	float steep_from, inv_steep; /* slope where steep begins; 1 / (steep_to − steep_from) */
 	/* Snow line by latitude (off when snow_equator is NaN): land above
 	 * snow_pole + (snow_equator − snow_pole)·cos²(lat) fades to snow over snow_blend metres;
 	 * beyond ±sea_ice_latitude everything is ice. */
@@ -88,7 +103,8 @@ static void item_text(const char *s, const char *e, char out[52])
 	strcpy(out + len, len == 48 ? "..." : "");
 }
 
-static int parse_stops(struct node_parse *p, const char *text, double sea, struct ramp *r)
+static int parse_stops(struct node_parse *p, const char *key, const char *text, double sea,
+		       struct ramp_table *r)
 {
 	const char *s = text;
 	r->nstops = 0;
@@ -100,17 +116,17 @@ static int parse_stops(struct node_parse *p, const char *text, double sea, struc
 		item_text(s, e, shown);
 		double v[4];
 		if (parse_stop(s, e, v))
-			return np_error(p, "stops", "item %d \"%s\": expected \"height r g b\"", item,
+			return np_error(p, key, "item %d \"%s\": expected \"height r g b\"", item,
 					shown);
 		for (int i = 1; i < 4; i++)
 			if (v[i] < 0 || v[i] > 255)
-				return np_error(p, "stops", "item %d \"%s\": colour %g is outside 0..255",
+				return np_error(p, key, "item %d \"%s\": colour %g is outside 0..255",
 						item, shown, v[i]);
 		if (r->nstops == RAMP_MAX_STOPS)
-			return np_error(p, "stops", "more than %d stops", RAMP_MAX_STOPS);
+			return np_error(p, key, "more than %d stops", RAMP_MAX_STOPS);
 		float h = (float)(v[0] + sea);
 		if (r->nstops > 0 && !(h > r->h[r->nstops - 1]))
-			return np_error(p, "stops", "item %d \"%s\": height %g is not above the "
+			return np_error(p, key, "item %d \"%s\": height %g is not above the "
 					"previous stop's", item, shown, v[0]);
 		r->h[r->nstops] = h;
 		for (int i = 0; i < 3; i++)
@@ -121,6 +137,56 @@ static int parse_stops(struct node_parse *p, const char *text, double sea, struc
 			break;
 		s = e + 1;
 	}
+	return 0;
+}
+
+/* The colour-per-metre slopes and the bin table of parsed stops. */
+static void build_table(struct ramp_table *r)
+{
+	int last = r->nstops - 1;
+	r->h[r->nstops] = INFINITY;
+	for (int s = 0; s < last; s++)
+		for (int i = 0; i < 3; i++)
+			r->dc[s][i] = (r->c[s + 1][i] - r->c[s][i]) / (r->h[s + 1] - r->h[s]);
+	if (last > 0) {
+		double span = (double)r->h[last] - r->h[0];
+		r->inv_bin = (float)(RAMP_BINS / span);
+		int seg = 0;
+		for (int b = 0; b < RAMP_BINS; b++) {
+			double start = r->h[0] + b * (span / RAMP_BINS);
+			while (seg + 1 < last && r->h[seg + 1] <= start)
+				seg++;
+			r->bin_seg[b] = (uint8_t)seg;
+		}
+	}
+}
+
+/* The steep ramp's keys: needed with a slope input, refused without one. */
+static int parse_steep(struct node *n, struct node_parse *p, double sea, struct ramp *r)
+{
+	const char *stops;
+	double from, to;
+	int rc;
+	if ((rc = np_string(p, "steep_stops", NULL, &stops)) ||
+	    (rc = np_double(p, "steep_from", 0.6, 0, 1e3, &from)) ||
+	    (rc = np_double(p, "steep_to", 1.2, 0, 1e3, &to)))
+		return rc;
+	if (!n->in[SLOT_SLOPE]) {
+		if (stops || ini_find(p->sec, "steep_from") || ini_find(p->sec, "steep_to"))
+			return np_error(p, stops ? "steep_stops" : ini_find(p->sec, "steep_from")
+							       ? "steep_from" : "steep_to",
+					"needs input \"slope\"");
+		return 0;
+	}
+	if (!stops)
+		return np_error(p, "slope", "input slope needs steep_stops (\"height r g b, ...\")");
+	if (!(to > from))
+		return np_error(p, "steep_to", "steep_to (%g) is not above steep_from (%g)", to, from);
+	r->steep_from = (float)from;
+	r->inv_steep = (float)(1 / (to - from));
+	if ((rc = parse_stops(p, "steep_stops", stops, sea, &r->steep)))
+		return rc;
+	build_table(&r->steep);
 	return 0;
 }
 
@@ -139,28 +205,14 @@ static int ramp_create(struct node *n, struct node_parse *p)
 	    (rc = np_double(p, "snow_blend", 400, 1, 1e5, &r->snow_blend)) ||
 	    (rc = np_double(p, "sea_ice_latitude", 91, 0, 91, &r->sea_ice_latitude)) ||
 	    (rc = np_color(p, "snow_color", snow_def, snow)) ||
-	    (rc = parse_stops(p, stops, sea, r))) {
+	    (rc = parse_stops(p, "stops", stops, sea, &r->base)) ||
+	    (rc = parse_steep(n, p, sea, r))) {
 		free(r);
 		return rc;
 	}
 	for (int i = 0; i < 4; i++)
 		r->snow[i] = snow[i];
-	int last = r->nstops - 1;
-	r->h[r->nstops] = INFINITY;
-	for (int s = 0; s < last; s++)
-		for (int i = 0; i < 3; i++)
-			r->slope[s][i] = (r->c[s + 1][i] - r->c[s][i]) / (r->h[s + 1] - r->h[s]);
-	if (last > 0) {
-		double span = (double)r->h[last] - r->h[0];
-		r->inv_bin = (float)(RAMP_BINS / span);
-		int seg = 0;
-		for (int b = 0; b < RAMP_BINS; b++) {
-			double start = r->h[0] + b * (span / RAMP_BINS);
-			while (seg + 1 < last && r->h[seg + 1] <= start)
-				seg++;
-			r->bin_seg[b] = (uint8_t)seg;
-		}
-	}
+	build_table(&r->base);
 	n->impl = r;
 	n->out = PIX_COLOR;
 	return 0;
@@ -186,9 +238,18 @@ static inline void put(uint8_t *d, const float *c, const float *sl, float t)
 }
 #endif
 
+/* 0 below steep_from, 1 from steep_to, linear between; 0 for NaN. */
+static inline float steep_weight(const struct ramp *r, float slope)
+{
+	float w = (slope - r->steep_from) * r->inv_steep;
+	w = w > 0.0f ? w : 0.0f;
+	return w < 1.0f ? w : 1.0f;
+}
+
 /* Fades a row towards snow above its latitude's snow line (and all of it past the sea-ice
- * latitude). */
-static void snow_row(const struct ramp *r, double lat, const float *h, uint8_t *d, uint32_t T)
+ * latitude); with a slope row, less on steep texels. */
+static void snow_row(const struct ramp *r, double lat, const float *h, const float *slope,
+		     uint8_t *d, uint32_t T)
 {
 	double c = cos(lat * M_PI / 180.0);
 	double line = r->snow_pole + (r->snow_equator - r->snow_pole) * c * c;
@@ -205,6 +266,8 @@ static void snow_row(const struct ramp *r, double lat, const float *h, uint8_t *
 			continue;
 		if (t > 1)
 			t = 1;
+		if (slope)
+			t *= 1.0f - steep_weight(r, slope[i]);
 		for (int ch = 0; ch < 3; ch++) {
 			float v = d[4 * i + ch] + (r->snow[ch] - d[4 * i + ch]) * t;
 			d[4 * i + ch] = (uint8_t)(v + 0.5f);
@@ -212,41 +275,69 @@ static void snow_row(const struct ramp *r, double lat, const float *h, uint8_t *
 	}
 }
 
+/* The segment of table r holding h (clamped to its ends, where the last stop's segment has
+ * slope 0 and h[last + 1] = +∞ ends the search); *t = metres into it. */
+static inline int segment(const struct ramp_table *r, float h, float *t)
+{
+	const float h0 = r->h[0], hl = r->h[r->nstops - 1];
+	h = h < h0 ? h0 : h > hl ? hl : h;
+	int b = (int)((h - h0) * r->inv_bin);
+	int s = r->bin_seg[b < RAMP_BINS ? b : RAMP_BINS - 1];
+	while (h >= r->h[s + 1]) /* the bin holds a stop */
+		s++;
+	while (h < r->h[s]) /* rounding put h just below the bin's start */
+		s--;
+	*t = h - r->h[s];
+	return s;
+}
+
+/* A texel of the base ramp mixed with the steep ramp by weight w > 0. */
+static void put_steep(const struct ramp *r, float h, float w, uint8_t *d)
+{
+	float ta, tb;
+	int sa = segment(&r->base, h, &ta), sb = segment(&r->steep, h, &tb);
+	for (int i = 0; i < 3; i++) {
+		float a = r->base.c[sa][i] + ta * r->base.dc[sa][i];
+		float b = r->steep.c[sb][i] + tb * r->steep.dc[sb][i];
+		d[i] = (uint8_t)(int)(a + (b - a) * w + 0.5f);
+	}
+	d[3] = 255;
+}
+
 static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			 struct tile *const *in, int nin, struct tile *out)
 {
 	(void)g;
 	const struct ramp *r = n->impl;
-	if (nin < 1 || in[0]->type != PIX_HEIGHT || in[0]->size != out->size)
+	const bool steep = n->in[SLOT_SLOPE] != NULL;
+	if (nin < 1 + steep || in[0]->type != PIX_HEIGHT || in[0]->size != out->size ||
+	    (steep && (in[1]->type != PIX_HEIGHT || in[1]->size != out->size)))
 		return -EINVAL;
 	size_t count = (size_t)out->size * out->size;
-	const float *src = tile_f32(in[0]);
+	const float *src = tile_f32(in[0]), *slope = steep ? tile_f32(in[1]) : NULL;
 	uint8_t *dst = out->data;
-	const float h0 = r->h[0], hl = r->h[r->nstops - 1], inv = r->inv_bin;
 	for (size_t i = 0; i < count; i++) {
-		float h = src[i];
+		float h = src[i], t;
 		uint8_t *d = dst + 4 * i;
 		if (h != h) {
 			memset(d, 0, 4); /* NaN: no data */
 			continue;
 		}
-		/* clamped to the ends, where the last stop's segment has slope 0 and h[last + 1]
-		 * = +∞ ends the search */
-		h = h < h0 ? h0 : h > hl ? hl : h;
-		int b = (int)((h - h0) * inv);
-		int s = r->bin_seg[b < RAMP_BINS ? b : RAMP_BINS - 1];
-		while (h >= r->h[s + 1]) /* the bin holds a stop */
-			s++;
-		while (h < r->h[s]) /* rounding put h just below the bin's start */
-			s--;
-		put(d, r->c[s], r->slope[s], h - r->h[s]);
+		float w = steep ? steep_weight(r, slope[i]) : 0.0f;
+		if (w > 0) {
+			put_steep(r, h, w, d);
+			continue;
+		}
+		int s = segment(&r->base, h, &t);
+		put(d, r->base.c[s], r->base.dc[s], t);
 	}
 	if (r->snow_equator < NAN_DEFAULT || r->sea_ice_latitude <= 90) {
 		uint32_t T = out->size;
 		for (uint32_t j = 0; j < T; j++) {
 			double lon, lat;
 			grid_texel_center(k, T, 0, j, &lon, &lat);
-			snow_row(r, lat, src + (size_t)j * T, dst + (size_t)j * T * 4, T);
+			snow_row(r, lat, src + (size_t)j * T, slope ? slope + (size_t)j * T : NULL,
+				 dst + (size_t)j * T * 4, T);
 		}
 	}
 	return 0;
@@ -254,6 +345,7 @@ static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct t
 
 static const struct node_slot ramp_slots[] = {
 	{ .name = "input", .type = PIX_HEIGHT },
+	{ .name = "slope", .type = PIX_HEIGHT, .optional = true },
 };
 
 const struct node_type node_type_ramp = {
@@ -261,7 +353,7 @@ const struct node_type node_type_ramp = {
 	.doc = "hypsometric tint: heights to colours through interpolated stops",
 	.version = 1,
 	.slots = ramp_slots,
-	.nslots = 1,
+	.nslots = 2,
 	.create = ramp_create,
 	.destroy = node_free_impl,
 	.generate = ramp_generate,
