@@ -6,7 +6,8 @@
 // interpolated across the meridian behind it; elsewhere the vertices' (lon, lat) interpolate.
 // BLEND samples the coarser level too, HAZE applies the vertex shader's air, EXAG steepens the
 // normals by the vertical exaggeration, COLOR and NORMAL say which layers exist, SEA draws
-// water where the vertex shader lifted the ground to sea level. UNLIT writes the colour layer
+// water where the vertex shader lifted the ground to sea level (ice where the colour layer
+// shows it there). UNLIT writes the colour layer
 // as it is (no light, air or water: what the textures put on screen, for measuring).
 
 #ifndef BLEND
@@ -110,9 +111,19 @@ void main()
 	o_color = vec4(albedo, 1.0);
 	return;
 #endif
+#if SEA
+	// Ice on the sea: where the colour layer shows near-white (sea ice, ice shelves: bright,
+	// unsaturated), the surface is drawn as that ice, not as water.
+	float lum = dot(albedo, vec3(0.30, 0.59, 0.11));
+	float sat = max(albedo.r, max(albedo.g, albedo.b)) - min(albedo.r, min(albedo.g, albedo.b));
+	float ice = smoothstep(0.70, 0.82, lum) * (1.0 - smoothstep(0.10, 0.22, sat));
+#endif
 	albedo = srgb_to_linear(albedo);
 #else
 	vec3 albedo = vec3(0.5);
+#if SEA
+	float ice = 0.0;
+#endif
 #endif
 #if NORMAL
 	vec2 en = tex_at(u_normal, g, u_df, u_dvf, u_dsf).rg;
@@ -140,11 +151,12 @@ void main()
 #if SEA
 	// Water: flat, the floor's colour fading into deep-water blue with depth (the first few
 	// metres show the floor, a hundred hide it), and the sun's glint on top.
-	float wet = step(0.0, v_depth);
+	float below = step(0.0, v_depth); // at the sea's surface: water, or ice on it
+	float wet = below * (1.0 - ice);
 	float clear = exp2(max(v_depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)
 	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7), clear),
 		     wet);
-	nrm = mix(nrm, U, wet); // wet is 0 or 1: still a unit vector
+	nrm = mix(nrm, U, below); // below is 0 or 1: still a unit vector (flat water, flat ice)
 #endif
 	float diff = max(dot(nrm, u_sun), 0.0);
 	float sky = 0.5 + 0.5 * dot(nrm, U); // the open sky a slope sees

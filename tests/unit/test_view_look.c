@@ -3,7 +3,8 @@
  * Mars' air a butterscotch sky, --haze (view_desc.haze) overrides the planet's; the default
  * sun lights a north-up view from its upper left (a slope facing north-west is bright, one
  * facing south-east dark: craters read as bowls); a sea draws water over the ground below
- * it (dark blue, a glint of the sun) and the camera's height is above the water; and the
+ * it (dark blue, a glint of the sun) and the camera's height is above the water, except where
+ * the colour layer shows ice there; and the
  * look reaches the viewer from the planet file through the in-process source. Synthetic flat
  * grey planets, small framebuffers.
  */
@@ -33,6 +34,7 @@ struct flat {
 	double ne[2];
 	unsigned char grey;
 	float height;
+	bool tint; /* sand instead of grey: grey, 0.85 grey, 0.55 grey */
 };
 
 static void fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type f, void *data)
@@ -49,6 +51,10 @@ static void fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type
 			break;
 		default:
 			memset((unsigned char *)data + o * 4, s->grey, 3);
+			if (s->tint) {
+				((unsigned char *)data)[o * 4 + 1] = (unsigned char)(s->grey * 0.85);
+				((unsigned char *)data)[o * 4 + 2] = (unsigned char)(s->grey * 0.55);
+			}
 			((unsigned char *)data)[o * 4 + 3] = 255;
 			break;
 		}
@@ -115,7 +121,7 @@ struct horizon {
 
 static bool horizon_view(const struct view_look *look, float haze, struct horizon *h)
 {
-	struct flat s = { { 0, 0 }, 40, 0 }; /* dark: the haze shows */
+	struct flat s = { { 0, 0 }, 40, 0, false }; /* dark: the haze shows */
 	struct view_camera cam = { 0, 0, 2000, 0, -3, 12, W, H };
 	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
 	if (!render(&s, look, haze, &cam, px, bg)) {
@@ -192,7 +198,7 @@ static void mars_air(void **state)
 /* Looking straight down, north up: the mean of the frame's middle. */
 static bool slope_brightness(double e, double n, double *out)
 {
-	struct flat s = { { e, n }, 140, 0 };
+	struct flat s = { { e, n }, 140, 0, false };
 	struct view_camera cam = { 0, 0, 5000, 0, -90, 60, W, H };
 	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
 	if (!render(&s, NULL, 0, &cam, px, bg)) {
@@ -230,7 +236,7 @@ static void sun_from_upper_left(void **state)
 static void sea(void **state)
 {
 	(void)state;
-	struct flat s = { { 0, 0 }, 140, -500 };
+	struct flat s = { { 0, 0 }, 140, -500, false };
 	struct view_look wet = { .sea = true, .sea_level = 0 }, dry = { .sea = false };
 	struct view_camera down = { 0, 0, 2000, 0, -90, 60, W, H };
 	/* towards the sun (azimuth 315), looking 35° down: the sun's mirror image in the middle */
@@ -255,6 +261,29 @@ static void sea(void **state)
 	assert_true(d_wet[2] > d_wet[0] + 15);		   /* blue */
 	assert_true(d_wet[0] + d_wet[1] + d_wet[2] < d_dry[0] + d_dry[1] + d_dry[2]); /* darker */
 	assert_true(g_wet[0] > 200 && g_wet[0] > g_dry[0] + 50); /* the glint */
+	free(px);
+}
+
+/* Ice on the sea: where the colour layer is near-white below sea level (sea ice, an ice
+ * shelf), the viewer draws that white, flat and without a glint — not dark water; a light
+ * but saturated floor (shallows over sand) stays water. */
+static void sea_ice(void **state)
+{
+	(void)state;
+	struct flat ice = { { 0.3, 0 }, 235, -50, false }, sand = { { 0.3, 0 }, 200, -50, true };
+	struct view_look wet = { .sea = true, .sea_level = 0 };
+	struct view_camera down = { 0, 0, 2000, 0, -90, 60, W, H };
+	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
+	if (!render(&ice, &wet, -1, &down, px, bg))
+		skip();
+	unsigned char c_ice[4], c_sand[4];
+	memcpy(c_ice, at(px, W / 2, H / 2), 4);
+	assert_true(render(&sand, &wet, -1, &down, px, bg));
+	memcpy(c_sand, at(px, W / 2, H / 2), 4);
+	fprintf(stderr, "ice on the sea %u,%u,%u; tinted shallows %u,%u,%u\n", c_ice[0], c_ice[1],
+		c_ice[2], c_sand[0], c_sand[1], c_sand[2]);
+	assert_true(c_ice[0] > 150 && c_ice[1] > 150 && c_ice[2] > 150); /* white, lit */
+	assert_true(c_sand[0] + c_sand[1] + c_sand[2] < 300); /* water: dark, not the sand */
 	free(px);
 }
 
@@ -296,6 +325,7 @@ int main(void)
 		cmocka_unit_test(mars_air),
 		cmocka_unit_test(sun_from_upper_left),
 		cmocka_unit_test(sea),
+		cmocka_unit_test(sea_ice),
 		cmocka_unit_test(look_from_planet_file),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
