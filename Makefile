@@ -7,6 +7,7 @@
 #   make data       install the planet data packages and import them into data/
 
 BUILD   ?= build
+.DEFAULT_GOAL := all
 CC      ?= cc
 CXX     ?= g++
 PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal
@@ -77,6 +78,20 @@ SHADERS      := $(wildcard shaders/*.vert shaders/*.frag)
 SHADER_HDR   := $(foreach s,$(SHADERS),$(BUILD)/gen/$(subst .,_,$(notdir $(s))).h)
 VIEW_OBJ     := $(VIEW_SRC:%.c=$(BUILD)/%.o)
 VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(GL_TESTS)) $(BUILD)/client/view/clipmapview.o
+
+# The version the programs print (--version): `git describe --always --dirty` of this checkout,
+# else VERSION_FALLBACK (a release tarball), given to the three mains as CLIPMAP_VERSION.
+# build/gen/version.txt is rewritten only when it changes, so only the mains recompile then.
+VERSION_FALLBACK := 0.1.0
+VERSION ?= $(shell git describe --always --dirty 2>/dev/null || echo $(VERSION_FALLBACK))
+MAIN_OBJ     := $(MAINS:%.c=$(BUILD)/%.o)
+$(MAIN_OBJ): CFLAGS += -DCLIPMAP_VERSION='"$(VERSION)"'
+$(MAIN_OBJ): $(BUILD)/gen/version.txt
+$(BUILD)/gen/version.txt: FORCE
+	@mkdir -p $(dir $@)
+	@printf '%s\n' '$(VERSION)' > $@.tmp
+	@if cmp -s $@.tmp $@; then rm -f $@.tmp; else mv $@.tmp $@; fi
+FORCE:
 
 .PHONY: all check test layers asan tsan bench bench-keepup deps clean demo data shader-check fuzz install
 .SECONDARY:

@@ -40,7 +40,9 @@ static void usage(FILE *f)
 	fprintf(f, "usage: clipmapd [-c FILE] [--check-config]\n"
 		   "  -c, --config FILE   configuration (default " DEFAULT_CONF ")\n"
 		   "      --check-config  validate the configuration and the planet files, then exit\n"
-		   "  -h, --help          this text\n");
+		   "  -V, --version       the version\n"
+		   "  -h, --help          this text\n"
+		   "exit status: 0 stopped cleanly, 1 runtime failure, 2 bad usage or configuration\n");
 }
 
 static void reload(struct daemon *d)
@@ -115,18 +117,29 @@ static int check_token(const struct conf *c, char err[256])
 }
 
 /* The command line into *cfg and *check. Returns -1 to go on, else the exit status (0:
- * --help). */
+ * --help, --version). */
 static int parse_args(int argc, char **argv, const char **cfg, bool *check)
 {
 	for (int i = 1; i < argc; i++) {
-		if ((!strcmp(argv[i], "-c") || !strcmp(argv[i], "--config")) && i + 1 < argc) {
+		if (!strcmp(argv[i], "-c") || !strcmp(argv[i], "--config")) {
+			if (i + 1 >= argc || !argv[i + 1][0]) {
+				fprintf(stderr, "clipmapd: %s: expected a FILE\n", argv[i]);
+				return 2;
+			}
 			*cfg = argv[++i];
 		} else if (!strncmp(argv[i], "--config=", 9)) {
 			*cfg = argv[i] + 9;
+			if (!**cfg) {
+				fprintf(stderr, "clipmapd: --config: expected a FILE\n");
+				return 2;
+			}
 		} else if (!strcmp(argv[i], "--check-config")) {
 			*check = true;
 		} else if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 			usage(stdout);
+			return 0;
+		} else if (!strcmp(argv[i], "-V") || !strcmp(argv[i], "--version")) {
+			printf("clipmapd %s\n", CLIPMAP_VERSION);
 			return 0;
 		} else {
 			fprintf(stderr, "clipmapd: unknown argument \"%s\"\n", argv[i]);
