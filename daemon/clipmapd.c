@@ -45,13 +45,27 @@ static void usage(FILE *f)
 		   "exit status: 0 stopped cleanly, 1 runtime failure, 2 bad usage or configuration\n");
 }
 
+/* The planets of d->conf's directory into *ps (returned owned), every file on its own unless
+ * strict_planets; the files left out are logged as errors. Returns 0 or -errno with err. */
+static int load_planets(struct daemon *d, struct img_cache *images, struct planet_set **ps,
+			char err[256])
+{
+	int rc = d->conf.strict_planets
+			 ? planet_set_load(d->conf.planets_dir, ++d->generation, images, ps, err)
+			 : planet_set_load_each(d->conf.planets_dir, ++d->generation, images, ps, err);
+	for (size_t i = 0; rc == 0 && i < (*ps)->nskipped; i++)
+		log_msg(LOG_ERROR, "planet file skipped (strict_planets = false): %s",
+			(*ps)->skipped[i]);
+	return rc;
+}
+
 static void reload(struct daemon *d)
 {
 	sd_notify(0, "RELOADING=1\nSTATUS=reloading planets");
 	char err[256];
 	struct planet_set *ps = NULL;
-	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, server_planets(d->srv)->images, &ps,
-				 err); /* the same image cache: unchanged files stay cached */
+	/* the same image cache: unchanged files stay cached */
+	int rc = load_planets(d, server_planets(d->srv)->images, &ps, err);
 	if (rc) {
 		log_msg(LOG_ERROR, "reload failed, keeping the loaded planets: %s", err);
 	} else {
@@ -63,8 +77,8 @@ static void reload(struct daemon *d)
 				kept += planet_set_has_node(old, ps->planets[i]->nodes[j]->hash);
 			}
 		server_set_planets(d->srv, ps);
-		log_msg(LOG_INFO, "reloaded %zu planets from %s: %zu of %zu nodes unchanged", ps->n,
-			d->conf.planets_dir, kept, nodes);
+		log_msg(LOG_INFO, "reloaded %zu planets from %s: %zu of %zu nodes unchanged%s", ps->n,
+			d->conf.planets_dir, kept, nodes, ps->nskipped ? " (some files skipped)" : "");
 	}
 	sd_notify(0, "READY=1\nSTATUS=serving");
 }
@@ -163,7 +177,7 @@ static int configure(struct daemon *d, const char *cfg, struct planet_set **ps)
 	log_set_level(d->conf.log_level);
 	*ps = NULL;
 	struct img_cache *images = img_cache_create(d->conf.image_cache_mb); /* the set holds it */
-	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, images, ps, err);
+	int rc = load_planets(d, images, ps, err);
 	img_cache_unref(images);
 	if (rc || check_token(&d->conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
@@ -214,8 +228,13 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 			ls[i].compress ? " (compressed tiles)" : "");
 	struct sched_stats ss;
 	sched_get_stats(sched, &ss);
-	log_msg(LOG_INFO, "clipmapd ready: %zu planets, %d workers, cache %zu MiB",
-		server_planets(d->srv)->n, ss.workers, d->conf.cache_bytes >> 20);
+	const struct planet_set *ps = server_planets(d->srv);
+	char names[512] = "";
+	for (size_t i = 0, l = 0; i < ps->n && l < sizeof names; i++, l = strlen(names))
+		snprintf(names + l, sizeof names - l, "%s%s", i ? ", " : "", ps->planets[i]->name);
+	log_msg(LOG_INFO, "clipmapd ready: %zu planets (%s)%s, %d workers, cache %zu MiB, version %s",
+		ps->n, names, ps->nskipped ? ", some skipped" : "", ss.workers,
+		d->conf.cache_bytes >> 20, CLIPMAP_VERSION);
 }
 
 /* The cache, the workers and the server over the planets ps (taken), run until a signal
@@ -266,10 +285,15 @@ int main(int argc, char **argv)
 		return status;
 	struct daemon d = { .sigfd = -1 };
 	struct planet_set *ps;
+	log_detect_journal();
 	if ((status = configure(&d, cfg, &ps)))
 		return status;
 	if (check) {
-		printf("%s: OK (%zu planets in %s)\n", cfg, ps->n, d.conf.planets_dir);
+		printf("%s: OK (%zu planets in %s", cfg, ps->n, d.conf.planets_dir);
+		if (ps->nskipped)
+			printf("; %zu planet file%s skipped, see above", ps->nskipped,
+			       ps->nskipped == 1 ? "" : "s");
+		printf(")\n");
 		planet_set_unref(ps);
 		conf_fini(&d.conf);
 		return 0;

@@ -18,7 +18,7 @@
 #include "common/proto.h"
 #include "common/xalloc.h"
 
-enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG };
+enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG, K_BOOL };
 
 struct row {
 	const char *sec, *key;
@@ -38,6 +38,7 @@ static const struct row rows[] = {
 	{ "listen", "require_token", K_ENUM, 0, 0, token_names },
 	{ "listen", "max_sessions", K_INT, 1, 100000, NULL },
 	{ "engine", "planets", K_PATH, 0, 0, NULL },
+	{ "engine", "strict_planets", K_BOOL, 0, 1, NULL },
 	{ "engine", "workers", K_INT, 0, 1024, NULL },
 	{ "engine", "worker_nice", K_INT, 0, 19, NULL },
 	{ "engine", "cache_mb", K_SIZE_MB, 16, 1L << 24, NULL },
@@ -199,6 +200,14 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	}
 	case K_TCP:
 		return set_tcp(c, path, e, err);
+	case K_BOOL: /* the only one: strict_planets */
+		if (strcmp(v, "true") == 0 || strcmp(v, "yes") == 0 || strcmp(v, "1") == 0)
+			c->strict_planets = true;
+		else if (strcmp(v, "false") == 0 || strcmp(v, "no") == 0 || strcmp(v, "0") == 0)
+			c->strict_planets = false;
+		else
+			return cerr(err, path, e->line, e->key, "\"%s\": expected true or false", v);
+		return 0;
 	case K_LOG:
 		if (log_parse_level(v, &c->log_level))
 			return cerr(err, path, e->line, e->key,

@@ -282,6 +282,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "errors.sent", c->errors_sent);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
+	stat_u(&b, "planets.skipped", srv->planets->nskipped); /* files that did not load */
 	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0;
 	for (const struct session_link *l = srv->sessions; l; l = l->next) {
 		struct session_load ld;

@@ -485,6 +485,8 @@ static int cmd_status(int argc, char **argv, struct ctl_target *t)
 		return 1;
 	char err[256];
 	int rc = ctl_status_run(conn, json, timeout_of(t), stdout, err);
+	if (rc == 0 && !json) /* JSON: the stats' own keys only (planets, planets.skipped) */
+		rc = ctl_status_planets(conn, timeout_of(t), stdout, err);
 	net_close(conn);
 	return rc ? fail("status", rc, err) : 0;
 }
