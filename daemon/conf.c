@@ -304,6 +304,22 @@ static int check(struct conf *c, const struct ini_file *f, char *err)
 	return 0;
 }
 
+/* The line where entry j of section i was given before (the same key in a section of the
+ * same name, earlier in the file), or 0. */
+static int first_line(const struct ini_file *f, size_t i, size_t j)
+{
+	const struct ini_section *s = &f->sections[i];
+	for (size_t a = 0; a <= i; a++) {
+		const struct ini_section *t = &f->sections[a];
+		if (strcmp(t->name, s->name) != 0)
+			continue;
+		for (size_t b = 0; b < (a == i ? j : t->n); b++)
+			if (strcmp(t->entries[b].key, s->entries[j].key) == 0)
+				return t->entries[b].line;
+	}
+	return 0;
+}
+
 int conf_parse(const char *path, const char *text, size_t len, struct conf *c, char err[256])
 {
 	struct ini_file *f = NULL;
@@ -333,8 +349,12 @@ int conf_parse(const char *path, const char *text, size_t len, struct conf *c, c
 			for (size_t r = 0; r < sizeof rows / sizeof rows[0]; r++)
 				if (strcmp(rows[r].sec, s->name) == 0 && strcmp(rows[r].key, e->key) == 0)
 					row = &rows[r];
+			int first = first_line(f, i, j);
 			if (!row)
 				rc = cerr(err, path, e->line, e->key, "unknown key in [%s]", s->name);
+			else if (first)
+				rc = cerr(err, path, e->line, e->key, "given twice in [%s] (first at line %d)",
+					  s->name, first);
 			else
 				rc = apply(c, path, row, e, err);
 		}
