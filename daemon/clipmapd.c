@@ -1,6 +1,7 @@
 /* clipmapd — the daemon's main: arguments, configuration, the planet set, signals through a
- * signalfd watched by the event loop (SIGTERM/SIGINT: graceful stop; SIGHUP: reload the
- * planet files), and systemd notification (READY, RELOADING, STOPPING, WATCHDOG).
+ * signalfd watched by the event loop (SIGTERM/SIGINT: graceful stop; SIGHUP: re-read
+ * clipmapd.conf for the keys that can change live, then reload the planet files), and
+ * systemd notification (READY, RELOADING, STOPPING, WATCHDOG).
  * Exit status: 0 after a clean stop, 1 on a runtime failure, 2 on bad usage or configuration.
  */
 #include <errno.h>
@@ -59,9 +60,74 @@ static int load_planets(struct daemon *d, struct img_cache *images, struct plane
 	return rc;
 }
 
+static bool same_str(const char *a, const char *b)
+{
+	return (!a && !b) || (a && b && strcmp(a, b) == 0);
+}
+
+/* The keys of nc that only a restart applies and that differ from the running c, named in a
+ * warning each. */
+static void warn_restart_keys(const struct conf *c, const struct conf *nc)
+{
+	bool tcp = c->ntcp == nc->ntcp;
+	for (int i = 0; tcp && i < c->ntcp; i++)
+		tcp = strcmp(c->tcp[i], nc->tcp[i]) == 0;
+	const struct {
+		bool same;
+		const char *key;
+	} k[] = {
+		{ same_str(c->unix_path, nc->unix_path), "[listen] unix" },
+		{ c->unix_mode == nc->unix_mode, "[listen] unix_mode" },
+		{ tcp, "[listen] tcp" },
+		{ same_str(c->token_file, nc->token_file), "[listen] token_file" },
+		{ c->require_token == nc->require_token, "[listen] require_token" },
+		{ c->workers == nc->workers, "[engine] workers" },
+		{ c->worker_nice == nc->worker_nice, "[engine] worker_nice" },
+		{ c->cache_bytes == nc->cache_bytes, "[engine] cache_mb" },
+		{ c->image_cache_mb == nc->image_cache_mb, "[engine] image_cache_mb" },
+		{ c->compress == nc->compress, "[session] compress" },
+	};
+	for (size_t i = 0; i < sizeof k / sizeof k[0]; i++)
+		if (!k[i].same)
+			log_msg(LOG_WARN, "reload: %s changed in %s: not applied until a restart",
+				k[i].key, c->path);
+}
+
+/* Re-reads clipmapd.conf and applies the keys that can change while running: [log] level,
+ * [engine] planets and strict_planets, [listen] max_sessions, [session] max_want, max_rate,
+ * max_pending_kb, max_frame_kb, max_jobs. The others keep their running values (a warning
+ * names each one that changed). A file that does not load changes nothing. */
+static void reload_conf(struct daemon *d)
+{
+	struct conf nc;
+	char err[256];
+	if (conf_load(d->conf.path, &nc, err)) {
+		log_msg(LOG_ERROR, "reload: %s; keeping the running configuration", err);
+		return;
+	}
+	struct conf *c = &d->conf;
+	warn_restart_keys(c, &nc);
+	char *dir = c->planets_dir; /* swapped: nc frees the old one */
+	c->planets_dir = nc.planets_dir;
+	nc.planets_dir = dir;
+	c->strict_planets = nc.strict_planets;
+	c->log_level = nc.log_level;
+	c->max_sessions = nc.max_sessions;
+	c->max_want = nc.max_want;
+	c->max_rate = nc.max_rate;
+	c->max_pending = nc.max_pending;
+	c->max_frame = nc.max_frame;
+	c->max_jobs = nc.max_jobs;
+	conf_fini(&nc);
+	log_set_level(c->log_level);
+	server_conf_changed(d->srv);
+	log_msg(LOG_INFO, "reload: %s re-read", c->path);
+}
+
 static void reload(struct daemon *d)
 {
-	sd_notify(0, "RELOADING=1\nSTATUS=reloading planets");
+	sd_notify(0, "RELOADING=1\nSTATUS=reloading");
+	reload_conf(d);
 	char err[256];
 	struct planet_set *ps = NULL;
 	/* the same image cache: unchanged files stay cached */
@@ -89,7 +155,7 @@ static void on_signal(void *ud)
 	struct signalfd_siginfo si;
 	while (read(d->sigfd, &si, sizeof si) == (ssize_t)sizeof si) {
 		if (si.ssi_signo == SIGHUP) {
-			log_msg(LOG_INFO, "SIGHUP: reloading planets");
+			log_msg(LOG_INFO, "SIGHUP: reloading the configuration and the planets");
 			reload(d);
 		} else {
 			log_msg(LOG_INFO, "%s: stopping", strsignal((int)si.ssi_signo));

@@ -331,6 +331,15 @@ static int load_token(struct server *srv, char err[256])
 	return 0;
 }
 
+void server_conf_changed(struct server *srv)
+{
+	const struct conf *c = srv->conf;
+	srv->limits = (struct proto_limits){ .max_want = c->max_want, .max_rate = c->max_rate,
+					     .max_pending = c->max_pending,
+					     .max_frame = c->max_frame };
+	srv->env.max_jobs = c->max_jobs;
+}
+
 static void init_env(struct server *srv)
 {
 	srv->env = (struct session_env){
