@@ -27,8 +27,8 @@
 #include "render.h"
 
 #define GLOBAL_USAGE                                                                         \
-	"usage: clipmapctl [-s SOCKET | -H HOST:PORT] [--token-file FILE] [--timeout SEC] "  \
-	"COMMAND ...\n"
+	"usage: clipmapctl [-s SOCKET | -H HOST:PORT | --connect SOCKET|HOST:PORT]\n"           \
+	"                  [--token-file FILE] [--timeout SEC] COMMAND ...\n"
 
 /* Each command's lines of the usage, in the order the full usage lists them. */
 static const struct cmd_usage {
@@ -144,6 +144,12 @@ static int global_opt(int c, struct ctl_target *t)
 	switch (c) {
 	case 'S': t->socket_path = optarg; return 1;
 	case 'H': t->hostport = optarg; return 1;
+	case 'C': /* clipmapview's spelling: HOST:PORT when it has a colon and no slash */
+		if (strchr(optarg, ':') && !strchr(optarg, '/'))
+			t->hostport = optarg;
+		else
+			t->socket_path = optarg;
+		return 1;
 	case 'T': t->token_file = optarg; return 1;
 	case 'W': {
 		uint64_t v;
@@ -162,6 +168,7 @@ static int global_opt(int c, struct ctl_target *t)
 
 #define GLOBAL_OPTS                                                                          \
 	{ "socket", required_argument, NULL, 'S' }, { "host", required_argument, NULL, 'H' },   \
+	{ "connect", required_argument, NULL, 'C' },                                             \
 	{ "token-file", required_argument, NULL, 'T' },                                          \
 	{ "timeout", required_argument, NULL, 'W' }, { "help", no_argument, NULL, 'h' },        \
 	{ "version", no_argument, NULL, 'V' }

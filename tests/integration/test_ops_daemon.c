@@ -2,7 +2,8 @@
  * pid over the Unix socket) and a failed authentication is a warning; a broken planet file is
  * logged and skipped while the others are served (and `clipmapctl status` lists the planets
  * served and counts the skipped file), unless strict_planets = true, which makes it fatal at
- * start and in --check-config. Real processes: build/clipmapd through tests/support/daemon_env
+ * start and in --check-config; SIGHUP re-reads clipmapd.conf (the log level at once, a
+ * restart-only key named in a warning, a bad file changing nothing). Real processes: build/clipmapd through tests/support/daemon_env
  * and build/clipmapctl. Skipped when they were not built.
  */
 #include <setjmp.h>
@@ -83,11 +84,12 @@ static void test_peer_and_auth_in_log(void **state)
 	int rc = ctl(&e, out, sizeof out, "-H", hp, "--token-file", bad, "status", NULL);
 	assert_int_not_equal(rc, 0);
 	assert_true(daemon_env_log_wait(&e, "error auth", 1, 5000));
-	rc = ctl(&e, out, sizeof out, "-H", hp, "--token-file", good, "status", NULL);
+	/* --connect is clipmapview's spelling of -H and -s */
+	rc = ctl(&e, out, sizeof out, "--connect", hp, "--token-file", good, "status", NULL);
 	if (rc != 0)
 		print_message("%s\n", out);
 	assert_int_equal(rc, 0);
-	rc = ctl(&e, out, sizeof out, "-s", e.sock, "status", NULL);
+	rc = ctl(&e, out, sizeof out, "status", "--connect", e.sock, NULL);
 	assert_int_equal(rc, 0);
 	assert_true(daemon_env_log_wait(&e, "closed", 3, 5000));
 
@@ -161,6 +163,43 @@ static void test_broken_planet_skipped(void **state)
 	assert_int_equal(rc, 2);
 	assert_non_null(strstr(out, "broken.ini"));
 }
+
+/* SIGHUP re-reads clipmapd.conf: the log level changes at once (sessions are logged at info
+ * after the reload, not before), a key that needs a restart is named in a warning, a config
+ * that does not load changes nothing. */
+static void test_sighup_rereads_conf(void **state)
+{
+	struct daemon_env *ep = *state;
+	char err[256], out[8192];
+	assert_int_equal(daemon_env_init(&e, "test_ops_hup"), 0);
+	if (!built(&e))
+		skip();
+	if (daemon_env_start(&e, NULL, err)) /* log level warn */
+		fail_msg("daemon: %s", err);
+	assert_int_equal(ctl(&e, out, sizeof out, "-s", e.sock, "status", NULL), 0);
+	assert_int_equal(daemon_env_log_count(&e, "connected on"), 0);
+
+	/* warn -> info, and workers 2 -> 1 (restart only) */
+	char cmd[512];
+	snprintf(cmd, sizeof cmd,
+		 "sed -i 's/^level = warn/level = info/; s/^workers = 2/workers = 1/' '%s'", e.conf);
+	char *sed[] = { "sh", "-c", cmd, NULL };
+	assert_int_equal(daemon_env_run(sed, out, sizeof out), 0);
+	assert_int_equal(daemon_env_signal(&e, SIGHUP), 0);
+	assert_true(daemon_env_log_wait(&e, "reloaded 1 planets", 1, 5000));
+	assert_int_equal(daemon_env_log_count(&e, "[engine] workers changed"), 1);
+	assert_int_equal(ctl(&e, out, sizeof out, "-s", e.sock, "status", NULL), 0);
+	assert_true(daemon_env_log_wait(&e, "connected on", 1, 5000));
+
+	/* a broken config: nothing changes, an error says why */
+	snprintf(cmd, sizeof cmd, "printf '[log]\nlevel = loud\n' > '%s'", e.conf);
+	assert_int_equal(daemon_env_run(sed, out, sizeof out), 0);
+	assert_int_equal(daemon_env_signal(&e, SIGHUP), 0);
+	assert_true(daemon_env_log_wait(&e, "keeping the running configuration", 1, 5000));
+	assert_true(daemon_env_log_wait(&e, "reloaded 1 planets", 2, 5000));
+	assert_int_equal(ctl(&e, out, sizeof out, "-s", e.sock, "status", NULL), 0);
+	assert_true(daemon_env_log_wait(&e, "connected on", 2, 5000)); /* still info */
+}
 #undef e
 
 int main(void)
@@ -168,6 +207,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_setup_teardown(test_peer_and_auth_in_log, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_broken_planet_skipped, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_sighup_rereads_conf, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
