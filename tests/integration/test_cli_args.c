@@ -32,12 +32,14 @@ static const char *const names[] = { "clipmapd", "clipmapctl", "clipmapview" };
 static int setup(void **state)
 {
 	struct env *e = calloc(1, sizeof *e);
-	if (!e || daemon_env_bindir(e->bindir, sizeof e->bindir))
+	char bin[512]; /* a local copy: snprintf from *e into *e may overlap, says GCC */
+	if (!e || daemon_env_bindir(bin, sizeof bin))
 		return -1;
+	snprintf(e->bindir, sizeof e->bindir, "%s", bin);
 	for (int i = 0; i < 3; i++)
-		snprintf(e->prog[i], sizeof e->prog[i], "%s/%s", e->bindir, names[i]);
-	snprintf(e->planet, sizeof e->planet, "%s/../conf/planets/procedural.ini", e->bindir);
-	snprintf(e->conf, sizeof e->conf, "%s/../conf/clipmapd.conf", e->bindir);
+		snprintf(e->prog[i], sizeof e->prog[i], "%s/%s", bin, names[i]);
+	snprintf(e->planet, sizeof e->planet, "%s/../conf/planets/procedural.ini", bin);
+	snprintf(e->conf, sizeof e->conf, "%s/../conf/clipmapd.conf", bin);
 	*state = e;
 	return 0;
 }

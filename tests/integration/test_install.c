@@ -30,10 +30,12 @@ struct env {
 static int setup(void **state)
 {
 	struct env *e = calloc(1, sizeof *e);
-	if (!e || daemon_env_bindir(e->bindir, sizeof e->bindir))
+	char bin[512]; /* a local copy: snprintf from *e into *e may overlap, says GCC */
+	if (!e || daemon_env_bindir(bin, sizeof bin))
 		return -1;
-	snprintf(e->root, sizeof e->root, "%s/..", e->bindir);
-	snprintf(e->build, sizeof e->build, "%s", strrchr(e->bindir, '/') + 1);
+	snprintf(e->bindir, sizeof e->bindir, "%s", bin);
+	snprintf(e->root, sizeof e->root, "%s/..", bin);
+	snprintf(e->build, sizeof e->build, "%s", strrchr(bin, '/') + 1);
 	snprintf(e->tmp, sizeof e->tmp, "/tmp/test_install.XXXXXX");
 	if (!mkdtemp(e->tmp))
 		return -1;
