@@ -591,6 +591,10 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 		{ "level", required_argument, NULL, 'l' },  { "limit", required_argument, NULL, 'm' },
 		{ "json", no_argument, NULL, 'j' },	    { 0, 0, 0, 0 },
 	};
+	if (argc == 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
+		cmd_usage(stdout);
+		return 0;
+	}
 	if (argc < 2 || strcmp(argv[1], "ls") != 0) {
 		fprintf(stderr, "clipmapctl cache: the only subcommand is \"ls\"\n");
 		return 2;

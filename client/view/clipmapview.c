@@ -275,7 +275,6 @@ static bool take_option(int c, const char *s, struct args *a)
 	case O_BACKEND: return parse_backend(s, &a->backend);
 	case O_WORKERS: rc = args_int("--workers", s, 0, 1024, &a->workers, err); break;
 	case O_NOPF: a->d.no_prefetch = true; return true;
-	case O_VERSION: return true;
 	default: usage(stderr); return false;
 	}
 	return rc ? complain(err) : true;
