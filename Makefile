@@ -7,6 +7,7 @@
 #   make data       install the planet data packages and import them into data/
 
 BUILD   ?= build
+.DEFAULT_GOAL := all
 CC      ?= cc
 CXX     ?= g++
 PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal
@@ -77,6 +78,20 @@ SHADERS      := $(wildcard shaders/*.vert shaders/*.frag)
 SHADER_HDR   := $(foreach s,$(SHADERS),$(BUILD)/gen/$(subst .,_,$(notdir $(s))).h)
 VIEW_OBJ     := $(VIEW_SRC:%.c=$(BUILD)/%.o)
 VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(GL_TESTS)) $(BUILD)/client/view/clipmapview.o
+
+# The version the programs print (--version): `git describe --always --dirty` of this checkout,
+# else VERSION_FALLBACK (a release tarball), given to the three mains as CLIPMAP_VERSION.
+# build/gen/version.txt is rewritten only when it changes, so only the mains recompile then.
+VERSION_FALLBACK := 0.1.0
+VERSION ?= $(shell git describe --always --dirty 2>/dev/null || echo $(VERSION_FALLBACK))
+MAIN_OBJ     := $(MAINS:%.c=$(BUILD)/%.o)
+$(MAIN_OBJ): CFLAGS += -DCLIPMAP_VERSION='"$(VERSION)"'
+$(MAIN_OBJ): $(BUILD)/gen/version.txt
+$(BUILD)/gen/version.txt: FORCE
+	@mkdir -p $(dir $@)
+	@printf '%s\n' '$(VERSION)' > $@.tmp
+	@if cmp -s $@.tmp $@; then rm -f $@.tmp; else mv $@.tmp $@; fi
+FORCE:
 
 .PHONY: all check test layers asan tsan bench bench-keepup deps clean demo data shader-check fuzz install
 .SECONDARY:
@@ -191,18 +206,77 @@ fuzz: deps $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%)
 		else tail -n 40 $$f.log; echo "$$f: found a failure (crash input saved in ./)"; exit 1; fi; \
 	done
 
-# Install: binaries in $(PREFIX)/bin (the units expect /usr/local/bin), the config and the
-# planets in /etc/clipmap (kept if present), the units in /etc/systemd/system. DESTDIR stages.
-PREFIX ?= /usr/local
-install: all
-	install -d $(DESTDIR)$(PREFIX)/bin $(DESTDIR)/etc/clipmap/planets $(DESTDIR)/etc/systemd/system
-	install -m 755 $(PROGS) $(DESTDIR)$(PREFIX)/bin/
-	test -e $(DESTDIR)/etc/clipmap/clipmapd.conf || \
-		install -m 644 conf/clipmapd.conf $(DESTDIR)/etc/clipmap/clipmapd.conf
+# Install (no tests, no benches): the programs in $(BINDIR); the config and the planets in
+# $(CONFDIR) (kept if present: the admin's files), the planets' file paths pointed at
+# $(STATEDIR), where the shipped planets' data (data/, from make data) go; the systemd units
+# made from systemd/*.in with these paths in $(UNITDIR), the group clipmap (sysusers.d), man
+# pages (when scdoc is here), docs, bash completion. DESTDIR stages everything; a real install
+# (no DESTDIR; RUN_SYSUSERS=no skips it) then creates the group with systemd-sysusers. `make uninstall` removes what
+# install put there except the config, the planets and the data.
+PREFIX      ?= /usr/local
+BINDIR      ?= $(PREFIX)/bin
+SYSCONFDIR  ?= /etc
+CONFDIR     ?= $(SYSCONFDIR)/clipmap
+STATEDIR    ?= /var/lib/clipmap
+MANDIR      ?= $(PREFIX)/share/man
+DOCDIR      ?= $(PREFIX)/share/doc/clipmap
+UNITDIR     ?= $(if $(filter /usr,$(PREFIX)),/usr/lib/systemd/system,$(SYSCONFDIR)/systemd/system)
+SYSUSERSDIR ?= $(PREFIX)/lib/sysusers.d
+BASHCOMPDIR ?= $(PREFIX)/share/bash-completion/completions
+RUN_SYSUSERS ?= $(if $(DESTDIR),no,yes)
+MAN_SRC     := $(wildcard docs/man/*.scd)
+MAN_PAGES   := $(MAN_SRC:docs/man/%.scd=$(BUILD)/man/%)
+SCDOC       := $(shell command -v scdoc 2>/dev/null)
+UNIT_SED    := s\#@BINDIR@\#$(BINDIR)\#g; s\#@CONFDIR@\#$(CONFDIR)\#g; s\#@DOCDIR@\#$(DOCDIR)\#g
+PLANET_DATA := $(wildcard data/earth/*.tif data/moon/*.tif data/mars/*.tif)
+
+$(BUILD)/man/%: docs/man/%.scd
+	@mkdir -p $(dir $@)
+	scdoc < $< > $@
+man: $(MAN_PAGES)
+# Phony, so they follow the paths of each make run (no pattern rule: phony targets skip them).
+$(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.socket:
+	@mkdir -p $(dir $@)
+	sed '$(UNIT_SED)' systemd/$(notdir $@).in > $@
+$(BUILD)/systemd/clipmapd.conf: conf/clipmapd.conf
+	@mkdir -p $(dir $@)
+	sed 's#^planets = /etc/clipmap/planets#planets = $(CONFDIR)/planets#' $< > $@
+.PHONY: man uninstall $(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.socket \
+	$(BUILD)/systemd/clipmapd.conf
+
+install: $(PROGS) $(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.socket \
+		$(BUILD)/systemd/clipmapd.conf $(if $(SCDOC),$(MAN_PAGES))
+	install -d $(DESTDIR)$(BINDIR) $(DESTDIR)$(CONFDIR)/planets $(DESTDIR)$(UNITDIR) \
+		$(DESTDIR)$(SYSUSERSDIR) $(DESTDIR)$(DOCDIR) $(DESTDIR)$(BASHCOMPDIR) $(DESTDIR)$(STATEDIR)
+	install -m 755 $(PROGS) $(DESTDIR)$(BINDIR)/
+	test -e $(DESTDIR)$(CONFDIR)/clipmapd.conf || \
+		install -m 644 $(BUILD)/systemd/clipmapd.conf $(DESTDIR)$(CONFDIR)/clipmapd.conf
 	for f in conf/planets/*.ini; do \
-		test -e $(DESTDIR)/etc/clipmap/planets/$$(basename $$f) || \
-		install -m 644 $$f $(DESTDIR)/etc/clipmap/planets/; done
-	install -m 644 systemd/clipmapd.service systemd/clipmapd.socket $(DESTDIR)/etc/systemd/system/
+		t=$(DESTDIR)$(CONFDIR)/planets/$$(basename $$f); test -e $$t && continue; \
+		sed 's#^path = \.\./\.\./data/#path = $(STATEDIR)/#' $$f > $$t && chmod 644 $$t || exit 1; done
+	for f in $(PLANET_DATA); do \
+		d=$(DESTDIR)$(STATEDIR)/$$(basename $$(dirname $$f)); \
+		install -d $$d && install -m 644 $$f $$d/ || exit 1; done
+	install -m 644 $(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.socket \
+		$(DESTDIR)$(UNITDIR)/
+	install -m 644 systemd/clipmap.sysusers $(DESTDIR)$(SYSUSERSDIR)/clipmap.conf
+	install -m 644 README.md LICENSE docs/ARCHITECTURE.md docs/PLANETS.md docs/PROTOCOL.md \
+		$(DESTDIR)$(DOCDIR)/
+	install -m 644 scripts/clipmapctl.bash-completion $(DESTDIR)$(BASHCOMPDIR)/clipmapctl
+	$(if $(SCDOC),for m in $(MAN_PAGES); do s=$${m##*.}; install -d $(DESTDIR)$(MANDIR)/man$$s && \
+		install -m 644 $$m $(DESTDIR)$(MANDIR)/man$$s/ || exit 1; done, \
+		@echo "make install: scdoc not found: no man pages (make deps installs it)")
+	$(if $(filter yes,$(RUN_SYSUSERS)),-command -v systemd-sysusers >/dev/null && \
+		systemd-sysusers $(SYSUSERSDIR)/clipmap.conf)
+	@echo "installed; then: systemctl daemon-reload && systemctl enable --now clipmapd.socket"
+
+uninstall:
+	rm -f $(addprefix $(DESTDIR)$(BINDIR)/,clipmapd clipmapctl clipmapview) \
+		$(DESTDIR)$(UNITDIR)/clipmapd.service $(DESTDIR)$(UNITDIR)/clipmapd.socket \
+		$(DESTDIR)$(SYSUSERSDIR)/clipmap.conf $(DESTDIR)$(BASHCOMPDIR)/clipmapctl \
+		$(foreach m,$(MAN_SRC:docs/man/%.scd=%),$(DESTDIR)$(MANDIR)/man$(subst .,,$(suffix $(m)))/$(m))
+	rm -rf $(DESTDIR)$(DOCDIR)
+	@echo "kept: $(DESTDIR)$(CONFDIR) (config, planets), $(DESTDIR)$(STATEDIR) (data), the group clipmap"
 
 clean:
 	rm -rf build build-asan build-tsan build-fuzz

@@ -1,7 +1,10 @@
 /* log — one line per event on stderr (journald adds the time). Thread-safe: each line is
- * written with a single write(2). The threshold is process-wide state set once by main. */
+ * written with a single write(2). The threshold is process-wide state set once by main. When
+ * stderr is the journal (log_detect_journal), each line starts with its syslog priority
+ * ("<3>error: ...", sd-daemon(3)), which journald strips and records. */
 #ifndef CLIPMAP_LOG_H
 #define CLIPMAP_LOG_H
+#include <stdbool.h>
 
 enum log_level { LOG_DEFAULT = 0, LOG_ERROR, LOG_WARN, LOG_INFO, LOG_DEBUG };
 
@@ -9,6 +12,9 @@ enum log_level { LOG_DEFAULT = 0, LOG_ERROR, LOG_WARN, LOG_INFO, LOG_DEBUG };
 void log_set_level(enum log_level level);
 /* Parses "error", "warn", "info", "debug"; returns 0 or -EINVAL. */
 int log_parse_level(const char *s, enum log_level *out);
+/* Whether stderr is the systemd journal ($JOURNAL_STREAM names it); from then on lines carry
+ * priority prefixes, or stop carrying them when it is not. Call from main before threads. */
+bool log_detect_journal(void);
 void log_msg(enum log_level level, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 
 #endif

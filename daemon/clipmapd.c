@@ -1,6 +1,7 @@
 /* clipmapd — the daemon's main: arguments, configuration, the planet set, signals through a
- * signalfd watched by the event loop (SIGTERM/SIGINT: graceful stop; SIGHUP: reload the
- * planet files), and systemd notification (READY, RELOADING, STOPPING, WATCHDOG).
+ * signalfd watched by the event loop (SIGTERM/SIGINT: graceful stop; SIGHUP: re-read
+ * clipmapd.conf for the keys that can change live, then reload the planet files), and
+ * systemd notification (READY, RELOADING, STOPPING, WATCHDOG).
  * Exit status: 0 after a clean stop, 1 on a runtime failure, 2 on bad usage or configuration.
  */
 #include <errno.h>
@@ -40,16 +41,97 @@ static void usage(FILE *f)
 	fprintf(f, "usage: clipmapd [-c FILE] [--check-config]\n"
 		   "  -c, --config FILE   configuration (default " DEFAULT_CONF ")\n"
 		   "      --check-config  validate the configuration and the planet files, then exit\n"
-		   "  -h, --help          this text\n");
+		   "  -V, --version       the version\n"
+		   "  -h, --help          this text\n"
+		   "exit status: 0 stopped cleanly, 1 runtime failure, 2 bad usage or configuration\n");
+}
+
+/* The planets of d->conf's directory into *ps (returned owned), every file on its own unless
+ * strict_planets; the files left out are logged as errors. Returns 0 or -errno with err. */
+static int load_planets(struct daemon *d, struct img_cache *images, struct planet_set **ps,
+			char err[256])
+{
+	int rc = d->conf.strict_planets
+			 ? planet_set_load(d->conf.planets_dir, ++d->generation, images, ps, err)
+			 : planet_set_load_each(d->conf.planets_dir, ++d->generation, images, ps, err);
+	for (size_t i = 0; rc == 0 && i < (*ps)->nskipped; i++)
+		log_msg(LOG_ERROR, "planet file skipped (strict_planets = false): %s",
+			(*ps)->skipped[i]);
+	return rc;
+}
+
+static bool same_str(const char *a, const char *b)
+{
+	return (!a && !b) || (a && b && strcmp(a, b) == 0);
+}
+
+/* The keys of nc that only a restart applies and that differ from the running c, named in a
+ * warning each. */
+static void warn_restart_keys(const struct conf *c, const struct conf *nc)
+{
+	bool tcp = c->ntcp == nc->ntcp;
+	for (int i = 0; tcp && i < c->ntcp; i++)
+		tcp = strcmp(c->tcp[i], nc->tcp[i]) == 0;
+	const struct {
+		bool same;
+		const char *key;
+	} k[] = {
+		{ same_str(c->unix_path, nc->unix_path), "[listen] unix" },
+		{ c->unix_mode == nc->unix_mode, "[listen] unix_mode" },
+		{ tcp, "[listen] tcp" },
+		{ same_str(c->token_file, nc->token_file), "[listen] token_file" },
+		{ c->require_token == nc->require_token, "[listen] require_token" },
+		{ c->workers == nc->workers, "[engine] workers" },
+		{ c->worker_nice == nc->worker_nice, "[engine] worker_nice" },
+		{ c->cache_bytes == nc->cache_bytes, "[engine] cache_mb" },
+		{ c->image_cache_mb == nc->image_cache_mb, "[engine] image_cache_mb" },
+		{ c->compress == nc->compress, "[session] compress" },
+	};
+	for (size_t i = 0; i < sizeof k / sizeof k[0]; i++)
+		if (!k[i].same)
+			log_msg(LOG_WARN, "reload: %s changed in %s: not applied until a restart",
+				k[i].key, c->path);
+}
+
+/* Re-reads clipmapd.conf and applies the keys that can change while running: [log] level,
+ * [engine] planets and strict_planets, [listen] max_sessions, [session] max_want, max_rate,
+ * max_pending_kb, max_frame_kb, max_jobs. The others keep their running values (a warning
+ * names each one that changed). A file that does not load changes nothing. */
+static void reload_conf(struct daemon *d)
+{
+	struct conf nc;
+	char err[256];
+	if (conf_load(d->conf.path, &nc, err)) {
+		log_msg(LOG_ERROR, "reload: %s; keeping the running configuration", err);
+		return;
+	}
+	struct conf *c = &d->conf;
+	warn_restart_keys(c, &nc);
+	char *dir = c->planets_dir; /* swapped: nc frees the old one */
+	c->planets_dir = nc.planets_dir;
+	nc.planets_dir = dir;
+	c->strict_planets = nc.strict_planets;
+	c->log_level = nc.log_level;
+	c->max_sessions = nc.max_sessions;
+	c->max_want = nc.max_want;
+	c->max_rate = nc.max_rate;
+	c->max_pending = nc.max_pending;
+	c->max_frame = nc.max_frame;
+	c->max_jobs = nc.max_jobs;
+	conf_fini(&nc);
+	log_set_level(c->log_level);
+	server_conf_changed(d->srv);
+	log_msg(LOG_INFO, "reload: %s re-read", c->path);
 }
 
 static void reload(struct daemon *d)
 {
-	sd_notify(0, "RELOADING=1\nSTATUS=reloading planets");
+	sd_notify(0, "RELOADING=1\nSTATUS=reloading");
+	reload_conf(d);
 	char err[256];
 	struct planet_set *ps = NULL;
-	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, server_planets(d->srv)->images, &ps,
-				 err); /* the same image cache: unchanged files stay cached */
+	/* the same image cache: unchanged files stay cached */
+	int rc = load_planets(d, server_planets(d->srv)->images, &ps, err);
 	if (rc) {
 		log_msg(LOG_ERROR, "reload failed, keeping the loaded planets: %s", err);
 	} else {
@@ -61,8 +143,8 @@ static void reload(struct daemon *d)
 				kept += planet_set_has_node(old, ps->planets[i]->nodes[j]->hash);
 			}
 		server_set_planets(d->srv, ps);
-		log_msg(LOG_INFO, "reloaded %zu planets from %s: %zu of %zu nodes unchanged", ps->n,
-			d->conf.planets_dir, kept, nodes);
+		log_msg(LOG_INFO, "reloaded %zu planets from %s: %zu of %zu nodes unchanged%s", ps->n,
+			d->conf.planets_dir, kept, nodes, ps->nskipped ? " (some files skipped)" : "");
 	}
 	sd_notify(0, "READY=1\nSTATUS=serving");
 }
@@ -73,7 +155,7 @@ static void on_signal(void *ud)
 	struct signalfd_siginfo si;
 	while (read(d->sigfd, &si, sizeof si) == (ssize_t)sizeof si) {
 		if (si.ssi_signo == SIGHUP) {
-			log_msg(LOG_INFO, "SIGHUP: reloading planets");
+			log_msg(LOG_INFO, "SIGHUP: reloading the configuration and the planets");
 			reload(d);
 		} else {
 			log_msg(LOG_INFO, "%s: stopping", strsignal((int)si.ssi_signo));
@@ -115,18 +197,29 @@ static int check_token(const struct conf *c, char err[256])
 }
 
 /* The command line into *cfg and *check. Returns -1 to go on, else the exit status (0:
- * --help). */
+ * --help, --version). */
 static int parse_args(int argc, char **argv, const char **cfg, bool *check)
 {
 	for (int i = 1; i < argc; i++) {
-		if ((!strcmp(argv[i], "-c") || !strcmp(argv[i], "--config")) && i + 1 < argc) {
+		if (!strcmp(argv[i], "-c") || !strcmp(argv[i], "--config")) {
+			if (i + 1 >= argc || !argv[i + 1][0]) {
+				fprintf(stderr, "clipmapd: %s: expected a FILE\n", argv[i]);
+				return 2;
+			}
 			*cfg = argv[++i];
 		} else if (!strncmp(argv[i], "--config=", 9)) {
 			*cfg = argv[i] + 9;
+			if (!**cfg) {
+				fprintf(stderr, "clipmapd: --config: expected a FILE\n");
+				return 2;
+			}
 		} else if (!strcmp(argv[i], "--check-config")) {
 			*check = true;
 		} else if (!strcmp(argv[i], "-h") || !strcmp(argv[i], "--help")) {
 			usage(stdout);
+			return 0;
+		} else if (!strcmp(argv[i], "-V") || !strcmp(argv[i], "--version")) {
+			printf("clipmapd %s\n", CLIPMAP_VERSION);
 			return 0;
 		} else {
 			fprintf(stderr, "clipmapd: unknown argument \"%s\"\n", argv[i]);
@@ -150,7 +243,7 @@ static int configure(struct daemon *d, const char *cfg, struct planet_set **ps)
 	log_set_level(d->conf.log_level);
 	*ps = NULL;
 	struct img_cache *images = img_cache_create(d->conf.image_cache_mb); /* the set holds it */
-	int rc = planet_set_load(d->conf.planets_dir, ++d->generation, images, ps, err);
+	int rc = load_planets(d, images, ps, err);
 	img_cache_unref(images);
 	if (rc || check_token(&d->conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
@@ -201,8 +294,13 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 			ls[i].compress ? " (compressed tiles)" : "");
 	struct sched_stats ss;
 	sched_get_stats(sched, &ss);
-	log_msg(LOG_INFO, "clipmapd ready: %zu planets, %d workers, cache %zu MiB",
-		server_planets(d->srv)->n, ss.workers, d->conf.cache_bytes >> 20);
+	const struct planet_set *ps = server_planets(d->srv);
+	char names[512] = "";
+	for (size_t i = 0, l = 0; i < ps->n && l < sizeof names; i++, l = strlen(names))
+		snprintf(names + l, sizeof names - l, "%s%s", i ? ", " : "", ps->planets[i]->name);
+	log_msg(LOG_INFO, "clipmapd ready: %zu planets (%s)%s, %d workers, cache %zu MiB, version %s",
+		ps->n, names, ps->nskipped ? ", some skipped" : "", ss.workers,
+		d->conf.cache_bytes >> 20, CLIPMAP_VERSION);
 }
 
 /* The cache, the workers and the server over the planets ps (taken), run until a signal
@@ -253,10 +351,15 @@ int main(int argc, char **argv)
 		return status;
 	struct daemon d = { .sigfd = -1 };
 	struct planet_set *ps;
+	log_detect_journal();
 	if ((status = configure(&d, cfg, &ps)))
 		return status;
 	if (check) {
-		printf("%s: OK (%zu planets in %s)\n", cfg, ps->n, d.conf.planets_dir);
+		printf("%s: OK (%zu planets in %s", cfg, ps->n, d.conf.planets_dir);
+		if (ps->nskipped)
+			printf("; %zu planet file%s skipped, see above", ps->nskipped,
+			       ps->nskipped == 1 ? "" : "s");
+		printf(")\n");
 		planet_set_unref(ps);
 		conf_fini(&d.conf);
 		return 0;

@@ -18,7 +18,7 @@
 #include "common/proto.h"
 #include "common/xalloc.h"
 
-enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG };
+enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG, K_BOOL };
 
 struct row {
 	const char *sec, *key;
@@ -38,6 +38,7 @@ static const struct row rows[] = {
 	{ "listen", "require_token", K_ENUM, 0, 0, token_names },
 	{ "listen", "max_sessions", K_INT, 1, 100000, NULL },
 	{ "engine", "planets", K_PATH, 0, 0, NULL },
+	{ "engine", "strict_planets", K_BOOL, 0, 1, NULL },
 	{ "engine", "workers", K_INT, 0, 1024, NULL },
 	{ "engine", "worker_nice", K_INT, 0, 19, NULL },
 	{ "engine", "cache_mb", K_SIZE_MB, 16, 1L << 24, NULL },
@@ -199,6 +200,14 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	}
 	case K_TCP:
 		return set_tcp(c, path, e, err);
+	case K_BOOL: /* the only one: strict_planets */
+		if (strcmp(v, "true") == 0 || strcmp(v, "yes") == 0 || strcmp(v, "1") == 0)
+			c->strict_planets = true;
+		else if (strcmp(v, "false") == 0 || strcmp(v, "no") == 0 || strcmp(v, "0") == 0)
+			c->strict_planets = false;
+		else
+			return cerr(err, path, e->line, e->key, "\"%s\": expected true or false", v);
+		return 0;
 	case K_LOG:
 		if (log_parse_level(v, &c->log_level))
 			return cerr(err, path, e->line, e->key,
@@ -295,6 +304,22 @@ static int check(struct conf *c, const struct ini_file *f, char *err)
 	return 0;
 }
 
+/* The line where entry j of section i was given before (the same key in a section of the
+ * same name, earlier in the file), or 0. */
+static int first_line(const struct ini_file *f, size_t i, size_t j)
+{
+	const struct ini_section *s = &f->sections[i];
+	for (size_t a = 0; a <= i; a++) {
+		const struct ini_section *t = &f->sections[a];
+		if (strcmp(t->name, s->name) != 0)
+			continue;
+		for (size_t b = 0; b < (a == i ? j : t->n); b++)
+			if (strcmp(t->entries[b].key, s->entries[j].key) == 0)
+				return t->entries[b].line;
+	}
+	return 0;
+}
+
 int conf_parse(const char *path, const char *text, size_t len, struct conf *c, char err[256])
 {
 	struct ini_file *f = NULL;
@@ -324,8 +349,12 @@ int conf_parse(const char *path, const char *text, size_t len, struct conf *c, c
 			for (size_t r = 0; r < sizeof rows / sizeof rows[0]; r++)
 				if (strcmp(rows[r].sec, s->name) == 0 && strcmp(rows[r].key, e->key) == 0)
 					row = &rows[r];
+			int first = first_line(f, i, j);
 			if (!row)
 				rc = cerr(err, path, e->line, e->key, "unknown key in [%s]", s->name);
+			else if (first)
+				rc = cerr(err, path, e->line, e->key, "given twice in [%s] (first at line %d)",
+					  s->name, first);
 			else
 				rc = apply(c, path, row, e, err);
 		}

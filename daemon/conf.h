@@ -41,6 +41,7 @@ struct conf {
 	int max_sessions;
 	/* [engine] */
 	char *planets_dir;
+	bool strict_planets; /* a bad planet file stops the daemon (else it is skipped) */
 	int workers;	 /* 0: one per CPU */
 	int worker_nice; /* niceness added to workers */
 	size_t cache_bytes;

@@ -282,6 +282,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "errors.sent", c->errors_sent);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
+	stat_u(&b, "planets.skipped", srv->planets->nskipped); /* files that did not load */
 	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0;
 	for (const struct session_link *l = srv->sessions; l; l = l->next) {
 		struct session_load ld;
@@ -328,6 +329,15 @@ static int load_token(struct server *srv, char err[256])
 	srv->token_len = (size_t)n;
 	srv->have_token = true;
 	return 0;
+}
+
+void server_conf_changed(struct server *srv)
+{
+	const struct conf *c = srv->conf;
+	srv->limits = (struct proto_limits){ .max_want = c->max_want, .max_rate = c->max_rate,
+					     .max_pending = c->max_pending,
+					     .max_frame = c->max_frame };
+	srv->env.max_jobs = c->max_jobs;
 }
 
 static void init_env(struct server *srv)

@@ -43,6 +43,10 @@ void server_stop(struct server *srv);
  * want-set re-submitted, so changed tiles are sent again; a planet that is gone or whose
  * layers changed is dropped from the session with an ERROR. Loop thread only. */
 void server_set_planets(struct server *srv, struct planet_set *ps);
+/* The conf given to server_create changed in place (a reload): the session limits (max_want,
+ * max_rate, max_pending, max_frame, max_jobs) and max_sessions follow it from now on. Loop
+ * thread. */
+void server_conf_changed(struct server *srv);
 /* The current planet set (borrowed: valid until the next server_set_planets). */
 const struct planet_set *server_planets(const struct server *srv);
 /* The listeners (borrowed), for logs and tests ("tcp:127.0.0.1:41234" after binding port 0). */

@@ -14,6 +14,9 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/epoll.h>
+#include <sys/socket.h>
+#include <netinet/in.h>
+#include <arpa/inet.h>
 
 #include "common/clock.h"
 #include "common/log.h"
@@ -38,6 +41,7 @@ struct session {
 	struct conn c;
 	uint64_t id;
 	char name[64];
+	char peer[64]; /* "127.0.0.1:40312", "[::1]:40312", "unix" (pid when known) */
 	bool need_token, compress;
 	enum proto_state st;
 	bool closing, dead;
@@ -125,8 +129,10 @@ send_error(struct session *s, uint16_t code, uint16_t ref_type, uint32_t ref_id,
 					  .message = msg } };
 	send_msg(s, &m);
 	s->env->counters->errors_sent++;
-	log_msg(code == PROTO_E_SHUTDOWN ? LOG_DEBUG : LOG_INFO, "session %llu (%s): error %s: %s",
-		(unsigned long long)s->id, s->name, proto_code_name(code), msg);
+	/* a failed authentication is an operator's business: a warning, with the peer */
+	log_msg(code == PROTO_E_SHUTDOWN ? LOG_DEBUG : code == PROTO_E_AUTH ? LOG_WARN : LOG_INFO,
+		"session %llu (%s, %s): error %s: %s", (unsigned long long)s->id, s->name, s->peer,
+		proto_code_name(code), msg);
 }
 
 /* control's way out (control_host). */
@@ -653,6 +659,34 @@ void session_on_event(struct session *s, uint32_t events)
 
 /* ---- lifecycle -------------------------------------------------------------------------- */
 
+/* Who is at the other end of fd, for the logs: "ADDR:PORT" ("[ADDR]:PORT" for IPv6) for
+ * TCP, "unix" (with the peer's pid and uid when the kernel tells them) for a Unix socket. */
+static void peer_name(int fd, char *out, size_t n)
+{
+	struct sockaddr_storage ss;
+	socklen_t len = sizeof ss;
+	char host[INET6_ADDRSTRLEN] = "?";
+	snprintf(out, n, "unknown peer");
+	if (getpeername(fd, (struct sockaddr *)&ss, &len) != 0)
+		return;
+	if (ss.ss_family == AF_INET) {
+		const struct sockaddr_in *a = (const struct sockaddr_in *)&ss;
+		inet_ntop(AF_INET, &a->sin_addr, host, sizeof host);
+		snprintf(out, n, "%s:%u", host, (unsigned)ntohs(a->sin_port));
+	} else if (ss.ss_family == AF_INET6) {
+		const struct sockaddr_in6 *a = (const struct sockaddr_in6 *)&ss;
+		inet_ntop(AF_INET6, &a->sin6_addr, host, sizeof host);
+		snprintf(out, n, "[%s]:%u", host, (unsigned)ntohs(a->sin6_port));
+	} else if (ss.ss_family == AF_UNIX) {
+		struct ucred cr;
+		socklen_t cl = sizeof cr;
+		if (getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cr, &cl) == 0)
+			snprintf(out, n, "unix pid %ld uid %lu", (long)cr.pid, (unsigned long)cr.uid);
+		else
+			snprintf(out, n, "unix");
+	}
+}
+
 struct session *session_create(const struct session_env *env, int fd, const struct listener *l)
 {
 	struct session *s = xcalloc(1, sizeof *s);
@@ -672,7 +706,9 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	struct control_host host = { .s = s, .id = s->id, .send = send_msg, .error = ctl_error };
 	control_init(&s->ctl, env, &host);
 	s->req = sched_req_create(env->sched, sess_ready_cb, s);
-	log_msg(LOG_INFO, "session %llu: connected on %s", (unsigned long long)s->id, l->name);
+	peer_name(fd, s->peer, sizeof s->peer);
+	log_msg(LOG_INFO, "session %llu: connected on %s from %s", (unsigned long long)s->id,
+		l->name, s->peer);
 	return s;
 }
 
@@ -716,8 +752,8 @@ void session_close(struct session *s, const char *why)
 	if (rc)
 		log_msg(LOG_WARN, "session %llu: close: %s", (unsigned long long)s->id,
 			strerror(-rc));
-	log_msg(LOG_INFO, "session %llu (%s): closed%s%s; %llu tiles sent, %llu dropped",
-		(unsigned long long)s->id, s->name, why ? ": " : "", why ? why : "",
+	log_msg(LOG_INFO, "session %llu (%s, %s): closed%s%s; %llu tiles sent, %llu dropped",
+		(unsigned long long)s->id, s->name, s->peer, why ? ": " : "", why ? why : "",
 		(unsigned long long)s->tiles_sent, (unsigned long long)s->tiles_dropped);
 	env->focus_changed(env->ud);
 }

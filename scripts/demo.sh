@@ -80,8 +80,11 @@ flight() {
 	shift 3
 	s=$(date +%s)
 	# shellcheck disable=SC2086
+	# exit status 3: some frame still incomplete after 60 s (written anyway): go on
+	rc=0
 	$VIEW --planet "$planet" --flight "$ROOT/conf/demo/$csv" --steps "$STEPS" --size "$SIZE" --wait-complete \
-		--timeout 60 -o "$OUT/frames/$name-%02d.png" "$@"
+		--timeout 60 -o "$OUT/frames/$name-%02d.png" "$@" || rc=$?
+	[ $rc -eq 0 ] || [ $rc -eq 3 ] || exit $rc
 	n=$(ls "$OUT/frames/$name"-*.png | wc -l)
 	echo "  $name: $n frames in $(( $(date +%s) - s )) s"
 }

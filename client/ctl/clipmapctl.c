@@ -12,6 +12,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "common/args.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "engine/planet.h"
@@ -25,34 +26,86 @@
 #include "planet_path.h"
 #include "render.h"
 
+#define GLOBAL_USAGE                                                                         \
+	"usage: clipmapctl [-s SOCKET | -H HOST:PORT | --connect SOCKET|HOST:PORT]\n"           \
+	"                  [--token-file FILE] [--timeout SEC] COMMAND ...\n"
+
+/* Each command's lines of the usage, in the order the full usage lists them. */
+static const struct cmd_usage {
+	const char *name, *text;
+} cmd_usages[] = {
+	{ "status", "  clipmapctl status [--json]                         uptime, planets served, "
+		    "queues, cache\n" },
+	{ "tile", "  clipmapctl tile PLANET LAYER LX LY X Y -o FILE     one tile through the "
+		  "daemon\n" },
+	{ "cache", "  clipmapctl cache ls PLANET [--near LAT,LON [--radius KM]] [--level L]\n"
+		   "                          [--limit N] [--json]       what is cached\n" },
+	{ "prefetch",
+	  "  clipmapctl prefetch PLANET --bbox W,S,E,N --levels A-B [--layers a,b]\n"
+	  "  clipmapctl prefetch PLANET --path LAT,LON:LAT,LON --width KM --levels A-B\n"
+	  "                          [--layers a,b]             fill the cache (Ctrl-C cancels)\n"
+	  "      --bbox: W < E; across the antimeridian write E + 360 (170,-10,190,10)\n" },
+	{ "render",
+	  "  clipmapctl render PLANET LAYER LX LY X Y -o FILE   one tile\n"
+	  "  clipmapctl render PLANET LAYER --level L --world -o FILE\n"
+	  "                                                     a whole level (lx = L+1, ly = L)\n"
+	  "  clipmapctl render PLANET LAYER --level L --at LAT,LON [--tiles N] -o FILE\n"
+	  "                                                     N×N tiles around a place (N = 3)\n"
+	  "      options: --workers N  --cache-mb N  --shade (colour × hillshade)  --quiet\n"
+	  "      heights: .tif/.tiff/.exr (float metres) or .png (16-bit, scale printed);\n"
+	  "      colour and normals: .png\n" },
+	{ "graph", "  clipmapctl graph PLANET                            the node graph as "
+		   "Graphviz dot\n" },
+	{ "layers", "  clipmapctl layers PLANET                           layers, nodes and "
+		    "hashes\n" },
+	{ "import", "  clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N]\n"
+		    "                     any GDAL raster -> tiled, mipmapped TIFF with its bounds\n" },
+};
+#define ONLINE_CMDS 4 /* the first four go through clipmapd */
+
+static const struct cmd_usage *find_usage(const char *cmd)
+{
+	for (size_t i = 0; i < sizeof cmd_usages / sizeof cmd_usages[0]; i++)
+		if (cmd && strcmp(cmd_usages[i].name, cmd) == 0)
+			return &cmd_usages[i];
+	return NULL;
+}
+
+/* The full usage. */
 static void usage(FILE *f)
 {
-	fputs("usage: clipmapctl [-s SOCKET | -H HOST:PORT] [--token-file FILE] [--timeout SEC] "
-	      "COMMAND ...\n"
+	fputs(GLOBAL_USAGE
 	      "online (through clipmapd; socket default $CLIPMAP_SOCKET or " CTL_DEFAULT_SOCKET ",\n"
-	      "token default $CLIPMAP_TOKEN):\n"
-	      "  clipmapctl status [--json]                         uptime, queues, cache, nodes\n"
-	      "  clipmapctl tile PLANET LAYER LX LY X Y -o FILE     one tile through the daemon\n"
-	      "  clipmapctl cache ls PLANET [--near LAT,LON [--radius KM]] [--level L]\n"
-	      "                          [--limit N] [--json]       what is cached\n"
-	      "  clipmapctl prefetch PLANET --bbox W,S,E,N --levels A-B [--layers a,b]\n"
-	      "  clipmapctl prefetch PLANET --path LAT,LON:LAT,LON --width KM --levels A-B\n"
-	      "                          [--layers a,b]             fill the cache (Ctrl-C cancels)\n"
-	      "offline (evaluates the planet file here):\n"
-	      "  clipmapctl render PLANET LAYER LX LY X Y -o FILE   one tile\n"
-	      "  clipmapctl render PLANET LAYER --level L --world -o FILE\n"
-	      "                                                     a whole level (lx = L+1, ly = L)\n"
-	      "  clipmapctl render PLANET LAYER --level L --at LAT,LON [--tiles N] -o FILE\n"
-	      "                                                     N×N tiles around a place (N = 3)\n"
-	      "      options: --workers N  --cache-mb N  --shade (colour × hillshade)  --quiet\n"
-	      "      heights: .tif/.tiff/.exr (float metres) or .png (16-bit, scale printed);\n"
-	      "      colour and normals: .png\n"
-	      "  clipmapctl graph PLANET                            the node graph as Graphviz dot\n"
-	      "  clipmapctl layers PLANET                           layers, nodes and hashes\n"
-	      "  clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N]\n"
-	      "                     any GDAL raster -> tiled, mipmapped TIFF with its bounds\n"
-	      "PLANET is a planet file or a name in $CLIPMAP_PLANETS or conf/planets/.\n",
+	      "token default $CLIPMAP_TOKEN):\n",
 	      f);
+	for (size_t i = 0; i < sizeof cmd_usages / sizeof cmd_usages[0]; i++) {
+		if (i == ONLINE_CMDS)
+			fputs("offline (evaluates the planet file here):\n", f);
+		fputs(cmd_usages[i].text, f);
+	}
+	fputs("PLANET is a planet file or a name in $CLIPMAP_PLANETS, conf/planets/ or\n"
+	      "/etc/clipmap/planets/.\n"
+	      "  -V, --version  the version;  clipmapctl COMMAND --help: one command's usage\n"
+	      "exit status: 0 ok, 1 failure, 2 bad usage, 130 prefetch interrupted\n",
+	      f);
+}
+
+/* The command being run (set once by run_command), for its own usage. */
+static const char *current_cmd;
+
+/* The usage of the current command (the full usage when there is none). */
+static void cmd_usage(FILE *f)
+{
+	const struct cmd_usage *u = find_usage(current_cmd);
+	if (!u) {
+		usage(f);
+		return;
+	}
+	fputs(GLOBAL_USAGE, f);
+	fputs(u->text, f);
+	if (u - cmd_usages < ONLINE_CMDS)
+		fputs("  (global options may also follow the command; socket default "
+		      "$CLIPMAP_SOCKET or " CTL_DEFAULT_SOCKET ")\n", f);
 }
 
 static int load(const char *arg, struct planet **p)
@@ -91,6 +144,12 @@ static int global_opt(int c, struct ctl_target *t)
 	switch (c) {
 	case 'S': t->socket_path = optarg; return 1;
 	case 'H': t->hostport = optarg; return 1;
+	case 'C': /* clipmapview's spelling: HOST:PORT when it has a colon and no slash */
+		if (strchr(optarg, ':') && !strchr(optarg, '/'))
+			t->hostport = optarg;
+		else
+			t->socket_path = optarg;
+		return 1;
 	case 'T': t->token_file = optarg; return 1;
 	case 'W': {
 		uint64_t v;
@@ -109,8 +168,10 @@ static int global_opt(int c, struct ctl_target *t)
 
 #define GLOBAL_OPTS                                                                          \
 	{ "socket", required_argument, NULL, 'S' }, { "host", required_argument, NULL, 'H' },   \
+	{ "connect", required_argument, NULL, 'C' },                                             \
 	{ "token-file", required_argument, NULL, 'T' },                                          \
-	{ "timeout", required_argument, NULL, 'W' }, { "help", no_argument, NULL, 'h' }
+	{ "timeout", required_argument, NULL, 'W' }, { "help", no_argument, NULL, 'h' },        \
+	{ "version", no_argument, NULL, 'V' }
 
 /* The next option for a command to handle (getopt_long over shorts and longs), after the
  * ones every command shares: with t (an online command) the global options go into t (-s is
@@ -131,7 +192,12 @@ static int next_opt(int argc, char **argv, const char *shorts, const struct opti
 		if (g)
 			continue;
 		if (c == 'h') {
-			usage(stdout);
+			cmd_usage(stdout);
+			*status = 0;
+			return OPT_EXIT;
+		}
+		if (c == 'V') {
+			printf("clipmapctl %s\n", CLIPMAP_VERSION);
 			*status = 0;
 			return OPT_EXIT;
 		}
@@ -163,13 +229,9 @@ struct render_args {
 
 static bool parse_at(const char *s, struct render_args *ra)
 {
-	char *end;
-	ra->lat = strtod(s, &end);
-	if (*end == ',')
-		ra->lon = strtod(end + 1, &end);
-	if (*end || end == s || ra->lat < -90 || ra->lat > 90 || ra->lon < -180 || ra->lon > 180) {
-		fprintf(stderr, "clipmapctl render: --at wants LAT,LON in degrees "
-			"(-90..90, -180..180), got \"%s\"\n", s);
+	char err[256];
+	if (args_latlon("--at", s, &ra->lat, &ra->lon, err)) {
+		fprintf(stderr, "clipmapctl render: %s\n", err);
 		return false;
 	}
 	ra->at = true;
@@ -211,7 +273,7 @@ static bool render_option(int c, const char *s, struct render_args *ra)
 		return true;
 	case 's': ra->ro.shade = 1; return true;
 	case 'q': ra->quiet = true; return true;
-	default: usage(stderr); return false;
+	default: cmd_usage(stderr); return false;
 	}
 }
 
@@ -242,7 +304,7 @@ static int render_region_of(const struct render_args *ra, int npos, char **pos,
 		return 2;
 	}
 	if (npos != 6) {
-		usage(stderr);
+		cmd_usage(stderr);
 		return 2;
 	}
 	uint32_t lx, ly, x, y;
@@ -300,7 +362,7 @@ static int cmd_render(int argc, char **argv)
 		{ "shade", no_argument, NULL, 's' },	    { "quiet", no_argument, NULL, 'q' },
 		{ "output", required_argument, NULL, 'o' }, { "help", no_argument, NULL, 'h' },
 		{ "at", required_argument, NULL, 'a' },	    { "tiles", required_argument, NULL, 't' },
-		{ 0, 0, 0, 0 },
+		{ "version", no_argument, NULL, 'V' },	    { 0, 0, 0, 0 },
 	};
 	struct render_args ra = { .level = -1, .ntiles = 3 };
 	int c, status;
@@ -322,21 +384,35 @@ static int cmd_render(int argc, char **argv)
 	return render_to_file(&ra, pos[0], pos[1], &rg);
 }
 
-/* `COMMAND PLANET`: the one planet argument, loaded. Returns 0 or the exit status. */
+/* `COMMAND PLANET` (and --help): the one planet argument, loaded. Returns 0 or the exit
+ * status (after --help: 0 with *p NULL). */
 static int load_only_arg(int argc, char **argv, struct planet **p)
 {
-	if (argc != 2) {
-		usage(stderr);
+	static const struct option opts[] = { { "help", no_argument, NULL, 'h' },
+					      { "version", no_argument, NULL, 'V' },
+					      { 0, 0, 0, 0 } };
+	int c, status;
+	*p = NULL;
+	optind = 0; /* 0: glibc re-initialises (main parsed with "+") */
+	while ((c = next_opt(argc, argv, "h", opts, NULL, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		cmd_usage(stderr);
 		return 2;
 	}
-	return load(argv[1], p);
+	if (argc - optind != 1) {
+		fprintf(stderr, "clipmapctl %s: want one PLANET\n", argv[0]);
+		cmd_usage(stderr);
+		return 2;
+	}
+	return load(argv[optind], p);
 }
 
 static int cmd_graph(int argc, char **argv)
 {
 	struct planet *p;
 	int rc = load_only_arg(argc, argv, &p);
-	if (rc)
+	if (rc || !p)
 		return rc;
 	rc = planet_write_dot(p, stdout);
 	planet_unref(p);
@@ -351,7 +427,7 @@ static int cmd_layers(int argc, char **argv)
 {
 	struct planet *p;
 	int rc = load_only_arg(argc, argv, &p);
-	if (rc)
+	if (rc || !p)
 		return rc;
 	printf("planet %s: a = %.1f m, f = %.9f, tile %u, max level %d\n", p->name, p->a, p->f,
 	       p->tile_size, p->max_level);
@@ -402,7 +478,7 @@ static int cmd_status(int argc, char **argv, struct ctl_target *t)
 		if (c == OPT_EXIT)
 			return status;
 		if (c != 'j') {
-			usage(stderr);
+			cmd_usage(stderr);
 			return 2;
 		}
 		json = true;
@@ -416,6 +492,8 @@ static int cmd_status(int argc, char **argv, struct ctl_target *t)
 		return 1;
 	char err[256];
 	int rc = ctl_status_run(conn, json, timeout_of(t), stdout, err);
+	if (rc == 0 && !json) /* JSON: the stats' own keys only (planets, planets.skipped) */
+		rc = ctl_status_planets(conn, timeout_of(t), stdout, err);
 	net_close(conn);
 	return rc ? fail("status", rc, err) : 0;
 }
@@ -436,7 +514,7 @@ static int cmd_tile(int argc, char **argv, struct ctl_target *t)
 		else if (c == 'q')
 			quiet = true;
 		else {
-			usage(stderr);
+			cmd_usage(stderr);
 			return 2;
 		}
 	}
@@ -501,7 +579,7 @@ static int cache_option(int c, const char *s, struct ctl_cache_opts *o)
 		o->limit = (uint32_t)v;
 		return 0;
 	case 'j': o->json = true; return 0;
-	default: usage(stderr); return 2;
+	default: cmd_usage(stderr); return 2;
 	}
 }
 
@@ -513,6 +591,10 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 		{ "level", required_argument, NULL, 'l' },  { "limit", required_argument, NULL, 'm' },
 		{ "json", no_argument, NULL, 'j' },	    { 0, 0, 0, 0 },
 	};
+	if (argc == 2 && (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0)) {
+		cmd_usage(stdout);
+		return 0;
+	}
 	if (argc < 2 || strcmp(argv[1], "ls") != 0) {
 		fprintf(stderr, "clipmapctl cache: the only subcommand is \"ls\"\n");
 		return 2;
@@ -578,7 +660,7 @@ static int prefetch_option(int c, const char *s, struct prefetch_args *pa)
 		pa->levels = true;
 		return 0;
 	case 'y': o->layers = s; return 0;
-	default: usage(stderr); return 2;
+	default: cmd_usage(stderr); return 2;
 	}
 }
 
@@ -685,6 +767,7 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 static int run_command(int argc, char **argv, struct ctl_target *t)
 {
 	const char *cmd = argv[0];
+	current_cmd = cmd;
 	if (strcmp(cmd, "status") == 0)
 		return cmd_status(argc, argv, t);
 	if (strcmp(cmd, "tile") == 0)
@@ -701,11 +784,17 @@ static int run_command(int argc, char **argv, struct ctl_target *t)
 		return cmd_layers(argc, argv);
 	if (strcmp(cmd, "import") == 0)
 		return import_cli(argc, argv);
-	if (strcmp(cmd, "help") == 0 || strcmp(cmd, "--help") == 0 || strcmp(cmd, "-h") == 0) {
-		usage(stdout);
+	if (strcmp(cmd, "help") == 0) { /* help [COMMAND] */
+		current_cmd = argc > 1 ? argv[1] : NULL;
+		if (current_cmd && !find_usage(current_cmd)) {
+			fprintf(stderr, "clipmapctl help: unknown command \"%s\"\n", current_cmd);
+			return 2;
+		}
+		cmd_usage(stdout);
 		return 0;
 	}
 	fprintf(stderr, "clipmapctl: unknown command \"%s\"\n", cmd);
+	current_cmd = NULL;
 	usage(stderr);
 	return 2;
 }
@@ -716,7 +805,7 @@ int main(int argc, char **argv)
 	struct ctl_target t = { 0 };
 	int c, status;
 	/* global options before the command ("+": stop at the command) */
-	while ((c = next_opt(argc, argv, "+s:H:h", opts, &t, &status)) != -1) {
+	while ((c = next_opt(argc, argv, "+s:H:hV", opts, &t, &status)) != -1) {
 		if (c == OPT_EXIT)
 			return status;
 		usage(stderr);

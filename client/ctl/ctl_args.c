@@ -9,6 +9,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/args.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
 
@@ -76,24 +77,13 @@ int ctl_parse_levels(const char *s, int max_level, uint8_t *lmin, uint8_t *lmax,
 
 int ctl_parse_bbox(const char *s, struct geo_rect *r, char err[256])
 {
-	const char *p = s;
 	double v[4];
-	for (int i = 0; i < 4; i++) {
-		if (num(&p, i < 3 ? "," : "", &v[i]) || (i < 3 && *p != ','))
-			return bad(err, "--bbox wants W,S,E,N in degrees, got \"%s\"", s);
-		if (i < 3)
-			p++;
-	}
-	if (*p)
-		return bad(err, "--bbox wants W,S,E,N in degrees, got \"%s\"", s);
-	if (v[0] < -180 || v[0] > 180 || v[2] < -180 || v[2] > 180)
-		return bad(err, "--bbox %s: west and east must be in [-180, 180]", s);
-	if (v[1] < -90 || v[3] > 90 || v[1] >= v[3])
-		return bad(err, "--bbox %s: need -90 <= south < north <= 90", s);
-	if (v[0] == v[2])
-		return bad(err, "--bbox %s: west and east must differ (west > east crosses the "
-			   "antimeridian)", s);
-	*r = (struct geo_rect){ .west = v[0], .south = v[1], .east = v[2], .north = v[3] };
+	int rc = args_bbox("--bbox", s, v, err);
+	if (rc)
+		return rc;
+	/* the protocol's form: east in [-180, 180], west > east across the antimeridian */
+	*r = (struct geo_rect){ .west = v[0], .south = v[1], .east = v[2] > 180 ? v[2] - 360 : v[2],
+				.north = v[3] };
 	return 0;
 }
 

@@ -16,8 +16,9 @@
 int ctl_parse_uint(const char *s, const char *what, uint64_t max, uint64_t *out, char err[256]);
 /* "A-B" or "A": a ly range, 0 ≤ A ≤ B ≤ max_level. */
 int ctl_parse_levels(const char *s, int max_level, uint8_t *lmin, uint8_t *lmax, char err[256]);
-/* "W,S,E,N" in degrees: W, E in [-180, 180], W ≠ E (W > E crosses the antimeridian),
- * -90 ≤ S < N ≤ 90. */
+/* "W,S,E,N" in degrees (args_bbox): W < E, -90 ≤ S < N ≤ 90; a box across the antimeridian
+ * is written with E > 180 (170,-10,190,10) and returned with E - 360 (then W > E, as the
+ * protocol has it). West > east as written is refused. */
 int ctl_parse_bbox(const char *s, struct geo_rect *r, char err[256]);
 /* "LAT,LON" in degrees (-90..90, -180..180). */
 int ctl_parse_latlon(const char *s, double *lat, double *lon, char err[256]);

@@ -301,3 +301,29 @@ int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, cha
 	proto_msg_fini(&m);
 	return rc;
 }
+
+int ctl_status_planets(struct net_conn *c, int timeout_ms, FILE *out, char err[256])
+{
+	struct proto_msg req = { .type = PROTO_LIST_PLANETS,
+				 .list_planets = { .req = net_next_req(c) } };
+	int rc = net_send(c, &req, err);
+	if (rc)
+		return rc;
+	struct proto_msg m = { 0 };
+	rc = net_expect(c, PROTO_PLANETS, &m, timeout_ms, NULL, NULL, err);
+	if (rc)
+		return rc;
+	fprintf(out, "planets served (%u)\n", (unsigned)m.planets.count);
+	for (uint16_t i = 0; i < m.planets.count; i++) {
+		const struct proto_planet *p = &m.planets.planets[i];
+		fprintf(out, "  %-22s  %u layer%s, levels 0-%u, %.0f km radius\n", p->name,
+			(unsigned)p->nlayers, p->nlayers == 1 ? "" : "s", (unsigned)p->max_level,
+			p->a / 1000);
+	}
+	proto_msg_fini(&m);
+	if (ferror(out)) {
+		err_set(err, "writing the status: %s", strerror(EIO));
+		return -EIO;
+	}
+	return 0;
+}

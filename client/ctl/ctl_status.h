@@ -17,5 +17,8 @@
 int ctl_status_print(const struct proto_stats *st, const char *peer, bool json, FILE *out);
 /* Sends STATS_REQ, waits for STATS and prints it. Returns 0 or -errno with err filled. */
 int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, char err[256]);
+/* Sends LIST_PLANETS, waits for PLANETS and prints the planets served, one line each (name,
+ * layers, levels, radius). Returns 0 or -errno with err filled. */
+int ctl_status_planets(struct net_conn *c, int timeout_ms, FILE *out, char err[256]);
 
 #endif

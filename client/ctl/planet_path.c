@@ -29,7 +29,9 @@ int planet_path_resolve(const char *arg, char *out, size_t n)
 		exe[el] = '\0';
 		snprintf(exedir, sizeof exedir, "%s/../conf/planets", dirname(exe));
 	}
-	const char *dirs[] = { env, "conf/planets", exedir[0] ? exedir : NULL };
+	/* the last: where `make install` puts the shipped planets (clipmapd's default) */
+	const char *dirs[] = { env, "conf/planets", exedir[0] ? exedir : NULL,
+			       "/etc/clipmap/planets" };
 	for (size_t i = 0; i < sizeof dirs / sizeof dirs[0]; i++) {
 		if (!dirs[i] || !dirs[i][0])
 			continue;

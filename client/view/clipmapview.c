@@ -2,7 +2,8 @@
  * process (--planet FILE) or served by clipmapd (--connect SOCKET|HOST:PORT --planet NAME):
  * one camera (--camera) or a flight (--flight CSV), EGL surfaceless or OSMesa, no display
  * needed. Window mode (--window) flies the same views interactively in a GLFW window at up to
- * 60 frames/s, never waiting for tiles. Exit status: 0 ok, 1 runtime failure, 2 bad usage.
+ * 60 frames/s, never waiting for tiles. Exit status: 0 ok, 1 runtime failure, 2 bad usage,
+ * 3 when a --wait-complete picture was not complete within --timeout (written anyway).
  */
 #include <errno.h>
 #include <getopt.h>
@@ -10,7 +11,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
+#include "common/args.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/img.h"
@@ -33,10 +36,12 @@ static void usage(FILE *f)
 		"                      water where the planet's sea covers it)\n"
 		"  --flight FILE       CSV of camera keys (lat,lon,alt,heading,pitch per line)\n"
 		"  --steps N           frames from one key to the next (default 1)\n"
-		"  -o PATH             PNG to write (a flight: a printf pattern, e.g. f/%%05d.png)\n"
+		"  -o PATH             PNG to write, required without --window (a flight: a pattern\n"
+		"                      with one frame number, e.g. f/%%05d.png; its directory must exist)\n"
 		"  --size WxH          framebuffer (default 1280x720)\n"
 		"  --wait-complete     wait for every wanted level before writing a picture\n"
-		"  --timeout S         give up waiting after S seconds (default 300)\n"
+		"  --timeout S         give up waiting after S seconds (default 300): the picture\n"
+		"                      is written as it is and the exit status is 3\n"
 		"  --fps N             without --wait-complete: frames paced at N per second in real\n"
 		"                      time, tiles taken between them (default 30; 0: unpaced)\n"
 		"  --budget MS         real time (window, paced flights): a frame stops refining once\n"
@@ -55,7 +60,9 @@ static void usage(FILE *f)
 		"                      left drag orbit, right drag look, wheel zoom, WASD/arrows move,\n"
 		"                      E/PageUp climb, Q/PageDown descend, Shift faster, R reset, Esc quit\n"
 		"  --exit-after N      (window) close after N frames\n"
-		"  --screenshot FILE   (window) write the last frame as PNG on exit\n");
+		"  --screenshot FILE   (window) write the last frame as PNG on exit\n"
+		"  -V, --version       the version\n"
+		"exit status: 0 ok, 1 failure, 2 bad usage, 3 incomplete after --timeout\n");
 }
 
 /* What the command line asks for (parse_args). */
@@ -72,15 +79,11 @@ struct args {
 	enum gl_backend backend;
 };
 
-/* Whether all of s is a number in [lo, hi] (then stored in *out). */
-static bool number(const char *s, double lo, double hi, double *out)
+/* Prints an argument error (err from common/args) and returns false. */
+static bool complain(const char *err)
 {
-	char *end;
-	double v = strtod(s, &end);
-	if (end == s || *end || !(v >= lo && v <= hi))
-		return false;
-	*out = v;
-	return true;
+	fprintf(stderr, "clipmapview: %s\n", err);
+	return false;
 }
 
 /* ---- -o for a flight: one frame-number conversion ------------------------------------- */
@@ -158,53 +161,31 @@ static bool frame_path(const char *pat, int f, char *out, size_t n)
 
 /* ---- arguments ------------------------------------------------------------------------ */
 
-static bool parse_size(const char *s, struct args *a)
+static bool parse_sun(const char *opt, const char *s, struct view_desc *d)
 {
-	if (sscanf(s, "%dx%d", &a->width, &a->height) != 2 || a->width < 16 || a->height < 16 ||
-	    a->width > 16384 || a->height > 16384) {
-		fprintf(stderr, "clipmapview: --size: expected WxH\n");
-		return false;
-	}
+	static const double lo[2] = { -360, -90 }, hi[2] = { 360, 90 };
+	double v[2];
+	char err[256];
+	if (args_doubles(opt, s, 2, lo, hi, "AZ,EL in degrees", v, err))
+		return complain(err);
+	d->sun_az = (float)v[0];
+	d->sun_el = (float)v[1];
 	return true;
 }
 
-static bool parse_exaggerate(const char *s, struct view_desc *d)
+static bool parse_rings(const char *opt, const char *s, struct view_desc *d)
 {
-	d->exaggeration = strtof(s, NULL);
-	if (!(d->exaggeration >= 0.1f && d->exaggeration <= 100)) {
-		fprintf(stderr, "clipmapview: --exaggerate: 0.1 to 100\n");
-		return false;
+	static const double lo[2] = { 8, 1 }, hi[2] = { 4096, 64 };
+	double v[2];
+	char err[256];
+	if (args_doubles(opt, s, 2, lo, hi, "N,M (steps around, rings per level)", v, err))
+		return complain(err);
+	if (v[0] != floor(v[0]) || v[1] != floor(v[1])) {
+		snprintf(err, sizeof err, "%s: \"%s\": N and M are whole numbers", opt, s);
+		return complain(err);
 	}
-	return true;
-}
-
-static bool parse_haze(const char *s, struct view_desc *d)
-{
-	float hz = strtof(s, NULL);
-	if (!(hz >= 0 && hz <= 100)) {
-		fprintf(stderr, "clipmapview: --haze: 0 to 100\n");
-		return false;
-	}
-	d->haze = hz > 0 ? hz : -1;
-	return true;
-}
-
-static bool parse_sun(const char *s, struct view_desc *d)
-{
-	if (sscanf(s, "%f,%f", &d->sun_az, &d->sun_el) != 2) {
-		fprintf(stderr, "clipmapview: --sun: expected AZ,EL\n");
-		return false;
-	}
-	return true;
-}
-
-static bool parse_rings(const char *s, struct view_desc *d)
-{
-	if (sscanf(s, "%d,%d", &d->n_phi, &d->m_rings) != 2 || d->n_phi < 8 || d->m_rings < 1 ||
-	    d->n_phi > 4096 || d->m_rings > 64) {
-		fprintf(stderr, "clipmapview: --rings: expected N,M\n");
-		return false;
-	}
+	d->n_phi = (int)v[0];
+	d->m_rings = (int)v[1];
 	return true;
 }
 
@@ -215,18 +196,7 @@ static bool parse_backend(const char *s, enum gl_backend *b)
 	else if (!strcmp(s, "osmesa"))
 		*b = GL_BACKEND_OSMESA;
 	else {
-		fprintf(stderr, "clipmapview: --backend: egl or osmesa\n");
-		return false;
-	}
-	return true;
-}
-
-static bool parse_exit_after(const char *s, long *frames)
-{
-	char *end;
-	*frames = strtol(s, &end, 10);
-	if (*end || *frames < 1) {
-		fprintf(stderr, "clipmapview: --exit-after: a number of frames >= 1\n");
+		fprintf(stderr, "clipmapview: --backend: expected egl or osmesa, got \"%s\"\n", s);
 		return false;
 	}
 	return true;
@@ -235,7 +205,7 @@ static bool parse_exit_after(const char *s, long *frames)
 enum {
 	O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS, O_FOV,
 	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
-	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET
+	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION
 };
 
 static const struct option long_opts[] = {
@@ -256,6 +226,7 @@ static const struct option long_opts[] = {
 	{ "workers", required_argument, NULL, O_WORKERS },
 	{ "no-prefetch", no_argument, NULL, O_NOPF },
 	{ "help", no_argument, NULL, O_HELP },
+	{ "version", no_argument, NULL, O_VERSION },
 	{ "connect", required_argument, NULL, O_CONNECT },
 	{ "token-file", required_argument, NULL, O_TOKEN },
 	{ "exaggerate", required_argument, NULL, O_EXAG },
@@ -267,63 +238,86 @@ static const struct option long_opts[] = {
 };
 
 /* Takes option c (getopt_long's answer) with its argument s into a. Returns false on a bad
- * value (after saying so). */
+ * value (after saying so, naming the option). */
 static bool take_option(int c, const char *s, struct args *a)
 {
+	char err[256];
+	double v;
+	int rc = 0;
 	switch (c) {
 	case O_PLANET: a->planet = s; return true;
 	case O_CONNECT: a->connect_to = s; return true;
 	case O_TOKEN: a->token_file = s; return true;
-	case O_EXAG: return parse_exaggerate(s, &a->d);
-	case O_HAZE: return parse_haze(s, &a->d);
+	case O_EXAG:
+		if ((rc = args_double("--exaggerate", s, 0.1, 100, &v, err)) == 0)
+			a->d.exaggeration = (float)v;
+		break;
+	case O_HAZE:
+		if ((rc = args_double("--haze", s, 0, 100, &v, err)) == 0)
+			a->d.haze = v > 0 ? (float)v : -1;
+		break;
 	case O_WINDOW: a->window = true; return true;
-	case O_EXIT_AFTER: return parse_exit_after(s, &a->exit_after);
+	case O_EXIT_AFTER: rc = args_long("--exit-after", s, 1, 1L << 40, &a->exit_after, err); break;
 	case O_SCREENSHOT: a->screenshot = s; return true;
 	case O_CAMERA: a->camera = s; return true;
 	case O_FLIGHT: a->flight = s; return true;
-	case O_STEPS: a->steps = atoi(s); return true;
+	case O_STEPS: rc = args_int("--steps", s, 1, 100000, &a->steps, err); break;
 	case 'o': a->outp = s; return true;
-	case O_SIZE: return parse_size(s, a);
+	case O_SIZE: rc = args_size("--size", s, 16, 16384, &a->width, &a->height, err); break;
 	case O_WAIT: a->wait_complete = true; return true;
-	case O_TIMEOUT: a->timeout = atof(s); return true;
-	case O_BUDGET:
-		if (!number(s, 0, 10000, &a->budget)) {
-			fprintf(stderr, "clipmapview: --budget: milliseconds, 0 to 10000\n");
-			return false;
-		}
-		return true;
-	case O_FPS:
-		if (!number(s, 0, 1000, &a->fps)) {
-			fprintf(stderr, "clipmapview: --fps: frames per second, 0 to 1000\n");
-			return false;
-		}
-		return true;
+	case O_TIMEOUT: rc = args_double("--timeout", s, 0.001, 86400 * 7, &a->timeout, err); break;
+	case O_BUDGET: rc = args_double("--budget", s, 0, 10000, &a->budget, err); break;
+	case O_FPS: rc = args_double("--fps", s, 0, 1000, &a->fps, err); break;
 	case O_STATS: a->statsp = s; return true;
-	case O_FOV: a->fov = atof(s); return true;
-	case O_SUN: return parse_sun(s, &a->d);
-	case O_RINGS: return parse_rings(s, &a->d);
+	case O_FOV: rc = args_double("--fov", s, 1, 170, &a->fov, err); break;
+	case O_SUN: return parse_sun("--sun", s, &a->d);
+	case O_RINGS: return parse_rings("--rings", s, &a->d);
 	case O_BACKEND: return parse_backend(s, &a->backend);
-	case O_WORKERS: a->workers = atoi(s); return true;
+	case O_WORKERS: rc = args_int("--workers", s, 0, 1024, &a->workers, err); break;
 	case O_NOPF: a->d.no_prefetch = true; return true;
 	default: usage(stderr); return false;
 	}
+	return rc ? complain(err) : true;
+}
+
+/* Whether the directory the picture path goes into exists and is writable (else says so,
+ * naming -o, and returns false): a flight into a missing directory fails before its first
+ * frame rather than at it. */
+static bool out_dir_ok(const char *opt, const char *path)
+{
+	char dir[4096];
+	const char *slash = strrchr(path, '/');
+	if (!slash)
+		snprintf(dir, sizeof dir, ".");
+	else if (slash == path)
+		snprintf(dir, sizeof dir, "/");
+	else
+		snprintf(dir, sizeof dir, "%.*s", (int)(slash - path), path);
+	if (access(dir, W_OK | X_OK) != 0) {
+		fprintf(stderr, "clipmapview: %s: \"%s\": directory %s: %s\n", opt, path, dir,
+			strerror(errno));
+		return false;
+	}
+	return true;
 }
 
 /* The options that only make sense together (or apart). Returns 0 or 2 (after saying why). */
 static int check_args(const struct args *a)
 {
-	if (a->window && (a->flight || a->outp || a->wait_complete)) {
-		fprintf(stderr, "clipmapview: --window flies interactively: no --flight, -o or "
-				"--wait-complete (use --screenshot)\n");
-		return 2;
-	}
-	if (!a->window && (a->exit_after || a->screenshot)) {
-		fprintf(stderr, "clipmapview: --exit-after and --screenshot need --window\n");
-		return 2;
-	}
-	if (!a->planet || (!a->window && !a->camera == !a->flight) || a->steps < 1 ||
-	    a->fov <= 1 || a->fov >= 170) {
-		usage(stderr);
+	const char *why = NULL;
+	if (a->window && (a->flight || a->outp || a->wait_complete))
+		why = "--window flies interactively: no --flight, -o or --wait-complete (use "
+		      "--screenshot)";
+	else if (!a->window && (a->exit_after || a->screenshot))
+		why = "--exit-after and --screenshot need --window";
+	else if (!a->planet)
+		why = "--planet is required (a planet file, or with --connect a planet name)";
+	else if (!a->window && !a->camera == !a->flight)
+		why = "give --camera or --flight (one of them), or --window";
+	else if (!a->window && !a->outp && !a->statsp)
+		why = "-o PATH is required without --window (or --stats FILE for figures only)";
+	if (why) {
+		fprintf(stderr, "clipmapview: %s\n", why);
 		return 2;
 	}
 	if (a->flight && a->outp && !frame_pattern_ok(a->outp)) {
@@ -331,22 +325,40 @@ static int check_args(const struct args *a)
 				"frame number (e.g. f/%%05d.png); write %%%% for a literal %%\n", a->outp);
 		return 2;
 	}
+	char first[4096];
+	if (a->outp && a->flight && !frame_path(a->outp, 0, first, sizeof first)) {
+		fprintf(stderr, "clipmapview: -o: \"%s\": path too long\n", a->outp);
+		return 2;
+	}
+	if ((a->outp && !out_dir_ok("-o", a->flight ? first : a->outp)) ||
+	    (a->statsp && !out_dir_ok("--stats", a->statsp)) ||
+	    (a->screenshot && !out_dir_ok("--screenshot", a->screenshot)))
+		return 2;
 	return 0;
 }
 
-/* The command line into a. Returns -1 to go on, else the exit status (0: --help). */
+/* The command line into a. Returns -1 to go on, else the exit status (0: --help,
+ * --version). */
 static int parse_args(int argc, char **argv, struct args *a)
 {
 	*a = (struct args){ .width = 1280, .height = 720, .steps = 1, .timeout = 300,
 			    .fov = 60, .fps = 30, .budget = 12, .backend = GL_BACKEND_AUTO };
 	int c;
-	while ((c = getopt_long(argc, argv, "o:h", long_opts, NULL)) != -1) {
+	while ((c = getopt_long(argc, argv, "o:hV", long_opts, NULL)) != -1) {
 		if (c == O_HELP || c == 'h') {
 			usage(stdout);
 			return 0;
 		}
+		if (c == O_VERSION || c == 'V') {
+			printf("clipmapview %s\n", CLIPMAP_VERSION);
+			return 0;
+		}
 		if (!take_option(c, optarg, a))
 			return 2;
+	}
+	if (optind < argc) {
+		fprintf(stderr, "clipmapview: unexpected argument \"%s\"\n", argv[optind]);
+		return 2;
 	}
 	int rc = check_args(a);
 	return rc ? rc : -1;
@@ -358,24 +370,19 @@ struct key {
 	double v[5]; /* lat, lon, alt, heading, pitch */
 };
 
-static int parse_camera(const char *s, struct key *k)
+/* "LAT,LON,ALT,HEADING,PITCH" (trailing blanks allowed, for flight file lines) into k.
+ * Returns 0 or -EINVAL with err naming opt. */
+static int parse_camera(const char *opt, const char *s, struct key *k, char err[256])
 {
-	char *end;
-	const char *p = s;
-	for (int i = 0; i < 5; i++) {
-		k->v[i] = strtod(p, &end);
-		if (end == p)
-			return -EINVAL;
-		p = end;
-		if (i < 4) {
-			if (*p != ',')
-				return -EINVAL;
-			p++;
-		}
-	}
-	while (*p == ' ' || *p == '\t' || *p == '\r' || *p == '\n')
-		p++;
-	return *p ? -EINVAL : 0;
+	static const double lo[5] = { -90, -180, 0, -360, -90 }, hi[5] = { 90, 180, 1e10, 360, 90 };
+	char line[512];
+	size_t n = strlen(s);
+	while (n && strchr(" \t\r\n", s[n - 1]))
+		n--;
+	snprintf(line, sizeof line, "%.*s", (int)n, s);
+	return args_doubles(opt, line, 5, lo, hi,
+			    "LAT,LON,ALT,HEADING,PITCH (degrees, ALT metres above the ground)",
+			    k->v, err);
 }
 
 /* The keys of a flight file into *out (returned owned), saying what is wrong if anything.
@@ -385,7 +392,7 @@ static int read_flight(const char *path, struct key **out, size_t *n)
 	FILE *f = fopen(path, "r");
 	if (!f) {
 		int rc = -errno;
-		fprintf(stderr, "clipmapview: %s: %s\n", path, strerror(-rc));
+		fprintf(stderr, "clipmapview: --flight: %s: %s\n", path, strerror(-rc));
 		return rc;
 	}
 	char line[512];
@@ -400,8 +407,9 @@ static int read_flight(const char *path, struct key **out, size_t *n)
 		if (*s == '#' || *s == '\n' || *s == '\r' || !*s || (*s >= 'a' && *s <= 'z'))
 			continue; /* comments, blank lines, a header */
 		struct key k;
-		if (parse_camera(s, &k) < 0) {
-			fprintf(stderr, "%s:%zu: camera: expected lat,lon,alt,heading,pitch\n", path, ln);
+		char err[256];
+		if (parse_camera("camera", s, &k, err) < 0) {
+			fprintf(stderr, "clipmapview: --flight: %s:%zu: %s\n", path, ln, err);
 			fclose(f);
 			free(*out);
 			*out = NULL;
@@ -415,7 +423,7 @@ static int read_flight(const char *path, struct key **out, size_t *n)
 	}
 	fclose(f);
 	if (!*n) {
-		fprintf(stderr, "clipmapview: %s: no camera keys\n", path);
+		fprintf(stderr, "clipmapview: --flight: %s: no camera keys\n", path);
 		return -EINVAL;
 	}
 	return 0;
@@ -430,8 +438,9 @@ static int load_keys(const struct args *a, struct key **keys, size_t *nkeys)
 	if (a->camera) {
 		*keys = xmalloc(sizeof **keys);
 		*nkeys = 1;
-		if (parse_camera(a->camera, *keys) < 0) {
-			fprintf(stderr, "clipmapview: --camera: expected LAT,LON,ALT,HEADING,PITCH\n");
+		char err[256];
+		if (parse_camera("--camera", a->camera, *keys, err) < 0) {
+			fprintf(stderr, "clipmapview: %s\n", err);
 			free(*keys);
 			*keys = NULL;
 			return 2;
@@ -678,6 +687,7 @@ static int render_frames(const struct args *a, struct view *v, const struct key 
 	size_t nframes = nkeys == 1 ? 1 : (nkeys - 1) * (size_t)a->steps + 1;
 	double t_start = clock_now_s();
 	int status = 1;
+	size_t incomplete = 0; /* --wait-complete frames written after --timeout */
 	for (size_t f = 0; f < nframes; f++) {
 		struct view_camera cam = flight_camera(keys, nkeys, a->steps, a->fov, f);
 		struct view_frame_stats st;
@@ -687,10 +697,11 @@ static int render_frames(const struct args *a, struct view *v, const struct key 
 		else
 			rc = view_frame(v, &cam,
 					a->fps > 0 ? clock_now_s() - t_start : (double)f / 30.0, &st);
-		if (rc == -ETIMEDOUT)
-			fprintf(stderr, "clipmapview: frame %zu: not complete after %.0f s\n", f,
-				a->timeout);
-		else if (rc < 0) {
+		if (rc == -ETIMEDOUT) {
+			fprintf(stderr, "clipmapview: frame %zu: not complete after %g s (--timeout)\n",
+				f, a->timeout);
+			incomplete++;
+		} else if (rc < 0) {
 			fprintf(stderr, "clipmapview: frame %zu: %s\n", f, strerror(-rc));
 			goto out;
 		}
@@ -717,7 +728,10 @@ static int render_frames(const struct args *a, struct view *v, const struct key 
 			}
 		}
 	}
-	status = 0;
+	status = incomplete ? 3 : 0;
+	if (incomplete)
+		fprintf(stderr, "clipmapview: %zu of %zu frames incomplete (written anyway); exit "
+				"status 3\n", incomplete, nframes);
 out:
 	free(pix);
 	return status;

@@ -3,6 +3,7 @@
 
 #include <dirent.h>
 #include <errno.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -26,11 +27,22 @@ static void set_free(struct planet_set *s)
 	for (size_t i = 0; i < s->n; i++)
 		planet_unref(s->planets[i]);
 	free(s->planets);
+	for (size_t i = 0; i < s->nskipped; i++)
+		free(s->skipped[i]);
+	free(s->skipped);
 	img_cache_unref(s->images);
 	free(s);
 }
 
-int planet_set_load(const char *dir, uint64_t generation, struct img_cache *images,
+/* Keeps the error of a planet file left out of the set. */
+static void skip_file(struct planet_set *s, const char *err)
+{
+	s->skipped = xrealloc(s->skipped, (s->nskipped + 1) * sizeof *s->skipped);
+	s->skipped[s->nskipped++] = xstrdup(err);
+}
+
+/* planet_set_load (each false) or planet_set_load_each (each true). */
+static int load_set(const char *dir, uint64_t generation, struct img_cache *images, bool each,
 		    struct planet_set **out, char err[256])
 {
 	*out = NULL;
@@ -71,27 +83,47 @@ int planet_set_load(const char *dir, uint64_t generation, struct img_cache *imag
 		struct planet *p = NULL;
 		rc = planet_load_shared(path, NULL, s->images, &p, err);
 		free(path);
-		if (rc)
-			break;
-		if (planet_set_find(s, p->name)) {
+		if (rc == 0 && planet_set_find(s, p->name)) {
 			err_set(err, "%s: planet \"%s\" is defined twice in %s", p->path, p->name,
 				dir);
 			planet_unref(p);
 			rc = -EINVAL;
-			break;
 		}
+		if (rc && each && rc != -ENOMEM) {
+			skip_file(s, err);
+			rc = 0;
+			continue;
+		}
+		if (rc)
+			break;
 		s->planets[s->n++] = p;
 		qsort(s->planets, s->n, sizeof *s->planets, cmp_planet);
 	}
 	for (size_t i = 0; i < nn; i++)
 		free(names[i]);
 	free(names);
+	if (rc == 0 && s->n == 0 && s->nskipped) {
+		err_set(err, "%s (and no other planet loaded)", s->skipped[0]);
+		rc = -EINVAL;
+	}
 	if (rc) {
 		set_free(s);
 		return rc;
 	}
 	*out = s;
 	return 0;
+}
+
+int planet_set_load(const char *dir, uint64_t generation, struct img_cache *images,
+		    struct planet_set **out, char err[256])
+{
+	return load_set(dir, generation, images, false, out, err);
+}
+
+int planet_set_load_each(const char *dir, uint64_t generation, struct img_cache *images,
+			 struct planet_set **out, char err[256])
+{
+	return load_set(dir, generation, images, true, out, err);
 }
 
 struct planet_set *planet_set_ref(struct planet_set *s)

@@ -25,6 +25,9 @@ struct planet_set {
 	struct planet **planets; /* sorted by name; owned */
 	size_t n;
 	struct img_cache *images; /* one reference; every planet holds one too */
+	/* planet_set_load_each: the files left out, as "file:line: key: message"; owned */
+	char **skipped;
+	size_t nskipped;
 };
 
 /* Loads every "*.ini" in dir (sorted by file name), all reading through the image cache
@@ -34,6 +37,12 @@ struct planet_set {
  * error). */
 int planet_set_load(const char *dir, uint64_t generation, struct img_cache *images,
 		    struct planet_set **out, char err[256]);
+/* planet_set_load, except that each file loads on its own: one that fails (or repeats a
+ * planet's name) is left out and its error kept in s->skipped. Fails as planet_set_load does
+ * when the directory cannot be read, on ENOMEM, and when files were skipped and none
+ * loaded. */
+int planet_set_load_each(const char *dir, uint64_t generation, struct img_cache *images,
+			 struct planet_set **out, char err[256]);
 struct planet_set *planet_set_ref(struct planet_set *s);
 void planet_set_unref(struct planet_set *s); /* NULL is a no-op */
 /* The planet named name, or NULL (borrowed from the set). */

@@ -891,11 +891,13 @@ static void test_systemd_units(void **state)
 	snprintf(exe, sizeof exe, "%s/clipmapd", E.bindir);
 	char *real = realpath(exe, NULL);
 	assert_non_null(real);
-	/* The unit's ExecStart names /usr/local/bin/clipmapd; verify resolves it, so point a
-	 * temporary root's copy of the units at the built binary. */
+	/* The units are templates (@BINDIR@: make install fills it); verify resolves ExecStart,
+	 * so point a temporary copy of the units at the built binary. */
+	*strrchr(real, '/') = '\0';
 	snprintf(cmd, sizeof cmd,
-		 "d=$(mktemp -d) && sed 's#/usr/local/bin/clipmapd#%s#' systemd/clipmapd.service "
-		 "> $d/clipmapd.service && cp systemd/clipmapd.socket $d/ && "
+		 "d=$(mktemp -d) && for u in service socket; do sed 's#@BINDIR@#%s#; "
+		 "s#@CONFDIR@#/etc/clipmap#; s#@DOCDIR@#/usr/share/doc/clipmap#' "
+		 "systemd/clipmapd.$u.in > $d/clipmapd.$u; done && "
 		 "SYSTEMD_LOG_LEVEL=warning systemd-analyze verify --man=no $d/clipmapd.socket "
 		 "$d/clipmapd.service > $d/out 2>&1; rc=$?; cat $d/out; rm -rf $d; exit $rc",
 		 real);

@@ -108,8 +108,19 @@ static void test_errors(void **state)
 	parse_fails("[session]\nmax_want = 5000\n", "max_want");
 	parse_fails("[session]\nmax_frame_kb = 8\n", "d.conf:2: max_frame_kb:");
 	parse_fails("[listen]\nunix_mode = rw\n", "unix_mode");
+	/* a key given twice, in one section or in two of the same name */
+	parse_fails("[engine]\nworkers = 1\nworkers = 2\n",
+		    "d.conf:3: workers: given twice in [engine] (first at line 2)");
+	parse_fails("[engine]\nworkers = 1\n[log]\nlevel = info\n[engine]\nworkers = 2\n",
+		    "d.conf:6: workers: given twice in [engine] (first at line 2)");
+	parse_fails("[engine]\nstrict_planets = maybe\n",
+		    "d.conf:2: strict_planets: \"maybe\": expected true or false");
 	struct conf c;
 	char err[256] = "";
+	const char *strict = "[engine]\nstrict_planets = true\n";
+	assert_int_equal(conf_parse("/etc/x/d.conf", strict, strlen(strict), &c, err), 0);
+	assert_true(c.strict_planets);
+	conf_fini(&c);
 	assert_true(conf_load("/nonexistent/clipmapd.conf", &c, err) < 0);
 	assert_non_null(strstr(err, "/nonexistent/clipmapd.conf"));
 }

@@ -814,7 +814,7 @@ static void cli_exit_codes(void **state)
 	pid = spawn(a2, &fd);
 	rc = finish(pid, fd, out, sizeof out);
 	assert_int_equal(rc, 2);
-	assert_non_null(strstr(out, "--bbox wants W,S,E,N"));
+	assert_non_null(strstr(out, "--bbox: expected W,S,E,N"));
 
 	char dir[] = "/tmp/test_net_XXXXXX";
 	assert_non_null(mkdtemp(dir));
@@ -852,17 +852,20 @@ static void parse_bbox_path_levels(void **state)
 	struct geo_rect r;
 	assert_int_equal(ctl_parse_bbox("-10.5,40,5,52.25", &r, err), 0);
 	assert_true(r.west == -10.5 && r.south == 40 && r.east == 5 && r.north == 52.25);
-	assert_int_equal(ctl_parse_bbox("170,-5,-170,5", &r, err), 0); /* antimeridian */
+	/* across the antimeridian: east + 360 as written, west > east in the protocol's form */
+	assert_int_equal(ctl_parse_bbox("170,-5,190,5", &r, err), 0);
+	assert_true(r.west == 170 && r.south == -5 && r.east == -170 && r.north == 5);
+	/* west > east as written would be the band round the other side: refused */
 	const char *bad_boxes[] = { "1,2,3", "1,2,3,4,5", "a,2,3,4", "1,2,3,4x", "", "1,,3,4",
 				    "-181,0,10,10", "0,10,10,5", "0,-91,10,10", "5,0,5,10",
-				    "1, 2,3,4" };
+				    "1, 2,3,4", "170,-5,-170,5", "88,27,86,28", "10,0,371,1" };
 	for (size_t i = 0; i < sizeof bad_boxes / sizeof *bad_boxes; i++) {
 		err[0] = 0;
 		assert_int_equal(ctl_parse_bbox(bad_boxes[i], &r, err), -EINVAL);
 		assert_non_null(strstr(err, "--bbox"));
 	}
 	assert_int_equal(ctl_parse_bbox("0,10,10,5", &r, err), -EINVAL);
-	assert_non_null(strstr(err, "south < north"));
+	assert_non_null(strstr(err, "south must be less than north"));
 
 	struct proto_lonlat *p;
 	uint32_t n;
