@@ -26,8 +26,8 @@ out=$(
 		daemon/engine/*.[ch] daemon/engine/nodes/*.[ch]
 	check server 'common/|engine/' daemon/*.[ch]
 	check client 'common/' client/*.[ch]
-	check ctl 'common/|engine/|client/net\.h' client/ctl/*.[ch]
-	check view 'common/|engine/|client/net\.h' client/view/*.[ch]
+	check ctl 'common/|engine/|client/[a-z_]+\.h' client/ctl/*.[ch]
+	check view 'common/|engine/|client/[a-z_]+\.h' client/view/*.[ch]
 	grep -n -E '#include <(sys/socket|sys/epoll|netinet/|arpa/)' daemon/engine/*.[ch] daemon/engine/nodes/*.[ch] |
 		sed 's/$/  (the engine has no sockets)/'
 )

@@ -23,7 +23,7 @@
 #include "ctl_status.h"
 #include "ctl_tile.h"
 #include "import_cli.h"
-#include "planet_path.h"
+#include "client/planet_path.h"
 #include "render.h"
 
 #define GLOBAL_USAGE                                                                         \

@@ -13,6 +13,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "client/planet_path.h"
 #include "common/args.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
@@ -28,7 +29,7 @@
 static void usage(FILE *f)
 {
 	fprintf(f,
-		"usage: clipmapview --planet FILE [options]              (in-process engine)\n"
+		"usage: clipmapview --planet FILE|NAME [options]         (in-process engine)\n"
 		"       clipmapview --connect SOCKET|HOST:PORT --planet NAME [--token-file F] [options]\n"
 		"  --connect TARGET    clipmapd's Unix socket path, or HOST:PORT (TCP)\n"
 		"  --token-file F      the daemon's shared secret (default: $CLIPMAP_TOKEN)\n"
@@ -800,8 +801,13 @@ static int open_source(const struct args *a, struct view_source **src)
 		}
 		return 0;
 	}
-	if (view_source_local_create(a->planet,
-				     &(struct view_source_local_opts){ a->workers, 0 }, src,
+	/* a planet file, or a planet's name looked up as clipmapctl does */
+	char path[4096];
+	if (planet_path_resolve(a->planet, path, sizeof path) < 0) {
+		fprintf(stderr, "clipmapview: planet %s not found (tried %s)\n", a->planet, path);
+		return 2;
+	}
+	if (view_source_local_create(path, &(struct view_source_local_opts){ a->workers, 0 }, src,
 				     err) < 0) {
 		fprintf(stderr, "clipmapview: %s\n", err);
 		return 2;

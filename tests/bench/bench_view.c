@@ -44,7 +44,7 @@ int main(int argc, char **argv)
 		fprintf(stderr, "bench_view: %s\n", err);
 		return 1;
 	}
-	struct view_desc d = { .width = 1280, .height = 720 };
+	struct view_desc d = { .width = 1280, .height = 720, .no_prefetch = getenv("BV_NOPF") != NULL };
 	struct view *v;
 	if (view_create(gl_context_api(ctx), src, &d, &v, err) < 0) {
 		fprintf(stderr, "bench_view: %s\n", err);

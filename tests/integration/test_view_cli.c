@@ -157,11 +157,38 @@ static void test_pattern_frames(void **state)
 	unlink(pat);
 }
 
+/* --planet takes a name too, found as clipmapctl finds it (conf/planets/NAME.ini from the
+ * checkout here); an unknown name is exit 2 naming it. */
+static void test_planet_by_name(void **state)
+{
+	struct env *e = *state;
+	need_viewer(e);
+	char pic[200], out[4096];
+	snprintf(pic, sizeof pic, "%s/byname.png", e->dir);
+	char *argv[] = { e->view, "--planet", "procedural", "--camera", "0,0,5000000,0,-90",
+			 "--size", "64x48", "--wait-complete", "-o", pic, NULL };
+	int rc = daemon_env_run(argv, out, sizeof out);
+	if (rc == 1 && strstr(out, "no OpenGL context"))
+		skip();
+	if (rc != 0)
+		print_message("clipmapview --planet procedural: exit %d:\n%s\n", rc, out);
+	assert_int_equal(rc, 0);
+	assert_true(picture_at(pic));
+	unlink(pic);
+	char *bad[] = { e->view, "--planet", "vulcan", "--camera", "0,0,5000000,0,-90", "-o", pic,
+			NULL };
+	rc = daemon_env_run(bad, out, sizeof out);
+	assert_int_equal(rc, 2);
+	assert_non_null(strstr(out, "vulcan"));
+	assert_int_not_equal(access(pic, F_OK), 0);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_pattern_refused),
 		cmocka_unit_test(test_pattern_frames),
+		cmocka_unit_test(test_planet_by_name),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
