@@ -179,7 +179,7 @@ struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct 
 	j->seq = g->seq++;
 	j->heap_idx = -1;
 	jobmap_insert(&g->map, j);
-	if (g->store && store_contains(g->store, key)) {
+	if (g->store && store_keeps(node) && store_contains(g->store, key)) {
 		/* A worker loads it; its inputs are resolved only if that fails. */
 		j->from_store = true;
 		j->mstate = JOB_SUBMITTED;

@@ -430,7 +430,7 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j)
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
 		cache_insert(s->cache, t);
-		if (s->store)
+		if (s->store && store_keeps(n))
 			store_put(s->store, t); /* write-behind: never waits; a full queue drops it */
 		atomic_fetch_add(&j->node->generated, 1);
 		atomic_fetch_add(&j->node->gen_ns, dt);

@@ -19,6 +19,8 @@
 
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "node.h"
+#include "planet.h"
 
 #define MAGIC 0x31534d43u /* "CMS1" little-endian */
 #define VERSION 1
@@ -27,6 +29,15 @@ void store_destroy(struct store *s)
 {
 	if (s)
 		s->ops->destroy(s);
+}
+
+bool store_keeps(const struct node *n)
+{
+	const struct planet *p = n->planet;
+	for (size_t i = 0; p && i < p->nlayers; i++)
+		if (p->layers[i].node == n)
+			return true;
+	return false;
 }
 
 static void put_be64(uint8_t *p, uint64_t v)

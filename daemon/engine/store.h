@@ -27,6 +27,7 @@
 #include "tile.h"
 
 struct tilecodec;
+struct node;
 
 /* Tier numbers as CACHE_ENTRIES reports them (docs/PROTOCOL.md). */
 enum store_tier { STORE_TIER_NONE = 0, STORE_TIER_MEMORY = 1, STORE_TIER_DISK = 2,
@@ -44,7 +45,7 @@ struct store_stats {
 	uint64_t corrupt;     /* entries that failed their checksum (dropped) */
 	uint64_t write_drops; /* puts dropped because the write queue was full */
 	uint64_t write_errors; /* batches that failed to commit (disk full, I/O error) */
-	uint64_t queued;      /* writes waiting for the writer */
+	uint64_t queued;      /* writes queued or being committed */
 };
 
 /* One entry, as iterate reports it. */
@@ -89,6 +90,12 @@ struct store {
 	const struct store_ops *ops;
 };
 
+/* Whether tiles of node n go to the tiers below memory: those of the planet's published
+ * layers (what clients ask for). Intermediate nodes stay in memory only: storing them would
+ * multiply the writes (the procedural planet makes ~14 tiles per layer tile) for tiles a
+ * stored layer tile no longer needs. */
+bool store_keeps(const struct node *n);
+
 /* Thin wrappers over the vtable (s must not be NULL, except store_destroy). */
 static inline int store_get(struct store *s, const struct tile_key *k, enum pix_type type,
 			    uint32_t size, struct tilecodec *tc, struct tile **out)
@@ -116,7 +123,7 @@ struct store_lmdb_desc {
 	uint64_t budget;      /* bytes at rest to stay under; 0: 1 GiB */
 	size_t queue_max;     /* writes queued before puts are dropped; 0: 1024 */
 	uint64_t queue_bytes; /* raw tile bytes queued before puts are dropped; 0: 256 MiB */
-	int zstd_level;	      /* 0: 3 */
+	int zstd_level;	      /* 0: 1 */
 };
 
 /* Opens (creating) the store file. Returns 0 with *out owned, or -errno with err filled. A
