@@ -35,7 +35,8 @@ struct daemon {
 	uint64_t generation;
 	uint64_t watchdog_usec, last_watchdog_ns;
 	struct store *store; /* the disk tier, NULL without [store] path */
-	struct store_stats store_seen; /* what on_tick last logged about it */
+	struct store_stats store_seen; /* its counters at the last tick */
+	bool store_failing;	       /* its writes fail (logged once) */
 };
 
 static void usage(FILE *f)
@@ -86,8 +87,9 @@ static void on_signal(void *ud)
 	}
 }
 
-/* Says once per tick what went wrong in the store since the last one (the engine only
- * counts). */
+/* Says what went wrong in the store (the engine only counts): damaged entries once per tick
+ * in which some were found; failing writes (disk full, I/O) once when they start and once
+ * when a batch commits again; a full write queue the first time. */
 static void store_watch(struct daemon *d)
 {
 	struct store_stats st, *old = &d->store_seen;
@@ -95,9 +97,15 @@ static void store_watch(struct daemon *d)
 	if (st.corrupt > old->corrupt)
 		log_msg(LOG_WARN, "store %s: %llu corrupt tiles dropped (regenerated, never served)",
 			d->conf.store_path, (unsigned long long)(st.corrupt - old->corrupt));
-	if (st.write_errors > old->write_errors)
-		log_msg(LOG_WARN, "store %s: %llu write batches failed (disk full or I/O error?)",
-			d->conf.store_path, (unsigned long long)(st.write_errors - old->write_errors));
+	if (st.write_errors > old->write_errors && !d->store_failing) {
+		log_msg(LOG_WARN, "store %s: writes fail (disk full or I/O error?): serving from "
+			"memory and generation, tiles left unstored", d->conf.store_path);
+		d->store_failing = true;
+	} else if (st.write_errors == old->write_errors && st.puts > old->puts &&
+		   d->store_failing) {
+		log_msg(LOG_INFO, "store %s: writes succeed again", d->conf.store_path);
+		d->store_failing = false;
+	}
 	if (st.write_drops > 0 && old->write_drops == 0)
 		log_msg(LOG_WARN, "store %s: write queue full, tiles left unstored (counted as "
 			"store.disk.write_drops)", d->conf.store_path);

@@ -84,8 +84,9 @@ int main(void)
 	double gen_s = (double)(clock_now_ns() - t0) * 1e-9;
 	struct sched_stats ss;
 	sched_get_stats(s, &ss);
-	printf("store/generate: %llu tiles (with inputs) in %.2f s, 2 workers: %.0f tiles/s\n",
-	       (unsigned long long)ss.generated, gen_s, (double)ss.generated / gen_s);
+	printf("store/generate: %zu layer tiles (%llu with their inputs) in %.2f s, 2 workers: "
+	       "%.0f layer tiles/s (what the writer must keep up with)\n",
+	       n, (unsigned long long)ss.generated, gen_s, (double)n / gen_s);
 
 	char dir[] = "/tmp/bench_store_XXXXXX";
 	if (!mkdtemp(dir)) {

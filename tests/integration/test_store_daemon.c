@@ -331,16 +331,20 @@ static void corrupt_entry_regenerated(void **state)
 	net_close(c);
 }
 
-/* kill -9 while the writer is busy, five times: each restart opens the store and every tile
- * served is exactly what generation gives. */
+/* kill -9 while the writer is busy, five times (STORE_KILL_LOOPS=100 for the long run): each
+ * restart opens the store and every tile served is exactly what generation gives. */
 static void kill9_during_writes(void **state)
 {
 	struct env *e = *state;
 	NEED_DAEMON(e);
 	static struct proto_want_entry w[MAXW];
 	uint64_t prev_tiles = 0;
-	for (int it = 0; it < 5; it++) {
-		uint32_t n = block(w, 0, 5, (uint32_t)it * 8, 8, 8, 8); /* 128 tiles, new ones */
+	int loops = getenv("STORE_KILL_LOOPS") ? atoi(getenv("STORE_KILL_LOOPS")) : 5;
+	if (loops < 1)
+		loops = 1;
+	for (int it = 0; it < loops; it++) {
+		/* 128 tiles, new ones for the first eight rounds */
+		uint32_t n = block(w, 0, 5, (uint32_t)(it % 8) * 8, 8, 8, 8);
 		n = block(w, n, 4, 0, 0, 16, 8);		       /* 256 tiles, the same each time */
 		uint32_t pid;
 		struct net_conn *c = conn(e, &pid);
@@ -350,7 +354,7 @@ static void kill9_during_writes(void **state)
 		uint64_t tiles = stat_of(c, "store.disk.tiles");
 		assert_true(tiles >= prev_tiles); /* committed batches survived the kill */
 		/* Heavy writes: new tiles, killed partway. */
-		uint32_t got = fetch(e, c, pid, 2, w, 128, 40 + (uint32_t)it * 17, false);
+		uint32_t got = fetch(e, c, pid, 2, w, 128, 40 + (uint32_t)(it % 5) * 17, false);
 		assert_true(got > 0);
 		prev_tiles = stat_of(c, "store.disk.tiles");
 		print_message("kill -9 #%d: %u tiles received, %llu stored, %llu writes queued\n", it + 1,
@@ -362,7 +366,7 @@ static void kill9_during_writes(void **state)
 	uint32_t pid;
 	struct net_conn *c = conn(e, &pid);
 	uint32_t n = 0;
-	for (int it = 0; it < 5; it++)
+	for (int it = 0; it < loops && it < 8; it++)
 		n = block(w, n, 5, (uint32_t)it * 8, 8, 8, 8);
 	assert_int_equal(fetch(e, c, pid, 3, w, n, 0, true), n);
 	assert_int_equal(stat_of(c, "store.disk.corrupt"), 0);
