@@ -421,7 +421,9 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j)
 	j->err = rc;
 }
 
-static void generate(struct sched *s, struct gen_ctx *g, struct job *j)
+/* cls: the class the job was queued with; bulk work (operator prefetch) is kept on disk
+ * ahead of what viewers happened to ask for. */
+static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;
 	struct tile *t = tile_create(&j->key, n->out, n->planet->tile_size);
@@ -431,7 +433,9 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j)
 	if (rc == 0) {
 		cache_insert(s->cache, t);
 		if (s->store && store_keeps(n))
-			store_put(s->store, t); /* write-behind: never waits; a full queue drops it */
+			/* Write-behind: never waits; a full queue drops it. */
+			store_put(s->store, t,
+				  cls == SCHED_BULK ? STORE_KEEP_PREFETCHED : STORE_KEEP_INCIDENTAL);
 		atomic_fetch_add(&j->node->generated, 1);
 		atomic_fetch_add(&j->node->gen_ns, dt);
 		atomic_fetch_add(&s->generated, 1);
@@ -460,14 +464,15 @@ static void *worker_main(void *arg)
 		if (s->q_stop)
 			break;
 		struct job *j = jobheap_pop(&s->heap);
-		s->queued[j->qprio.cls]--;
+		enum sched_class cls = (enum sched_class)j->qprio.cls;
+		s->queued[cls]--;
 		s->running++;
 		xmutex_unlock(&s->q_mu);
 
 		if (j->from_store)
 			load(s, tc, j);
 		else
-			generate(s, &g, j);
+			generate(s, &g, j, cls);
 
 		xmutex_lock(&s->in_mu);
 		j->next_done = s->done;

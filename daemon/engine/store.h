@@ -48,11 +48,20 @@ struct store_stats {
 	uint64_t queued;      /* writes queued or being committed */
 };
 
+/* Why a tile was stored, which decides the eviction order: incidental tiles (what viewers
+ * happened to ask for) go first, least recently used first; prefetched tiles (what an operator
+ * asked to keep ready) only when no incidental one is left. */
+enum store_keep {
+	STORE_KEEP_INCIDENTAL = 0,
+	STORE_KEEP_PREFETCHED = 1,
+};
+
 /* One entry, as iterate reports it. */
 struct store_entry {
 	struct tile_key key;
 	uint32_t bytes;	      /* the value's length */
 	uint64_t stamp;	      /* last use, a store-wide increasing counter (larger: more recent) */
+	enum store_keep keep;
 };
 
 typedef int (*store_iter_fn)(void *ud, const struct store_entry *e);
@@ -69,9 +78,10 @@ struct store_ops {
 		   struct tilecodec *tc, struct tile **out);
 	/* Whether k is present (no checksum, no decode; a miss is counted). */
 	bool (*contains)(struct store *s, const struct tile_key *k);
-	/* Queues t for writing; returns 0, or -EAGAIN when the queue is full (counted: the
-	 * tile is simply not stored). Never waits for I/O. */
-	int (*put)(struct store *s, struct tile *t);
+	/* Queues t for writing with its eviction class (an entry once prefetched stays so);
+	 * returns 0, or -EAGAIN when the queue is full (counted: the tile is simply not
+	 * stored). Never waits for I/O. */
+	int (*put)(struct store *s, struct tile *t, enum store_keep keep);
 	/* Queues the removal of k. Returns 0 or -EAGAIN. */
 	int (*del)(struct store *s, const struct tile_key *k);
 	/* Calls fn for every entry (key order) from one consistent snapshot; stops when fn
@@ -106,7 +116,10 @@ static inline bool store_contains(struct store *s, const struct tile_key *k)
 {
 	return s->ops->contains(s, k);
 }
-static inline int store_put(struct store *s, struct tile *t) { return s->ops->put(s, t); }
+static inline int store_put(struct store *s, struct tile *t, enum store_keep keep)
+{
+	return s->ops->put(s, t, keep);
+}
 static inline int store_del(struct store *s, const struct tile_key *k) { return s->ops->del(s, k); }
 static inline int store_iterate(struct store *s, store_iter_fn fn, void *ud)
 {

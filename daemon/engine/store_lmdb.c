@@ -1,9 +1,11 @@
 /* store_lmdb — the disk tier: one LMDB file (MDB_NOSUBDIR) with three databases:
  *   tiles  key (18 bytes, store.h) → value (store.c's format: header, checksum, zstd payload)
- *   meta   key → stamp u64, accounted bytes u32, value length u32 (little-endian)
- *   lru    stamp u64 big-endian ‖ key → empty: the entries oldest first
+ *   meta   key → stamp u64, accounted bytes u32, value length u32 (little-endian), keep u8
+ *   lru    keep u8 ‖ stamp u64 big-endian ‖ key → empty: incidental entries oldest first,
+ *          then prefetched ones oldest first — the order eviction takes them in
  * A stamp is a store-wide counter (continued across restarts from the largest in lru), set on
- * write and refreshed on every hit, so eviction takes lru's first entries.
+ * write and refreshed on every hit (keeping the entry's class), so eviction takes lru's first
+ * entries: prefetched tiles go only once no incidental one is left.
  *
  * Reads run on the caller's thread in a read-only transaction (MDB_NOTLS: any thread, any
  * number) and decode straight from the map. Every change goes through one writer thread:
@@ -37,8 +39,8 @@
 #include "common/xthread.h"
 #include "store.h"
 
-#define META_LEN 16
-#define LRU_LEN (8 + STORE_KEY_LEN)
+#define META_LEN 17
+#define LRU_LEN (1 + 8 + STORE_KEY_LEN)
 #define ENTRY_OVERHEAD 128 /* three index records, estimated */
 #define BATCH_MAX 256
 
@@ -47,6 +49,7 @@ enum wop_kind { W_NONE = 0, W_PUT, W_TOUCH, W_DEL };
 struct wop {
 	enum wop_kind kind;
 	struct tile *t; /* W_PUT: owned reference */
+	uint8_t keep;	/* W_PUT: enum store_keep */
 	struct tile_key key;
 	void *val; /* W_PUT: the encoded value (writer) */
 	size_t vlen;
@@ -125,12 +128,30 @@ static void be64(uint8_t *p, uint64_t v)
 	for (int i = 7; i >= 0; i--, v >>= 8)
 		p[i] = (uint8_t)v;
 }
-static uint64_t rbe64(const uint8_t *p)
+
+struct meta {
+	uint64_t stamp;
+	uint32_t at_rest, vlen;
+	uint8_t keep; /* enum store_keep */
+};
+
+static int meta_read(const MDB_val *m, struct meta *o)
 {
-	uint64_t v = 0;
-	for (int i = 0; i < 8; i++)
-		v = v << 8 | p[i];
-	return v;
+	if (m->mv_size != META_LEN)
+		return MDB_CORRUPTED;
+	const uint8_t *p = m->mv_data;
+	uint64_t av = rle64(p + 8);
+	*o = (struct meta){ .stamp = rle64(p), .at_rest = (uint32_t)av,
+			    .vlen = (uint32_t)(av >> 32), .keep = p[16] };
+	return 0;
+}
+
+static void lru_key(uint8_t lk[LRU_LEN], uint8_t keep, uint64_t stamp,
+		    const uint8_t kb[STORE_KEY_LEN])
+{
+	lk[0] = keep;
+	be64(lk + 1, stamp);
+	memcpy(lk + 9, kb, STORE_KEY_LEN);
 }
 
 /* ---- the queue ---- */
@@ -139,8 +160,11 @@ static uint64_t rbe64(const uint8_t *p)
 static int enqueue(struct lstore *s, const struct wop *op)
 {
 	uint64_t nb = op->t ? op->t->nbytes : 0;
+	/* Recency updates only use the first half of the queue, so a burst of hits (a viewer
+	 * after a restart) never crowds out the tiles being generated. */
+	size_t cap = op->kind == W_TOUCH ? s->qmax / 2 : s->qmax;
 	xmutex_lock(&s->mu);
-	if (s->stop || s->qn >= s->qmax || (nb && s->qbytes + nb > s->qbytes_max)) {
+	if (s->stop || s->qn >= cap || (nb && s->qbytes + nb > s->qbytes_max)) {
 		xmutex_unlock(&s->mu);
 		return -EAGAIN;
 	}
@@ -156,24 +180,26 @@ static int enqueue(struct lstore *s, const struct wop *op)
 
 /* ---- the writer ---- */
 
-/* Removes k's entry from the three databases in txn, updating the byte and tile counts. */
+/* Removes k's entry from the three databases in txn, updating the byte and tile counts;
+ * *keep (optional) receives its class (0 when absent). */
 static int remove_entry(struct lstore *s, MDB_txn *txn, const uint8_t kb[STORE_KEY_LEN],
-			uint64_t *nb, uint64_t *nt)
+			uint64_t *nb, uint64_t *nt, uint8_t *keep)
 {
 	MDB_val k = { STORE_KEY_LEN, (void *)kb }, m;
+	if (keep)
+		*keep = 0;
 	int rc = mdb_get(txn, s->meta, &k, &m);
 	if (rc == MDB_NOTFOUND) {
 		rc = mdb_del(txn, s->tiles, &k, NULL); /* a value without meta: drop it too */
 		return rc == MDB_NOTFOUND ? 0 : rc;
 	}
-	if (rc)
+	struct meta md;
+	if (rc || (rc = meta_read(&m, &md)))
 		return rc;
-	if (m.mv_size != META_LEN)
-		return MDB_CORRUPTED;
+	if (keep)
+		*keep = md.keep;
 	uint8_t lk[LRU_LEN];
-	be64(lk, rle64(m.mv_data));
-	memcpy(lk + 8, kb, STORE_KEY_LEN);
-	uint64_t a = (uint32_t)rle64((const uint8_t *)m.mv_data + 8);
+	lru_key(lk, md.keep, md.stamp, kb);
 	MDB_val l = { LRU_LEN, lk };
 	if ((rc = mdb_del(txn, s->lru, &l, NULL)) && rc != MDB_NOTFOUND)
 		return rc;
@@ -181,20 +207,20 @@ static int remove_entry(struct lstore *s, MDB_txn *txn, const uint8_t kb[STORE_K
 		return rc;
 	if ((rc = mdb_del(txn, s->tiles, &k, NULL)) && rc != MDB_NOTFOUND)
 		return rc;
-	*nb -= *nb >= a ? a : *nb;
+	*nb -= *nb >= md.at_rest ? md.at_rest : *nb;
 	*nt -= *nt ? 1 : 0;
 	return 0;
 }
 
-/* Records k's recency (meta and lru) with a new stamp. */
+/* Records k's meta and lru records. */
 static int stamp_entry(struct lstore *s, MDB_txn *txn, const uint8_t kb[STORE_KEY_LEN],
-		       uint64_t stamp, uint32_t a, uint32_t vlen)
+		       const struct meta *md)
 {
 	uint8_t mv[META_LEN], lk[LRU_LEN];
-	le64(mv, stamp);
-	le64(mv + 8, (uint64_t)vlen << 32 | a);
-	be64(lk, stamp);
-	memcpy(lk + 8, kb, STORE_KEY_LEN);
+	le64(mv, md->stamp);
+	le64(mv + 8, (uint64_t)md->vlen << 32 | md->at_rest);
+	mv[16] = md->keep;
+	lru_key(lk, md->keep, md->stamp, kb);
 	MDB_val k = { STORE_KEY_LEN, (void *)kb }, m = { META_LEN, mv }, l = { LRU_LEN, lk },
 		e = { 0, NULL };
 	int rc = mdb_put(txn, s->meta, &k, &m, 0);
@@ -208,18 +234,16 @@ static int touch_entry(struct lstore *s, MDB_txn *txn, const uint8_t kb[STORE_KE
 	int rc = mdb_get(txn, s->meta, &k, &m);
 	if (rc == MDB_NOTFOUND)
 		return 0;
-	if (rc)
+	struct meta md;
+	if (rc || (rc = meta_read(&m, &md)))
 		return rc;
-	if (m.mv_size != META_LEN)
-		return MDB_CORRUPTED;
-	uint64_t old = rle64(m.mv_data), av = rle64((const uint8_t *)m.mv_data + 8);
 	uint8_t lk[LRU_LEN];
-	be64(lk, old);
-	memcpy(lk + 8, kb, STORE_KEY_LEN);
+	lru_key(lk, md.keep, md.stamp, kb);
 	MDB_val l = { LRU_LEN, lk };
 	if ((rc = mdb_del(txn, s->lru, &l, NULL)) && rc != MDB_NOTFOUND)
 		return rc;
-	return stamp_entry(s, txn, kb, (*stamp)++, (uint32_t)av, (uint32_t)(av >> 32));
+	md.stamp = (*stamp)++;
+	return stamp_entry(s, txn, kb, &md);
 }
 
 /* Evicts the least recent entries until *nb ≤ target. */
@@ -233,10 +257,11 @@ static int evict_to(struct lstore *s, MDB_txn *txn, uint64_t target, uint64_t *n
 			return rc;
 		MDB_val l, e;
 		rc = mdb_cursor_get(c, &l, &e, MDB_FIRST);
-		uint8_t kb[STORE_KEY_LEN];
-		if (rc == 0 && l.mv_size == LRU_LEN)
-			memcpy(kb, (const uint8_t *)l.mv_data + 8, STORE_KEY_LEN);
+		/* Copied at once: a write in this transaction may move the page l points into. */
+		uint8_t lk[LRU_LEN];
 		bool bad = rc == 0 && l.mv_size != LRU_LEN;
+		if (rc == 0 && !bad)
+			memcpy(lk, l.mv_data, LRU_LEN);
 		if (bad)
 			rc = mdb_cursor_del(c, 0);
 		mdb_cursor_close(c);
@@ -251,12 +276,10 @@ static int evict_to(struct lstore *s, MDB_txn *txn, uint64_t target, uint64_t *n
 		if (bad)
 			continue;
 		uint64_t before = *nt;
-		if ((rc = remove_entry(s, txn, kb, nb, nt)))
+		if ((rc = remove_entry(s, txn, lk + 9, nb, nt, NULL)))
 			return rc;
 		if (*nt == before) {
 			/* An lru record without meta: drop the record itself. */
-			uint8_t lk[LRU_LEN];
-			memcpy(lk, l.mv_data, LRU_LEN);
 			MDB_val lv = { LRU_LEN, lk };
 			if ((rc = mdb_del(txn, s->lru, &lv, NULL)) && rc != MDB_NOTFOUND)
 				return rc;
@@ -282,21 +305,25 @@ static int apply(struct lstore *s, struct wop *ops, size_t n, uint64_t extra_evi
 		uint8_t kb[STORE_KEY_LEN];
 		store_key_encode(&op->key, kb);
 		if (op->kind == W_PUT) {
-			if ((rc = remove_entry(s, txn, kb, &nb, &nt)))
+			uint8_t keep;
+			if ((rc = remove_entry(s, txn, kb, &nb, &nt, &keep)))
 				break;
 			MDB_val k = { STORE_KEY_LEN, kb }, v = { op->vlen, op->val };
 			if ((rc = mdb_put(txn, s->tiles, &k, &v, 0)))
 				break;
-			uint64_t a = at_rest(s, op->vlen);
-			if ((rc = stamp_entry(s, txn, kb, stamp++, (uint32_t)a, (uint32_t)op->vlen)))
+			/* A tile once prefetched stays prefetched when written again. */
+			struct meta md = { .stamp = stamp++, .at_rest = (uint32_t)at_rest(s, op->vlen),
+					   .vlen = (uint32_t)op->vlen,
+					   .keep = keep > op->keep ? keep : op->keep };
+			if ((rc = stamp_entry(s, txn, kb, &md)))
 				break;
-			nb += a;
+			nb += md.at_rest;
 			nt++;
 			written++;
 		} else if (op->kind == W_TOUCH) {
 			rc = touch_entry(s, txn, kb, &stamp);
 		} else if (op->kind == W_DEL) {
-			rc = remove_entry(s, txn, kb, &nb, &nt);
+			rc = remove_entry(s, txn, kb, &nb, &nt, NULL);
 		}
 	}
 	if (rc == 0 && s->budget && nb > s->budget)
@@ -411,10 +438,11 @@ static bool l_contains(struct store *base, const struct tile_key *k)
 	return found;
 }
 
-static int l_put(struct store *base, struct tile *t)
+static int l_put(struct store *base, struct tile *t, enum store_keep keep)
 {
 	struct lstore *s = (struct lstore *)base;
-	int rc = enqueue(s, &(struct wop){ .kind = W_PUT, .t = tile_ref(t), .key = t->key });
+	int rc = enqueue(s, &(struct wop){ .kind = W_PUT, .t = tile_ref(t), .key = t->key,
+					   .keep = (uint8_t)keep });
 	if (rc) {
 		tile_unref(t);
 		atomic_fetch_add(&s->drops, 1);
@@ -444,10 +472,12 @@ static int l_iterate(struct store *base, store_iter_fn fn, void *ud)
 	for (rc = mdb_cursor_get(c, &k, &m, MDB_FIRST); rc == 0 && r == 0;
 	     rc = mdb_cursor_get(c, &k, &m, MDB_NEXT)) {
 		struct store_entry e;
-		if (store_key_decode(k.mv_data, k.mv_size, &e.key) || m.mv_size != META_LEN)
+		struct meta md;
+		if (store_key_decode(k.mv_data, k.mv_size, &e.key) || meta_read(&m, &md))
 			continue;
-		e.stamp = rle64(m.mv_data);
-		e.bytes = (uint32_t)(rle64((const uint8_t *)m.mv_data + 8) >> 32);
+		e.stamp = md.stamp;
+		e.bytes = md.vlen;
+		e.keep = (enum store_keep)md.keep;
 		r = fn(ud, &e);
 	}
 	mdb_cursor_close(c);
@@ -561,20 +591,19 @@ static int open_env(struct lstore *s, char err[256])
 	}
 	for (rc = mdb_cursor_get(c, &k, &v, MDB_FIRST); rc == 0;
 	     rc = mdb_cursor_get(c, &k, &v, MDB_NEXT)) {
-		if (v.mv_size == META_LEN)
-			nb += (uint32_t)rle64((const uint8_t *)v.mv_data + 8);
+		struct meta md;
+		if (meta_read(&v, &md) == 0) {
+			nb += md.at_rest;
+			stamp = md.stamp >= stamp ? md.stamp + 1 : stamp;
+		}
 		nt++;
 	}
 	mdb_cursor_close(c);
-	if (rc != MDB_NOTFOUND || (rc = mdb_cursor_open(txn, s->lru, &c))) {
+	if (rc != MDB_NOTFOUND) {
 		mdb_txn_abort(txn);
 		goto fail;
 	}
-	rc = mdb_cursor_get(c, &k, &v, MDB_LAST);
-	if (rc == 0 && k.mv_size == LRU_LEN)
-		stamp = rbe64(k.mv_data) + 1;
-	mdb_cursor_close(c);
-	if ((rc && rc != MDB_NOTFOUND) || (rc = mdb_txn_commit(txn)))
+	if ((rc = mdb_txn_commit(txn)))
 		goto fail;
 	atomic_store(&s->bytes, nb);
 	atomic_store(&s->ntiles, nt);

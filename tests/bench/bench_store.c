@@ -103,7 +103,7 @@ int main(void)
 	uint64_t raw = 0;
 	t0 = clock_now_ns();
 	for (size_t i = 0; i < n; i++) {
-		store_put(st, t[i]);
+		store_put(st, t[i], STORE_KEEP_INCIDENTAL);
 		raw += t[i]->nbytes;
 	}
 	uint64_t t_queued = clock_now_ns() - t0;

@@ -1,7 +1,8 @@
 /* Store tests (engine/store.h) on a real LMDB file in a temporary directory: put / get /
  * contains / delete / iterate / stat through the vtable, persistence across reopening, a
  * value damaged inside the file (detected, counted, dropped — never returned), a value moved
- * under another key, the byte budget (least recently used evicted first), the write queue's
+ * under another key, the byte budget (least recently used evicted first, prefetched tiles
+ * after every incidental one), the write queue's
  * accounting (every put is either written or counted as dropped), and a file that is not
  * LMDB (moved aside, a fresh store created). */
 #include <stdarg.h>
@@ -94,7 +95,7 @@ static void assert_same(const struct tile *a, const struct tile *b)
 static void put_new(struct store *s, const struct tile_key *k, bool noisy)
 {
 	struct tile *t = make_tile(k, noisy);
-	assert_int_equal(store_put(s, t), 0);
+	assert_int_equal(store_put(s, t, STORE_KEEP_INCIDENTAL), 0);
 	tile_unref(t);
 }
 
@@ -118,8 +119,8 @@ static void put_get_delete_iterate(void **state)
 	struct store *s = open_store(e, 0, 0);
 	struct tile_key a = key(7, 1, 2), b = key(7, 3, 2), c = key(8, 1, 2);
 	struct tile *ta = make_tile(&a, false), *tb = make_tile(&b, true);
-	assert_int_equal(store_put(s, ta), 0);
-	assert_int_equal(store_put(s, tb), 0);
+	assert_int_equal(store_put(s, ta, STORE_KEEP_INCIDENTAL), 0);
+	assert_int_equal(store_put(s, tb, STORE_KEEP_INCIDENTAL), 0);
 	assert_int_equal(store_flush(s), 0);
 
 	struct tile *got = NULL;
@@ -148,7 +149,7 @@ static void put_get_delete_iterate(void **state)
 	assert_int_equal(count(s), 2);
 
 	/* Putting a key again replaces its value; the accounting does not double. */
-	assert_int_equal(store_put(s, ta), 0);
+	assert_int_equal(store_put(s, ta, STORE_KEEP_INCIDENTAL), 0);
 	assert_int_equal(store_flush(s), 0);
 	struct store_stats st2;
 	store_stat(s, &st2);
@@ -285,6 +286,70 @@ static void budget_evicts_least_recent(void **state)
 	store_destroy(s);
 }
 
+struct keep_scan {
+	uint64_t max_stamp;
+	int prefetched;
+	struct tile_key probe;
+	int probe_keep;
+};
+
+static int keep_fn(void *ud, const struct store_entry *e)
+{
+	struct keep_scan *k = ud;
+	k->max_stamp = e->stamp > k->max_stamp ? e->stamp : k->max_stamp;
+	k->prefetched += e->keep == STORE_KEEP_PREFETCHED;
+	if (grid_key_equal(&e->key, &k->probe))
+		k->probe_keep = (int)e->keep;
+	return 0;
+}
+
+/* Prefetched tiles outlive incidental ones however old they are; a prefetched tile written
+ * again incidentally stays prefetched; recency stamps keep increasing across reopening. */
+static void prefetched_kept_ahead(void **state)
+{
+	struct env *e = *state;
+	const uint64_t budget = (uint64_t)1 << 20;
+	struct store *s = open_store(e, budget, 0);
+	for (uint32_t i = 0; i < 20; i++) {
+		struct tile_key k = key(14, i, 0);
+		struct tile *t = make_tile(&k, true);
+		assert_int_equal(store_put(s, t, STORE_KEEP_PREFETCHED), 0);
+		tile_unref(t);
+	}
+	assert_int_equal(store_flush(s), 0);
+	struct tile_key k0 = key(14, 0, 0);
+	put_new(s, &k0, true); /* incidental rewrite of a prefetched tile */
+	for (uint32_t i = 0; i < 200; i++) {
+		struct tile_key k = key(14, i, 1);
+		put_new(s, &k, true);
+	}
+	assert_int_equal(store_flush(s), 0);
+	struct store_stats st;
+	store_stat(s, &st);
+	assert_true(st.evictions > 0);
+	assert_true(st.bytes <= budget);
+	for (uint32_t i = 0; i < 20; i++) {
+		struct tile_key k = key(14, i, 0);
+		assert_true(store_contains(s, &k));
+	}
+	struct tile_key first_inc = key(14, 0, 1);
+	assert_false(store_contains(s, &first_inc));
+	struct keep_scan ks = { .probe = k0, .probe_keep = -1 };
+	assert_int_equal(store_iterate(s, keep_fn, &ks), 0);
+	assert_int_equal(ks.prefetched, 20);
+	assert_int_equal(ks.probe_keep, STORE_KEEP_PREFETCHED);
+	store_destroy(s);
+
+	s = open_store(e, budget, 0);
+	struct tile_key fresh = key(14, 999, 2);
+	put_new(s, &fresh, false);
+	assert_int_equal(store_flush(s), 0);
+	struct keep_scan after = { .probe = fresh, .probe_keep = -1 };
+	assert_int_equal(store_iterate(s, keep_fn, &after), 0);
+	assert_int_equal(after.max_stamp, ks.max_stamp + 1);
+	store_destroy(s);
+}
+
 static void queue_accounting(void **state)
 {
 	struct env *e = *state;
@@ -293,7 +358,7 @@ static void queue_accounting(void **state)
 	for (uint32_t i = 0; i < 200; i++) {
 		struct tile_key k = key(12, i, 1);
 		struct tile *t = make_tile(&k, true);
-		accepted += store_put(s, t) == 0;
+		accepted += store_put(s, t, STORE_KEEP_INCIDENTAL) == 0;
 		tile_unref(t);
 	}
 	assert_int_equal(store_flush(s), 0);
@@ -331,6 +396,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(put_get_delete_iterate, setup, teardown),
 		cmocka_unit_test_setup_teardown(corrupt_value_detected, setup, teardown),
 		cmocka_unit_test_setup_teardown(budget_evicts_least_recent, setup, teardown),
+		cmocka_unit_test_setup_teardown(prefetched_kept_ahead, setup, teardown),
 		cmocka_unit_test_setup_teardown(queue_accounting, setup, teardown),
 		cmocka_unit_test_setup_teardown(foreign_file_moved_aside, setup, teardown),
 	};
