@@ -203,6 +203,7 @@ static int take_signals(struct daemon *d)
 	sigaddset(&mask, SIGINT);
 	sigaddset(&mask, SIGHUP);
 	signal(SIGPIPE, SIG_IGN);
+	signal(SIGXFSZ, SIG_IGN); /* a store write past a file size limit fails (EFBIG), counted */
 	int rc = pthread_sigmask(SIG_BLOCK, &mask, NULL);
 	if (rc)
 		return -rc;

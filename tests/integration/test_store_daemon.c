@@ -6,6 +6,8 @@
  *     tile served is the right one (compared with in-process generation, byte for byte);
  *   - kill -9 during heavy writes, five times: every restart opens the store and serves no
  *     damaged tile;
+ *   - writes that fail (the file may not grow, as on a full disk) leave it serving, logged
+ *     once, and it recovers when the file may grow again;
  *   - a small disk_mb holds: the bytes at rest stay under it while tiles are evicted.
  * Skipped when build/clipmapd was not built. */
 #include <stdarg.h>
@@ -20,6 +22,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -381,6 +384,52 @@ static void kill9_during_writes(void **state)
 	net_close(c);
 }
 
+/* Writes that fail (the file may not grow: a file size limit set on the running daemon, as a
+ * full disk would) leave the daemon serving from memory and generation, logged once; when the
+ * file may grow again writes succeed again (logged) and what they wrote survives a restart. */
+static void write_failure_recovers(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	static struct proto_want_entry w[MAXW];
+	uint32_t pid;
+	struct net_conn *c = conn(e, &pid);
+	uint32_t n = block(w, 0, 4, 0, 0, 8, 4);
+	assert_int_equal(fetch(e, c, pid, 1, w, n, 0, false), n);
+	wait_written(c);
+	uint64_t puts0 = stat_of(c, "store.disk.puts");
+
+	struct stat st;
+	assert_int_equal(stat(e->store, &st), 0);
+	struct rlimit lim = { .rlim_cur = (rlim_t)st.st_size, .rlim_max = RLIM_INFINITY };
+	assert_int_equal(prlimit(e->d.daemon, RLIMIT_FSIZE, &lim, NULL), 0);
+	n = block(w, 0, 6, 0, 16, 16, 8); /* 256 new tiles: the file must grow */
+	assert_int_equal(fetch(e, c, pid, 2, w, n, 0, true), n);
+	wait_written(c);
+	uint64_t werr = stat_of(c, "store.disk.write_errors");
+	print_message("file limited to %lld bytes: %llu write batches failed\n", (long long)st.st_size,
+		      (unsigned long long)werr);
+	assert_true(werr > 0);
+	assert_true(daemon_env_log_wait(&e->d, "writes fail", 1, 3000));
+
+	lim.rlim_cur = RLIM_INFINITY;
+	assert_int_equal(prlimit(e->d.daemon, RLIMIT_FSIZE, &lim, NULL), 0);
+	n = block(w, 0, 6, 20, 16, 8, 4); /* 64 new tiles */
+	assert_int_equal(fetch(e, c, pid, 3, w, n, 0, false), n);
+	wait_written(c);
+	assert_true(stat_of(c, "store.disk.puts") >= puts0 + n);
+	assert_true(daemon_env_log_wait(&e->d, "writes succeed again", 1, 3000));
+	assert_int_equal(daemon_env_log_count(&e->d, "writes fail"), 1);
+	net_close(c);
+
+	restart(e, SIGTERM);
+	c = conn(e, &pid);
+	assert_int_equal(fetch(e, c, pid, 1, w, n, 0, true), n);
+	assert_int_equal(stat_of(c, "sched.generated"), 0);
+	assert_int_equal(stat_of(c, "store.disk.corrupt"), 0);
+	net_close(c);
+}
+
 /* disk_mb = 1 with many more tiles than fit: the bytes at rest stay under it. */
 static void disk_budget_respected(void **state)
 {
@@ -417,6 +466,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(survives_restart, setup, teardown),
 		cmocka_unit_test_setup_teardown(corrupt_entry_regenerated, setup, teardown),
 		cmocka_unit_test_setup_teardown(kill9_during_writes, setup, teardown),
+		cmocka_unit_test_setup_teardown(write_failure_recovers, setup, teardown),
 		cmocka_unit_test_setup_teardown(disk_budget_respected, setup_small, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
