@@ -23,6 +23,7 @@
 #include "engine/cache.h"
 #include "engine/planets.h"
 #include "engine/sched.h"
+#include "engine/store.h"
 #include "conf.h"
 #include "server.h"
 
@@ -34,6 +35,9 @@ struct daemon {
 	int sigfd;
 	uint64_t generation;
 	uint64_t watchdog_usec, last_watchdog_ns;
+	struct store *store; /* the disk tier, NULL without [store] path */
+	struct store_stats store_seen; /* its counters at the last tick */
+	bool store_failing;	       /* its writes fail (logged once) */
 };
 
 static void usage(FILE *f)
@@ -165,9 +169,36 @@ static void on_signal(void *ud)
 	}
 }
 
+/* Says what went wrong in the store (the engine only counts): damaged entries once per tick
+ * in which some were found; failing writes (disk full, I/O) once when they start and once
+ * when a batch commits again; a full write queue the first time. */
+static void store_watch(struct daemon *d)
+{
+	struct store_stats st, *old = &d->store_seen;
+	store_stat(d->store, &st);
+	if (st.corrupt > old->corrupt)
+		log_msg(LOG_WARN, "store %s: %llu corrupt tiles dropped (regenerated, never served)",
+			d->conf.store_path, (unsigned long long)(st.corrupt - old->corrupt));
+	if (st.write_errors > old->write_errors && !d->store_failing) {
+		log_msg(LOG_WARN, "store %s: writes fail (disk full or I/O error?): serving from "
+			"memory and generation, tiles left unstored", d->conf.store_path);
+		d->store_failing = true;
+	} else if (st.write_errors == old->write_errors && st.puts > old->puts &&
+		   d->store_failing) {
+		log_msg(LOG_INFO, "store %s: writes succeed again", d->conf.store_path);
+		d->store_failing = false;
+	}
+	if (st.write_drops > 0 && old->write_drops == 0)
+		log_msg(LOG_WARN, "store %s: write queue full, tiles left unstored (counted as "
+			"store.disk.write_drops)", d->conf.store_path);
+	*old = st;
+}
+
 static void on_tick(void *ud)
 {
 	struct daemon *d = ud;
+	if (d->store)
+		store_watch(d);
 	if (!d->watchdog_usec)
 		return;
 	uint64_t now = clock_now_ns();
@@ -265,6 +296,7 @@ static int take_signals(struct daemon *d)
 	sigaddset(&mask, SIGINT);
 	sigaddset(&mask, SIGHUP);
 	signal(SIGPIPE, SIG_IGN);
+	signal(SIGXFSZ, SIG_IGN); /* a store write past a file size limit fails (EFBIG), counted */
 	int rc = pthread_sigmask(SIG_BLOCK, &mask, NULL);
 	if (rc)
 		return -rc;
@@ -309,15 +341,36 @@ static int serve(struct daemon *d, struct planet_set *ps)
 {
 	char err[256];
 	/* Threads start after the mask is set, so they inherit it and signals reach the fd. */
+	int rc;
+	if (d->conf.store_path) {
+		err[0] = '\0';
+		rc = store_lmdb_open(&(struct store_lmdb_desc){ .path = d->conf.store_path,
+								.budget = d->conf.store_bytes },
+				     &d->store, err);
+		if (rc) {
+			log_msg(LOG_ERROR, "store: %s", err);
+			planet_set_unref(ps);
+			return 1;
+		}
+		if (err[0])
+			log_msg(LOG_WARN, "store: %s", err);
+		store_stat(d->store, &d->store_seen);
+		log_msg(LOG_INFO, "store %s: %llu tiles, %llu of %llu MiB", d->conf.store_path,
+			(unsigned long long)d->store_seen.tiles,
+			(unsigned long long)(d->store_seen.bytes >> 20),
+			(unsigned long long)(d->store_seen.budget >> 20));
+	}
 	struct cache *cache = cache_create(d->conf.cache_bytes);
 	struct sched *sched = sched_create(&(struct sched_desc){
-		.cache = cache, .workers = d->conf.workers, .worker_nice = d->conf.worker_nice });
-	int rc = server_create(&d->conf, sched, cache, ps, &d->srv, err);
+		.cache = cache, .store = d->store, .workers = d->conf.workers,
+		.worker_nice = d->conf.worker_nice });
+	rc = server_create(&d->conf, sched, cache, ps, &d->srv, err);
 	if (rc) {
 		log_msg(LOG_ERROR, "%s", err);
 		planet_set_unref(ps);
 		sched_destroy(sched);
 		cache_destroy(cache);
+		store_destroy(d->store);
 		return rc == -EINVAL ? 2 : 1;
 	}
 	bool ran = false;
@@ -337,6 +390,7 @@ out:
 	server_destroy(d->srv);
 	sched_destroy(sched);
 	cache_destroy(cache);
+	store_destroy(d->store); /* commits the writes still queued */
 	if (ran)
 		log_msg(LOG_INFO, "clipmapd stopped");
 	return rc ? 1 : 0;

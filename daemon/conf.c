@@ -50,6 +50,8 @@ static const struct row rows[] = {
 	{ "session", "max_jobs", K_INT, 0, 64, NULL },
 	{ "session", "compress", K_ENUM, 0, 0, compress_names },
 	{ "log", "level", K_LOG, 0, 0, NULL },
+	{ "store", "path", K_PATH, 0, 0, NULL },
+	{ "store", "disk_mb", K_SIZE_MB, 1, 1L << 26, NULL },
 };
 
 static int __attribute__((format(printf, 5, 6)))
@@ -148,6 +150,7 @@ static void defaults(struct conf *c)
 	c->max_frame = 0;
 	c->max_jobs = 4;
 	c->log_level = LOG_INFO;
+	c->store_bytes = (uint64_t)1024 << 20;
 }
 
 static int set_tcp(struct conf *c, const char *path, const struct ini_entry *e, char *err)
@@ -189,6 +192,7 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	case K_PATH: {
 		char **dst = strcmp(r->key, "unix") == 0	 ? &c->unix_path
 			     : strcmp(r->key, "token_file") == 0 ? &c->token_file
+			     : strcmp(r->key, "path") == 0	 ? &c->store_path
 								 : &c->planets_dir;
 		free(*dst);
 		*dst = NULL;
@@ -260,6 +264,8 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->max_frame = (uint32_t)n << 10;
 	else if (strcmp(k, "max_jobs") == 0)
 		c->max_jobs = (uint32_t)n;
+	else if (strcmp(k, "disk_mb") == 0)
+		c->store_bytes = (uint64_t)n << 20;
 	return 0;
 }
 
@@ -339,7 +345,7 @@ int conf_parse(const char *path, const char *text, size_t len, struct conf *c, c
 					  "key outside any section");
 			else
 				rc = cerr(err, path, s->line, NULL,
-					  "unknown section [%s] (expected listen, engine, session, log)",
+					  "unknown section [%s] (expected listen, engine, session, log, store)",
 					  s->name);
 			break;
 		}
@@ -415,5 +421,6 @@ void conf_fini(struct conf *c)
 		free(c->tcp[i]);
 	free(c->token_file);
 	free(c->planets_dir);
+	free(c->store_path);
 	memset(c, 0, sizeof *c);
 }

@@ -1,5 +1,5 @@
 /* conf — clipmapd.conf (INI): listeners, token, engine sizing, planets directory, per-session
- * limits and the log level. Every key has a default (a zeroed file is a valid config) and is
+ * limits, the log level and the persistent store. Every key has a default (a zeroed file is a valid config) and is
  * documented in conf/clipmapd.conf. Loading refuses unknown sections and keys and reports the
  * first error as "file:line: key: message". Relative paths resolve against the config file's
  * directory.
@@ -52,6 +52,9 @@ struct conf {
 	enum conf_compress compress;
 	/* [log] */
 	enum log_level log_level;
+	/* [store] */
+	char *store_path;     /* the disk tier's LMDB file; NULL: no disk tier */
+	uint64_t store_bytes; /* its budget at rest (disk_mb) */
 };
 
 /* Reads and checks a config file into c (zeroed by the call). Returns 0 or -errno with err

@@ -245,6 +245,27 @@ static void stat_nodes(struct statb *b, const struct planet_set *ps)
 	}
 }
 
+/* The disk tier's counters (store.disk.*), when there is one. */
+static void stat_store(struct statb *b, struct store *st)
+{
+	if (!st)
+		return;
+	struct store_stats s;
+	store_stat(st, &s);
+	stat_u(b, "store.disk.tiles", s.tiles);
+	stat_u(b, "store.disk.bytes", s.bytes);
+	stat_u(b, "store.disk.budget", s.budget);
+	stat_u(b, "store.disk.file_bytes", s.file_bytes);
+	stat_u(b, "store.disk.hits", s.hits);
+	stat_u(b, "store.disk.misses", s.misses);
+	stat_u(b, "store.disk.puts", s.puts);
+	stat_u(b, "store.disk.evictions", s.evictions);
+	stat_u(b, "store.disk.corrupt", s.corrupt);
+	stat_u(b, "store.disk.write_drops", s.write_drops);
+	stat_u(b, "store.disk.write_errors", s.write_errors);
+	stat_u(b, "store.disk.queued", s.queued);
+}
+
 static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap)
 {
 	const struct server *srv = ud;
@@ -274,6 +295,8 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "cache.misses", cs.misses);
 	stat_u(&b, "cache.inserts", cs.inserts);
 	stat_u(&b, "cache.evictions", cs.evictions);
+	stat_u(&b, "sched.loaded", ss.loaded);
+	stat_store(&b, sched_store(srv->sched));
 	stat_u(&b, "tiles.sent", c->tiles_sent);
 	stat_u(&b, "tiles.failed", c->tiles_failed);
 	stat_u(&b, "tiles.dropped", c->tiles_dropped);

@@ -133,24 +133,19 @@ static void link_dep(struct job *j, int k, struct job *dj)
 	dj->dependents[dj->ndependents++] = j;
 }
 
-struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct tile_key *key)
+/* Creates j's missing dependencies (or holds cached ones) and queues j when none is missing. */
+static void resolve(struct jobgraph *g, struct job *j)
 {
-	struct job *j = xcalloc(1, sizeof *j);
-	j->key = *key;
-	j->node = node;
-	planet_ref(node->planet); /* the planet outlives every job on its nodes */
-	j->seq = g->seq++;
-	j->heap_idx = -1;
-	jobmap_insert(&g->map, j);
 	struct node_dep deps[NODE_MAX_DEPS];
-	int nd = node->type->deps ? node->type->deps(node, key, deps)
-				  : node_default_deps(node, key, deps);
+	struct node *node = j->node;
+	int nd = node->type->deps ? node->type->deps(node, &j->key, deps)
+				  : node_default_deps(node, &j->key, deps);
 	if (nd < 0 || nd > NODE_MAX_DEPS) {
 		j->err = nd < 0 ? nd : -E2BIG;
 		j->mstate = JOB_SUBMITTED;
 		j->next = g->fails;
 		g->fails = j;
-		return j;
+		return;
 	}
 	j->nin = nd;
 	for (int k = 0; k < nd; k++) {
@@ -173,7 +168,37 @@ struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct 
 		j->mstate = JOB_WAITING;
 		atomic_fetch_add(&g->waiting, 1);
 	}
+}
+
+struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct tile_key *key)
+{
+	struct job *j = xcalloc(1, sizeof *j);
+	j->key = *key;
+	j->node = node;
+	planet_ref(node->planet); /* the planet outlives every job on its nodes */
+	j->seq = g->seq++;
+	j->heap_idx = -1;
+	jobmap_insert(&g->map, j);
+	if (g->store && store_keeps(node) && store_contains(g->store, key)) {
+		/* A worker loads it; its inputs are resolved only if that fails. */
+		j->from_store = true;
+		j->mstate = JOB_SUBMITTED;
+		j->next = g->push;
+		g->push = j;
+		return j;
+	}
+	resolve(g, j);
 	return j;
+}
+
+void jobgraph_regenerate(struct jobgraph *g, struct job *j)
+{
+	j->from_store = false;
+	j->err = 0;
+	resolve(g, j);
+	for (int k = 0; k < j->nin; k++)
+		if (j->dep[k])
+			jobgraph_visit(g, j->dep[k], &j->prio);
 }
 
 void jobgraph_visit(struct jobgraph *g, struct job *j, const struct job_prio *p)

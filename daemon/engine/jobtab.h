@@ -18,6 +18,7 @@
 #include "common/grid.h"
 #include "cache.h"
 #include "node.h"
+#include "store.h"
 #include "tile.h"
 
 struct sched_req;
@@ -46,6 +47,7 @@ struct job {
 	uint64_t seq;	   /* creation order: the last tie-break */
 	uint64_t hash;
 	struct job *hnext; /* map chain */
+	bool from_store;   /* set by the manager before queueing: load from the store, no inputs */
 
 	/* Manager only. */
 	enum job_mstate mstate;
@@ -92,6 +94,7 @@ struct job **jobmap_list(const struct jobmap *m, size_t *n);
 struct jobgraph {
 	struct jobmap map;
 	struct cache *cache; /* borrowed: dependency lookups */
+	struct store *store; /* borrowed, optional: tried before generating (store.h) */
 	uint64_t epoch;	     /* of the current marking pass */
 	uint64_t seq;
 	struct job *push;  /* jobs that became ready, linked by next, for the caller to queue */
@@ -108,8 +111,12 @@ void jobgraph_init(struct jobgraph *g, struct cache *c,
 /* Frees every job still in the graph (threads stopped). */
 void jobgraph_fini(struct jobgraph *g);
 /* A new job for (node, key), its missing dependencies created depth-first (cached ones are
- * held as tile references). Ready jobs go on g->push, failed ones on g->fails. */
+ * held as tile references). Ready jobs go on g->push, failed ones on g->fails. A key the store
+ * holds becomes a from_store job with no inputs, ready at once. */
 struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct tile_key *key);
+/* A from_store job whose load failed (absent after all, or corrupt): resolves its inputs as
+ * for a new job so that it is generated, marking new dependencies with j's priority. */
+void jobgraph_regenerate(struct jobgraph *g, struct job *j);
 /* Marks j and its pending dependencies for this epoch with priority p, keeping the best. */
 void jobgraph_visit(struct jobgraph *g, struct job *j, const struct job_prio *p);
 /* Records that want entry (r, idx) waits for j (valid for this epoch). */

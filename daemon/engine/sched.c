@@ -30,6 +30,7 @@
 #include <unistd.h>
 
 #include "common/clock.h"
+#include "common/tilecodec.h"
 #include "common/xalloc.h"
 #include "common/xthread.h"
 #include "jobtab.h"
@@ -72,6 +73,7 @@ struct report {
 
 struct sched {
 	struct cache *cache;
+	struct store *store; /* borrowed, optional */
 	int nworkers, nice;
 	pthread_t manager;
 	pthread_t *workers;
@@ -95,7 +97,7 @@ struct sched {
 	struct report *batch;	/* callbacks to run at the end of the iteration */
 	size_t nbatch, capbatch;
 
-	atomic_uint_fast64_t generated;
+	atomic_uint_fast64_t generated, loaded;
 	atomic_int nice_err;
 };
 
@@ -352,7 +354,10 @@ static void *manager_main(void *arg)
 		while (done) {
 			struct job *j = done;
 			done = j->next_done;
-			jobgraph_complete(&s->g, j);
+			if (j->from_store && !j->result)
+				jobgraph_regenerate(&s->g, j); /* not loaded after all: generate */
+			else
+				jobgraph_complete(&s->g, j);
 		}
 		submit(s);
 		deliver(s);
@@ -401,7 +406,24 @@ static void lower_priority(struct sched *s)
 		atomic_compare_exchange_strong(&s->nice_err, &zero, err);
 }
 
-static void generate(struct sched *s, struct gen_ctx *g, struct job *j)
+/* A from_store job: the tile from the store, else the job goes back to the manager with no
+ * result to be generated. */
+static void load(struct sched *s, struct tilecodec *tc, struct job *j)
+{
+	const struct node *n = j->node;
+	struct tile *t = NULL;
+	int rc = store_get(s->store, &j->key, n->out, n->planet->tile_size, tc, &t);
+	if (rc == 0) {
+		cache_insert(s->cache, t);
+		atomic_fetch_add(&s->loaded, 1);
+	}
+	j->result = t;
+	j->err = rc;
+}
+
+/* cls: the class the job was queued with; bulk work (operator prefetch) is kept on disk
+ * ahead of what viewers happened to ask for. */
+static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;
 	struct tile *t = tile_create(&j->key, n->out, n->planet->tile_size);
@@ -410,6 +432,10 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j)
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
 		cache_insert(s->cache, t);
+		if (s->store && store_keeps(n))
+			/* Write-behind: never waits; a full queue drops it. */
+			store_put(s->store, t,
+				  cls == SCHED_BULK ? STORE_KEEP_PREFETCHED : STORE_KEEP_INCIDENTAL);
 		atomic_fetch_add(&j->node->generated, 1);
 		atomic_fetch_add(&j->node->gen_ns, dt);
 		atomic_fetch_add(&s->generated, 1);
@@ -428,6 +454,7 @@ static void *worker_main(void *arg)
 	struct worker_arg *wa = arg;
 	struct sched *s = wa->s;
 	struct gen_ctx g = { .worker = wa->idx };
+	struct tilecodec *tc = s->store ? tilecodec_create() : NULL; /* this worker's store reads */
 	free(wa);
 	lower_priority(s);
 	xmutex_lock(&s->q_mu);
@@ -437,11 +464,15 @@ static void *worker_main(void *arg)
 		if (s->q_stop)
 			break;
 		struct job *j = jobheap_pop(&s->heap);
-		s->queued[j->qprio.cls]--;
+		enum sched_class cls = (enum sched_class)j->qprio.cls;
+		s->queued[cls]--;
 		s->running++;
 		xmutex_unlock(&s->q_mu);
 
-		generate(s, &g, j);
+		if (j->from_store)
+			load(s, tc, j);
+		else
+			generate(s, &g, j, cls);
 
 		xmutex_lock(&s->in_mu);
 		j->next_done = s->done;
@@ -454,6 +485,7 @@ static void *worker_main(void *arg)
 	}
 	xmutex_unlock(&s->q_mu);
 	gen_ctx_fini(&g);
+	tilecodec_destroy(tc);
 	return NULL;
 }
 
@@ -463,6 +495,7 @@ struct sched *sched_create(const struct sched_desc *d)
 {
 	struct sched *s = xcalloc(1, sizeof *s);
 	s->cache = d->cache;
+	s->store = d->store;
 	s->nworkers = d->workers;
 	if (s->nworkers <= 0) {
 		long n = sysconf(_SC_NPROCESSORS_ONLN);
@@ -476,6 +509,7 @@ struct sched *sched_create(const struct sched_desc *d)
 	xcond_init(&s->q_cv);
 	int rc;
 	jobgraph_init(&s->g, s->cache, report_entry, s);
+	s->g.store = s->store;
 	if ((rc = xthread_create(&s->manager, manager_main, s)))
 		die("pthread_create (manager)", -rc);
 	s->workers = xcalloc((size_t)s->nworkers, sizeof *s->workers);
@@ -665,6 +699,7 @@ void sched_get_stats(struct sched *s, struct sched_stats *out)
 	xmutex_unlock(&s->q_mu);
 	out->waiting = atomic_load(&s->g.waiting);
 	out->generated = atomic_load(&s->generated);
+	out->loaded = atomic_load(&s->loaded);
 	out->merged = atomic_load(&s->g.merged);
 	out->cancelled = atomic_load(&s->g.cancelled);
 	out->failed = atomic_load(&s->g.failed);
@@ -674,4 +709,9 @@ void sched_get_stats(struct sched *s, struct sched_stats *out)
 int sched_worker_nice_error(struct sched *s)
 {
 	return atomic_load(&s->nice_err);
+}
+
+struct store *sched_store(struct sched *s)
+{
+	return s->store;
 }

@@ -22,6 +22,7 @@
 
 #include "cache.h"
 #include "node.h"
+#include "store.h"
 
 enum sched_class {
 	SCHED_NONE = 0,
@@ -44,6 +45,8 @@ typedef void (*sched_ready_fn)(void *ud, const struct want *w, struct tile *t, i
 
 struct sched_desc {
 	struct cache *cache; /* borrowed; required */
+	struct store *store; /* borrowed, optional: the tier below the cache (store.h); tried
+			      * before generating, and every generated tile is put there */
 	int workers;	     /* 0: one per online CPU */
 	int worker_nice;     /* added niceness for workers; 0: default (+5); <0: unchanged */
 };
@@ -53,6 +56,7 @@ struct sched_stats {
 	uint64_t waiting;	       /* jobs waiting for their inputs */
 	uint64_t running;	       /* workers busy */
 	uint64_t generated;	       /* tiles generated since start */
+	uint64_t loaded;	       /* tiles loaded from the store since start */
 	uint64_t merged;	       /* wants that joined existing work instead of adding a job */
 	uint64_t cancelled;	       /* queued jobs dropped because nobody wanted them */
 	uint64_t failed;	       /* generations that returned an error */
@@ -87,5 +91,7 @@ void sched_get_stats(struct sched *s, struct sched_stats *out);
 /* 0, or the first -errno a worker got lowering its priority (setpriority refusals for lack of
  * privilege, EPERM/EACCES, are not errors: the worker just runs at the default priority). */
 int sched_worker_nice_error(struct sched *s);
+/* The store given at creation (borrowed), or NULL. */
+struct store *sched_store(struct sched *s);
 
 #endif

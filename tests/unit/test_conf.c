@@ -51,6 +51,8 @@ static void test_shipped_file(void **state)
 	assert_string_equal(c.planets_dir, "/etc/clipmap/planets");
 	assert_int_equal(c.max_pending, (uint64_t)8192 << 10);
 	assert_int_equal(c.image_cache_mb, 256);
+	assert_null(c.store_path); /* no disk tier unless a path is set */
+	assert_int_equal(c.store_bytes, (uint64_t)1024 << 20);
 	conf_fini(&c);
 }
 
@@ -61,7 +63,7 @@ static void test_values(void **state)
 			"token_file = secret\nrequire_token = tcp\nunix_mode = 0600\n"
 			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\nimage_cache_mb = 48\n"
 			"[session]\nmax_pending_kb = 128\nmax_rate = 0\ncompress = never\n"
-			"[log]\nlevel = debug\n";
+			"[log]\nlevel = debug\n[store]\npath = tiles.lmdb\ndisk_mb = 512\n";
 	struct conf c;
 	char err[256] = "";
 	int rc = conf_parse("/etc/x/d.conf", t, strlen(t), &c, err);
@@ -80,6 +82,8 @@ static void test_values(void **state)
 	assert_int_equal(c.max_pending, 128u << 10);
 	assert_int_equal(c.compress, CONF_COMPRESS_NEVER);
 	assert_int_equal(c.log_level, LOG_DEBUG);
+	assert_string_equal(c.store_path, "/etc/x/tiles.lmdb");
+	assert_int_equal(c.store_bytes, (uint64_t)512 << 20);
 	conf_fini(&c);
 }
 
@@ -90,6 +94,8 @@ static void test_errors(void **state)
 	parse_fails("[server]\n", "/etc/x/d.conf:1: unknown section [server]");
 	parse_fails("[engine]\nworkers = lots\n", "d.conf:2: workers: \"lots\": expected an integer");
 	parse_fails("[engine]\ncache_mb = 1\n", "d.conf:2: cache_mb:");
+	parse_fails("[store]\ndisk_mb = 0\n", "d.conf:2: disk_mb: \"0\": expected an integer in [1, ");
+	parse_fails("[store]\nsize = 1\n", "d.conf:2: size: unknown key in [store]");
 	parse_fails("[engine]\nimage_cache_mb = 8\n",
 		    "d.conf:2: image_cache_mb: \"8\": expected an integer in [16, 1048576]");
 	parse_fails("\n[engine]\nimage_cache_mb = 1G\n", "d.conf:3: image_cache_mb: \"1G\"");

@@ -1,0 +1,198 @@
+/* bench_store — the disk tier (engine/store.h, LMDB) beside the memory cache, on real tiles:
+ * the procedural planet's height (f32), colour (rgba8) and normal (rg8) layers, 256², made
+ * in-process. Figures:
+ *   - generation rate of those tiles (2 workers), the rate the writer must keep up with;
+ *   - write-behind throughput: puts of every tile until flush says they are durable (one
+ *     writer thread, zstd-3, batched transactions with fsync);
+ *   - bytes per tile at rest per layer type (the value, and what the accounting charges);
+ *   - hit latency per 256² tile, p50/p99, with the file in the page cache (read txn, checksum,
+ *     zstd decode, unfilter), and the memory cache's lookup for comparison.
+ * One run, one line per figure. The store file lives in a temporary directory under /tmp.
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "common/clock.h"
+#include "common/tilecodec.h"
+#include "common/xalloc.h"
+#include "engine/cache.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
+#include "engine/store.h"
+#include "support/daemon_env.h"
+
+#define SIDE 6 /* SIDE × SIDE tiles per layer */
+#define LEVEL 9
+#define READS 8 /* gets per tile */
+
+static int cmp_u64(const void *a, const void *b)
+{
+	uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+	return x < y ? -1 : x > y;
+}
+
+struct at_rest {
+	const struct planet *p;
+	uint64_t bytes[8], n[8];
+};
+
+static int rest_fn(void *ud, const struct store_entry *e)
+{
+	struct at_rest *r = ud;
+	for (size_t l = 0; l < r->p->nlayers && l < 8; l++)
+		if (r->p->layers[l].node->hash == e->key.node) {
+			r->bytes[l] += e->bytes;
+			r->n[l]++;
+		}
+	return 0;
+}
+
+int main(void)
+{
+	char bindir[512], path[700], err[256];
+	if (daemon_env_bindir(bindir, sizeof bindir)) {
+		fprintf(stderr, "bench_store: cannot find the build directory\n");
+		return 1;
+	}
+	snprintf(path, sizeof path, "%s/../conf/planets/procedural.ini", bindir);
+	struct planet *p;
+	if (planet_load(path, &p, err)) {
+		fprintf(stderr, "bench_store: %s\n", err);
+		return 1;
+	}
+	size_t nl = p->nlayers < 3 ? p->nlayers : 3;
+	size_t n = nl * SIDE * SIDE;
+	struct want *w = xcalloc(n, sizeof *w);
+	for (size_t l = 0, i = 0; l < nl; l++)
+		for (uint32_t y = 0; y < SIDE; y++)
+			for (uint32_t x = 0; x < SIDE; x++, i++)
+				w[i] = (struct want){
+					.node = p->layers[l].node, .cls = SCHED_VISIBLE,
+					.key = { .node = p->layers[l].node->hash, .lx = LEVEL + 1,
+						 .ly = LEVEL, .x = 560 + x, .y = 150 + y } };
+	struct cache *cache = cache_create(0);
+	struct sched *s = sched_create(&(struct sched_desc){ .cache = cache, .workers = 2 });
+	struct tile **t = xcalloc(n, sizeof *t);
+	uint64_t t0 = clock_now_ns();
+	if (sched_fetch(s, w, n, t)) {
+		fprintf(stderr, "bench_store: generation failed\n");
+		return 1;
+	}
+	double gen_s = (double)(clock_now_ns() - t0) * 1e-9;
+	struct sched_stats ss;
+	sched_get_stats(s, &ss);
+	printf("store/generate: %zu layer tiles (%llu with their inputs) in %.2f s, 2 workers: "
+	       "%.0f layer tiles/s (what the writer must keep up with)\n",
+	       n, (unsigned long long)ss.generated, gen_s, (double)n / gen_s);
+
+	char dir[] = "/tmp/bench_store_XXXXXX";
+	if (!mkdtemp(dir)) {
+		perror("bench_store: mkdtemp");
+		return 1;
+	}
+	char file[64];
+	snprintf(file, sizeof file, "%s/tiles.lmdb", dir);
+	struct store *st;
+	if (store_lmdb_open(&(struct store_lmdb_desc){ .path = file }, &st, err)) {
+		fprintf(stderr, "bench_store: %s\n", err);
+		return 1;
+	}
+	uint64_t raw = 0;
+	t0 = clock_now_ns();
+	for (size_t i = 0; i < n; i++) {
+		store_put(st, t[i], STORE_KEEP_INCIDENTAL);
+		raw += t[i]->nbytes;
+	}
+	uint64_t t_queued = clock_now_ns() - t0;
+	int rc = store_flush(st);
+	double put_s = (double)(clock_now_ns() - t0) * 1e-9;
+	struct store_stats sst;
+	store_stat(st, &sst);
+	printf("store/write-behind: %zu puts queued in %.3f ms (callers never wait); durable after "
+	       "%.3f s: %.0f tiles/s, %.0f MB/s raw (%s, %llu dropped)\n",
+	       n, (double)t_queued * 1e-6, put_s, (double)n / put_s, (double)raw / put_s * 1e-6,
+	       rc ? "write error" : "ok", (unsigned long long)sst.write_drops);
+
+	struct at_rest r = { .p = p };
+	store_iterate(st, rest_fn, &r);
+	for (size_t l = 0; l < nl; l++)
+		printf("store/at rest %-6s (%s, %u²): %.0f bytes per tile, %.1f %% of raw\n",
+		       p->layers[l].name, pix_format_name(p->layers[l].type), p->tile_size,
+		       r.n[l] ? (double)r.bytes[l] / (double)r.n[l] : 0.0,
+		       r.n[l] ? 100.0 * (double)r.bytes[l] / (double)r.n[l] /
+					(double)((size_t)p->tile_size * p->tile_size *
+						 pix_bytes(p->layers[l].type))
+			      : 0.0);
+	printf("store/at rest: %llu tiles charged %llu bytes (values in whole pages + index); file "
+	       "%llu bytes\n",
+	       (unsigned long long)sst.tiles, (unsigned long long)sst.bytes,
+	       (unsigned long long)sst.file_bytes);
+
+	/* Hits, the file in the page cache (just written and read once). */
+	struct tilecodec *tc = tilecodec_create();
+	uint64_t *lat = xcalloc(n * READS, sizeof *lat);
+	uint64_t *per = xcalloc(n * READS, sizeof *per);
+	size_t k = 0, bad = 0;
+	for (int pass = 0; pass < READS + 1; pass++)
+		for (size_t i = 0; i < n; i++) {
+			size_t j = (i * 7 + (size_t)pass * 13) % n;
+			struct tile *g = NULL;
+			uint64_t a = clock_now_ns();
+			int e = store_get(st, &w[j].key, t[j]->type, t[j]->size, tc, &g);
+			uint64_t b = clock_now_ns();
+			bad += e != 0 || memcmp(g->data, t[j]->data, g->nbytes) != 0;
+			tile_unref(g);
+			if (pass > 0)
+				lat[k++] = b - a;
+		}
+	qsort(lat, k, sizeof *lat, cmp_u64);
+	printf("store/disk hit per 256² tile (page cache, all layers): p50 %.3f ms, p99 %.3f ms, "
+	       "%zu gets, %zu wrong\n",
+	       (double)lat[k / 2] * 1e-6, (double)lat[k * 99 / 100] * 1e-6, k, bad);
+	for (size_t l = 0; l < nl; l++) {
+		size_t m = 0;
+		for (int pass = 0; pass < READS; pass++)
+			for (size_t i = 0; i < SIDE * SIDE; i++) {
+				size_t j = l * SIDE * SIDE + i;
+				struct tile *g = NULL;
+				uint64_t a = clock_now_ns();
+				store_get(st, &w[j].key, t[j]->type, t[j]->size, tc, &g);
+				per[m++] = clock_now_ns() - a;
+				tile_unref(g);
+			}
+		qsort(per, m, sizeof *per, cmp_u64);
+		printf("store/disk hit %-6s: p50 %.3f ms, p99 %.3f ms\n", p->layers[l].name,
+		       (double)per[m / 2] * 1e-6, (double)per[m * 99 / 100] * 1e-6);
+	}
+	k = 0;
+	for (int pass = 0; pass < READS; pass++)
+		for (size_t i = 0; i < n; i++) {
+			uint64_t a = clock_now_ns();
+			struct tile *g = cache_lookup(cache, &w[i].key);
+			lat[k++] = clock_now_ns() - a;
+			tile_unref(g);
+		}
+	qsort(lat, k, sizeof *lat, cmp_u64);
+	printf("store/memory hit (cache_lookup, for comparison): p50 %.4f ms, p99 %.4f ms\n",
+	       (double)lat[k / 2] * 1e-6, (double)lat[k * 99 / 100] * 1e-6);
+
+	tilecodec_destroy(tc);
+	store_destroy(st);
+	char cmd[128];
+	snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
+	if (system(cmd) != 0)
+		fprintf(stderr, "bench_store: could not remove %s\n", dir);
+	for (size_t i = 0; i < n; i++)
+		tile_unref(t[i]);
+	free(t);
+	free(w);
+	free(lat);
+	free(per);
+	sched_destroy(s);
+	cache_destroy(cache);
+	planet_unref(p);
+	return bad ? 1 : 0;
+}
