@@ -66,6 +66,7 @@ TEST_SUPPORT_OBJ := $(patsubst %.c,$(BUILD)/%.o,$(wildcard tests/support/*.c))
 BENCH_SRC    := $(wildcard tests/bench/bench_*.c)
 BENCH_BIN    := $(BENCH_SRC:tests/bench/%.c=$(BUILD)/tests/%)
 PROGS        := $(foreach m,$(MAINS),$(if $(wildcard $(m)),$(BUILD)/$(notdir $(basename $(m)))))
+PROGS        += $(BUILD)/clipmapctl-offline
 # Programs that draw: they link the view wing and GL.
 GL_TESTS     := $(wildcard tests/unit/test_view_*.c tests/integration/test_view_*.c) tests/bench/bench_view.c tests/bench/bench_keepup.c
 
@@ -84,7 +85,7 @@ VIEW_TESTOBJ := $(patsubst %.c,$(BUILD)/%.o,$(GL_TESTS)) $(BUILD)/client/view/cl
 # build/gen/version.txt is rewritten only when it changes, so only the mains recompile then.
 VERSION_FALLBACK := 0.1.0
 VERSION ?= $(shell git describe --always --dirty 2>/dev/null || echo $(VERSION_FALLBACK))
-MAIN_OBJ     := $(MAINS:%.c=$(BUILD)/%.o)
+MAIN_OBJ     := $(MAINS:%.c=$(BUILD)/%.o) $(BUILD)/client/ctl/clipmapctl_thin.o
 $(MAIN_OBJ): CFLAGS += -DCLIPMAP_VERSION='"$(VERSION)"'
 $(MAIN_OBJ): $(BUILD)/gen/version.txt
 $(BUILD)/gen/version.txt: FORCE
@@ -116,8 +117,17 @@ $(BUILD)/lib%.a:
 
 $(BUILD)/clipmapd: $(BUILD)/daemon/clipmapd.o $(SERVER_LIB) $(ENGINE_LIB) $(COMMON_LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
-$(BUILD)/clipmapctl: $(BUILD)/client/ctl/clipmapctl.o $(CTL_LIB) $(CLIENT_LIB) $(ENGINE_LIB) $(COMMON_LIB)
+# clipmapctl-offline: every command. clipmapctl: the online ones (the same main, CTL_THIN),
+# without the engine, and --as-needed drops the shared libraries only the engine uses (GDAL,
+# OpenImageIO: ~260 of them); it runs the offline commands through clipmapctl-offline.
+$(BUILD)/clipmapctl-offline: $(BUILD)/client/ctl/clipmapctl.o $(CTL_LIB) $(CLIENT_LIB) $(ENGINE_LIB) $(COMMON_LIB)
 	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
+$(BUILD)/client/ctl/clipmapctl_thin.o: client/ctl/clipmapctl.c
+	@mkdir -p $(dir $@)
+	$(CC) $(CFLAGS) -DCTL_THIN -c $< -o $@
+$(BUILD)/clipmapctl: $(BUILD)/client/ctl/clipmapctl_thin.o $(CTL_LIB) $(CLIENT_LIB) $(COMMON_LIB) \
+		| $(BUILD)/clipmapctl-offline
+	$(CC) $(LDFLAGS) -Wl,--as-needed $(filter %.o %.a,$^) $(LDLIBS) -o $@
 $(VIEW_OBJ) $(VIEW_TESTOBJ): CFLAGS += $(GL_CFLAGS) -iquote $(BUILD)/gen
 $(VIEW_OBJ): $(SHADER_HDR)
 $(BUILD)/gen/%_vert.h: shaders/%.vert
@@ -271,7 +281,7 @@ install: $(PROGS) $(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.so
 	@echo "installed; then: systemctl daemon-reload && systemctl enable --now clipmapd.socket"
 
 uninstall:
-	rm -f $(addprefix $(DESTDIR)$(BINDIR)/,clipmapd clipmapctl clipmapview) \
+	rm -f $(addprefix $(DESTDIR)$(BINDIR)/,clipmapd clipmapctl clipmapctl-offline clipmapview) \
 		$(DESTDIR)$(UNITDIR)/clipmapd.service $(DESTDIR)$(UNITDIR)/clipmapd.socket \
 		$(DESTDIR)$(SYSUSERSDIR)/clipmap.conf $(DESTDIR)$(BASHCOMPDIR)/clipmapctl \
 		$(foreach m,$(MAN_SRC:docs/man/%.scd=%),$(DESTDIR)$(MANDIR)/man$(subst .,,$(suffix $(m)))/$(m))

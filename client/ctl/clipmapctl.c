@@ -1,7 +1,13 @@
 /* clipmapctl — the operator's command line. This file is only argument handling and output;
  * the work lives in render.c (offline evaluation), ctl_*.c (online commands, through net.c)
  * and the library. Exit codes: 0 ok, 1 runtime failure, 2 bad usage or config, 130 when a
- * prefetch was interrupted. */
+ * prefetch was interrupted.
+ *
+ * Built twice: clipmapctl-offline is everything; clipmapctl (CTL_THIN) is the commands that
+ * need neither the engine nor OpenImageIO (which alone loads some 260 shared libraries):
+ * `status`, `cache`, `prefetch`, `help` start in milliseconds. It runs the others (`tile`,
+ * which writes pictures, and the offline ones) by executing clipmapctl-offline from its own
+ * directory, the global options passed on. */
 #include <errno.h>
 #include <getopt.h>
 #include <signal.h>
@@ -15,16 +21,20 @@
 #include "common/args.h"
 #include "common/clock.h"
 #include "common/errbuf.h"
+#ifndef CTL_THIN
 #include "engine/planet.h"
+#endif
 #include "ctl_args.h"
 #include "ctl_cache.h"
 #include "ctl_conn.h"
 #include "ctl_prefetch.h"
 #include "ctl_status.h"
 #include "ctl_tile.h"
-#include "import_cli.h"
 #include "client/planet_path.h"
+#ifndef CTL_THIN
+#include "import_cli.h"
 #include "render.h"
+#endif
 
 #define GLOBAL_USAGE                                                                         \
 	"usage: clipmapctl [-s SOCKET | -H HOST:PORT | --connect SOCKET|HOST:PORT]\n"           \
@@ -108,6 +118,7 @@ static void cmd_usage(FILE *f)
 		      "$CLIPMAP_SOCKET or " CTL_DEFAULT_SOCKET ")\n", f);
 }
 
+#ifndef CTL_THIN
 static int load(const char *arg, struct planet **p)
 {
 	char path[4096], err[256];
@@ -121,7 +132,9 @@ static int load(const char *arg, struct planet **p)
 	}
 	return 0;
 }
+#endif
 
+#ifndef CTL_THIN
 static int parse_u32(const char *s, const char *what, long max, uint32_t *out)
 {
 	char *end;
@@ -135,6 +148,7 @@ static int parse_u32(const char *s, const char *what, long max, uint32_t *out)
 	*out = (uint32_t)v;
 	return 0;
 }
+#endif
 
 /* ---- options -------------------------------------------------------------------------- */
 
@@ -207,6 +221,47 @@ static int next_opt(int argc, char **argv, const char *shorts, const struct opti
 }
 
 /* ---- offline commands ----------------------------------------------------------------- */
+
+#ifdef CTL_THIN
+/* Runs argv (a command and its arguments; argc of them) in clipmapctl-offline, found beside
+ * this program, the global options in t given before it. Returns only on failure, with the
+ * exit status. */
+static int run_offline(int argc, char **argv, const struct ctl_target *t)
+{
+	char self[4096], path[4200];
+	ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+	if (n <= 0) {
+		fprintf(stderr, "clipmapctl: /proc/self/exe: %s\n", strerror(errno));
+		return 1;
+	}
+	self[n] = 0;
+	char *slash = strrchr(self, '/');
+	*slash = 0;
+	snprintf(path, sizeof path, "%s/clipmapctl-offline", self);
+	char **av = calloc((size_t)argc + 10, sizeof *av), tmo[32];
+	if (!av)
+		return 1;
+	int k = 0;
+	av[k++] = path;
+	if (t->socket_path)
+		av[k++] = "--socket", av[k++] = (char *)t->socket_path;
+	if (t->hostport)
+		av[k++] = "--host", av[k++] = (char *)t->hostport;
+	if (t->token_file)
+		av[k++] = "--token-file", av[k++] = (char *)t->token_file;
+	if (t->timeout_ms) {
+		snprintf(tmo, sizeof tmo, "%d", t->timeout_ms / 1000);
+		av[k++] = "--timeout", av[k++] = tmo;
+	}
+	for (int i = 0; i < argc; i++)
+		av[k++] = argv[i];
+	execv(path, av);
+	free(av);
+	fprintf(stderr, "clipmapctl %s: needs %s (installed with clipmapctl): %s\n", argv[0], path,
+		strerror(errno));
+	return 1;
+}
+#else
 
 static void progress(void *ud, size_t done, size_t total)
 {
@@ -443,6 +498,8 @@ static int cmd_layers(int argc, char **argv)
 	return 0;
 }
 
+#endif /* CTL_THIN */
+
 /* ---- online commands ------------------------------------------------------------------ */
 
 /* The exit code for a failed online command: request errors the user can fix are usage. */
@@ -498,6 +555,7 @@ static int cmd_status(int argc, char **argv, struct ctl_target *t)
 	return rc ? fail("status", rc, err) : 0;
 }
 
+#ifndef CTL_THIN
 static int cmd_tile(int argc, char **argv, struct ctl_target *t)
 {
 	static const struct option opts[] = { GLOBAL_OPTS, { "output", required_argument, NULL, 'o' },
@@ -551,6 +609,7 @@ static int cmd_tile(int argc, char **argv, struct ctl_target *t)
 	}
 	return 0;
 }
+#endif
 
 /* Takes `cache ls` option c with its argument s into o. Returns 0, or the exit status after
  * saying what is wrong. */
@@ -770,12 +829,18 @@ static int run_command(int argc, char **argv, struct ctl_target *t)
 	current_cmd = cmd;
 	if (strcmp(cmd, "status") == 0)
 		return cmd_status(argc, argv, t);
-	if (strcmp(cmd, "tile") == 0)
-		return cmd_tile(argc, argv, t);
 	if (strcmp(cmd, "cache") == 0)
 		return cmd_cache(argc, argv, t);
 	if (strcmp(cmd, "prefetch") == 0)
 		return cmd_prefetch(argc, argv, t);
+#ifdef CTL_THIN
+	/* what needs the engine, or OpenImageIO to write pictures */
+	if (!strcmp(cmd, "tile") || !strcmp(cmd, "render") || !strcmp(cmd, "graph") ||
+	    !strcmp(cmd, "layers") || !strcmp(cmd, "import"))
+		return run_offline(argc, argv, t);
+#else
+	if (strcmp(cmd, "tile") == 0)
+		return cmd_tile(argc, argv, t);
 	if (strcmp(cmd, "render") == 0)
 		return cmd_render(argc, argv);
 	if (strcmp(cmd, "graph") == 0)
@@ -784,6 +849,7 @@ static int run_command(int argc, char **argv, struct ctl_target *t)
 		return cmd_layers(argc, argv);
 	if (strcmp(cmd, "import") == 0)
 		return import_cli(argc, argv);
+#endif
 	if (strcmp(cmd, "help") == 0) { /* help [COMMAND] */
 		current_cmd = argc > 1 ? argv[1] : NULL;
 		if (current_cmd && !find_usage(current_cmd)) {

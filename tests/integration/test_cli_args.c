@@ -223,6 +223,30 @@ static void test_ctl_command_help(void **state)
 	assert_non_null(strstr(out, "clipmapctl graph PLANET"));
 }
 
+/* clipmapctl starts fast: the program the operator runs loads neither OpenImageIO nor GDAL
+ * (some 260 shared libraries, ~0.2-2 s and 130 MB before main); what needs them (tile,
+ * render, graph, layers, import) runs in clipmapctl-offline beside it. */
+static void test_ctl_thin(void **state)
+{
+	struct env *e = *state;
+	need(e, CTL);
+	char cmd[1400], out[16384];
+	snprintf(cmd, sizeof cmd, "ldd '%s' | wc -l; ldd '%s' | grep -c -i -E 'gdal|OpenImageIO'",
+		 e->prog[CTL], e->prog[CTL]);
+	char *argv[] = { "sh", "-c", cmd, NULL };
+	daemon_env_run(argv, out, sizeof out);
+	int nlibs = -1, heavy = -1;
+	assert_int_equal(sscanf(out, "%d %d", &nlibs, &heavy), 2);
+	print_message("clipmapctl: %d shared libraries, %d of them GDAL/OpenImageIO\n", nlibs,
+		      heavy);
+	assert_int_equal(heavy, 0);
+	assert_true(nlibs < 20);
+	/* the offline commands still work through it */
+	const char *layers[] = { "layers", "@P", NULL };
+	assert_int_equal(run(e, CTL, layers, out, sizeof out), 0);
+	assert_non_null(strstr(out, "planet procedural"));
+}
+
 /* --wait-complete that runs out of --timeout: the picture is written, exit status 3. */
 static void test_view_timeout_exit(void **state)
 {
@@ -256,6 +280,7 @@ int main(void)
 		cmocka_unit_test(test_version),
 		cmocka_unit_test(test_ctl_command_help),
 		cmocka_unit_test(test_view_timeout_exit),
+		cmocka_unit_test(test_ctl_thin),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
