@@ -126,6 +126,54 @@ static void matches_double_oracle(void **state)
 	}
 }
 
+/* stretch: tile = oracle; crests run east-west (the field changes faster north-south than
+ * east-west, by about the factor) at mid latitude; band limit by wavelength / stretch. */
+static void stretched(void **state)
+{
+	(void)state;
+	const uint32_t T = 64;
+	const double a = 3396190;
+	for (int kind = 0; kind < 2; kind++) {
+		struct noise nz;
+		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 3, 12);
+		p.radius = a;
+		p.stretch = 4;
+		assert_int_equal(noise_init(&nz, &p), 0);
+		int ly = 18;
+		struct tile_key k = key(ly + 1, ly, 300000, 100000); /* about -9.3 deg */
+		float *v = gen(&nz, k, T, NOISE_ISA_AUTO, NULL);
+		double worst = 0, de = 0, dn = 0;
+		for (uint32_t j = 0; j < T; j += 3)
+			for (uint32_t c = 0; c < T; c += 3) {
+				double lon, lat;
+				grid_texel_center(&k, T, c, j, &lon, &lat);
+				worst = fmax(worst, fabs(noise_point(&nz, lon, lat, ly, T) - v[j * T + c]));
+			}
+		for (uint32_t j = 0; j + 1 < T; j++)
+			for (uint32_t c = 0; c + 1 < T; c++) {
+				de += fabs(v[j * T + c + 1] - v[j * T + c]);
+				dn += fabs(v[(j + 1) * T + c] - v[j * T + c]);
+			}
+		/* texels are twice as long east-west as north-south (lx = ly + 1 at ~9°S) */
+		double ratio = (dn / 1) / (de / 2);
+		if (!(worst <= 2e-5 && ratio > 2.5))
+			fail_msg("kind %d: worst %g, north/east gradient ratio %g", kind, worst, ratio);
+		free(v);
+		/* 12 m / 4 = 3 m: gone at texels of 2 m, which would keep a 12 m octave */
+		assert_true(noise_band_weight(12, 2) > 0);
+		float *c0 = gen(&nz, key(13, 12, 1000, 1000), T, NOISE_ISA_AUTO, NULL);
+		double amax = 0;
+		for (uint32_t i = 0; i < T * T; i++)
+			amax = fmax(amax, fabs(c0[i]));
+		assert_true(amax < 1e-6 || kind == 1); /* ridged keeps its centring constant */
+		free(c0);
+	}
+	struct noise nz;
+	struct noise_params p = params(NOISE_FBM, 3, 12);
+	p.stretch = 0.5;
+	assert_int_equal(noise_init(&nz, &p), -EINVAL);
+}
+
 /* ---- multi-resolution ---- */
 
 /* The lattice-interpolated low octaves (noise.h) against every octave evaluated at every
@@ -639,6 +687,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(isa_paths_identical),
 		cmocka_unit_test(matches_double_oracle),
+		cmocka_unit_test(stretched),
 		cmocka_unit_test(multires_matches_exact),
 		cmocka_unit_test(seamless_east_west),
 		cmocka_unit_test(seamless_across_poles),

@@ -38,21 +38,32 @@ double craters_band_weight(double radius_m, double s)
 	return noise_band_weight(2 * radius_m, s);
 }
 
-/* Depth and rim height (metres) of a crater of radius R. */
-static void shape(const struct craters_params *p, double R, double *depth, double *rim,
+/* Depth and rim height (metres) of a crater of radius R and wear factor a (depth × a,
+ * rim × a²); for boulders, depth is the rock's height. */
+static void shape(const struct craters_params *p, double R, double a, double *depth, double *rim,
 		  int *complex_)
 {
 	double D = 2 * R;
+	if (p->boulders) {
+		*depth = p->depth_ratio * D * a;
+		*rim = 0;
+		*complex_ = -1;
+		return;
+	}
 	double d = D < p->transition ? p->depth_ratio * D
 				     : p->depth_ratio * p->transition * pow(D / p->transition, 0.3);
-	*depth = d;
-	*rim = p->rim_ratio * d;
+	*depth = d * a;
+	*rim = p->rim_ratio * d * a * a;
 	*complex_ = D >= p->transition;
 }
 
 /* Height at normalised distance r = dist / R (0 ≤ r < 2). */
 static double profile(double r, double depth, double rim, int complex_)
 {
+	if (complex_ < 0) { /* a boulder: flat-topped dome with steep sides */
+		double r2 = r * r;
+		return r < 1 ? depth * (1 - r2 * r2) : 0;
+	}
 	if (r >= 1) {
 		/* Ejecta: rim · r⁻³, shifted to reach 0 at r = 2. */
 		double r3 = r * r * r;
@@ -81,7 +92,8 @@ int craters_init(struct craters *c, const struct craters_params *p)
 {
 	if (!(p->radius > 0) || !(p->min_radius > 0) || !(p->max_radius >= p->min_radius) ||
 	    !(p->density >= 0 && p->density <= 4) || !(p->depth_ratio >= 0) ||
-	    !(p->rim_ratio >= 0) || !(p->transition > 0) || p->max_radius > p->radius)
+	    !(p->rim_ratio >= 0) || !(p->transition > 0) || p->max_radius > p->radius ||
+	    !(p->degradation >= 0 && p->degradation <= 1))
 		return -EINVAL;
 	memset(c, 0, sizeof *c);
 	c->p = *p;
@@ -93,17 +105,20 @@ int craters_init(struct craters *c, const struct craters_params *p)
 		/* Expected height: craters per unit area (density / s²) × the mean over the
 		 * radius distribution of ∫ profile dA, by midpoint quadrature. */
 		double s = 8 * Rk, sum = 0;
-		const int nu = 16, nr = 256;
+		const int nu = 16, nr = 256, nf = p->degradation > 0 ? 16 : 1;
 		for (int a = 0; a < nu; a++) {
-			double R = draw_radius(Rk, (a + 0.5) / nu), depth, rim;
-			int cx;
-			shape(p, R, &depth, &rim, &cx);
-			double integral = 0;
-			for (int b = 0; b < nr; b++) {
-				double r = (b + 0.5) * 2.0 / nr;
-				integral += profile(r, depth, rim, cx) * 2 * M_PI * r * (2.0 / nr);
+			for (int f = 0; f < nf; f++) {
+				double R = draw_radius(Rk, (a + 0.5) / nu), depth, rim;
+				int cx;
+				shape(p, R, 1 - p->degradation * (f + 0.5) / nf, &depth, &rim, &cx);
+				double integral = 0;
+				for (int b = 0; b < nr; b++) {
+					double r = (b + 0.5) * 2.0 / nr;
+					integral += profile(r, depth, rim, cx) * 2 * M_PI * r *
+						    (2.0 / nr);
+				}
+				sum += integral * R * R / (nu * nf);
 			}
-			sum += integral * R * R / nu;
 		}
 		c->mean[k] = p->density * sum / (s * s);
 		c->nclass = k + 1;
@@ -120,6 +135,7 @@ size_t craters_scratch_size(uint32_t T)
 struct crater {
 	double cx, cy, cz; /* centre on the unit sphere */
 	double R;	   /* radius, metres */
+	double a;	   /* wear: depth × a, rim × a² */
 };
 
 /* The craters cell (ix, iy, iz) of class k holds, accepted (near the sphere) ones only.
@@ -150,6 +166,9 @@ static int cell_craters(const struct craters *c, int k, int64_t ix, int64_t iy, 
 		out[m].cy = qy / len;
 		out[m].cz = qz / len;
 		out[m].R = draw_radius(c->r[k], u);
+		/* Wear from a side stream of this crater's hash: the draws above are unchanged. */
+		uint64_t hf = h ^ 0x5851f42d4c957f2dULL;
+		out[m].a = p->degradation > 0 ? 1 - p->degradation * next_u(&hf) : 1;
 		m++;
 	}
 	return m;
@@ -186,7 +205,8 @@ double craters_point(const struct craters *c, double lon, double lat, int ly, ui
 							continue;
 						double depth, rim;
 						int cx;
-						shape(&c->p, cr[i].R, &depth, &rim, &cx);
+						shape(&c->p, cr[i].R, cr[i].a, &depth, &rim,
+						      &cx);
 						acc += profile(d, depth, rim, cx);
 					}
 				}
@@ -201,7 +221,7 @@ static void stamp(const struct craters *c, const struct crater *cr, double w, ui
 		  double *acc)
 {
 	double Ru = cr->R / c->p.radius;	     /* unit-sphere radius */
-	double reach = 2 * Ru;			     /* chord */
+	double reach = (c->p.boulders ? 1 : 2) * Ru; /* chord */
 	double ang = 2 * asin(fmin(1.0, reach / 2)); /* radians */
 	double clat = asin(fmax(-1.0, fmin(1.0, cr->cz))) / DEG;
 	double clon = atan2(cr->cy, cr->cx) / DEG;
@@ -238,7 +258,7 @@ static void stamp(const struct craters *c, const struct crater *cr, double w, ui
 	}
 	double depth, rim;
 	int cx;
-	shape(&c->p, cr->R, &depth, &rim, &cx);
+	shape(&c->p, cr->R, cr->a, &depth, &rim, &cx);
 	double inv = 1 / Ru, reach2 = reach * reach;
 	for (int q = 0; q < nr; q++) {
 		for (int64_t j = j0; j <= j1; j++) {

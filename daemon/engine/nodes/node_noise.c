@@ -17,6 +17,9 @@
  *                  (default 2)
  *   max_wavelength metres (default: wavelength): only octaves with a wavelength ≤ this
  *                  contribute — with an input, the "detail below the data's resolution"
+ *   stretch        1..16 (default 1): features that many times narrower north–south than
+ *                  east–west (space compressed along the polar axis): crests run east–west,
+ *                  like ripples under a meridional wind; isotropic at the poles, no seam
  *   input          optional height node: output = input + offset + amplitude · noise
  * Output: height (f32 metres). Thread-safety: the impl is immutable after create.
  */
@@ -55,7 +58,8 @@ static int noise_create(struct node *n, struct node_parse *p)
 	    (rc = np_double(p, "offset", 0.0, -1e7, 1e7, &offset)) ||
 	    (rc = np_double(p, "ridge_offset", 1.0, 0.0, 2.0, &np.ridge_offset)) ||
 	    (rc = np_double(p, "ridge_gain", 2.0, 0.0, 16.0, &np.ridge_gain)) ||
-	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)))
+	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)) ||
+	    (rc = np_double(p, "stretch", 1.0, 1.0, 16.0, &np.stretch)))
 		return rc;
 	if (!n->planet || !(n->planet->a > 0))
 		return np_error(p, NULL, "noise node \"%s\": the planet has no radius", n->name);
@@ -98,7 +102,7 @@ const struct node_type node_type_noise = {
 	.name = "noise",
 	.doc = "seeded fBm/ridged simplex noise on the sphere (seed, kind=fbm|ridged, octaves, "
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
-	       "max_wavelength m), band-limited per level; optional input height gets the "
+	       "max_wavelength m, stretch), band-limited per level; optional input height gets the "
 	       "octaves with wavelength <= max_wavelength added",
 	.version = 3, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice */
 	.slots = slots,

@@ -265,7 +265,8 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 	if (p->octaves < 1 || p->octaves > NOISE_MAX_OCTAVES || !(p->wavelength > 0) ||
 	    !(p->lacunarity > 1) || !(p->gain >= 0) || !(p->radius > 0) ||
 	    !isfinite(p->wavelength) || !isfinite(p->radius) || !isfinite(p->gain) ||
-	    !(p->max_wavelength >= 0) || !isfinite(p->ridge_offset) || !isfinite(p->ridge_gain))
+	    !(p->max_wavelength >= 0) || !isfinite(p->ridge_offset) || !isfinite(p->ridge_gain) ||
+	    !(p->stretch == 0 || (p->stretch >= 1 && p->stretch <= 16)))
 		return -EINVAL;
 	memset(nz, 0, sizeof *nz);
 	nz->p = *p;
@@ -279,6 +280,11 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 		o->amp = pow(p->gain, k) / total * (p->kind == NOISE_RIDGED ? 2.0 : 1.0);
 		o->seed = mix32(p->seed ^ mix32((uint32_t)k * 0x9e3779b9u + 0x632be5abu));
 		octave_rotation(o->seed, o->rot);
+		/* Stretch: rotate(S·p) with S scaling z by the factor, folded into the matrix. */
+		double st = p->stretch > 1 ? p->stretch : 1;
+		for (int a = 0; a < 3; a++)
+			o->rot[a][2] *= st;
+		o->lmin = o->lambda / st;
 	}
 	if (p->kind == NOISE_RIDGED) {
 		int k0 = 0;
@@ -297,7 +303,7 @@ static int active_octaves(const struct noise *nz, int ly, uint32_t T, int idx[],
 	for (int k = 0; k < nz->p.octaves; k++) {
 		if (!included(nz, k))
 			continue;
-		double bw = noise_band_weight(nz->oct[k].lambda, s);
+		double bw = noise_band_weight(nz->oct[k].lmin, s);
 		if (bw <= 0)
 			break;
 		idx[m] = k;
@@ -347,7 +353,7 @@ static int coarse_count(const struct noise *nz, int lx, uint32_t T, const int id
 		return 0;
 	double circ = 2.0 * M_PI * nz->p.radius, su = circ / (ldexp(1.0, lx) * T);
 	int mc = 0;
-	while (mc < m && fmin(nz->oct[idx[mc]].lambda, circ) >= NOISE_MR_MIN_TEXELS * su)
+	while (mc < m && fmin(nz->oct[idx[mc]].lmin, circ) >= NOISE_MR_MIN_TEXELS * su)
 		mc++;
 	return mc;
 }

@@ -49,6 +49,11 @@ struct noise_params {
 	double ridge_gain;	/* ridged: next octave weight = clamp(signal · ridge_gain, 0, 1) */
 	double max_wavelength;	/* octaves with a longer wavelength are skipped; 0 = none */
 	double radius;		/* body radius in metres (the sphere the noise lives on) */
+	double stretch;		/* ≥ 1 (0 reads as 1): space is compressed by this factor along
+				 * the polar axis before the noise is evaluated, so features are
+				 * that much narrower north–south than east–west (crests running
+				 * east–west, isotropic at the poles); band limits use
+				 * wavelength / stretch */
 	bool exact;		/* evaluate every octave at every texel (no coarse lattice): for
 				 * tests and benchmarks; false (the default) in the node */
 };
@@ -56,6 +61,7 @@ struct noise_params {
 /* Per-octave constants, precomputed by noise_init. */
 struct noise_octave {
 	double lambda; /* wavelength, metres */
+	double lmin;   /* shortest wavelength in any direction: lambda / stretch */
 	double freq;   /* noise units per unit-sphere unit, exactly representable as float */
 	double amp;    /* normalised amplitude of this octave */
 	double mean;   /* ridged: expected weighted signal, subtracted so the sum is centred */
