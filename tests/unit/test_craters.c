@@ -322,6 +322,48 @@ static void small_worn_and_boulders(void **state)
 	cnode_fini(&c);
 }
 
+/* Near a pole, classes that bend over a texel (every boulder class at 4 cm texels) fade out:
+ * 0 on the two rows nearest each pole whatever the longitude, full from the fourth; the tile
+ * still matches the oracle there. */
+static void pole_fade(void **state)
+{
+	(void)state;
+	struct cnode b;
+	cnode_ok(&b, "[node x]\ntype = craters\nkind = boulder\nseed = 6\nmin_radius = 0.08\n"
+		     "max_radius = 1.3\ndensity = 4\ndepth_ratio = 0.35\n");
+	const int ly = 21; /* texels of 4 cm */
+	double far = 0;
+	for (int pole = 0; pole < 2; pole++) {
+		uint32_t y = pole ? (1u << ly) - 1 : 0;
+		for (int lx = 0; lx <= 2; lx++)
+			for (uint32_t x = 0; x < (1u << lx); x++) {
+				struct tile *t = gen(&b, lx, ly, x, y);
+				for (uint32_t i = 0; i < T; i++)
+					for (uint32_t r = 0; r < 2; r++) {
+						uint32_t j = pole ? T - 1 - r : r;
+						if (fabs(at(t, i, j)) > 1e-6)
+							fail_msg("pole %d (%d,%d) %u: texel %u,%u = %g m",
+								 pole, lx, ly, x, i, j, at(t, i, j));
+					}
+				for (uint32_t j = 8; j < T - 8; j++)
+					for (uint32_t i = 0; i < T; i++)
+						far = fmax(far, fabs(at(t, i, j)));
+				tile_unref(t);
+			}
+	}
+	assert_true(far > 0.01); /* boulders away from the pole rows */
+	const struct craters *cr = b.n.impl;
+	struct tile *t = gen(&b, 0, ly, 0, 0);
+	for (uint32_t j = 0; j < 6; j++)
+		for (uint32_t i = 0; i < T; i += 5) {
+			double lon, lat;
+			grid_texel_center(&t->key, T, i, j, &lon, &lat);
+			assert_true(fabs(at(t, i, j) - craters_point(cr, lon, lat, ly, T)) < 1e-4);
+		}
+	tile_unref(t);
+	cnode_fini(&b);
+}
+
 static void errors(void **state)
 {
 	(void)state;
@@ -354,7 +396,7 @@ int main(void)
 		cmocka_unit_test(oracle),	cmocka_unit_test(seams),
 		cmocka_unit_test(determinism_and_seed), cmocka_unit_test(band_limit),
 		cmocka_unit_test(digs_craters), cmocka_unit_test(small_worn_and_boulders),
-		cmocka_unit_test(errors),
+		cmocka_unit_test(pole_fade),	cmocka_unit_test(errors),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -128,8 +128,8 @@ int craters_init(struct craters *c, const struct craters_params *p)
 
 size_t craters_scratch_size(uint32_t T)
 {
-	/* acc[T²], px/py/pz[T²], lon/lat tables (sin/cos, degrees) */
-	return ((size_t)4 * T * T + 6 * (size_t)T) * sizeof(double);
+	/* acc[T²], px/py/pz[T²], lon/lat tables (sin/cos, degrees), per-row weights and bases */
+	return ((size_t)4 * T * T + 8 * (size_t)T) * sizeof(double);
 }
 
 struct crater {
@@ -179,8 +179,21 @@ static double class_weight(const struct craters *c, int k, int ly, uint32_t T)
 	return craters_band_weight(c->r[k], noise_texel_size(c->p.radius, ly, T));
 }
 
+/* Class k's bend over a texel of level ly (noise_pole_weight): the curvature of its smallest,
+ * freshest crater (bowl 2·depth/R², complex wall 3.2·depth/R², the ejecta at the rim
+ * 14·rim/R²; a boulder's shoulder 12·height/R²) times the texel size. */
+static double class_bend(const struct craters *c, int k, int ly, uint32_t T)
+{
+	double R = c->r[k], depth, rim;
+	int cx;
+	shape(&c->p, R, 1, &depth, &rim, &cx);
+	double curv = cx < 0 ? 12 * depth : fmax((cx ? 3.2 : 2) * depth, 14 * rim);
+	return curv / (R * R) * noise_texel_size(c->p.radius, ly, T);
+}
+
 double craters_point(const struct craters *c, double lon, double lat, int ly, uint32_t T)
 {
+	double tp = noise_pole_texels(lat, ly, T);
 	double px = cos(lat * DEG) * cos(lon * DEG), py = cos(lat * DEG) * sin(lon * DEG),
 	       pz = sin(lat * DEG);
 	double sum = 0;
@@ -210,13 +223,13 @@ double craters_point(const struct craters *c, double lon, double lat, int ly, ui
 						acc += profile(d, depth, rim, cx);
 					}
 				}
-		sum += w * (acc - c->mean[k]);
+		sum += w * noise_pole_weight(class_bend(c, k, ly, T), tp) * (acc - c->mean[k]);
 	}
 	return sum;
 }
 
-/* Stamps one crater onto the tile's texels inside its lat/lon box. */
-static void stamp(const struct craters *c, const struct crater *cr, double w, uint32_t T,
+/* Stamps one crater onto the tile's texels inside its lat/lon box, with weight w[row]. */
+static void stamp(const struct craters *c, const struct crater *cr, const double *w, uint32_t T,
 		  const struct geo_rect *r, const double *px, const double *py, const double *pz,
 		  double *acc)
 {
@@ -267,7 +280,7 @@ static void stamp(const struct craters *c, const struct crater *cr, double w, ui
 				double dx = px[t] - cr->cx, dy = py[t] - cr->cy, dz = pz[t] - cr->cz;
 				double d2 = dx * dx + dy * dy + dz * dz;
 				if (d2 < reach2)
-					acc[t] += w * profile(sqrt(d2) * inv, depth, rim, cx);
+					acc[t] += w[j] * profile(sqrt(d2) * inv, depth, rim, cx);
 			}
 		}
 	}
@@ -281,6 +294,7 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 	size_t n = (size_t)T * T;
 	double *acc = scratch, *px = acc + n, *py = px + n, *pz = py + n;
 	double *clon = pz + n, *slon = clon + T, *clat = slon + T, *slat = clat + T;
+	double *wrow = slat + T, *base = wrow + T;
 	struct geo_rect r;
 	grid_tile_rect(k, &r);
 	for (uint32_t i = 0; i < T; i++) {
@@ -288,7 +302,10 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 		double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + i + 0.5);
 		clon[i] = cos(lon * DEG), slon[i] = sin(lon * DEG);
 		clat[i] = cos(lat * DEG), slat[i] = sin(lat * DEG);
+		base[i] = 0;
 	}
+	/* Rows within 3.5 texels of a pole: only in a tile touching one (T ≥ 4). */
+	const bool polar = k->y == 0 || k->y == grid_tiles_y(k->ly) - 1;
 	double lo[3] = { 2, 2, 2 }, hi[3] = { -2, -2, -2 };
 	for (uint32_t j = 0; j < T; j++) {
 		for (uint32_t i = 0; i < T; i++) {
@@ -308,13 +325,21 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 		}
 	}
 	int used = 0;
-	double base = 0;
 	for (int cl = 0; cl < c->nclass; cl++) {
 		double w = class_weight(c, cl, k->ly, T);
 		if (w <= 0)
 			continue;
 		used++;
-		base += w * c->mean[cl];
+		double bend = polar ? class_bend(c, cl, k->ly, T) : 0;
+		for (uint32_t j = 0; j < T; j++) {
+			double wp = 1;
+			if (bend > NOISE_POLE_BEND) {
+				double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5);
+				wp = noise_pole_weight(bend, noise_pole_texels(lat, k->ly, T));
+			}
+			wrow[j] = w * wp;
+			base[j] += wrow[j] * c->mean[cl];
+		}
 		double s = 8 * c->r[cl] / c->p.radius;
 		int64_t a0[3], a1[3];
 		for (int a = 0; a < 3; a++) {
@@ -327,10 +352,10 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 					struct crater cr[4];
 					int m = cell_craters(c, cl, ix, iy, iz, cr);
 					for (int i = 0; i < m; i++)
-						stamp(c, &cr[i], w, T, &r, px, py, pz, acc);
+						stamp(c, &cr[i], wrow, T, &r, px, py, pz, acc);
 				}
 	}
 	for (size_t t = 0; t < n; t++)
-		out[t] = (float)(acc[t] - base);
+		out[t] = (float)(acc[t] - base[t / T]);
 	return used;
 }

@@ -13,6 +13,9 @@
  * coarse tile skips tiny craters and keeps the mean of its children. `degradation` gives each
  * crater its own wear (a hash of its cell, apart from the draws that place it, so craters stay
  * where they were); `boulders` turns the field into rocks (domes) with the same distribution.
+ * Near a pole a class that bends more than NOISE_POLE_BEND over a texel of the level (its
+ * smallest fresh crater's curvature × the texel size) is faded out over the last texels
+ * (noise_pole_weight), in the tile and the point oracle alike.
  *
  * Threads: a struct craters is immutable after craters_init; any number of threads may call
  * craters_tile with their own scratch. Nothing here allocates.

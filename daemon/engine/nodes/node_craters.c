@@ -15,7 +15,10 @@
  *   kind         crater | boulder (default crater): boulder makes rocks — domes of height
  *                depth_ratio × diameter (flat-topped, steep-sided), no rim or ejecta
  *   input        optional height node: output = input + craters
- * Output: height (f32 metres), zero-mean per class and band-limited per level.
+ * Output: height (f32 metres), zero-mean per class and band-limited per level. Near a pole,
+ * classes whose smallest crater (or rock) is not planar over a texel of the level fade to 0 on
+ * the two rows nearest it (noise.h, noise_pole_weight): every level's pole rows are
+ * independent of longitude.
  * Thread-safety: the impl is immutable after create.
  */
 #include <errno.h>
@@ -98,7 +101,7 @@ const struct node_type node_type_craters = {
 	.doc = "seeded impact craters on the sphere (seed, min_radius m, max_radius m, density, "
 	       "depth_ratio, rim_ratio, transition m, degradation, kind=crater|boulder), size-distributed, band-limited per level; "
 	       "optional input height gets them added",
-	.version = 1,
+	.version = 2, /* 2: classes that bend over a texel fade out at the poles */
 	.slots = slots,
 	.nslots = 1,
 	.create = craters_create,

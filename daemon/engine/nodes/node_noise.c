@@ -20,10 +20,14 @@
  *   stretch        1..16 (default 1): features that many times narrower north–south than
  *                  east–west (space compressed along the polar axis): crests run east–west,
  *                  like ripples under a meridional wind; isotropic at the poles, no seam
+ * Near a pole, octaves that are not planar over a texel of the level (curvature × amplitude ×
+ * texel size over NOISE_POLE_BEND) fade to 0 on the two rows nearest it (noise.h), so every
+ * level's pole rows are independent of longitude.
  *   input          optional height node: output = input + offset + amplitude · noise
  * Output: height (f32 metres). Thread-safety: the impl is immutable after create.
  */
 #include <errno.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -67,6 +71,7 @@ static int noise_create(struct node *n, struct node_parse *p)
 	np.kind = kind == 1 ? NOISE_RIDGED : NOISE_FBM;
 	np.octaves = (int)octaves;
 	np.radius = n->planet->a;
+	np.pole_amplitude = fabs(amplitude);
 	struct noise_impl *im = xmalloc(sizeof *im);
 	if (noise_init(&im->nz, &np)) {
 		free(im);
@@ -104,7 +109,8 @@ const struct node_type node_type_noise = {
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
 	       "max_wavelength m, stretch), band-limited per level; optional input height gets the "
 	       "octaves with wavelength <= max_wavelength added",
-	.version = 3, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice */
+	.version = 4, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice;
+		       * 4: octaves that bend over a texel fade out at the poles */
 	.slots = slots,
 	.nslots = 1,
 	.create = noise_create,
