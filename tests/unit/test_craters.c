@@ -266,6 +266,104 @@ static void digs_craters(void **state)
 	cnode_fini(&c);
 }
 
+/* Small, worn craters (0.6-19.5 m, degradation) and boulders: tile = oracle at a fine level
+ * (texels ~8 cm, every class at full weight) and across a tile border; worn craters are
+ * shallower on average than fresh ones in the same places; boulders only raise the ground
+ * (a tile's minimum is minus the class means: no bowls). */
+static const char *const SMALL = "[node x]\ntype = craters\nseed = 2\nmin_radius = 0.6\n"
+				 "max_radius = 19.5\ndensity = 1.6\ndegradation = 0.85\n";
+
+static void small_worn_and_boulders(void **state)
+{
+	(void)state;
+	struct cnode c, f, b;
+	cnode_ok(&c, SMALL);
+	cnode_ok(&f, "[node x]\ntype = craters\nseed = 2\nmin_radius = 0.6\n"
+		     "max_radius = 19.5\ndensity = 1.6\n");
+	cnode_ok(&b, "[node x]\ntype = craters\nkind = boulder\nseed = 6\nmin_radius = 0.08\n"
+		     "max_radius = 1.3\ndensity = 0.35\ndepth_ratio = 0.35\n");
+	const struct craters *cr = c.n.impl;
+	assert_int_equal(cr->nclass, 6);
+	check_oracle(&c, 19, 18, 300000, 70000);
+	check_oracle(&c, 19, 18, 300001, 70000);
+	/* worn vs fresh: same seeds, so the same craters; the spread of heights shrinks */
+	double vw = 0, vf = 0;
+	for (uint32_t x = 0; x < 16; x++) {
+		struct tile *tw = gen(&c, 17, 16, 70000 + 3 * x, 17000),
+			    *tf = gen(&f, 17, 16, 70000 + 3 * x, 17000);
+		double mw = 0, mf = 0;
+		for (int i = 0; i < T * T; i++)
+			mw += tile_f32(tw)[i], mf += tile_f32(tf)[i];
+		mw /= T * T, mf /= T * T;
+		for (int i = 0; i < T * T; i++) {
+			vw += (tile_f32(tw)[i] - mw) * (tile_f32(tw)[i] - mw) / (T * T);
+			vf += (tile_f32(tf)[i] - mf) * (tile_f32(tf)[i] - mf) / (T * T);
+		}
+		tile_unref(tw);
+		tile_unref(tf);
+	}
+	if (!(vw < 0.85 * vf && vw > 0.05 * vf))
+		fail_msg("worn variance %g m², fresh %g m²", vw, vf);
+	/* boulders, at level 20 (texels ~2 cm) */
+	const struct craters *bc = b.n.impl;
+	double base = 0;
+	for (int k = 0; k < bc->nclass; k++)
+		base += bc->mean[k];
+	assert_true(base > 0);
+	struct tile *tb = gen(&b, 21, 20, 1200000, 280000);
+	double lo = 1e9, hi = -1e9;
+	for (int i = 0; i < T * T; i++)
+		lo = fmin(lo, tile_f32(tb)[i]), hi = fmax(hi, tile_f32(tb)[i]);
+	if (!(lo > -base - 1e-4 && hi > 0.05))
+		fail_msg("boulders: %g .. %g m (class means %g m)", lo, hi, base);
+	tile_unref(tb);
+	cnode_fini(&b);
+	cnode_fini(&f);
+	cnode_fini(&c);
+}
+
+/* Near a pole, classes that bend over a texel (every boulder class at 4 cm texels) fade out:
+ * 0 on the two rows nearest each pole whatever the longitude, full from the fourth; the tile
+ * still matches the oracle there. */
+static void pole_fade(void **state)
+{
+	(void)state;
+	struct cnode b;
+	cnode_ok(&b, "[node x]\ntype = craters\nkind = boulder\nseed = 6\nmin_radius = 0.08\n"
+		     "max_radius = 1.3\ndensity = 4\ndepth_ratio = 0.35\n");
+	const int ly = 21; /* texels of 4 cm */
+	double far = 0;
+	for (int pole = 0; pole < 2; pole++) {
+		uint32_t y = pole ? (1u << ly) - 1 : 0;
+		for (int lx = 0; lx <= 2; lx++)
+			for (uint32_t x = 0; x < (1u << lx); x++) {
+				struct tile *t = gen(&b, lx, ly, x, y);
+				for (uint32_t i = 0; i < T; i++)
+					for (uint32_t r = 0; r < 2; r++) {
+						uint32_t j = pole ? T - 1 - r : r;
+						if (fabs(at(t, i, j)) > 1e-6)
+							fail_msg("pole %d (%d,%d) %u: texel %u,%u = %g m",
+								 pole, lx, ly, x, i, j, at(t, i, j));
+					}
+				for (uint32_t j = 8; j < T - 8; j++)
+					for (uint32_t i = 0; i < T; i++)
+						far = fmax(far, fabs(at(t, i, j)));
+				tile_unref(t);
+			}
+	}
+	assert_true(far > 0.01); /* boulders away from the pole rows */
+	const struct craters *cr = b.n.impl;
+	struct tile *t = gen(&b, 0, ly, 0, 0);
+	for (uint32_t j = 0; j < 6; j++)
+		for (uint32_t i = 0; i < T; i += 5) {
+			double lon, lat;
+			grid_texel_center(&t->key, T, i, j, &lon, &lat);
+			assert_true(fabs(at(t, i, j) - craters_point(cr, lon, lat, ly, T)) < 1e-4);
+		}
+	tile_unref(t);
+	cnode_fini(&b);
+}
+
 static void errors(void **state)
 {
 	(void)state;
@@ -297,7 +395,8 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(oracle),	cmocka_unit_test(seams),
 		cmocka_unit_test(determinism_and_seed), cmocka_unit_test(band_limit),
-		cmocka_unit_test(digs_craters), cmocka_unit_test(errors),
+		cmocka_unit_test(digs_craters), cmocka_unit_test(small_worn_and_boulders),
+		cmocka_unit_test(pole_fade),	cmocka_unit_test(errors),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

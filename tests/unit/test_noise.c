@@ -126,6 +126,129 @@ static void matches_double_oracle(void **state)
 	}
 }
 
+/* Pole fade: with pole_amplitude, octaves that bend over a texel fade out on the rows nearest a
+ * pole — the pole row of tiles all round varies far less with longitude than without the fade,
+ * the rows further out keep them, and the tile matches the oracle there. */
+static double pole_row_spread(const struct noise *nz, int ly, uint32_t T, uint32_t j)
+{
+	double lo = INFINITY, hi = -INFINITY;
+	for (int lx = 0; lx <= 2; lx++)
+		for (uint32_t x = 0; x < (1u << lx); x++) {
+			float *v = gen(nz, key(lx, ly, x, 0), T, NOISE_ISA_AUTO, NULL);
+			for (uint32_t i = 0; i < T; i++) {
+				lo = fmin(lo, v[j * T + i]);
+				hi = fmax(hi, v[j * T + i]);
+			}
+			free(v);
+		}
+	return hi - lo;
+}
+
+/* Largest second difference around the ring of row j of the lx 0 tile (all longitudes): small
+ * for content planar over the pole (a sinusoid once round), large for finer content. */
+static double ring_roughness(const struct noise *nz, int ly, uint32_t T, uint32_t j)
+{
+	float *v = gen(nz, key(0, ly, 0, 0), T, NOISE_ISA_AUTO, NULL);
+	double m = 0;
+	for (uint32_t i = 0; i < T; i++) {
+		double a = v[j * T + (i + T - 1) % T], b = v[j * T + i], c = v[j * T + (i + 1) % T];
+		m = fmax(m, fabs(a - 2 * b + c));
+	}
+	free(v);
+	return m;
+}
+
+static void pole_fade(void **state)
+{
+	(void)state;
+	const double moon = 1737400;
+	const int ly = 21; /* 4 cm texels with T = 64 */
+	const uint32_t T = 64;
+	for (int kind = 0; kind < 2; kind++) {
+		struct noise plain, faded;
+		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 9, 12);
+		p.radius = moon;
+		p.gain = 0.6;
+		assert_int_equal(noise_init(&plain, &p), 0);
+		p.pole_amplitude = 0.25;
+		assert_int_equal(noise_init(&faded, &p), 0);
+		double s0 = pole_row_spread(&plain, ly, T, 0), s1 = pole_row_spread(&faded, ly, T, 0);
+		double far0 = pole_row_spread(&plain, ly, T, 40),
+		       far1 = pole_row_spread(&faded, ly, T, 40);
+		double r0 = ring_roughness(&plain, ly, T, 0), r1 = ring_roughness(&faded, ly, T, 0);
+		if (getenv("TEST_NOISE_VERBOSE"))
+			printf("kind %d: pole row spread %g faded %g, roughness %g faded %g; row 40 "
+			       "%g / %g\n", kind, s0, s1, r0, r1, far0, far1);
+		/* what is left at the pole row: the planar octaves, once round the ring (fBm; the
+		 * ridged field's fine octaves are weighted by the coarse ones, so how much they
+		 * vary at one pole is down to the seed) */
+		if (kind == 0) {
+			assert_true(r1 < 0.25 * r0);
+			assert_true(s1 < 0.5 * s0);
+		}
+		assert_true(s1 < 0.02);
+		assert_true(far1 == far0);
+		float *v = gen(&faded, key(1, ly, 1, 0), T, NOISE_ISA_AUTO, NULL);
+		for (uint32_t j = 0; j < 6; j++)
+			for (uint32_t c = 0; c < T; c += 5) {
+				double lon, lat;
+				struct tile_key k = key(1, ly, 1, 0);
+				grid_texel_center(&k, T, c, j, &lon, &lat);
+				assert_true(fabs(noise_point(&faded, lon, lat, ly, T) - v[j * T + c]) <
+					    2e-5);
+			}
+		free(v);
+	}
+}
+
+/* stretch: tile = oracle; crests run east-west (the field changes faster north-south than
+ * east-west, by about the factor) at mid latitude; band limit by wavelength / stretch. */
+static void stretched(void **state)
+{
+	(void)state;
+	const uint32_t T = 64;
+	const double a = 3396190;
+	for (int kind = 0; kind < 2; kind++) {
+		struct noise nz;
+		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 3, 12);
+		p.radius = a;
+		p.stretch = 4;
+		assert_int_equal(noise_init(&nz, &p), 0);
+		int ly = 18;
+		struct tile_key k = key(ly + 1, ly, 300000, 100000); /* about -9.3 deg */
+		float *v = gen(&nz, k, T, NOISE_ISA_AUTO, NULL);
+		double worst = 0, de = 0, dn = 0;
+		for (uint32_t j = 0; j < T; j += 3)
+			for (uint32_t c = 0; c < T; c += 3) {
+				double lon, lat;
+				grid_texel_center(&k, T, c, j, &lon, &lat);
+				worst = fmax(worst, fabs(noise_point(&nz, lon, lat, ly, T) - v[j * T + c]));
+			}
+		for (uint32_t j = 0; j + 1 < T; j++)
+			for (uint32_t c = 0; c + 1 < T; c++) {
+				de += fabs(v[j * T + c + 1] - v[j * T + c]);
+				dn += fabs(v[(j + 1) * T + c] - v[j * T + c]);
+			}
+		/* texels are twice as long east-west as north-south (lx = ly + 1 at ~9°S) */
+		double ratio = (dn / 1) / (de / 2);
+		if (!(worst <= 2e-5 && ratio > 2.5))
+			fail_msg("kind %d: worst %g, north/east gradient ratio %g", kind, worst, ratio);
+		free(v);
+		/* 12 m / 4 = 3 m: gone at texels of 2 m, which would keep a 12 m octave */
+		assert_true(noise_band_weight(12, 2) > 0);
+		float *c0 = gen(&nz, key(13, 12, 1000, 1000), T, NOISE_ISA_AUTO, NULL);
+		double amax = 0;
+		for (uint32_t i = 0; i < T * T; i++)
+			amax = fmax(amax, fabs(c0[i]));
+		assert_true(amax < 1e-6 || kind == 1); /* ridged keeps its centring constant */
+		free(c0);
+	}
+	struct noise nz;
+	struct noise_params p = params(NOISE_FBM, 3, 12);
+	p.stretch = 0.5;
+	assert_int_equal(noise_init(&nz, &p), -EINVAL);
+}
+
 /* ---- multi-resolution ---- */
 
 /* The lattice-interpolated low octaves (noise.h) against every octave evaluated at every
@@ -639,6 +762,8 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(isa_paths_identical),
 		cmocka_unit_test(matches_double_oracle),
+		cmocka_unit_test(stretched),
+		cmocka_unit_test(pole_fade),
 		cmocka_unit_test(multires_matches_exact),
 		cmocka_unit_test(seamless_east_west),
 		cmocka_unit_test(seamless_across_poles),

@@ -38,21 +38,32 @@ double craters_band_weight(double radius_m, double s)
 	return noise_band_weight(2 * radius_m, s);
 }
 
-/* Depth and rim height (metres) of a crater of radius R. */
-static void shape(const struct craters_params *p, double R, double *depth, double *rim,
+/* Depth and rim height (metres) of a crater of radius R and wear factor a (depth × a,
+ * rim × a²); for boulders, depth is the rock's height. */
+static void shape(const struct craters_params *p, double R, double a, double *depth, double *rim,
 		  int *complex_)
 {
 	double D = 2 * R;
+	if (p->boulders) {
+		*depth = p->depth_ratio * D * a;
+		*rim = 0;
+		*complex_ = -1;
+		return;
+	}
 	double d = D < p->transition ? p->depth_ratio * D
 				     : p->depth_ratio * p->transition * pow(D / p->transition, 0.3);
-	*depth = d;
-	*rim = p->rim_ratio * d;
+	*depth = d * a;
+	*rim = p->rim_ratio * d * a * a;
 	*complex_ = D >= p->transition;
 }
 
 /* Height at normalised distance r = dist / R (0 ≤ r < 2). */
 static double profile(double r, double depth, double rim, int complex_)
 {
+	if (complex_ < 0) { /* a boulder: flat-topped dome with steep sides */
+		double r2 = r * r;
+		return r < 1 ? depth * (1 - r2 * r2) : 0;
+	}
 	if (r >= 1) {
 		/* Ejecta: rim · r⁻³, shifted to reach 0 at r = 2. */
 		double r3 = r * r * r;
@@ -81,7 +92,8 @@ int craters_init(struct craters *c, const struct craters_params *p)
 {
 	if (!(p->radius > 0) || !(p->min_radius > 0) || !(p->max_radius >= p->min_radius) ||
 	    !(p->density >= 0 && p->density <= 4) || !(p->depth_ratio >= 0) ||
-	    !(p->rim_ratio >= 0) || !(p->transition > 0) || p->max_radius > p->radius)
+	    !(p->rim_ratio >= 0) || !(p->transition > 0) || p->max_radius > p->radius ||
+	    !(p->degradation >= 0 && p->degradation <= 1))
 		return -EINVAL;
 	memset(c, 0, sizeof *c);
 	c->p = *p;
@@ -93,17 +105,20 @@ int craters_init(struct craters *c, const struct craters_params *p)
 		/* Expected height: craters per unit area (density / s²) × the mean over the
 		 * radius distribution of ∫ profile dA, by midpoint quadrature. */
 		double s = 8 * Rk, sum = 0;
-		const int nu = 16, nr = 256;
+		const int nu = 16, nr = 256, nf = p->degradation > 0 ? 16 : 1;
 		for (int a = 0; a < nu; a++) {
-			double R = draw_radius(Rk, (a + 0.5) / nu), depth, rim;
-			int cx;
-			shape(p, R, &depth, &rim, &cx);
-			double integral = 0;
-			for (int b = 0; b < nr; b++) {
-				double r = (b + 0.5) * 2.0 / nr;
-				integral += profile(r, depth, rim, cx) * 2 * M_PI * r * (2.0 / nr);
+			for (int f = 0; f < nf; f++) {
+				double R = draw_radius(Rk, (a + 0.5) / nu), depth, rim;
+				int cx;
+				shape(p, R, 1 - p->degradation * (f + 0.5) / nf, &depth, &rim, &cx);
+				double integral = 0;
+				for (int b = 0; b < nr; b++) {
+					double r = (b + 0.5) * 2.0 / nr;
+					integral += profile(r, depth, rim, cx) * 2 * M_PI * r *
+						    (2.0 / nr);
+				}
+				sum += integral * R * R / (nu * nf);
 			}
-			sum += integral * R * R / nu;
 		}
 		c->mean[k] = p->density * sum / (s * s);
 		c->nclass = k + 1;
@@ -113,13 +128,14 @@ int craters_init(struct craters *c, const struct craters_params *p)
 
 size_t craters_scratch_size(uint32_t T)
 {
-	/* acc[T²], px/py/pz[T²], lon/lat tables (sin/cos, degrees) */
-	return ((size_t)4 * T * T + 6 * (size_t)T) * sizeof(double);
+	/* acc[T²], px/py/pz[T²], lon/lat tables (sin/cos, degrees), per-row weights and bases */
+	return ((size_t)4 * T * T + 8 * (size_t)T) * sizeof(double);
 }
 
 struct crater {
 	double cx, cy, cz; /* centre on the unit sphere */
 	double R;	   /* radius, metres */
+	double a;	   /* wear: depth × a, rim × a² */
 };
 
 /* The craters cell (ix, iy, iz) of class k holds, accepted (near the sphere) ones only.
@@ -150,6 +166,9 @@ static int cell_craters(const struct craters *c, int k, int64_t ix, int64_t iy, 
 		out[m].cy = qy / len;
 		out[m].cz = qz / len;
 		out[m].R = draw_radius(c->r[k], u);
+		/* Wear from a side stream of this crater's hash: the draws above are unchanged. */
+		uint64_t hf = h ^ 0x5851f42d4c957f2dULL;
+		out[m].a = p->degradation > 0 ? 1 - p->degradation * next_u(&hf) : 1;
 		m++;
 	}
 	return m;
@@ -160,8 +179,21 @@ static double class_weight(const struct craters *c, int k, int ly, uint32_t T)
 	return craters_band_weight(c->r[k], noise_texel_size(c->p.radius, ly, T));
 }
 
+/* Class k's bend over a texel of level ly (noise_pole_weight): the curvature of its smallest,
+ * freshest crater (bowl 2·depth/R², complex wall 3.2·depth/R², the ejecta at the rim
+ * 14·rim/R²; a boulder's shoulder 12·height/R²) times the texel size. */
+static double class_bend(const struct craters *c, int k, int ly, uint32_t T)
+{
+	double R = c->r[k], depth, rim;
+	int cx;
+	shape(&c->p, R, 1, &depth, &rim, &cx);
+	double curv = cx < 0 ? 12 * depth : fmax((cx ? 3.2 : 2) * depth, 14 * rim);
+	return curv / (R * R) * noise_texel_size(c->p.radius, ly, T);
+}
+
 double craters_point(const struct craters *c, double lon, double lat, int ly, uint32_t T)
 {
+	double tp = noise_pole_texels(lat, ly, T);
 	double px = cos(lat * DEG) * cos(lon * DEG), py = cos(lat * DEG) * sin(lon * DEG),
 	       pz = sin(lat * DEG);
 	double sum = 0;
@@ -186,22 +218,23 @@ double craters_point(const struct craters *c, double lon, double lat, int ly, ui
 							continue;
 						double depth, rim;
 						int cx;
-						shape(&c->p, cr[i].R, &depth, &rim, &cx);
+						shape(&c->p, cr[i].R, cr[i].a, &depth, &rim,
+						      &cx);
 						acc += profile(d, depth, rim, cx);
 					}
 				}
-		sum += w * (acc - c->mean[k]);
+		sum += w * noise_pole_weight(class_bend(c, k, ly, T), tp) * (acc - c->mean[k]);
 	}
 	return sum;
 }
 
-/* Stamps one crater onto the tile's texels inside its lat/lon box. */
-static void stamp(const struct craters *c, const struct crater *cr, double w, uint32_t T,
+/* Stamps one crater onto the tile's texels inside its lat/lon box, with weight w[row]. */
+static void stamp(const struct craters *c, const struct crater *cr, const double *w, uint32_t T,
 		  const struct geo_rect *r, const double *px, const double *py, const double *pz,
 		  double *acc)
 {
 	double Ru = cr->R / c->p.radius;	     /* unit-sphere radius */
-	double reach = 2 * Ru;			     /* chord */
+	double reach = (c->p.boulders ? 1 : 2) * Ru; /* chord */
 	double ang = 2 * asin(fmin(1.0, reach / 2)); /* radians */
 	double clat = asin(fmax(-1.0, fmin(1.0, cr->cz))) / DEG;
 	double clon = atan2(cr->cy, cr->cx) / DEG;
@@ -238,7 +271,7 @@ static void stamp(const struct craters *c, const struct crater *cr, double w, ui
 	}
 	double depth, rim;
 	int cx;
-	shape(&c->p, cr->R, &depth, &rim, &cx);
+	shape(&c->p, cr->R, cr->a, &depth, &rim, &cx);
 	double inv = 1 / Ru, reach2 = reach * reach;
 	for (int q = 0; q < nr; q++) {
 		for (int64_t j = j0; j <= j1; j++) {
@@ -247,7 +280,7 @@ static void stamp(const struct craters *c, const struct crater *cr, double w, ui
 				double dx = px[t] - cr->cx, dy = py[t] - cr->cy, dz = pz[t] - cr->cz;
 				double d2 = dx * dx + dy * dy + dz * dz;
 				if (d2 < reach2)
-					acc[t] += w * profile(sqrt(d2) * inv, depth, rim, cx);
+					acc[t] += w[j] * profile(sqrt(d2) * inv, depth, rim, cx);
 			}
 		}
 	}
@@ -261,6 +294,7 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 	size_t n = (size_t)T * T;
 	double *acc = scratch, *px = acc + n, *py = px + n, *pz = py + n;
 	double *clon = pz + n, *slon = clon + T, *clat = slon + T, *slat = clat + T;
+	double *wrow = slat + T, *base = wrow + T;
 	struct geo_rect r;
 	grid_tile_rect(k, &r);
 	for (uint32_t i = 0; i < T; i++) {
@@ -268,7 +302,10 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 		double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + i + 0.5);
 		clon[i] = cos(lon * DEG), slon[i] = sin(lon * DEG);
 		clat[i] = cos(lat * DEG), slat[i] = sin(lat * DEG);
+		base[i] = 0;
 	}
+	/* Rows within 3.5 texels of a pole: only in a tile touching one (T ≥ 4). */
+	const bool polar = k->y == 0 || k->y == grid_tiles_y(k->ly) - 1;
 	double lo[3] = { 2, 2, 2 }, hi[3] = { -2, -2, -2 };
 	for (uint32_t j = 0; j < T; j++) {
 		for (uint32_t i = 0; i < T; i++) {
@@ -288,13 +325,21 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 		}
 	}
 	int used = 0;
-	double base = 0;
 	for (int cl = 0; cl < c->nclass; cl++) {
 		double w = class_weight(c, cl, k->ly, T);
 		if (w <= 0)
 			continue;
 		used++;
-		base += w * c->mean[cl];
+		double bend = polar ? class_bend(c, cl, k->ly, T) : 0;
+		for (uint32_t j = 0; j < T; j++) {
+			double wp = 1;
+			if (bend > NOISE_POLE_BEND) {
+				double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5);
+				wp = noise_pole_weight(bend, noise_pole_texels(lat, k->ly, T));
+			}
+			wrow[j] = w * wp;
+			base[j] += wrow[j] * c->mean[cl];
+		}
 		double s = 8 * c->r[cl] / c->p.radius;
 		int64_t a0[3], a1[3];
 		for (int a = 0; a < 3; a++) {
@@ -307,10 +352,10 @@ int craters_tile(const struct craters *c, const struct tile_key *k, uint32_t T, 
 					struct crater cr[4];
 					int m = cell_craters(c, cl, ix, iy, iz, cr);
 					for (int i = 0; i < m; i++)
-						stamp(c, &cr[i], w, T, &r, px, py, pz, acc);
+						stamp(c, &cr[i], wrow, T, &r, px, py, pz, acc);
 				}
 	}
 	for (size_t t = 0; t < n; t++)
-		out[t] = (float)(acc[t] - base);
+		out[t] = (float)(acc[t] - base[t / T]);
 	return used;
 }

@@ -10,7 +10,12 @@
  * to 2R; past `transition` diameter shallower, flat-floored, with a central peak) is summed
  * over every crater. Each class is centred (its expected mean is subtracted) and band-limited
  * like noise: weight 0 while its smallest diameter is under 2 texels, 1 from 4 texels — so a
- * coarse tile skips tiny craters and keeps the mean of its children.
+ * coarse tile skips tiny craters and keeps the mean of its children. `degradation` gives each
+ * crater its own wear (a hash of its cell, apart from the draws that place it, so craters stay
+ * where they were); `boulders` turns the field into rocks (domes) with the same distribution.
+ * Near a pole a class that bends more than NOISE_POLE_BEND over a texel of the level (its
+ * smallest fresh crater's curvature × the texel size) is faded out over the last texels
+ * (noise_pole_weight), in the tile and the point oracle alike.
  *
  * Threads: a struct craters is immutable after craters_init; any number of threads may call
  * craters_tile with their own scratch. Nothing here allocates.
@@ -34,6 +39,11 @@ struct craters_params {
 	double rim_ratio;   /* rim height / depth (0.2) */
 	double transition;  /* diameter (m) from which craters are complex (shallower, flat floor,
 			     * central peak) */
+	double degradation; /* 0..1: each crater's depth is scaled by 1 − degradation·f and its
+			     * rim (and ejecta) by the square of that, f uniform in [0, 1) per
+			     * crater — a mix of fresh and worn-down craters (0: all fresh) */
+	int boulders;	    /* nonzero: rocks instead of craters — domes of height
+			     * depth_ratio · diameter, h·(1 − r⁴), no rim, ejecta or complex form */
 };
 
 struct craters {

@@ -10,8 +10,15 @@
  *   rim_ratio    rim height / depth (default 0.2)
  *   transition   diameter in metres from which craters are complex: shallower, flat floor,
  *                central peak (default 15000, the Moon's)
+ *   degradation  0..1 (default 0): each crater's wear f, uniform per crater, scales its depth
+ *                by 1 − degradation·f and its rim and ejecta by the square: fresh and old craters
+ *   kind         crater | boulder (default crater): boulder makes rocks — domes of height
+ *                depth_ratio × diameter (flat-topped, steep-sided), no rim or ejecta
  *   input        optional height node: output = input + craters
- * Output: height (f32 metres), zero-mean per class and band-limited per level.
+ * Output: height (f32 metres), zero-mean per class and band-limited per level. Near a pole,
+ * classes whose smallest crater (or rock) is not planar over a texel of the level fade to 0 on
+ * the two rows nearest it (noise.h, noise_pole_weight): every level's pole rows are
+ * independent of longitude.
  * Thread-safety: the impl is immutable after create.
  */
 #include <errno.h>
@@ -29,16 +36,20 @@ static const struct node_slot slots[] = {
 static int craters_create(struct node *n, struct node_parse *p)
 {
 	struct craters_params cp = { 0 };
+	static const char *const kinds[] = { "crater", "boulder", NULL };
 	long seed;
-	int rc;
+	int rc, kind;
 	if ((rc = np_int(p, "seed", 0, 0, 4294967295L, &seed)) ||
 	    (rc = np_double(p, "min_radius", 200, 1e-3, 1e8, &cp.min_radius)) ||
 	    (rc = np_double(p, "max_radius", 60000, 1e-3, 1e8, &cp.max_radius)) ||
 	    (rc = np_double(p, "density", 0.8, 0, 4, &cp.density)) ||
 	    (rc = np_double(p, "depth_ratio", 0.2, 0, 1, &cp.depth_ratio)) ||
 	    (rc = np_double(p, "rim_ratio", 0.2, 0, 2, &cp.rim_ratio)) ||
-	    (rc = np_double(p, "transition", 15000, 1e-3, 1e9, &cp.transition)))
+	    (rc = np_double(p, "transition", 15000, 1e-3, 1e9, &cp.transition)) ||
+	    (rc = np_double(p, "degradation", 0, 0, 1, &cp.degradation)) ||
+	    (rc = np_enum(p, "kind", kinds, 0, &kind)))
 		return rc;
+	cp.boulders = kind == 1;
 	if (!n->planet || !(n->planet->a > 0))
 		return np_error(p, NULL, "craters node \"%s\": the planet has no radius", n->name);
 	if (cp.max_radius < cp.min_radius)
@@ -88,9 +99,9 @@ static int craters_generate(const struct node *n, struct gen_ctx *g, const struc
 const struct node_type node_type_craters = {
 	.name = "craters",
 	.doc = "seeded impact craters on the sphere (seed, min_radius m, max_radius m, density, "
-	       "depth_ratio, rim_ratio, transition m), size-distributed, band-limited per level; "
+	       "depth_ratio, rim_ratio, transition m, degradation, kind=crater|boulder), size-distributed, band-limited per level; "
 	       "optional input height gets them added",
-	.version = 1,
+	.version = 2, /* 2: classes that bend over a texel fade out at the poles */
 	.slots = slots,
 	.nslots = 1,
 	.create = craters_create,

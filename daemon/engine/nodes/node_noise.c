@@ -17,10 +17,17 @@
  *                  (default 2)
  *   max_wavelength metres (default: wavelength): only octaves with a wavelength ≤ this
  *                  contribute — with an input, the "detail below the data's resolution"
+ *   stretch        1..16 (default 1): features that many times narrower north–south than
+ *                  east–west (space compressed along the polar axis): crests run east–west,
+ *                  like ripples under a meridional wind; isotropic at the poles, no seam
+ * Near a pole, octaves that are not planar over a texel of the level (curvature × amplitude ×
+ * texel size over NOISE_POLE_BEND) fade to 0 on the two rows nearest it (noise.h), so every
+ * level's pole rows are independent of longitude.
  *   input          optional height node: output = input + offset + amplitude · noise
  * Output: height (f32 metres). Thread-safety: the impl is immutable after create.
  */
 #include <errno.h>
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -55,7 +62,8 @@ static int noise_create(struct node *n, struct node_parse *p)
 	    (rc = np_double(p, "offset", 0.0, -1e7, 1e7, &offset)) ||
 	    (rc = np_double(p, "ridge_offset", 1.0, 0.0, 2.0, &np.ridge_offset)) ||
 	    (rc = np_double(p, "ridge_gain", 2.0, 0.0, 16.0, &np.ridge_gain)) ||
-	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)))
+	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)) ||
+	    (rc = np_double(p, "stretch", 1.0, 1.0, 16.0, &np.stretch)))
 		return rc;
 	if (!n->planet || !(n->planet->a > 0))
 		return np_error(p, NULL, "noise node \"%s\": the planet has no radius", n->name);
@@ -63,6 +71,7 @@ static int noise_create(struct node *n, struct node_parse *p)
 	np.kind = kind == 1 ? NOISE_RIDGED : NOISE_FBM;
 	np.octaves = (int)octaves;
 	np.radius = n->planet->a;
+	np.pole_amplitude = fabs(amplitude);
 	struct noise_impl *im = xmalloc(sizeof *im);
 	if (noise_init(&im->nz, &np)) {
 		free(im);
@@ -98,9 +107,10 @@ const struct node_type node_type_noise = {
 	.name = "noise",
 	.doc = "seeded fBm/ridged simplex noise on the sphere (seed, kind=fbm|ridged, octaves, "
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
-	       "max_wavelength m), band-limited per level; optional input height gets the "
+	       "max_wavelength m, stretch), band-limited per level; optional input height gets the "
 	       "octaves with wavelength <= max_wavelength added",
-	.version = 3, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice */
+	.version = 4, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice;
+		       * 4: octaves that bend over a texel fade out at the poles */
 	.slots = slots,
 	.nslots = 1,
 	.create = noise_create,

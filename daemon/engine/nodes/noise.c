@@ -194,6 +194,31 @@ double noise_texel_size(double a, int ly, uint32_t T)
 	return M_PI * a / (ldexp(1.0, ly) * T);
 }
 
+double noise_pole_texels(double lat, int ly, uint32_t T)
+{
+	return (90 - fabs(lat)) * (ldexp(1.0, ly) * T / 180.0);
+}
+
+double noise_pole_weight(double bend, double t)
+{
+	double g = 2 - bend / NOISE_POLE_BEND;
+	if (g >= 1)
+		return 1;
+	g = g > 0 ? g : 0;
+	double f = (t - 1.5) / 2;
+	f = f <= 0 ? 0 : f >= 1 ? 1 : f;
+	return g + (1 - g) * f;
+}
+
+/* Octave k's bend over a texel of size s metres: its curvature, amplitude (metres) ×
+ * (2π / shortest wavelength)², times s. 0 without pole_amplitude. */
+static double octave_bend(const struct noise *nz, int k, double s)
+{
+	const struct noise_octave *o = &nz->oct[k];
+	double kw = 2 * M_PI / o->lmin;
+	return nz->p.pole_amplitude * o->amp * kw * kw * s;
+}
+
 double noise_band_weight(double lambda, double s)
 {
 	double w = log2(lambda / (2.0 * s));
@@ -265,7 +290,8 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 	if (p->octaves < 1 || p->octaves > NOISE_MAX_OCTAVES || !(p->wavelength > 0) ||
 	    !(p->lacunarity > 1) || !(p->gain >= 0) || !(p->radius > 0) ||
 	    !isfinite(p->wavelength) || !isfinite(p->radius) || !isfinite(p->gain) ||
-	    !(p->max_wavelength >= 0) || !isfinite(p->ridge_offset) || !isfinite(p->ridge_gain))
+	    !(p->max_wavelength >= 0) || !isfinite(p->ridge_offset) || !isfinite(p->ridge_gain) ||
+	    !(p->stretch == 0 || (p->stretch >= 1 && p->stretch <= 16)))
 		return -EINVAL;
 	memset(nz, 0, sizeof *nz);
 	nz->p = *p;
@@ -279,6 +305,11 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 		o->amp = pow(p->gain, k) / total * (p->kind == NOISE_RIDGED ? 2.0 : 1.0);
 		o->seed = mix32(p->seed ^ mix32((uint32_t)k * 0x9e3779b9u + 0x632be5abu));
 		octave_rotation(o->seed, o->rot);
+		/* Stretch: rotate(S·p) with S scaling z by the factor, folded into the matrix. */
+		double st = p->stretch > 1 ? p->stretch : 1;
+		for (int a = 0; a < 3; a++)
+			o->rot[a][2] *= st;
+		o->lmin = o->lambda / st;
 	}
 	if (p->kind == NOISE_RIDGED) {
 		int k0 = 0;
@@ -297,7 +328,7 @@ static int active_octaves(const struct noise *nz, int ly, uint32_t T, int idx[],
 	for (int k = 0; k < nz->p.octaves; k++) {
 		if (!included(nz, k))
 			continue;
-		double bw = noise_band_weight(nz->oct[k].lambda, s);
+		double bw = noise_band_weight(nz->oct[k].lmin, s);
 		if (bw <= 0)
 			break;
 		idx[m] = k;
@@ -347,7 +378,7 @@ static int coarse_count(const struct noise *nz, int lx, uint32_t T, const int id
 		return 0;
 	double circ = 2.0 * M_PI * nz->p.radius, su = circ / (ldexp(1.0, lx) * T);
 	int mc = 0;
-	while (mc < m && fmin(nz->oct[idx[mc]].lambda, circ) >= NOISE_MR_MIN_TEXELS * su)
+	while (mc < m && fmin(nz->oct[idx[mc]].lmin, circ) >= NOISE_MR_MIN_TEXELS * su)
 		mc++;
 	return mc;
 }
@@ -655,18 +686,45 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 				   offset, T);
 		return 0;
 	}
+	/* Pole fade (noise_pole_weight): in a tile touching a pole, the octaves that bend too
+	 * much get a weight per texel row; they stay off the lattice (whose sum is shared by
+	 * all rows — its interpolation error is ~1e-6 of the amplitude, no seam to speak of). */
+	double bend[NOISE_MAX_OCTAVES];
+	int pf = t.m; /* the first octave the pole fade touches; m: none */
+	if (nz->p.pole_amplitude > 0 && (k->y == 0 || k->y == grid_tiles_y(k->ly) - 1)) {
+		double s = noise_texel_size(nz->p.radius, k->ly, T);
+		for (int o = 0; o < t.m; o++) {
+			bend[o] = octave_bend(nz, idx[o], s);
+			if (bend[o] > NOISE_POLE_BEND && pf == t.m)
+				pf = o;
+		}
+		t.mc = t.mc < pf ? t.mc : pf;
+	}
 	octave_setup(&t, idx, w);
 	if (t.mc > 0)
 		coarse_lattice(&t);
 	if (t.mc < t.m)
 		texel_columns(&t);
 	float *const tmp[7] = { t.dx, t.dy, t.dz, t.rx, t.ry, t.rz, t.nb };
+	float pamp[NOISE_MAX_OCTAVES];
 	for (uint32_t j = 0; j < T; j++) {
 		float *row = out + (size_t)j * T;
+		const float *amp = t.amp;
+		if (pf < t.m) {
+			double tp = noise_pole_texels(
+				grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5), k->ly, T);
+			if (tp < 3.5) {
+				for (int o = 0; o < t.m; o++)
+					pamp[o] = o < pf ? t.amp[o]
+							 : (float)(t.amp[o] *
+								   noise_pole_weight(bend[o], tp));
+				amp = pamp;
+			}
+		}
 		coarse_row(&t, j, row);
 		if (t.mc < t.m)
 			full_res_row(nz, ns, t.row_fn, k, T, j, t.pc, t.ccos, t.csin, t.rows, t.rot,
-				     t.amp, t.mean, t.mc, t.m, row, t.wt, tmp);
+				     amp, t.mean, t.mc, t.m, row, t.wt, tmp);
 		if (scale)
 			ns->finish(row, base ? base + (size_t)j * T : NULL, amplitude, offset, T);
 	}
@@ -693,6 +751,7 @@ double noise_point(const struct noise *nz, double lon, double lat, int ly, uint3
 	float w[NOISE_MAX_OCTAVES];
 	int m = active_octaves(nz, ly, T, idx, w);
 	double p0[3], p[3], sum = 0, wt = 1;
+	double ts = noise_texel_size(nz->p.radius, ly, T), tp = noise_pole_texels(lat, ly, T);
 	unit_vector(lon, lat, p0);
 	for (int o = 0; o < m; o++) {
 		const struct noise_octave *oc = &nz->oct[idx[o]];
@@ -700,6 +759,8 @@ double noise_point(const struct noise *nz, double lon, double lat, int ly, uint3
 		double n = noise_simplex_ref(p[0] * oc->freq, p[1] * oc->freq, p[2] * oc->freq,
 					     oc->seed);
 		double a = oc->amp * w[o];
+		if (nz->p.pole_amplitude > 0)
+			a *= noise_pole_weight(octave_bend(nz, idx[o], ts), tp);
 		if (nz->p.kind == NOISE_FBM) {
 			sum += a * n;
 			continue;

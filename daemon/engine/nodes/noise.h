@@ -49,6 +49,15 @@ struct noise_params {
 	double ridge_gain;	/* ridged: next octave weight = clamp(signal · ridge_gain, 0, 1) */
 	double max_wavelength;	/* octaves with a longer wavelength are skipped; 0 = none */
 	double radius;		/* body radius in metres (the sphere the noise lives on) */
+	double stretch;		/* ≥ 1 (0 reads as 1): space is compressed by this factor along
+				 * the polar axis before the noise is evaluated, so features are
+				 * that much narrower north–south than east–west (crests running
+				 * east–west, isotropic at the poles); band limits use
+				 * wavelength / stretch */
+	double pole_amplitude;	/* metres per unit of noise as the caller scales it (the node's
+				 * |amplitude|); > 0 turns on the pole fade (noise_pole_weight):
+				 * octaves that bend more than NOISE_POLE_BEND over a texel fade
+				 * out over the last texels before a pole. 0: no fade */
 	bool exact;		/* evaluate every octave at every texel (no coarse lattice): for
 				 * tests and benchmarks; false (the default) in the node */
 };
@@ -56,6 +65,7 @@ struct noise_params {
 /* Per-octave constants, precomputed by noise_init. */
 struct noise_octave {
 	double lambda; /* wavelength, metres */
+	double lmin;   /* shortest wavelength in any direction: lambda / stretch */
 	double freq;   /* noise units per unit-sphere unit, exactly representable as float */
 	double amp;    /* normalised amplitude of this octave */
 	double mean;   /* ridged: expected weighted signal, subtracted so the sum is centred */
@@ -123,6 +133,23 @@ double noise_simplex_ref(double x, double y, double z, uint32_t seed);
 
 /* Octave weight (0..1) for wavelength lambda at texel size s: 0 below 2s, 1 above 4s. */
 double noise_band_weight(double lambda, double s);
+
+/* Near a pole a texel row is a ring around it, and content that is not planar over a texel
+ * (it bends: its slope changes by more than NOISE_POLE_BEND radians over one texel) makes the
+ * pole rows depend on longitude — in height, and worse in the normals across the pole. Such
+ * content (noise octaves, crater and boulder classes; decided per level, from its curvature
+ * estimate times the level's texel size) is faded to 0 on the two texel rows nearest each pole
+ * and back in over the next two, as the slope node fades its slope: the pole rows of every
+ * level hold only content that is planar there. Content bending less than NOISE_POLE_BEND is
+ * untouched, from 2 × NOISE_POLE_BEND faded fully, linear between. */
+#define NOISE_POLE_BEND 0.01
+
+/* Texels of level ly (size T) from latitude lat (degrees) to the nearer pole: 0.5 on the pole
+ * row's centre. */
+double noise_pole_texels(double lat, int ly, uint32_t T);
+
+/* The weight of content bending by `bend` radians over one texel at t texels from a pole. */
+double noise_pole_weight(double bend, double t);
 
 /* Texel size in metres (latitudinal) of level ly with tile size T on a body of radius a. */
 double noise_texel_size(double a, int ly, uint32_t T);
