@@ -11,15 +11,6 @@
 
 #include "errbuf.h"
 
-__attribute__((format(printf, 2, 3))) static int bad(char *err, const char *fmt, ...)
-{
-	va_list ap;
-	va_start(ap, fmt);
-	err_vset(err, fmt, ap);
-	va_end(ap);
-	return -EINVAL;
-}
-
 /* A number at s up to the first character of delims (or the end); *end past it. strtod
  * accepts leading blanks, "inf" and "nan": refused here. */
 static int num(const char *s, const char *delims, double *v, const char **end)
@@ -46,7 +37,7 @@ int args_long(const char *opt, const char *s, long lo, long hi, long *out, char 
 		ok = *end == '\0' && !errno && v >= lo && v <= hi;
 	}
 	if (!ok)
-		return bad(err, "%s: expected an integer in [%ld, %ld], got \"%s\"", opt, lo, hi,
+		return err_inval(err, "%s: expected an integer in [%ld, %ld], got \"%s\"", opt, lo, hi,
 			   s ? s : "");
 	*out = v;
 	return 0;
@@ -67,7 +58,7 @@ int args_double(const char *opt, const char *s, double lo, double hi, double *ou
 	double v;
 	const char *end;
 	if (num(s, "", &v, &end) || *end || !(v >= lo && v <= hi))
-		return bad(err, "%s: expected a number in [%g, %g], got \"%s\"", opt, lo, hi,
+		return err_inval(err, "%s: expected a number in [%g, %g], got \"%s\"", opt, lo, hi,
 			   s ? s : "");
 	*out = v;
 	return 0;
@@ -79,15 +70,15 @@ int args_doubles(const char *opt, const char *s, int n, const double *lo, const 
 	double v[16];
 	const char *p = s;
 	if (n < 1 || n > 16)
-		return bad(err, "%s: bad parser call", opt);
+		return err_inval(err, "%s: bad parser call", opt);
 	for (int i = 0; i < n; i++) {
 		const char *end;
 		if (num(p, i + 1 < n ? "," : "", &v[i], &end) || (i + 1 < n && *end != ',') ||
 		    (i + 1 == n && *end))
-			return bad(err, "%s: expected %s (%d numbers separated by commas), got \"%s\"",
+			return err_inval(err, "%s: expected %s (%d numbers separated by commas), got \"%s\"",
 				   opt, what, n, s ? s : "");
 		if (!(v[i] >= lo[i] && v[i] <= hi[i]))
-			return bad(err, "%s: \"%s\": value %d of %s must be in [%g, %g]", opt, s,
+			return err_inval(err, "%s: \"%s\": value %d of %s must be in [%g, %g]", opt, s,
 				   i + 1, what, lo[i], hi[i]);
 		p = end + (i + 1 < n);
 	}
@@ -115,12 +106,12 @@ int args_bbox(const char *opt, const char *s, double wsen[4], char err[256])
 	if (rc)
 		return rc;
 	if (v[1] >= v[3])
-		return bad(err, "%s: \"%s\": south must be less than north", opt, s);
+		return err_inval(err, "%s: \"%s\": south must be less than north", opt, s);
 	if (v[0] >= v[2])
-		return bad(err, "%s: \"%s\": west must be less than east (to cross the antimeridian "
+		return err_inval(err, "%s: \"%s\": west must be less than east (to cross the antimeridian "
 			   "write east + 360, e.g. 170,-10,190,10)", opt, s);
 	if (v[2] > 180 && v[2] - v[0] > 360)
-		return bad(err, "%s: \"%s\": a box across the antimeridian spans at most 360 "
+		return err_inval(err, "%s: \"%s\": a box across the antimeridian spans at most 360 "
 			   "degrees", opt, s);
 	memcpy(wsen, v, sizeof v);
 	return 0;
@@ -141,6 +132,6 @@ int args_size(const char *opt, const char *s, int lo, int hi, int *w, int *h, ch
 			return 0;
 		}
 	}
-	return bad(err, "%s: expected WxH with each in [%d, %d], got \"%s\"", opt, lo, hi,
+	return err_inval(err, "%s: expected WxH with each in [%d, %d], got \"%s\"", opt, lo, hi,
 		   s ? s : "");
 }

@@ -12,6 +12,8 @@ extern "C" {
 void err_set(char *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* err_set with a va_list, for functions that format on behalf of their caller. */
 void err_vset(char *err, const char *fmt, va_list ap) __attribute__((format(printf, 2, 0)));
+/* err_set, returning -EINVAL: `return err_inval(err, "...", ...);` for a bad argument. */
+int err_inval(char *err, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* A config error as "path:line: key: message": the line is left out when <= 0, the key when
  * NULL. NULL err is a no-op. */
 void err_vset_at(char *err, const char *path, int line, const char *key, const char *fmt,

@@ -13,15 +13,6 @@
 #include "common/errbuf.h"
 #include "common/xalloc.h"
 
-__attribute__((format(printf, 2, 3))) static int bad(char *err, const char *fmt, ...)
-{
-	va_list ap;
-	va_start(ap, fmt);
-	err_vset(err, fmt, ap);
-	va_end(ap);
-	return -EINVAL;
-}
-
 /* Parses a double from *p up to a delimiter in delims (or the end); advances *p past it. */
 static int num(const char **p, const char *delims, double *v)
 {
@@ -43,11 +34,11 @@ int ctl_parse_uint(const char *s, const char *what, uint64_t max, uint64_t *out,
 	char *end;
 	errno = 0;
 	if (!s || *s < '0' || *s > '9')
-		return bad(err, "%s must be an integer in [0, %llu], got \"%s\"", what,
+		return err_inval(err, "%s must be an integer in [0, %llu], got \"%s\"", what,
 			   (unsigned long long)max, s ? s : "");
 	unsigned long long v = strtoull(s, &end, 10);
 	if (*end || errno || v > max)
-		return bad(err, "%s must be an integer in [0, %llu], got \"%s\"", what,
+		return err_inval(err, "%s must be an integer in [0, %llu], got \"%s\"", what,
 			   (unsigned long long)max, s);
 	*out = v;
 	return 0;
@@ -59,7 +50,7 @@ int ctl_parse_levels(const char *s, int max_level, uint8_t *lmin, uint8_t *lmax,
 	char a[16], b[16];
 	size_t la = dash ? (size_t)(dash - s) : strlen(s);
 	if (la == 0 || la >= sizeof a || (dash && (!dash[1] || strlen(dash + 1) >= sizeof b)))
-		return bad(err, "--levels wants A-B (0 <= A <= B <= %d), got \"%s\"", max_level, s);
+		return err_inval(err, "--levels wants A-B (0 <= A <= B <= %d), got \"%s\"", max_level, s);
 	memcpy(a, s, la);
 	a[la] = '\0';
 	snprintf(b, sizeof b, "%s", dash ? dash + 1 : a);
@@ -67,9 +58,9 @@ int ctl_parse_levels(const char *s, int max_level, uint8_t *lmin, uint8_t *lmax,
 	char e2[256];
 	if (ctl_parse_uint(a, "level", (uint64_t)max_level, &va, e2) ||
 	    ctl_parse_uint(b, "level", (uint64_t)max_level, &vb, e2))
-		return bad(err, "--levels wants A-B (0 <= A <= B <= %d), got \"%s\"", max_level, s);
+		return err_inval(err, "--levels wants A-B (0 <= A <= B <= %d), got \"%s\"", max_level, s);
 	if (va > vb)
-		return bad(err, "--levels %s: the first level must not exceed the second", s);
+		return err_inval(err, "--levels %s: the first level must not exceed the second", s);
 	*lmin = (uint8_t)va;
 	*lmax = (uint8_t)vb;
 	return 0;
@@ -104,9 +95,9 @@ int ctl_parse_latlon(const char *s, double *lat, double *lon, char err[256])
 	const char *p = s;
 	int rc = latlon(&p, "", lat, lon);
 	if (rc == -1 || *p)
-		return bad(err, "want LAT,LON in degrees, got \"%s\"", s);
+		return err_inval(err, "want LAT,LON in degrees, got \"%s\"", s);
 	if (rc)
-		return bad(err, "%s: latitude must be in [-90, 90] and longitude in [-180, 180]", s);
+		return err_inval(err, "%s: latitude must be in [-90, 90] and longitude in [-180, 180]", s);
 	return 0;
 }
 
@@ -118,9 +109,9 @@ int ctl_parse_path(const char *s, struct proto_lonlat **pts, uint32_t *n, char e
 	for (const char *q = s; *q; q++)
 		cap += *q == ':';
 	if (cap < 2)
-		return bad(err, "--path wants LAT,LON:LAT,LON (two or more places), got \"%s\"", s);
+		return err_inval(err, "--path wants LAT,LON:LAT,LON (two or more places), got \"%s\"", s);
 	if (cap > PROTO_MAX_PATH)
-		return bad(err, "--path has %zu places; at most %d", cap, PROTO_MAX_PATH);
+		return err_inval(err, "--path has %zu places; at most %d", cap, PROTO_MAX_PATH);
 	struct proto_lonlat *a = xcalloc(cap, sizeof *a);
 	const char *p = s;
 	for (size_t i = 0; i < cap; i++) {
@@ -129,9 +120,9 @@ int ctl_parse_path(const char *s, struct proto_lonlat **pts, uint32_t *n, char e
 		if (rc || (i + 1 < cap && *p != ':') || (i + 1 == cap && *p)) {
 			free(a);
 			if (rc == -2)
-				return bad(err, "--path %s: place %zu is out of range (latitude -90..90, "
+				return err_inval(err, "--path %s: place %zu is out of range (latitude -90..90, "
 					   "longitude -180..180)", s, i + 1);
-			return bad(err, "--path wants LAT,LON:LAT,LON (two or more places), got "
+			return err_inval(err, "--path wants LAT,LON:LAT,LON (two or more places), got "
 				   "\"%s\"", s);
 		}
 		if (*p == ':')
@@ -148,7 +139,7 @@ int ctl_parse_km(const char *s, const char *what, double *metres, char err[256])
 	const char *p = s;
 	double v;
 	if (num(&p, "", &v) || *p || v < 0 || v > 1e9)
-		return bad(err, "%s wants a distance in km (>= 0), got \"%s\"", what, s);
+		return err_inval(err, "%s wants a distance in km (>= 0), got \"%s\"", what, s);
 	*metres = v * 1000.0;
 	return 0;
 }
@@ -163,7 +154,7 @@ int ctl_find_layer(const struct proto_planet *p, const char *s, char err[256])
 		size_t l = strlen(names);
 		snprintf(names + l, sizeof names - l, "%s%s", i ? ", " : "", p->layers[i].name);
 	}
-	bad(err, "planet %s has no layer \"%s\" (layers: %s)", p->name, s, names);
+	err_inval(err, "planet %s has no layer \"%s\" (layers: %s)", p->name, s, names);
 	return -ENOENT;
 }
 
@@ -184,7 +175,7 @@ int ctl_parse_layers(const char *s, const struct proto_planet *p, uint64_t *mask
 	}
 	free(dup);
 	if (rc == 0 && *mask == 0)
-		return bad(err, "--layers wants layer names separated by commas, got \"%s\"", s);
+		return err_inval(err, "--layers wants layer names separated by commas, got \"%s\"", s);
 	return rc;
 }
 

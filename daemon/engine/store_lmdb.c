@@ -521,6 +521,20 @@ static void close_env(struct lstore *s)
 	s->env = NULL;
 }
 
+/* Everything but the writer thread: the environment, the codec, the locks, the memory. */
+static void free_store(struct lstore *s)
+{
+	close_env(s);
+	tilecodec_destroy(s->tc);
+	xmutex_destroy(&s->mu);
+	xcond_destroy(&s->cv);
+	xcond_destroy(&s->done_cv);
+	free(s->q);
+	free(s->batch);
+	free(s->path);
+	free(s);
+}
+
 static void l_destroy(struct store *base)
 {
 	struct lstore *s = (struct lstore *)base;
@@ -531,15 +545,7 @@ static void l_destroy(struct store *base)
 	xthread_join(s->writer);
 	for (size_t i = 0; i < s->qn; i++)
 		tile_unref(s->q[i].t);
-	close_env(s);
-	tilecodec_destroy(s->tc);
-	xmutex_destroy(&s->mu);
-	xcond_destroy(&s->cv);
-	xcond_destroy(&s->done_cv);
-	free(s->q);
-	free(s->batch);
-	free(s->path);
-	free(s);
+	free_store(s);
 }
 
 static const struct store_ops lmdb_ops = {
@@ -657,15 +663,7 @@ int store_lmdb_open(const struct store_lmdb_desc *d, struct store **out, char er
 	xcond_init(&s->done_cv);
 	if ((rc = xthread_create(&s->writer, writer_main, s))) {
 		err_set(err, "store writer thread: %s", strerror(-rc));
-		close_env(s);
-		tilecodec_destroy(s->tc);
-		xmutex_destroy(&s->mu);
-		xcond_destroy(&s->cv);
-		xcond_destroy(&s->done_cv);
-		free(s->q);
-		free(s->batch);
-		free(s->path);
-		free(s);
+		free_store(s);
 		return rc;
 	}
 	*out = &s->base;
