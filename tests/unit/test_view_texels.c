@@ -11,7 +11,7 @@
  * With detail levels (colour from CLIPMAP_DETAIL levels finer than a ring's geometry, in windows
  * of 4×4 tiles) a texel covers about 2 pixels by area (the median over the picture, 1.5–2.1
  * on these views) and 3–4 along its most magnified direction, on average; with each ring's
- * own level (2×2-tile windows) it was 7–9 by area and 13–16. Why not ≤ 1.5 px everywhere:
+ * own level it was 4–8 by area (median 4–7) and 8–16. Why not ≤ 1.5 px everywhere:
  * at distance d from the nadir the finest level whose window (S texels wide) reaches d has
  * texels of at least 2d/S, which a 60° view 720 pixels tall shows at 1.2 px or more near its
  * centre for S = 1024 — and levels are powers of two, so up to twice that at each level's
@@ -179,8 +179,8 @@ static void texels_per_pixel(void **state)
 		       m.area_mean, m.area_p50, m.area_p90);
 		assert_true(m.n > 1000); /* the ground fills much of the picture */
 		assert_true(st.ldetail >= st.llast);
-		/* Sized by area a texel covers about 2 pixels (it was 7–9 with each ring's own
-		 * level); along its most magnified direction 3–4 (13–16). */
+		/* Sized by area a texel covers about 2 pixels (4–8 with each ring's own level);
+		 * along its most magnified direction 3–4 on average (8–16). */
 		if (m.area_p50 > 2.4 || m.area_p90 > 3.5 || m.mean > 4.5) {
 			printf("camera %zu: texels too large on screen\n", c);
 			bad++;
