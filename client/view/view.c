@@ -9,7 +9,7 @@
  *   uploads of new quads (taking tiles, drawing: not the plan's to stop).
  * - Detail: a ring's heights come from its own level, its colour and normals from the finest
  *   level up to CLIPMAP_DETAIL finer whose window (CLIPMAP_WINDOW_TILES tiles wide) covers it — a
- *   texel about a pixel wide across the ring, where its own level's would be 4–8. Where that
+ *   texel about 2 pixels (by area) across the ring, where its own level's would be 4–8. Where that
  *   level is not resident yet (after a jump), the next coarser one that is.
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
  *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
