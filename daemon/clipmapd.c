@@ -25,6 +25,8 @@
 #include "engine/sched.h"
 #include "engine/store.h"
 #include "conf.h"
+#include "http.h"
+#include "metrics.h"
 #include "server.h"
 
 #define DEFAULT_CONF "/etc/clipmap/clipmapd.conf"
@@ -38,6 +40,8 @@ struct daemon {
 	struct store *store; /* the disk tier, NULL without [store] path */
 	struct store_stats store_seen; /* its counters at the last tick */
 	bool store_failing;	       /* its writes fail (logged once) */
+	struct http *http;	       /* the HTTP endpoint, NULL without [http] listen */
+	uint64_t metrics_ns;	       /* when its /metrics text was last gathered */
 };
 
 static void usage(FILE *f)
@@ -147,6 +151,8 @@ static void reload(struct daemon *d)
 				kept += planet_set_has_node(old, ps->planets[i]->nodes[j]->hash);
 			}
 		server_set_planets(d->srv, ps);
+		if (d->http)
+			http_set_planets(d->http, ps);
 		log_msg(LOG_INFO, "reloaded %zu planets from %s: %zu of %zu nodes unchanged%s", ps->n,
 			d->conf.planets_dir, kept, nodes, ps->nskipped ? " (some files skipped)" : "");
 	}
@@ -194,9 +200,46 @@ static void store_watch(struct daemon *d)
 	*old = st;
 }
 
+/* The STATS figures plus the HTTP endpoint's own, as /metrics text: gathered on the loop
+ * thread (where the figures live) once a second. */
+static void gather_metrics(struct daemon *d)
+{
+	uint64_t now = clock_now_ns();
+	if (now - d->metrics_ns < 1000000000ull)
+		return;
+	d->metrics_ns = now;
+	enum { CAP = PROTO_MAX_STATS };
+	struct proto_stat *it = calloc(CAP, sizeof *it);
+	char(*keys)[128] = calloc(CAP, sizeof *keys);
+	if (!it || !keys) {
+		free(it);
+		free(keys);
+		return;
+	}
+	size_t n = server_stats(d->srv, it, keys, CAP - 7);
+	struct http_stats hs;
+	http_get_stats(d->http, &hs);
+	const struct { const char *k; uint64_t v; } h[] = {
+		{ "http.requests", hs.requests },	{ "http.tiles.sent", hs.tiles },
+		{ "http.not_modified.sent", hs.not_modified }, { "http.client_errors.sent", hs.client_errors },
+		{ "http.server_errors.sent", hs.server_errors }, { "http.auth_failures", hs.auth_failures },
+		{ "http.bytes.sent", hs.bytes },
+	};
+	for (size_t i = 0; i < sizeof h / sizeof h[0]; i++, n++)
+		it[n] = (struct proto_stat){ .key = h[i].k, .kind = PROTO_STAT_U64, .u = h[i].v };
+	size_t len;
+	char *text = metrics_format(it, n, CLIPMAP_VERSION, &len);
+	http_set_metrics(d->http, text, len);
+	free(text);
+	free(it);
+	free(keys);
+}
+
 static void on_tick(void *ud)
 {
 	struct daemon *d = ud;
+	if (d->http)
+		gather_metrics(d);
 	if (d->store)
 		store_watch(d);
 	if (!d->watchdog_usec)
@@ -335,6 +378,38 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 		d->conf.cache_bytes >> 20, CLIPMAP_VERSION);
 }
 
+/* The HTTP endpoint of [http], with the token where the listener is not loopback (or
+ * require_token asks for it everywhere) unless `open`. */
+static int start_http(struct daemon *d, struct sched *sched, struct cache *cache,
+		      struct planet_set *ps)
+{
+	const struct conf *c = &d->conf;
+	size_t tlen;
+	const uint8_t *tok = server_token(d->srv, &tlen);
+	bool need = tok && !c->http_open &&
+		    (!conf_addr_is_loopback(c->http_listen) || c->require_token != CONF_TOKEN_AUTO);
+	char err[256];
+	int rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
+						  .cache = cache, .planets = ps,
+						  .token = need ? tok : NULL, .token_len = need ? tlen : 0,
+						  .threads = c->http_threads,
+						  .max_conns = c->http_max_conns,
+						  .max_per_addr = c->http_max_per_addr,
+						  .timeout_s = c->http_timeout_s,
+						  .max_age_s = c->http_max_age_s },
+			     &d->http, err);
+	if (rc) {
+		log_msg(LOG_ERROR, "%s", err);
+		return rc;
+	}
+	char host[256], port[16];
+	conf_split_hostport(c->http_listen, host, sizeof host, port, sizeof port);
+	log_msg(LOG_INFO, "http: listening on http://%s%s%s:%u/%s", strchr(host, ':') ? "[" : "",
+		host, strchr(host, ':') ? "]" : "", http_port(d->http),
+		need ? " (bearer token required)" : "");
+	return 0;
+}
+
 /* The cache, the workers and the server over the planets ps (taken), run until a signal
  * stops them. Returns the exit status. */
 static int serve(struct daemon *d, struct planet_set *ps)
@@ -374,6 +449,8 @@ static int serve(struct daemon *d, struct planet_set *ps)
 		return rc == -EINVAL ? 2 : 1;
 	}
 	bool ran = false;
+	if (d->conf.http_listen && (rc = start_http(d, sched, cache, ps)))
+		goto out;
 	if ((rc = server_watch_fd(d->srv, d->sigfd, on_signal, d))) {
 		log_msg(LOG_ERROR, "signalfd: %s", strerror(-rc));
 		goto out;
@@ -387,6 +464,8 @@ static int serve(struct daemon *d, struct planet_set *ps)
 	ran = true;
 	sd_notify(0, "STOPPING=1");
 out:
+	http_destroy(d->http); /* before the scheduler its requests use */
+	d->http = NULL;
 	server_destroy(d->srv);
 	sched_destroy(sched);
 	cache_destroy(cache);

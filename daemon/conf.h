@@ -55,6 +55,14 @@ struct conf {
 	/* [store] */
 	char *store_path;     /* the disk tier's LMDB file; NULL: no disk tier */
 	uint64_t store_bytes; /* its budget at rest (disk_mb) */
+	/* [http] */
+	char *http_listen;     /* "host:port"; NULL: no HTTP endpoint */
+	bool http_open;	       /* non-loopback without the token */
+	int http_threads;      /* libmicrohttpd's thread pool */
+	int http_max_conns;    /* connections at once */
+	int http_max_per_addr; /* per client address; 0: no limit */
+	int http_timeout_s;    /* an idle or slow connection is closed after it */
+	int http_max_age_s;    /* Cache-Control max-age of tiles */
 };
 
 /* Reads and checks a config file into c (zeroed by the call). Returns 0 or -errno with err

@@ -323,6 +323,17 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	return b.n;
 }
 
+size_t server_stats(struct server *srv, struct proto_stat *items, char (*keys)[128], size_t cap)
+{
+	return fill_stats(srv, items, keys, cap);
+}
+
+const uint8_t *server_token(const struct server *srv, size_t *len)
+{
+	*len = srv->have_token ? srv->token_len : 0;
+	return srv->have_token ? srv->token : NULL;
+}
+
 /* ---- setup ------------------------------------------------------------------------------ */
 
 static int load_token(struct server *srv, char err[256])
