@@ -136,8 +136,12 @@ static int encode_to(const struct geoimg *im, enum geoimg_format f, const char *
 		err_set(err, "geoimg: %s", CPLGetLastErrorMsg());
 		rc = -EIO;
 	}
-	if (!rc && bands == 4)
-		GDALSetRasterColorInterpretation(GDALGetRasterBand(ds, 4), GCI_AlphaBand);
+	if (!rc && bands >= 3) {
+		static const GDALColorInterp ci[] = { GCI_RedBand, GCI_GreenBand, GCI_BlueBand,
+						      GCI_AlphaBand };
+		for (int b = 0; b < bands; b++)
+			GDALSetRasterColorInterpretation(GDALGetRasterBand(ds, b + 1), ci[b]);
+	}
 	if (!rc && im->has_nodata)
 		for (int b = 1; b <= bands; b++)
 			GDALSetRasterNoDataValue(GDALGetRasterBand(ds, b), im->nodata);
@@ -151,8 +155,10 @@ static int encode_to(const struct geoimg *im, enum geoimg_format f, const char *
 	case GEOIMG_TIFF:
 		opt = CSLSetNameValue(opt, "COMPRESS", "DEFLATE");
 		opt = CSLSetNameValue(opt, "PREDICTOR", im->type == IMG_F32 ? "3" : "2");
+		if (bands >= 3 && im->type == IMG_U8)
+			opt = CSLSetNameValue(opt, "PHOTOMETRIC", "RGB");
 		if (bands == 4 && im->type == IMG_U8)
-			opt = CSLSetNameValue(opt, "ALPHA", "UNASSOCIATED");
+			opt = CSLSetNameValue(opt, "ALPHA", "YES"); /* straight (unassociated) alpha */
 		break;
 	default: break;
 	}

@@ -147,14 +147,7 @@ static void *pixels_for(const struct tile *t, enum geoimg_format fmt, struct geo
 			return NULL;
 		}
 		uint8_t *o = xmalloc(n * 3);
-		for (size_t i = 0; i < n; i++) {
-			double e = t->data[2 * i] / 127.5 - 1, nn = t->data[2 * i + 1] / 127.5 - 1;
-			double up = 1 - e * e - nn * nn;
-			up = up > 0 ? sqrt(up) : 0;
-			o[3 * i] = t->data[2 * i];
-			o[3 * i + 1] = t->data[2 * i + 1];
-			o[3 * i + 2] = (uint8_t)lround((up + 1) * 127.5);
-		}
+		pix_normals_rgb(t->data, o, n);
 		im->channels = 3;
 		im->type = IMG_U8;
 		im->pixels = o;

@@ -285,6 +285,45 @@ static void heights_and_georeference(void **state)
 		fail_msg("gdalinfo's corners are not the tile's:\n%s", out);
 }
 
+/* clipmapctl's exports carry their place: gdalinfo reads EPSG:4326 and the corners of a whole
+ * level, of a block across the antimeridian and of one tile fetched through the daemon. */
+static void exports_georeferenced(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	if (!have_gdal())
+		skip();
+	char exe[600], f[3][200], out[8192];
+	snprintf(exe, sizeof exe, "%s/clipmapctl", e->d.bindir);
+	for (int i = 0; i < 3; i++)
+		snprintf(f[i], sizeof f[i], "%s/export%d.tif", e->d.dir, i);
+	char *const world[] = { exe, "render", e->planet, "color", "--level", "1", "--world",
+				"--quiet", "-o", f[0], NULL };
+	/* level 3 (16 × 8 tiles of 22.5°): 2 × 2 tiles around 10°S 179°E: x 15..16 → 157.5..202.5 */
+	char *const block[] = { exe, "render", e->planet, "height", "--level", "3", "--at",
+				"-10,179", "--tiles", "2", "--quiet", "-o", f[1], NULL };
+	char *const tile[] = { exe, "-s", e->d.sock, "tile", "test", "height", "4", "3", "13", "2",
+			       "-o", f[2], NULL };
+	char *const *cmds[] = { world, block, tile };
+	static const char *const corners[][2] = {
+		{ "Upper Left  (-180.0000000,  90.0000000)", "Lower Right ( 180.0000000, -90.0000000)" },
+		{ "Upper Left  ( 157.5000000,   0.0000000)", "Lower Right (     202.500,     -45.000)" },
+		/* lx 4, ly 3: 16 × 8 tiles; x 13 → 112.5..135, y 2 → 45..22.5 */
+		{ "Upper Left  ( 112.5000000,  45.0000000)", "Lower Right ( 135.0000000,  22.5000000)" },
+	};
+	for (int i = 0; i < 3; i++) {
+		int rc = daemon_env_run(cmds[i], out, sizeof out);
+		if (rc)
+			fail_msg("export %d: exit %d: %s", i, rc, out);
+		char *const info[] = { "gdalinfo", f[i], NULL };
+		assert_int_equal(daemon_env_run(info, out, sizeof out), 0);
+		if (!strstr(out, "ID[\"EPSG\",4326]") || !strstr(out, corners[i][0]) ||
+		    !strstr(out, corners[i][1]))
+			fail_msg("export %d: gdalinfo shows no EPSG:4326 or wrong corners (want %s, "
+				 "%s):\n%s", i, corners[i][0], corners[i][1], out);
+	}
+}
+
 static void revalidation_and_keepalive(void **state)
 {
 	struct env *e = *state;
@@ -447,6 +486,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_setup_teardown(gdal_equals_render, setup, teardown),
 		cmocka_unit_test_setup_teardown(heights_and_georeference, setup, teardown),
+		cmocka_unit_test_setup_teardown(exports_georeferenced, setup, teardown),
 		cmocka_unit_test_setup_teardown(revalidation_and_keepalive, setup, teardown),
 		cmocka_unit_test_setup_teardown(bad_requests, setup, teardown),
 		cmocka_unit_test_setup_teardown(metrics_count, setup, teardown),
