@@ -26,6 +26,7 @@
 #include "common/strbuf.h"
 #include "common/xalloc.h"
 #include "conf.h"
+#include "http_cesium.h"
 #include "http_route.h"
 #include "http_wmts.h"
 
@@ -52,6 +53,7 @@ struct hreq {
 	struct MHD_Connection *c;
 	struct planet_set *ps; /* the reference that keeps node alive */
 	struct node *node;
+	const struct planet *terrain; /* Cesium terrain of this planet; NULL: an image */
 	struct tile_key key;
 	enum pix_type type;
 	enum geoimg_format fmt;
@@ -77,6 +79,7 @@ static enum MHD_Result send_buf(struct http *h, struct MHD_Connection *c, unsign
 		return MHD_NO;
 	}
 	MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, type);
+	MHD_add_response_header(r, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, "*");
 	if (status == MHD_HTTP_UNAUTHORIZED)
 		MHD_add_response_header(r, MHD_HTTP_HEADER_WWW_AUTHENTICATE,
 					"Bearer realm=\"clipmapd\"");
@@ -157,25 +160,33 @@ static void *pixels_for(const struct tile *t, enum geoimg_format fmt, struct geo
 	}
 }
 
+/* Answers with tile t: an image in fmt, or (terrain set) a quantized-mesh tile of that
+ * planet. */
 static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const struct tile *t,
-				 enum geoimg_format fmt, const char *etag)
+				 enum geoimg_format fmt, const struct planet *terrain,
+				 const char *etag)
 {
-	struct geoimg im;
-	const char *why = NULL;
-	void *own = pixels_for(t, fmt, &im, &why);
-	if (why)
-		return text(h, c, MHD_HTTP_BAD_REQUEST, "%s", why);
-	struct geo_rect r;
-	grid_tile_rect(&t->key, &r);
-	im.bounds = &r;
 	unsigned char *out = NULL;
 	size_t n = 0;
-	char err[256];
-	int rc = geoimg_encode(&im, fmt, &out, &n, err);
-	free(own);
-	if (rc < 0) {
-		log_msg(LOG_WARN, "http: encoding a tile: %s", err);
-		return text(h, c, MHD_HTTP_INTERNAL_SERVER_ERROR, "encoding failed: %s", err);
+	if (terrain) {
+		cesium_quantized_mesh(terrain, t, &out, &n);
+	} else {
+		struct geoimg im;
+		const char *why = NULL;
+		void *own = pixels_for(t, fmt, &im, &why);
+		if (why)
+			return text(h, c, MHD_HTTP_BAD_REQUEST, "%s", why);
+		struct geo_rect r;
+		grid_tile_rect(&t->key, &r);
+		im.bounds = &r;
+		char err[256];
+		int rc = geoimg_encode(&im, fmt, &out, &n, err);
+		free(own);
+		if (rc < 0) {
+			log_msg(LOG_WARN, "http: encoding a tile: %s", err);
+			return text(h, c, MHD_HTTP_INTERNAL_SERVER_ERROR, "encoding failed: %s",
+				    err);
+		}
 	}
 	struct MHD_Response *resp = MHD_create_response_from_buffer(n, out, MHD_RESPMEM_MUST_FREE);
 	if (!resp) {
@@ -184,7 +195,8 @@ static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const
 	}
 	char cc[64];
 	snprintf(cc, sizeof cc, "public, max-age=%d", h->max_age);
-	MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE, geoimg_mime(fmt));
+	MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE,
+				terrain ? "application/vnd.quantized-mesh" : geoimg_mime(fmt));
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, cc);
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, "*");
@@ -331,14 +343,27 @@ static enum MHD_Result index_page(struct http *h, struct MHD_Connection *c)
 	return send_buf(h, c, MHD_HTTP_OK, "text/html; charset=utf-8", s, n, true);
 }
 
+/* The layer Cesium terrain is made from: the planet's first height layer. */
+static const struct planet_layer *height_layer(const struct planet *p)
+{
+	for (size_t i = 0; i < p->nlayers; i++)
+		if (p->layers[i].type == PIX_HEIGHT)
+			return &p->layers[i];
+	return NULL;
+}
+
 static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 				    const struct http_route *rt, void **con_cls)
 {
 	struct planet_set *ps = current(h);
 	struct planet *p = planet_set_find(ps, rt->planet);
-	const struct planet_layer *l = p ? planet_find_layer(p, rt->layer) : NULL;
+	bool terrain = rt->kind == HTTP_CESIUM_TILE;
+	const struct planet_layer *l = !p ? NULL : terrain ? height_layer(p)
+							   : planet_find_layer(p, rt->layer);
 	if (!p || !l) {
 		planet_set_unref(ps);
+		if (p && terrain)
+			return text(h, c, MHD_HTTP_NOT_FOUND, "planet %s has no height layer", p->name);
 		return text(h, c, MHD_HTTP_NOT_FOUND, "no %s %s (see /wmts/1.0.0/WMTSCapabilities.xml)",
 			    p ? "layer" : "planet", p ? rt->layer : rt->planet);
 	}
@@ -350,8 +375,8 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 	struct tile_key key = { .node = l->node->hash, .x = rt->x, .y = rt->y,
 				.lx = (uint8_t)(rt->z + 1), .ly = (uint8_t)rt->z };
 	char etag[64];
-	snprintf(etag, sizeof etag, "\"%016llx-%u-%u-%u-%d\"", (unsigned long long)key.node, rt->z,
-		 rt->x, rt->y, (int)rt->fmt);
+	snprintf(etag, sizeof etag, "\"%016llx-%u-%u-%u-%s\"", (unsigned long long)key.node, rt->z,
+		 rt->x, rt->y, terrain ? "qm" : geoimg_mime(rt->fmt) + 6);
 	const char *inm = MHD_lookup_connection_value(c, MHD_HEADER_KIND,
 						      MHD_HTTP_HEADER_IF_NONE_MATCH);
 	if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
@@ -366,14 +391,14 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 	}
 	struct tile *t = cache_lookup(h->cache, &key);
 	if (t) {
-		enum MHD_Result res = send_tile(h, c, t, rt->fmt, etag);
+		enum MHD_Result res = send_tile(h, c, t, rt->fmt, terrain ? p : NULL, etag);
 		tile_unref(t);
 		planet_set_unref(ps);
 		return res;
 	}
 	struct hreq *q = xcalloc(1, sizeof *q);
 	*q = (struct hreq){ .h = h, .c = c, .ps = ps, .node = l->node, .key = key,
-			    .type = l->type, .fmt = rt->fmt };
+			    .type = l->type, .fmt = rt->fmt, .terrain = terrain ? p : NULL };
 	memcpy(q->etag, etag, sizeof etag);
 	pthread_mutex_init(&q->mu, NULL);
 	q->req = sched_req_create(h->sched, on_ready, q);
@@ -416,7 +441,7 @@ static enum MHD_Result tile_ready(struct http *h, struct MHD_Connection *c, stru
 	if (!t)
 		return text(h, c, MHD_HTTP_INTERNAL_SERVER_ERROR, "the tile could not be made: %s",
 			    strerror(-err));
-	enum MHD_Result res = send_tile(h, c, t, q->fmt, q->etag);
+	enum MHD_Result res = send_tile(h, c, t, q->fmt, q->terrain, q->etag);
 	tile_unref(t);
 	return res;
 }
@@ -493,7 +518,20 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		planet_set_unref(ps);
 		return send_buf(h, c, MHD_HTTP_OK, "application/xml", x, n, true);
 	}
-	case HTTP_TILE: return tile_request(h, c, &rt, con_cls);
+	case HTTP_TILE:
+	case HTTP_CESIUM_TILE: return tile_request(h, c, &rt, con_cls);
+	case HTTP_CESIUM_LAYER: {
+		struct planet_set *ps = current(h);
+		const struct planet *p = planet_set_find(ps, rt.planet);
+		if (!p || !height_layer(p)) {
+			planet_set_unref(ps);
+			return text(h, c, MHD_HTTP_NOT_FOUND, "no planet %s with heights", rt.planet);
+		}
+		size_t n;
+		char *j = cesium_layer_json(p, &n);
+		planet_set_unref(ps);
+		return send_buf(h, c, MHD_HTTP_OK, "application/json", j, n, true);
+	}
 	}
 	return MHD_NO;
 }

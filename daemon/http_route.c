@@ -74,14 +74,16 @@ static void bad(struct http_route *r, const char *why)
 	r->why = why;
 }
 
-/* planet layer z a b.ext: a, b are (row, col) for WMTS, (x, y) for TMS. */
+/* Level z, then a, b: (row, col) for WMTS, (x, y) for TMS, each a decimal string. */
+static void tile_at(struct http_route *r, const char *zs, const char *as, const char *bs, bool tms);
+
+/* planet layer z a b.ext */
 static void tile(struct http_route *r, char **p, bool tms)
 {
 	if (!name_ok(p[0]) || !name_ok(p[1]))
 		return bad(r, "bad planet or layer name");
 	strcpy(r->planet, p[0]);
 	strcpy(r->layer, p[1]);
-	uint32_t z, a, b;
 	char *dot = strrchr(p[4], '.');
 	if (!dot)
 		return bad(r, "the tile needs an extension: .png, .jpg, .webp or .tif");
@@ -89,9 +91,30 @@ static void tile(struct http_route *r, char **p, bool tms)
 	r->fmt = geoimg_format_parse(dot + 1);
 	if (r->fmt == GEOIMG_NONE)
 		return bad(r, "unknown format: use .png, .jpg, .webp or .tif");
-	if (!number(p[2], GRID_MAX_LEVEL - 1, &z))
+	tile_at(r, p[2], p[3], p[4], tms);
+}
+
+/* planet z x y.terrain */
+static void cesium_tile(struct http_route *r, char **p)
+{
+	if (!name_ok(p[0]))
+		return bad(r, "bad planet name");
+	strcpy(r->planet, p[0]);
+	size_t n = strlen(p[3]);
+	if (n < 9 || strcmp(p[3] + n - 8, ".terrain"))
+		return bad(r, "Cesium tiles end in .terrain");
+	p[3][n - 8] = '\0';
+	tile_at(r, p[1], p[2], p[3], true);
+	if (r->kind == HTTP_TILE)
+		r->kind = HTTP_CESIUM_TILE;
+}
+
+static void tile_at(struct http_route *r, const char *zs, const char *as, const char *bs, bool tms)
+{
+	uint32_t z, a, b;
+	if (!number(zs, GRID_MAX_LEVEL - 1, &z))
 		return bad(r, "bad level");
-	if (!number(p[3], UINT32_MAX, &a) || !number(p[4], UINT32_MAX, &b))
+	if (!number(as, UINT32_MAX, &a) || !number(bs, UINT32_MAX, &b))
 		return bad(r, "bad tile column or row");
 	uint64_t nx = (uint64_t)1 << (z + 1), ny = (uint64_t)1 << z;
 	uint32_t x, y;
@@ -144,4 +167,11 @@ void http_route_parse(const char *url, const char *service, const char *request,
 		tile(r, p + 1, false);
 	else if (n == 7 && !strcmp(p[0], "tms") && !strcmp(p[1], "1.0.0"))
 		tile(r, p + 2, true);
+	else if (n == 3 && !strcmp(p[0], "cesium") && !strcmp(p[2], "layer.json")) {
+		if (!name_ok(p[1]))
+			return bad(r, "bad planet name");
+		strcpy(r->planet, p[1]);
+		r->kind = HTTP_CESIUM_LAYER;
+	} else if (n == 5 && !strcmp(p[0], "cesium"))
+		cesium_tile(r, p + 1);
 }

@@ -7,6 +7,8 @@
  *                                       /wmts?SERVICE=WMTS&REQUEST=GetCapabilities)
  *   /wmts/{planet}/{layer}/{z}/{row}/{col}.{ext}   a tile, WorldCRS84Quad (row 0 north)
  *   /tms/1.0.0/{planet}/{layer}/{z}/{x}/{y}.{ext}  the same tile, TMS global-geodetic (y 0 south)
+ *   /cesium/{planet}/layer.json         Cesium terrain: the tileset (quantized-mesh-1.0, TMS)
+ *   /cesium/{planet}/{z}/{x}/{y}.terrain  a quantized-mesh tile of the planet's heights
  * Level z of the web grids is the daemon's level (lx, ly) = (z + 1, z): 2^(z+1) × 2^z tiles.
  */
 #ifndef CLIPMAP_HTTP_ROUTE_H
@@ -24,6 +26,8 @@ enum http_kind {
 	HTTP_METRICS,
 	HTTP_WMTS_CAPS,
 	HTTP_TILE,
+	HTTP_CESIUM_LAYER, /* planet set */
+	HTTP_CESIUM_TILE,  /* planet, z, x, y set; layer empty (the planet's heights) */
 };
 
 #define HTTP_NAME_MAX 64

@@ -324,6 +324,82 @@ static void exports_georeferenced(void **state)
 	}
 }
 
+/* CesiumJS (npm `cesium` in Node) reads layer.json and decodes quantized-mesh tiles: at texel
+ * corners (the mesh's vertices) the height it interpolates equals the mean of the four texels
+ * around the corner in the daemon's float32 height tile, to the mesh's quantization; a level-0
+ * tile decodes too, and children are declared available. */
+static void cesium_terrain(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char npm[700], script[700];
+	snprintf(npm, sizeof npm, "%s/npm", e->d.bindir);
+	snprintf(script, sizeof script, "%s/tests/http/cesium_heights.mjs", e->d.root);
+	char probe[800];
+	snprintf(probe, sizeof probe, "%s/node_modules/cesium/package.json", npm);
+	if (access(probe, R_OK) != 0) {
+		print_message("no CesiumJS in %s (make deps installs it): skipped\n", npm);
+		skip();
+	}
+	setenv("CLIPMAP_NPM", npm, 1);
+	char base[128], tif[200];
+	snprintf(base, sizeof base, "%s/cesium/test", e->url);
+	/* level 3 (16 × 8 tiles of 22.5°, 64² texels): row 2, column 11 */
+	snprintf(tif, sizeof tif, "%s/h3.tif", e->d.dir);
+	assert_int_equal(get(e, "/wmts/test/height/3/2/11.tif", tif, NULL), 200);
+	struct img_info ii;
+	float *h = read_img(tif, IMG_F32, &ii);
+	static const int corner[][2] = { { 10, 20 }, { 33, 47 }, { 63, 1 }, { 1, 63 } };
+	char pts[4][64];
+	double want[4], lo = INFINITY, hi = -INFINITY;
+	for (int i = 0; i < 64 * 64; i++) {
+		lo = h[i] < lo ? h[i] : lo;
+		hi = h[i] > hi ? h[i] : hi;
+	}
+	for (int k = 0; k < 4; k++) {
+		int ci = corner[k][0], cj = corner[k][1];
+		/* where the mesh put the vertex: u, v quantized to 1/32767 of the tile */
+		double lon = 67.5 + round(ci * 32767.0 / 64) / 32767 * 22.5,
+		       lat = 22.5 + round((64 - cj) * 32767.0 / 64) / 32767 * 22.5;
+		snprintf(pts[k], sizeof pts[k], "%.12f,%.12f", lon, lat);
+		want[k] = (h[(cj - 1) * 64 + ci - 1] + h[(cj - 1) * 64 + ci] + h[cj * 64 + ci - 1] +
+			   h[cj * 64 + ci]) / 4.0;
+	}
+	free(h);
+	char out[8192];
+	char *const argv[] = { "node", script, base, "1000000", "0", "3", "11", "2", pts[0], pts[1],
+			       pts[2], pts[3], NULL };
+	int rc = daemon_env_run(argv, out, sizeof out);
+	if (rc)
+		fail_msg("cesium_heights.mjs: exit %d:\n%s", rc, out);
+	/* The mesh quantizes heights to 1/32767 of the tile's range (corners lie inside it). */
+	double tol = (hi - lo) / 32767.0 + 1e-3;
+	const char *p = out;
+	for (int k = 0; k < 4; k++) {
+		double lon, lat, got;
+		if (sscanf(p, "%lf %lf %lf", &lon, &lat, &got) != 3)
+			fail_msg("unexpected output:\n%s", out);
+		print_message("Cesium at %s: %.3f m, daemon %.3f m\n", pts[k], got, want[k]);
+		if (fabs(got - want[k]) > tol)
+			fail_msg("Cesium reads %.3f m at %s, the daemon's tile says %.3f m (±%.4f)",
+				 got, pts[k], want[k], tol);
+		p = strchr(p, '\n') + 1;
+	}
+	assert_non_null(strstr(out, "available 4 22 4 yes"));
+	/* level 0: the western hemisphere tile, wider than any horizon */
+	char *const l0[] = { "node", script, base, "1000000", "0", "0", "0", "0", "-90,0", NULL };
+	rc = daemon_env_run(l0, out, sizeof out);
+	if (rc)
+		fail_msg("cesium_heights.mjs level 0: exit %d:\n%s", rc, out);
+	double lon, lat, got;
+	assert_int_equal(sscanf(out, "%lf %lf %lf", &lon, &lat, &got), 3);
+	assert_true(fabs(got) < 600); /* the planet's amplitude is 500 m */
+	/* bad requests */
+	assert_int_equal(get(e, "/cesium/test/9/0/0.terrain", NULL, NULL), 404);
+	assert_int_equal(get(e, "/cesium/test/1/0/2.terrain", NULL, NULL), 400);
+	assert_int_equal(get(e, "/cesium/nope/layer.json", NULL, NULL), 404);
+}
+
 static void revalidation_and_keepalive(void **state)
 {
 	struct env *e = *state;
@@ -487,6 +563,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(gdal_equals_render, setup, teardown),
 		cmocka_unit_test_setup_teardown(heights_and_georeference, setup, teardown),
 		cmocka_unit_test_setup_teardown(exports_georeferenced, setup, teardown),
+		cmocka_unit_test_setup_teardown(cesium_terrain, setup, teardown),
 		cmocka_unit_test_setup_teardown(revalidation_and_keepalive, setup, teardown),
 		cmocka_unit_test_setup_teardown(bad_requests, setup, teardown),
 		cmocka_unit_test_setup_teardown(metrics_count, setup, teardown),
