@@ -378,6 +378,33 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 		d->conf.cache_bytes >> 20, CLIPMAP_VERSION);
 }
 
+/* Where CesiumJS is for the browser page: [http] cesium, else the build tree's copy beside
+ * the program (build/npm/..., from make deps). NULL (no page) when neither has Cesium.js. */
+static char *find_cesium(const struct conf *c, char *buf, size_t n)
+{
+	if (c->http_cesium)
+		snprintf(buf, n, "%s", c->http_cesium);
+	else {
+		char exe[512];
+		ssize_t k = readlink("/proc/self/exe", exe, sizeof exe - 1);
+		if (k <= 0)
+			return NULL;
+		exe[k] = '\0';
+		char *slash = strrchr(exe, '/');
+		if (slash)
+			*slash = '\0';
+		if (snprintf(buf, n, "%.400s/npm/node_modules/cesium/Build/Cesium", exe) >= (int)n)
+			return NULL;
+	}
+	char js[600];
+	snprintf(js, sizeof js, "%.500s/Cesium.js", buf);
+	if (access(js, R_OK) == 0)
+		return buf;
+	if (c->http_cesium)
+		log_msg(LOG_WARN, "http: no Cesium.js in %s: the browser page is off", buf);
+	return NULL;
+}
+
 /* The HTTP endpoint of [http], with the token where the listener is not loopback (or
  * require_token asks for it everywhere) unless `open`. */
 static int start_http(struct daemon *d, struct sched *sched, struct cache *cache,
@@ -388,7 +415,8 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 	const uint8_t *tok = server_token(d->srv, &tlen);
 	bool need = tok && !c->http_open &&
 		    (!conf_addr_is_loopback(c->http_listen) || c->require_token != CONF_TOKEN_AUTO);
-	char err[256];
+	char err[256], cesium[512];
+	const char *cdir = find_cesium(c, cesium, sizeof cesium);
 	int rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
 						  .cache = cache, .planets = ps,
 						  .token = need ? tok : NULL, .token_len = need ? tlen : 0,
@@ -396,7 +424,8 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 						  .max_conns = c->http_max_conns,
 						  .max_per_addr = c->http_max_per_addr,
 						  .timeout_s = c->http_timeout_s,
-						  .max_age_s = c->http_max_age_s },
+						  .max_age_s = c->http_max_age_s,
+						  .cesium_dir = cdir },
 			     &d->http, err);
 	if (rc) {
 		log_msg(LOG_ERROR, "%s", err);
@@ -404,9 +433,9 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 	}
 	char host[256], port[16];
 	conf_split_hostport(c->http_listen, host, sizeof host, port, sizeof port);
-	log_msg(LOG_INFO, "http: listening on http://%s%s%s:%u/%s", strchr(host, ':') ? "[" : "",
+	log_msg(LOG_INFO, "http: listening on http://%s%s%s:%u/%s%s", strchr(host, ':') ? "[" : "",
 		host, strchr(host, ':') ? "]" : "", http_port(d->http),
-		need ? " (bearer token required)" : "");
+		need ? " (bearer token required)" : "", cdir ? " (browser viewer)" : "");
 	return 0;
 }
 

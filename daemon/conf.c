@@ -54,6 +54,7 @@ static const struct row rows[] = {
 	{ "store", "disk_mb", K_SIZE_MB, 1, 1L << 26, NULL },
 	{ "http", "listen", K_ADDR, 0, 0, NULL },
 	{ "http", "open", K_BOOL, 0, 1, NULL },
+	{ "http", "cesium", K_PATH, 0, 0, NULL },
 	{ "http", "threads", K_INT, 1, 64, NULL },
 	{ "http", "max_connections", K_INT, 1, 100000, NULL },
 	{ "http", "max_per_address", K_INT, 0, 100000, NULL },
@@ -205,6 +206,7 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		char **dst = strcmp(r->key, "unix") == 0	 ? &c->unix_path
 			     : strcmp(r->key, "token_file") == 0 ? &c->token_file
 			     : strcmp(r->key, "path") == 0	 ? &c->store_path
+			     : strcmp(r->key, "cesium") == 0	 ? &c->http_cesium
 								 : &c->planets_dir;
 		free(*dst);
 		*dst = NULL;
@@ -229,6 +231,7 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	case K_ADDR: { /* [http] listen: one host:port, or empty for none */
 		char host[256], port[16];
 		free(c->http_listen);
+	free(c->http_cesium);
 		c->http_listen = NULL;
 		if (!*v)
 			return 0;
@@ -467,5 +470,6 @@ void conf_fini(struct conf *c)
 	free(c->planets_dir);
 	free(c->store_path);
 	free(c->http_listen);
+	free(c->http_cesium);
 	memset(c, 0, sizeof *c);
 }

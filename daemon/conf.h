@@ -57,6 +57,7 @@ struct conf {
 	uint64_t store_bytes; /* its budget at rest (disk_mb) */
 	/* [http] */
 	char *http_listen;     /* "host:port"; NULL: no HTTP endpoint */
+	char *http_cesium;     /* CesiumJS's Build/Cesium; NULL: beside the program (build tree) */
 	bool http_open;	       /* non-loopback without the token */
 	int http_threads;      /* libmicrohttpd's thread pool */
 	int http_max_conns;    /* connections at once */

@@ -8,6 +8,7 @@
 #include "http.h"
 
 #include <errno.h>
+#include <fcntl.h>
 #include <math.h>
 #include <microhttpd.h>
 #include <netdb.h>
@@ -18,6 +19,8 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "common/errbuf.h"
 #include "common/geoimg.h"
@@ -27,6 +30,7 @@
 #include "common/xalloc.h"
 #include "conf.h"
 #include "http_cesium.h"
+#include "http_page.h"
 #include "http_route.h"
 #include "http_wmts.h"
 
@@ -38,6 +42,7 @@ struct http {
 	size_t token_len;
 	int max_age;
 	uint16_t port;
+	char *cesium_dir; /* NULL: no browser page */
 	pthread_mutex_t mu; /* guards the fields below */
 	struct planet_set *ps;
 	char *metrics;
@@ -446,6 +451,33 @@ static enum MHD_Result tile_ready(struct http *h, struct MHD_Connection *c, stru
 	return res;
 }
 
+/* A file of CesiumJS (rel checked by http_static_path_ok), sent from its descriptor. */
+static enum MHD_Result static_file(struct http *h, struct MHD_Connection *c, const char *rel)
+{
+	if (!h->cesium_dir)
+		return text(h, c, MHD_HTTP_NOT_FOUND, "no CesiumJS here (make deps installs it)");
+	char path[1024];
+	snprintf(path, sizeof path, "%s/%s", h->cesium_dir, rel);
+	int fd = open(path, O_RDONLY | O_CLOEXEC);
+	struct stat st;
+	if (fd < 0 || fstat(fd, &st) < 0 || !S_ISREG(st.st_mode)) {
+		if (fd >= 0)
+			close(fd);
+		return text(h, c, MHD_HTTP_NOT_FOUND, "no such file: %s", rel);
+	}
+	struct MHD_Response *r = MHD_create_response_from_fd((uint64_t)st.st_size, fd);
+	if (!r) {
+		close(fd);
+		return MHD_NO;
+	}
+	MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, http_mime_of(rel));
+	MHD_add_response_header(r, MHD_HTTP_HEADER_CACHE_CONTROL, "public, max-age=86400");
+	enum MHD_Result res = MHD_queue_response(c, MHD_HTTP_OK, r);
+	MHD_destroy_response(r);
+	atomic_fetch_add(&h->st_bytes, (uint64_t)st.st_size);
+	return res;
+}
+
 static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const char *url,
 				  const char *method, const char *version, const char *upload,
 				  size_t *upload_size, void **con_cls)
@@ -489,6 +521,23 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 		return text(h, c, MHD_HTTP_NOT_FOUND, "no such path (see / for what is served)");
 	case HTTP_BAD: return text(h, c, MHD_HTTP_BAD_REQUEST, "%s", rt.why);
 	case HTTP_INDEX: return index_page(h, c);
+	case HTTP_PAGE:
+		if (!h->cesium_dir)
+			return index_page(h, c);
+		{
+			size_t n;
+			const char *pg = http_page_html(&n);
+			return send_buf(h, c, MHD_HTTP_OK, "text/html; charset=utf-8", (void *)pg, n,
+					false);
+		}
+	case HTTP_PLANETS_JSON: {
+		struct planet_set *ps = current(h);
+		size_t n;
+		char *j = http_planets_json(ps, &n);
+		planet_set_unref(ps);
+		return send_buf(h, c, MHD_HTTP_OK, "application/json", j, n, true);
+	}
+	case HTTP_STATIC: return static_file(h, c, rt.rel);
 	case HTTP_HEALTH: return text(h, c, MHD_HTTP_OK, "ok");
 	case HTTP_READY: {
 		struct planet_set *ps = current(h);
@@ -551,6 +600,7 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 	h->sched = d->sched;
 	h->cache = d->cache;
 	h->max_age = d->max_age_s;
+	h->cesium_dir = d->cesium_dir ? xstrdup(d->cesium_dir) : NULL;
 	h->ps = planet_set_ref(d->planets);
 	if (d->token && d->token_len && d->token_len <= sizeof h->token) {
 		memcpy(h->token, d->token, d->token_len);
@@ -575,6 +625,7 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 		err_set(err, "http: cannot listen on %s: %s", d->listen, strerror(e));
 		planet_set_unref(h->ps);
 		pthread_mutex_destroy(&h->mu);
+		free(h->cesium_dir);
 		free(h);
 		return -e;
 	}
@@ -607,6 +658,7 @@ void http_destroy(struct http *h)
 	MHD_stop_daemon(h->d);
 	planet_set_unref(h->ps);
 	free(h->metrics);
+	free(h->cesium_dir);
 	pthread_mutex_destroy(&h->mu);
 	free(h);
 }

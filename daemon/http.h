@@ -26,6 +26,8 @@ struct http_desc {
 	const uint8_t *token;	    /* required as "Authorization: Bearer TOKEN"; NULL: none */
 	size_t token_len;
 	int threads, max_conns, max_per_addr, timeout_s, max_age_s;
+	const char *cesium_dir; /* CesiumJS's Build/Cesium directory for the browser page; NULL:
+				 * no page ("/" is the plain index) */
 };
 
 struct http_stats {

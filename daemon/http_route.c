@@ -8,6 +8,7 @@
 #include <strings.h>
 
 #include "common/grid.h"
+#include "http_page.h"
 
 #define MAX_PARTS 8
 
@@ -139,12 +140,23 @@ void http_route_parse(const char *url, const char *service, const char *request,
 		      struct http_route *r)
 {
 	*r = (struct http_route){ .kind = HTTP_NOT_FOUND };
+	static const char js[] = "/cesium-js/";
+	if (url && !strncmp(url, js, sizeof js - 1)) {
+		const char *rel = url + sizeof js - 1;
+		if (strlen(rel) < sizeof r->rel && http_static_path_ok(rel)) {
+			strcpy(r->rel, rel);
+			r->kind = HTTP_STATIC;
+		} else {
+			bad(r, "bad file name");
+		}
+		return;
+	}
 	char buf[512], *p[MAX_PARTS];
 	int n = split(url ? url : "", buf, p);
 	if (n < 0)
 		return;
 	if (n == 0) {
-		r->kind = HTTP_INDEX;
+		r->kind = HTTP_PAGE;
 		return;
 	}
 	if (n == 1 && !strcmp(p[0], "healthz"))
@@ -153,6 +165,10 @@ void http_route_parse(const char *url, const char *service, const char *request,
 		r->kind = HTTP_READY;
 	else if (n == 1 && !strcmp(p[0], "metrics"))
 		r->kind = HTTP_METRICS;
+	else if (n == 1 && !strcmp(p[0], "planets.json"))
+		r->kind = HTTP_PLANETS_JSON;
+	else if (n == 1 && !strcmp(p[0], "list"))
+		r->kind = HTTP_INDEX;
 	else if (n == 1 && !strcmp(p[0], "wmts")) {
 		if (service && request && !strcasecmp(service, "WMTS") &&
 		    !strcasecmp(request, "GetCapabilities"))

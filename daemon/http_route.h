@@ -1,6 +1,9 @@
 /* http_route — what an HTTP path asks for, parsed without touching any state (so it is tested
  * and fuzzed alone). The paths (docs/HTTP.md):
- *   /                                   an index of the planets and their layers (HTML)
+ *   /                                   the browser viewer (CesiumJS), or without CesiumJS the
+ *                                       index of the planets and their layers (HTML)
+ *   /planets.json                       the planets the viewer can show
+ *   /cesium-js/{path}                   CesiumJS's own files
  *   /healthz, /readyz                   liveness, readiness (planets loaded)
  *   /metrics                            Prometheus text exposition
  *   /wmts/1.0.0/WMTSCapabilities.xml    OGC WMTS 1.0.0 capabilities (also the KVP form
@@ -20,7 +23,8 @@
 enum http_kind {
 	HTTP_NOT_FOUND = 0,
 	HTTP_BAD,	/* a tile path that is malformed: 400 with route.why */
-	HTTP_INDEX,
+	HTTP_PAGE,  /* "/": the browser viewer */
+	HTTP_INDEX, /* "/list": the plain index */
 	HTTP_HEALTH,
 	HTTP_READY,
 	HTTP_METRICS,
@@ -28,6 +32,8 @@ enum http_kind {
 	HTTP_TILE,
 	HTTP_CESIUM_LAYER, /* planet set */
 	HTTP_CESIUM_TILE,  /* planet, z, x, y set; layer empty (the planet's heights) */
+	HTTP_PLANETS_JSON,
+	HTTP_STATIC, /* rel set: a file under the CesiumJS directory */
 };
 
 #define HTTP_NAME_MAX 64
@@ -38,6 +44,7 @@ struct http_route {
 	uint32_t z, x, y; /* the daemon's grid: x east from -180°, y south from the north pole */
 	enum geoimg_format fmt;
 	const char *why; /* HTTP_BAD: a static message */
+	char rel[512];	 /* HTTP_STATIC: the path below /cesium-js/ */
 };
 
 /* Parses url (the path, without the query) and, for /wmts, the query's SERVICE and REQUEST

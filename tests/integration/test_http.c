@@ -26,6 +26,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "common/clock.h"
@@ -400,6 +401,54 @@ static void cesium_terrain(void **state)
 	assert_int_equal(get(e, "/cesium/nope/layer.json", NULL, NULL), 404);
 }
 
+/* Headless Chromium (a real browser, driven over the DevTools protocol) opens the page: CesiumJS
+ * from build/npm shows the planet with the daemon's imagery on the daemon's terrain, no
+ * console error or exception, and the screenshot is the planet's colours (the test planet's
+ * ramp: blue, green, white), not blank. The screenshot is kept in
+ * build/test-output/test_http_browser.png. */
+static void browser_page(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char npm[700], script[700], probe[800], out[8192];
+	snprintf(npm, sizeof npm, "%s/npm", e->d.bindir);
+	snprintf(script, sizeof script, "%s/tests/http/browser_shot.mjs", e->d.root);
+	snprintf(probe, sizeof probe, "%s/node_modules/cesium/Build/Cesium/Cesium.js", npm);
+	char *const which[] = { "chromium", "--version", NULL };
+	if (access(probe, R_OK) != 0 || daemon_env_run(which, out, sizeof out) != 0) {
+		print_message("no CesiumJS or no chromium (make deps installs both): skipped\n");
+		skip();
+	}
+	char dir[700], png[800], url[200];
+	snprintf(dir, sizeof dir, "%s/test-output", e->d.bindir);
+	mkdir(dir, 0755);
+	snprintf(png, sizeof png, "%s/test_http_browser.png", dir);
+	unlink(png);
+	snprintf(url, sizeof url, "%s/?planet=test&lon=60&lat=20&alt=2500000", e->url);
+	char *const argv[] = { "node", script, url, png, "240", NULL };
+	int rc = daemon_env_run(argv, out, sizeof out);
+	print_message("browser: %s", out);
+	if (rc)
+		fail_msg("the page did not load cleanly in Chromium (exit %d):\n%s", rc, out);
+	struct img_info ii;
+	uint8_t *px = read_img(png, IMG_U8, &ii);
+	long n = (long)ii.width * ii.height, dark = 0, blue = 0, green = 0, white = 0;
+	for (long i = 0; i < n; i++) {
+		const uint8_t *p = px + (size_t)i * ii.channels;
+		int r = p[0], g = p[1], b = p[2];
+		dark += r + g + b < 40;
+		blue += b > 100 && b > r + 40 && b > g + 20;
+		green += g > 60 && g > r + 20 && g > b + 20;
+		white += r > 200 && g > 200 && b > 200;
+	}
+	free(px);
+	print_message("screenshot %s: %dx%d, %.0f %% dark, %.1f %% blue, %.1f %% green, "
+		      "%.1f %% white\n", png, ii.width, ii.height, 100.0 * dark / n, 100.0 * blue / n,
+		      100.0 * green / n, 100.0 * white / n);
+	assert_true(dark < n * 0.75);	     /* a globe, not a black page */
+	assert_true(blue + green > n / 20); /* in the planet's own colours */
+}
+
 static void revalidation_and_keepalive(void **state)
 {
 	struct env *e = *state;
@@ -564,6 +613,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(heights_and_georeference, setup, teardown),
 		cmocka_unit_test_setup_teardown(exports_georeferenced, setup, teardown),
 		cmocka_unit_test_setup_teardown(cesium_terrain, setup, teardown),
+		cmocka_unit_test_setup_teardown(browser_page, setup, teardown),
 		cmocka_unit_test_setup_teardown(revalidation_and_keepalive, setup, teardown),
 		cmocka_unit_test_setup_teardown(bad_requests, setup, teardown),
 		cmocka_unit_test_setup_teardown(metrics_count, setup, teardown),

@@ -24,7 +24,18 @@ static struct http_route parse(const char *url)
 static void routes(void **state)
 {
 	(void)state;
-	assert_int_equal(parse("/").kind, HTTP_INDEX);
+	assert_int_equal(parse("/").kind, HTTP_PAGE);
+	assert_int_equal(parse("/list").kind, HTTP_INDEX);
+	assert_int_equal(parse("/planets.json").kind, HTTP_PLANETS_JSON);
+	struct http_route st = parse("/cesium-js/Widgets/widgets.css");
+	assert_int_equal(st.kind, HTTP_STATIC);
+	assert_string_equal(st.rel, "Widgets/widgets.css");
+	static const char *const bad_files[] = { "/cesium-js/../x.js", "/cesium-js/a/../../x",
+						 "/cesium-js/.hidden", "/cesium-js/a//b.js",
+						 "/cesium-js/", "/cesium-js/a b.js", "/cesium-js/a/" };
+	for (size_t i = 0; i < sizeof bad_files / sizeof bad_files[0]; i++)
+		if (parse(bad_files[i]).kind != HTTP_BAD)
+			fail_msg("%s accepted", bad_files[i]);
 	assert_int_equal(parse("/healthz").kind, HTTP_HEALTH);
 	assert_int_equal(parse("/readyz").kind, HTTP_READY);
 	assert_int_equal(parse("/metrics").kind, HTTP_METRICS);
