@@ -39,6 +39,7 @@
 #define STOP_GRACE_NS 2000000000ull
 #define MAX_WATCH 4
 #define MAX_FOCI 512
+#define ACCEPT_BATCH 16
 #define UNIX_RESERVE 8		       /* sessions over max_sessions kept for the Unix socket */
 #define EVICT_WARN_NS 10000000000ull /* at most one eviction warning per 10 s */
 
@@ -667,7 +668,9 @@ static void admit_preauth(struct server *srv, const struct listener *l,
 
 static void on_accept(struct server *srv, struct listener *l)
 {
-	for (;;) {
+	/* A batch at a time (the listener stays readable), so a flood of connections does not
+	 * keep the sessions' input waiting. */
+	for (int i = 0; i < ACCEPT_BATCH; i++) {
 		struct sockaddr_storage peer;
 		int fd = listen_accept(l, &peer);
 		if (fd < 0) {
@@ -679,7 +682,11 @@ static void on_accept(struct server *srv, struct listener *l)
 		listen_tune(l, fd);
 		srv->accept_unix = l->is_unix;
 		srv->accept_peer = peer;
-		session_create(&srv->env, fd, l);
+		struct session *ss = session_create(&srv->env, fd, l);
+		/* A client sends HELLO with its connect: read it now, so it leaves the pre-auth pool
+		 * before the connections accepted after it could push it out. */
+		if (ss)
+			session_on_event(ss, EPOLLIN);
 	}
 }
 
