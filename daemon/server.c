@@ -645,24 +645,28 @@ static void evict(struct server *srv, struct session_link *victim, const struct 
 	session_close(victim->s, why);
 }
 
-/* Makes room in the new connection's pre-auth pool (and its peer's share of it). */
-static void admit_preauth(struct server *srv, const struct listener *l,
-			  const struct sockaddr_storage *peer)
+/* Brings the pre-auth pool of a new connection from peer back within its caps, closing the
+ * oldest connections first (the new one is the newest: it stays). */
+static void enforce_preauth(struct server *srv, const struct listener *l,
+			    const struct sockaddr_storage *peer)
 {
 	int k = l->is_unix;
 	if (!l->is_unix) {
-		struct session_link *oldest = NULL;
-		int same = 0;
-		for (struct session_link *p = srv->pre_head[0]; p; p = p->pre_next) {
-			if (same_host(&p->peer, peer)) {
-				oldest = oldest ? oldest : p;
-				same++;
+		for (;;) {
+			struct session_link *oldest = NULL;
+			int same = 0;
+			for (struct session_link *p = srv->pre_head[0]; p; p = p->pre_next) {
+				if (same_host(&p->peer, peer)) {
+					oldest = oldest ? oldest : p;
+					same++;
+				}
 			}
-		}
-		if (same >= srv->conf->max_preauth_per_peer)
+			if (same <= srv->conf->max_preauth_per_peer)
+				break;
 			evict(srv, oldest, l, "max_preauth_per_peer");
+		}
 	}
-	if (srv->npre[k] >= (size_t)srv->conf->max_preauth && srv->pre_head[k])
+	while (srv->npre[k] > (size_t)srv->conf->max_preauth && srv->pre_head[k])
 		evict(srv, srv->pre_head[k], l, "max_preauth");
 }
 
@@ -678,15 +682,16 @@ static void on_accept(struct server *srv, struct listener *l)
 				log_msg(LOG_WARN, "%s: accept: %s", l->name, strerror(-fd));
 			return;
 		}
-		admit_preauth(srv, l, &peer);
 		listen_tune(l, fd);
 		srv->accept_unix = l->is_unix;
 		srv->accept_peer = peer;
 		struct session *ss = session_create(&srv->env, fd, l);
-		/* A client sends HELLO with its connect: read it now, so it leaves the pre-auth pool
-		 * before the connections accepted after it could push it out. */
-		if (ss)
-			session_on_event(ss, EPOLLIN);
+		if (!ss)
+			continue;
+		/* A client sends HELLO with its connect: read it now, so a well-behaved one leaves
+		 * the pre-auth pool at once and costs no one a slot; then the caps. */
+		session_on_event(ss, EPOLLIN);
+		enforce_preauth(srv, l, &peer);
 	}
 }
 

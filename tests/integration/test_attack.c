@@ -9,8 +9,14 @@
  * leaves the first one reachable; a stale socket file is replaced; a daemon that stops
  * removes only its own socket. Real processes (build/clipmapd, build/clipmapctl, python3);
  * skipped when they are missing. Latency is reported, never asserted tightly (the machine is
- * shared): the harness's own goal (p99 <= 100 ms) is for `attack.py --long`.
+ * shared): the harness's own goal (p99 <= 100 ms) is for `attack.py --long`. Admission in
+ * detail: connections that have not said HELLO are kept per listener kind and per TCP peer,
+ * the oldest closed to make room; max_sessions is checked at HELLO (ERROR busy), and the Unix
+ * socket has slots beyond it that TCP sessions cannot take.
  */
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <poll.h>
 #include <setjmp.h>
 #include <signal.h>
 #include <stdarg.h>
@@ -20,10 +26,14 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <sys/un.h>
 #include <unistd.h>
 #include <cmocka.h>
 
+#include "common/clock.h"
+#include "common/proto.h"
 #include "support/daemon_env.h"
 
 #define OUT_CAP (256u << 10)
@@ -206,11 +216,200 @@ static void test_socket_never_stolen(void **state)
 	assert_true(gone);
 }
 
+/* ---- admission, with a minimal client over common/proto.h ------------------------------ */
+
+static int dial_unix(const char *path)
+{
+	int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	struct sockaddr_un sa = { .sun_family = AF_UNIX };
+	snprintf(sa.sun_path, sizeof sa.sun_path, "%s", path);
+	assert_true(fd >= 0);
+	assert_int_equal(connect(fd, (struct sockaddr *)&sa, sizeof sa), 0);
+	return fd;
+}
+
+/* A TCP connection from the loopback address 127.0.0.src. */
+static int dial_tcp(int port, int src)
+{
+	int fd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	assert_true(fd >= 0);
+	struct sockaddr_in me = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(0x7f000000u | (uint32_t)src) };
+	assert_int_equal(bind(fd, (struct sockaddr *)&me, sizeof me), 0);
+	struct sockaddr_in sa = { .sin_family = AF_INET, .sin_port = htons((uint16_t)port),
+				  .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+	assert_int_equal(connect(fd, (struct sockaddr *)&sa, sizeof sa), 0);
+	return fd;
+}
+
+static void say(int fd, const struct proto_msg *m)
+{
+	struct pbuf b;
+	pbuf_init(&b);
+	char err[256];
+	assert_true(proto_encode(&b, m, err) > 0);
+	assert_int_equal(send(fd, b.data, b.len, MSG_NOSIGNAL), (ssize_t)b.len);
+	pbuf_fini(&b);
+}
+
+static void say_hello(int fd)
+{
+	struct proto_msg m = { .type = PROTO_HELLO,
+			       .hello = { .ver_min = PROTO_VERSION, .ver_max = PROTO_VERSION,
+					  .name = "test_attack/1" } };
+	say(fd, &m);
+}
+
+/* The next frame's type into *type (its ERROR code into *code), 1; 0 when nothing came in
+ * timeout_ms; -1 at end of stream (the daemon closed). */
+static int hear(int fd, int timeout_ms, uint16_t *type, uint16_t *code)
+{
+	static uint8_t buf[1 << 16];
+	size_t len = 0;
+	uint64_t end = clock_now_ms() + (uint64_t)timeout_ms;
+	for (;;) {
+		size_t need = 0;
+		char err[256];
+		struct proto_hdr h;
+		ssize_t r = proto_frame_check(buf, len, &h, &need, err);
+		assert_true(r >= 0);
+		if (r > 0) {
+			struct proto_msg m = { 0 };
+			assert_int_equal(proto_decode(buf, (size_t)r, &m, &need, err), r);
+			*type = m.type;
+			*code = m.type == PROTO_ERROR ? m.error.code : 0;
+			proto_msg_fini(&m);
+			return 1;
+		}
+		int64_t left = (int64_t)(end - clock_now_ms());
+		struct pollfd pf = { .fd = fd, .events = POLLIN };
+		if (left <= 0 || poll(&pf, 1, (int)left) <= 0)
+			return 0;
+		ssize_t n = recv(fd, buf + len, sizeof buf - len, 0);
+		if (n <= 0)
+			return -1;
+		len += (size_t)n;
+	}
+}
+
+/* Whether the daemon closed fd (within timeout_ms), having said nothing. */
+static bool closed_silently(int fd, int timeout_ms)
+{
+	uint16_t t = 0, c = 0;
+	return hear(fd, timeout_ms, &t, &c) == -1;
+}
+
+static void expect(int fd, uint16_t type, uint16_t code)
+{
+	uint16_t t = 0, c = 0;
+	int r = hear(fd, 10000, &t, &c);
+	if (r != 1 || t != type || c != code)
+		fail_msg("expected %s (code %u), got %d: %s code %u", proto_type_name(type), code, r,
+			 r == 1 ? proto_type_name(t) : "nothing", c);
+}
+
+static void test_admission(void **state)
+{
+	struct daemon_env *e = *state;
+	char err[256];
+	assert_int_equal(daemon_env_init(e, "test_attack_admit"), 0);
+	if (!have_tools(e))
+		skip();
+	static const char *const set[] = { "listen.tcp = 127.0.0.1:0", "listen.max_sessions = 2",
+					   "listen.max_preauth = 4",
+					   "listen.max_preauth_per_peer = 2",
+					   "listen.handshake_timeout = 60", "log.level = info", NULL };
+	struct daemon_env_conf c = { .set = set };
+	if (daemon_env_start(e, &c, err))
+		fail_msg("daemon: %s", err);
+
+	/* per peer: a third silent connection from 127.0.0.1 closes the first */
+	int a[3];
+	for (int i = 0; i < 3; i++) {
+		a[i] = dial_tcp(e->port, 1);
+		usleep(100000); /* accepted in this order */
+	}
+	assert_true(closed_silently(a[0], 5000));
+	assert_false(closed_silently(a[1], 300));
+	/* the TCP pool: 4 more peers push out the two oldest (a[1], a[2]) */
+	int b[4];
+	for (int i = 0; i < 4; i++) {
+		b[i] = dial_tcp(e->port, 3 + i);
+		usleep(100000);
+	}
+	assert_true(closed_silently(a[1], 5000));
+	assert_true(closed_silently(a[2], 5000));
+	assert_false(closed_silently(b[0], 300));
+	/* silent TCP connections do not touch the Unix socket's pool, nor a TCP client that
+	 * says HELLO with its connect (read before the pool's cap is applied) */
+	int u = dial_unix(e->sock);
+	say_hello(u);
+	expect(u, PROTO_HELLO_OK, 0);
+	int t1 = dial_tcp(e->port, 20);
+	say_hello(t1);
+	expect(t1, PROTO_HELLO_OK, 0);
+	assert_false(closed_silently(b[0], 300)); /* its HELLO was read first: no one pushed out */
+	/* max_sessions = 2 (u and t1): a TCP HELLO is refused with busy, a Unix one still gets
+	 * in (the Unix socket's reserve) */
+	int t2 = dial_tcp(e->port, 21);
+	say_hello(t2);
+	expect(t2, PROTO_ERROR, PROTO_E_BUSY);
+	assert_true(closed_silently(t2, 5000));
+	int u2 = dial_unix(e->sock);
+	say_hello(u2);
+	expect(u2, PROTO_HELLO_OK, 0);
+	assert_true(daemon_env_log_count(e, "refused at HELLO") == 1);
+
+	/* the figures in STATS */
+	struct proto_msg q = { .type = PROTO_STATS_REQ, .stats_req = { .req = 5 } };
+	say(u2, &q);
+	static uint8_t buf[1 << 20];
+	size_t len = 0;
+	struct proto_msg m = { 0 };
+	for (uint64_t end = clock_now_ms() + 10000; clock_now_ms() < end;) {
+		size_t need;
+		char e2[256];
+		struct proto_hdr h;
+		ssize_t r = proto_frame_check(buf, len, &h, &need, e2);
+		assert_true(r >= 0);
+		if (r > 0) {
+			assert_int_equal(proto_decode(buf, (size_t)r, &m, &need, e2), r);
+			break;
+		}
+		ssize_t n = recv(u2, buf + len, sizeof buf - len, 0);
+		assert_true(n > 0);
+		len += (size_t)n;
+	}
+	assert_int_equal(m.type, PROTO_STATS);
+	uint64_t evicted = 0, refused = 0, preauth = 99;
+	for (unsigned i = 0; i < m.stats.count; i++) {
+		const struct proto_stat *st = &m.stats.items[i];
+		if (strcmp(st->key, "sessions.preauth.evicted") == 0)
+			evicted = st->u;
+		else if (strcmp(st->key, "sessions.refused") == 0)
+			refused = st->u;
+		else if (strcmp(st->key, "sessions.preauth") == 0)
+			preauth = st->u;
+	}
+	proto_msg_fini(&m);
+	assert_int_equal(evicted, 3);
+	assert_int_equal(refused, 1);
+	assert_int_equal(preauth, 4); /* b[0..3] */
+	for (int i = 0; i < 3; i++)
+		close(a[i]);
+	for (int i = 0; i < 4; i++)
+		close(b[i]);
+	close(u);
+	close(u2);
+	close(t1);
+	close(t2);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_setup_teardown(test_attacks, setup, teardown),
 		cmocka_unit_test_setup_teardown(test_socket_never_stolen, setup, teardown),
+		cmocka_unit_test_setup_teardown(test_admission, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
