@@ -22,6 +22,10 @@
 #include "common/log.h"
 
 #define UNIX_SNDBUF (4 << 20) /* bytes asked for per Unix session */
+/* Connections the kernel queues before accept (capped by net.core.somaxconn): deep, so a
+ * burst of connections (an attacker's) does not make the kernel drop a client's SYN, which
+ * costs it a 1 s retransmission; the pre-auth pools bound what is accepted. */
+#define BACKLOG 4096
 
 static bool sa_loopback(const struct sockaddr_storage *ss)
 {
@@ -119,7 +123,7 @@ static int listen_unix(const struct conf *c, const char *path, struct listener *
 		return e;
 	}
 	if (bind(fd, (struct sockaddr *)&sa, sizeof sa) || lstat(path, &st) ||
-	    chmod(path, c->unix_mode) || listen(fd, 128)) {
+	    chmod(path, c->unix_mode) || listen(fd, BACKLOG)) {
 		int e = -errno;
 		err_set(err, "%s: %s", path, strerror(-e));
 		close(fd);
@@ -149,7 +153,7 @@ static int listen_tcp(const char *hostport, char err[256])
 	int fd = socket(ai->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
 	int one = 1;
 	if (fd < 0 || setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) ||
-	    bind(fd, ai->ai_addr, ai->ai_addrlen) || listen(fd, 128)) {
+	    bind(fd, ai->ai_addr, ai->ai_addrlen) || listen(fd, BACKLOG)) {
 		int e = -errno;
 		err_set(err, "%s: %s", hostport, strerror(-e));
 		if (fd >= 0)

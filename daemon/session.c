@@ -134,10 +134,11 @@ send_error(struct session *s, uint16_t code, uint16_t ref_type, uint32_t ref_id,
 	s->env->counters->errors_sent++;
 	/* A failed authentication is an operator's business: a warning, with the peer. Errors
 	 * before the handshake are otherwise chatter (a garbage flood must not flood the log). */
-	enum log_level lv = code == PROTO_E_AUTH		? LOG_WARN
-			    : code == PROTO_E_SHUTDOWN		? LOG_DEBUG
-			    : s->st == PROTO_ST_HANDSHAKE ? LOG_DEBUG
-							  : LOG_INFO;
+	enum log_level lv = LOG_INFO;
+	if (code == PROTO_E_AUTH)
+		lv = LOG_WARN;
+	else if (code == PROTO_E_SHUTDOWN || s->st == PROTO_ST_HANDSHAKE)
+		lv = LOG_DEBUG;
 	char esc[700];
 	log_msg(lv, "session %llu (%s, %s): error %s: %s", (unsigned long long)s->id, s->name,
 		s->peer, proto_code_name(code), log_escape(esc, sizeof esc, msg));
