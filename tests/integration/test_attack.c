@@ -35,6 +35,7 @@
 #include "common/clock.h"
 #include "common/proto.h"
 #include "support/daemon_env.h"
+#include "support/slow.h"
 
 #define OUT_CAP (256u << 10)
 
@@ -93,10 +94,16 @@ static void test_attacks(void **state)
 	snprintf(tcp, sizeof tcp, "127.0.0.1:%d", e->port);
 	snprintf(pid, sizeof pid, "%d", (int)e->daemon);
 	snprintf(ctl, sizeof ctl, "%s/clipmapctl", e->bindir);
-	/* generous latency bound: a shared 2-core machine; the figures are printed */
+	/* A generous latency bound: a shared 2-core machine (the figures are printed). A
+	 * sanitizer build (CLIPMAP_TEST_SLOW > 1) is slower, and ASan's quarantine holds freed
+	 * memory: 512 MiB still tells 48 buffered 16 MiB frames (768 MiB) apart. */
+	char p99[32], rss[32], slack[32];
+	snprintf(p99, sizeof p99, "%.0f", test_slow(2000));
+	snprintf(rss, sizeof rss, "%d", test_slow(1) > 1 ? 512 : 64);
+	snprintf(slack, sizeof slack, "%.1f", test_slow(2));
 	char *argv[] = { "python3", script, "--short", "--unix", e->sock, "--tcp", tcp, "--pid", pid,
 			 "--ctl", ctl, "--handshake-timeout", "1", "--frame-timeout", "1",
-			 "--p99-ms", "2000", "--rss-mb", "64", NULL };
+			 "--p99-ms", p99, "--rss-mb", rss, "--slack", slack, NULL };
 	char *out = malloc(OUT_CAP);
 	assert_non_null(out);
 	int rc = daemon_env_run(argv, out, OUT_CAP);
@@ -104,14 +111,16 @@ static void test_attacks(void **state)
 	print_message("%s", sum ? sum : out); /* the figures, in the test's output */
 	if (rc != 0)
 		print_message("%s\n", out);
-	assert_int_equal(rc, 0);
-	assert_non_null(sum);
-	assert_non_null(strstr(sum, "\"failed\": []"));
+	bool held = rc == 0 && sum && strstr(sum, "\"failed\": []");
 	/* every 16 MiB frame was refused at its header with `state` (a client never sends TILE) */
-	assert_non_null(strstr(out, "\"errors_read\": {\"state\": "));
-	assert_non_null(strstr(sum, "\"silent_error\": \"limit\""));
-	assert_non_null(strstr(sum, "\"partial_error\": \"limit\""));
+	bool refused = strstr(out, "\"errors_read\": {\"state\": ") != NULL;
+	bool timeouts = sum && strstr(sum, "\"silent_error\": \"limit\"") &&
+			strstr(sum, "\"partial_error\": \"limit\"");
 	free(out);
+	assert_int_equal(rc, 0);
+	assert_true(held);
+	assert_true(refused);
+	assert_true(timeouts);
 
 	/* the daemon lived through it */
 	assert_int_equal(kill(e->daemon, 0), 0);
@@ -344,8 +353,13 @@ static void test_admission(void **state)
 	int u = dial_unix(e->sock);
 	say_hello(u);
 	expect(u, PROTO_HELLO_OK, 0);
+	/* (the daemon paused, so the HELLO is surely there when it accepts: a client whose
+	 * HELLO comes after the accept counts as silent until it arrives) */
+	assert_int_equal(kill(e->daemon, SIGSTOP), 0);
 	int t1 = dial_tcp(e->port, 20);
 	say_hello(t1);
+	usleep(100000);
+	assert_int_equal(kill(e->daemon, SIGCONT), 0);
 	expect(t1, PROTO_HELLO_OK, 0);
 	assert_false(closed_silently(b[0], 300)); /* its HELLO was read first: no one pushed out */
 	/* max_sessions = 2 (u and t1): a TCP HELLO is refused with busy, a Unix one still gets
