@@ -373,6 +373,27 @@ static void test_admission(void **state)
 	expect(u2, PROTO_HELLO_OK, 0);
 	assert_true(daemon_env_log_count(e, "refused at HELLO") == 1);
 
+	/* refused at the header, the body never sent: a server-to-client type before HELLO and
+	 * after it, a client type before HELLO */
+	static const uint16_t types[3] = { PROTO_TILE, PROTO_PLANETS, PROTO_WANT };
+	for (int i = 0; i < 3; i++) {
+		int x = dial_unix(e->sock);
+		if (i == 1) {
+			say_hello(x);
+			expect(x, PROTO_HELLO_OK, 0);
+		}
+		uint8_t h[PROTO_HDR] = { 'C', 'L', 'M', 'P', PROTO_VERSION, 0 };
+		uint32_t n = i == 2 ? 60000 : 8u << 20;
+		h[6] = (uint8_t)types[i];
+		h[7] = (uint8_t)(types[i] >> 8);
+		for (int k = 0; k < 4; k++)
+			h[8 + k] = (uint8_t)(n >> (8 * k));
+		assert_int_equal(send(x, h, sizeof h, MSG_NOSIGNAL), (ssize_t)sizeof h);
+		expect(x, PROTO_ERROR, PROTO_E_STATE);
+		assert_true(closed_silently(x, 5000));
+		close(x);
+	}
+
 	/* the figures in STATS */
 	struct proto_msg q = { .type = PROTO_STATS_REQ, .stats_req = { .req = 5 } };
 	say(u2, &q);

@@ -311,13 +311,11 @@ def scenario_slow(args):
         s.close()
         out["silent_closed_s"], out["silent_error"] = t, err
     if args.frame_timeout:
-        s, rd, _, _ = cmproto.handshake(args.unix, token=args.token, name="attack-slow/1")
+        s, _, _, _ = cmproto.handshake(args.unix, token=args.token, name="attack-slow/1")
         s.sendall(cmproto.stats_req(7)[:7])  # half a header, and nothing more
-        t0 = time.monotonic()
         t, err = wait_closed(s, args.frame_timeout + args.slack + 3)
         s.close()
         out["partial_closed_s"], out["partial_error"] = t, err
-        del t0, rd
     return out
 
 
