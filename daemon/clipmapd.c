@@ -102,7 +102,8 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 }
 
 /* Re-reads clipmapd.conf and applies the keys that can change while running: [log] level,
- * [engine] planets and strict_planets, [listen] max_sessions, [session] max_want, max_rate,
+ * [engine] planets and strict_planets, [listen] max_sessions, max_preauth, max_preauth_per_peer,
+ * handshake_timeout, frame_timeout, [session] max_want, max_rate,
  * max_pending_kb, max_frame_kb, max_jobs. The others keep their running values (a warning
  * names each one that changed). A file that does not load changes nothing. */
 static void reload_conf(struct daemon *d)
@@ -121,6 +122,10 @@ static void reload_conf(struct daemon *d)
 	c->strict_planets = nc.strict_planets;
 	c->log_level = nc.log_level;
 	c->max_sessions = nc.max_sessions;
+	c->max_preauth = nc.max_preauth;
+	c->max_preauth_per_peer = nc.max_preauth_per_peer;
+	c->handshake_timeout = nc.handshake_timeout;
+	c->frame_timeout = nc.frame_timeout;
 	c->max_want = nc.max_want;
 	c->max_rate = nc.max_rate;
 	c->max_pending = nc.max_pending;

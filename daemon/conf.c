@@ -37,6 +37,10 @@ static const struct row rows[] = {
 	{ "listen", "token_file", K_PATH, 0, 0, NULL },
 	{ "listen", "require_token", K_ENUM, 0, 0, token_names },
 	{ "listen", "max_sessions", K_INT, 1, 100000, NULL },
+	{ "listen", "max_preauth", K_INT, 1, 100000, NULL },
+	{ "listen", "max_preauth_per_peer", K_INT, 1, 100000, NULL },
+	{ "listen", "handshake_timeout", K_INT, 1, 3600, NULL },
+	{ "listen", "frame_timeout", K_INT, 1, 3600, NULL },
 	{ "engine", "planets", K_PATH, 0, 0, NULL },
 	{ "engine", "strict_planets", K_BOOL, 0, 1, NULL },
 	{ "engine", "workers", K_INT, 0, 1024, NULL },
@@ -148,6 +152,10 @@ static void defaults(struct conf *c)
 	c->tcp[0] = xstrdup("127.0.0.1:7878");
 	c->ntcp = 1;
 	c->max_sessions = 256;
+	c->max_preauth = 32;
+	c->max_preauth_per_peer = 8;
+	c->handshake_timeout = 10;
+	c->frame_timeout = 30;
 	c->planets_dir = xstrdup("/etc/clipmap/planets");
 	c->worker_nice = 5;
 	c->cache_bytes = (size_t)1024 << 20;
@@ -275,6 +283,14 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	const char *k = r->key;
 	if (strcmp(k, "max_sessions") == 0)
 		c->max_sessions = (int)n;
+	else if (strcmp(k, "max_preauth") == 0)
+		c->max_preauth = (int)n;
+	else if (strcmp(k, "max_preauth_per_peer") == 0)
+		c->max_preauth_per_peer = (int)n;
+	else if (strcmp(k, "handshake_timeout") == 0)
+		c->handshake_timeout = (int)n;
+	else if (strcmp(k, "frame_timeout") == 0)
+		c->frame_timeout = (int)n;
 	else if (strcmp(k, "workers") == 0)
 		c->workers = (int)n;
 	else if (strcmp(k, "worker_nice") == 0)

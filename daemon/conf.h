@@ -38,7 +38,11 @@ struct conf {
 	int ntcp;
 	char *token_file;   /* NULL: no token (then no listener may require one) */
 	enum conf_token_policy require_token;
-	int max_sessions;
+	int max_sessions;	  /* authenticated sessions (the Unix socket has UNIX_RESERVE more) */
+	int max_preauth;	  /* connections before HELLO_OK, per listener kind (Unix, TCP) */
+	int max_preauth_per_peer; /* of those, per TCP peer address */
+	int handshake_timeout;	  /* s from accept to HELLO_OK */
+	int frame_timeout;	  /* s a frame may take to arrive once its first byte has */
 	/* [engine] */
 	char *planets_dir;
 	bool strict_planets; /* a bad planet file stops the daemon (else it is skipped) */

@@ -45,8 +45,8 @@ void server_stop(struct server *srv);
  * layers changed is dropped from the session with an ERROR. Loop thread only. */
 void server_set_planets(struct server *srv, struct planet_set *ps);
 /* The conf given to server_create changed in place (a reload): the session limits (max_want,
- * max_rate, max_pending, max_frame, max_jobs) and max_sessions follow it from now on. Loop
- * thread. */
+ * max_rate, max_pending, max_frame, max_jobs), max_sessions, the pre-auth caps and the
+ * handshake and frame timeouts follow it from now on. Loop thread. */
 void server_conf_changed(struct server *srv);
 /* The current planet set (borrowed: valid until the next server_set_planets). */
 const struct planet_set *server_planets(const struct server *srv);
