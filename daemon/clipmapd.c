@@ -221,7 +221,7 @@ static void gather_metrics(struct daemon *d)
 		free(keys);
 		return;
 	}
-	size_t n = server_stats(d->srv, it, keys, CAP - 7);
+	size_t n = server_stats(d->srv, it, keys, CAP - 10);
 	struct http_stats hs;
 	http_get_stats(d->http, &hs);
 	const struct { const char *k; uint64_t v; } h[] = {
@@ -229,6 +229,8 @@ static void gather_metrics(struct daemon *d)
 		{ "http.not_modified.sent", hs.not_modified }, { "http.client_errors.sent", hs.client_errors },
 		{ "http.server_errors.sent", hs.server_errors }, { "http.auth_failures", hs.auth_failures },
 		{ "http.bytes.sent", hs.bytes },
+		{ "http.cache.hits", hs.cache_hits }, { "http.cache.misses", hs.cache_misses },
+		{ "http.cache.bytes", hs.cache_bytes },
 	};
 	for (size_t i = 0; i < sizeof h / sizeof h[0]; i++, n++)
 		it[n] = (struct proto_stat){ .key = h[i].k, .kind = PROTO_STAT_U64, .u = h[i].v };
@@ -430,6 +432,7 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 						  .max_per_addr = c->http_max_per_addr,
 						  .timeout_s = c->http_timeout_s,
 						  .max_age_s = c->http_max_age_s,
+						  .cache_bytes = (size_t)c->http_cache_mb << 20,
 						  .cesium_dir = cdir },
 			     &d->http, err);
 	if (rc) {

@@ -64,6 +64,7 @@ static const struct row rows[] = {
 	{ "http", "max_per_address", K_INT, 0, 100000, NULL },
 	{ "http", "timeout_s", K_INT, 1, 3600, NULL },
 	{ "http", "max_age_s", K_INT, 0, 31536000, NULL },
+	{ "http", "cache_mb", K_INT, 1, 1 << 20, NULL },
 };
 
 static int __attribute__((format(printf, 5, 6)))
@@ -172,6 +173,7 @@ static void defaults(struct conf *c)
 	c->http_max_per_addr = 32;
 	c->http_timeout_s = 15;
 	c->http_max_age_s = 600;
+	c->http_cache_mb = 64;
 }
 
 static int set_tcp(struct conf *c, const char *path, const struct ini_entry *e, char *err)
@@ -321,6 +323,8 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->http_timeout_s = (int)n;
 	else if (strcmp(k, "max_age_s") == 0)
 		c->http_max_age_s = (int)n;
+	else if (strcmp(k, "cache_mb") == 0 && strcmp(r->sec, "http") == 0)
+		c->http_cache_mb = (int)n;
 	return 0;
 }
 

@@ -68,6 +68,7 @@ struct conf {
 	int http_max_per_addr; /* per client address; 0: no limit */
 	int http_timeout_s;    /* an idle or slow connection is closed after it */
 	int http_max_age_s;    /* Cache-Control max-age of tiles */
+	int http_cache_mb;     /* encoded tiles kept by ETag, MiB */
 };
 
 /* Reads and checks a config file into c (zeroed by the call). Returns 0 or -errno with err

@@ -29,6 +29,7 @@
 #include "common/strbuf.h"
 #include "common/xalloc.h"
 #include "conf.h"
+#include "http_cache.h"
 #include "http_cesium.h"
 #include "http_page.h"
 #include "http_route.h"
@@ -43,6 +44,7 @@ struct http {
 	int max_age;
 	uint16_t port;
 	char *cesium_dir; /* NULL: no browser page */
+	struct http_cache *bodies; /* encoded tiles by ETag */
 	pthread_mutex_t mu; /* guards the fields below */
 	struct planet_set *ps;
 	char *metrics;
@@ -165,8 +167,35 @@ static void *pixels_for(const struct tile *t, enum geoimg_format fmt, struct geo
 	}
 }
 
+static void release_body(void *cls) { http_cache_release(cls); }
+
+/* Answers with an encoded tile (a reference the response takes over). */
+static enum MHD_Result send_body(struct http *h, struct MHD_Connection *c,
+				 const struct http_body *b, enum geoimg_format fmt, bool terrain,
+				 const char *etag)
+{
+	struct MHD_Response *resp = MHD_create_response_from_buffer_with_free_callback_cls(
+		b->n, (void *)b->data, release_body, (void *)b);
+	if (!resp) {
+		http_cache_release(b);
+		return MHD_NO;
+	}
+	char cc[64];
+	snprintf(cc, sizeof cc, "public, max-age=%d", h->max_age);
+	MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE,
+				terrain ? "application/vnd.quantized-mesh" : geoimg_mime(fmt));
+	MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
+	MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, cc);
+	MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, "*");
+	enum MHD_Result res = MHD_queue_response(c, MHD_HTTP_OK, resp);
+	MHD_destroy_response(resp);
+	atomic_fetch_add(&h->st_tiles, 1);
+	atomic_fetch_add(&h->st_bytes, b->n);
+	return res;
+}
+
 /* Answers with tile t: an image in fmt, or (terrain set) a quantized-mesh tile of that
- * planet. */
+ * planet; the encoding is kept under its ETag for the next request. */
 static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const struct tile *t,
 				 enum geoimg_format fmt, const struct planet *terrain,
 				 const char *etag)
@@ -193,23 +222,7 @@ static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const
 				    err);
 		}
 	}
-	struct MHD_Response *resp = MHD_create_response_from_buffer(n, out, MHD_RESPMEM_MUST_FREE);
-	if (!resp) {
-		free(out);
-		return MHD_NO;
-	}
-	char cc[64];
-	snprintf(cc, sizeof cc, "public, max-age=%d", h->max_age);
-	MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_TYPE,
-				terrain ? "application/vnd.quantized-mesh" : geoimg_mime(fmt));
-	MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
-	MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, cc);
-	MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, "*");
-	enum MHD_Result res = MHD_queue_response(c, MHD_HTTP_OK, resp);
-	MHD_destroy_response(resp);
-	atomic_fetch_add(&h->st_tiles, 1);
-	atomic_fetch_add(&h->st_bytes, n);
-	return res;
+	return send_body(h, c, http_cache_put(h->bodies, etag, out, n), fmt, terrain != NULL, etag);
 }
 
 /* ---- waiting for the scheduler ---------------------------------------------------------- */
@@ -393,6 +406,11 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 		enum MHD_Result res = MHD_queue_response(c, MHD_HTTP_NOT_MODIFIED, r);
 		MHD_destroy_response(r);
 		return res;
+	}
+	const struct http_body *body = http_cache_get(h->bodies, etag);
+	if (body) {
+		planet_set_unref(ps);
+		return send_body(h, c, body, rt->fmt, terrain, etag);
 	}
 	struct tile *t = cache_lookup(h->cache, &key);
 	if (t) {
@@ -601,6 +619,7 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 	h->cache = d->cache;
 	h->max_age = d->max_age_s;
 	h->cesium_dir = d->cesium_dir ? xstrdup(d->cesium_dir) : NULL;
+	h->bodies = http_cache_create(d->cache_bytes ? d->cache_bytes : (size_t)64 << 20);
 	h->ps = planet_set_ref(d->planets);
 	if (d->token && d->token_len && d->token_len <= sizeof h->token) {
 		memcpy(h->token, d->token, d->token_len);
@@ -625,6 +644,7 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 		err_set(err, "http: cannot listen on %s: %s", d->listen, strerror(e));
 		planet_set_unref(h->ps);
 		pthread_mutex_destroy(&h->mu);
+		http_cache_destroy(h->bodies);
 		free(h->cesium_dir);
 		free(h);
 		return -e;
@@ -658,6 +678,7 @@ void http_destroy(struct http *h)
 	MHD_stop_daemon(h->d);
 	planet_set_unref(h->ps);
 	free(h->metrics);
+	http_cache_destroy(h->bodies);
 	free(h->cesium_dir);
 	pthread_mutex_destroy(&h->mu);
 	free(h);
@@ -690,11 +711,15 @@ void http_set_metrics(struct http *h, const char *text_, size_t n)
 
 void http_get_stats(struct http *h, struct http_stats *o)
 {
+	struct http_cache_stats cs;
+	http_cache_stats(h->bodies, &cs);
 	*o = (struct http_stats){ .requests = atomic_load(&h->st_requests),
 				  .tiles = atomic_load(&h->st_tiles),
 				  .not_modified = atomic_load(&h->st_304),
 				  .client_errors = atomic_load(&h->st_4xx),
 				  .server_errors = atomic_load(&h->st_5xx),
 				  .auth_failures = atomic_load(&h->st_auth),
-				  .bytes = atomic_load(&h->st_bytes) };
+				  .bytes = atomic_load(&h->st_bytes),
+				  .cache_hits = cs.hits, .cache_misses = cs.misses,
+				  .cache_bytes = cs.bytes };
 }

@@ -26,13 +26,14 @@ struct http_desc {
 	const uint8_t *token;	    /* required as "Authorization: Bearer TOKEN"; NULL: none */
 	size_t token_len;
 	int threads, max_conns, max_per_addr, timeout_s, max_age_s;
+	size_t cache_bytes; /* encoded tiles kept by ETag; 0: 64 MiB */
 	const char *cesium_dir; /* CesiumJS's Build/Cesium directory for the browser page; NULL:
 				 * no page ("/" is the plain index) */
 };
 
 struct http_stats {
 	uint64_t requests, tiles, not_modified, client_errors, server_errors, auth_failures,
-		bytes;
+		bytes, cache_hits, cache_misses, cache_bytes;
 };
 
 struct http;

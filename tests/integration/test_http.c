@@ -574,11 +574,13 @@ static void metrics_count(void **state)
 		char p[64];
 		snprintf(p, sizeof p, "/wmts/test/color/1/0/%d.webp", x);
 		assert_int_equal(get(e, p, NULL, NULL), 200);
+		assert_int_equal(get(e, p, NULL, NULL), 200); /* again: from the encoded cache */
 	}
 	daemon_env_log_wait(&e->d, "never", 1, 1200);
 	assert_int_equal(get(e, "/metrics", m, NULL), 200);
 	char *b = slurp(m);
-	assert_true(metric(b, "clipmapd_http_tiles_sent_total") >= before + 4);
+	assert_true(metric(b, "clipmapd_http_tiles_sent_total") >= before + 8);
+	assert_true(metric(b, "clipmapd_http_cache_hits_total") >= 4);
 	assert_true(metric(b, "clipmapd_sched_generated_total") > 0);
 	/* promtool's own check of the format and names, where Prometheus is installed */
 	char out[8192];
