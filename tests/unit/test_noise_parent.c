@@ -39,6 +39,7 @@
 #define BOUND_RANGES_M 0.5
 #define BOUND_FBM_REL 8e-3
 #define BOUND_TERRAIN_DEEP_M 0.2 /* ly ≥ 15 */
+#define BOUND_SEAM_REL 3e-3 /* the step across a tile edge, pole or antimeridian */
 
 static char planet_fp[64];
 
@@ -274,11 +275,217 @@ static void error_against_direct(void **state)
 	assert_true(worst_f > 0);
 }
 
+
+/* ---- determinism ---- */
+
+struct fresh {
+	struct cache *c;
+	struct sched *s;
+};
+
+static void fresh_open(struct fresh *f, int workers)
+{
+	f->c = cache_create(512u << 20);
+	f->s = sched_create(&(struct sched_desc){ .cache = f->c, .workers = workers });
+}
+
+static void fresh_close(struct fresh *f)
+{
+	sched_destroy(f->s);
+	cache_destroy(f->c);
+}
+
+static void drop(struct tile *t)
+{
+	tile_unref(t);
+}
+
+/* The same bytes for a tile generated cold with 1 worker, after its children (which need its
+ * level's carry) with 3, and after its parent and neighbours with 2. */
+static void same_bytes_any_order(void **state)
+{
+	struct env *e = *state;
+	const uint32_t T = e->pp->tile_size;
+	const struct {
+		int ly;
+		double lon, lat;
+	} cases[] = { { 16, 7.7, 46.1 }, { 14, 120.0, 89.999 }, { 18, -179.999, -3.0 },
+		      { 11, -60.0, -89.999 } };
+	const char *nodes[] = { "terrain", "grain", "jitter", "patches" };
+	for (size_t c = 0; c < sizeof cases / sizeof *cases; c++) {
+		int lx = clipmap_level_lx(cases[c].ly, cases[c].lat, -1);
+		struct tile_key k = at(lx, cases[c].ly, cases[c].lon, cases[c].lat, T);
+		struct tile *ref[4], *t;
+		struct fresh f;
+		fresh_open(&f, 1);
+		for (int q = 0; q < 4; q++)
+			ref[q] = fetch(f.s, e->pp, nodes[q], k);
+		fresh_close(&f);
+
+		fresh_open(&f, 3);
+		struct tile_key ch[4];
+		int nch = grid_children(&k, k.lx < k.ly + 1 ? 0 : 1, 1, ch);
+		assert_true(nch > 0);
+		for (int i = 0; i < nch; i++)
+			drop(fetch(f.s, e->pp, "terrain", ch[i]));
+		for (int q = 0; q < 4; q++) {
+			t = fetch(f.s, e->pp, nodes[q], k);
+			assert_memory_equal(t->data, ref[q]->data, t->nbytes);
+			drop(t);
+		}
+		fresh_close(&f);
+
+		fresh_open(&f, 2);
+		int plx, ply;
+		assert_int_equal(noise_carry_parent(k.lx, k.ly, &plx, &ply), 0);
+		struct tile_key pk;
+		uint32_t ox, oy;
+		assert_int_equal(grid_parent(&k, k.lx - plx, k.ly - ply, T, &pk, &ox, &oy), 0);
+		drop(fetch(f.s, e->pp, "terrain", pk));
+		for (int dx = -1; dx <= 1; dx++) {
+			struct tile_key nk;
+			bool flip;
+			grid_neighbor(&k, dx, dx == 0 ? 1 : 0, &nk, &flip);
+			drop(fetch(f.s, e->pp, "terrain", nk));
+		}
+		for (int q = 0; q < 4; q++) {
+			t = fetch(f.s, e->pp, nodes[q], k);
+			assert_memory_equal(t->data, ref[q]->data, t->nbytes);
+			drop(t);
+		}
+		fresh_close(&f);
+		/* and the shared cache, warm with everything the other tests fetched */
+		for (int q = 0; q < 4; q++) {
+			t = fetch(e->sp, e->pp, nodes[q], k);
+			assert_memory_equal(t->data, ref[q]->data, t->nbytes);
+			drop(t);
+			drop(ref[q]);
+		}
+	}
+}
+
+/* ---- seams ---- */
+
+enum edge { EAST, SOUTH, POLE_N, POLE_S };
+
+/* The largest difference, over the texel pairs across the edge between tiles a and b, of the
+ * step from_parent makes and the step the direct evaluation makes, over amp. */
+static double seam(struct env *e, const char *node, double amp, struct tile_key a,
+		   struct tile_key b, enum edge ed)
+{
+	struct tile *fa = fetch(e->sp, e->pp, node, a), *fb = fetch(e->sp, e->pp, node, b);
+	struct tile *da = fetch(e->sd, e->pd, node, a), *db = fetch(e->sd, e->pd, node, b);
+	const uint32_t T = fa->size;
+	double m = 0, step = 0;
+	for (uint32_t q = 0; q < T; q++) {
+		size_t ia, ib;
+		switch (ed) {
+		case EAST:
+			ia = (size_t)q * T + T - 1;
+			ib = (size_t)q * T;
+			break;
+		case SOUTH:
+			ia = (size_t)(T - 1) * T + q;
+			ib = q;
+			break;
+		case POLE_N:
+			ia = ib = q;
+			break;
+		default:
+			ia = ib = (size_t)(T - 1) * T + q;
+			break;
+		}
+		double sf = (double)tile_f32(fb)[ib] - tile_f32(fa)[ia];
+		double sd = (double)tile_f32(db)[ib] - tile_f32(da)[ia];
+		m = fmax(m, fabs(sf - sd));
+		step = fmax(step, fabs(sd));
+	}
+	(void)step;
+	tile_unref(fa);
+	tile_unref(fb);
+	tile_unref(da);
+	tile_unref(db);
+	return m / amp;
+}
+
+static void no_seams(void **state)
+{
+	struct env *e = *state;
+	const uint32_t T = e->pp->tile_size;
+	double worst = 0;
+	for (size_t q = 0; q < sizeof fbm_nodes / sizeof *fbm_nodes; q++) {
+		for (int ly = 3; ly <= 21; ly += 6) {
+			int lx = ly + 1;
+			uint32_t W = grid_tiles_x(lx), H = grid_tiles_y(ly);
+			double s[6];
+			/* the antimeridian */
+			s[0] = seam(e, fbm_nodes[q], fbm_amp[q], tkey(lx, ly, W - 1, H / 2 - 1),
+				    tkey(lx, ly, 0, H / 2 - 1), EAST);
+			/* a north–south border between tiles of different parents */
+			s[1] = seam(e, fbm_nodes[q], fbm_amp[q], tkey(lx, ly, 5, H / 2 + 1),
+				    tkey(lx, ly, 5, H / 2 + 2), SOUTH);
+			/* across both poles, on an anisotropic level */
+			int alx = clipmap_level_lx(ly, 89.99, -1);
+			uint32_t AW = grid_tiles_x(alx);
+			s[2] = seam(e, fbm_nodes[q], fbm_amp[q], tkey(alx, ly, 0, 0),
+				    tkey(alx, ly, AW / 2, 0), POLE_N);
+			s[3] = seam(e, fbm_nodes[q], fbm_amp[q], tkey(alx, ly, AW - 1, H - 1),
+				    tkey(alx, ly, AW / 2 - 1, H - 1), POLE_S);
+			/* east–west on the anisotropic level at 70°N */
+			int blx = clipmap_level_lx(ly, 70.3, -1);
+			struct tile_key k = at(blx, ly, -40.2, 70.3, T), kb = k;
+			kb.x = grid_wrap_x(blx, (int64_t)k.x + 1);
+			s[4] = seam(e, fbm_nodes[q], fbm_amp[q], k, kb, EAST);
+			/* across the north pole on the isotropic level */
+			s[5] = seam(e, fbm_nodes[q], fbm_amp[q], tkey(lx, ly, 3, 0),
+				    tkey(lx, ly, 3 + W / 2, 0), POLE_N);
+			printf("%-11s ly %2d: step error / amplitude: antimeridian %.2g, N-S %.2g, "
+			       "N pole %.2g, S pole %.2g, 70N %.2g, N pole iso %.2g\n",
+			       fbm_nodes[q], ly, s[0], s[1], s[2], s[3], s[4], s[5]);
+			for (int i = 0; i < 6; i++)
+				worst = fmax(worst, s[i]);
+		}
+	}
+	printf("worst seam step error: %.3g of the amplitude (bound %g)\n", worst,
+	       BOUND_SEAM_REL);
+	assert_true(worst <= BOUND_SEAM_REL);
+}
+
+/* ---- bad input ---- */
+
+static void ridged_refused(void **state)
+{
+	(void)state;
+	char path[64], err[256];
+	snprintf(path, sizeof path, "/tmp/test_noise_parent_r%d.ini", (int)getpid());
+	FILE *f = fopen(path, "w");
+	assert_non_null(f);
+	fputs("[planet]\nname = r\nbody = wgs84\ntile_size = 64\n\n[node n]\ntype = noise\n"
+	      "kind = ridged\nfrom_parent = true\n\n[layer height]\nnode = n\nformat = f32\n",
+	      f);
+	fclose(f);
+	struct planet *p = NULL;
+	assert_int_equal(planet_load(path, &p, err), -EINVAL);
+	printf("%s\n", err);
+	assert_non_null(strstr(err, ":9: from_parent: ridged noise cannot be built from its parent"));
+	f = fopen(path, "w");
+	assert_non_null(f);
+	fputs("[planet]\nname = r\nbody = wgs84\ntile_size = 64\n\n[node n]\ntype = noise\n"
+	      "from_parent = maybe\n\n[layer height]\nnode = n\nformat = f32\n", f);
+	fclose(f);
+	assert_int_equal(planet_load(path, &p, err), -EINVAL);
+	assert_non_null(strstr(err, ":8: from_parent: "));
+	unlink(path);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(carry_deps),
 		cmocka_unit_test(error_against_direct),
+		cmocka_unit_test(same_bytes_any_order),
+		cmocka_unit_test(no_seams),
+		cmocka_unit_test(ridged_refused),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
