@@ -145,7 +145,7 @@ static int noise_generate(const struct node *n, struct gen_ctx *g, const struct 
 	const struct tile *src;
 	if (node_opt_height_input(n, in, nin, T, &src))
 		return -EINVAL;
-	if (im->from_parent) {
+	if (im->from_parent && noise_carry_upsampled(&im->nz, k->lx, k->ly, T)) {
 		const struct tile *c = nin > 0 ? in[nin - 1] : NULL;
 		if (!c || c->type != PIX_HEIGHT || c->size != T || c == src)
 			return -EINVAL;
@@ -168,7 +168,7 @@ static int noise_deps(const struct node *n, const struct tile_key *k, struct nod
 {
 	const struct noise_impl *im = n->impl;
 	int m = node_default_deps(n, k, out);
-	if (im->from_parent) {
+	if (im->from_parent && noise_carry_upsampled(&im->nz, k->lx, k->ly, n->planet->tile_size)) {
 		out[m].node = (struct node *)&im->carry;
 		out[m].key = *k;
 		out[m].key.node = im->carry.hash;
@@ -180,7 +180,8 @@ static int noise_deps(const struct node *n, const struct tile_key *k, struct nod
 static int carry_deps(const struct node *n, const struct tile_key *k, struct node_dep *out)
 {
 	struct tile_key keys[NOISE_CARRY_MAX_DEPS];
-	int m = noise_carry_deps(k, n->planet->tile_size, n->hash, keys);
+	const struct noise_impl *im = n->impl;
+	int m = noise_carry_deps(&im->nz, k, n->planet->tile_size, n->hash, keys);
 	for (int i = 0; i < m; i++) {
 		out[i].node = (struct node *)n;
 		out[i].key = keys[i];

@@ -799,3 +799,11 @@ bool noise_pole_fades(const struct noise *nz, const struct tile_key *k, uint32_t
 			return true;
 	return false;
 }
+
+int noise_band_full(const struct noise *nz, int lx, int ly, uint32_t T, double lo, double hi)
+{
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	int m = active_octaves(nz, ly, T, lo, hi, idx, w);
+	return m - coarse_count(nz, lx, T, idx, m);
+}

@@ -159,21 +159,31 @@ double noise_band_weight(double lambda, double s);
  * octaves; a ridged node keeps the direct path. */
 #define NOISE_CARRY_TEXELS 8.0
 
+/* Whether level (lx, ly) builds its carry from the parent level, and its tiles from their
+ * carry: where that evaluates at least 2 octaves fewer per texel than the direct path (whose
+ * octaves of at least NOISE_MR_MIN_TEXELS texels already cost little, on the lattice), i.e.
+ * where the upsample (about one octave's cost) pays. Elsewhere the carry, wherever a finer
+ * level needs it, is evaluated directly (no parent: the chain stops there) and the tiles are
+ * exactly the direct path's. One decision per level and parameters: every tile agrees. fBm
+ * only (false for ridged). */
+bool noise_carry_upsampled(const struct noise *nz, int lx, int ly, uint32_t T);
 /* The parent level of (lx, ly) for the carry; -EINVAL at ly = 0 (no parent). */
 int noise_carry_parent(int lx, int ly, int *plx, int *ply);
 /* The parent-level tiles the carry of tile k needs (their node field set to `node`), without
- * duplicates, in a fixed order; none at ly = 0. Returns how many (≤ NOISE_CARRY_MAX_DEPS). */
+ * duplicates, in a fixed order; none where the level's carry is evaluated directly. Returns
+ * how many (≤ NOISE_CARRY_MAX_DEPS). */
 #define NOISE_CARRY_MAX_DEPS 8
-int noise_carry_deps(const struct tile_key *k, uint32_t T, uint64_t node, struct tile_key *out);
+int noise_carry_deps(const struct noise *nz, const struct tile_key *k, uint32_t T, uint64_t node,
+		     struct tile_key *out);
 /* Scratch for noise_carry_tile (≥ noise_scratch_size). */
 size_t noise_carry_scratch_size(uint32_t T);
 /* The carry of tile k into out[T·T] from the parent-level tiles noise_carry_deps named (in any
- * order; their keys are matched). Returns 0, -EINVAL (bad key or size, a kind other than fBm,
+ * order; their keys are matched), or evaluated directly where the level does not upsample. Returns 0, -EINVAL (bad key or size, a kind other than fBm,
  * a missing or wrong-sized input), -ENOTSUP (isa). */
 int noise_carry_tile(const struct noise *nz, const struct tile_key *k, uint32_t T,
 		     enum noise_isa isa, void *scratch, struct tile *const *in, int nin, float *out);
-/* What noise_tile_scaled gives, from the tile's carry: the carry plus the octaves under
- * NOISE_CARRY_TEXELS texels, then out = base + (offset + amplitude · value). In a pole tile
+/* What noise_tile_scaled gives, from the tile's carry (on a level that upsamples): the carry
+ * plus the octaves under NOISE_CARRY_TEXELS texels, then out = base + (offset + amplitude · value). In a pole tile
  * where a carried octave would be faded (noise_pole_fades) the tile is evaluated directly.
  * Returns 0 or as noise_tile. */
 int noise_tile_from_carry(const struct noise *nz, const struct tile_key *k, uint32_t T,
@@ -186,6 +196,9 @@ int noise_tile_from_carry(const struct noise *nz, const struct tile_key *k, uint
 int noise_tile_band(const struct noise *nz, const struct tile_key *k, uint32_t T,
 		    enum noise_isa isa, void *scratch, double lo, double hi, bool fade, float *out);
 bool noise_pole_fades(const struct noise *nz, const struct tile_key *k, uint32_t T, double lo);
+/* How many octaves with a shortest wavelength in [lo, hi) metres a tile of level (lx, ly)
+ * evaluates at every texel (the others of the band go through the lattice). */
+int noise_band_full(const struct noise *nz, int lx, int ly, uint32_t T, double lo, double hi);
 
 /* Near a pole a texel row is a ring around it, and content that is not planar over a texel
  * (it bends: its slope changes by more than NOISE_POLE_BEND radians over one texel) makes the

@@ -106,10 +106,21 @@ static void carry_map(const struct carry_geom *g, int64_t pu, int64_t pv, int64_
 	*ov = pv;
 }
 
-int noise_carry_deps(const struct tile_key *k, uint32_t T, uint64_t node, struct tile_key *out)
+bool noise_carry_upsampled(const struct noise *nz, int lx, int ly, uint32_t T)
+{
+	if (ly < 1 || nz->p.kind != NOISE_FBM || !grid_level_valid(lx, ly))
+		return false;
+	double lo = NOISE_CARRY_TEXELS * noise_texel_size(nz->p.radius, ly, T);
+	int mid = noise_band_full(nz, lx, ly, T, lo, INFINITY);
+	int band = noise_band_full(nz, lx, ly, T, lo, 2 * lo);
+	return mid >= band + 2;
+}
+
+int noise_carry_deps(const struct noise *nz, const struct tile_key *k, uint32_t T, uint64_t node,
+		     struct tile_key *out)
 {
 	struct carry_geom g;
-	if (k->ly == 0 || carry_geom(k, T, &g))
+	if (!noise_carry_upsampled(nz, k->lx, k->ly, T) || carry_geom(k, T, &g))
 		return 0;
 	/* The columns where the tile changes: the region's ends and the tile borders inside. */
 	int64_t cand[8];
@@ -159,21 +170,25 @@ static const struct tile *find_in(struct tile *const *in, int nin, const struct 
 	return NULL;
 }
 
-/* The parent level's texels of the region into G (gw × gh). */
+/* The parent level's texels of the region into G (gw × gh), a run of columns within one tile
+ * at a time. */
 static int gather(const struct carry_geom *g, uint32_t T, struct tile *const *in, int nin,
 		  float *G)
 {
-	const struct tile *last = NULL;
 	for (uint32_t r = 0; r < g->gh; r++) {
-		for (uint32_t c = 0; c < g->gw; c++) {
+		for (uint32_t c = 0; c < g->gw;) {
 			int64_t mu, mv;
 			carry_map(g, g->pu0 + c, g->pv0 + r, &mu, &mv);
 			uint32_t tx = (uint32_t)(mu / T), ty = (uint32_t)(mv / T);
-			if (!last || last->key.x != tx || last->key.y != ty)
-				last = find_in(in, nin, g, tx, ty, T);
-			if (!last)
+			const struct tile *t = find_in(in, nin, g, tx, ty, T);
+			if (!t)
 				return -EINVAL;
-			G[(size_t)r * g->gw + c] = tile_f32(last)[(size_t)(mv % T) * T + mu % T];
+			uint32_t i = (uint32_t)(mu % T), n = T - i;
+			if (n > g->gw - c)
+				n = g->gw - c;
+			memcpy(G + (size_t)r * g->gw + c, tile_f32(t) + (size_t)(mv % T) * T + i,
+			       n * sizeof *G);
+			c += n;
 		}
 	}
 	return 0;
@@ -185,7 +200,7 @@ int noise_carry_tile(const struct noise *nz, const struct tile_key *k, uint32_t 
 	if (nz->p.kind != NOISE_FBM || !grid_key_valid(k) || T < 16 || T > 4096 || T % 16)
 		return -EINVAL;
 	double s = noise_texel_size(nz->p.radius, k->ly, T), lo = NOISE_CARRY_TEXELS * s;
-	if (k->ly == 0) {
+	if (!noise_carry_upsampled(nz, k->lx, k->ly, T)) {
 		int rc = noise_tile_band(nz, k, T, isa, scratch, lo, INFINITY, false, out);
 		return rc < 0 ? rc : 0;
 	}
