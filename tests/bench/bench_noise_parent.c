@@ -1,5 +1,5 @@
 /* bench_noise_parent — per-level generation time of each noise node of the procedural planet,
- * evaluated directly (as shipped) and built from its parent level (`from_parent = true` on the
+ * evaluated directly and built from its parent level (`from_parent = true` on the
  * fBm nodes: the carry tile — upsample plus one band — and the node's tile from it), measured
  * in the same run, alternating, best of several, one thread, tiles at 46°N (isotropic levels)
  * and at 80°N (anisotropic). Ridged nodes are evaluated directly either way (noise.h says why)
@@ -24,28 +24,43 @@
 #define PLANET "conf/planets/procedural.ini"
 #define RUNS 5
 
-static char planet_fp[64];
+static char planet_fp[64], planet_direct[64];
 
-static int write_from_parent_planet(void)
+/* Two variants of the shipped procedural planet: `from_parent = true` on every fBm node
+ * (planet_fp), and none (planet_direct, the direct evaluation), whatever the shipped file
+ * sets. */
+static int write_planets(void)
 {
 	FILE *in = fopen(PLANET, "r");
 	if (!in)
 		return -1;
-	snprintf(planet_fp, sizeof planet_fp, "/tmp/bench_noise_parent_%d.ini", (int)getpid());
-	FILE *out = fopen(planet_fp, "w");
-	if (!out) {
+	snprintf(planet_fp, sizeof planet_fp, "/tmp/%s_%d.ini", "bench_noise_parent", (int)getpid());
+	snprintf(planet_direct, sizeof planet_direct, "/tmp/%s_d%d.ini", "bench_noise_parent", (int)getpid());
+	FILE *fp = fopen(planet_fp, "w"), *fd = fopen(planet_direct, "w");
+	if (!fp || !fd) {
 		fclose(in);
+		if (fp)
+			fclose(fp);
+		if (fd)
+			fclose(fd);
 		return -1;
 	}
 	char line[4096];
+	int n = 0;
 	while (fgets(line, sizeof line, in)) {
-		fputs(line, out);
-		if (strncmp(line, "kind = fbm", 10) == 0)
-			fputs("from_parent = true\n", out);
+		if (strncmp(line, "from_parent", 11) == 0)
+			continue;
+		fputs(line, fp);
+		fputs(line, fd);
+		if (strncmp(line, "kind = fbm", 10) == 0) {
+			fputs("from_parent = true\n", fp);
+			n++;
+		}
 	}
 	fclose(in);
-	fclose(out);
-	return 0;
+	fclose(fp);
+	fclose(fd);
+	return n > 0 ? 0 : -1;
 }
 
 static struct tile_key at(int lx, int ly, double lon, double lat, uint32_t T, uint64_t node)
@@ -90,12 +105,13 @@ int main(void)
 {
 	char err[256];
 	struct planet *pd, *pp;
-	if (write_from_parent_planet() || planet_load(PLANET, &pd, err) ||
+	if (write_planets() || planet_load(planet_direct, &pd, err) ||
 	    planet_load(planet_fp, &pp, err)) {
 		fprintf(stderr, "bench_noise_parent: %s\n", err);
 		return 1;
 	}
 	unlink(planet_fp);
+	unlink(planet_direct);
 	const uint32_t T = pd->tile_size;
 	struct cache *c = cache_create(1024u << 20);
 	struct sched *s = sched_create(&(struct sched_desc){ .cache = c, .workers = 2 });

@@ -41,31 +41,42 @@
 #define BOUND_TERRAIN_DEEP_M 0.1 /* ly ≥ 15 */
 #define BOUND_SEAM_REL 2e-3 /* the step across a tile edge, pole or antimeridian */
 
-static char planet_fp[64];
+static char planet_fp[64], planet_direct[64];
 
-/* The shipped procedural planet with `from_parent = true` after every `kind = fbm`. */
-static int write_from_parent_planet(void)
+/* Two variants of the shipped procedural planet: `from_parent = true` on every fBm node
+ * (planet_fp), and none (planet_direct, the direct evaluation), whatever the shipped file
+ * sets. */
+static int write_planets(void)
 {
 	FILE *in = fopen(PLANET, "r");
 	if (!in)
 		return -1;
-	snprintf(planet_fp, sizeof planet_fp, "/tmp/test_noise_parent_%d.ini", (int)getpid());
-	FILE *out = fopen(planet_fp, "w");
-	if (!out) {
+	snprintf(planet_fp, sizeof planet_fp, "/tmp/%s_%d.ini", "test_noise_parent", (int)getpid());
+	snprintf(planet_direct, sizeof planet_direct, "/tmp/%s_d%d.ini", "test_noise_parent", (int)getpid());
+	FILE *fp = fopen(planet_fp, "w"), *fd = fopen(planet_direct, "w");
+	if (!fp || !fd) {
 		fclose(in);
+		if (fp)
+			fclose(fp);
+		if (fd)
+			fclose(fd);
 		return -1;
 	}
 	char line[4096];
 	int n = 0;
 	while (fgets(line, sizeof line, in)) {
-		fputs(line, out);
+		if (strncmp(line, "from_parent", 11) == 0)
+			continue;
+		fputs(line, fp);
+		fputs(line, fd);
 		if (strncmp(line, "kind = fbm", 10) == 0) {
-			fputs("from_parent = true\n", out);
+			fputs("from_parent = true\n", fp);
 			n++;
 		}
 	}
 	fclose(in);
-	fclose(out);
+	fclose(fp);
+	fclose(fd);
 	return n > 0 ? 0 : -1;
 }
 
@@ -79,7 +90,7 @@ static int setup(void **state)
 {
 	struct env *e = calloc(1, sizeof *e);
 	char err[256];
-	if (write_from_parent_planet() || planet_load(PLANET, &e->pd, err) ||
+	if (write_planets() || planet_load(planet_direct, &e->pd, err) ||
 	    planet_load(planet_fp, &e->pp, err)) {
 		fprintf(stderr, "setup: %s\n", err);
 		return -1;
@@ -102,6 +113,7 @@ static int teardown(void **state)
 	planet_unref(e->pd);
 	planet_unref(e->pp);
 	unlink(planet_fp);
+	unlink(planet_direct);
 	free(e);
 	return 0;
 }

@@ -153,8 +153,9 @@ double noise_band_weight(double lambda, double s);
  * Ridged multifractal is not built this way, and should not be: its carry would be the sum of
  * creased signals (ro − |n|)² and the running weight after them, both with kinks along every
  * crest, which no interpolation reproduces — a cubic rounds a crest of an octave first carried
- * at 8 texels per wavelength by ~0.2 of that octave's amplitude, and every finer level keeps
- * the rounding (over 300 m for the `ranges` node of the procedural planet). Carrying each
+ * at 8 texels per wavelength by ~0.2 of that octave's amplitude (an estimate from the kink's
+ * slope, not measured), and every finer level keeps the rounding (some 300 m for the `ranges`
+ * node of the procedural planet). Carrying each
  * octave's raw (smooth) value instead is what the in-tile lattice already does for its coarse
  * octaves; a ridged node keeps the direct path. */
 #define NOISE_CARRY_TEXELS 8.0
