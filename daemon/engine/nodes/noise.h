@@ -141,10 +141,16 @@ double noise_band_weight(double lambda, double s);
  * at least NOISE_CARRY_TEXELS texels of level ly (band weight 1 there), at its texel centres,
  * without the pole fade. At ly = 0 it is evaluated directly. Below, it is the carry of the
  * parent level, upsampled (a separable C1 cubic Hermite with 4th-order slopes: 6 taps), plus the one band of octaves the parent
- * did not carry (NOISE_CARRY_TEXELS to twice that): the parent level is (lx − 1, ly − 1) for an
- * isotropic level (lx = ly + 1) and (lx, ly − 1) otherwise, so an anisotropic level keeps its
- * columns (only latitude is interpolated; its wide texels never are) and every parent is a
- * valid level. The upsample reads the parent level's texels over the tile's footprint and three
+ * did not carry (NOISE_CARRY_TEXELS to twice that). The parent level is (lx − 1, ly − 1) — the
+ * level a viewer at that latitude uses one step coarser, so the chain is the levels it asks
+ * for anyway — where the tile's texels are at most NOISE_CARRY_MAX_ASPECT times wider than
+ * tall (in metres, at its latitude nearest the equator: isotropic levels, and the anisotropic
+ * levels near the latitudes they are made for: the viewer's are 1.37 at 70°N, 1.39 at 80°N),
+ * and (lx, ly − 1) otherwise: an anisotropic tile far from the poles keeps its columns (only
+ * latitude is interpolated, never its wide texels). With (lx, ly − 1) everywhere, a viewer at
+ * 80°N needed carries on levels it never asks for and the whole keys cost 1.3× more than
+ * evaluating directly (bench_noise_parent). Either is a valid level; the choice is a function
+ * of the key. The upsample reads the parent level's texels over the tile's footprint and three
  * beyond each side: from the parent tile and up to three of its neighbours (x wraps; beyond a
  * pole, the texels on the far side of it, rows reversed, as in grid_neighbor). A tile's value
  * is then that carry plus its octaves under NOISE_CARRY_TEXELS texels evaluated directly (2 at
@@ -168,8 +174,11 @@ double noise_band_weight(double lambda, double s);
  * exactly the direct path's. One decision per level and parameters: every tile agrees. fBm
  * only (false for ridged). */
 bool noise_carry_upsampled(const struct noise *nz, int lx, int ly, uint32_t T);
-/* The parent level of (lx, ly) for the carry; -EINVAL at ly = 0 (no parent). */
-int noise_carry_parent(int lx, int ly, int *plx, int *ply);
+#define NOISE_CARRY_MAX_ASPECT 1.5
+/* Width over height of tile k's texels in metres at its latitude nearest the equator. */
+double noise_carry_aspect(const struct tile_key *k, uint32_t T);
+/* The parent level of tile k for the carry; -EINVAL at ly = 0 (no parent). */
+int noise_carry_parent(const struct tile_key *k, uint32_t T, int *plx, int *ply);
 /* The parent-level tiles the carry of tile k needs (their node field set to `node`), without
  * duplicates, in a fixed order; none where the level's carry is evaluated directly. Returns
  * how many (≤ NOISE_CARRY_MAX_DEPS). */

@@ -50,12 +50,22 @@ static inline float apply(const float w[TAPS], const float *f, size_t stride)
 	       w[5] * f[5 * stride];
 }
 
-int noise_carry_parent(int lx, int ly, int *plx, int *ply)
+double noise_carry_aspect(const struct tile_key *k, uint32_t T)
 {
-	if (ly < 1 || !grid_level_valid(lx, ly))
+	double n = grid_v_to_lat(k->ly, T, (double)k->y * T);
+	double s = grid_v_to_lat(k->ly, T, (double)(k->y + 1) * T);
+	double lat = n >= 0 && s <= 0 ? 0 : fmin(fabs(n), fabs(s));
+	return cos(lat * (M_PI / 180.0)) * ldexp(1.0, k->ly + 1 - k->lx);
+}
+
+int noise_carry_parent(const struct tile_key *k, uint32_t T, int *plx, int *ply)
+{
+	if (k->ly < 1 || !grid_level_valid(k->lx, k->ly))
 		return -EINVAL;
-	*ply = ly - 1;
-	*plx = lx <= ly ? lx : lx - 1;
+	*ply = k->ly - 1;
+	bool diagonal = k->lx == k->ly + 1 ||
+			(k->lx >= 1 && noise_carry_aspect(k, T) <= NOISE_CARRY_MAX_ASPECT);
+	*plx = diagonal ? k->lx - 1 : k->lx;
 	return 0;
 }
 
@@ -70,7 +80,7 @@ struct carry_geom {
 
 static int carry_geom(const struct tile_key *k, uint32_t T, struct carry_geom *g)
 {
-	if (noise_carry_parent(k->lx, k->ly, &g->plx, &g->ply))
+	if (noise_carry_parent(k, T, &g->plx, &g->ply))
 		return -EINVAL;
 	g->dlx = g->plx != k->lx;
 	g->PW = (int64_t)grid_tiles_x(g->plx) * T;
