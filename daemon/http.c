@@ -21,6 +21,7 @@
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <zlib.h>
 
 #include "common/errbuf.h"
 #include "common/geoimg.h"
@@ -75,9 +76,21 @@ struct hreq {
 
 /* ---- responses -------------------------------------------------------------------------- */
 
+static bool takes_gzip(struct MHD_Connection *c);
+static unsigned char *gzip(const void *data, size_t n, size_t *out_n);
+
 static enum MHD_Result send_buf(struct http *h, struct MHD_Connection *c, unsigned status,
 				const char *type, void *data, size_t n, bool take)
 {
+	size_t zn = 0;
+	unsigned char *z = n >= 1024 && takes_gzip(c) ? gzip(data, n, &zn) : NULL;
+	if (z) {
+		if (take)
+			free(data);
+		data = z;
+		n = zn;
+		take = true;
+	}
 	struct MHD_Response *r = MHD_create_response_from_buffer(
 		n, data, take ? MHD_RESPMEM_MUST_FREE : MHD_RESPMEM_MUST_COPY);
 	if (!r) {
@@ -87,6 +100,9 @@ static enum MHD_Result send_buf(struct http *h, struct MHD_Connection *c, unsign
 	}
 	MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_TYPE, type);
 	MHD_add_response_header(r, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, "*");
+	MHD_add_response_header(r, MHD_HTTP_HEADER_VARY, MHD_HTTP_HEADER_ACCEPT_ENCODING);
+	if (z)
+		MHD_add_response_header(r, MHD_HTTP_HEADER_CONTENT_ENCODING, "gzip");
 	if (status == MHD_HTTP_UNAUTHORIZED)
 		MHD_add_response_header(r, MHD_HTTP_HEADER_WWW_AUTHENTICATE,
 					"Bearer realm=\"clipmapd\"");
@@ -169,10 +185,42 @@ static void *pixels_for(const struct tile *t, enum geoimg_format fmt, struct geo
 
 static void release_body(void *cls) { http_cache_release(cls); }
 
+/* Whether the client takes gzip (Accept-Encoding names it without q=0). */
+static bool takes_gzip(struct MHD_Connection *c)
+{
+	const char *a = MHD_lookup_connection_value(c, MHD_HEADER_KIND,
+						    MHD_HTTP_HEADER_ACCEPT_ENCODING);
+	const char *g = a ? strstr(a, "gzip") : NULL;
+	return g && strncmp(g + 4, ";q=0", 4) != 0;
+}
+
+/* data (n bytes) gzip-compressed into a malloc'ed buffer, or NULL when that does not pay
+ * (less than a tenth smaller) or fails. */
+static unsigned char *gzip(const void *data, size_t n, size_t *out_n)
+{
+	z_stream z = { 0 };
+	if (deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY) != Z_OK)
+		return NULL;
+	size_t cap = deflateBound(&z, (uLong)n);
+	unsigned char *out = xmalloc(cap);
+	z.next_in = (Bytef *)data;
+	z.avail_in = (uInt)n;
+	z.next_out = out;
+	z.avail_out = (uInt)cap;
+	int rc = deflate(&z, Z_FINISH);
+	*out_n = z.total_out;
+	deflateEnd(&z);
+	if (rc != Z_STREAM_END || *out_n > n - n / 10) {
+		free(out);
+		return NULL;
+	}
+	return out;
+}
+
 /* Answers with an encoded tile (a reference the response takes over). */
 static enum MHD_Result send_body(struct http *h, struct MHD_Connection *c,
 				 const struct http_body *b, enum geoimg_format fmt, bool terrain,
-				 const char *etag)
+				 bool gz, const char *etag)
 {
 	struct MHD_Response *resp = MHD_create_response_from_buffer_with_free_callback_cls(
 		b->n, (void *)b->data, release_body, (void *)b);
@@ -187,6 +235,10 @@ static enum MHD_Result send_body(struct http *h, struct MHD_Connection *c,
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, cc);
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, "*");
+	if (terrain)
+		MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, MHD_HTTP_HEADER_ACCEPT_ENCODING);
+	if (gz)
+		MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_ENCODING, "gzip");
 	enum MHD_Result res = MHD_queue_response(c, MHD_HTTP_OK, resp);
 	MHD_destroy_response(resp);
 	atomic_fetch_add(&h->st_tiles, 1);
@@ -204,6 +256,18 @@ static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const
 	size_t n = 0;
 	if (terrain) {
 		cesium_quantized_mesh(terrain, t, &out, &n);
+		/* meshes compress (images do not): a gzip variant for clients that take it */
+		if (takes_gzip(c)) {
+			size_t zn;
+			unsigned char *z = gzip(out, n, &zn);
+			if (z) {
+				char key[80];
+				snprintf(key, sizeof key, "%s+gzip", etag);
+				http_cache_release(http_cache_put(h->bodies, etag, out, n));
+				return send_body(h, c, http_cache_put(h->bodies, key, z, zn), fmt,
+						 true, true, etag);
+			}
+		}
 	} else {
 		struct geoimg im;
 		const char *why = NULL;
@@ -222,7 +286,8 @@ static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const
 				    err);
 		}
 	}
-	return send_body(h, c, http_cache_put(h->bodies, etag, out, n), fmt, terrain != NULL, etag);
+	return send_body(h, c, http_cache_put(h->bodies, etag, out, n), fmt, terrain != NULL, false,
+			 etag);
 }
 
 /* ---- waiting for the scheduler ---------------------------------------------------------- */
@@ -407,10 +472,17 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 		MHD_destroy_response(r);
 		return res;
 	}
-	const struct http_body *body = http_cache_get(h->bodies, etag);
+	char gzkey[80];
+	snprintf(gzkey, sizeof gzkey, "%s+gzip", etag);
+	bool gz = terrain && takes_gzip(c);
+	const struct http_body *body = gz ? http_cache_get(h->bodies, gzkey) : NULL;
+	if (!body) {
+		gz = false;
+		body = http_cache_get(h->bodies, etag);
+	}
 	if (body) {
 		planet_set_unref(ps);
-		return send_body(h, c, body, rt->fmt, terrain, etag);
+		return send_body(h, c, body, rt->fmt, terrain, gz, etag);
 	}
 	struct tile *t = cache_lookup(h->cache, &key);
 	if (t) {

@@ -477,6 +477,23 @@ static void revalidation_and_keepalive(void **state)
 	if (!strstr(out, "Re-using existing connection"))
 		fail_msg("no keep-alive:\n%s", out);
 	assert_non_null(strstr(out, "ready: 1 planets"));
+	/* gzip where it pays: the capabilities (text) and a terrain tile, and the bytes intact */
+	const char *zpaths[] = { "/wmts/1.0.0/WMTSCapabilities.xml", "/cesium/test/2/3/1.terrain" };
+	for (int i = 0; i < 2; i++) {
+		char zf[200], pf[200];
+		snprintf(zf, sizeof zf, "%s/z%d", e->d.dir, i);
+		snprintf(pf, sizeof pf, "%s/p%d", e->d.dir, i);
+		snprintf(url, sizeof url, "%s%s", e->url, zpaths[i]);
+		char *const zc[] = { "curl", "-s", "--compressed", "-D", hdr, "-o", zf, url, NULL };
+		assert_int_equal(daemon_env_run(zc, out, sizeof out), 0);
+		char *zh = slurp(hdr);
+		if (!strstr(zh, "Content-Encoding: gzip"))
+			fail_msg("%s: not gzip-encoded:\n%s", zpaths[i], zh);
+		free(zh);
+		assert_int_equal(get(e, zpaths[i], pf, NULL), 200);
+		char *const cmp[] = { "cmp", zf, pf, NULL };
+		assert_int_equal(daemon_env_run(cmp, out, sizeof out), 0);
+	}
 }
 
 /* A client that sends half a request and stalls; returns its socket. */
