@@ -48,6 +48,8 @@ static const struct type_info types[] = {
 	{ PROTO_PREFETCH, "PREFETCH", 128u << 10, FROM_CLIENT },
 	{ PROTO_PREFETCH_PROGRESS, "PREFETCH_PROGRESS", 64, FROM_SERVER },
 	{ PROTO_PREFETCH_CANCEL, "PREFETCH_CANCEL", 4, FROM_CLIENT },
+	{ PROTO_PREFETCH_DRY, "PREFETCH_DRY", 128u << 10, FROM_CLIENT },
+	{ PROTO_PREFETCH_ESTIMATE, "PREFETCH_ESTIMATE", 1024, FROM_SERVER },
 };
 
 static const char *const code_names[PROTO_E_COUNT] = {
@@ -686,7 +688,7 @@ static void decode_prefetch(struct rd *r, struct proto_prefetch *p)
 		if (!r->err && !(p->bbox.south < p->bbox.north && p->bbox.west != p->bbox.east))
 			rd_fail(r, PROTO_ERR_FIELD, "empty bbox");
 	} else if (p->shape == PROTO_SHAPE_PATH) {
-		p->width_m = rd_range(r, 0, 1e12, "width");
+		p->width_m = rd_range(r, 0, PROTO_MAX_WIDTH, "width");
 		p->npoints = rd_u32(r, "point count");
 		if (!r->err && p->npoints == 0)
 			rd_fail(r, PROTO_ERR_FIELD, "path without points");
@@ -699,6 +701,30 @@ static void decode_prefetch(struct rd *r, struct proto_prefetch *p)
 		}
 	} else {
 		rd_fail(r, PROTO_ERR_FIELD, "shape %u", p->shape);
+	}
+}
+
+static void decode_estimate(struct rd *r, struct proto_prefetch_estimate *e)
+{
+	e->id = rd_u32(r, "id");
+	e->tier = rd_u8(r, "tier");
+	e->tiles = rd_u64(r, "tiles");
+	e->bytes = rd_u64(r, "bytes");
+	e->budget = rd_u64(r, "budget");
+	e->used = rd_u64(r, "used");
+	e->max_tiles = rd_u64(r, "max_tiles");
+	e->nlevels = rd_u8(r, "level count");
+	if (!r->err && (e->tier < PROTO_TIER_MEMORY || e->tier > PROTO_TIER_REMOTE))
+		rd_fail(r, PROTO_ERR_FIELD, "tier %u", e->tier);
+	struct proto_estimate_level *l = rd_array(r, e->nlevels, GRID_MAX_LEVEL + 1, 17,
+						  sizeof(*l), "estimate levels");
+	e->levels = l;
+	for (uint32_t i = 0; i < e->nlevels && !r->err; i++) {
+		l[i].ly = rd_u8(r, "ly");
+		l[i].tiles = rd_u64(r, "level tiles");
+		l[i].bytes = rd_u64(r, "level bytes");
+		if (!r->err && l[i].ly > GRID_MAX_LEVEL)
+			rd_fail(r, PROTO_ERR_FIELD, "level %u", l[i].ly);
 	}
 }
 
@@ -752,6 +778,8 @@ int proto_decode_payload(uint16_t type, const void *payload, size_t len, struct 
 	case PROTO_PREFETCH: decode_prefetch(&r, &m->prefetch); break;
 	case PROTO_PREFETCH_PROGRESS: decode_progress(&r, &m->prefetch_progress); break;
 	case PROTO_PREFETCH_CANCEL: m->prefetch_cancel.req = rd_u32(&r, "id"); break;
+	case PROTO_PREFETCH_DRY: decode_prefetch(&r, &m->prefetch_dry); break;
+	case PROTO_PREFETCH_ESTIMATE: decode_estimate(&r, &m->prefetch_estimate); break;
 	}
 	if (!r.err && r.off != r.n)
 		rd_fail(&r, PROTO_ERR_FIELD, "%zu trailing bytes", r.n - r.off);

@@ -37,6 +37,7 @@
 #define PROTO_MAX_STATS 1024
 #define PROTO_MAX_CACHE_ENTRIES 16384 /* per CACHE_ENTRIES message */
 #define PROTO_MAX_PATH 4096	       /* prefetch path points */
+#define PROTO_MAX_WIDTH 2e7	       /* prefetch corridor width, metres */
 
 enum proto_type {
 	PROTO_NONE = 0,
@@ -58,6 +59,8 @@ enum proto_type {
 	PROTO_PREFETCH = 64,	/* C→S */
 	PROTO_PREFETCH_PROGRESS = 65, /* S→C */
 	PROTO_PREFETCH_CANCEL = 66,   /* C→S */
+	PROTO_PREFETCH_DRY = 67,      /* C→S: a PREFETCH only estimated */
+	PROTO_PREFETCH_ESTIMATE = 68, /* S→C */
 };
 
 /* Decoder errors: one distinct negative errno per malformed class. */
@@ -307,6 +310,23 @@ struct proto_prefetch_progress {
 	double rate;	      /* tiles per second, recent */
 };
 
+/* PREFETCH_ESTIMATE: what a PREFETCH_DRY (or the PREFETCH it describes) would take. */
+struct proto_estimate_level {
+	uint8_t ly;
+	uint64_t tiles, bytes; /* every layer */
+};
+
+struct proto_prefetch_estimate {
+	uint32_t id;	      /* the PREFETCH_DRY's */
+	uint8_t tier;	      /* enum proto_tier the job's tiles would go to */
+	uint64_t tiles, bytes; /* estimated, every level and layer; bytes as held in that tier */
+	uint64_t budget;      /* that tier's byte budget */
+	uint64_t used;	      /* bytes that tier holds now */
+	uint64_t max_tiles;   /* this session's limit per job */
+	uint8_t nlevels;      /* ≤ GRID_MAX_LEVEL + 1 */
+	const struct proto_estimate_level *levels;
+};
+
 struct proto_arena;
 
 struct proto_msg {
@@ -329,6 +349,8 @@ struct proto_msg {
 		struct proto_prefetch prefetch;
 		struct proto_prefetch_progress prefetch_progress;
 		struct proto_req prefetch_cancel; /* req = the job id */
+		struct proto_prefetch prefetch_dry;
+		struct proto_prefetch_estimate prefetch_estimate;
 	};
 	struct proto_arena *arena; /* owned storage of a decoded message */
 };

@@ -395,6 +395,32 @@ static void enc_prefetch_progress(struct wr *w, const struct proto_msg *m)
 	wf64(w, p->rate);
 }
 
+static void enc_prefetch_dry(struct wr *w, const struct proto_msg *m)
+{
+	struct proto_msg p = { .type = PROTO_PREFETCH, .prefetch = m->prefetch_dry };
+	enc_prefetch(w, &p);
+}
+
+static void enc_prefetch_estimate(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_prefetch_estimate *e = &m->prefetch_estimate;
+	w32(w, e->id);
+	w8(w, e->tier);
+	w64(w, e->tiles);
+	w64(w, e->bytes);
+	w64(w, e->budget);
+	w64(w, e->used);
+	w64(w, e->max_tiles);
+	w8(w, e->nlevels);
+	if (!wcount(w, e->nlevels, GRID_MAX_LEVEL + 1, "estimate levels"))
+		return;
+	for (uint32_t i = 0; i < e->nlevels; i++) {
+		w8(w, e->levels[i].ly);
+		w64(w, e->levels[i].tiles);
+		w64(w, e->levels[i].bytes);
+	}
+}
+
 typedef void enc_fn(struct wr *w, const struct proto_msg *m);
 
 /* The body encoder of every message type; NULL: no body (BYE). */
@@ -420,6 +446,8 @@ static const struct {
 	{ PROTO_PREFETCH, enc_prefetch },
 	{ PROTO_PREFETCH_PROGRESS, enc_prefetch_progress },
 	{ PROTO_PREFETCH_CANCEL, enc_req },
+	{ PROTO_PREFETCH_DRY, enc_prefetch_dry },
+	{ PROTO_PREFETCH_ESTIMATE, enc_prefetch_estimate },
 };
 
 /* m's payload; its type is known (proto_type_name gave it a name). */
@@ -503,7 +531,7 @@ static bool from_client(uint16_t type)
 	switch (type) {
 	case PROTO_HELLO: case PROTO_BYE: case PROTO_ERROR: case PROTO_LIST_PLANETS:
 	case PROTO_OPEN: case PROTO_WANT: case PROTO_STATS_REQ: case PROTO_CACHE_LS:
-	case PROTO_PREFETCH: case PROTO_PREFETCH_CANCEL:
+	case PROTO_PREFETCH: case PROTO_PREFETCH_CANCEL: case PROTO_PREFETCH_DRY:
 		return true;
 	default:
 		return false;
@@ -515,7 +543,7 @@ static bool from_server(uint16_t type)
 	switch (type) {
 	case PROTO_HELLO_OK: case PROTO_BYE: case PROTO_ERROR: case PROTO_PLANETS:
 	case PROTO_OPENED: case PROTO_TILE: case PROTO_TILE_FAIL: case PROTO_STATS:
-	case PROTO_CACHE_ENTRIES: case PROTO_PREFETCH_PROGRESS:
+	case PROTO_CACHE_ENTRIES: case PROTO_PREFETCH_PROGRESS: case PROTO_PREFETCH_ESTIMATE:
 		return true;
 	default:
 		return false;

@@ -10,6 +10,7 @@
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "common/clock.h"
 #include "common/log.h"
@@ -140,7 +141,19 @@ void control_cache_ls(struct control *ctl, const struct proto_cache_ls *q)
 	free(nodes);
 }
 
-/* ---- PREFETCH --------------------------------------------------------------------------- */
+/* ---- PREFETCH ---------------------------------------------------------------------------- */
+
+#define JOB_FED 1 /* a ready item's err: the job's builder has keys (not a tile report) */
+
+bool control_token_ok(const struct session_env *env, const struct proto_hello *h)
+{
+	if (!env->have_token || h->token_len != env->token_len)
+		return false;
+	unsigned diff = 0;
+	for (size_t i = 0; i < env->token_len; i++)
+		diff |= env->token[i] ^ h->token[i];
+	return diff == 0;
+}
 
 static void send_progress(struct control *c, struct prefetch_job *j)
 {
@@ -167,6 +180,11 @@ static void retire(struct control *c, struct planet_set *ps)
 
 static void job_remove(struct control *c, size_t i)
 {
+	struct prefetch_limits *lim = c->env->prefetch;
+	if (lim) {
+		lim->jobs--;
+		lim->tiles -= c->jobs[i]->charged;
+	}
 	prefetch_job_destroy(c->jobs[i]); /* stops its scheduler request first */
 	retire(c, c->jobsets[i]);
 	c->njobs--;
@@ -184,14 +202,126 @@ static void job_ready_cb(void *ud, const struct want *w, struct tile *t, int err
 	readyq_push(c->env->ready, &it);
 }
 
+/* Runs on the job's builder thread: keys are queued; only tells the loop. */
+static void job_fed_cb(void *ud)
+{
+	struct prefetch_job *j = ud;
+	const struct control *c = j->owner;
+	struct ready_item it = { .s = c->host.s, .job = j, .err = JOB_FED };
+	readyq_push(c->env->ready, &it);
+}
+
+/* Where a job's tiles go and what they take there: the disk tier when there is one (bytes at
+ * rest: the store's mean value size once it holds a few tiles, else the raw size, an upper
+ * bound), else the memory cache (raw bytes). */
+struct budget {
+	uint8_t tier;
+	uint64_t budget, used;
+	double per_raw; /* bytes held per raw tile byte */
+};
+
+static void tier_budget(const struct control *c, struct budget *b)
+{
+	struct store *st = sched_store(c->env->sched);
+	if (st) {
+		struct store_stats ss;
+		store_stat(st, &ss);
+		*b = (struct budget){ .tier = PROTO_TIER_DISK, .budget = ss.budget, .used = ss.bytes,
+				      .per_raw = 1.0 };
+		return;
+	}
+	struct cache_stats cs;
+	cache_stats(c->env->cache, &cs);
+	*b = (struct budget){ .tier = PROTO_TIER_MEMORY, .budget = cs.budget, .used = cs.bytes,
+			      .per_raw = 1.0 };
+}
+
+/* Bytes for n tiles whose raw size averages raw bytes each. */
+static uint64_t est_bytes(const struct control *c, const struct budget *b, uint64_t n,
+			  double raw)
+{
+	double per = raw;
+	struct store *st = b->tier == PROTO_TIER_DISK ? sched_store(c->env->sched) : NULL;
+	if (st) {
+		struct store_stats ss;
+		store_stat(st, &ss);
+		if (ss.tiles >= 64)
+			per = fmin((double)ss.bytes / (double)ss.tiles, raw + 4096.0);
+		else
+			per = raw + 4096.0; /* uncompressed, a page of header and index */
+	}
+	double v = per * (double)n;
+	return v >= 1.8e19 ? UINT64_MAX : (uint64_t)v;
+}
+
+static uint64_t job_limit(const struct control *c)
+{
+	const struct prefetch_limits *lim = c->env->prefetch;
+	if (!lim)
+		return PREFETCH_MAX_TILES;
+	uint64_t t = c->authed ? lim->max_tiles : lim->max_tiles_local;
+	return t < PREFETCH_MAX_TILES ? t : PREFETCH_MAX_TILES;
+}
+
+static double mib(uint64_t b) { return (double)b / (1024.0 * 1024.0); }
+
+/* Estimates m; on a failure answers the ERROR (ref_type) and returns false. */
+static bool estimate(struct control *c, uint16_t ref_type, const struct proto_prefetch *m,
+		     const struct planet **pp, struct prefetch_estimate *e)
+{
+	const struct planet *p = planet_set_find(*c->env->planets, m->planet);
+	if (!p) {
+		errorf(c, PROTO_E_NOT_FOUND, ref_type, m->id, "no planet \"%s\"", m->planet);
+		return false;
+	}
+	char err[256];
+	if (prefetch_estimate(p, m, e, err)) {
+		errorf(c, PROTO_E_INVALID, ref_type, m->id, "%s", err);
+		return false;
+	}
+	*pp = p;
+	return true;
+}
+
+static unsigned nlayers_of(const struct planet *p, const struct proto_prefetch *m)
+{
+	unsigned n = 0;
+	for (size_t i = 0; i < p->nlayers && i < 64; i++)
+		n += m->layers == 0 || (m->layers >> i) & 1;
+	return n ? n : 1;
+}
+
+void control_prefetch_dry(struct control *c, const struct proto_prefetch *m)
+{
+	const struct planet *p;
+	struct prefetch_estimate e;
+	if (!estimate(c, PROTO_PREFETCH_DRY, m, &p, &e))
+		return;
+	struct budget b;
+	tier_budget(c, &b);
+	double raw = (double)e.tile_bytes / nlayers_of(p, m);
+	struct proto_estimate_level lv[GRID_MAX_LEVEL + 1];
+	uint8_t n = 0;
+	uint64_t bytes = 0;
+	for (int ly = e.lmin; ly <= e.lmax; ly++) {
+		lv[n] = (struct proto_estimate_level){ .ly = (uint8_t)ly,
+						       .tiles = e.level_tiles[ly],
+						       .bytes = est_bytes(c, &b, e.level_tiles[ly], raw) };
+		bytes = bytes + lv[n].bytes < bytes ? UINT64_MAX : bytes + lv[n].bytes;
+		n++;
+	}
+	struct proto_msg r = { .type = PROTO_PREFETCH_ESTIMATE,
+			       .prefetch_estimate = { .id = m->id, .tier = b.tier, .tiles = e.tiles,
+						      .bytes = bytes, .budget = b.budget,
+						      .used = b.used, .max_tiles = job_limit(c),
+						      .nlevels = n, .levels = lv } };
+	c->host.send(c->host.s, &r);
+}
+
 void control_prefetch(struct control *c, const struct proto_prefetch *m)
 {
 	const struct session_env *env = c->env;
-	const struct planet *p = planet_set_find(*env->planets, m->planet);
-	if (!p) {
-		errorf(c, PROTO_E_NOT_FOUND, PROTO_PREFETCH, m->id, "no planet \"%s\"", m->planet);
-		return;
-	}
+	struct prefetch_limits *lim = env->prefetch;
 	for (size_t i = 0; i < c->njobs; i++) {
 		if (c->jobs[i]->id == m->id) {
 			errorf(c, PROTO_E_INVALID, PROTO_PREFETCH, m->id, "job %u is already running",
@@ -199,15 +329,63 @@ void control_prefetch(struct control *c, const struct proto_prefetch *m)
 			return;
 		}
 	}
-	if (c->njobs >= env->max_jobs) {
+	uint32_t max_jobs = env->max_jobs;
+	if (lim && !c->authed && lim->max_jobs_local < max_jobs)
+		max_jobs = lim->max_jobs_local;
+	if (c->njobs >= max_jobs) {
 		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, m->id,
-		       "%zu prefetch jobs running: this session's limit is %u", c->njobs,
-		       env->max_jobs);
+		       "%zu prefetch jobs running: this session's limit is %u%s", c->njobs, max_jobs,
+		       !c->authed && lim && max_jobs == lim->max_jobs_local
+			       ? " ([prefetch] max_jobs_local: no token presented)"
+			       : "");
+		return;
+	}
+	if (lim && lim->jobs >= lim->max_jobs_total) {
+		errorf(c, PROTO_E_BUSY, PROTO_PREFETCH, m->id,
+		       "%u prefetch jobs running on this server: its limit is %u", lim->jobs,
+		       lim->max_jobs_total);
+		return;
+	}
+	/* Sized before anything is enumerated. */
+	const struct planet *p;
+	struct prefetch_estimate e;
+	if (!estimate(c, PROTO_PREFETCH, m, &p, &e))
+		return;
+	uint64_t limit = job_limit(c);
+	if (e.tiles > limit) {
+		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, m->id,
+		       "prefetch job %u: about %llu tiles (levels %u-%u) exceeds this session's "
+		       "limit of %llu tiles per job%s",
+		       m->id, (unsigned long long)e.tiles, m->lmin, m->lmax,
+		       (unsigned long long)limit,
+		       c->authed ? " ([prefetch] max_tiles)"
+				 : " ([prefetch] max_tiles_local: no token presented)");
+		return;
+	}
+	if (lim && lim->tiles + e.tiles > lim->max_tiles_total) {
+		errorf(c, PROTO_E_BUSY, PROTO_PREFETCH, m->id,
+		       "prefetch job %u: about %llu tiles; running jobs hold %llu of this server's "
+		       "%llu ([prefetch] max_tiles_total)",
+		       m->id, (unsigned long long)e.tiles, (unsigned long long)lim->tiles,
+		       (unsigned long long)lim->max_tiles_total);
+		return;
+	}
+	struct budget b;
+	tier_budget(c, &b);
+	uint64_t bytes = est_bytes(c, &b, e.tiles, (double)e.tile_bytes / nlayers_of(p, m));
+	if (b.budget && bytes > b.budget) {
+		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, m->id,
+		       "prefetch job %u: about %llu tiles, %.1f MiB in the %s tier (levels %u-%u), "
+		       "exceeds its budget of %.1f MiB (%s): it would evict itself",
+		       m->id, (unsigned long long)e.tiles, mib(bytes),
+		       b.tier == PROTO_TIER_DISK ? "disk" : "memory", m->lmin, m->lmax,
+		       mib(b.budget),
+		       b.tier == PROTO_TIER_DISK ? "[store] disk_mb" : "[engine] cache_mb");
 		return;
 	}
 	struct prefetch_job *j;
 	char err[256];
-	int rc = prefetch_job_create(p, m, clock_now_ns(), &j, err);
+	int rc = prefetch_job_create(p, m, limit, e.tiles, clock_now_ns(), &j, err);
 	if (rc) {
 		errorf(c, rc == -E2BIG ? PROTO_E_LIMIT : PROTO_E_INVALID, PROTO_PREFETCH, m->id, "%s",
 		       err);
@@ -220,15 +398,21 @@ void control_prefetch(struct control *c, const struct proto_prefetch *m)
 	/* The job borrows p: it keeps the set holding it (a reload does not move jobs). */
 	c->jobsets[c->njobs] = planet_set_ref(*env->planets);
 	c->jobs[c->njobs++] = j;
-	log_msg(LOG_INFO, "session %llu: prefetch job %u on %s: %llu tiles, levels %u-%u",
+	if (lim) {
+		lim->jobs++;
+		lim->tiles += e.tiles;
+		j->charged = e.tiles;
+	}
+	if ((rc = prefetch_job_start(j, job_fed_cb, j))) {
+		errorf(c, PROTO_E_INTERNAL, PROTO_PREFETCH, m->id, "prefetch job %u: no thread: %s",
+		       m->id, strerror(-rc));
+		job_remove(c, c->njobs - 1);
+		return;
+	}
+	log_msg(LOG_INFO, "session %llu: prefetch job %u on %s: about %llu tiles, levels %u-%u",
 		(unsigned long long)c->host.id, j->id, p->name, (unsigned long long)j->total,
 		m->lmin, m->lmax);
 	send_progress(c, j);
-	prefetch_job_start(j);
-	if (j->state != PROTO_JOB_RUNNING) { /* nothing to do */
-		send_progress(c, j);
-		job_remove(c, c->njobs - 1);
-	}
 }
 
 bool control_job_ready(struct control *c, const struct ready_item *it)
@@ -239,11 +423,14 @@ bool control_job_ready(struct control *c, const struct ready_item *it)
 	if (i == c->njobs)
 		return false; /* cancelled since */
 	struct prefetch_job *j = it->job;
-	if (!prefetch_job_ready(j, &it->key, it->err))
+	if (!(it->err == JOB_FED ? prefetch_job_fed(j) : prefetch_job_ready(j, &it->key, it->err)))
 		return false;
 	prefetch_job_tick(j, clock_now_ns());
 	send_progress(c, j);
-	if (j->state == PROTO_JOB_FAILED)
+	if (j->state == PROTO_JOB_FAILED && j->err[0])
+		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, j->id, "prefetch job %u stopped: %s", j->id,
+		       j->err);
+	else if (j->state == PROTO_JOB_FAILED)
 		errorf(c, PROTO_E_UNAVAILABLE, PROTO_PREFETCH, j->id,
 		       "prefetch job %u: %llu of %llu tiles failed", j->id,
 		       (unsigned long long)j->failed, (unsigned long long)j->total);

@@ -35,6 +35,7 @@ struct control {
 	size_t njobs;
 	struct planet_set **retired; /* sets of finished jobs, released by control_fini */
 	size_t nretired;
+	bool authed; /* the client presented the token: [prefetch] max_tiles, else the _local caps */
 };
 
 void control_init(struct control *c, const struct session_env *env,
@@ -46,6 +47,10 @@ void control_fini(struct control *c);
 void control_cache_ls(struct control *c, const struct proto_cache_ls *q);
 void control_prefetch(struct control *c, const struct proto_prefetch *m);
 void control_prefetch_cancel(struct control *c, uint32_t id);
+/* PREFETCH_DRY: the job's estimate (PREFETCH_ESTIMATE), nothing started. */
+void control_prefetch_dry(struct control *c, const struct proto_prefetch *m);
+/* Whether HELLO h carries the server's token (constant time in the token's content). */
+bool control_token_ok(const struct session_env *env, const struct proto_hello *h);
 /* A ready report of one of the jobs (it->job). Returns true when it finished a job (its last
  * report was sent: flush). */
 bool control_job_ready(struct control *c, const struct ready_item *it);

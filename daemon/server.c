@@ -22,6 +22,7 @@
 #include "common/log.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "prefetch.h"
 #include "readyq.h"
 #include "session.h"
 
@@ -65,6 +66,7 @@ struct server {
 	uint8_t token[PROTO_MAX_TOKEN];
 	size_t token_len;
 	bool have_token;
+	struct prefetch_limits prefetch; /* caps from the conf, counts from the sessions */
 
 	int epfd, timerfd;
 	struct evsrc ev_ready, ev_timer;
@@ -354,6 +356,17 @@ static int load_token(struct server *srv, char err[256])
 	return 0;
 }
 
+/* [prefetch] caps (the running jobs' counts are kept). */
+static void set_prefetch_caps(struct server *srv)
+{
+	const struct conf *c = srv->conf;
+	srv->prefetch.max_tiles = c->pf_max_tiles;
+	srv->prefetch.max_tiles_local = c->pf_max_tiles_local;
+	srv->prefetch.max_jobs_local = c->pf_max_jobs_local;
+	srv->prefetch.max_jobs_total = c->pf_max_jobs_total;
+	srv->prefetch.max_tiles_total = c->pf_max_tiles_total;
+}
+
 void server_conf_changed(struct server *srv)
 {
 	const struct conf *c = srv->conf;
@@ -361,6 +374,7 @@ void server_conf_changed(struct server *srv)
 					     .max_pending = c->max_pending,
 					     .max_frame = c->max_frame };
 	srv->env.max_jobs = c->max_jobs;
+	set_prefetch_caps(srv);
 }
 
 static void init_env(struct server *srv)
@@ -371,8 +385,10 @@ static void init_env(struct server *srv)
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,
 		.attach = sess_attach, .interest = sess_interest, .pump = sess_pump,
-		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats
+		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats,
+		.prefetch = &srv->prefetch
 	};
+	set_prefetch_caps(srv);
 }
 
 /* The ready eventfd and the housekeeping timer in the epoll set. */
