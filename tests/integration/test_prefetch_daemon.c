@@ -1,0 +1,394 @@
+/* test_prefetch_daemon — PREFETCH that cannot hurt the daemon (issue 14) and its estimate
+ * (issue 13), through a real clipmapd (tests/support/daemon_env) with a disk store, over
+ * client/net.h. What an operator or an attacker would notice:
+ *   - the 67-byte PREFETCH of a corridor 9.55e6 m wide at level 22 is answered with ERROR
+ *     `limit` naming the estimate at once (printed; asserted under a generous 2 s on this
+ *     loaded machine), the daemon's RSS does not grow, and `status` answers meanwhile; the
+ *     same for a 4096-point path at the widest width the protocol takes;
+ *   - the whole planet at levels 0-11 (25 M tiles) is refused with its estimate to a local
+ *     client without the token, and to one with it (over [prefetch] max_tiles);
+ *   - caps: one job at a time without the token ([prefetch] max_jobs_local), [session]
+ *     max_jobs with it, [prefetch] max_jobs_total over every session;
+ *   - PREFETCH_DRY answers the estimate per level with the disk tier's budget, and a
+ *     PREFETCH larger than that budget is refused with the same estimate;
+ *   - a job that runs ends with done = total (the total made exact as its levels are built).
+ * Skipped when build/clipmapd was not built. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "client/net.h"
+#include "common/clock.h"
+#include "common/proto.h"
+#include "support/daemon_env.h"
+
+#define TOKEN "pf-token-123"
+
+static const char planet_text[] =
+	"[planet]\nname = test\nbody = sphere\nradius = 6371000\ntile_size = 64\nmax_level = 22\n"
+	"[node base]\ntype = noise\nseed = 5\noctaves = 2\nwavelength = 3000000\namplitude = 500\n"
+	"[node tint]\ntype = ramp\ninput = base\n"
+	"stops = -500 0 0 255, 0 0 128 0, 500 255 255 255\n"
+	"[layer height]\nnode = base\nformat = f32\n"
+	"[layer color]\nnode = tint\nformat = rgba8\n";
+
+struct env {
+	struct daemon_env d;
+	char store[160], set_store[200], token_file[160];
+};
+
+static int setup(void **state)
+{
+	struct env *e = calloc(1, sizeof *e);
+	*state = e;
+	if (!e || daemon_env_init(&e->d, "test_prefetch") ||
+	    daemon_env_planet_text(&e->d, "test.ini", planet_text, NULL))
+		return -1;
+	if (!daemon_env_built(&e->d, "clipmapd"))
+		return 0;
+	snprintf(e->store, sizeof e->store, "%s/tiles.lmdb", e->d.dir);
+	snprintf(e->set_store, sizeof e->set_store, "store.path = %s", e->store);
+	snprintf(e->token_file, sizeof e->token_file, "%s/token", e->d.dir);
+	const char *const set[] = { e->set_store,
+				    "store.disk_mb = 1024",
+				    "engine.workers = 1",
+				    "session.max_rate = 0",
+				    "session.max_jobs = 2",
+				    "prefetch.max_jobs_total = 3",
+				    "log.level = info",
+				    NULL };
+	char err[256];
+	if (daemon_env_start(&e->d, &(struct daemon_env_conf){ .set = set, .token = TOKEN },
+			     err)) {
+		fprintf(stderr, "test_prefetch_daemon: %s\n", err);
+		return -1;
+	}
+	return 0;
+}
+
+static int teardown(void **state)
+{
+	struct env *e = *state;
+	if (!e)
+		return 0;
+	if (e->d.daemon > 0)
+		daemon_env_stop(&e->d, SIGKILL, NULL);
+	daemon_env_fini(&e->d);
+	free(e);
+	return 0;
+}
+
+#define NEED_DAEMON(e)                  \
+	do {                            \
+		if ((e)->d.daemon <= 0) \
+			skip();         \
+	} while (0)
+
+/* A session on the Unix socket, with the token or without. */
+static struct net_conn *conn(struct env *e, bool token)
+{
+	struct net_conn *c = NULL;
+	char err[256];
+	/* without: a file with another token would be refused; none at all is what we want */
+	unsetenv("CLIPMAP_TOKEN");
+	if (net_connect(&(struct net_opts){ .socket_path = e->d.sock, .name = "test_prefetch",
+					    .token_file = token ? e->token_file : NULL },
+			&c, err))
+		fail_msg("%s", err);
+	return c;
+}
+
+static uint64_t rss_kb(pid_t pid)
+{
+	char path[64], line[256];
+	snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
+	FILE *f = fopen(path, "r");
+	assert_non_null(f);
+	uint64_t kb = 0;
+	while (fgets(line, sizeof line, f))
+		if (sscanf(line, "VmRSS: %lu kB", &kb) == 1)
+			break;
+	fclose(f);
+	return kb;
+}
+
+/* Sends m and waits for its first answer: ERROR (returned 1, *out filled), PREFETCH_PROGRESS
+ * or PREFETCH_ESTIMATE (0). *ms: how long the answer took. */
+static int ask(struct net_conn *c, const struct proto_msg *m, struct proto_msg *out, double *ms)
+{
+	char err[256];
+	double t0 = clock_now_s();
+	if (net_send(c, m, err))
+		fail_msg("%s", err);
+	for (;;) {
+		*out = (struct proto_msg){ 0 };
+		if (net_recv(c, out, 10000, err))
+			fail_msg("no answer: %s", err);
+		if (out->type == PROTO_ERROR || out->type == PROTO_PREFETCH_PROGRESS ||
+		    out->type == PROTO_PREFETCH_ESTIMATE)
+			break;
+		proto_msg_fini(out);
+	}
+	*ms = (clock_now_s() - t0) * 1000.0;
+	return out->type == PROTO_ERROR;
+}
+
+/* "about N tiles" in an ERROR's message. */
+static uint64_t about(const char *msg)
+{
+	const char *p = strstr(msg, "about ");
+	assert_non_null(p);
+	return strtoull(p + 6, NULL, 10);
+}
+
+static void status_answers(struct net_conn *c)
+{
+	char err[256];
+	struct proto_msg m = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
+	assert_int_equal(net_send(c, &m, err), 0);
+	struct proto_msg r = { 0 };
+	if (net_expect(c, PROTO_STATS, &r, 2000, NULL, NULL, err))
+		fail_msg("STATS: %s", err);
+	proto_msg_fini(&r);
+}
+
+static void cancel(struct net_conn *c, uint32_t id)
+{
+	char err[256];
+	struct proto_msg m = { .type = PROTO_PREFETCH_CANCEL, .prefetch_cancel = { .req = id } };
+	assert_int_equal(net_send(c, &m, err), 0);
+	for (;;) {
+		struct proto_msg r = { 0 };
+		if (net_recv(c, &r, 10000, err))
+			fail_msg("cancel %u: %s", id, err);
+		bool end = r.type == PROTO_PREFETCH_PROGRESS && r.prefetch_progress.id == id &&
+			   r.prefetch_progress.state != PROTO_JOB_RUNNING;
+		proto_msg_fini(&r);
+		if (end)
+			return;
+	}
+}
+
+static void wide_corridor_refused_at_once(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	struct net_conn *c = conn(e, false), *auth = conn(e, true);
+	status_answers(c);
+	uint64_t rss0 = rss_kb(e->d.daemon);
+	struct proto_lonlat pt = { 8.0, 46.0 };
+	struct proto_msg m = { .type = PROTO_PREFETCH,
+			       .prefetch = { .id = 1, .planet = "test", .shape = PROTO_SHAPE_PATH,
+					     .lmin = 22, .lmax = 22, .width_m = 9.55e6,
+					     .npoints = 1, .points = &pt } };
+	struct net_conn *who[2] = { c, auth };
+	for (int k = 0; k < 2; k++) {
+		struct proto_msg r;
+		double ms;
+		assert_int_equal(ask(who[k], &m, &r, &ms), 1);
+		printf("wide corridor (%s token): ERROR %u in %.1f ms: %s\n", k ? "with" : "without",
+		       r.error.code, ms, r.error.message);
+		assert_int_equal(r.error.code, PROTO_E_LIMIT);
+		assert_int_equal(r.error.ref_id, 1);
+		assert_true(about(r.error.message) > 4000000);
+		assert_non_null(strstr(r.error.message, k ? "max_tiles)" : "max_tiles_local"));
+		assert_true(ms < 2000);
+		proto_msg_fini(&r);
+		status_answers(who[k]);
+	}
+	/* the widest corridor the protocol takes along 4096 points: the estimate's worst case */
+	struct proto_lonlat *pts = calloc(PROTO_MAX_PATH, sizeof *pts);
+	for (int i = 0; i < PROTO_MAX_PATH; i++)
+		pts[i] = (struct proto_lonlat){ (i % 2) ? 170.0 : -170.0, -80.0 + (i % 160) };
+	m.prefetch.width_m = PROTO_MAX_WIDTH;
+	m.prefetch.npoints = PROTO_MAX_PATH;
+	m.prefetch.points = pts;
+	m.prefetch.lmin = 0;
+	struct proto_msg r;
+	double ms;
+	assert_int_equal(ask(auth, &m, &r, &ms), 1);
+	printf("4096-point corridor %.0f m wide, levels 0-22: ERROR in %.1f ms: %s\n",
+	       PROTO_MAX_WIDTH, ms, r.error.message);
+	assert_int_equal(r.error.code, PROTO_E_LIMIT);
+	assert_true(ms < 2000);
+	proto_msg_fini(&r);
+	free(pts);
+	status_answers(c);
+	uint64_t rss1 = rss_kb(e->d.daemon);
+	printf("daemon RSS %lu kB before, %lu kB after\n", (unsigned long)rss0,
+	       (unsigned long)rss1);
+	assert_true(rss1 < rss0 + 16 * 1024);
+	net_close(c);
+	net_close(auth);
+}
+
+static void whole_planet_refused_with_estimate(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	struct net_conn *c = conn(e, false), *auth = conn(e, true);
+	struct proto_msg m = { .type = PROTO_PREFETCH,
+			       .prefetch = { .id = 7, .planet = "test", .shape = PROTO_SHAPE_BBOX,
+					     .lmin = 0, .lmax = 11,
+					     .bbox = { -180, -90, 180, 90 } } };
+	struct proto_msg r;
+	double ms;
+	assert_int_equal(ask(c, &m, &r, &ms), 1);
+	printf("whole planet, levels 0-11, no token: %.1f ms: %s\n", ms, r.error.message);
+	assert_int_equal(r.error.code, PROTO_E_LIMIT);
+	uint64_t n = about(r.error.message);
+	/* 2 layers: the finest level alone holds ≈ 2 × 6.2 M tiles on the lx viewers use */
+	assert_true(n > 12000000 && n < 40000000);
+	assert_non_null(strstr(r.error.message, "levels 0-11"));
+	assert_non_null(strstr(r.error.message, "250000 tiles per job"));
+	proto_msg_fini(&r);
+	assert_int_equal(ask(auth, &m, &r, &ms), 1);
+	printf("the same with the token: %s\n", r.error.message);
+	assert_int_equal(r.error.code, PROTO_E_LIMIT);
+	assert_non_null(strstr(r.error.message, "4000000 tiles per job"));
+	proto_msg_fini(&r);
+	net_close(c);
+	net_close(auth);
+}
+
+/* A job that takes a while (thousands of tiles at one worker), started; its first PROGRESS. */
+static void start_job(struct net_conn *c, uint32_t id, double west)
+{
+	struct proto_msg m = { .type = PROTO_PREFETCH,
+			       .prefetch = { .id = id, .planet = "test", .layers = 1,
+					     .shape = PROTO_SHAPE_BBOX, .lmin = 10, .lmax = 10,
+					     .bbox = { west, 0, west + 10, 10 } } };
+	struct proto_msg r;
+	double ms;
+	if (ask(c, &m, &r, &ms))
+		fail_msg("job %u refused: %s", id, r.error.message);
+	assert_int_equal(r.prefetch_progress.id, id);
+	assert_int_equal(r.prefetch_progress.state, PROTO_JOB_RUNNING);
+	assert_true(r.prefetch_progress.total > 1000);
+	proto_msg_fini(&r);
+}
+
+static void refused(struct net_conn *c, uint32_t id, uint16_t code, const char *what)
+{
+	struct proto_msg m = { .type = PROTO_PREFETCH,
+			       .prefetch = { .id = id, .planet = "test", .layers = 1,
+					     .shape = PROTO_SHAPE_BBOX, .lmin = 4, .lmax = 4,
+					     .bbox = { 0, 0, 1, 1 } } };
+	struct proto_msg r;
+	double ms;
+	assert_int_equal(ask(c, &m, &r, &ms), 1);
+	printf("job %u: %s\n", id, r.error.message);
+	assert_int_equal(r.error.code, code);
+	assert_non_null(strstr(r.error.message, what));
+	proto_msg_fini(&r);
+}
+
+static void caps_enforced(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	struct net_conn *c = conn(e, false), *a1 = conn(e, true), *a2 = conn(e, true);
+	start_job(c, 1, 0);
+	refused(c, 2, PROTO_E_LIMIT, "max_jobs_local");
+	start_job(a1, 1, 20);
+	start_job(a1, 2, 40);
+	refused(a1, 3, PROTO_E_LIMIT, "this session's limit is 2");
+	/* three jobs run on the server: [prefetch] max_jobs_total = 3 */
+	refused(a2, 1, PROTO_E_BUSY, "its limit is 3");
+	cancel(a1, 2);
+	start_job(a2, 1, 60);
+	cancel(c, 1);
+	cancel(a1, 1);
+	cancel(a2, 1);
+	status_answers(c);
+	net_close(c);
+	net_close(a1);
+	net_close(a2);
+}
+
+static void dry_run_and_budget(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	struct net_conn *c = conn(e, true);
+	struct proto_prefetch pf = { .id = 11, .planet = "test", .shape = PROTO_SHAPE_BBOX,
+				     .lmin = 6, .lmax = 12, .bbox = { 0, 40, 20, 50 } };
+	struct proto_msg m = { .type = PROTO_PREFETCH_DRY, .prefetch_dry = pf };
+	struct proto_msg r;
+	double ms;
+	assert_int_equal(ask(c, &m, &r, &ms), 0);
+	const struct proto_prefetch_estimate *est = &r.prefetch_estimate;
+	assert_int_equal(r.type, PROTO_PREFETCH_ESTIMATE);
+	assert_int_equal(est->id, 11);
+	assert_int_equal(est->tier, PROTO_TIER_DISK);
+	assert_int_equal(est->budget, 1024u << 20);
+	assert_int_equal(est->max_tiles, 4000000);
+	assert_int_equal(est->nlevels, 7);
+	uint64_t t = 0, b = 0;
+	for (int i = 0; i < est->nlevels; i++) {
+		printf("  level %u: %lu tiles, %lu bytes\n", est->levels[i].ly,
+		       (unsigned long)est->levels[i].tiles, (unsigned long)est->levels[i].bytes);
+		assert_int_equal(est->levels[i].ly, 6 + i);
+		assert_true(i == 0 || est->levels[i].tiles > est->levels[i - 1].tiles);
+		t += est->levels[i].tiles;
+		b += est->levels[i].bytes;
+	}
+	assert_int_equal(t, est->tiles);
+	assert_int_equal(b, est->bytes);
+	printf("dry run: %lu tiles, %lu bytes; the disk tier's budget %lu\n",
+	       (unsigned long)est->tiles, (unsigned long)est->bytes, (unsigned long)est->budget);
+	uint64_t tiles = est->tiles;
+	assert_true(est->bytes > est->budget); /* 1 GiB holds ~50000 such tiles */
+	proto_msg_fini(&r);
+	/* run, it is refused with the same estimate instead of evicting itself */
+	m = (struct proto_msg){ .type = PROTO_PREFETCH, .prefetch = pf };
+	assert_int_equal(ask(c, &m, &r, &ms), 1);
+	printf("%s\n", r.error.message);
+	assert_int_equal(r.error.code, PROTO_E_LIMIT);
+	assert_int_equal(about(r.error.message), tiles);
+	assert_non_null(strstr(r.error.message, "disk_mb"));
+	proto_msg_fini(&r);
+	/* a small one fits and runs to the end: done = total, the total exact */
+	pf.lmin = 3;
+	pf.lmax = 5;
+	m = (struct proto_msg){ .type = PROTO_PREFETCH_DRY, .prefetch_dry = pf };
+	assert_int_equal(ask(c, &m, &r, &ms), 0);
+	assert_true(r.prefetch_estimate.bytes < r.prefetch_estimate.budget);
+	uint64_t guess = r.prefetch_estimate.tiles;
+	proto_msg_fini(&r);
+	m = (struct proto_msg){ .type = PROTO_PREFETCH, .prefetch = pf };
+	assert_int_equal(ask(c, &m, &r, &ms), 0);
+	char err[256];
+	while (r.prefetch_progress.state == PROTO_JOB_RUNNING) {
+		proto_msg_fini(&r);
+		if (net_recv(c, &r, 60000, err))
+			fail_msg("%s", err);
+		if (r.type == PROTO_ERROR)
+			fail_msg("%s", r.error.message);
+	}
+	printf("small job: estimated %lu, done %lu of %lu\n", (unsigned long)guess,
+	       (unsigned long)r.prefetch_progress.done, (unsigned long)r.prefetch_progress.total);
+	assert_int_equal(r.prefetch_progress.state, PROTO_JOB_DONE);
+	assert_int_equal(r.prefetch_progress.done, r.prefetch_progress.total);
+	proto_msg_fini(&r);
+	net_close(c);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(wide_corridor_refused_at_once),
+		cmocka_unit_test(whole_planet_refused_with_estimate),
+		cmocka_unit_test(caps_enforced),
+		cmocka_unit_test(dry_run_and_budget),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}
