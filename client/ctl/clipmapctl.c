@@ -54,6 +54,7 @@ static const struct cmd_usage {
 	  "  clipmapctl prefetch PLANET --bbox W,S,E,N --levels A-B [--layers a,b]\n"
 	  "  clipmapctl prefetch PLANET --path LAT,LON:LAT,LON --width KM --levels A-B\n"
 	  "                          [--layers a,b]             fill the cache (Ctrl-C cancels)\n"
+	  "      --dry-run [--json]: the estimate per level and the tier's budget, nothing run\n"
 	  "      --bbox: W < E; across the antimeridian write E + 360 (170,-10,190,10)\n" },
 	{ "render",
 	  "  clipmapctl render PLANET LAYER LX LY X Y -o FILE   one tile\n"
@@ -687,7 +688,7 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 struct prefetch_args {
 	struct ctl_prefetch_opts o;
 	struct proto_lonlat *pts; /* --path, owned (free()) */
-	bool levels, width;
+	bool levels, width, dry_run;
 };
 
 /* Takes prefetch option c with its argument s into pa. Returns 0, or the exit status after
@@ -719,6 +720,8 @@ static int prefetch_option(int c, const char *s, struct prefetch_args *pa)
 		pa->levels = true;
 		return 0;
 	case 'y': o->layers = s; return 0;
+	case 'n': pa->dry_run = true; return 0;
+	case 'j': o->json = true; return 0;
 	default: cmd_usage(stderr); return 2;
 	}
 }
@@ -737,6 +740,8 @@ static int check_prefetch_args(const struct prefetch_args *pa, int npos)
 		why = "--path needs --width KM";
 	else if (pa->o.shape == PROTO_SHAPE_BBOX && pa->width)
 		why = "--width goes with --path";
+	else if (pa->o.json && !pa->dry_run)
+		why = "--json goes with --dry-run";
 	if (!why)
 		return 0;
 	fprintf(stderr, "clipmapctl prefetch: %s\n", why);
@@ -752,7 +757,8 @@ static int parse_prefetch_args(int argc, char **argv, struct ctl_target *t,
 		GLOBAL_OPTS,
 		{ "bbox", required_argument, NULL, 'b' },   { "path", required_argument, NULL, 'p' },
 		{ "width", required_argument, NULL, 'w' },  { "levels", required_argument, NULL, 'l' },
-		{ "layers", required_argument, NULL, 'y' }, { 0, 0, 0, 0 },
+		{ "layers", required_argument, NULL, 'y' }, { "dry-run", no_argument, NULL, 'n' },
+		{ "json", no_argument, NULL, 'j' },	    { 0, 0, 0, 0 },
 	};
 	*pa = (struct prefetch_args){ 0 };
 	int c, status;
@@ -816,8 +822,19 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 {
 	struct prefetch_args pa;
 	int status = parse_prefetch_args(argc, argv, t, &pa);
-	if (status < 0)
+	if (status < 0 && pa.dry_run) {
+		struct net_conn *conn;
+		if (connect_or_complain(t, &conn)) {
+			status = 1;
+		} else {
+			char err[256];
+			int rc = ctl_prefetch_dry(conn, &pa.o, t->timeout_ms, stdout, err);
+			net_close(conn);
+			status = rc ? fail("prefetch", rc, err) : 0;
+		}
+	} else if (status < 0) {
 		status = prefetch(t, &pa.o);
+	}
 	free(pa.pts);
 	return status;
 }
