@@ -144,6 +144,20 @@ void control_cache_ls(struct control *ctl, const struct proto_cache_ls *q)
 /* ---- PREFETCH ---------------------------------------------------------------------------- */
 
 #define JOB_FED 1 /* a ready item's err: the job's builder has keys (not a tile report) */
+/* Jobs take no new keys while the disk tier has this many writes queued: bulk work waits for
+ * the writer rather than have its writes dropped (viewers' writes keep the rest of the queue). */
+#define STORE_QUEUE_HOLD 256
+
+/* Whether the disk tier's writer is behind (jobs pause until the next tick). */
+static bool store_behind(const struct control *c)
+{
+	struct store *st = sched_store(c->env->sched);
+	if (!st)
+		return false;
+	struct store_stats ss;
+	store_stat(st, &ss);
+	return ss.queued >= STORE_QUEUE_HOLD;
+}
 
 bool control_token_ok(const struct session_env *env, const struct proto_hello *h)
 {
@@ -415,16 +429,10 @@ void control_prefetch(struct control *c, const struct proto_prefetch *m)
 	send_progress(c, j);
 }
 
-bool control_job_ready(struct control *c, const struct ready_item *it)
+/* Job i has finished: its last report, then it goes. */
+static void job_finished(struct control *c, size_t i)
 {
-	size_t i = 0;
-	while (i < c->njobs && c->jobs[i] != it->job)
-		i++;
-	if (i == c->njobs)
-		return false; /* cancelled since */
-	struct prefetch_job *j = it->job;
-	if (!(it->err == JOB_FED ? prefetch_job_fed(j) : prefetch_job_ready(j, &it->key, it->err)))
-		return false;
+	struct prefetch_job *j = c->jobs[i];
 	prefetch_job_tick(j, clock_now_ns());
 	send_progress(c, j);
 	if (j->state == PROTO_JOB_FAILED && j->err[0])
@@ -438,6 +446,20 @@ bool control_job_ready(struct control *c, const struct ready_item *it)
 		(unsigned long long)c->host.id, j->id, (unsigned long long)j->done,
 		(unsigned long long)j->failed);
 	job_remove(c, i);
+}
+
+bool control_job_ready(struct control *c, const struct ready_item *it)
+{
+	size_t i = 0;
+	while (i < c->njobs && c->jobs[i] != it->job)
+		i++;
+	if (i == c->njobs)
+		return false; /* cancelled since */
+	struct prefetch_job *j = it->job;
+	j->paused = store_behind(c);
+	if (!(it->err == JOB_FED ? prefetch_job_fed(j) : prefetch_job_ready(j, &it->key, it->err)))
+		return false;
+	job_finished(c, i);
 	return true;
 }
 
@@ -458,11 +480,23 @@ void control_prefetch_cancel(struct control *c, uint32_t id)
 
 bool control_tick(struct control *c, uint64_t now_ns)
 {
-	for (size_t i = 0; i < c->njobs; i++) {
-		prefetch_job_tick(c->jobs[i], now_ns);
-		send_progress(c, c->jobs[i]);
+	bool sent = c->njobs > 0;
+	bool behind = c->njobs && store_behind(c);
+	for (size_t i = 0; i < c->njobs;) {
+		struct prefetch_job *j = c->jobs[i];
+		if (j->paused && !behind) { /* resume a job the writer held */
+			j->paused = false;
+			if (prefetch_job_fed(j)) {
+				prefetch_job_tick(j, now_ns);
+				job_finished(c, i); /* removes it: i now names the next */
+				continue;
+			}
+		}
+		prefetch_job_tick(j, now_ns);
+		send_progress(c, j);
+		i++;
 	}
-	return c->njobs > 0;
+	return sent;
 }
 
 void control_cancel_all(struct control *c)

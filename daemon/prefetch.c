@@ -666,7 +666,7 @@ static void *builder_main(void *arg)
 /* Takes keys from the feed into the window (owner's thread; bounded: one window). */
 static void refill(struct prefetch_job *j)
 {
-	if (!j->exhausted && j->nwin <= PREFETCH_WINDOW / 2) {
+	if (!j->exhausted && !j->paused && j->nwin <= PREFETCH_WINDOW / 2) {
 		struct prefetch_feed *f = j->feed;
 		size_t got = 0, want = PREFETCH_WINDOW - j->nwin;
 		xmutex_lock(&f->mu);

@@ -88,6 +88,7 @@ struct prefetch_job {
 	struct want win[PREFETCH_WINDOW]; /* outstanding keys */
 	size_t nwin;
 	bool exhausted;
+	bool paused; /* set by the owner: take no new keys (the window drains) */
 	char err[256]; /* why the builder stopped the job (state FAILED), else "" */
 	uint64_t charged; /* tiles counted against the server's caps (the owner's) */
 	/* progress reporting */

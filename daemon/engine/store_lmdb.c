@@ -19,8 +19,13 @@
  * pages; each entry adds a fixed estimate for its three index records. The map is the budget
  * plus half of it plus 32 MiB, room for copy-on-write pages of a batch and the free list.
  *
- * Locks: mu protects the queue, the stop flag, the flush sequence numbers and the write
- * error; nothing is encoded or written under it. Counters are atomics. The writer alone
+ * Reads see writes not yet committed: a miss in the file looks through the queue and the batch
+ * being committed (newest first; a delete hides an older put), so a tile put a moment ago is
+ * found — bulk work written only to the store is not generated twice while it waits.
+ *
+ * Locks: mu protects the queue, the batch's count (inflight: the batch's keys and tiles may
+ * be read under mu while it is non-zero), the stop flag, the flush sequence numbers and the
+ * write error; nothing is encoded or written under it. Counters are atomics. The writer alone
  * writes the accounted bytes, tile count and stamp (atomics, read by stat).
  */
 #include <errno.h>
@@ -373,14 +378,19 @@ static void *writer_main(void *arg)
 			rc = apply(s, s->batch, n, s->budget / 4 + (uint64_t)s->psize * 64);
 		if (rc)
 			atomic_fetch_add(&s->werrs, 1);
+
+		xmutex_lock(&s->mu);
+		s->inflight = 0; /* readers no longer look at the batch */
+		xmutex_unlock(&s->mu);
 		for (size_t i = 0; i < n; i++) {
 			free(s->batch[i].val);
+			s->batch[i].val = NULL;
 			tile_unref(s->batch[i].t);
+			s->batch[i].t = NULL;
 		}
 
 		xmutex_lock(&s->mu);
 		s->done_seq = seq;
-		s->inflight = 0;
 		atomic_store(&s->queued, s->qn);
 		if (rc && !s->flush_err)
 			s->flush_err = mdb_errno(rc);
@@ -391,6 +401,27 @@ static void *writer_main(void *arg)
 }
 
 /* ---- the vtable ---- */
+
+/* The newest queued or in-flight put or delete of k (not yet committed): a new reference to
+ * the put's tile in *t (NULL for a delete). Returns whether there is one. */
+static bool pending(struct lstore *s, const struct tile_key *k, struct tile **t)
+{
+	bool found = false;
+	*t = NULL;
+	xmutex_lock(&s->mu);
+	for (size_t i = s->qn; i-- > 0 && !found;)
+		if (s->q[i].kind != W_TOUCH && grid_key_equal(&s->q[i].key, k)) {
+			found = true;
+			*t = s->q[i].kind == W_PUT ? tile_ref(s->q[i].t) : NULL;
+		}
+	for (size_t i = s->inflight; i-- > 0 && !found;)
+		if (s->batch[i].kind != W_TOUCH && grid_key_equal(&s->batch[i].key, k)) {
+			found = true;
+			*t = s->batch[i].kind == W_PUT ? tile_ref(s->batch[i].t) : NULL;
+		}
+	xmutex_unlock(&s->mu);
+	return found;
+}
 
 static int l_get(struct store *base, const struct tile_key *k, enum pix_type type, uint32_t size,
 		 struct tilecodec *tc, struct tile **out)
@@ -410,6 +441,15 @@ static int l_get(struct store *base, const struct tile_key *k, enum pix_type typ
 	else
 		rc = mdb_errno(rc);
 	mdb_txn_abort(txn);
+	struct tile *pt;
+	if (rc == -ENOENT && pending(s, k, &pt)) {
+		if (pt && pt->type == type && pt->size == size) {
+			atomic_fetch_add(&s->hits, 1);
+			*out = pt;
+			return 0;
+		}
+		tile_unref(pt);
+	}
 	if (rc == -EBADMSG) {
 		atomic_fetch_add(&s->corrupt, 1);
 		enqueue(s, &(struct wop){ .kind = W_DEL, .key = *k });
@@ -433,6 +473,11 @@ static bool l_contains(struct store *base, const struct tile_key *k)
 	MDB_val key = { STORE_KEY_LEN, kb }, v;
 	bool found = mdb_get(txn, s->tiles, &key, &v) == 0;
 	mdb_txn_abort(txn);
+	struct tile *pt;
+	if (!found && pending(s, k, &pt)) {
+		found = pt != NULL;
+		tile_unref(pt);
+	}
 	if (!found)
 		atomic_fetch_add(&s->misses, 1);
 	return found;

@@ -11,7 +11,9 @@
  *     max_jobs with it, [prefetch] max_jobs_total over every session;
  *   - PREFETCH_DRY answers the estimate per level with the disk tier's budget, and a
  *     PREFETCH larger than that budget is refused with the same estimate;
- *   - a job that runs ends with done = total (the total made exact as its levels are built).
+ *   - a job that runs ends with done = total (the total made exact as its levels are built);
+ *   - prefetched tiles are written through to the disk tier: no memory-cache insert or
+ *     eviction, a viewer's tiles still served from memory; a second run generates nothing.
  * Skipped when build/clipmapd was not built. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -24,6 +26,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "client/net.h"
 #include "common/clock.h"
@@ -382,13 +385,149 @@ static void dry_run_and_budget(void **state)
 	net_close(c);
 }
 
+static uint64_t stat_of(struct net_conn *c, const char *key)
+{
+	char err[256];
+	struct proto_msg m = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
+	if (net_send(c, &m, err))
+		fail_msg("%s", err);
+	struct proto_msg r = { 0 };
+	if (net_expect(c, PROTO_STATS, &r, 5000, NULL, NULL, err))
+		fail_msg("%s", err);
+	uint64_t v = UINT64_MAX;
+	for (uint16_t i = 0; i < r.stats.count; i++)
+		if (strcmp(r.stats.items[i].key, key) == 0)
+			v = r.stats.items[i].u;
+	proto_msg_fini(&r);
+	if (v == UINT64_MAX)
+		fail_msg("no stat %s", key);
+	return v;
+}
+
+/* A viewer's WANT of both layers of an 8 × 4 block at level (7, 6), every tile received. */
+static void view_block(struct net_conn *c, uint32_t seq)
+{
+	char err[256];
+	struct proto_msg op = { 0 };
+	if (net_open_planet(c, "test", &op, 5000, err))
+		fail_msg("%s", err);
+	uint32_t pid = op.opened.planet_id;
+	proto_msg_fini(&op);
+	struct proto_want_entry w[64];
+	uint32_t n = 0;
+	for (uint32_t y = 20; y < 24; y++)
+		for (uint32_t x = 64; x < 72; x++)
+			for (uint8_t l = 0; l < 2; l++)
+				w[n++] = (struct proto_want_entry){ .layer = l,
+								    .cls = PROTO_CLASS_VISIBLE,
+								    .lx = 7, .ly = 6, .x = x, .y = y };
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = pid, .seq = seq, .count = n, .entries = w } };
+	if (net_send(c, &m, err))
+		fail_msg("%s", err);
+	for (uint32_t got = 0; got < n;) {
+		struct proto_msg r = { 0 };
+		if (net_recv(c, &r, 30000, err))
+			fail_msg("after %u of %u tiles: %s", got, n, err);
+		if (r.type == PROTO_TILE_FAIL)
+			fail_msg("TILE_FAIL: %s", r.tile_fail.message);
+		got += r.type == PROTO_TILE && r.tile.seq == seq;
+		proto_msg_fini(&r);
+	}
+}
+
+/* Runs a prefetch to its end; returns its total. */
+static uint64_t run_job(struct net_conn *c, const struct proto_prefetch *pf)
+{
+	char err[256];
+	struct proto_msg m = { .type = PROTO_PREFETCH, .prefetch = *pf }, r;
+	double ms;
+	if (ask(c, &m, &r, &ms))
+		fail_msg("%s", r.error.message);
+	while (r.prefetch_progress.state == PROTO_JOB_RUNNING) {
+		proto_msg_fini(&r);
+		if (net_recv(c, &r, 60000, err))
+			fail_msg("%s", err);
+		if (r.type == PROTO_ERROR)
+			fail_msg("%s", r.error.message);
+		if (r.type != PROTO_PREFETCH_PROGRESS)
+			r.prefetch_progress.state = PROTO_JOB_RUNNING;
+	}
+	assert_int_equal(r.prefetch_progress.state, PROTO_JOB_DONE);
+	assert_int_equal(r.prefetch_progress.done, r.prefetch_progress.total);
+	uint64_t t = r.prefetch_progress.total;
+	proto_msg_fini(&r);
+	return t;
+}
+
+/* Waits (bounded) until no tile is being generated or queued and the writer has committed
+ * everything (earlier tests' cancelled jobs may still have had tiles in flight). */
+static void wait_written(struct net_conn *c)
+{
+	uint64_t end = clock_now_ms() + 20000;
+	while ((stat_of(c, "store.disk.queued") > 0 || stat_of(c, "sched.workers.busy") > 0 ||
+		stat_of(c, "sched.queued.bulk") > 0) &&
+	       clock_now_ms() < end)
+		usleep(20000);
+	assert_int_equal(stat_of(c, "store.disk.queued"), 0);
+}
+
+/* Issue 13: prefetched (bulk) tiles are written through to the disk tier and leave the memory
+ * cache live viewers use alone — no insert, no eviction — and a viewer's tiles are still
+ * served from memory after it; a second run of the same prefetch generates nothing. */
+static void bulk_writes_through(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	struct net_conn *v = conn(e, false), *op = conn(e, true);
+	view_block(v, 1);
+	wait_written(op);
+	uint64_t ins0 = stat_of(op, "cache.inserts"), ev0 = stat_of(op, "cache.evictions");
+	uint64_t puts0 = stat_of(op, "store.disk.puts"), drops0 = stat_of(op, "store.disk.write_drops");
+	uint64_t gen0 = stat_of(op, "sched.generated");
+	struct proto_prefetch pf = { .id = 21, .planet = "test", .shape = PROTO_SHAPE_BBOX,
+				     .lmin = 7, .lmax = 8, .bbox = { 100, -20, 110, -10 } };
+	uint64_t total = run_job(op, &pf);
+	wait_written(op);
+	uint64_t ins1 = stat_of(op, "cache.inserts"), ev1 = stat_of(op, "cache.evictions");
+	uint64_t puts1 = stat_of(op, "store.disk.puts"), drops1 = stat_of(op, "store.disk.write_drops");
+	uint64_t gen1 = stat_of(op, "sched.generated");
+	printf("prefetch of %lu tiles: %lu generated, %lu written to disk, %lu dropped, %lu cache "
+	       "inserts, %lu evictions\n",
+	       (unsigned long)total, (unsigned long)(gen1 - gen0), (unsigned long)(puts1 - puts0),
+	       (unsigned long)(drops1 - drops0), (unsigned long)(ins1 - ins0),
+	       (unsigned long)(ev1 - ev0));
+	assert_int_equal(gen1 - gen0, total);
+	/* the job waits for the writer rather than have its writes dropped */
+	assert_int_equal(drops1 - drops0, 0);
+	assert_int_equal(puts1 - puts0, total);
+	assert_int_equal(ins1 - ins0, 0);
+	assert_int_equal(ev1 - ev0, 0);
+	/* the viewer's tiles: still in memory */
+	uint64_t hits0 = stat_of(op, "cache.hits"), load0 = stat_of(op, "sched.loaded");
+	struct net_conn *v2 = conn(e, false);
+	view_block(v2, 1);
+	assert_int_equal(stat_of(op, "sched.generated"), gen1);
+	assert_int_equal(stat_of(op, "sched.loaded"), load0);
+	assert_true(stat_of(op, "cache.hits") - hits0 >= 64);
+	/* again: nothing generated, nothing put in memory (the tiles are on disk) */
+	pf.id = 22;
+	assert_int_equal(run_job(op, &pf), total);
+	assert_int_equal(stat_of(op, "sched.generated"), gen1);
+	assert_int_equal(stat_of(op, "cache.inserts"), ins1);
+	net_close(v);
+	net_close(v2);
+	net_close(op);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(wide_corridor_refused_at_once),
 		cmocka_unit_test(whole_planet_refused_with_estimate),
-		cmocka_unit_test(caps_enforced),
 		cmocka_unit_test(dry_run_and_budget),
+		cmocka_unit_test(bulk_writes_through),
+		cmocka_unit_test(caps_enforced), /* last: its cancelled jobs' tiles may still run */
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
