@@ -12,6 +12,7 @@
  *   - PREFETCH_DRY answers the estimate per level with the disk tier's budget, and a
  *     PREFETCH larger than that budget is refused with the same estimate;
  *   - a job that runs ends with done = total (the total made exact as its levels are built);
+ *   - a region prefetched at 46°N, the daemon restarted: a viewer there generates 0 tiles;
  *   - prefetched tiles are written through to the disk tier: no memory-cache insert or
  *     eviction, a viewer's tiles still served from memory; a second run generates nothing.
  * Skipped when build/clipmapd was not built. */
@@ -29,7 +30,9 @@
 #include <unistd.h>
 
 #include "client/net.h"
+#include "common/clipmap.h"
 #include "common/clock.h"
+#include "common/grid.h"
 #include "common/proto.h"
 #include "support/daemon_env.h"
 
@@ -520,6 +523,87 @@ static void bulk_writes_through(void **state)
 	net_close(op);
 }
 
+/* What a clipmapview focused at (lat, lon) asks for at levels 0..lmax (common/clipmap.h):
+ * at each level the lx it uses there, its window and the ring around it, both layers; appended
+ * to w (distinct entries) from *n. */
+static void viewer_wants(double lat, double lon, int lmax, struct proto_want_entry *w,
+			 uint32_t *n, uint32_t cap)
+{
+	for (int ly = 0; ly <= lmax; ly++) {
+		int lx = clipmap_level_lx(ly, lat, -1);
+		struct grid_quad q;
+		grid_window(lx, ly, 64, CLIPMAP_WINDOW_TILES * 64, lon, lat, &q);
+		for (int64_t dy = -1; dy <= q.nty; dy++)
+			for (int64_t dx = -1; dx <= q.ntx; dx++) {
+				int64_t y = (int64_t)q.ty0 + dy;
+				if (y < 0 || y >= grid_tiles_y(ly))
+					continue;
+				uint32_t x = grid_wrap_x(lx, (int64_t)q.tx0 + dx);
+				for (uint8_t l = 0; l < 2; l++) {
+					bool dup = false;
+					for (uint32_t i = 0; i < *n && !dup; i++)
+						dup = w[i].layer == l && w[i].lx == lx && w[i].ly == ly &&
+						      w[i].x == x && w[i].y == (uint32_t)y;
+					if (!dup && *n < cap)
+						w[(*n)++] = (struct proto_want_entry){
+							.layer = l, .cls = PROTO_CLASS_VISIBLE,
+							.lx = (uint8_t)lx, .ly = (uint8_t)ly, .x = x,
+							.y = (uint32_t)y };
+				}
+			}
+	}
+}
+
+/* Issue 13: prefetch a region at 46°N, restart the daemon; a viewer anywhere in it then gets
+ * every tile it asks for (window and ring, levels 0-9, on the lx it uses at 46°N) from disk:
+ * 0 generated. */
+static void restart_then_viewer_generates_nothing(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	struct net_conn *op = conn(e, true);
+	struct proto_prefetch pf = { .id = 31, .planet = "test", .shape = PROTO_SHAPE_BBOX,
+				     .lmin = 0, .lmax = 9, .bbox = { 7, 45.5, 10, 46.8 } };
+	uint64_t total = run_job(op, &pf);
+	net_close(op);
+	char err[256];
+	assert_int_equal(daemon_env_stop(&e->d, SIGTERM, NULL), 0); /* commits what is queued */
+	if (daemon_env_restart(&e->d, err))
+		fail_msg("restart: %s", err);
+	static struct proto_want_entry w[4096];
+	uint32_t n = 0;
+	static const double foci[][2] = { { 46.0, 8.0 }, { 46.5, 9.6 }, { 45.6, 7.1 },
+					  { 46.79, 9.99 } };
+	for (int i = 0; i < 4; i++)
+		viewer_wants(foci[i][0], foci[i][1], 9, w, &n, 4096);
+	struct net_conn *v = conn(e, false);
+	struct proto_msg opn = { 0 };
+	if (net_open_planet(v, "test", &opn, 5000, err))
+		fail_msg("%s", err);
+	uint32_t pid = opn.opened.planet_id;
+	proto_msg_fini(&opn);
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = pid, .seq = 5, .count = n, .entries = w } };
+	assert_int_equal(net_send(v, &m, err), 0);
+	for (uint32_t got = 0; got < n;) {
+		struct proto_msg r = { 0 };
+		if (net_recv(v, &r, 30000, err))
+			fail_msg("after %u of %u tiles: %s", got, n, err);
+		if (r.type == PROTO_TILE_FAIL)
+			fail_msg("TILE_FAIL: %s", r.tile_fail.message);
+		got += r.type == PROTO_TILE && r.tile.seq == 5;
+		proto_msg_fini(&r);
+	}
+	uint64_t gen = stat_of(v, "sched.generated"), loaded = stat_of(v, "sched.loaded");
+	printf("prefetched %lu tiles at 46°N; after a restart a viewer's %u tiles: %lu generated, "
+	       "%lu loaded from disk\n",
+	       (unsigned long)total, n, (unsigned long)gen, (unsigned long)loaded);
+	assert_int_equal(gen, 0);
+	assert_int_equal(loaded, n);
+	assert_int_equal(stat_of(v, "store.disk.corrupt"), 0);
+	net_close(v);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -527,7 +611,8 @@ int main(void)
 		cmocka_unit_test(whole_planet_refused_with_estimate),
 		cmocka_unit_test(dry_run_and_budget),
 		cmocka_unit_test(bulk_writes_through),
-		cmocka_unit_test(caps_enforced), /* last: its cancelled jobs' tiles may still run */
+		cmocka_unit_test(caps_enforced), /* late: its cancelled jobs' tiles may still run */
+		cmocka_unit_test(restart_then_viewer_generates_nothing),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
