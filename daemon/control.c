@@ -12,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "cacheop.h"
 #include "common/clock.h"
 #include "common/log.h"
 #include "common/xalloc.h"
@@ -139,6 +140,70 @@ void control_cache_ls(struct control *ctl, const struct proto_cache_ls *q)
 	} while (off < c.n);
 	free(c.out);
 	free(nodes);
+}
+
+/* ---- CACHE_OP ----------------------------------------------------------------------------- */
+
+#define OP_DONE 2 /* a ready item's err: its job pointer is a struct control_op whose op is done */
+
+struct control_op {
+	struct control *c;
+	struct cacheop *op;
+};
+
+/* Runs on the op's thread: only tells the loop. The ready item's job field carries the slot
+ * (never dereferenced as a job: control_job_ready looks at err first). */
+static void op_done_cb(void *ud)
+{
+	struct control_op *slot = ud;
+	const struct control *c = slot->c;
+	struct ready_item it = { .s = c->host.s, .job = (struct prefetch_job *)(void *)slot,
+				 .err = OP_DONE };
+	readyq_push(c->env->ready, &it);
+}
+
+static void op_remove(struct control *c, size_t i)
+{
+	cacheop_destroy(c->ops[i]->op);
+	free(c->ops[i]);
+	c->ops[i] = c->ops[--c->nops];
+}
+
+void control_cache_op(struct control *c, const struct proto_cache_op *q)
+{
+	struct control_op *slot = xcalloc(1, sizeof *slot);
+	slot->c = c;
+	char err[256];
+	int rc = cacheop_start(q, *c->env->planets, c->env->cache, sched_store(c->env->sched),
+			       op_done_cb, slot, &slot->op, err);
+	if (rc) {
+		free(slot);
+		errorf(c, rc == -ENOENT ? PROTO_E_NOT_FOUND : PROTO_E_UNAVAILABLE, PROTO_CACHE_OP,
+		       q->req, "%s", err);
+		return;
+	}
+	c->ops = xrealloc(c->ops, (c->nops + 1) * sizeof *c->ops);
+	c->ops[c->nops++] = slot;
+}
+
+/* The op of slot is done: its replies, then it goes. Returns whether it was still ours. */
+static bool op_finished(struct control *c, const struct control_op *slot)
+{
+	for (size_t i = 0; i < c->nops; i++) {
+		if (c->ops[i] != slot)
+			continue;
+		const struct proto_msg *msgs;
+		size_t n = cacheop_replies(slot->op, &msgs);
+		for (size_t k = 0; k < n; k++)
+			c->host.send(c->host.s, &msgs[k]);
+		if (n && msgs[n - 1].type == PROTO_CACHE_DONE && msgs[n - 1].cache_done.removed)
+			log_msg(LOG_INFO, "session %llu: cache op %u removed %llu entries",
+				(unsigned long long)c->host.id, msgs[n - 1].cache_done.op,
+				(unsigned long long)msgs[n - 1].cache_done.removed);
+		op_remove(c, i);
+		return true;
+	}
+	return false;
 }
 
 /* ---- PREFETCH ---------------------------------------------------------------------------- */
@@ -450,6 +515,8 @@ static void job_finished(struct control *c, size_t i)
 
 bool control_job_ready(struct control *c, const struct ready_item *it)
 {
+	if (it->err == OP_DONE)
+		return op_finished(c, (const struct control_op *)(const void *)it->job);
 	size_t i = 0;
 	while (i < c->njobs && c->jobs[i] != it->job)
 		i++;
@@ -513,6 +580,8 @@ void control_stop(struct control *c)
 {
 	while (c->njobs)
 		job_remove(c, c->njobs - 1);
+	while (c->nops)
+		op_remove(c, c->nops - 1);
 }
 
 void control_fini(struct control *c)
@@ -520,6 +589,7 @@ void control_fini(struct control *c)
 	control_stop(c);
 	free(c->jobs);
 	free(c->jobsets);
+	free(c->ops);
 	for (size_t i = 0; i < c->nretired; i++)
 		planet_set_unref(c->retired[i]);
 	free(c->retired);

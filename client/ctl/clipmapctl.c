@@ -49,7 +49,13 @@ static const struct cmd_usage {
 	{ "tile", "  clipmapctl tile PLANET LAYER LX LY X Y -o FILE     one tile through the "
 		  "daemon\n" },
 	{ "cache", "  clipmapctl cache ls PLANET [--near LAT,LON [--radius KM]] [--level L]\n"
-		   "                          [--limit N] [--json]       what is cached\n" },
+		   "                          [--limit N] [--json]       what is cached\n"
+		   "  clipmapctl cache stat [PLANET] [--json]          tiles and bytes per planet,\n"
+		   "                                                     layer, level and tier\n"
+		   "  clipmapctl cache purge PLANET [--bbox W,S,E,N] [--levels A-B] [--json]\n"
+		   "                                                     drop its tiles from disk\n"
+		   "  clipmapctl cache gc [--json]                     drop disk entries no planet uses\n"
+		   "  clipmapctl cache verify [PLANET] [--json]        check every stored checksum\n" },
 	{ "prefetch",
 	  "  clipmapctl prefetch PLANET --bbox W,S,E,N --levels A-B [--layers a,b]\n"
 	  "  clipmapctl prefetch PLANET --path LAT,LON:LAT,LON --width KM --levels A-B\n"
@@ -643,6 +649,72 @@ static int cache_option(int c, const char *s, struct ctl_cache_opts *o)
 	}
 }
 
+/* `cache stat|purge|gc|verify`. */
+static int cmd_cache_op(int argc, char **argv, struct ctl_target *t)
+{
+	static const struct option opts[] = {
+		GLOBAL_OPTS,
+		{ "bbox", required_argument, NULL, 'b' }, { "levels", required_argument, NULL, 'l' },
+		{ "json", no_argument, NULL, 'j' },	  { 0, 0, 0, 0 },
+	};
+	static const char *const names[] = { "stat", "purge", "gc", "verify" };
+	struct ctl_cache_op_opts o = { 0 };
+	for (int i = 0; i < 4; i++)
+		if (strcmp(argv[1], names[i]) == 0)
+			o.op = (uint8_t)(PROTO_COP_STAT + i);
+	char what[32];
+	snprintf(what, sizeof what, "cache %.16s", argv[1]);
+	if (!o.op) {
+		fprintf(stderr, "clipmapctl cache: unknown subcommand \"%s\" (ls, stat, purge, gc, "
+				"verify)\n", argv[1]);
+		return 2;
+	}
+	argc--;
+	argv++;
+	int c, status;
+	char err[256];
+	optind = 0;
+	while ((c = next_opt(argc, argv, "s:H:h", opts, t, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		switch (c) {
+		case 'b':
+			if (ctl_parse_bbox(optarg, &o.bbox, err))
+				return fail(what, -EINVAL, err);
+			o.filter |= PROTO_COF_BBOX;
+			break;
+		case 'l':
+			if (ctl_parse_levels(optarg, GRID_MAX_LEVEL, &o.lmin, &o.lmax, err))
+				return fail(what, -EINVAL, err);
+			o.filter |= PROTO_COF_LEVELS;
+			break;
+		case 'j': o.json = true; break;
+		default: cmd_usage(stderr); return 2;
+		}
+	}
+	int npos = argc - optind;
+	const char *why = NULL;
+	if (o.filter && o.op != PROTO_COP_PURGE)
+		why = "--bbox and --levels go with purge";
+	else if (o.op == PROTO_COP_PURGE && npos != 1)
+		why = "want PLANET";
+	else if (o.op == PROTO_COP_GC && npos != 0)
+		why = "takes no PLANET";
+	else if (npos > 1)
+		why = "want at most one PLANET";
+	if (why) {
+		fprintf(stderr, "clipmapctl %s: %s\n", what, why);
+		return 2;
+	}
+	o.planet = npos ? argv[optind] : NULL;
+	struct net_conn *conn;
+	if (connect_or_complain(t, &conn))
+		return 1;
+	int rc = ctl_cache_op(conn, &o, t->timeout_ms, stdout, err);
+	net_close(conn);
+	return rc ? fail(what, rc, err) : 0;
+}
+
 static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 {
 	static const struct option opts[] = {
@@ -655,8 +727,10 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 		cmd_usage(stdout);
 		return 0;
 	}
-	if (argc < 2 || strcmp(argv[1], "ls") != 0) {
-		fprintf(stderr, "clipmapctl cache: the only subcommand is \"ls\"\n");
+	if (argc >= 2 && strcmp(argv[1], "ls") != 0)
+		return cmd_cache_op(argc, argv, t);
+	if (argc < 2) {
+		fprintf(stderr, "clipmapctl cache: want ls, stat, purge, gc or verify\n");
 		return 2;
 	}
 	argc--;

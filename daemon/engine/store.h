@@ -65,6 +65,9 @@ struct store_entry {
 };
 
 typedef int (*store_iter_fn)(void *ud, const struct store_entry *e);
+/* verify's report: an entry, and whether its value passed (ok) — a damaged one was counted
+ * (corrupt) and its removal queued. Non-zero stops. */
+typedef int (*store_verify_fn)(void *ud, const struct store_entry *e, bool ok);
 
 struct store;
 
@@ -87,6 +90,10 @@ struct store_ops {
 	/* Calls fn for every entry (key order) from one consistent snapshot; stops when fn
 	 * returns non-zero and returns that, else 0 or -errno. fn must not call the store. */
 	int (*iterate)(struct store *s, store_iter_fn fn, void *ud);
+	/* Checks every value (header, checksum over key and payload; not decoded) from one
+	 * snapshot, calling fn for each; stops when fn returns non-zero and returns that, else 0
+	 * or -errno. fn must not call the store. */
+	int (*verify)(struct store *s, store_verify_fn fn, void *ud);
 	void (*stat)(struct store *s, struct store_stats *out);
 	/* Waits until every write queued before the call is committed; 0 or the first write
 	 * error since the last flush. */
@@ -126,6 +133,10 @@ static inline int store_iterate(struct store *s, store_iter_fn fn, void *ud)
 	return s->ops->iterate(s, fn, ud);
 }
 static inline void store_stat(struct store *s, struct store_stats *out) { s->ops->stat(s, out); }
+static inline int store_verify(struct store *s, store_verify_fn fn, void *ud)
+{
+	return s->ops->verify(s, fn, ud);
+}
 static inline int store_flush(struct store *s) { return s->ops->flush(s); }
 void store_destroy(struct store *s); /* NULL is a no-op */
 
@@ -157,6 +168,9 @@ int store_key_decode(const void *p, size_t n, struct tile_key *k);
  * header + tile codec payload (codec zstd at `level`, the format's default filter). */
 void store_value_encode(struct tilecodec *tc, const struct tile *t, int level, void **out,
 			size_t *n);
+/* Whether value v (n bytes) stored under kb has a sound header and checksum (the payload is
+ * not decoded). Returns 0 or -EBADMSG. */
+int store_value_check(const uint8_t kb[STORE_KEY_LEN], const void *v, size_t n);
 /* Verifies value v (n bytes, borrowed: may point into a map) stored under kb and decodes it
  * into a new tile of the expected type and size (*out, owned). Returns 0, -ENOENT (a tile of
  * another type or size: not this one), or -EBADMSG (checksum, header or payload damaged). */

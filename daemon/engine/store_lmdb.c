@@ -532,6 +532,44 @@ static int l_iterate(struct store *base, store_iter_fn fn, void *ud)
 	return rc == MDB_NOTFOUND ? 0 : mdb_errno(rc);
 }
 
+static int l_verify(struct store *base, store_verify_fn fn, void *ud)
+{
+	struct lstore *s = (struct lstore *)base;
+	MDB_txn *txn;
+	MDB_cursor *c;
+	int rc = mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn);
+	if (rc)
+		return mdb_errno(rc);
+	if ((rc = mdb_cursor_open(txn, s->tiles, &c))) {
+		mdb_txn_abort(txn);
+		return mdb_errno(rc);
+	}
+	MDB_val k, v, m;
+	int r = 0;
+	for (rc = mdb_cursor_get(c, &k, &v, MDB_FIRST); rc == 0 && r == 0;
+	     rc = mdb_cursor_get(c, &k, &v, MDB_NEXT)) {
+		struct store_entry e = { .bytes = (uint32_t)v.mv_size };
+		if (k.mv_size != STORE_KEY_LEN || store_key_decode(k.mv_data, k.mv_size, &e.key))
+			continue;
+		struct meta md;
+		if (mdb_get(txn, s->meta, &k, &m) == 0 && meta_read(&m, &md) == 0) {
+			e.stamp = md.stamp;
+			e.keep = (enum store_keep)md.keep;
+		}
+		bool ok = store_value_check(k.mv_data, v.mv_data, v.mv_size) == 0;
+		if (!ok) {
+			atomic_fetch_add(&s->corrupt, 1);
+			enqueue(s, &(struct wop){ .kind = W_DEL, .key = e.key });
+		}
+		r = fn(ud, &e, ok);
+	}
+	mdb_cursor_close(c);
+	mdb_txn_abort(txn);
+	if (r)
+		return r;
+	return rc == MDB_NOTFOUND ? 0 : mdb_errno(rc);
+}
+
 static void l_stat(struct store *base, struct store_stats *o)
 {
 	struct lstore *s = (struct lstore *)base;
@@ -595,7 +633,7 @@ static void l_destroy(struct store *base)
 
 static const struct store_ops lmdb_ops = {
 	.name = "lmdb", .get = l_get, .contains = l_contains, .put = l_put, .del = l_del,
-	.iterate = l_iterate, .stat = l_stat, .flush = l_flush, .destroy = l_destroy,
+	.iterate = l_iterate, .verify = l_verify, .stat = l_stat, .flush = l_flush, .destroy = l_destroy,
 };
 
 /* ---- opening ---- */

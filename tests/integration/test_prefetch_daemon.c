@@ -23,6 +23,7 @@
 #include <cmocka.h>
 
 #include <errno.h>
+#include <lmdb.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -604,6 +605,149 @@ static void restart_then_viewer_generates_nothing(void **state)
 	net_close(v);
 }
 
+/* Runs clipmapctl -s SOCKET with the arguments; returns its exit status, output in out. */
+static int ctl(struct env *e, char *out, size_t n, const char *a0, ...)
+{
+	char exe[600];
+	snprintf(exe, sizeof exe, "%s/clipmapctl", e->d.bindir);
+	char *argv[32] = { exe, "-s", e->d.sock };
+	int argc = 3;
+	va_list ap;
+	va_start(ap, a0);
+	for (const char *a = a0; a && argc < 31; a = va_arg(ap, const char *))
+		argv[argc++] = (char *)a;
+	va_end(ap);
+	argv[argc] = NULL;
+	return daemon_env_run(argv, out, n);
+}
+
+/* Sum of "key": N after every occurrence of `after` in a JSON text. */
+static uint64_t sum_after(const char *text, const char *after, const char *key)
+{
+	uint64_t t = 0;
+	for (const char *p = strstr(text, after); p; p = strstr(p + 1, after)) {
+		const char *k = strstr(p, key);
+		if (k)
+			t += strtoull(k + strlen(key), NULL, 10);
+	}
+	return t;
+}
+
+static uint64_t json_u(const char *text, const char *key)
+{
+	const char *k = strstr(text, key);
+	if (!k)
+		fail_msg("no %s in %s", key, text);
+	return strtoull(k + strlen(key), NULL, 10);
+}
+
+/* Flips bytes in the middle of the first stored value, with the daemon stopped. */
+static void damage_first(struct env *e)
+{
+	MDB_env *env;
+	MDB_txn *txn;
+	MDB_dbi dbi;
+	MDB_cursor *cur;
+	assert_int_equal(mdb_env_create(&env), 0);
+	assert_int_equal(mdb_env_set_maxdbs(env, 4), 0);
+	assert_int_equal(mdb_env_open(env, e->store, MDB_NOSUBDIR, 0644), 0);
+	assert_int_equal(mdb_txn_begin(env, NULL, 0, &txn), 0);
+	assert_int_equal(mdb_dbi_open(txn, "tiles", 0, &dbi), 0);
+	assert_int_equal(mdb_cursor_open(txn, dbi, &cur), 0);
+	MDB_val k, v;
+	assert_int_equal(mdb_cursor_get(cur, &k, &v, MDB_FIRST), 0);
+	MDB_val nv = { v.mv_size, malloc(v.mv_size) };
+	memcpy(nv.mv_data, v.mv_data, v.mv_size);
+	((uint8_t *)nv.mv_data)[nv.mv_size / 2] ^= 0xa5;
+	mdb_cursor_close(cur);
+	assert_int_equal(mdb_put(txn, dbi, &k, &nv, 0), 0);
+	assert_int_equal(mdb_txn_commit(txn), 0);
+	mdb_env_close(env);
+	free(nv.mv_data);
+}
+
+/* Issue 13: cache stat / purge / gc / verify through clipmapctl on a real store. */
+static void cache_maintenance(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	if (!daemon_env_built(&e->d, "clipmapctl"))
+		skip();
+	static char out[1 << 20];
+	struct net_conn *s = conn(e, false);
+	wait_written(s);
+	uint64_t disk = stat_of(s, "store.disk.tiles");
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "test", "--json", NULL), 0);
+	assert_int_equal(sum_after(out, "\"tier\": \"disk\"", "\"tiles\": "), disk);
+	assert_non_null(strstr(out, "\"layer\": \"height\", \"level\": 9, \"tier\": \"disk\""));
+	assert_int_equal(json_u(strstr(out, "\"disk\": {"), "\"tiles\": "), disk);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "test", NULL), 0);
+	printf("%.600s...\n", out);
+	assert_non_null(strstr(out, "planet"));
+	assert_non_null(strstr(out, " disk "));
+	/* purge level 9: gone from disk, the rest stays */
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", "test", "--levels", "9-9",
+			     "--json", NULL), 0);
+	uint64_t r9 = json_u(out, "\"removed\": ");
+	printf("purge --levels 9-9: %s", out);
+	assert_true(r9 > 0);
+	assert_int_equal(stat_of(s, "store.disk.tiles"), disk - r9);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "test", "--json", NULL), 0);
+	assert_null(strstr(out, "\"level\": 9, \"tier\": \"disk\""));
+	assert_non_null(strstr(out, "\"level\": 8, \"tier\": \"disk\""));
+	/* purge a bbox at level 8: the 46°N tiles go, those at 100°E (bulk_writes_through) stay */
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", "test", "--bbox",
+			     "7,45.5,10,46.8", "--levels", "8-8", "--json", NULL), 0);
+	uint64_t r8 = json_u(out, "\"removed\": ");
+	assert_true(r8 > 0);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "test", "--json", NULL), 0);
+	assert_non_null(strstr(out, "\"level\": 8, \"tier\": \"disk\""));
+	disk -= r9 + r8;
+	assert_int_equal(stat_of(s, "store.disk.tiles"), disk);
+	net_close(s);
+	/* verify: one value damaged with the daemon stopped is found and removed */
+	char err[256];
+	assert_int_equal(daemon_env_stop(&e->d, SIGTERM, NULL), 0);
+	damage_first(e);
+	if (daemon_env_restart(&e->d, err))
+		fail_msg("restart: %s", err);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "verify", "--json", NULL), 0);
+	printf("verify: %s", out);
+	assert_int_equal(json_u(out, "\"checked\": "), disk);
+	assert_int_equal(json_u(out, "\"corrupt\": "), 1);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "verify", NULL), 0);
+	assert_non_null(strstr(out, " 0 damaged"));
+	s = conn(e, false);
+	assert_int_equal(stat_of(s, "store.disk.tiles"), disk - 1);
+	disk--;
+	/* gc: after the planet changes (another seed: every node hash changes), its old tiles are
+	 * no planet's any more and gc drops them all */
+	char text[sizeof planet_text + 16];
+	snprintf(text, sizeof text, "%s", planet_text);
+	char *seed = strstr(text, "seed = 5");
+	assert_non_null(seed);
+	seed[7] = '6';
+	assert_int_equal(daemon_env_planet_text(&e->d, "test.ini", text, NULL), 0);
+	assert_int_equal(daemon_env_signal(&e->d, SIGHUP), 0);
+	uint64_t end = clock_now_ms() + 10000;
+	do {
+		usleep(50000);
+		assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "--json", NULL), 0);
+	} while (!strstr(out, "\"planet\": \"\"") && clock_now_ms() < end);
+	assert_int_equal(sum_after(out, "\"planet\": \"\"", "\"tiles\": "), disk);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "gc", "--json", NULL), 0);
+	printf("gc: %s", out);
+	assert_int_equal(json_u(out, "\"removed\": "), disk);
+	assert_int_equal(stat_of(s, "store.disk.tiles"), 0);
+	/* usage errors */
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", NULL), 2);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "gc", "test", NULL), 2);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "--levels", "1-2", NULL), 2);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "nosuch", NULL), 2);
+	assert_non_null(strstr(out, "no planet \"nosuch\""));
+	net_close(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -613,6 +757,7 @@ int main(void)
 		cmocka_unit_test(bulk_writes_through),
 		cmocka_unit_test(caps_enforced), /* late: its cancelled jobs' tiles may still run */
 		cmocka_unit_test(restart_then_viewer_generates_nothing),
+		cmocka_unit_test(cache_maintenance),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

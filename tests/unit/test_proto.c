@@ -40,7 +40,7 @@ struct fixture {
 	struct proto_cache_entry entries[PROTO_MAX_CACHE_ENTRIES];
 	struct proto_lonlat points[PROTO_MAX_PATH];
 	uint8_t payload[64 * 64 * 4];
-	struct proto_msg msgs[32];
+	struct proto_msg msgs[40];
 	int nmsgs;
 };
 
@@ -173,6 +173,19 @@ static struct fixture *fixture_create(void)
 		.prefetch_progress = { .id = 1, .state = PROTO_JOB_FAILED, .done = UINT64_MAX,
 				       .total = 0, .rate = 1234.5 } };
 	*m++ = (struct proto_msg){ .type = PROTO_PREFETCH_CANCEL, .prefetch_cancel = { .req = 1 } };
+	static const struct proto_cache_stat_row rows[2] = {
+		{ "earth", "height", 12, PROTO_TIER_DISK, 1234, 5678 },
+		{ "", "", 0, PROTO_TIER_MEMORY, UINT64_MAX, 0 } };
+	*m++ = (struct proto_msg){ .type = PROTO_CACHE_OP,
+				   .cache_op = { .req = 3, .op = PROTO_COP_PURGE, .planet = "earth",
+						 .filter = PROTO_COF_BBOX | PROTO_COF_LEVELS,
+						 .bbox = { 170, -10, -170, 10 }, .lmin = 2,
+						 .lmax = 30 } };
+	*m++ = (struct proto_msg){ .type = PROTO_CACHE_STAT,
+				   .cache_stat = { .req = 3, .more = 1, .count = 2, .rows = rows } };
+	*m++ = (struct proto_msg){ .type = PROTO_CACHE_DONE,
+				   .cache_done = { .req = 3, .op = PROTO_COP_VERIFY, .checked = 9,
+						   .removed = 1, .bytes = 4096, .corrupt = 1 } };
 	*m++ = (struct proto_msg){
 		.type = PROTO_PREFETCH_DRY,
 		.prefetch_dry = { .id = 9, .planet = "earth", .layers = 0, .shape = PROTO_SHAPE_PATH,
