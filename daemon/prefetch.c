@@ -418,13 +418,39 @@ static struct piece *path_pieces(const struct proto_prefetch *m, double a, size_
 /* Tiles of one layer at level ly that a corridor piece of length ds (metres; 0 for an end)
  * sweeps at latitude lat: its length by the corridor's width plus a window and ring, over
  * every lx a viewer there may use. An end adds half a window's length. */
-static double piece_tiles(double a, int ly, double lat, double ds, double w, double e,
-			  double n, bool end)
+/* The lx range viewers use at a latitude, per level, memoised in 1/8° bins (the estimate asks
+ * for it once per piece and level: up to PROTO_MAX_PATH pieces). */
+#define LX_BINS (180 * 8 + 1)
+struct lx_memo {
+	int ly;
+	int8_t lo[LX_BINS], hi[LX_BINS]; /* -1: not yet */
+};
+
+static void lx_range(struct lx_memo *mm, int ly, double lat, int *lxa, int *lxb)
+{
+	if (mm->ly != ly) {
+		mm->ly = ly;
+		memset(mm->lo, -1, sizeof mm->lo);
+	}
+	int b = (int)lround((fmax(-90.0, fmin(90.0, lat)) + 90.0) * 8.0);
+	if (mm->lo[b] < 0) {
+		int lo, hi;
+		double bl = b / 8.0 - 90.0;
+		clipmap_level_lx_range(ly, bl, bl, &lo, &hi);
+		mm->lo[b] = (int8_t)lo;
+		mm->hi[b] = (int8_t)hi;
+	}
+	*lxa = mm->lo[b];
+	*lxb = mm->hi[b];
+}
+
+static double piece_tiles(struct lx_memo *mm, double a, int ly, double lat, double ds, double w,
+			  double e, double n, bool end)
 {
 	const double K = CLIPMAP_WINDOW_TILES + 2; /* window and ring, in tiles */
 	double th = M_PI * a / (double)grid_tiles_y(ly);
 	int lxa, lxb;
-	clipmap_level_lx_range(ly, lat, lat, &lxa, &lxb);
+	lx_range(mm, ly, lat, &lxa, &lxb);
 	double sum = 0;
 	for (int lx = lxa; lx <= lxb; lx++) {
 		double cols = (double)grid_tiles_x(lx);
@@ -456,17 +482,21 @@ int prefetch_estimate(const struct planet *p, const struct proto_prefetch *m,
 	double a = p->a, total = 0;
 	size_t npc = 0;
 	struct piece *pc = m->shape == PROTO_SHAPE_PATH ? path_pieces(m, a, &npc) : NULL;
+	struct lx_memo *mm = pc ? xmalloc(sizeof *mm) : NULL;
+	if (mm)
+		mm->ly = -1;
 	for (int ly = m->lmin; ly <= m->lmax; ly++) {
 		double t;
 		if (m->shape == PROTO_SHAPE_BBOX) {
 			t = bbox_level_estimate(&it, ly);
 		} else {
 			double w = fmin(m->width_m, M_PI * a); /* wider wraps round the planet */
-			t = piece_tiles(a, ly, m->points[0].lat, 0, w, 0, 1, true) +
-			    piece_tiles(a, ly, m->points[m->npoints - 1].lat, 0, w, 0, 1, true);
+			t = piece_tiles(mm, a, ly, m->points[0].lat, 0, w, 0, 1, true) +
+			    piece_tiles(mm, a, ly, m->points[m->npoints - 1].lat, 0, w, 0, 1,
+					true);
 			for (size_t i = 0; i < npc; i++)
-				t += piece_tiles(a, ly, pc[i].lat, pc[i].ds, w, pc[i].e, pc[i].n,
-						 false);
+				t += piece_tiles(mm, a, ly, pc[i].lat, pc[i].ds, w, pc[i].e,
+						 pc[i].n, false);
 		}
 		/* never more than the level holds on the lx viewers use there */
 		int lxa, lxb;
@@ -480,6 +510,7 @@ int prefetch_estimate(const struct planet *p, const struct proto_prefetch *m,
 		total = fmin(total + t, ESTIMATE_MAX);
 	}
 	free(pc);
+	free(mm);
 	e->tiles = (uint64_t)total;
 	return 0;
 }

@@ -266,6 +266,7 @@ static void stat_store(struct statb *b, struct store *st)
 	stat_u(b, "store.disk.write_drops", s.write_drops);
 	stat_u(b, "store.disk.write_errors", s.write_errors);
 	stat_u(b, "store.disk.queued", s.queued);
+	stat_u(b, "store.disk.recovered", s.recovered);
 }
 
 static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap)

@@ -46,6 +46,8 @@ struct store_stats {
 	uint64_t write_drops; /* puts dropped because the write queue was full */
 	uint64_t write_errors; /* batches that failed to commit (disk full, I/O error) */
 	uint64_t queued;      /* writes queued or being committed */
+	uint64_t recovered;   /* times the file failed at run time (MDB_PANIC, MDB_CORRUPTED…)
+			       * and was moved aside and recreated empty */
 };
 
 /* Why a tile was stored, which decides the eviction order: incidental tiles (what viewers
@@ -152,7 +154,10 @@ struct store_lmdb_desc {
 
 /* Opens (creating) the store file. Returns 0 with *out owned, or -errno with err filled. A
  * file LMDB cannot read (damaged, not LMDB) is renamed PATH.corrupt-TIME and an empty store
- * created: then 0 is returned with err saying so (err[0] is '\0' otherwise — clear it first). */
+ * created: then 0 is returned with err saying so (err[0] is '\0' otherwise — clear it first).
+ * The same happens at run time when LMDB reports the file damaged (MDB_PANIC, MDB_CORRUPTED,
+ * MDB_PAGE_NOTFOUND) to a read or a write: the writer thread moves it aside and recreates it
+ * (counted in store_stats.recovered); reads meanwhile miss, and the caller generates. */
 int store_lmdb_open(const struct store_lmdb_desc *d, struct store **out, char err[256]);
 
 /* ---- the value format (shared by backends; pure) ---- */

@@ -22,6 +22,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <dirent.h>
 #include <errno.h>
 #include <lmdb.h>
 #include <signal.h>
@@ -748,6 +749,86 @@ static void cache_maintenance(void **state)
 	net_close(s);
 }
 
+/* Issue 13: the store file damaged under a running daemon (B-tree pages overwritten, the meta
+ * pages intact): the first read that meets it has the file moved aside and recreated, the
+ * daemon keeps serving every tile (generated again) and writes to the new file. */
+static void damaged_file_replaced_at_run_time(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	struct net_conn *op = conn(e, true);
+	struct proto_prefetch pf = { .id = 41, .planet = "test", .shape = PROTO_SHAPE_BBOX,
+				     .lmin = 5, .lmax = 6, .bbox = { 60, 10, 80, 30 } };
+	uint64_t total = run_job(op, &pf);
+	wait_written(op);
+	assert_true(stat_of(op, "store.disk.tiles") >= total);
+	assert_int_equal(stat_of(op, "store.disk.recovered"), 0);
+	/* zeros over every page but the two meta pages (as a lost write-back would leave) */
+	FILE *f = fopen(e->store, "r+b");
+	assert_non_null(f);
+	assert_int_equal(fseek(f, 0, SEEK_END), 0);
+	long size = ftell(f);
+	static uint8_t junk[4096];
+	memset(junk, 0, sizeof junk); /* a page of zeros: neither branch nor leaf */
+	for (long off = 2 * 4096; off + 4096 <= size; off += 4096) {
+		assert_int_equal(fseek(f, off, SEEK_SET), 0);
+		assert_int_equal(fwrite(junk, 1, sizeof junk, f), sizeof junk);
+	}
+	assert_int_equal(fclose(f), 0);
+	/* a viewer over the prefetched region (its tiles are on disk only) */
+	struct net_conn *v = conn(e, false);
+	char err[256];
+	struct proto_msg opn = { 0 };
+	if (net_open_planet(v, "test", &opn, 5000, err))
+		fail_msg("%s", err);
+	uint32_t pid = opn.opened.planet_id;
+	proto_msg_fini(&opn);
+	static struct proto_want_entry w[4096];
+	uint32_t n = 0;
+	viewer_wants(20, 70, 6, w, &n, 4096);
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = pid, .seq = 9, .count = n, .entries = w } };
+	assert_int_equal(net_send(v, &m, err), 0);
+	for (uint32_t got = 0; got < n;) {
+		struct proto_msg r = { 0 };
+		if (net_recv(v, &r, 30000, err))
+			fail_msg("after %u of %u tiles: %s", got, n, err);
+		if (r.type == PROTO_TILE_FAIL)
+			fail_msg("TILE_FAIL: %s", r.tile_fail.message);
+		got += r.type == PROTO_TILE && r.tile.seq == 9;
+		proto_msg_fini(&r);
+	}
+	uint64_t end = clock_now_ms() + 10000;
+	while (stat_of(op, "store.disk.recovered") == 0 && clock_now_ms() < end)
+		usleep(20000);
+	printf("after the damage: %u tiles served, store recovered %lu time(s), %lu tiles on "
+	       "disk\n",
+	       n, (unsigned long)stat_of(op, "store.disk.recovered"),
+	       (unsigned long)stat_of(op, "store.disk.tiles"));
+	assert_int_equal(stat_of(op, "store.disk.recovered"), 1);
+	char aside[200];
+	snprintf(aside, sizeof aside, "%s.corrupt-", e->store);
+	bool found = false;
+	DIR *d = opendir(e->d.dir);
+	assert_non_null(d);
+	for (struct dirent *de; (de = readdir(d));) {
+		char full[600];
+		snprintf(full, sizeof full, "%s/%s", e->d.dir, de->d_name);
+		found |= strncmp(full, aside, strlen(aside)) == 0;
+	}
+	closedir(d);
+	assert_true(found);
+	/* it goes on: the tiles generated again are written to the new file */
+	wait_written(op);
+	struct net_conn *v2 = conn(e, false);
+	view_block(v2, 3);
+	wait_written(op);
+	assert_true(stat_of(op, "store.disk.tiles") > 0);
+	net_close(v2);
+	net_close(v);
+	net_close(op);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -758,6 +839,7 @@ int main(void)
 		cmocka_unit_test(caps_enforced), /* late: its cancelled jobs' tiles may still run */
 		cmocka_unit_test(restart_then_viewer_generates_nothing),
 		cmocka_unit_test(cache_maintenance),
+		cmocka_unit_test(damaged_file_replaced_at_run_time),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
