@@ -9,6 +9,7 @@
 #include "cacheop.h"
 
 #include <errno.h>
+#include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdbool.h>
@@ -23,9 +24,13 @@
 
 #define NLY (GRID_MAX_LEVEL + 1)
 
+#define CACHE_LS_DEFAULT 10000u
+#define CACHE_LS_MAX (1u << 20)
+
 struct nodeent {
 	uint64_t hash;
 	uint32_t planet, label; /* indices into names */
+	uint8_t format;		/* enum pix_type of its tiles */
 };
 
 struct cacheop {
@@ -49,6 +54,12 @@ struct cacheop {
 	size_t ndel, cap;
 	uint64_t checked, removed, bytes, corrupt;
 	int err;
+	/* CACHE_LS */
+	bool ls;
+	struct proto_cache_ls lq; /* planet unused: target names it */
+	struct proto_cache_entry *ents;
+	size_t nents, lscap, limit;
+	uint64_t total, now_ns;
 	/* replies */
 	struct proto_cache_stat_row *rows;
 	size_t nrows;
@@ -223,9 +234,113 @@ static void build_replies(struct cacheop *op)
 				.removed = op->removed, .bytes = op->bytes, .corrupt = op->corrupt } };
 }
 
+/* Great-circle distance (metres, mean Earth-like radius r) from (lon, lat) to the nearest
+ * point of the tile's rectangle: a spherical approximation, good enough for a listing filter. */
+static double rect_distance(const struct geo_rect *rc, double lon, double lat, double r)
+{
+	double clat = fmin(fmax(lat, rc->south), rc->north);
+	double w = rc->west, e = rc->east, l = fmod(lon + 540.0, 360.0) - 180.0;
+	double clon;
+	if (l >= w && l <= e) {
+		clon = l;
+	} else {
+		double dw = fmod(w - l + 720.0, 360.0), de = fmod(l - e + 720.0, 360.0);
+		clon = dw < de ? w : e;
+	}
+	double p1 = lat * M_PI / 180, p2 = clat * M_PI / 180;
+	double dl = (clon - l) * M_PI / 180;
+	double h = sin((p2 - p1) / 2) * sin((p2 - p1) / 2) +
+		   cos(p1) * cos(p2) * sin(dl / 2) * sin(dl / 2);
+	return 2 * r * asin(fmin(1.0, sqrt(h)));
+}
+
+/* Whether a CACHE_LS lists k. */
+static bool ls_match(const struct cacheop *op, const struct tile_key *k)
+{
+	const struct proto_cache_ls *q = &op->lq;
+	if (q->filter & PROTO_CLS_PLANET) {
+		size_t i = node_of(op, k->node);
+		if (i == op->nnodes || (int)op->nodes[i].planet != op->target)
+			return false;
+	}
+	if ((q->filter & PROTO_CLS_LEVEL) &&
+	    ((q->lx != PROTO_ANY_LX && k->lx != q->lx) || k->ly != q->ly))
+		return false;
+	if (q->filter & PROTO_CLS_NEAR) {
+		struct geo_rect rc;
+		grid_tile_rect(k, &rc);
+		if (rect_distance(&rc, q->lon, q->lat, 6371008.8) > q->radius_m)
+			return false;
+	}
+	return true;
+}
+
+static void ls_add(struct cacheop *op, const struct proto_cache_entry *e)
+{
+	op->total++;
+	if (op->nents >= op->limit)
+		return;
+	if (op->nents == op->lscap) {
+		op->lscap = op->lscap ? op->lscap * 2 : 1024;
+		op->ents = xrealloc(op->ents, op->lscap * sizeof *op->ents);
+	}
+	op->ents[op->nents++] = *e;
+}
+
+static int ls_mem_fn(void *ud, const struct tile *t, uint64_t used_ns)
+{
+	struct cacheop *op = ud;
+	if (ls_match(op, &t->key)) {
+		uint64_t age = op->now_ns > used_ns ? (op->now_ns - used_ns) / 1000000000ull : 0;
+		ls_add(op, &(struct proto_cache_entry){
+				   .key = t->key, .format = (uint8_t)t->type,
+				   .tier = PROTO_TIER_MEMORY, .bytes = (uint32_t)t->nbytes,
+				   .age_s = age >= UINT32_MAX ? UINT32_MAX - 1 : (uint32_t)age });
+	}
+	return cancelled(op);
+}
+
+static int ls_disk_fn(void *ud, const struct store_entry *e)
+{
+	struct cacheop *op = ud;
+	size_t i = node_of(op, e->key.node);
+	if (i < op->nnodes && ls_match(op, &e->key)) /* entries of no planet: gc's */
+		ls_add(op, &(struct proto_cache_entry){ .key = e->key,
+							.format = op->nodes[i].format,
+							.tier = PROTO_TIER_DISK, .bytes = e->bytes,
+							.age_s = UINT32_MAX });
+	return cancelled(op);
+}
+
+static void build_ls_replies(struct cacheop *op)
+{
+	size_t parts = (op->nents + PROTO_MAX_CACHE_ENTRIES - 1) / PROTO_MAX_CACHE_ENTRIES;
+	if (!parts)
+		parts = 1;
+	op->msgs = xcalloc(parts, sizeof *op->msgs);
+	for (size_t p = 0; p < parts; p++) {
+		size_t off = p * PROTO_MAX_CACHE_ENTRIES;
+		size_t k = op->nents - off < PROTO_MAX_CACHE_ENTRIES ? op->nents - off
+								     : PROTO_MAX_CACHE_ENTRIES;
+		op->msgs[op->nmsgs++] = (struct proto_msg){
+			.type = PROTO_CACHE_ENTRIES,
+			.cache_entries = { .req = op->lq.req, .more = p + 1 < parts,
+					   .total = op->total, .count = (uint32_t)k,
+					   .entries = op->ents + off } };
+	}
+}
+
 static void *op_main(void *arg)
 {
 	struct cacheop *op = arg;
+	if (op->ls) {
+		if (op->cache)
+			cache_foreach(op->cache, ls_mem_fn, op);
+		if (op->store && !cancelled(op))
+			op->err = store_iterate(op->store, ls_disk_fn, op);
+		build_ls_replies(op);
+		goto done;
+	}
 	switch (op->q.op) {
 	case PROTO_COP_STAT:
 		op->cnt = xcalloc((op->nnodes + 1) * NLY * 2 * 2, sizeof *op->cnt);
@@ -249,6 +364,7 @@ static void *op_main(void *arg)
 		break;
 	}
 	build_replies(op);
+done:
 	xmutex_lock(&op->mu);
 	if (!cancelled(op))
 		op->done(op->ud);
@@ -256,25 +372,17 @@ static void *op_main(void *arg)
 	return NULL;
 }
 
-int cacheop_start(const struct proto_cache_op *q, const struct planet_set *ps,
-		  struct cache *cache, struct store *store, void (*done)(void *ud), void *ud,
-		  struct cacheop **out, char err[256])
+/* A new op with the node table of ps; target set when `planet` (may be NULL or "") names
+ * one. Returns NULL (err filled) when it names none. */
+static struct cacheop *op_new(const struct planet_set *ps, const char *planet, char err[256])
 {
-	*out = NULL;
-	if (q->op != PROTO_COP_STAT && !store) {
-		err_set(err, "this daemon has no disk store ([store] path): nothing to %s",
-			q->op == PROTO_COP_PURGE ? "purge" : q->op == PROTO_COP_GC ? "collect"
-										 : "verify");
-		return -ENODEV;
-	}
 	struct cacheop *op = xcalloc(1, sizeof *op);
-	op->q = *q;
-	op->q.planet = NULL;
 	op->target = -1;
+	const char *want = planet && planet[0] ? planet : NULL;
 	for (size_t i = 0; ps && i < ps->n; i++) {
 		const struct planet *p = ps->planets[i];
 		uint32_t pn = add_name(op, p->name);
-		if (q->planet && q->planet[0] && strcmp(q->planet, p->name) == 0)
+		if (want && strcmp(want, p->name) == 0)
 			op->target = (int)pn;
 		for (size_t k = 0; k < p->nnodes; k++) {
 			const struct node *n = p->nodes[k];
@@ -288,16 +396,23 @@ int cacheop_start(const struct proto_cache_op *q, const struct planet_set *ps,
 				label = buf;
 			}
 			op->nodes = xrealloc(op->nodes, (op->nnodes + 1) * sizeof *op->nodes);
-			op->nodes[op->nnodes++] = (struct nodeent){ n->hash, pn, add_name(op, label) };
+			op->nodes[op->nnodes++] = (struct nodeent){ n->hash, pn, add_name(op, label),
+								    (uint8_t)n->out };
 		}
 	}
 	if (op->nnodes > 1)
 		qsort(op->nodes, op->nnodes, sizeof *op->nodes, cmp_node);
-	if (q->planet && q->planet[0] && op->target < 0) {
-		err_set(err, "no planet \"%s\"", q->planet);
+	if (want && op->target < 0) {
+		err_set(err, "no planet \"%s\"", want);
 		cacheop_destroy(op);
-		return -ENOENT;
+		return NULL;
 	}
+	return op;
+}
+
+static int op_run(struct cacheop *op, struct cache *cache, struct store *store,
+		  void (*done)(void *ud), void *ud, struct cacheop **out, char err[256])
+{
 	op->cache = cache;
 	op->store = store;
 	op->done = done;
@@ -315,6 +430,43 @@ int cacheop_start(const struct proto_cache_op *q, const struct planet_set *ps,
 	op->started = true;
 	*out = op;
 	return 0;
+}
+
+int cacheop_start(const struct proto_cache_op *q, const struct planet_set *ps,
+		  struct cache *cache, struct store *store, void (*done)(void *ud), void *ud,
+		  struct cacheop **out, char err[256])
+{
+	*out = NULL;
+	if (q->op != PROTO_COP_STAT && !store) {
+		err_set(err, "this daemon has no disk store ([store] path): nothing to %s",
+			q->op == PROTO_COP_PURGE ? "purge" : q->op == PROTO_COP_GC ? "collect"
+										 : "verify");
+		return -ENODEV;
+	}
+	struct cacheop *op = op_new(ps, q->planet, err);
+	if (!op)
+		return -ENOENT;
+	op->q = *q;
+	op->q.planet = NULL;
+	return op_run(op, cache, store, done, ud, out, err);
+}
+
+int cacheop_start_ls(const struct proto_cache_ls *q, const struct planet_set *ps,
+		     struct cache *cache, struct store *store, void (*done)(void *ud), void *ud,
+		     struct cacheop **out, char err[256])
+{
+	*out = NULL;
+	struct cacheop *op = op_new(ps, (q->filter & PROTO_CLS_PLANET) ? q->planet : NULL, err);
+	if (!op)
+		return -ENOENT;
+	op->ls = true;
+	op->lq = *q;
+	op->lq.planet = NULL;
+	op->limit = q->limit ? q->limit : CACHE_LS_DEFAULT;
+	if (op->limit > CACHE_LS_MAX)
+		op->limit = CACHE_LS_MAX;
+	op->now_ns = cache_now_ns();
+	return op_run(op, cache, store, done, ud, out, err);
 }
 
 size_t cacheop_replies(struct cacheop *op, const struct proto_msg **msgs)
@@ -341,6 +493,7 @@ void cacheop_destroy(struct cacheop *op)
 	free(op->cnt);
 	free(op->del);
 	free(op->rows);
+	free(op->ents);
 	free(op->msgs);
 	free(op);
 }

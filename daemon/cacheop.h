@@ -27,6 +27,11 @@ struct cacheop;
 int cacheop_start(const struct proto_cache_op *q, const struct planet_set *ps,
 		  struct cache *cache, struct store *store, void (*done)(void *ud), void *ud,
 		  struct cacheop **out, char err[256]);
+/* CACHE_LS the same way: the memory tier's tiles and the disk tier's entries matching q (a
+ * disk entry's age is unknown: UINT32_MAX), in CACHE_ENTRIES parts. */
+int cacheop_start_ls(const struct proto_cache_ls *q, const struct planet_set *ps,
+		     struct cache *cache, struct store *store, void (*done)(void *ud), void *ud,
+		     struct cacheop **out, char err[256]);
 /* After done: the replies in order (CACHE_STAT parts, then CACHE_DONE), borrowed from op. */
 size_t cacheop_replies(struct cacheop *op, const struct proto_msg **msgs);
 /* Stops the thread (waits for it) and frees. NULL is a no-op. */

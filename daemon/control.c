@@ -1,7 +1,9 @@
-/* control — see control.h. CACHE_LS walks the cache under its lock (cache_foreach), so the
- * filter is cheap and the entries are copied out before any reply is encoded. A job's ready
- * reports come back through the ready queue naming the job; one finished or cancelled since
- * is recognised by its absence from the job list.
+/* control — see control.h. CACHE_LS and CACHE_OP run on a thread of their own (cacheop.h)
+ * whose end comes back through the ready queue (err OP_DONE, the op's slot in the job field);
+ * their replies are then sent in one go. A job's ready reports come back through the ready
+ * queue naming the job; one finished or cancelled since is recognised by its absence from the
+ * job list. Jobs are sized (prefetch_estimate) and checked against the [prefetch] caps and
+ * the budget of the tier they fill before anything is enumerated.
  */
 #include "control.h"
 
@@ -17,8 +19,6 @@
 #include "common/log.h"
 #include "common/xalloc.h"
 
-#define CACHE_LS_DEFAULT 10000u
-#define CACHE_LS_MAX (1u << 20)
 
 static void __attribute__((format(printf, 5, 6)))
 errorf(struct control *c, uint16_t code, uint16_t ref_type, uint32_t ref_id, const char *fmt, ...)
@@ -35,111 +35,6 @@ void control_init(struct control *c, const struct session_env *env,
 		  const struct control_host *host)
 {
 	*c = (struct control){ .env = env, .host = *host };
-}
-
-/* ---- CACHE_LS --------------------------------------------------------------------------- */
-
-struct lsctx {
-	const struct proto_cache_ls *q;
-	const uint64_t *nodes;
-	size_t nnodes;
-	struct proto_cache_entry *out;
-	size_t n, limit;
-	uint64_t total;
-	uint64_t now_ns; /* cache_now_ns() when the listing started */
-};
-
-/* Great-circle distance (metres, mean Earth-like radius r) from (lon, lat) to the nearest
- * point of the tile's rectangle: a spherical approximation, good enough for a listing filter
- * and cheap enough to run under the cache lock. */
-static double rect_distance(const struct geo_rect *rc, double lon, double lat, double r)
-{
-	double clat = fmin(fmax(lat, rc->south), rc->north);
-	double w = rc->west, e = rc->east, l = fmod(lon + 540.0, 360.0) - 180.0;
-	double clon;
-	if (l >= w && l <= e) {
-		clon = l;
-	} else {
-		double dw = fmod(w - l + 720.0, 360.0), de = fmod(l - e + 720.0, 360.0);
-		clon = dw < de ? w : e;
-	}
-	double p1 = lat * M_PI / 180, p2 = clat * M_PI / 180;
-	double dl = (clon - l) * M_PI / 180;
-	double h = sin((p2 - p1) / 2) * sin((p2 - p1) / 2) +
-		   cos(p1) * cos(p2) * sin(dl / 2) * sin(dl / 2);
-	return 2 * r * asin(fmin(1.0, sqrt(h)));
-}
-
-static int ls_fn(void *ud, const struct tile *t, uint64_t used_ns)
-{
-	struct lsctx *c = ud;
-	const struct proto_cache_ls *q = c->q;
-	if (q->filter & PROTO_CLS_PLANET) {
-		bool found = false;
-		for (size_t i = 0; i < c->nnodes && !found; i++)
-			found = c->nodes[i] == t->key.node;
-		if (!found)
-			return 0;
-	}
-	if ((q->filter & PROTO_CLS_LEVEL) &&
-	    ((q->lx != PROTO_ANY_LX && t->key.lx != q->lx) || t->key.ly != q->ly))
-		return 0;
-	if (q->filter & PROTO_CLS_NEAR) {
-		struct geo_rect rc;
-		grid_tile_rect(&t->key, &rc);
-		if (rect_distance(&rc, q->lon, q->lat, 6371008.8) > q->radius_m)
-			return 0;
-	}
-	c->total++;
-	uint64_t age = c->now_ns > used_ns ? (c->now_ns - used_ns) / 1000000000ull : 0;
-	if (c->n < c->limit)
-		c->out[c->n++] = (struct proto_cache_entry){ .key = t->key, .format = (uint8_t)t->type,
-							    .tier = PROTO_TIER_MEMORY,
-							    .bytes = (uint32_t)t->nbytes,
-							    .age_s = age > UINT32_MAX ? UINT32_MAX
-										      : (uint32_t)age };
-	return 0;
-}
-
-void control_cache_ls(struct control *ctl, const struct proto_cache_ls *q)
-{
-	struct lsctx c = { .q = q };
-	uint64_t *nodes = NULL;
-	if (q->filter & PROTO_CLS_PLANET) {
-		const struct planet *p = planet_set_find(*ctl->env->planets, q->planet);
-		if (!p) {
-			errorf(ctl, PROTO_E_NOT_FOUND, PROTO_CACHE_LS, q->req, "no planet \"%s\"",
-			       q->planet);
-			return;
-		}
-		nodes = xmalloc((p->nnodes + 1) * sizeof *nodes);
-		for (size_t i = 0; i < p->nnodes; i++)
-			nodes[i] = p->nodes[i]->hash;
-		c.nodes = nodes;
-		c.nnodes = p->nnodes;
-	}
-	c.limit = q->limit ? q->limit : CACHE_LS_DEFAULT;
-	if (c.limit > CACHE_LS_MAX)
-		c.limit = CACHE_LS_MAX;
-	struct cache_stats cs;
-	cache_stats(ctl->env->cache, &cs);
-	size_t cap = cs.tiles + 64 < c.limit ? cs.tiles + 64 : c.limit;
-	c.out = xmalloc((cap ? cap : 1) * sizeof *c.out);
-	c.limit = cap;
-	c.now_ns = cache_now_ns();
-	cache_foreach(ctl->env->cache, ls_fn, &c);
-	size_t off = 0;
-	do {
-		size_t k = c.n - off > PROTO_MAX_CACHE_ENTRIES ? PROTO_MAX_CACHE_ENTRIES : c.n - off;
-		struct proto_msg m = { .type = PROTO_CACHE_ENTRIES,
-				       .cache_entries = { .req = q->req, .more = off + k < c.n,
-							  .total = c.total, .count = (uint32_t)k,
-							  .entries = c.out + off } };
-		ctl->host.send(ctl->host.s, &m);
-		off += k;
-	} while (off < c.n);
-	free(c.out);
-	free(nodes);
 }
 
 /* ---- CACHE_OP ----------------------------------------------------------------------------- */
@@ -204,6 +99,23 @@ static bool op_finished(struct control *c, const struct control_op *slot)
 		return true;
 	}
 	return false;
+}
+
+void control_cache_ls(struct control *c, const struct proto_cache_ls *q)
+{
+	struct control_op *slot = xcalloc(1, sizeof *slot);
+	slot->c = c;
+	char err[256];
+	int rc = cacheop_start_ls(q, *c->env->planets, c->env->cache, sched_store(c->env->sched),
+				  op_done_cb, slot, &slot->op, err);
+	if (rc) {
+		free(slot);
+		errorf(c, rc == -ENOENT ? PROTO_E_NOT_FOUND : PROTO_E_INTERNAL, PROTO_CACHE_LS,
+		       q->req, "%s", err);
+		return;
+	}
+	c->ops = xrealloc(c->ops, (c->nops + 1) * sizeof *c->ops);
+	c->ops[c->nops++] = slot;
 }
 
 /* ---- PREFETCH ---------------------------------------------------------------------------- */

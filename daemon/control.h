@@ -1,6 +1,7 @@
-/* control — a session's control requests: CACHE_LS (the memory cache's tiles, filtered by
- * planet, level or distance) and PREFETCH / PREFETCH_CANCEL with the prefetch jobs they start
- * (prefetch.h enumerates a job's tiles; here they are run, reported and cancelled).
+/* control — a session's control requests: CACHE_LS (the memory and disk tiers' tiles,
+ * filtered by planet, level or distance), CACHE_OP (stat, purge, gc, verify), PREFETCH_DRY,
+ * and PREFETCH / PREFETCH_CANCEL with the prefetch jobs they start (prefetch.h enumerates a
+ * job's tiles; here they are sized, capped, run, reported and cancelled).
  *
  * Threads: the loop thread; a job's scheduler callback only pushes onto env->ready.
  * Ownership: a control belongs to one session and owns its jobs and the planet-set references

@@ -60,10 +60,14 @@ int ctl_cache_print(struct proto_cache_entry *e, size_t n, uint64_t total,
 				fprintf(out, (*q == '"' || *q == '\\') ? "\\%c" : "%c", *q);
 			fprintf(out, "\", \"node\": \"%016" PRIx64 "\", \"lx\": %u, \"ly\": %u, "
 				"\"x\": %u, \"y\": %u, \"format\": \"%s\", \"tier\": \"%s\", "
-				"\"bytes\": %u, \"age_s\": %u}", x->key.node, x->key.lx, x->key.ly,
+				"\"bytes\": %u, \"age_s\": ", x->key.node, x->key.lx, x->key.ly,
 				x->key.x, x->key.y,
 				pix_valid(x->format) ? pix_format_name(x->format) : "?",
-				tier_name(x->tier), x->bytes, x->age_s);
+				tier_name(x->tier), x->bytes);
+			if (x->age_s == UINT32_MAX) /* unknown (the disk tier) */
+				fprintf(out, "null}");
+			else
+				fprintf(out, "%u}", x->age_s);
 		}
 		fprintf(out, "%s]}\n", n ? "\n" : "");
 		return ferror(out) ? -EIO : 0;
@@ -81,7 +85,10 @@ int ctl_cache_print(struct proto_cache_entry *e, size_t n, uint64_t total,
 		const struct proto_cache_entry *x = &e[i];
 		char lv[16], age[32];
 		snprintf(lv, sizeof lv, "%u/%u", x->key.lx, x->key.ly);
-		ctl_fmt_duration(x->age_s, age, sizeof age);
+		if (x->age_s == UINT32_MAX)
+			snprintf(age, sizeof age, "-");
+		else
+			ctl_fmt_duration(x->age_s, age, sizeof age);
 		fprintf(out, "%-*s  %5s  %10u  %10u  %10u  %9s  %-6s\n", lw,
 			layer_name(p, x->key.node, hb, sizeof hb), lv, x->key.x, x->key.y, x->bytes,
 			age, tier_name(x->tier));

@@ -686,16 +686,30 @@ static void cache_maintenance(void **state)
 	printf("%.600s...\n", out);
 	assert_non_null(strstr(out, "planet"));
 	assert_non_null(strstr(out, " disk "));
+	/* cache ls lists the disk tier (age unknown there) */
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "ls", "test", "--level", "9", "--limit",
+			     "100000", "--json", NULL), 0);
+	assert_non_null(strstr(out, "\"tier\": \"disk\", \"bytes\": "));
+	assert_non_null(strstr(out, "\"age_s\": null"));
+	uint64_t ls9 = 0;
+	for (const char *p = strstr(out, "\"tier\": \"disk\""); p;
+	     p = strstr(p + 1, "\"tier\": \"disk\""))
+		ls9++;
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "ls", "test", "--level", "9", NULL), 0);
+	assert_non_null(strstr(out, " disk"));
 	/* purge level 9: gone from disk, the rest stays */
 	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", "test", "--levels", "9-9",
 			     "--json", NULL), 0);
 	uint64_t r9 = json_u(out, "\"removed\": ");
 	printf("purge --levels 9-9: %s", out);
-	assert_true(r9 > 0);
+	assert_int_equal(r9, ls9);
 	assert_int_equal(stat_of(s, "store.disk.tiles"), disk - r9);
 	assert_int_equal(ctl(e, out, sizeof out, "cache", "stat", "test", "--json", NULL), 0);
 	assert_null(strstr(out, "\"level\": 9, \"tier\": \"disk\""));
 	assert_non_null(strstr(out, "\"level\": 8, \"tier\": \"disk\""));
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "ls", "test", "--level", "9", "--json",
+			     NULL), 0);
+	assert_null(strstr(out, "\"tier\": \"disk\""));
 	/* purge a bbox at level 8: the 46°N tiles go, those at 100°E (bulk_writes_through) stay */
 	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", "test", "--bbox",
 			     "7,45.5,10,46.8", "--levels", "8-8", "--json", NULL), 0);
