@@ -3,6 +3,14 @@
  * iteration. A closed session's record stays allocated (the graveyard) until the iteration
  * ends, so pointers in the current epoll batch or ready batch never dangle. The sessions see
  * the server only through srv->env: the callbacks below are its half of that contract.
+ *
+ * Admission: a connection is first not yet authenticated (pre-auth). Pre-auth connections
+ * have pools of their own, one per listener kind (Unix, TCP) of max_preauth each, and on TCP
+ * at most max_preauth_per_peer per peer address; a new connection over a cap closes the
+ * oldest pre-auth one of its pool (or of its peer) rather than being refused, so idle
+ * connections that hold every slot cannot lock a client out, and those on a TCP listener
+ * never touch the Unix socket's. max_sessions counts authenticated sessions only, checked at
+ * HELLO; the Unix socket has UNIX_RESERVE slots beyond it that TCP sessions cannot take.
  */
 #include "server.h"
 
@@ -13,7 +21,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <netinet/in.h>
 #include <sys/epoll.h>
+#include <sys/socket.h>
 #include <sys/timerfd.h>
 #include <unistd.h>
 
@@ -30,6 +40,9 @@
 #define STOP_GRACE_NS 2000000000ull
 #define MAX_WATCH 4
 #define MAX_FOCI 512
+#define ACCEPT_BATCH 16
+#define UNIX_RESERVE 8		       /* sessions over max_sessions kept for the Unix socket */
+#define EVICT_WARN_NS 10000000000ull /* at most one eviction warning per 10 s */
 
 enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH };
 
@@ -46,7 +59,10 @@ struct session_link {
 	uint64_t id;
 	int fd;
 	bool in_pump, dead;
-	struct session_link *prev, *next; /* the live sessions */
+	bool preauth, is_unix;
+	struct sockaddr_storage peer;		  /* TCP: the per-peer cap compares addresses */
+	struct session_link *pre_prev, *pre_next; /* its pre-auth pool, oldest first */
+	struct session_link *prev, *next;	  /* the live sessions */
 	struct session_link *pump_next;	  /* the pump list */
 	struct session_link *grave_next;  /* closed this iteration */
 };
@@ -82,7 +98,12 @@ struct server {
 	uint64_t stop_deadline_ns;
 
 	struct session_link *sessions; /* doubly linked */
-	size_t nsessions;
+	size_t nsessions;	       /* every connection */
+	struct session_link *pre_head[2], *pre_tail[2]; /* [is_unix]: pre-auth pools */
+	size_t npre[2], nauth;
+	uint64_t evicted, refused, evict_warn_ns;
+	bool accept_unix; /* the connection being accepted (for sess_attach) */
+	struct sockaddr_storage accept_peer;
 	uint64_t next_session_id, sessions_total;
 	struct session_link *pump;	/* sessions with more output to produce */
 	struct session_link *graveyard; /* closed this iteration, freed at its end */
@@ -120,7 +141,52 @@ static struct session_link *sess_attach(void *ud, struct session *s, int fd, uin
 	srv->sessions = l;
 	srv->nsessions++;
 	srv->sessions_total++;
+	/* into its pre-auth pool, newest last */
+	int k = l->is_unix = srv->accept_unix;
+	l->peer = srv->accept_peer;
+	l->preauth = true;
+	l->pre_prev = srv->pre_tail[k];
+	if (srv->pre_tail[k])
+		srv->pre_tail[k]->pre_next = l;
+	else
+		srv->pre_head[k] = l;
+	srv->pre_tail[k] = l;
+	srv->npre[k]++;
 	return l;
+}
+
+static void pre_unlink(struct server *srv, struct session_link *l)
+{
+	int k = l->is_unix;
+	if (l->pre_prev)
+		l->pre_prev->pre_next = l->pre_next;
+	else
+		srv->pre_head[k] = l->pre_next;
+	if (l->pre_next)
+		l->pre_next->pre_prev = l->pre_prev;
+	else
+		srv->pre_tail[k] = l->pre_prev;
+	l->pre_prev = l->pre_next = NULL;
+	l->preauth = false;
+	srv->npre[k]--;
+}
+
+static int sess_authenticated(void *ud, struct session_link *l)
+{
+	struct server *srv = ud;
+	size_t cap = (size_t)srv->conf->max_sessions + (l->is_unix ? UNIX_RESERVE : 0);
+	if (!l->preauth)
+		return 0;
+	if (srv->nauth >= cap) {
+		srv->refused++;
+		log_msg(LOG_WARN, "session %llu: refused at HELLO: %zu sessions (max_sessions %d%s)",
+			(unsigned long long)l->id, srv->nauth, srv->conf->max_sessions,
+			l->is_unix ? " + the Unix socket's reserve" : "");
+		return -EBUSY;
+	}
+	pre_unlink(srv, l);
+	srv->nauth++;
+	return 0;
 }
 
 static void sess_interest(void *ud, struct session_link *l, uint32_t events)
@@ -156,6 +222,10 @@ static void sess_detach(void *ud, struct session_link *l)
 	if (l->next)
 		l->next->prev = l->prev;
 	srv->nsessions--;
+	if (l->preauth)
+		pre_unlink(srv, l);
+	else
+		srv->nauth--;
 	l->grave_next = srv->graveyard;
 	srv->graveyard = l;
 }
@@ -281,6 +351,9 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_f(&b, "uptime_s", (double)(clock_now_ns() - srv->start_ns) * 1e-9);
 	stat_u(&b, "sessions", srv->nsessions);
 	stat_u(&b, "sessions.total", srv->sessions_total);
+	stat_u(&b, "sessions.preauth", srv->npre[0] + srv->npre[1]);
+	stat_u(&b, "sessions.preauth.evicted", srv->evicted);
+	stat_u(&b, "sessions.refused", srv->refused);
 	stat_u(&b, "sched.queued.visible", ss.queued[SCHED_VISIBLE]);
 	stat_u(&b, "sched.queued.prefetch", ss.queued[SCHED_PREFETCH]);
 	stat_u(&b, "sched.queued.bulk", ss.queued[SCHED_BULK]);
@@ -324,6 +397,17 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_nodes(&b, srv->planets);
 	return b.n;
+}
+
+size_t server_stats(struct server *srv, struct proto_stat *items, char (*keys)[128], size_t cap)
+{
+	return fill_stats(srv, items, keys, cap);
+}
+
+const uint8_t *server_token(const struct server *srv, size_t *len)
+{
+	*len = srv->have_token ? srv->token_len : 0;
+	return srv->have_token ? srv->token : NULL;
 }
 
 /* ---- setup ------------------------------------------------------------------------------ */
@@ -375,6 +459,8 @@ void server_conf_changed(struct server *srv)
 					     .max_pending = c->max_pending,
 					     .max_frame = c->max_frame };
 	srv->env.max_jobs = c->max_jobs;
+	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
+	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
 	set_prefetch_caps(srv);
 }
 
@@ -385,7 +471,10 @@ static void init_env(struct server *srv)
 		.cache = srv->cache, .ready = &srv->ready, .codec = srv->codec,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,
-		.attach = sess_attach, .interest = sess_interest, .pump = sess_pump,
+		.handshake_ns = (uint64_t)srv->conf->handshake_timeout * 1000000000u,
+		.frame_ns = (uint64_t)srv->conf->frame_timeout * 1000000000u,
+		.attach = sess_attach, .authenticated = sess_authenticated,
+		.interest = sess_interest, .pump = sess_pump,
 		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats,
 		.prefetch = &srv->prefetch
 	};
@@ -544,23 +633,82 @@ static void on_ready(struct server *srv)
 	free(batch);
 }
 
+/* Whether two TCP peers have the same address (ports aside). */
+static bool same_host(const struct sockaddr_storage *a, const struct sockaddr_storage *b)
+{
+	if (a->ss_family != b->ss_family)
+		return false;
+	if (a->ss_family == AF_INET)
+		return ((const struct sockaddr_in *)a)->sin_addr.s_addr ==
+		       ((const struct sockaddr_in *)b)->sin_addr.s_addr;
+	if (a->ss_family == AF_INET6)
+		return memcmp(&((const struct sockaddr_in6 *)a)->sin6_addr,
+			      &((const struct sockaddr_in6 *)b)->sin6_addr, sizeof(struct in6_addr)) == 0;
+	return false;
+}
+
+/* Closes the pre-auth connection victim to make room for a new one (why: which cap). */
+static void evict(struct server *srv, struct session_link *victim, const struct listener *l,
+		  const char *why)
+{
+	srv->evicted++;
+	uint64_t now = clock_now_ns();
+	if (now >= srv->evict_warn_ns) {
+		srv->evict_warn_ns = now + EVICT_WARN_NS;
+		log_msg(LOG_WARN, "%s: %s reached: closing the oldest connections that have not "
+			"completed HELLO (%llu so far)", l->name, why,
+			(unsigned long long)srv->evicted);
+	}
+	session_close(victim->s, why);
+}
+
+/* Brings the pre-auth pool of a new connection from peer back within its caps, closing the
+ * oldest connections first (the new one is the newest: it stays). */
+static void enforce_preauth(struct server *srv, const struct listener *l,
+			    const struct sockaddr_storage *peer)
+{
+	int k = l->is_unix;
+	if (!l->is_unix) {
+		for (;;) {
+			struct session_link *oldest = NULL;
+			int same = 0;
+			for (struct session_link *p = srv->pre_head[0]; p; p = p->pre_next) {
+				if (same_host(&p->peer, peer)) {
+					oldest = oldest ? oldest : p;
+					same++;
+				}
+			}
+			if (same <= srv->conf->max_preauth_per_peer)
+				break;
+			evict(srv, oldest, l, "max_preauth_per_peer");
+		}
+	}
+	while (srv->npre[k] > (size_t)srv->conf->max_preauth && srv->pre_head[k])
+		evict(srv, srv->pre_head[k], l, "max_preauth");
+}
+
 static void on_accept(struct server *srv, struct listener *l)
 {
-	for (;;) {
-		int fd = listen_accept(l);
+	/* A batch at a time (the listener stays readable), so a flood of connections does not
+	 * keep the sessions' input waiting. */
+	for (int i = 0; i < ACCEPT_BATCH; i++) {
+		struct sockaddr_storage peer;
+		int fd = listen_accept(l, &peer);
 		if (fd < 0) {
 			if (fd != -EAGAIN)
 				log_msg(LOG_WARN, "%s: accept: %s", l->name, strerror(-fd));
 			return;
 		}
-		if (srv->nsessions >= (size_t)srv->conf->max_sessions) {
-			log_msg(LOG_WARN, "%s: refusing a connection: %zu sessions (max_sessions)",
-				l->name, srv->nsessions);
-			close(fd);
-			continue;
-		}
 		listen_tune(l, fd);
-		session_create(&srv->env, fd, l);
+		srv->accept_unix = l->is_unix;
+		srv->accept_peer = peer;
+		struct session *ss = session_create(&srv->env, fd, l);
+		if (!ss)
+			continue;
+		/* A client sends HELLO with its connect: read it now, so a well-behaved one leaves
+		 * the pre-auth pool at once and costs no one a slot; then the caps. */
+		session_on_event(ss, EPOLLIN);
+		enforce_preauth(srv, l, &peer);
 	}
 }
 
