@@ -39,6 +39,7 @@ void control_init(struct control *c, const struct session_env *env,
 
 /* ---- CACHE_OP ----------------------------------------------------------------------------- */
 
+#define CONTROL_MAX_OPS 4 /* CACHE_LS / CACHE_OP running at once per session */
 #define OP_DONE 2 /* a ready item's err: its job pointer is a struct control_op whose op is done */
 
 struct control_op {
@@ -64,8 +65,21 @@ static void op_remove(struct control *c, size_t i)
 	c->ops[i] = c->ops[--c->nops];
 }
 
+/* Whether another listing or maintenance op may start (each has a thread): else ERROR busy. */
+static bool op_room(struct control *c, uint16_t ref_type, uint32_t req)
+{
+	if (c->nops < CONTROL_MAX_OPS)
+		return true;
+	errorf(c, PROTO_E_BUSY, ref_type, req,
+	       "%zu cache listings or operations running: this session's limit is %d", c->nops,
+	       CONTROL_MAX_OPS);
+	return false;
+}
+
 void control_cache_op(struct control *c, const struct proto_cache_op *q)
 {
+	if (!op_room(c, PROTO_CACHE_OP, q->req))
+		return;
 	struct control_op *slot = xcalloc(1, sizeof *slot);
 	slot->c = c;
 	char err[256];
@@ -103,6 +117,8 @@ static bool op_finished(struct control *c, const struct control_op *slot)
 
 void control_cache_ls(struct control *c, const struct proto_cache_ls *q)
 {
+	if (!op_room(c, PROTO_CACHE_LS, q->req))
+		return;
 	struct control_op *slot = xcalloc(1, sizeof *slot);
 	slot->c = c;
 	char err[256];
