@@ -53,6 +53,11 @@ static const struct row rows[] = {
 	{ "session", "max_frame_kb", K_SIZE_KB, 0, 16384, NULL },
 	{ "session", "max_jobs", K_INT, 0, 64, NULL },
 	{ "session", "compress", K_ENUM, 0, 0, compress_names },
+	{ "prefetch", "max_tiles", K_INT, 1, 1L << 26, NULL },
+	{ "prefetch", "max_tiles_local", K_INT, 0, 1L << 26, NULL },
+	{ "prefetch", "max_jobs_local", K_INT, 0, 64, NULL },
+	{ "prefetch", "max_jobs_total", K_INT, 1, 4096, NULL },
+	{ "prefetch", "max_tiles_total", K_INT, 1, 1L << 32, NULL },
 	{ "log", "level", K_LOG, 0, 0, NULL },
 	{ "store", "path", K_PATH, 0, 0, NULL },
 	{ "store", "disk_mb", K_SIZE_MB, 1, 1L << 26, NULL },
@@ -166,6 +171,11 @@ static void defaults(struct conf *c)
 	c->max_pending = (uint64_t)8 << 20;
 	c->max_frame = 0;
 	c->max_jobs = 4;
+	c->pf_max_tiles = 4000000;
+	c->pf_max_tiles_local = 250000;
+	c->pf_max_jobs_local = 1;
+	c->pf_max_jobs_total = 16;
+	c->pf_max_tiles_total = 16000000;
 	c->log_level = LOG_INFO;
 	c->store_bytes = (uint64_t)1024 << 20;
 	c->http_threads = 2;
@@ -311,6 +321,16 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->max_frame = (uint32_t)n << 10;
 	else if (strcmp(k, "max_jobs") == 0)
 		c->max_jobs = (uint32_t)n;
+	else if (strcmp(k, "max_tiles") == 0)
+		c->pf_max_tiles = (uint64_t)n;
+	else if (strcmp(k, "max_tiles_local") == 0)
+		c->pf_max_tiles_local = (uint64_t)n;
+	else if (strcmp(k, "max_jobs_local") == 0)
+		c->pf_max_jobs_local = (uint32_t)n;
+	else if (strcmp(k, "max_jobs_total") == 0)
+		c->pf_max_jobs_total = (uint32_t)n;
+	else if (strcmp(k, "max_tiles_total") == 0)
+		c->pf_max_tiles_total = (uint64_t)n;
 	else if (strcmp(k, "disk_mb") == 0)
 		c->store_bytes = (uint64_t)n << 20;
 	else if (strcmp(k, "threads") == 0)

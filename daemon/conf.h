@@ -54,6 +54,9 @@ struct conf {
 	uint32_t max_want, max_rate, max_frame, max_jobs;
 	uint64_t max_pending;
 	enum conf_compress compress;
+	/* [prefetch] (prefetch.h's struct prefetch_limits) */
+	uint64_t pf_max_tiles, pf_max_tiles_local, pf_max_tiles_total;
+	uint32_t pf_max_jobs_local, pf_max_jobs_total;
 	/* [log] */
 	enum log_level log_level;
 	/* [store] */

@@ -32,6 +32,7 @@
 #include "common/log.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "prefetch.h"
 #include "readyq.h"
 #include "session.h"
 
@@ -81,6 +82,7 @@ struct server {
 	uint8_t token[PROTO_MAX_TOKEN];
 	size_t token_len;
 	bool have_token;
+	struct prefetch_limits prefetch; /* caps from the conf, counts from the sessions */
 
 	int epfd, timerfd;
 	struct evsrc ev_ready, ev_timer;
@@ -334,6 +336,7 @@ static void stat_store(struct statb *b, struct store *st)
 	stat_u(b, "store.disk.write_drops", s.write_drops);
 	stat_u(b, "store.disk.write_errors", s.write_errors);
 	stat_u(b, "store.disk.queued", s.queued);
+	stat_u(b, "store.disk.recovered", s.recovered);
 }
 
 static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap)
@@ -438,6 +441,17 @@ static int load_token(struct server *srv, char err[256])
 	return 0;
 }
 
+/* [prefetch] caps (the running jobs' counts are kept). */
+static void set_prefetch_caps(struct server *srv)
+{
+	const struct conf *c = srv->conf;
+	srv->prefetch.max_tiles = c->pf_max_tiles;
+	srv->prefetch.max_tiles_local = c->pf_max_tiles_local;
+	srv->prefetch.max_jobs_local = c->pf_max_jobs_local;
+	srv->prefetch.max_jobs_total = c->pf_max_jobs_total;
+	srv->prefetch.max_tiles_total = c->pf_max_tiles_total;
+}
+
 void server_conf_changed(struct server *srv)
 {
 	const struct conf *c = srv->conf;
@@ -447,6 +461,7 @@ void server_conf_changed(struct server *srv)
 	srv->env.max_jobs = c->max_jobs;
 	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
 	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
+	set_prefetch_caps(srv);
 }
 
 static void init_env(struct server *srv)
@@ -460,8 +475,10 @@ static void init_env(struct server *srv)
 		.frame_ns = (uint64_t)srv->conf->frame_timeout * 1000000000u,
 		.attach = sess_attach, .authenticated = sess_authenticated,
 		.interest = sess_interest, .pump = sess_pump,
-		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats
+		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats,
+		.prefetch = &srv->prefetch
 	};
+	set_prefetch_caps(srv);
 }
 
 /* The ready eventfd and the housekeeping timer in the epoll set. */

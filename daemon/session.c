@@ -344,6 +344,8 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 		return;
 	}
 	s->req = sched_req_create(env->sched, sess_ready_cb, s);
+	/* Presented the token (required or not): prefetch limits of an authenticated client. */
+	s->ctl.authed = s->need_token || control_token_ok(env, h);
 	uint8_t codec = TCODEC_NONE;
 	if (s->compress) {
 		if (h->codecs & (1u << TCODEC_ZSTD))
@@ -547,6 +549,8 @@ static uint32_t ref_of(const struct proto_msg *m)
 	case PROTO_CACHE_LS: return m->cache_ls.req;
 	case PROTO_PREFETCH: return m->prefetch.id;
 	case PROTO_PREFETCH_CANCEL: return m->prefetch_cancel.req;
+	case PROTO_PREFETCH_DRY: return m->prefetch_dry.id;
+	case PROTO_CACHE_OP: return m->cache_op.req;
 	default: return 0;
 	}
 }
@@ -608,6 +612,8 @@ static void handle(struct session *s, const struct proto_msg *m, size_t frame_le
 	case PROTO_CACHE_LS: control_cache_ls(&s->ctl, &m->cache_ls); break;
 	case PROTO_PREFETCH: control_prefetch(&s->ctl, &m->prefetch); break;
 	case PROTO_PREFETCH_CANCEL: control_prefetch_cancel(&s->ctl, m->prefetch_cancel.req); break;
+	case PROTO_PREFETCH_DRY: control_prefetch_dry(&s->ctl, &m->prefetch_dry); break;
+	case PROTO_CACHE_OP: control_cache_op(&s->ctl, &m->cache_op); break;
 	default:
 		send_error(s, PROTO_E_STATE, m->type, 0, "%s is not a client message",
 			   proto_type_name(m->type));

@@ -23,6 +23,7 @@
 #include "readyq.h"
 
 struct session;
+struct prefetch_limits;
 struct session_link; /* the server's record of a session (opaque here) */
 
 /* Server-wide counters the sessions add to (STATS). */
@@ -34,6 +35,7 @@ struct session_counters {
 struct session_env {
 	const struct proto_limits *limits;
 	uint32_t max_jobs; /* prefetch jobs per session */
+	struct prefetch_limits *prefetch; /* the server's caps on prefetch jobs (prefetch.h) */
 	uint64_t handshake_ns; /* accept to HELLO_OK, at most ([listen] handshake_timeout) */
 	uint64_t frame_ns;     /* a frame's first byte to its last, at most (frame_timeout) */
 	struct sched *sched;

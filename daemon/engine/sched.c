@@ -407,14 +407,15 @@ static void lower_priority(struct sched *s)
 }
 
 /* A from_store job: the tile from the store, else the job goes back to the manager with no
- * result to be generated. */
-static void load(struct sched *s, struct tilecodec *tc, struct job *j)
+ * result to be generated. Bulk work (prefetch) finding it there leaves the memory cache alone. */
+static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;
 	struct tile *t = NULL;
 	int rc = store_get(s->store, &j->key, n->out, n->planet->tile_size, tc, &t);
 	if (rc == 0) {
-		cache_insert(s->cache, t);
+		if (cls != SCHED_BULK)
+			cache_insert(s->cache, t);
 		atomic_fetch_add(&s->loaded, 1);
 	}
 	j->result = t;
@@ -422,7 +423,10 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j)
 }
 
 /* cls: the class the job was queued with; bulk work (operator prefetch) is kept on disk
- * ahead of what viewers happened to ask for. */
+ * ahead of what viewers happened to ask for, and does not flush the memory cache viewers use:
+ * with a store its stored tiles are written through to the store only, the others
+ * (intermediate nodes, or a tile the store's full queue dropped) go in at the cache's cold
+ * end; without one its layer tiles warm the memory cache as any others. */
 static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;
@@ -431,11 +435,15 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
-		cache_insert(s->cache, t);
+		bool bulk = cls == SCHED_BULK, stored = false;
 		if (s->store && store_keeps(n))
 			/* Write-behind: never waits; a full queue drops it. */
-			store_put(s->store, t,
-				  cls == SCHED_BULK ? STORE_KEEP_PREFETCHED : STORE_KEEP_INCIDENTAL);
+			stored = store_put(s->store, t,
+					   bulk ? STORE_KEEP_PREFETCHED : STORE_KEEP_INCIDENTAL) == 0;
+		if (!bulk || (!s->store && store_keeps(n)))
+			cache_insert(s->cache, t); /* without a disk tier, prefetch warms memory */
+		else if (!stored)
+			cache_insert_cold(s->cache, t);
 		atomic_fetch_add(&j->node->generated, 1);
 		atomic_fetch_add(&j->node->gen_ns, dt);
 		atomic_fetch_add(&s->generated, 1);
@@ -470,7 +478,7 @@ static void *worker_main(void *arg)
 		xmutex_unlock(&s->q_mu);
 
 		if (j->from_store)
-			load(s, tc, j);
+			load(s, tc, j, cls);
 		else
 			generate(s, &g, j, cls);
 
