@@ -3,11 +3,15 @@
  * iteration. A closed session's record stays allocated (the graveyard) until the iteration
  * ends, so pointers in the current epoll batch or ready batch never dangle. The sessions see
  * the server only through srv->env: the callbacks below are its half of that contract.
+ * Every iteration's work (from epoll_wait's return to its end) goes into the loop.*
+ * histogram (loopstat.h). Memory that closed sessions held goes back to the system at the
+ * next tick (malloc_trim: glibc keeps freed heap otherwise, see clipmapd.c's mallopt).
  */
 #include "server.h"
 
 #include <errno.h>
 #include <fcntl.h>
+#include <malloc.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -22,6 +26,7 @@
 #include "common/log.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "loopstat.h"
 #include "readyq.h"
 #include "session.h"
 
@@ -29,6 +34,7 @@
 #define STOP_GRACE_NS 2000000000ull
 #define MAX_WATCH 4
 #define MAX_FOCI 512
+#define TRIM_EVERY_NS 1000000000ull /* at most one malloc_trim a second */
 
 enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH };
 
@@ -90,6 +96,10 @@ struct server {
 	uint64_t start_ns;
 	struct session_counters counters;
 	struct session_env env; /* lent to every session */
+
+	struct loopstat loop;	/* iteration times */
+	bool trim_due;		/* sessions were freed since the last trim */
+	uint64_t last_trim_ns, trims;
 };
 
 static int ep_add(struct server *srv, int fd, struct evsrc *ev)
@@ -266,6 +276,25 @@ static void stat_store(struct statb *b, struct store *st)
 	stat_u(b, "store.disk.queued", s.queued);
 }
 
+/* The loop-iteration histogram: count, maximum, p99 (a bucket bound), per bucket. */
+static void stat_loop(struct statb *b, const struct loopstat *ls)
+{
+	stat_u(b, "loop.iterations", ls->n);
+	stat_f(b, "loop.max_ms", (double)ls->max_ns * 1e-6);
+	stat_f(b, "loop.p99_ms", loopstat_quantile_ms(ls, 0.99));
+	stat_u(b, "loop.over_50ms", loopstat_over(ls, 50));
+	for (int i = 0; i < LOOPSTAT_NB; i++) {
+		struct proto_stat *st =
+			i < LOOPSTAT_NB - 1
+				? stat_add(b, "loop.le_%ums", loopstat_bound_ms(i))
+				: stat_add(b, "loop.gt_%ums", loopstat_bound_ms(LOOPSTAT_NB - 2));
+		if (st) {
+			st->kind = PROTO_STAT_U64;
+			st->u = ls->b[i];
+		}
+	}
+}
+
 static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap)
 {
 	const struct server *srv = ud;
@@ -303,14 +332,20 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "tiles.stale", c->tiles_stale);
 	stat_u(&b, "bytes.sent", c->bytes_sent);
 	stat_u(&b, "errors.sent", c->errors_sent);
+	stat_u(&b, "tiles.parked", c->tiles_parked);
+	stat_u(&b, "tiles.relooked", c->tiles_relooked);
+	stat_u(&b, "tiles.rewanted", c->tiles_rewanted);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
 	stat_u(&b, "planets.skipped", srv->planets->nskipped); /* files that did not load */
-	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0;
+	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0, held = 0, held_max = 0, outb = 0;
 	for (const struct session_link *l = srv->sessions; l; l = l->next) {
 		struct session_load ld;
 		session_get_load(l->s, &ld);
 		njobs += ld.jobs;
+		held += ld.held_bytes;
+		held_max = ld.held_bytes > held_max ? ld.held_bytes : held_max;
+		outb += ld.out_bytes;
 		pend += ld.pending_bytes;
 		pend_max = ld.pending_bytes > pend_max ? ld.pending_bytes : pend_max;
 		ready += ld.ready_tiles;
@@ -318,6 +353,13 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "sessions.pending_bytes", pend);
 	stat_u(&b, "sessions.pending_bytes.max", pend_max);
 	stat_u(&b, "sessions.ready_tiles", ready);
+	stat_u(&b, "sessions.held_bytes", held);
+	stat_u(&b, "sessions.held_bytes.max", held_max);
+	stat_u(&b, "sessions.out_bytes", outb);
+	/* the per-session allowance: held tiles and queued output, max_pending each */
+	stat_u(&b, "sessions.allowance_bytes", 2 * srv->limits.max_pending);
+	stat_loop(&b, &srv->loop);
+	stat_u(&b, "memory.trims", srv->trims);
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_nodes(&b, srv->planets);
 	return b.n;
@@ -464,6 +506,7 @@ static void free_graveyard(struct server *srv)
 		session_free(g->s);
 		free(g);
 		g = next;
+		srv->trim_due = true;
 	}
 }
 
@@ -475,6 +518,9 @@ void server_destroy(struct server *srv)
 		session_close(srv->sessions->s, "server exiting");
 	free_graveyard(srv);
 	close_listeners(srv);
+	/* Released requests may still report into the ready queue until the manager frees them. */
+	if (srv->sessions_total)
+		sched_barrier(srv->sched);
 	readyq_fini(&srv->ready);
 	if (srv->epfd >= 0)
 		close(srv->epfd);
@@ -521,9 +567,21 @@ static void on_ready(struct server *srv)
 	size_t n;
 	struct ready_item *batch = readyq_take(&srv->ready, &n);
 	/* Sessions closed while this batch runs stay allocated (graveyard) until the iteration
-	 * ends; session_on_ready ignores them. */
-	for (size_t i = 0; i < n; i++)
-		session_on_ready(batch[i].s, &batch[i]);
+	 * ends; session_on_ready ignores them. An item marked with a handle whose session closed
+	 * (it may be freed already) is dropped without looking at the session. */
+	for (size_t i = 0; i < n; i++) {
+		struct ready_item *it = &batch[i];
+		if (it->src) {
+			bool dead = it->src->dead;
+			ready_src_unref(it->src);
+			it->src = NULL;
+			if (dead) {
+				tile_unref(it->t);
+				continue;
+			}
+		}
+		session_on_ready(it->s, it);
+	}
 	free(batch);
 }
 
@@ -562,6 +620,13 @@ static void on_timer(struct server *srv)
 	if (srv->stopping && now > srv->stop_deadline_ns)
 		while (srv->sessions)
 			session_close(srv->sessions->s, "shutdown: flush timed out");
+	if (srv->trim_due && !srv->stopping && now - srv->last_trim_ns > TRIM_EVERY_NS) {
+		/* give back what closed sessions held (their tiles, buffers) */
+		malloc_trim(0);
+		srv->trim_due = false;
+		srv->last_trim_ns = clock_now_ns();
+		srv->trims++;
+	}
 }
 
 void server_set_planets(struct server *srv, struct planet_set *ps)
@@ -621,6 +686,7 @@ int server_run(struct server *srv)
 			log_msg(LOG_ERROR, "epoll_wait: %s", strerror(-e));
 			return e;
 		}
+		uint64_t t0 = clock_now_ns();
 		for (int i = 0; i < n; i++)
 			dispatch(srv, &evs[i]);
 		struct session_link *p = srv->pump;
@@ -634,6 +700,7 @@ int server_run(struct server *srv)
 			p = next;
 		}
 		free_graveyard(srv);
+		loopstat_add(&srv->loop, clock_now_ns() - t0);
 	}
 	free_graveyard(srv);
 	return 0;

@@ -5,6 +5,16 @@
  * (header space reserved, payload encoded after it, header written last) so a tile is copied
  * once. A closed session stays allocated until the server frees it at the end of the loop
  * iteration, so pointers in the current epoll batch or ready batch never dangle.
+ *
+ * Memory: ready tiles waiting for output room are held up to the session's allowance
+ * (max_pending bytes of raw tiles, the same figure that caps its queued output); beyond it
+ * they are parked (released) and looked up in the cache again when room appears, or wanted
+ * again when the cache let them go. A session thus holds at most about 2 × max_pending, and
+ * its output buffer is given back whenever it drains.
+ *
+ * Closing never waits for the scheduler: the request is released (sched_req_release) and the
+ * manager frees it later; reports for it that still come are marked with the session's
+ * ready_src, which the close marks dead, and the loop drops them.
  */
 #include "session.h"
 
@@ -29,6 +39,7 @@
 #define PUMP_BUDGET (4u << 20) /* output bytes produced per pump call (fairness) */
 #define READ_BUDGET (1u << 20) /* input bytes read per event */
 #define CLOSE_GRACE_NS 2000000000ull
+#define OUT_KEEP (1u << 20) /* a drained output buffer above this is freed */
 
 struct sopen {
 	struct planet *p;	/* NULL: dropped by a reload (the id may be given again) */
@@ -61,6 +72,7 @@ struct session {
 	struct wantset_entry *scratch; /* a WANT's entries, reused */
 	size_t capscratch;
 	struct sched_req *req;
+	struct ready_src *src; /* this session's handle on the ready queue (reference) */
 	bool has_focus;
 	double lon, lat, vel[3];
 
@@ -100,6 +112,11 @@ static int flush(struct session *s)
 		}
 	} else {
 		conn_throttle(&s->c, s->env->limits->max_pending);
+	}
+	if (!s->c.want_out && s->c.out.cap > OUT_KEEP) {
+		/* drained: a burst's buffer is not kept for the session's lifetime */
+		pbuf_fini(&s->c.out);
+		pbuf_init(&s->c.out);
 	}
 	if (was != conn_events(&s->c))
 		update_interest(s);
@@ -227,18 +244,36 @@ static bool has_room(const struct session *s)
 	return wantset_nready(&s->ws) && conn_pending(&s->c) < s->env->limits->max_pending;
 }
 
+static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
+
 bool session_pump(struct session *s)
 {
 	if (s->dead || s->closing)
 		return false;
+	struct session_counters *cnt = s->env->counters;
 	size_t start = s->c.out.len;
+	bool rewant = false;
 	while (has_room(s) && s->c.out.len - start < PUMP_BUDGET) {
 		struct wantset_entry *e = wantset_pop(&s->ws);
 		if (!e)
 			break;
+		if (wantset_parked(e)) {
+			struct tile *t = cache_lookup(s->env->cache, &e->key);
+			if (!t) {
+				/* the cache let it go meanwhile: the scheduler makes it again */
+				wantset_rewant(&s->ws, e);
+				cnt->tiles_rewanted++;
+				rewant = true;
+				continue;
+			}
+			wantset_unpark(&s->ws, e, t);
+			cnt->tiles_relooked++;
+		}
 		encode_tile(s, e);
-		wantset_sent(e);
+		wantset_sent(&s->ws, e);
 	}
+	if (rewant)
+		submit_wants(s, 0, 0);
 	if (s->c.out.len != start && flush(s))
 		return false;
 	return has_room(s);
@@ -255,16 +290,28 @@ void session_on_ready(struct session *s, struct ready_item *it)
 		tile_unref(it->t);
 		return;
 	}
-	if (wantset_ready(&s->ws, &it->key, it->t, it->err))
+	bool parked;
+	if (wantset_ready(&s->ws, &it->key, it->t, it->err, s->env->limits->max_pending,
+			  &parked)) {
+		s->env->counters->tiles_parked += parked;
 		pump_add(s);
+	}
 }
 
-/* Runs on the scheduler's manager thread: only hands the report to the loop. */
+/* Runs on the scheduler's manager thread, possibly after the session closed: only hands the
+ * report to the loop, marked with the session's handle (ud, a reference of the request's). */
 static void sess_ready_cb(void *ud, const struct want *w, struct tile *t, int err)
 {
-	struct session *s = ud;
-	struct ready_item it = { .s = s, .key = w->key, .t = t ? tile_ref(t) : NULL, .err = err };
-	readyq_push(s->env->ready, &it);
+	struct ready_src *src = ud;
+	struct ready_item it = { .s = src->s, .src = ready_src_ref(src), .key = w->key,
+				 .t = t ? tile_ref(t) : NULL, .err = err };
+	readyq_push(src->q, &it);
+}
+
+/* The manager is done with the request: its reference on the handle goes. */
+static void sess_req_fin(void *ud)
+{
+	ready_src_unref(ud);
 }
 
 /* Gives the scheduler what is still wanted; a failure is reported as an ERROR referring to
@@ -705,7 +752,8 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	wantset_init(&s->ws);
 	struct control_host host = { .s = s, .id = s->id, .send = send_msg, .error = ctl_error };
 	control_init(&s->ctl, env, &host);
-	s->req = sched_req_create(env->sched, sess_ready_cb, s);
+	s->src = ready_src_new(env->ready, s);
+	s->req = sched_req_create(env->sched, sess_ready_cb, ready_src_ref(s->src));
 	peer_name(fd, s->peer, sizeof s->peer);
 	log_msg(LOG_INFO, "session %llu: connected on %s from %s", (unsigned long long)s->id,
 		l->name, s->peer);
@@ -744,7 +792,8 @@ void session_close(struct session *s, const char *why)
 	const struct session_env *env = s->env;
 	s->dead = true;
 	control_stop(&s->ctl);
-	sched_req_destroy(s->req);
+	s->src->dead = true; /* reports still on their way are dropped (server's on_ready) */
+	sched_req_release(s->req, sess_req_fin);
 	s->req = NULL;
 	readyq_purge(env->ready, s);
 	env->detach(env->ud, s->link);
@@ -763,6 +812,7 @@ void session_free(struct session *s)
 	if (!s)
 		return;
 	wantset_fini(&s->ws);
+	ready_src_unref(s->src);
 	free(s->scratch);
 	control_fini(&s->ctl);
 	for (int i = 0; i < s->nopened; i++)
@@ -787,6 +837,8 @@ bool session_focus(const struct session *s, double *lon, double *lat, double vel
 void session_get_load(const struct session *s, struct session_load *out)
 {
 	*out = (struct session_load){ .pending_bytes = conn_pending(&s->c),
+				      .out_bytes = s->c.out.cap,
+				      .held_bytes = wantset_held(&s->ws),
 				      .ready_tiles = wantset_nready(&s->ws),
 				      .jobs = s->ctl.njobs };
 }

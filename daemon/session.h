@@ -28,6 +28,9 @@ struct session_link; /* the server's record of a session (opaque here) */
 /* Server-wide counters the sessions add to (STATS). */
 struct session_counters {
 	uint64_t tiles_sent, tiles_failed, tiles_dropped, tiles_stale, bytes_sent, errors_sent;
+	/* held-tile allowance: ready tiles released for want of output room, found again in
+	 * the cache when room came, wanted again because the cache had let them go */
+	uint64_t tiles_parked, tiles_relooked, tiles_rewanted;
 };
 
 /* What the server lends every session; every pointer is borrowed and outlives the sessions. */
@@ -64,6 +67,8 @@ struct session_env {
 /* One session's share of the server-wide figures. */
 struct session_load {
 	uint64_t pending_bytes, ready_tiles, jobs;
+	uint64_t held_bytes; /* ready tiles' bytes held for output room */
+	uint64_t out_bytes;  /* the output buffer's size */
 };
 
 /* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed).
