@@ -211,8 +211,16 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 	size_t bound = tilecodec_bound(codec, t->nbytes);
 	size_t head = PROTO_HDR + 44;
 	struct pbuf *out = &s->c.out;
-	if (pbuf_reserve(out, head + bound))
-		return;
+	size_t need = out->len + head + bound;
+	if (need > out->cap) {
+		/* Grow to what is needed, doubling only up to the session's cap (max_pending plus
+		 * this tile): a buffer twice max_pending would be resident for nothing. */
+		size_t cap = out->cap * 2, lim = (size_t)s->env->limits->max_pending + head + bound;
+		cap = cap > lim ? lim : cap;
+		cap = cap < need ? need : cap;
+		out->data = xrealloc(out->data, cap);
+		out->cap = cap;
+	}
 	uint8_t *at = out->data + out->len;
 	struct proto_tile pt = { .seq = e->seq, .planet_id = e->pid, .layer = e->layer,
 				 .key = e->key };
