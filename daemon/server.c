@@ -31,9 +31,10 @@
 #include "session.h"
 
 #define TICK_NS 250000000ull
-#define STOP_GRACE_NS 2000000000ull
+#define STOP_GRACE_NS 1500000000ull /* + one tick: SIGTERM done within 2 s */
 #define MAX_WATCH 4
 #define MAX_FOCI 512
+#define LOOP_OUT_BUDGET (4u << 20) /* output bytes produced per loop iteration */
 #define TRIM_EVERY_NS 1000000000ull /* at most one malloc_trim a second */
 
 enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH };
@@ -99,7 +100,7 @@ struct server {
 
 	struct loopstat loop;	/* iteration times */
 	bool trim_due;		/* sessions were freed since the last trim */
-	uint64_t last_trim_ns, trims;
+	uint64_t last_trim_ns, trims, trim_max_ns;
 };
 
 static int ep_add(struct server *srv, int fd, struct evsrc *ev)
@@ -360,6 +361,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "sessions.allowance_bytes", 2 * srv->limits.max_pending);
 	stat_loop(&b, &srv->loop);
 	stat_u(&b, "memory.trims", srv->trims);
+	stat_f(&b, "memory.trim_max_ms", (double)srv->trim_max_ns * 1e-6);
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_nodes(&b, srv->planets);
 	return b.n;
@@ -626,6 +628,8 @@ static void on_timer(struct server *srv)
 		srv->trim_due = false;
 		srv->last_trim_ns = clock_now_ns();
 		srv->trims++;
+		if (srv->last_trim_ns - now > srv->trim_max_ns)
+			srv->trim_max_ns = srv->last_trim_ns - now;
 	}
 }
 
@@ -689,14 +693,25 @@ int server_run(struct server *srv)
 		uint64_t t0 = clock_now_ns();
 		for (int i = 0; i < n; i++)
 			dispatch(srv, &evs[i]);
+		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (encoding and copying
+		 * scale with bytes): sessions not reached stay listed, at the front, for the next
+		 * iteration, which then does not wait. */
 		struct session_link *p = srv->pump;
 		srv->pump = NULL;
+		size_t budget = LOOP_OUT_BUDGET;
+		while (p && budget) {
+			struct session_link *next = p->pump_next;
+			p->pump_next = NULL;
+			p->in_pump = false;
+			if (session_pump(p->s, &budget))
+				sess_pump(srv, p);
+			p = next;
+		}
 		while (p) {
 			struct session_link *next = p->pump_next;
 			p->pump_next = NULL;
 			p->in_pump = false;
-			if (session_pump(p->s))
-				sess_pump(srv, p);
+			sess_pump(srv, p);
 			p = next;
 		}
 		free_graveyard(srv);

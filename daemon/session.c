@@ -254,14 +254,15 @@ static bool has_room(const struct session *s)
 
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
 
-bool session_pump(struct session *s)
+bool session_pump(struct session *s, size_t *budget)
 {
 	if (s->dead || s->closing)
 		return false;
 	struct session_counters *cnt = s->env->counters;
 	size_t start = s->c.out.len;
+	size_t lim = *budget < PUMP_BUDGET ? *budget : PUMP_BUDGET;
 	bool rewant = false;
-	while (has_room(s) && s->c.out.len - start < PUMP_BUDGET) {
+	while (has_room(s) && s->c.out.len - start < lim) {
 		struct wantset_entry *e = wantset_pop(&s->ws);
 		if (!e)
 			break;
@@ -282,6 +283,8 @@ bool session_pump(struct session *s)
 	}
 	if (rewant)
 		submit_wants(s, 0, 0);
+	size_t made = s->c.out.len - start;
+	*budget = made < *budget ? *budget - made : 0;
 	if (s->c.out.len != start && flush(s))
 		return false;
 	return has_room(s);

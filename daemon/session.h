@@ -78,9 +78,10 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 void session_on_event(struct session *s, uint32_t events);
 /* A ready item for this session or one of its jobs (takes the item's tile reference). */
 void session_on_ready(struct session *s, struct ready_item *it);
-/* Produces more output if there is room. Returns true while the session still has ready
- * tiles and output room (the server calls it again). */
-bool session_pump(struct session *s);
+/* Produces more output if there is room, at most *budget bytes (taken off it; the last tile
+ * may overshoot). Returns true while the session still has ready tiles and output room (the
+ * server calls it again). */
+bool session_pump(struct session *s, size_t *budget);
 /* Housekeeping every 250 ms: prefetch progress, close deadlines. */
 void session_tick(struct session *s, uint64_t now_ns);
 /* A reload installed ps (borrowed; the session takes references of its own): every planet the

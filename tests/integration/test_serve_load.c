@@ -257,7 +257,7 @@ static int teardown(void **state)
 static void test_slow_readers_memory(void **state)
 {
 	(void)state;
-	enum { NS = 4, CACHE_MB = 64, IMAGE_MB = 16, PENDING_KB = 8192, FIXED_MB = 48 };
+	enum { NS = 4, CACHE_MB = 64, IMAGE_MB = 16, PENDING_KB = 8192, FIXED_MB = 80 };
 	static const char *const set[] = { "engine.cache_mb = 64", "engine.image_cache_mb = 16",
 					   "engine.workers = 2", "session.max_rate = 0",
 					   "session.max_pending_kb = 8192", NULL };
@@ -302,6 +302,7 @@ static void test_slow_readers_memory(void **state)
 		    after <= base + (CACHE_MB + FIXED_MB) * MIB)
 			break;
 	}
+	print_message("malloc_trim took up to %.1f ms\n", cl_stat_opt(obs, "memory.trim_max_ms"));
 	print_message("slow readers: RSS at start %.0f MiB, peak %.0f MiB (bound %.0f MiB), "
 		      "%.0f MiB after they closed; %.0f tiles made, %.0f parked, held max %.1f MiB\n",
 		      base / MIB, peak / MIB, bound / MIB, after / MIB, gen, parked, held_max / MIB);
@@ -314,8 +315,9 @@ static void test_slow_readers_memory(void **state)
 	cl_free(obs);
 }
 
-/* 100 sessions reading their tiles while the workers make them; SIGTERM: every one gets its
- * BYE and EOF, and the daemon exits 0 within the bound (it was 9.6 s in issue 14's run). */
+/* 100 sessions reading their tiles while the workers make them and 10 that never read;
+ * SIGTERM: every one ends (the readers after their BYE, the others cut off after the grace
+ * period), and the daemon exits 0 within the bound (9.6 s in issue 14's run). */
 static void test_sigterm_hundred(void **state)
 {
 	(void)state;
@@ -326,7 +328,13 @@ static void test_sigterm_hundred(void **state)
 					   "session.max_rate = 0", "session.max_pending_kb = 1024",
 					   NULL };
 	start("clipmapd-load-term", set);
-	static struct cl *c[NS];
+	enum { NX = 10 };
+	static struct cl *c[NS], *x[NX];
+	for (int i = 0; i < NX; i++) {
+		x[i] = cl_connect(&E, 4096);
+		uint32_t pid = cl_open(x[i]);
+		cl_want_block(x[i], pid, 9, 0, (uint32_t)(32 * i), 64, 32);
+	}
 	for (int i = 0; i < NS; i++) {
 		c[i] = cl_connect(&E, 0);
 		uint32_t pid = cl_open(c[i]);
@@ -377,16 +385,20 @@ static void test_sigterm_hundred(void **state)
 		}
 	}
 	int64_t dt = exited ? exited - t0 : -1;
-	print_message("SIGTERM with %d sessions: every session ended after %lld ms (%.1f MiB "
-		      "read meanwhile), the daemon exited after %lld ms\n", NS,
+	print_message("SIGTERM with %d reading sessions and %d that never read: the readers "
+		      "ended after %lld ms (%.1f MiB read meanwhile), the daemon exited after "
+		      "%lld ms\n", NS, NX,
 		      (long long)(last_eof - t0), (double)(bytes - before) / MIB, (long long)dt);
 	assert_int_equal(open, 0);
 	assert_true(exited);
 	assert_true(WIFEXITED(status) && WEXITSTATUS(status) == 0);
-	/* 2 s is the goal; the margin is for a loaded 2-core machine. */
-	assert_true(dt <= 4000);
+	/* 2 s is the goal (1.5 s of grace for the non-readers, then one 250 ms tick); the margin
+	 * is for a loaded 2-core machine. */
+	assert_true(dt <= 3500);
 	for (int i = 0; i < NS; i++)
 		cl_free(c[i]);
+	for (int i = 0; i < NX; i++)
+		cl_free(x[i]);
 }
 
 /* 100 sessions with large want-sets close at once: the loop does not wait for the manager
@@ -427,6 +439,7 @@ static void test_close_at_once(void **state)
 		usleep(20000);
 	int64_t closed_ms = clock_now_ms() - t0;
 	double max1 = cl_stat_opt(probe, "loop.max_ms");
+	print_message("malloc_trim took up to %.1f ms\n", cl_stat_opt(probe, "memory.trim_max_ms"));
 	print_message("%d sessions closed at once: all gone after %lld ms, a new HELLO answered "
 		      "in %lld ms; loop max %.1f ms before, %.1f ms after\n", NS,
 		      (long long)closed_ms, (long long)hello_ms, max0, max1);
@@ -461,7 +474,7 @@ static void test_loop_histogram(void **state)
 	}
 	double max = cl_stat(c, "loop.max_ms"), p99 = cl_stat(c, "loop.p99_ms");
 	print_message("loop: %.0f iterations, max %.2f ms, p99 ≤ %.2f ms\n", iters, max, p99);
-	assert_true(iters > 10); /* connect, HELLO, OPEN, WANT, 16 tiles, STATS */
+	assert_true(iters >= 4); /* at least: connect, HELLO, OPEN, WANT */
 	assert_true(sum >= iters && sum <= iters + 40); /* STATS requests counted meanwhile */
 	assert_true(max > 0 && p99 <= max);
 	cl_free(c);
