@@ -31,7 +31,7 @@
 #include "session.h"
 
 #define TICK_NS 250000000ull
-#define STOP_GRACE_NS 1500000000ull /* + one tick: SIGTERM done within 2 s */
+#define STOP_GRACE_NS 1250000000ull /* + one tick + teardown: SIGTERM done within 2 s */
 #define MAX_WATCH 4
 #define MAX_FOCI 512
 #define LOOP_OUT_BUDGET (4u << 20) /* output bytes produced per loop iteration */
@@ -336,10 +336,12 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "tiles.parked", c->tiles_parked);
 	stat_u(&b, "tiles.relooked", c->tiles_relooked);
 	stat_u(&b, "tiles.rewanted", c->tiles_rewanted);
+	stat_u(&b, "sessions.pauses", c->pauses);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
 	stat_u(&b, "planets.skipped", srv->planets->nskipped); /* files that did not load */
 	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0, held = 0, held_max = 0, outb = 0;
+	uint64_t paused = 0;
 	for (const struct session_link *l = srv->sessions; l; l = l->next) {
 		struct session_load ld;
 		session_get_load(l->s, &ld);
@@ -347,6 +349,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 		held += ld.held_bytes;
 		held_max = ld.held_bytes > held_max ? ld.held_bytes : held_max;
 		outb += ld.out_bytes;
+		paused += ld.paused;
 		pend += ld.pending_bytes;
 		pend_max = ld.pending_bytes > pend_max ? ld.pending_bytes : pend_max;
 		ready += ld.ready_tiles;
@@ -357,6 +360,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "sessions.held_bytes", held);
 	stat_u(&b, "sessions.held_bytes.max", held_max);
 	stat_u(&b, "sessions.out_bytes", outb);
+	stat_u(&b, "sessions.paused", paused);
 	/* the per-session allowance: held tiles and queued output, max_pending each */
 	stat_u(&b, "sessions.allowance_bytes", 2 * srv->limits.max_pending);
 	stat_loop(&b, &srv->loop);

@@ -10,7 +10,10 @@
  * (max_pending bytes of raw tiles, the same figure that caps its queued output); beyond it
  * they are parked (released) and looked up in the cache again when room appears, or wanted
  * again when the cache let them go. A session thus holds at most about 2 × max_pending, and
- * its output buffer is given back whenever it drains.
+ * its output buffer is given back whenever it drains. Once it parks with its output full, its
+ * wants are withdrawn from the scheduler (paused: nothing is made for a client that does not
+ * read) until the output drains to half of max_pending; then the want-set's WANTED entries
+ * are submitted again, in order, so coarse-first and replacement work as before.
  *
  * Closing never waits for the scheduler: the request is released (sched_req_release) and the
  * manager frees it later; reports for it that still come are marked with the session's
@@ -73,6 +76,7 @@ struct session {
 	size_t capscratch;
 	struct sched_req *req;
 	struct ready_src *src; /* this session's handle on the ready queue (reference) */
+	bool paused; /* its wants are withdrawn while its output is full (see the top) */
 	bool has_focus;
 	double lon, lat, vel[3];
 
@@ -94,6 +98,8 @@ static void pump_add(struct session *s)
 		s->env->pump(s->env->ud, s->link);
 }
 
+static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
+
 /* Writes what it can. Returns 0, or -errno after closing the session. */
 static int flush(struct session *s)
 {
@@ -112,6 +118,11 @@ static int flush(struct session *s)
 		}
 	} else {
 		conn_throttle(&s->c, s->env->limits->max_pending);
+	}
+	if (s->paused && !s->closing &&
+	    conn_pending(&s->c) <= s->env->limits->max_pending / 2) {
+		s->paused = false; /* the client reads again: its wants go back in */
+		submit_wants(s, 0, 0);
 	}
 	if (!s->c.want_out && s->c.out.cap > OUT_KEEP) {
 		/* drained: a burst's buffer is not kept for the session's lifetime */
@@ -252,8 +263,6 @@ static bool has_room(const struct session *s)
 	return wantset_nready(&s->ws) && conn_pending(&s->c) < s->env->limits->max_pending;
 }
 
-static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
-
 bool session_pump(struct session *s, size_t *budget)
 {
 	if (s->dead || s->closing)
@@ -302,9 +311,15 @@ void session_on_ready(struct session *s, struct ready_item *it)
 		return;
 	}
 	bool parked;
-	if (wantset_ready(&s->ws, &it->key, it->t, it->err, s->env->limits->max_pending,
-			  &parked)) {
+	uint64_t max = s->env->limits->max_pending;
+	if (wantset_ready(&s->ws, &it->key, it->t, it->err, max, &parked)) {
 		s->env->counters->tiles_parked += parked;
+		if (parked && !s->paused && conn_pending(&s->c) >= max) {
+			/* held tiles and output both full: make nothing more for it for now */
+			s->paused = true;
+			s->env->counters->pauses++;
+			(void)sched_req_want(s->req, NULL, 0);
+		}
 		pump_add(s);
 	}
 }
@@ -329,6 +344,8 @@ static void sess_req_fin(void *ud)
  * (ref_type, ref_id). */
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id)
 {
+	if (s->paused)
+		return; /* flush submits them when the output drains */
 	size_t n;
 	struct want *list = wantset_wants(&s->ws, &n);
 	int rc = sched_req_want(s->req, list, n);
@@ -850,6 +867,7 @@ void session_get_load(const struct session *s, struct session_load *out)
 	*out = (struct session_load){ .pending_bytes = conn_pending(&s->c),
 				      .out_bytes = s->c.out.cap,
 				      .held_bytes = wantset_held(&s->ws),
+				      .paused = s->paused,
 				      .ready_tiles = wantset_nready(&s->ws),
 				      .jobs = s->ctl.njobs };
 }

@@ -31,6 +31,7 @@ struct session_counters {
 	/* held-tile allowance: ready tiles released for want of output room, found again in
 	 * the cache when room came, wanted again because the cache had let them go */
 	uint64_t tiles_parked, tiles_relooked, tiles_rewanted;
+	uint64_t pauses; /* times a session's wants were withdrawn while its output was full */
 };
 
 /* What the server lends every session; every pointer is borrowed and outlives the sessions. */
@@ -69,6 +70,7 @@ struct session_load {
 	uint64_t pending_bytes, ready_tiles, jobs;
 	uint64_t held_bytes; /* ready tiles' bytes held for output room */
 	uint64_t out_bytes;  /* the output buffer's size */
+	bool paused;	     /* wants withdrawn while the output is full */
 };
 
 /* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed).
