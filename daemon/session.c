@@ -100,6 +100,16 @@ static void pump_add(struct session *s)
 
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
 
+/* A paused session's wants go back in once its output drained to half of max_pending. */
+static void resume_if_drained(struct session *s)
+{
+	if (s->paused && !s->closing && !s->dead &&
+	    conn_pending(&s->c) <= s->env->limits->max_pending / 2) {
+		s->paused = false;
+		submit_wants(s, 0, 0);
+	}
+}
+
 /* Writes what it can. Returns 0, or -errno after closing the session. */
 static int flush(struct session *s)
 {
@@ -119,11 +129,7 @@ static int flush(struct session *s)
 	} else {
 		conn_throttle(&s->c, s->env->limits->max_pending);
 	}
-	if (s->paused && !s->closing &&
-	    conn_pending(&s->c) <= s->env->limits->max_pending / 2) {
-		s->paused = false; /* the client reads again: its wants go back in */
-		submit_wants(s, 0, 0);
-	}
+	resume_if_drained(s); /* the client reads again */
 	if (!s->c.want_out && s->c.out.cap > OUT_KEEP) {
 		/* drained: a burst's buffer is not kept for the session's lifetime */
 		pbuf_fini(&s->c.out);
@@ -291,7 +297,8 @@ bool session_pump(struct session *s, size_t *budget)
 		wantset_sent(&s->ws, e);
 	}
 	if (rewant)
-		submit_wants(s, 0, 0);
+		submit_wants(s, 0, 0); /* when paused: resume_if_drained does it */
+	resume_if_drained(s);
 	size_t made = s->c.out.len - start;
 	*budget = made < *budget ? *budget - made : 0;
 	if (s->c.out.len != start && flush(s))

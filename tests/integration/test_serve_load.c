@@ -328,6 +328,75 @@ static void test_slow_readers_memory(void **state)
 	cl_free(obs);
 }
 
+/* A client that stops reading is paused (its held tiles and output full); when it reads
+ * again it gets every tile it wants, each once, coarse levels first. */
+static void test_paused_session_resumes(void **state)
+{
+	(void)state;
+	static const char *const set[] = { "engine.cache_mb = 64", "engine.workers = 2",
+					   "session.max_rate = 0", "session.max_pending_kb = 1024",
+					   NULL };
+	start("clipmapd-load-resume", set);
+	struct cl *obs = cl_connect(&E, 0);
+	cl_open(obs);
+	struct cl *c = cl_connect(&E, 4096);
+	uint32_t pid = cl_open(c);
+	/* 2 × 64 tiles at level 8 and 2 × 4 at level 6 (coarser, wanted last) */
+	enum { N = 136 };
+	struct proto_want_entry e[N];
+	uint32_t n = 0;
+	for (int ly = 8; ly >= 6; ly -= 2) {
+		uint32_t w = ly == 8 ? 8 : 2;
+		for (uint32_t y = 0; y < w; y++)
+			for (uint32_t x = 0; x < w; x++)
+				for (uint8_t l = 0; l < 2; l++)
+					e[n++] = (struct proto_want_entry){
+						.layer = l, .cls = PROTO_CLASS_VISIBLE,
+						.lx = (uint8_t)(ly + 1), .ly = (uint8_t)ly, .x = x,
+						.y = y };
+	}
+	assert_int_equal(n, N);
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = pid, .seq = 3, .count = n, .entries = e } };
+	cl_send(c, &m);
+	int64_t t0 = clock_now_ms();
+	while (cl_stat(obs, "sessions.paused") < 1 && clock_now_ms() - t0 < 30000)
+		usleep(100000);
+	assert_int_equal(cl_stat(obs, "sessions.paused"), 1);
+	double made = cl_stat(obs, "sched.generated");
+	bool seen[N] = { false };
+	int got = 0, last_coarse = 0;
+	while (got < N) {
+		int r = cl_recv(c, 60000);
+		if (r <= 0)
+			fail_msg("%d of %d tiles, then %s", got, N, r ? "EOF" : "a timeout");
+		if (c->m.type != PROTO_TILE)
+			continue;
+		const struct proto_tile *t = &c->m.tile;
+		int k = -1;
+		for (int i = 0; i < N; i++)
+			if (e[i].ly == t->key.ly && e[i].x == t->key.x && e[i].y == t->key.y &&
+			    e[i].layer == t->layer)
+				k = i;
+		assert_true(k >= 0);
+		assert_false(seen[k]); /* each once */
+		seen[k] = true;
+		got++;
+		if (t->key.ly == 6)
+			last_coarse = got;
+	}
+	print_message("paused after %.0f tiles made; all %d received, %.0f made in all, "
+		      "%.0f re-looked up in the cache, %.0f made again\n", made, N,
+		      cl_stat(obs, "sched.generated"), cl_stat(obs, "tiles.relooked"),
+		      cl_stat(obs, "tiles.rewanted"));
+	assert_true(made < N); /* it did stop making them */
+	/* coarse first: the 8 level-6 tiles, wanted last, are among the first sent (what the
+	 * socket held at the pause, ≤ 40 tiles, plus themselves) */
+	assert_true(last_coarse <= 48);
+	cl_free(c);
+	cl_free(obs);
+}
+
 /* 100 sessions reading their tiles while the workers make them and 10 that never read;
  * SIGTERM: every one ends (the readers after their BYE, the others cut off after the grace
  * period), and the daemon exits 0 within the bound (9.6 s in issue 14's run). */
@@ -502,6 +571,7 @@ int main(int argc, char **argv)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_teardown(test_loop_histogram, teardown),
 		cmocka_unit_test_teardown(test_slow_readers_memory, teardown),
+		cmocka_unit_test_teardown(test_paused_session_resumes, teardown),
 		cmocka_unit_test_teardown(test_sigterm_hundred, teardown),
 		cmocka_unit_test_teardown(test_close_at_once, teardown),
 	};
