@@ -34,6 +34,14 @@
 
 #define MIB (1024.0 * 1024.0)
 
+/* Sanitizers' allocators keep freed memory (quarantine) and add shadow memory: RSS figures
+ * mean nothing there, the rest of the checks still run. */
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define RSS_CHECKS 0
+#else
+#define RSS_CHECKS 1
+#endif
+
 /* 256² tiles, cheap to make: one octave of noise and a colour ramp (two 256 KiB layers). */
 static const char planet[] =
 	"[planet]\nname = big\nbody = sphere\nradius = 1000000\ntile_size = 256\nmax_level = 12\n"
@@ -241,12 +249,26 @@ static void start(const char *tag, const char *const *set)
 		fail_msg("clipmapd: %s", err);
 }
 
+/* Stops the daemon (SIGTERM): a failed exit or a sanitizer report in its log (sanitized
+ * builds) fails the test. */
 static int teardown(void **state)
 {
 	(void)state;
+	int rc = 0, st = 0;
+	if (E.daemon > 0 && daemon_env_stop(&E, SIGTERM, &st) == 0 &&
+	    !(WIFEXITED(st) && WEXITSTATUS(st) == 0)) {
+		fprintf(stderr, "test_serve_load: clipmapd exit status %#x\n", st);
+		rc = -1;
+	}
+	char *log = E.dir[0] ? daemon_env_log_read(&E) : NULL;
+	if (log && (strstr(log, "Sanitizer") || strstr(log, "runtime error"))) {
+		fprintf(stderr, "test_serve_load: clipmapd log:\n%s\n", log);
+		rc = -1;
+	}
+	free(log);
 	daemon_env_fini(&E);
 	memset(&E, 0, sizeof E);
-	return 0;
+	return rc;
 }
 
 /* ---- tests ----------------------------------------------------------------------------- */
@@ -317,14 +339,17 @@ static void test_slow_readers_memory(void **state)
 		      base / MIB, peak / MIB, bound / MIB, after / MIB, gen, parked, held_max / MIB);
 	print_message("all %d paused after %lld ms; %.0f tiles made after that\n", NS,
 		      (long long)(t_paused ? t_paused - t0 : -1), gen - gen_paused);
-	assert_true(peak <= bound);
+	if (RSS_CHECKS)
+		assert_true(peak <= bound);
 	assert_true(held_max <= PENDING_KB * 1024.0 + 256 * 1024);
 	assert_true(parked > 0);
 	assert_true(t_paused > 0);
 	/* paused: nothing more is made for them (a few reports in flight at most) */
 	assert_true(gen - gen_paused <= 8);
-	assert_true(after <= base + (CACHE_MB + FIXED_MB) * MIB);
-	assert_true(after < peak);
+	if (RSS_CHECKS) {
+		assert_true(after <= base + (CACHE_MB + FIXED_MB) * MIB);
+		assert_true(after < peak);
+	}
 	cl_free(obs);
 }
 
