@@ -5,7 +5,16 @@
  * the server only through srv->env: the callbacks below are its half of that contract.
  * Every iteration's work (from epoll_wait's return to its end) goes into the loop.*
  * histogram (loopstat.h). Memory that closed sessions held goes back to the system at the
- * next tick (malloc_trim: glibc keeps freed heap otherwise, see clipmapd.c's mallopt).
+ * next tick (malloc_trim, on a thread of its own so that its tens of milliseconds never
+ * block the loop: glibc keeps freed heap otherwise, see clipmapd.c's mallopt).
+ *
+ * Admission: a connection is first not yet authenticated (pre-auth). Pre-auth connections
+ * have pools of their own, one per listener kind (Unix, TCP) of max_preauth each, and on TCP
+ * at most max_preauth_per_peer per peer address; a new connection over a cap closes the
+ * oldest pre-auth one of its pool (or of its peer) rather than being refused, so idle
+ * connections that hold every slot cannot lock a client out, and those on a TCP listener
+ * never touch the Unix socket's. max_sessions counts authenticated sessions only, checked at
+ * HELLO; the Unix socket has UNIX_RESERVE slots beyond it that TCP sessions cannot take.
  */
 #include "server.h"
 
@@ -14,10 +23,13 @@
 #include <malloc.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <netinet/in.h>
 #include <sys/epoll.h>
+#include <sys/socket.h>
 #include <sys/timerfd.h>
 #include <unistd.h>
 
@@ -26,6 +38,7 @@
 #include "common/log.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
 #include "loopstat.h"
 #include "readyq.h"
 #include "session.h"
@@ -36,6 +49,9 @@
 #define MAX_FOCI 512
 #define LOOP_OUT_BUDGET (4u << 20) /* output bytes produced per loop iteration */
 #define TRIM_EVERY_NS 1000000000ull /* at most one malloc_trim a second */
+#define ACCEPT_BATCH 16
+#define UNIX_RESERVE 8		       /* sessions over max_sessions kept for the Unix socket */
+#define EVICT_WARN_NS 10000000000ull /* at most one eviction warning per 10 s */
 
 enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH };
 
@@ -52,7 +68,10 @@ struct session_link {
 	uint64_t id;
 	int fd;
 	bool in_pump, dead;
-	struct session_link *prev, *next; /* the live sessions */
+	bool preauth, is_unix;
+	struct sockaddr_storage peer;		  /* TCP: the per-peer cap compares addresses */
+	struct session_link *pre_prev, *pre_next; /* its pre-auth pool, oldest first */
+	struct session_link *prev, *next;	  /* the live sessions */
 	struct session_link *pump_next;	  /* the pump list */
 	struct session_link *grave_next;  /* closed this iteration */
 };
@@ -87,7 +106,12 @@ struct server {
 	uint64_t stop_deadline_ns;
 
 	struct session_link *sessions; /* doubly linked */
-	size_t nsessions;
+	size_t nsessions;	       /* every connection */
+	struct session_link *pre_head[2], *pre_tail[2]; /* [is_unix]: pre-auth pools */
+	size_t npre[2], nauth;
+	uint64_t evicted, refused, evict_warn_ns;
+	bool accept_unix; /* the connection being accepted (for sess_attach) */
+	struct sockaddr_storage accept_peer;
 	uint64_t next_session_id, sessions_total;
 	struct session_link *pump;	/* sessions with more output to produce */
 	struct session_link *graveyard; /* closed this iteration, freed at its end */
@@ -100,7 +124,11 @@ struct server {
 
 	struct loopstat loop;	/* iteration times */
 	bool trim_due;		/* sessions were freed since the last trim */
-	uint64_t last_trim_ns, trims, trim_max_ns;
+	uint64_t last_trim_ns;
+	pthread_t trimmer;	/* the last trim's thread, joined before the next */
+	bool trimmer_started;
+	atomic_bool trimming;	/* the trimmer runs */
+	atomic_uint_fast64_t trims, trim_max_ns; /* written by the trimmer */
 };
 
 static int ep_add(struct server *srv, int fd, struct evsrc *ev)
@@ -129,7 +157,52 @@ static struct session_link *sess_attach(void *ud, struct session *s, int fd, uin
 	srv->sessions = l;
 	srv->nsessions++;
 	srv->sessions_total++;
+	/* into its pre-auth pool, newest last */
+	int k = l->is_unix = srv->accept_unix;
+	l->peer = srv->accept_peer;
+	l->preauth = true;
+	l->pre_prev = srv->pre_tail[k];
+	if (srv->pre_tail[k])
+		srv->pre_tail[k]->pre_next = l;
+	else
+		srv->pre_head[k] = l;
+	srv->pre_tail[k] = l;
+	srv->npre[k]++;
 	return l;
+}
+
+static void pre_unlink(struct server *srv, struct session_link *l)
+{
+	int k = l->is_unix;
+	if (l->pre_prev)
+		l->pre_prev->pre_next = l->pre_next;
+	else
+		srv->pre_head[k] = l->pre_next;
+	if (l->pre_next)
+		l->pre_next->pre_prev = l->pre_prev;
+	else
+		srv->pre_tail[k] = l->pre_prev;
+	l->pre_prev = l->pre_next = NULL;
+	l->preauth = false;
+	srv->npre[k]--;
+}
+
+static int sess_authenticated(void *ud, struct session_link *l)
+{
+	struct server *srv = ud;
+	size_t cap = (size_t)srv->conf->max_sessions + (l->is_unix ? UNIX_RESERVE : 0);
+	if (!l->preauth)
+		return 0;
+	if (srv->nauth >= cap) {
+		srv->refused++;
+		log_msg(LOG_WARN, "session %llu: refused at HELLO: %zu sessions (max_sessions %d%s)",
+			(unsigned long long)l->id, srv->nauth, srv->conf->max_sessions,
+			l->is_unix ? " + the Unix socket's reserve" : "");
+		return -EBUSY;
+	}
+	pre_unlink(srv, l);
+	srv->nauth++;
+	return 0;
 }
 
 static void sess_interest(void *ud, struct session_link *l, uint32_t events)
@@ -165,6 +238,10 @@ static void sess_detach(void *ud, struct session_link *l)
 	if (l->next)
 		l->next->prev = l->prev;
 	srv->nsessions--;
+	if (l->preauth)
+		pre_unlink(srv, l);
+	else
+		srv->nauth--;
 	l->grave_next = srv->graveyard;
 	srv->graveyard = l;
 }
@@ -308,6 +385,9 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_f(&b, "uptime_s", (double)(clock_now_ns() - srv->start_ns) * 1e-9);
 	stat_u(&b, "sessions", srv->nsessions);
 	stat_u(&b, "sessions.total", srv->sessions_total);
+	stat_u(&b, "sessions.preauth", srv->npre[0] + srv->npre[1]);
+	stat_u(&b, "sessions.preauth.evicted", srv->evicted);
+	stat_u(&b, "sessions.refused", srv->refused);
 	stat_u(&b, "sched.queued.visible", ss.queued[SCHED_VISIBLE]);
 	stat_u(&b, "sched.queued.prefetch", ss.queued[SCHED_PREFETCH]);
 	stat_u(&b, "sched.queued.bulk", ss.queued[SCHED_BULK]);
@@ -364,11 +444,22 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	/* the per-session allowance: held tiles and queued output, max_pending each */
 	stat_u(&b, "sessions.allowance_bytes", 2 * srv->limits.max_pending);
 	stat_loop(&b, &srv->loop);
-	stat_u(&b, "memory.trims", srv->trims);
-	stat_f(&b, "memory.trim_max_ms", (double)srv->trim_max_ns * 1e-6);
+	stat_u(&b, "memory.trims", atomic_load(&srv->trims));
+	stat_f(&b, "memory.trim_max_ms", (double)atomic_load(&srv->trim_max_ns) * 1e-6);
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_nodes(&b, srv->planets);
 	return b.n;
+}
+
+size_t server_stats(struct server *srv, struct proto_stat *items, char (*keys)[128], size_t cap)
+{
+	return fill_stats(srv, items, keys, cap);
+}
+
+const uint8_t *server_token(const struct server *srv, size_t *len)
+{
+	*len = srv->have_token ? srv->token_len : 0;
+	return srv->have_token ? srv->token : NULL;
 }
 
 /* ---- setup ------------------------------------------------------------------------------ */
@@ -409,6 +500,8 @@ void server_conf_changed(struct server *srv)
 					     .max_pending = c->max_pending,
 					     .max_frame = c->max_frame };
 	srv->env.max_jobs = c->max_jobs;
+	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
+	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
 }
 
 static void init_env(struct server *srv)
@@ -418,7 +511,10 @@ static void init_env(struct server *srv)
 		.cache = srv->cache, .ready = &srv->ready, .codec = srv->codec,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,
-		.attach = sess_attach, .interest = sess_interest, .pump = sess_pump,
+		.handshake_ns = (uint64_t)srv->conf->handshake_timeout * 1000000000u,
+		.frame_ns = (uint64_t)srv->conf->frame_timeout * 1000000000u,
+		.attach = sess_attach, .authenticated = sess_authenticated,
+		.interest = sess_interest, .pump = sess_pump,
 		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats
 	};
 }
@@ -528,6 +624,8 @@ void server_destroy(struct server *srv)
 	if (srv->sessions_total)
 		sched_barrier(srv->sched);
 	readyq_fini(&srv->ready);
+	if (srv->trimmer_started)
+		xthread_join(srv->trimmer);
 	if (srv->epfd >= 0)
 		close(srv->epfd);
 	if (srv->timerfd >= 0)
@@ -591,24 +689,97 @@ static void on_ready(struct server *srv)
 	free(batch);
 }
 
+/* Whether two TCP peers have the same address (ports aside). */
+static bool same_host(const struct sockaddr_storage *a, const struct sockaddr_storage *b)
+{
+	if (a->ss_family != b->ss_family)
+		return false;
+	if (a->ss_family == AF_INET)
+		return ((const struct sockaddr_in *)a)->sin_addr.s_addr ==
+		       ((const struct sockaddr_in *)b)->sin_addr.s_addr;
+	if (a->ss_family == AF_INET6)
+		return memcmp(&((const struct sockaddr_in6 *)a)->sin6_addr,
+			      &((const struct sockaddr_in6 *)b)->sin6_addr, sizeof(struct in6_addr)) == 0;
+	return false;
+}
+
+/* Closes the pre-auth connection victim to make room for a new one (why: which cap). */
+static void evict(struct server *srv, struct session_link *victim, const struct listener *l,
+		  const char *why)
+{
+	srv->evicted++;
+	uint64_t now = clock_now_ns();
+	if (now >= srv->evict_warn_ns) {
+		srv->evict_warn_ns = now + EVICT_WARN_NS;
+		log_msg(LOG_WARN, "%s: %s reached: closing the oldest connections that have not "
+			"completed HELLO (%llu so far)", l->name, why,
+			(unsigned long long)srv->evicted);
+	}
+	session_close(victim->s, why);
+}
+
+/* Brings the pre-auth pool of a new connection from peer back within its caps, closing the
+ * oldest connections first (the new one is the newest: it stays). */
+static void enforce_preauth(struct server *srv, const struct listener *l,
+			    const struct sockaddr_storage *peer)
+{
+	int k = l->is_unix;
+	if (!l->is_unix) {
+		for (;;) {
+			struct session_link *oldest = NULL;
+			int same = 0;
+			for (struct session_link *p = srv->pre_head[0]; p; p = p->pre_next) {
+				if (same_host(&p->peer, peer)) {
+					oldest = oldest ? oldest : p;
+					same++;
+				}
+			}
+			if (same <= srv->conf->max_preauth_per_peer)
+				break;
+			evict(srv, oldest, l, "max_preauth_per_peer");
+		}
+	}
+	while (srv->npre[k] > (size_t)srv->conf->max_preauth && srv->pre_head[k])
+		evict(srv, srv->pre_head[k], l, "max_preauth");
+}
+
 static void on_accept(struct server *srv, struct listener *l)
 {
-	for (;;) {
-		int fd = listen_accept(l);
+	/* A batch at a time (the listener stays readable), so a flood of connections does not
+	 * keep the sessions' input waiting. */
+	for (int i = 0; i < ACCEPT_BATCH; i++) {
+		struct sockaddr_storage peer;
+		int fd = listen_accept(l, &peer);
 		if (fd < 0) {
 			if (fd != -EAGAIN)
 				log_msg(LOG_WARN, "%s: accept: %s", l->name, strerror(-fd));
 			return;
 		}
-		if (srv->nsessions >= (size_t)srv->conf->max_sessions) {
-			log_msg(LOG_WARN, "%s: refusing a connection: %zu sessions (max_sessions)",
-				l->name, srv->nsessions);
-			close(fd);
-			continue;
-		}
 		listen_tune(l, fd);
-		session_create(&srv->env, fd, l);
+		srv->accept_unix = l->is_unix;
+		srv->accept_peer = peer;
+		struct session *ss = session_create(&srv->env, fd, l);
+		if (!ss)
+			continue;
+		/* A client sends HELLO with its connect: read it now, so a well-behaved one leaves
+		 * the pre-auth pool at once and costs no one a slot; then the caps. */
+		session_on_event(ss, EPOLLIN);
+		enforce_preauth(srv, l, &peer);
 	}
+}
+
+/* The trimmer thread: one malloc_trim, timed. */
+static void *trim_main(void *arg)
+{
+	struct server *srv = arg;
+	uint64_t t0 = clock_now_ns();
+	malloc_trim(0);
+	uint64_t dt = clock_now_ns() - t0;
+	if (dt > atomic_load(&srv->trim_max_ns))
+		atomic_store(&srv->trim_max_ns, dt);
+	atomic_fetch_add(&srv->trims, 1);
+	atomic_store(&srv->trimming, false);
+	return NULL;
 }
 
 static void on_timer(struct server *srv)
@@ -626,14 +797,17 @@ static void on_timer(struct server *srv)
 	if (srv->stopping && now > srv->stop_deadline_ns)
 		while (srv->sessions)
 			session_close(srv->sessions->s, "shutdown: flush timed out");
-	if (srv->trim_due && !srv->stopping && now - srv->last_trim_ns > TRIM_EVERY_NS) {
+	if (srv->trim_due && !srv->stopping && now - srv->last_trim_ns > TRIM_EVERY_NS &&
+	    !atomic_load(&srv->trimming)) {
 		/* give back what closed sessions held (their tiles, buffers) */
-		malloc_trim(0);
+		if (srv->trimmer_started)
+			xthread_join(srv->trimmer); /* finished: trimming is false */
+		atomic_store(&srv->trimming, true);
+		srv->trimmer_started = xthread_create(&srv->trimmer, trim_main, srv) == 0;
+		if (!srv->trimmer_started)
+			atomic_store(&srv->trimming, false);
 		srv->trim_due = false;
-		srv->last_trim_ns = clock_now_ns();
-		srv->trims++;
-		if (srv->last_trim_ns - now > srv->trim_max_ns)
-			srv->trim_max_ns = srv->last_trim_ns - now;
+		srv->last_trim_ns = now;
 	}
 }
 

@@ -56,6 +56,9 @@ struct session {
 	uint64_t id;
 	char name[64];
 	char peer[64]; /* "127.0.0.1:40312", "[::1]:40312", "unix" (pid when known) */
+	const struct listener *l;
+	uint64_t born_ns;    /* accepted: the handshake deadline counts from here */
+	uint64_t partial_ns; /* when the frame at the head of the input started to wait; 0: none */
 	bool need_token, compress;
 	enum proto_state st;
 	bool closing, dead;
@@ -163,10 +166,16 @@ send_error(struct session *s, uint16_t code, uint16_t ref_type, uint32_t ref_id,
 					  .message = msg } };
 	send_msg(s, &m);
 	s->env->counters->errors_sent++;
-	/* a failed authentication is an operator's business: a warning, with the peer */
-	log_msg(code == PROTO_E_SHUTDOWN ? LOG_DEBUG : code == PROTO_E_AUTH ? LOG_WARN : LOG_INFO,
-		"session %llu (%s, %s): error %s: %s", (unsigned long long)s->id, s->name, s->peer,
-		proto_code_name(code), msg);
+	/* A failed authentication is an operator's business: a warning, with the peer. Errors
+	 * before the handshake are otherwise chatter (a garbage flood must not flood the log). */
+	enum log_level lv = LOG_INFO;
+	if (code == PROTO_E_AUTH)
+		lv = LOG_WARN;
+	else if (code == PROTO_E_SHUTDOWN || s->st == PROTO_ST_HANDSHAKE)
+		lv = LOG_DEBUG;
+	char esc[700];
+	log_msg(lv, "session %llu (%s, %s): error %s: %s", (unsigned long long)s->id, s->name,
+		s->peer, proto_code_name(code), log_escape(esc, sizeof esc, msg));
 }
 
 /* control's way out (control_host). */
@@ -409,6 +418,14 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 			return;
 		}
 	}
+	if (env->authenticated(env->ud, s->link)) {
+		send_error(s, PROTO_E_BUSY, PROTO_HELLO, 0,
+			   "the server has as many sessions as it takes (max_sessions): try again "
+			   "later");
+		begin_close(s);
+		return;
+	}
+	s->req = sched_req_create(env->sched, sess_ready_cb, ready_src_ref(s->src));
 	uint8_t codec = TCODEC_NONE;
 	if (s->compress) {
 		if (h->codecs & (1u << TCODEC_ZSTD))
@@ -418,15 +435,18 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 	}
 	s->codec = codec;
 	s->st = PROTO_ST_READY;
-	snprintf(s->name + strlen(s->name), sizeof s->name - strlen(s->name), " %.20s",
-		 h->name ? h->name : "");
+	char nm[40];
+	snprintf(s->name + strlen(s->name), sizeof s->name - strlen(s->name), " %s",
+		 log_escape(nm, sizeof nm, h->name));
 	struct proto_msg m = { .type = PROTO_HELLO_OK,
 			       .hello_ok = { .version = PROTO_VERSION,
 					     .codecs = codec ? 1u << codec : 0,
 					     .session = s->id, .name = "clipmapd/0.1",
 					     .limits = *env->limits } };
 	send_msg(s, &m);
-	log_msg(LOG_INFO, "session %llu (%s): hello, codec %s", (unsigned long long)s->id, s->name,
+	/* the one info line of a session */
+	log_msg(LOG_INFO, "session %llu (%s) from %s on %s: hello, codec %s",
+		(unsigned long long)s->id, s->name, s->peer, s->l->name,
 		tilecodec_codec_name((enum tcodec)codec));
 }
 
@@ -474,7 +494,8 @@ static void on_open(struct session *s, const struct proto_open *o)
 			       .opened = { .req = o->req, .planet_id = (uint32_t)id } };
 	fill_planet(p, &m.opened.planet, ls);
 	send_msg(s, &m);
-	log_msg(LOG_DEBUG, "session %llu: opened %s as %d", (unsigned long long)s->id, p->name, id);
+	log_msg(LOG_DEBUG, "session %llu (%s, %s): opened %s as %d", (unsigned long long)s->id,
+		s->name, s->peer, p->name, id);
 }
 
 static void on_want(struct session *s, const struct proto_want *w)
@@ -654,11 +675,14 @@ static void handle(struct session *s, const struct proto_msg *m, size_t frame_le
 		s->st = PROTO_ST_CLOSED;
 		begin_close(s);
 		break;
-	case PROTO_ERROR:
-		log_msg(LOG_INFO, "session %llu: client error %s: %s", (unsigned long long)s->id,
+	case PROTO_ERROR: {
+		char esc[700];
+		log_msg(LOG_INFO, "session %llu (%s, %s): client error %s: %s",
+			(unsigned long long)s->id, s->name, s->peer,
 			proto_code_name(m->error.code) ? proto_code_name(m->error.code) : "?",
-			m->error.message);
+			log_escape(esc, sizeof esc, m->error.message));
 		break;
+	}
 	case PROTO_LIST_PLANETS: on_list(s, m->list_planets.req); break;
 	case PROTO_OPEN: on_open(s, &m->open); break;
 	case PROTO_WANT: on_want(s, &m->want); break;
@@ -679,17 +703,23 @@ static void process_input(struct session *s)
 		struct proto_msg m = { 0 };
 		uint16_t code = 0, type = 0;
 		char err[256];
-		ssize_t r = conn_decode(&s->c, s->env->limits->max_frame, &m, &code, &type, err);
+		ssize_t r = conn_decode(&s->c, s->st, s->env->limits->max_frame, &m, &code, &type,
+					err);
 		if (r < 0) {
 			send_error(s, code, type, 0, "%s", err);
 			begin_close(s);
 			return;
 		}
-		if (r == 0)
+		if (r == 0) {
+			/* a frame has begun: frame_timeout runs from now (not from its last byte) */
+			if (!s->partial_ns)
+				s->partial_ns = clock_now_ns();
 			return;
+		}
 		handle(s, &m, (size_t)r);
 		proto_msg_fini(&m);
 		conn_consume(&s->c, (size_t)r);
+		s->partial_ns = 0;
 	}
 }
 
@@ -777,6 +807,8 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	s->need_token = l->need_token;
 	s->compress = l->compress;
 	snprintf(s->name, sizeof s->name, "%s", l->is_unix ? "unix" : "tcp");
+	s->l = l;
+	s->born_ns = clock_now_ns();
 	s->link = env->attach(env->ud, s, fd, &s->id);
 	if (!s->link) {
 		conn_close(&s->c);
@@ -788,9 +820,10 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	struct control_host host = { .s = s, .id = s->id, .send = send_msg, .error = ctl_error };
 	control_init(&s->ctl, env, &host);
 	s->src = ready_src_new(env->ready, s);
-	s->req = sched_req_create(env->sched, sess_ready_cb, ready_src_ref(s->src));
+	/* The scheduler request comes with the handshake (on_hello): closing a connection that
+	 * never authenticated involves no other thread. */
 	peer_name(fd, s->peer, sizeof s->peer);
-	log_msg(LOG_INFO, "session %llu: connected on %s from %s", (unsigned long long)s->id,
+	log_msg(LOG_DEBUG, "session %llu: connected on %s from %s", (unsigned long long)s->id,
 		l->name, s->peer);
 	return s;
 }
@@ -802,6 +835,22 @@ void session_tick(struct session *s, uint64_t now_ns)
 	if (s->closing) {
 		if (now_ns > s->close_deadline)
 			session_close(s, "close timed out (peer not reading)");
+		return;
+	}
+	const struct session_env *env = s->env;
+	if (s->st == PROTO_ST_HANDSHAKE && now_ns - s->born_ns > env->handshake_ns) {
+		send_error(s, PROTO_E_LIMIT, 0, 0, "no HELLO within %llu s (handshake_timeout): "
+			   "closing", (unsigned long long)(env->handshake_ns / 1000000000u));
+		begin_close(s);
+		return;
+	}
+	if (!s->c.reading && s->partial_ns)
+		s->partial_ns = now_ns; /* our output backpressure, not the peer's slowness */
+	if (s->partial_ns && now_ns - s->partial_ns > env->frame_ns) {
+		send_error(s, PROTO_E_LIMIT, 0, 0, "a frame begun %llu s ago has not arrived "
+			   "(frame_timeout): closing",
+			   (unsigned long long)((now_ns - s->partial_ns) / 1000000000u));
+		begin_close(s);
 		return;
 	}
 	if (control_tick(&s->ctl, now_ns))
@@ -828,7 +877,7 @@ void session_close(struct session *s, const char *why)
 	s->dead = true;
 	control_stop(&s->ctl);
 	s->src->dead = true; /* reports still on their way are dropped (server's on_ready) */
-	sched_req_release(s->req, sess_req_fin);
+	sched_req_release(s->req, sess_req_fin); /* NULL (never authenticated): nothing */
 	s->req = NULL;
 	readyq_purge(env->ready, s);
 	env->detach(env->ud, s->link);
@@ -836,7 +885,7 @@ void session_close(struct session *s, const char *why)
 	if (rc)
 		log_msg(LOG_WARN, "session %llu: close: %s", (unsigned long long)s->id,
 			strerror(-rc));
-	log_msg(LOG_INFO, "session %llu (%s, %s): closed%s%s; %llu tiles sent, %llu dropped",
+	log_msg(LOG_DEBUG, "session %llu (%s, %s): closed%s%s; %llu tiles sent, %llu dropped",
 		(unsigned long long)s->id, s->name, s->peer, why ? ": " : "", why ? why : "",
 		(unsigned long long)s->tiles_sent, (unsigned long long)s->tiles_dropped);
 	env->focus_changed(env->ud);

@@ -38,6 +38,8 @@ struct session_counters {
 struct session_env {
 	const struct proto_limits *limits;
 	uint32_t max_jobs; /* prefetch jobs per session */
+	uint64_t handshake_ns; /* accept to HELLO_OK, at most ([listen] handshake_timeout) */
+	uint64_t frame_ns;     /* a frame's first byte to its last, at most (frame_timeout) */
 	struct sched *sched;
 	struct cache *cache;
 	struct readyq *ready;	 /* the scheduler's callbacks push here */
@@ -52,6 +54,10 @@ struct session_env {
 	/* A new session on fd: the server registers fd for input, lists s and gives it an id.
 	 * Returns the server's record of s, or NULL (logged) when fd cannot be watched. */
 	struct session_link *(*attach)(void *ud, struct session *s, int fd, uint64_t *id);
+	/* The session's HELLO passed (version, token): it leaves the not-yet-authenticated pool
+	 * and counts against max_sessions. Returns 0, or -EBUSY when there is no room (the
+	 * session answers ERROR busy and closes). */
+	int (*authenticated)(void *ud, struct session_link *l);
 	/* The epoll events (EPOLLIN, EPOLLRDHUP, EPOLLOUT) the session wants now. */
 	void (*interest)(void *ud, struct session_link *l, uint32_t events);
 	/* The session has ready tiles and output room: call session_pump before the next wait. */
@@ -73,7 +79,8 @@ struct session_load {
 	bool paused;	     /* wants withdrawn while the output is full */
 };
 
-/* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed).
+/* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed:
+ * it outlives the session).
  * Returns NULL only when the server cannot watch fd (fd closed). */
 struct session *session_create(const struct session_env *env, int fd, const struct listener *l);
 /* epoll events on the session's socket. */
@@ -84,7 +91,8 @@ void session_on_ready(struct session *s, struct ready_item *it);
  * may overshoot). Returns true while the session still has ready tiles and output room (the
  * server calls it again). */
 bool session_pump(struct session *s, size_t *budget);
-/* Housekeeping every 250 ms: prefetch progress, close deadlines. */
+/* Housekeeping every 250 ms: prefetch progress, close deadlines, the handshake deadline and
+ * the partial-frame timeout (ERROR limit, then close). */
 void session_tick(struct session *s, uint64_t now_ns);
 /* A reload installed ps (borrowed; the session takes references of its own): every planet the
  * session opened is replaced by the planet of the same name in ps when its layers are
