@@ -3,7 +3,10 @@
  * - four sessions that never read, wanting 4096 tiles each, with cache_mb = 64: the daemon's
  *   resident memory (/proc/PID/status VmRSS) stays within cache_mb + image_cache_mb + the
  *   documented per-session allowance (2 × max_pending) × sessions + a fixed overhead, and goes
- *   back down once they close;
+ *   back down once they close; their wants are withdrawn while they do not read;
+ * - a client paused that way gets every tile, once, coarse first, when it reads again;
+ * - 100 sessions with large want-sets closing at once: a new client's HELLO is answered
+ *   promptly (the loop does not wait for the scheduler's manager per closed session);
  * - 100 sessions with want-sets being generated, then SIGTERM: the daemon is gone within the
  *   bound below (the manager is not waited for once per closed session);
  * - the loop-iteration histogram (loop.*) is in STATS.
