@@ -238,6 +238,10 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 	size_t head = PROTO_HDR + 44;
 	struct pbuf *out = &s->c.out;
 	size_t need = out->len + head + bound;
+	if (need > out->cap && s->c.out_off) {
+		conn_compact(&s->c); /* room from what went out before growing */
+		need = out->len + head + bound;
+	}
 	if (need > out->cap) {
 		/* Grow to what is needed, doubling only up to the session's cap (max_pending plus
 		 * this tile): a buffer twice max_pending would be resident for nothing. */
