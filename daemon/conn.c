@@ -146,3 +146,12 @@ void conn_throttle(struct conn *c, uint64_t max_pending)
 	else if (c->reading && pend > 2 * max_pending)
 		c->reading = false;
 }
+
+void conn_compact(struct conn *c)
+{
+	if (!c->out_off)
+		return;
+	memmove(c->out.data, c->out.data + c->out_off, c->out.len - c->out_off);
+	c->out.len -= c->out_off;
+	c->out_off = 0;
+}

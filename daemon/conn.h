@@ -57,5 +57,7 @@ int conn_flush(struct conn *c, uint64_t *sent);
 /* Output backpressure: stops reading above 2 × max_pending unsent bytes, resumes below
  * max_pending. */
 void conn_throttle(struct conn *c, uint64_t max_pending);
+/* Moves the unsent output to the start of the buffer (before growing it). */
+void conn_compact(struct conn *c);
 
 #endif

@@ -3,6 +3,10 @@
  * iteration. A closed session's record stays allocated (the graveyard) until the iteration
  * ends, so pointers in the current epoll batch or ready batch never dangle. The sessions see
  * the server only through srv->env: the callbacks below are its half of that contract.
+ * Every iteration's work (from epoll_wait's return to its end) goes into the loop.*
+ * histogram (loopstat.h). Memory that closed sessions held goes back to the system at the
+ * next tick (malloc_trim, on a thread of its own so that its tens of milliseconds never
+ * block the loop: glibc keeps freed heap otherwise, see clipmapd.c's mallopt).
  *
  * Admission: a connection is first not yet authenticated (pre-auth). Pre-auth connections
  * have pools of their own, one per listener kind (Unix, TCP) of max_preauth each, and on TCP
@@ -16,8 +20,10 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <malloc.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -32,14 +38,18 @@
 #include "common/log.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
+#include "loopstat.h"
 #include "prefetch.h"
 #include "readyq.h"
 #include "session.h"
 
 #define TICK_NS 250000000ull
-#define STOP_GRACE_NS 2000000000ull
+#define STOP_GRACE_NS 1250000000ull /* + one tick + teardown: SIGTERM done within 2 s */
 #define MAX_WATCH 4
 #define MAX_FOCI 512
+#define LOOP_OUT_BUDGET (4u << 20) /* output bytes produced per loop iteration */
+#define TRIM_EVERY_NS 1000000000ull /* at most one malloc_trim a second */
 #define ACCEPT_BATCH 16
 #define UNIX_RESERVE 8		       /* sessions over max_sessions kept for the Unix socket */
 #define EVICT_WARN_NS 10000000000ull /* at most one eviction warning per 10 s */
@@ -113,6 +123,14 @@ struct server {
 	uint64_t start_ns;
 	struct session_counters counters;
 	struct session_env env; /* lent to every session */
+
+	struct loopstat loop;	/* iteration times */
+	bool trim_due;		/* sessions were freed since the last trim */
+	uint64_t last_trim_ns;
+	pthread_t trimmer;	/* the last trim's thread, joined before the next */
+	bool trimmer_started;
+	atomic_bool trimming;	/* the trimmer runs */
+	atomic_uint_fast64_t trims, trim_max_ns; /* written by the trimmer */
 };
 
 static int ep_add(struct server *srv, int fd, struct evsrc *ev)
@@ -339,6 +357,25 @@ static void stat_store(struct statb *b, struct store *st)
 	stat_u(b, "store.disk.recovered", s.recovered);
 }
 
+/* The loop-iteration histogram: count, maximum, p99 (a bucket bound), per bucket. */
+static void stat_loop(struct statb *b, const struct loopstat *ls)
+{
+	stat_u(b, "loop.iterations", ls->n);
+	stat_f(b, "loop.max_ms", (double)ls->max_ns * 1e-6);
+	stat_f(b, "loop.p99_ms", loopstat_quantile_ms(ls, 0.99));
+	stat_u(b, "loop.over_50ms", loopstat_over(ls, 50));
+	for (int i = 0; i < LOOPSTAT_NB; i++) {
+		struct proto_stat *st =
+			i < LOOPSTAT_NB - 1
+				? stat_add(b, "loop.le_%ums", loopstat_bound_ms(i))
+				: stat_add(b, "loop.gt_%ums", loopstat_bound_ms(LOOPSTAT_NB - 2));
+		if (st) {
+			st->kind = PROTO_STAT_U64;
+			st->u = ls->b[i];
+		}
+	}
+}
+
 static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap)
 {
 	const struct server *srv = ud;
@@ -379,14 +416,23 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "tiles.stale", c->tiles_stale);
 	stat_u(&b, "bytes.sent", c->bytes_sent);
 	stat_u(&b, "errors.sent", c->errors_sent);
+	stat_u(&b, "tiles.parked", c->tiles_parked);
+	stat_u(&b, "tiles.relooked", c->tiles_relooked);
+	stat_u(&b, "tiles.rewanted", c->tiles_rewanted);
+	stat_u(&b, "sessions.pauses", c->pauses);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
 	stat_u(&b, "planets.skipped", srv->planets->nskipped); /* files that did not load */
-	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0;
+	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0, held = 0, held_max = 0, outb = 0;
+	uint64_t paused = 0;
 	for (const struct session_link *l = srv->sessions; l; l = l->next) {
 		struct session_load ld;
 		session_get_load(l->s, &ld);
 		njobs += ld.jobs;
+		held += ld.held_bytes;
+		held_max = ld.held_bytes > held_max ? ld.held_bytes : held_max;
+		outb += ld.out_bytes;
+		paused += ld.paused;
 		pend += ld.pending_bytes;
 		pend_max = ld.pending_bytes > pend_max ? ld.pending_bytes : pend_max;
 		ready += ld.ready_tiles;
@@ -394,6 +440,15 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "sessions.pending_bytes", pend);
 	stat_u(&b, "sessions.pending_bytes.max", pend_max);
 	stat_u(&b, "sessions.ready_tiles", ready);
+	stat_u(&b, "sessions.held_bytes", held);
+	stat_u(&b, "sessions.held_bytes.max", held_max);
+	stat_u(&b, "sessions.out_bytes", outb);
+	stat_u(&b, "sessions.paused", paused);
+	/* the per-session allowance: held tiles and queued output, max_pending each */
+	stat_u(&b, "sessions.allowance_bytes", 2 * srv->limits.max_pending);
+	stat_loop(&b, &srv->loop);
+	stat_u(&b, "memory.trims", atomic_load(&srv->trims));
+	stat_f(&b, "memory.trim_max_ms", (double)atomic_load(&srv->trim_max_ns) * 1e-6);
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_nodes(&b, srv->planets);
 	return b.n;
@@ -570,6 +625,7 @@ static void free_graveyard(struct server *srv)
 		session_free(g->s);
 		free(g);
 		g = next;
+		srv->trim_due = true;
 	}
 }
 
@@ -581,7 +637,12 @@ void server_destroy(struct server *srv)
 		session_close(srv->sessions->s, "server exiting");
 	free_graveyard(srv);
 	close_listeners(srv);
+	/* Released requests may still report into the ready queue until the manager frees them. */
+	if (srv->sessions_total)
+		sched_barrier(srv->sched);
 	readyq_fini(&srv->ready);
+	if (srv->trimmer_started)
+		xthread_join(srv->trimmer);
 	if (srv->epfd >= 0)
 		close(srv->epfd);
 	if (srv->timerfd >= 0)
@@ -627,9 +688,21 @@ static void on_ready(struct server *srv)
 	size_t n;
 	struct ready_item *batch = readyq_take(&srv->ready, &n);
 	/* Sessions closed while this batch runs stay allocated (graveyard) until the iteration
-	 * ends; session_on_ready ignores them. */
-	for (size_t i = 0; i < n; i++)
-		session_on_ready(batch[i].s, &batch[i]);
+	 * ends; session_on_ready ignores them. An item marked with a handle whose session closed
+	 * (it may be freed already) is dropped without looking at the session. */
+	for (size_t i = 0; i < n; i++) {
+		struct ready_item *it = &batch[i];
+		if (it->src) {
+			bool dead = it->src->dead;
+			ready_src_unref(it->src);
+			it->src = NULL;
+			if (dead) {
+				tile_unref(it->t);
+				continue;
+			}
+		}
+		session_on_ready(it->s, it);
+	}
 	free(batch);
 }
 
@@ -712,6 +785,20 @@ static void on_accept(struct server *srv, struct listener *l)
 	}
 }
 
+/* The trimmer thread: one malloc_trim, timed. */
+static void *trim_main(void *arg)
+{
+	struct server *srv = arg;
+	uint64_t t0 = clock_now_ns();
+	malloc_trim(0);
+	uint64_t dt = clock_now_ns() - t0;
+	if (dt > atomic_load(&srv->trim_max_ns))
+		atomic_store(&srv->trim_max_ns, dt);
+	atomic_fetch_add(&srv->trims, 1);
+	atomic_store(&srv->trimming, false);
+	return NULL;
+}
+
 static void on_timer(struct server *srv)
 {
 	uint64_t v;
@@ -727,6 +814,18 @@ static void on_timer(struct server *srv)
 	if (srv->stopping && now > srv->stop_deadline_ns)
 		while (srv->sessions)
 			session_close(srv->sessions->s, "shutdown: flush timed out");
+	if (srv->trim_due && !srv->stopping && now - srv->last_trim_ns > TRIM_EVERY_NS &&
+	    !atomic_load(&srv->trimming)) {
+		/* give back what closed sessions held (their tiles, buffers) */
+		if (srv->trimmer_started)
+			xthread_join(srv->trimmer); /* finished: trimming is false */
+		atomic_store(&srv->trimming, true);
+		srv->trimmer_started = xthread_create(&srv->trimmer, trim_main, srv) == 0;
+		if (!srv->trimmer_started)
+			atomic_store(&srv->trimming, false);
+		srv->trim_due = false;
+		srv->last_trim_ns = now;
+	}
 }
 
 void server_set_planets(struct server *srv, struct planet_set *ps)
@@ -786,19 +885,32 @@ int server_run(struct server *srv)
 			log_msg(LOG_ERROR, "epoll_wait: %s", strerror(-e));
 			return e;
 		}
+		uint64_t t0 = clock_now_ns();
 		for (int i = 0; i < n; i++)
 			dispatch(srv, &evs[i]);
+		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (encoding and copying
+		 * scale with bytes): sessions not reached stay listed, at the front, for the next
+		 * iteration, which then does not wait. */
 		struct session_link *p = srv->pump;
 		srv->pump = NULL;
+		size_t budget = LOOP_OUT_BUDGET;
+		while (p && budget) {
+			struct session_link *next = p->pump_next;
+			p->pump_next = NULL;
+			p->in_pump = false;
+			if (session_pump(p->s, &budget))
+				sess_pump(srv, p);
+			p = next;
+		}
 		while (p) {
 			struct session_link *next = p->pump_next;
 			p->pump_next = NULL;
 			p->in_pump = false;
-			if (session_pump(p->s))
-				sess_pump(srv, p);
+			sess_pump(srv, p);
 			p = next;
 		}
 		free_graveyard(srv);
+		loopstat_add(&srv->loop, clock_now_ns() - t0);
 	}
 	free_graveyard(srv);
 	return 0;

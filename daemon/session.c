@@ -5,6 +5,19 @@
  * (header space reserved, payload encoded after it, header written last) so a tile is copied
  * once. A closed session stays allocated until the server frees it at the end of the loop
  * iteration, so pointers in the current epoll batch or ready batch never dangle.
+ *
+ * Memory: ready tiles waiting for output room are held up to the session's allowance
+ * (max_pending bytes of raw tiles, the same figure that caps its queued output); beyond it
+ * they are parked (released) and looked up in the cache again when room appears, or wanted
+ * again when the cache let them go. A session thus holds at most about 2 × max_pending, and
+ * its output buffer is given back whenever it drains. Once it parks with its output full, its
+ * wants are withdrawn from the scheduler (paused: nothing is made for a client that does not
+ * read) until the output drains to half of max_pending; then the want-set's WANTED entries
+ * are submitted again, in order, so coarse-first and replacement work as before.
+ *
+ * Closing never waits for the scheduler: the request is released (sched_req_release) and the
+ * manager frees it later; reports for it that still come are marked with the session's
+ * ready_src, which the close marks dead, and the loop drops them.
  */
 #include "session.h"
 
@@ -29,6 +42,7 @@
 #define PUMP_BUDGET (4u << 20) /* output bytes produced per pump call (fairness) */
 #define READ_BUDGET (1u << 20) /* input bytes read per event */
 #define CLOSE_GRACE_NS 2000000000ull
+#define OUT_KEEP (1u << 20) /* a drained output buffer above this is freed */
 
 struct sopen {
 	struct planet *p;	/* NULL: dropped by a reload (the id may be given again) */
@@ -64,6 +78,8 @@ struct session {
 	struct wantset_entry *scratch; /* a WANT's entries, reused */
 	size_t capscratch;
 	struct sched_req *req;
+	struct ready_src *src; /* this session's handle on the ready queue (reference) */
+	bool paused; /* its wants are withdrawn while its output is full (see the top) */
 	bool has_focus;
 	double lon, lat, vel[3];
 
@@ -85,6 +101,18 @@ static void pump_add(struct session *s)
 		s->env->pump(s->env->ud, s->link);
 }
 
+static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
+
+/* A paused session's wants go back in once its output drained to half of max_pending. */
+static void resume_if_drained(struct session *s)
+{
+	if (s->paused && !s->closing && !s->dead &&
+	    conn_pending(&s->c) <= s->env->limits->max_pending / 2) {
+		s->paused = false;
+		submit_wants(s, 0, 0);
+	}
+}
+
 /* Writes what it can. Returns 0, or -errno after closing the session. */
 static int flush(struct session *s)
 {
@@ -103,6 +131,12 @@ static int flush(struct session *s)
 		}
 	} else {
 		conn_throttle(&s->c, s->env->limits->max_pending);
+	}
+	resume_if_drained(s); /* the client reads again */
+	if (!s->c.want_out && s->c.out.cap > OUT_KEEP) {
+		/* drained: a burst's buffer is not kept for the session's lifetime */
+		pbuf_fini(&s->c.out);
+		pbuf_init(&s->c.out);
 	}
 	if (was != conn_events(&s->c))
 		update_interest(s);
@@ -203,8 +237,20 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 	size_t bound = tilecodec_bound(codec, t->nbytes);
 	size_t head = PROTO_HDR + 44;
 	struct pbuf *out = &s->c.out;
-	if (pbuf_reserve(out, head + bound))
-		return;
+	size_t need = out->len + head + bound;
+	if (need > out->cap && s->c.out_off) {
+		conn_compact(&s->c); /* room from what went out before growing */
+		need = out->len + head + bound;
+	}
+	if (need > out->cap) {
+		/* Grow to what is needed, doubling only up to the session's cap (max_pending plus
+		 * this tile): a buffer twice max_pending would be resident for nothing. */
+		size_t cap = out->cap * 2, lim = (size_t)s->env->limits->max_pending + head + bound;
+		cap = cap > lim ? lim : cap;
+		cap = cap < need ? need : cap;
+		out->data = xrealloc(out->data, cap);
+		out->cap = cap;
+	}
 	uint8_t *at = out->data + out->len;
 	struct proto_tile pt = { .seq = e->seq, .planet_id = e->pid, .layer = e->layer,
 				 .key = e->key };
@@ -236,18 +282,38 @@ static bool has_room(const struct session *s)
 	return wantset_nready(&s->ws) && conn_pending(&s->c) < s->env->limits->max_pending;
 }
 
-bool session_pump(struct session *s)
+bool session_pump(struct session *s, size_t *budget)
 {
 	if (s->dead || s->closing)
 		return false;
+	struct session_counters *cnt = s->env->counters;
 	size_t start = s->c.out.len;
-	while (has_room(s) && s->c.out.len - start < PUMP_BUDGET) {
+	size_t lim = *budget < PUMP_BUDGET ? *budget : PUMP_BUDGET;
+	bool rewant = false;
+	while (has_room(s) && s->c.out.len - start < lim) {
 		struct wantset_entry *e = wantset_pop(&s->ws);
 		if (!e)
 			break;
+		if (wantset_parked(e)) {
+			struct tile *t = cache_lookup(s->env->cache, &e->key);
+			if (!t) {
+				/* the cache let it go meanwhile: the scheduler makes it again */
+				wantset_rewant(&s->ws, e);
+				cnt->tiles_rewanted++;
+				rewant = true;
+				continue;
+			}
+			wantset_unpark(&s->ws, e, t);
+			cnt->tiles_relooked++;
+		}
 		encode_tile(s, e);
-		wantset_sent(e);
+		wantset_sent(&s->ws, e);
 	}
+	if (rewant)
+		submit_wants(s, 0, 0); /* when paused: resume_if_drained does it */
+	resume_if_drained(s);
+	size_t made = s->c.out.len - start;
+	*budget = made < *budget ? *budget - made : 0;
 	if (s->c.out.len != start && flush(s))
 		return false;
 	return has_room(s);
@@ -264,22 +330,42 @@ void session_on_ready(struct session *s, struct ready_item *it)
 		tile_unref(it->t);
 		return;
 	}
-	if (wantset_ready(&s->ws, &it->key, it->t, it->err))
+	bool parked;
+	uint64_t max = s->env->limits->max_pending;
+	if (wantset_ready(&s->ws, &it->key, it->t, it->err, max, &parked)) {
+		s->env->counters->tiles_parked += parked;
+		if (parked && !s->paused && conn_pending(&s->c) >= max) {
+			/* held tiles and output both full: make nothing more for it for now */
+			s->paused = true;
+			s->env->counters->pauses++;
+			(void)sched_req_want(s->req, NULL, 0);
+		}
 		pump_add(s);
+	}
 }
 
-/* Runs on the scheduler's manager thread: only hands the report to the loop. */
+/* Runs on the scheduler's manager thread, possibly after the session closed: only hands the
+ * report to the loop, marked with the session's handle (ud, a reference of the request's). */
 static void sess_ready_cb(void *ud, const struct want *w, struct tile *t, int err)
 {
-	struct session *s = ud;
-	struct ready_item it = { .s = s, .key = w->key, .t = t ? tile_ref(t) : NULL, .err = err };
-	readyq_push(s->env->ready, &it);
+	struct ready_src *src = ud;
+	struct ready_item it = { .s = src->s, .src = ready_src_ref(src), .key = w->key,
+				 .t = t ? tile_ref(t) : NULL, .err = err };
+	readyq_push(src->q, &it);
+}
+
+/* The manager is done with the request: its reference on the handle goes. */
+static void sess_req_fin(void *ud)
+{
+	ready_src_unref(ud);
 }
 
 /* Gives the scheduler what is still wanted; a failure is reported as an ERROR referring to
  * (ref_type, ref_id). */
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id)
 {
+	if (s->paused)
+		return; /* flush submits them when the output drains */
 	size_t n;
 	struct want *list = wantset_wants(&s->ws, &n);
 	int rc = sched_req_want(s->req, list, n);
@@ -343,7 +429,7 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 		begin_close(s);
 		return;
 	}
-	s->req = sched_req_create(env->sched, sess_ready_cb, s);
+	s->req = sched_req_create(env->sched, sess_ready_cb, ready_src_ref(s->src));
 	/* Presented the token (required or not): prefetch limits of an authenticated client. */
 	s->ctl.authed = s->need_token || control_token_ok(env, h);
 	uint8_t codec = TCODEC_NONE;
@@ -743,6 +829,7 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	wantset_init(&s->ws);
 	struct control_host host = { .s = s, .id = s->id, .send = send_msg, .error = ctl_error };
 	control_init(&s->ctl, env, &host);
+	s->src = ready_src_new(env->ready, s);
 	/* The scheduler request comes with the handshake (on_hello): closing a connection that
 	 * never authenticated involves no other thread. */
 	peer_name(fd, s->peer, sizeof s->peer);
@@ -799,7 +886,8 @@ void session_close(struct session *s, const char *why)
 	const struct session_env *env = s->env;
 	s->dead = true;
 	control_stop(&s->ctl);
-	sched_req_destroy(s->req);
+	s->src->dead = true; /* reports still on their way are dropped (server's on_ready) */
+	sched_req_release(s->req, sess_req_fin); /* NULL (never authenticated): nothing */
 	s->req = NULL;
 	readyq_purge(env->ready, s);
 	env->detach(env->ud, s->link);
@@ -818,6 +906,7 @@ void session_free(struct session *s)
 	if (!s)
 		return;
 	wantset_fini(&s->ws);
+	ready_src_unref(s->src);
 	free(s->scratch);
 	control_fini(&s->ctl);
 	for (int i = 0; i < s->nopened; i++)
@@ -842,6 +931,9 @@ bool session_focus(const struct session *s, double *lon, double *lat, double vel
 void session_get_load(const struct session *s, struct session_load *out)
 {
 	*out = (struct session_load){ .pending_bytes = conn_pending(&s->c),
+				      .out_bytes = s->c.out.cap,
+				      .held_bytes = wantset_held(&s->ws),
+				      .paused = s->paused,
 				      .ready_tiles = wantset_nready(&s->ws),
 				      .jobs = s->ctl.njobs };
 }

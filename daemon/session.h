@@ -29,6 +29,10 @@ struct session_link; /* the server's record of a session (opaque here) */
 /* Server-wide counters the sessions add to (STATS). */
 struct session_counters {
 	uint64_t tiles_sent, tiles_failed, tiles_dropped, tiles_stale, bytes_sent, errors_sent;
+	/* held-tile allowance: ready tiles released for want of output room, found again in
+	 * the cache when room came, wanted again because the cache had let them go */
+	uint64_t tiles_parked, tiles_relooked, tiles_rewanted;
+	uint64_t pauses; /* times a session's wants were withdrawn while its output was full */
 };
 
 /* What the server lends every session; every pointer is borrowed and outlives the sessions. */
@@ -72,6 +76,9 @@ struct session_env {
 /* One session's share of the server-wide figures. */
 struct session_load {
 	uint64_t pending_bytes, ready_tiles, jobs;
+	uint64_t held_bytes; /* ready tiles' bytes held for output room */
+	uint64_t out_bytes;  /* the output buffer's size */
+	bool paused;	     /* wants withdrawn while the output is full */
 };
 
 /* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed:
@@ -82,9 +89,10 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 void session_on_event(struct session *s, uint32_t events);
 /* A ready item for this session or one of its jobs (takes the item's tile reference). */
 void session_on_ready(struct session *s, struct ready_item *it);
-/* Produces more output if there is room. Returns true while the session still has ready
- * tiles and output room (the server calls it again). */
-bool session_pump(struct session *s);
+/* Produces more output if there is room, at most *budget bytes (taken off it; the last tile
+ * may overshoot). Returns true while the session still has ready tiles and output room (the
+ * server calls it again). */
+bool session_pump(struct session *s, size_t *budget);
 /* Housekeeping every 250 ms: prefetch progress, close deadlines, the handshake deadline and
  * the partial-frame timeout (ERROR limit, then close). */
 void session_tick(struct session *s, uint64_t now_ns);

@@ -15,7 +15,8 @@
  * which want entries wait on each job; then cancel queued and waiting jobs the pass did not
  * reach); process finished jobs incrementally (report to the waiting entries, hand the tile
  * to dependents); push newly ready jobs; run the callbacks with no lock held; finally free
- * destroyed requests and wake whoever waits in sched_req_destroy.
+ * destroyed requests (calling a released request's fin) and wake whoever waits in
+ * sched_req_destroy.
  */
 #include "sched.h"
 
@@ -48,6 +49,7 @@ struct sched_req {
 	size_t npending;
 	bool has_pending, destroy, in_changes;
 	bool *ack; /* the destroyer's flag; NULL when destroyed on the manager thread */
+	void (*fin)(void *ud); /* sched_req_release's: called when r is freed */
 	struct sched_req *next_change;
 
 	/* Manager only. */
@@ -306,8 +308,11 @@ static void deliver(struct sched *s)
 	s->nbatch = 0;
 }
 
+/* Frees r (with in_mu held by the manager, or at sched_destroy); r's fin runs first. */
 static void free_req(struct sched_req *r)
 {
+	if (r->fin)
+		r->fin(r->ud);
 	free(r->pending);
 	free(r->pend_m);
 	free(r->list);
@@ -635,6 +640,35 @@ void sched_req_destroy(struct sched_req *r)
 	while (!on_manager && !done)
 		xcond_wait(&s->ack_cv, &s->in_mu);
 	xmutex_unlock(&s->in_mu);
+}
+
+void sched_req_release(struct sched_req *r, void (*fin)(void *ud))
+{
+	if (!r)
+		return;
+	struct sched *s = r->s;
+	bool on_manager = pthread_equal(pthread_self(), s->manager);
+	xmutex_lock(&s->in_mu);
+	r->destroy = true;
+	r->ack = NULL;
+	r->fin = fin;
+	if (on_manager)
+		r->dead = true; /* no further callbacks in this iteration's batch */
+	post_change(s, r);
+	xmutex_unlock(&s->in_mu);
+}
+
+static void barrier_cb(void *ud, const struct want *w, struct tile *t, int err)
+{
+	(void)ud, (void)w, (void)t, (void)err;
+}
+
+void sched_barrier(struct sched *s)
+{
+	/* The manager takes the whole change list at once and frees its destroyed requests at the
+	 * end of that iteration: once this request's destroy is acknowledged, every change posted
+	 * before it went through the same iteration or an earlier one. */
+	sched_req_destroy(sched_req_create(s, barrier_cb, NULL));
 }
 
 struct fetch {
