@@ -588,24 +588,46 @@ static int l_del(struct store *base, const struct tile_key *k)
 	return enqueue((struct lstore *)base, &(struct wop){ .kind = W_DEL, .key = *k });
 }
 
-static int l_iterate(struct store *base, store_iter_fn fn, void *ud)
+/* A read transaction and a cursor on db, under the read lock: 0, or -errno (nothing held). */
+static int read_cursor(struct lstore *s, MDB_dbi db, MDB_txn **txn, MDB_cursor **c)
 {
-	struct lstore *s = (struct lstore *)base;
-	MDB_txn *txn;
-	MDB_cursor *c;
 	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, txn) : EIO;
 	if (rc) {
 		rwunlock(s);
 		if (fatal(rc))
 			mark_broken(s);
 		return mdb_errno(rc);
 	}
-	if ((rc = mdb_cursor_open(txn, s->meta, &c))) {
-		mdb_txn_abort(txn);
+	if ((rc = mdb_cursor_open(*txn, db, c))) {
+		mdb_txn_abort(*txn);
 		rwunlock(s);
 		return mdb_errno(rc);
 	}
+	return 0;
+}
+
+/* Ends what read_cursor began; rc is the cursor walk's last LMDB code, r the callback's. */
+static int end_cursor(struct lstore *s, MDB_txn *txn, MDB_cursor *c, int rc, int r)
+{
+	mdb_cursor_close(c);
+	mdb_txn_abort(txn);
+	rwunlock(s);
+	if (fatal(rc))
+		mark_broken(s);
+	if (r)
+		return r;
+	return rc == MDB_NOTFOUND ? 0 : mdb_errno(rc);
+}
+
+static int l_iterate(struct store *base, store_iter_fn fn, void *ud)
+{
+	struct lstore *s = (struct lstore *)base;
+	MDB_txn *txn;
+	MDB_cursor *c;
+	int rc = read_cursor(s, s->meta, &txn, &c);
+	if (rc)
+		return rc;
 	MDB_val k, m;
 	int r = 0;
 	for (rc = mdb_cursor_get(c, &k, &m, MDB_FIRST); rc == 0 && r == 0;
@@ -619,14 +641,7 @@ static int l_iterate(struct store *base, store_iter_fn fn, void *ud)
 		e.keep = (enum store_keep)md.keep;
 		r = fn(ud, &e);
 	}
-	mdb_cursor_close(c);
-	mdb_txn_abort(txn);
-	rwunlock(s);
-	if (fatal(rc))
-		mark_broken(s);
-	if (r)
-		return r;
-	return rc == MDB_NOTFOUND ? 0 : mdb_errno(rc);
+	return end_cursor(s, txn, c, rc, r);
 }
 
 static int l_verify(struct store *base, store_verify_fn fn, void *ud)
@@ -634,19 +649,9 @@ static int l_verify(struct store *base, store_verify_fn fn, void *ud)
 	struct lstore *s = (struct lstore *)base;
 	MDB_txn *txn;
 	MDB_cursor *c;
-	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
-	if (rc) {
-		rwunlock(s);
-		if (fatal(rc))
-			mark_broken(s);
-		return mdb_errno(rc);
-	}
-	if ((rc = mdb_cursor_open(txn, s->tiles, &c))) {
-		mdb_txn_abort(txn);
-		rwunlock(s);
-		return mdb_errno(rc);
-	}
+	int rc = read_cursor(s, s->tiles, &txn, &c);
+	if (rc)
+		return rc;
 	MDB_val k, v, m;
 	int r = 0;
 	for (rc = mdb_cursor_get(c, &k, &v, MDB_FIRST); rc == 0 && r == 0;
@@ -666,14 +671,7 @@ static int l_verify(struct store *base, store_verify_fn fn, void *ud)
 		}
 		r = fn(ud, &e, ok);
 	}
-	mdb_cursor_close(c);
-	mdb_txn_abort(txn);
-	rwunlock(s);
-	if (fatal(rc))
-		mark_broken(s);
-	if (r)
-		return r;
-	return rc == MDB_NOTFOUND ? 0 : mdb_errno(rc);
+	return end_cursor(s, txn, c, rc, r);
 }
 
 static void l_stat(struct store *base, struct store_stats *o)
