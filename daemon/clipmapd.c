@@ -235,7 +235,7 @@ static void gather_metrics(struct daemon *d)
 	for (size_t i = 0; i < sizeof h / sizeof h[0]; i++, n++)
 		it[n] = (struct proto_stat){ .key = h[i].k, .kind = PROTO_STAT_U64, .u = h[i].v };
 	size_t len;
-	char *text = metrics_format(it, n, CLIPMAP_VERSION, &len);
+	char *text = metrics_format(it, n, CLIPMAP_VERSION, server_planets(d->srv), &len);
 	http_set_metrics(d->http, text, len);
 	free(text);
 	free(it);

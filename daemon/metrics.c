@@ -4,6 +4,7 @@
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <stdatomic.h>
 #include <string.h>
 
 #include "common/strbuf.h"
@@ -98,7 +99,43 @@ static void put_nodes(struct strbuf *b, const struct proto_stat *items, size_t n
 	}
 }
 
-char *metrics_format(const struct proto_stat *items, size_t n, const char *version, size_t *len)
+/* Every node's generation times as one Prometheus histogram (cumulative buckets). */
+static void put_histograms(struct strbuf *b, const struct planet_set *ps)
+{
+	strbuf_printf(b, "# HELP clipmapd_node_generate_seconds Time to generate one tile, per "
+			 "node of each planet.\n# TYPE clipmapd_node_generate_seconds histogram\n");
+	for (size_t i = 0; i < ps->n; i++)
+		for (size_t j = 0; j < ps->planets[i]->nnodes; j++) {
+			const struct node *nd = ps->planets[i]->nodes[j];
+			char lab[300];
+			struct strbuf l = { 0 };
+			strbuf_printf(&l, "planet=\"");
+			put_label(&l, ps->planets[i]->name, strlen(ps->planets[i]->name));
+			strbuf_printf(&l, "\",node=\"");
+			put_label(&l, nd->name, strlen(nd->name));
+			strbuf_printf(&l, "\"");
+			snprintf(lab, sizeof lab, "%s", l.s);
+			free(l.s);
+			uint64_t cum = 0;
+			for (int k = 0; k < NODE_GEN_BUCKETS; k++) {
+				cum += atomic_load(&nd->gen_hist[k]);
+				if (k < NODE_GEN_BUCKETS - 1)
+					strbuf_printf(b, "clipmapd_node_generate_seconds_bucket{%s,le=\"%g\"} %llu\n",
+						      lab, node_gen_bound_ms(k) * 1e-3,
+						      (unsigned long long)cum);
+				else
+					strbuf_printf(b, "clipmapd_node_generate_seconds_bucket{%s,le=\"+Inf\"} %llu\n",
+						      lab, (unsigned long long)cum);
+			}
+			strbuf_printf(b, "clipmapd_node_generate_seconds_sum{%s} %.9f\n", lab,
+				      (double)atomic_load(&nd->gen_ns) * 1e-9);
+			strbuf_printf(b, "clipmapd_node_generate_seconds_count{%s} %llu\n", lab,
+				      (unsigned long long)cum);
+		}
+}
+
+char *metrics_format(const struct proto_stat *items, size_t n, const char *version,
+		     const struct planet_set *ps, size_t *len)
 {
 	struct strbuf b = { 0 };
 	strbuf_printf(&b, "# HELP clipmapd_build_info The running clipmapd's version.\n"
@@ -121,5 +158,7 @@ char *metrics_format(const struct proto_stat *items, size_t n, const char *versi
 	}
 	put_nodes(&b, items, n, "generated");
 	put_nodes(&b, items, n, "mean_ms");
+	if (ps)
+		put_histograms(&b, ps);
 	return strbuf_take(&b, len);
 }

@@ -9,9 +9,12 @@
 #include <stddef.h>
 
 #include "common/proto.h"
+#include "engine/planets.h"
 
 /* Formats n items into a malloc'ed, NUL-terminated text (*len bytes without the NUL). version:
- * the build's version string for clipmapd_build_info. */
-char *metrics_format(const struct proto_stat *items, size_t n, const char *version, size_t *len);
+ * the build's version string for clipmapd_build_info. ps (optional): its nodes' generation
+ * times as the histogram clipmapd_node_generate_seconds{planet, node}. */
+char *metrics_format(const struct proto_stat *items, size_t n, const char *version,
+		     const struct planet_set *ps, size_t *len);
 
 #endif

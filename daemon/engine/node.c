@@ -321,3 +321,15 @@ void node_fini(struct node *n)
 		n->type->destroy(n);
 	n->impl = NULL;
 }
+
+double node_gen_bound_ms(int i) { return 0.25 * (double)(1u << i); }
+
+void node_count_generation(struct node *n, uint64_t ns)
+{
+	int b = 0;
+	while (b < NODE_GEN_BUCKETS - 1 && (double)ns > node_gen_bound_ms(b) * 1e6)
+		b++;
+	atomic_fetch_add(&n->generated, 1);
+	atomic_fetch_add(&n->gen_ns, ns);
+	atomic_fetch_add(&n->gen_hist[b], 1);
+}

@@ -93,6 +93,8 @@ struct node_type {
 			struct tile *const *in, int nin, struct tile *out);
 };
 
+#define NODE_GEN_BUCKETS 12 /* 0.25, 0.5, 1, … 256 ms, and longer */
+
 struct node {
 	char *name;
 	const struct node_type *type;
@@ -104,7 +106,14 @@ struct node {
 	int line;			  /* its section's line in the planet file */
 	atomic_uint_fast64_t generated;	  /* tiles generated */
 	atomic_uint_fast64_t gen_ns;	  /* total generation time */
+	/* generation times: counts at most node_gen_bound_ms(i) (the last bucket: longer) */
+	atomic_uint_fast64_t gen_hist[NODE_GEN_BUCKETS];
 };
+
+/* Counts one generation of n that took ns (generated, gen_ns, gen_hist). Any thread. */
+void node_count_generation(struct node *n, uint64_t ns);
+/* The upper bound of histogram bucket i < NODE_GEN_BUCKETS - 1, in ms: 0.25 · 2^i. */
+double node_gen_bound_ms(int i);
 
 /* Initialises node n as type t from its planet-file section (whose `type` and input-slot keys
  * the caller has already marked used) with n->name, n->planet and n->in[] already set: runs

@@ -449,8 +449,7 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 			cache_insert(s->cache, t); /* without a disk tier, prefetch warms memory */
 		else if (!stored)
 			cache_insert_cold(s->cache, t);
-		atomic_fetch_add(&j->node->generated, 1);
-		atomic_fetch_add(&j->node->gen_ns, dt);
+		node_count_generation(j->node, dt);
 		atomic_fetch_add(&s->generated, 1);
 		j->result = t;
 		j->err = 0;

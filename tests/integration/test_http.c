@@ -598,6 +598,13 @@ static void metrics_count(void **state)
 	char *b = slurp(m);
 	assert_true(metric(b, "clipmapd_http_tiles_sent_total") >= before + 8);
 	assert_true(metric(b, "clipmapd_http_cache_hits_total") >= 4);
+	/* the generation-time histogram of the colour node: as many counted as generated */
+	double gen = metric(b, "clipmapd_node_generated_total{planet=\"test\",node=\"tint\"}");
+	assert_true(gen >= 4);
+	assert_true(metric(b, "clipmapd_node_generate_seconds_count{planet=\"test\",node=\"tint\"}") ==
+		    gen);
+	assert_true(metric(b, "clipmapd_node_generate_seconds_bucket{planet=\"test\",node=\"tint\","
+			      "le=\"+Inf\"}") == gen);
 	assert_true(metric(b, "clipmapd_sched_generated_total") > 0);
 	/* promtool's own check of the format and names, where Prometheus is installed */
 	char out[8192];

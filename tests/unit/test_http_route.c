@@ -121,7 +121,7 @@ static void prometheus_text(void **state)
 		{ .key = "version", .kind = PROTO_STAT_STR, .s = "x" },
 	};
 	size_t n;
-	char *t = metrics_format(st, sizeof st / sizeof st[0], "v1\"x", &n);
+	char *t = metrics_format(st, sizeof st / sizeof st[0], "v1\"x", NULL, &n);
 	assert_int_equal(strlen(t), n);
 	assert_non_null(strstr(t, "clipmapd_build_info{version=\"v1\\\"x\"} 1\n"));
 	assert_non_null(strstr(t, "# TYPE clipmapd_uptime_seconds gauge\nclipmapd_uptime_seconds 12.5\n"));
