@@ -132,6 +132,29 @@ void img_tiled_abort(struct img_tiled_out *o);
 int img_cache_description(struct img_cache *c, const char *path, char *buf, size_t n,
 			  char err[256]);
 
+/* Checks that path is readable to its end, cheaply: for every MIP level (and subimage) the
+ * file itself stores, its first and last tile (or scanline) are read and decoded; a file cut
+ * short (a truncated download or copy) fails there. Virtual (automip) levels are not read:
+ * they come from level 0. Returns 0, or -ENOENT / -EIO with err naming the file, the level
+ * and the region that cannot be read. */
+int img_check_readable(const char *path, char err[256]);
+
+/* Where a file says it lies: a TIFF's GeoTIFF tags, read with libtiff (img_georef.c);
+ * nothing is guessed, so a plain TIFF without georeferencing gives georeferenced = false. */
+struct img_georef {
+	bool georeferenced; /* a north-up geotransform in geographic degrees: the bounds below */
+	bool projected;	    /* a geotransform in a projected CRS (UTM...): not usable as degrees */
+	bool rotated;	    /* a rotated or sheared geotransform */
+	bool no_crs;	    /* a geotransform without a coordinate reference system */
+	char crs[96];	    /* the CRS's name when there is one */
+	double west, south, east, north; /* pixel-area edges, degrees (snapped as import does) */
+	bool has_nodata;		 /* the first band's nodata value (GDAL_NODATA) */
+	double nodata;
+};
+/* Fills out (zeroed first). Returns 0 (also for a file that is not a TIFF: nothing known), or
+ * -ENOENT. Reentrant. Other formats (PNG, EXR...) have none: all false. */
+int img_georef_read(const char *path, struct img_georef *out, char err[256]);
+
 /* Reads the whole first image of path, all channels, converted to `type` (IMG_NONE: the
  * file's own img_info.type). *pixels is returned owned (free() it); info may be NULL.
  * Returns 0, -ENOENT or -EIO with err filled. */

@@ -67,6 +67,9 @@ struct fnode {
 	struct gen_ctx g;
 };
 
+/* Bounds for test images without georeferencing (img_write writes none). */
+#define GLOBAL "bounds = -180,-90,180,90\n"
+
 static int fnode_init(struct fnode *f, const char *text, char err[256])
 {
 	memset(f, 0, sizeof *f);
@@ -168,7 +171,7 @@ static void analytic_global(void **state)
 	(void)state;
 	write_fn("g.tif", 512, 256, -180, -90, 180, 90);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = g.tif\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = g.tif\n" GLOBAL);
 	assert_int_equal(f.n.out, PIX_HEIGHT);
 	static const uint32_t xy[][2] = { { 0, 0 }, { 5, 2 }, { 7, 3 }, { 3, 1 } };
 	for (int i = 0; i < 4; i++) {
@@ -199,7 +202,7 @@ static void tiles_join(void **state)
 	(void)state;
 	write_fn("j.tif", 500, 250, -180, -90, 180, 90); /* not a power of two: never aligned */
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = j.tif\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = j.tif\n" GLOBAL);
 	struct tile *big = gen(&f, 3, 2, 3, 1, 64);
 	for (uint32_t q = 0; q < 4; q++) {
 		uint32_t qx = q & 1, qy = q >> 1;
@@ -217,7 +220,7 @@ static void tiles_join(void **state)
 	 * the image's last and first columns. Bilinear error ≤ h²/8·|f''| ≈ 1.1 m; clamping
 	 * instead of wrapping would be off by up to ~17 m. */
 	write_fn("am100.tif", 100, 50, -180, -90, 180, 90);
-	fnode_ok(&f, "[node x]\ntype = file\npath = am100.tif\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = am100.tif\n" GLOBAL);
 	struct tile *west = gen(&f, 4, 3, 0, 2, 32), *east = gen(&f, 4, 3, 15, 2, 32);
 	check_fn(west, 2, 0);
 	check_fn(east, 2, 0);
@@ -313,8 +316,8 @@ static void coarse_is_filtered(void **state)
 	free(g);
 	free(rgb);
 	struct fnode f, c;
-	fnode_ok(&f, "[node x]\ntype = file\npath = cb.png\n");
-	fnode_ok(&c, "[node x]\ntype = file\npath = cbc.png\nkind = color\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = cb.png\n" GLOBAL);
+	fnode_ok(&c, "[node x]\ntype = file\npath = cbc.png\nkind = color\n" GLOBAL);
 	assert_int_equal(c.n.out, PIX_COLOR);
 	static const int lv[][2] = { { 1, 0 }, { 0, 0 }, { 0, 1 } };
 	for (int l = 0; l < 3; l++) {
@@ -359,7 +362,7 @@ static void nodata(void **state)
 	assert_int_equal(img_write(tpath("nd.tif"), w, h, 1, IMG_I16, px, err), 0);
 	free(px);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = nd.tif\nnodata = -32768\nfill = -7\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = nd.tif\nnodata = -32768\nfill = -7\n" GLOBAL);
 	/* Level (1,0) T=256: 512 texels over 360 pixels (bilinear), and (0,0) T=64 (filtered). */
 	static const int lv[][3] = { { 1, 0, 256 }, { 0, 0, 64 }, { 2, 1, 64 } };
 	for (int l = 0; l < 3; l++) {
@@ -411,7 +414,7 @@ static void nodata(void **state)
 	for (int i = 0; i < 64 * 32; i++)
 		fp[i] = (i % 64 >= 16 && i % 64 < 24) ? NAN : 5.0f;
 	assert_int_equal(img_write(tpath("nan.exr"), 64, 32, 1, IMG_F32, fp, err), 0);
-	fnode_ok(&f, "[node x]\ntype = file\npath = nan.exr\nfill = -1\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = nan.exr\nfill = -1\n" GLOBAL);
 	struct tile *t = gen(&f, 0, 0, 0, 0, 64); /* 64×64 over 64×32: 1:1 in x, 2× in y */
 	for (int j = 0; j < 64; j++)
 		for (int i = 0; i < 64; i++) {
@@ -454,7 +457,7 @@ static void color_channels(void **state)
 		      { "ga.png", { 99, 99, 99, 128 } } };
 	for (int c = 0; c < 3; c++) {
 		struct fnode f;
-		fnode_ok(&f, "[node x]\ntype = file\npath = %s\nkind = color\n", cases[c].file);
+		fnode_ok(&f, "[node x]\ntype = file\npath = %s\nkind = color\n" GLOBAL, cases[c].file);
 		for (int lv = 0; lv < 2; lv++) {
 			struct tile *t = gen(&f, 2 + lv, 1 + lv, 1, 1, 64);
 			for (int i = 0; i < 64 * 64; i++)
@@ -469,7 +472,7 @@ static void color_channels(void **state)
 		rgba[i] = (uint8_t)(i * 13 + i / 1024);
 	assert_int_equal(img_write(tpath("rgba.png"), 256, 128, 4, IMG_U8, rgba, err), 0);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = rgba.png\nkind = color\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = rgba.png\nkind = color\n" GLOBAL);
 	struct tile *t = gen(&f, 2, 1, 3, 1, 64);
 	for (int j = 0; j < 64; j++)
 		assert_memory_equal(t->data + j * 64 * 4, rgba + ((64 + j) * 256 + 192) * 4, 64 * 4);
@@ -483,6 +486,9 @@ static void bad_params(void **state)
 {
 	(void)state;
 	write_fn("ok.tif", 16, 8, -180, -90, 180, 90);
+	uint8_t grey8[16 * 8] = { 0 };
+	char werr[256];
+	assert_int_equal(img_write(tpath("ok8.png"), 16, 8, 1, IMG_U8, grey8, werr), 0);
 	FILE *fp = fopen(tpath("corrupt.png"), "wb");
 	assert_non_null(fp);
 	/* Not a truncated one: OIIO 2.4 leaks a string when libpng longjmps out of a short read. */
@@ -492,11 +498,11 @@ static void bad_params(void **state)
 		const char *text, *want, *also;
 	} cases[] = {
 		{ "[node x]\ntype = file\n", "test.ini:1: path: missing", NULL },
-		{ "[node x]\ntype = file\npath = nope.tif\n", "test.ini:3: path: cannot open ",
+		{ "[node x]\ntype = file\npath = nope.tif\n" GLOBAL, "test.ini:3: path: cannot open ",
 		  "nope.tif" },
-		{ "[node x]\ntype = file\n\npath = corrupt.png\n", "test.ini:4: path: cannot open ",
+		{ "[node x]\ntype = file\n\npath = corrupt.png\n" GLOBAL, "test.ini:4: path: cannot open ",
 		  "corrupt.png" },
-		{ "[node x]\ntype = file\npath = ok.tif\nkind = normal\n", "test.ini:4: kind: ",
+		{ "[node x]\ntype = file\npath = ok.tif\nkind = normal\n" GLOBAL, "test.ini:4: kind: ",
 		  "height, color" },
 		{ "[node x]\ntype = file\npath = ok.tif\nbounds = 1,2,3\n", "test.ini:4: bounds: ",
 		  "4 numbers" },
@@ -504,20 +510,20 @@ static void bad_params(void **state)
 		  "test.ini:4: bounds: ", "W < E" },
 		{ "[node x]\ntype = file\npath = ok.tif\nbounds = 0,-95,10,0\n",
 		  "test.ini:4: bounds: ", "S < N" },
-		{ "[node x]\ntype = file\npath = ok.tif\nchannel = 1\n", "test.ini:4: channel: ",
+		{ "[node x]\ntype = file\npath = ok.tif\nchannel = 1\n" GLOBAL, "test.ini:4: channel: ",
 		  "1 channel" },
-		{ "[node x]\ntype = file\npath = ok.tif\nkind = color\nnodata = 0\n",
+		{ "[node x]\ntype = file\npath = ok8.png\nkind = color\nnodata = 0\n" GLOBAL,
 		  "test.ini:5: nodata: only applies to kind = height", NULL },
 		{ "[node x]\ntype = file\npath = ok.tif\nbounds = 0,0,10,10\nlon_wrap = true\n",
 		  "test.ini:5: lon_wrap: ", "360" },
-		{ "[node x]\ntype = file\npath = ok.tif\nlon_wrap = maybe\n",
+		{ "[node x]\ntype = file\npath = ok.tif\nlon_wrap = maybe\n" GLOBAL,
 		  "test.ini:4: lon_wrap: ", NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\nscale = x\n", "test.ini:4: scale: ", NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\nkind = color\nfill = 1,2\n",
+		{ "[node x]\ntype = file\npath = ok.tif\nscale = x\n" GLOBAL, "test.ini:4: scale: ", NULL },
+		{ "[node x]\ntype = file\npath = ok8.png\nkind = color\nfill = 1,2\n" GLOBAL,
 		  "test.ini:5: fill: ", NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\ncache_mb = 0\n", "test.ini:4: cache_mb: ",
+		{ "[node x]\ntype = file\npath = ok.tif\ncache_mb = 0\n" GLOBAL, "test.ini:4: cache_mb: ",
 		  NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\ncolour = red\n", "test.ini:4: colour: ",
+		{ "[node x]\ntype = file\npath = ok.tif\ncolour = red\n" GLOBAL, "test.ini:4: colour: ",
 		  "unknown key" },
 	};
 	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
@@ -538,13 +544,13 @@ static void content_hash(void **state)
 	(void)state;
 	write_fn("h.tif", 16, 8, -180, -90, 180, 90);
 	struct fnode a, b, c, d;
-	fnode_ok(&a, "[node x]\ntype = file\npath = h.tif\n");
-	fnode_ok(&b, "[node x]\ntype = file\npath = %s\ncache_mb = 8\n", tpath("h.tif"));
-	fnode_ok(&c, "[node x]\ntype = file\npath = h.tif\nfill = 1\n");
+	fnode_ok(&a, "[node x]\ntype = file\npath = h.tif\n" GLOBAL);
+	fnode_ok(&b, "[node x]\ntype = file\npath = %s\ncache_mb = 8\n" GLOBAL, tpath("h.tif"));
+	fnode_ok(&c, "[node x]\ntype = file\npath = h.tif\nfill = 1\n" GLOBAL);
 	assert_true(a.n.hash == b.n.hash);
 	assert_true(a.n.hash != c.n.hash);
 	write_fn("h.tif", 16, 9, -180, -90, 180, 90); /* the file changes */
-	fnode_ok(&d, "[node x]\ntype = file\npath = h.tif\n");
+	fnode_ok(&d, "[node x]\ntype = file\npath = h.tif\n" GLOBAL);
 	assert_true(a.n.hash != d.n.hash);
 	fnode_fini(&a);
 	fnode_fini(&b);
@@ -581,7 +587,7 @@ static void concurrent_generate(void **state)
 	(void)state;
 	write_fn("c.tif", 300, 150, -180, -90, 180, 90);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = c.tif\ncache_mb = 1\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = c.tif\ncache_mb = 1\n" GLOBAL);
 	struct tile *ref[8];
 	struct job jobs[2];
 	memset(jobs, 0, sizeof jobs);
@@ -616,8 +622,8 @@ static void shared_cache(void **state)
 	assert_non_null(ic);
 	pl.images = ic;
 	struct fnode a, b, c;
-	fnode_ok(&a, "[node x]\ntype = file\npath = s.tif\ncache_mb = 1\n");
-	fnode_ok(&b, "[node x]\ntype = file\npath = %s\nscale = 2\n", tpath("s.tif"));
+	fnode_ok(&a, "[node x]\ntype = file\npath = s.tif\ncache_mb = 1\n" GLOBAL);
+	fnode_ok(&b, "[node x]\ntype = file\npath = %s\nscale = 2\n" GLOBAL, tpath("s.tif"));
 	struct tile *ta = gen(&a, 2, 1, 1, 0, 64), *tb = gen(&b, 2, 1, 1, 0, 64);
 	for (size_t i = 0; i < 64 * 64; i++)
 		if (tile_f32(tb)[i] != 2 * tile_f32(ta)[i])
@@ -628,7 +634,7 @@ static void shared_cache(void **state)
 	assert_int_equal(st.opens, 1);
 	assert_int_equal(st.max_bytes, (uint64_t)16 << 20); /* not cache_mb's 1 */
 	assert_true(st.memory_used > 0);
-	fnode_ok(&c, "[node x]\ntype = file\npath = s2.tif\n");
+	fnode_ok(&c, "[node x]\ntype = file\npath = s2.tif\n" GLOBAL);
 	tile_unref(gen(&c, 2, 1, 1, 0, 64));
 	img_cache_get_stats(ic, &st);
 	assert_int_equal(st.files, 2);
@@ -655,14 +661,14 @@ static void changed_file_reread(void **state)
 		px[i] = 5;
 	assert_int_equal(img_write(tpath("v.tif"), 8, 4, 1, IMG_F32, px, err), 0);
 	struct fnode a, b;
-	fnode_ok(&a, "[node x]\ntype = file\npath = v.tif\n");
+	fnode_ok(&a, "[node x]\ntype = file\npath = v.tif\n" GLOBAL);
 	struct tile *t = gen(&a, 1, 0, 0, 0, 64);
 	assert_true(tile_f32(t)[0] == 5.0f);
 	tile_unref(t);
 	for (int i = 0; i < 8 * 4; i++)
 		px[i] = -9;
 	assert_int_equal(img_write(tpath("v.tif"), 8, 4, 1, IMG_F32, px, err), 0);
-	fnode_ok(&b, "[node x]\ntype = file\npath = v.tif\n");
+	fnode_ok(&b, "[node x]\ntype = file\npath = v.tif\n" GLOBAL);
 	assert_true(a.n.hash != b.n.hash);
 	t = gen(&b, 1, 0, 0, 0, 64);
 	assert_true(tile_f32(t)[0] == -9.0f);

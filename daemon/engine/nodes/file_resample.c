@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "common/xthread.h"
+#include "engine/fault.h"
 #include "engine/node.h"
 #include "file_plan.h"
 
@@ -28,11 +29,20 @@ static int read_region(const struct file_source *f, int m, const struct file_axi
 		if (s < 0)
 			s += wm;
 		int64_t len = ax->hi - c < wm - s ? ax->hi - c : wm - s;
+		char err[256];
 		int rc = img_cache_read(f->cache, f->path, m, (int)s, (int)(s + len), (int)ay->lo,
 					(int)ay->hi, f->channel, f->channel + f->nch, f->rtype,
-					(char *)dst + (size_t)(c - ax->lo) * px, stride, NULL);
-		if (rc)
+					(char *)dst + (size_t)(c - ax->lo) * px, stride, err);
+		if (rc) {
+			/* The tile fails with -EIO; the why (file, level, region) is told once. */
+			if (!atomic_exchange(&f->poles->read_failed, true))
+				engine_fault("%s: read failed at MIP level %d, pixels [%lld,%lld) x "
+					     "[%lld,%lld): %s (tiles of this file fail; further "
+					     "failures not reported)", f->path, m, (long long)s,
+					     (long long)(s + len), (long long)ay->lo,
+					     (long long)ay->hi, err);
 			return rc;
+		}
 		c += len;
 	}
 	return 0;

@@ -52,6 +52,7 @@
 #ifndef CLIPMAP_FILE_RESAMPLE_H
 #define CLIPMAP_FILE_RESAMPLE_H
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -78,6 +79,7 @@ struct file_pole_stats {
 /* The node's pole statistics: a cache, so mutable although the source is not. */
 struct file_poles {
 	pthread_mutex_t mu; /* protects s (never held while reading the file) */
+	atomic_bool read_failed; /* a read failure was reported (engine_fault): once per node */
 	struct file_pole_stats s[FILE_MAX_LEVELS][2]; /* [level][0 north, 1 south] */
 };
 
