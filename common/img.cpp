@@ -36,8 +36,13 @@ struct img_cache {
 	ImageCache *ic;
 	size_t max_mb;
 	std::atomic<int> refs{ 1 };
-	std::mutex mu; // guards versions
+	std::mutex mu; // guards versions and broken
 	std::unordered_map<std::string, std::string> versions;
+	// Files a read failed on, with the message: OIIO serves a tile it could not read as
+	// black from then on, without an error, so every later read of the file fails here
+	// until the file changes (img_cache_set_version) or is invalidated.
+	std::unordered_map<std::string, std::string> broken;
+	std::atomic<int> nbroken{ 0 };
 };
 
 namespace {
@@ -410,6 +415,10 @@ extern "C" int img_cache_level_size(struct img_cache *c, const char *path, int m
 	});
 }
 
+static int cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1, int y0,
+	       int y1, int chbegin, int chend, TypeDesc td, size_t tbytes, void *dst,
+	       size_t dst_stride, char *err);
+
 extern "C" int img_cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1,
 			      int y0, int y1, int chbegin, int chend, enum img_type type, void *dst,
 			      size_t dst_stride, char err[256])
@@ -421,25 +430,74 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 		return -EINVAL;
 	}
 	return guarded(path, err, [&] {
-		size_t px = img_type_bytes(type) * (size_t)(chend - chbegin);
+		if (c->nbroken.load(std::memory_order_acquire)) {
+			std::lock_guard<std::mutex> lk(c->mu);
+			auto it = c->broken.find(path);
+			if (it != c->broken.end()) {
+				err_set(err, "%s", it->second.c_str());
+				return -EIO;
+			}
+		}
+		int rc = cache_read(c, path, miplevel, x0, x1, y0, y1, chbegin, chend, td,
+				    img_type_bytes(type), dst, dst_stride, err);
+		if (rc == -EIO) {
+			std::lock_guard<std::mutex> lk(c->mu);
+			if (c->broken.emplace(path, err ? err : "read failed").second)
+				c->nbroken.fetch_add(1, std::memory_order_release);
+		}
+		return rc;
+	});
+}
+
+namespace {
+void forget_broken(struct img_cache *c, const char *path)
+{
+	std::lock_guard<std::mutex> lk(c->mu);
+	if (c->broken.erase(path))
+		c->nbroken.fetch_sub(1, std::memory_order_release);
+}
+} // namespace
+
+static int cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1, int y0,
+	       int y1, int chbegin, int chend, TypeDesc td, size_t tbytes, void *dst,
+	       size_t dst_stride, char *err)
+{
+	{
+		size_t px = tbytes * (size_t)(chend - chbegin);
 		size_t row = dst_stride ? dst_stride : px * (size_t)(x1 - x0);
 		ustring name(path);
+		if (c->ic->has_error())
+			c->ic->geterror(true); // stale: not this read's
 		if (read_from_tiles(c->ic, name, miplevel, x0, x1, y0, y1, chbegin, chend, td,
-				    (char *)dst, row))
-			return 0;
+				    (char *)dst, row)) {
+			// An automip tile made from unreadable tiles comes back whole, with an
+			// error message: a failure, not zeros.
+			if (!c->ic->has_error())
+				return 0;
+			oiio_err(err, "%s: %s", path, c->ic->geterror());
+			return -EIO;
+		}
 		stride_t xs = (stride_t)px, ys = (stride_t)row;
 		if (!c->ic->get_pixels(name, 0, miplevel, x0, x1, y0, y1, 0, 1, chbegin,
 				       chend, td, dst, xs, ys, AutoStride, chbegin, chend)) {
 			oiio_err(err, "%s: %s", path, c->ic->geterror());
 			return missing_or(path, -EIO);
 		}
+		// A tile that cannot be read (a file cut short) comes back black with success
+		// and an error message: that is a failure, not zeros.
+		std::string e = c->ic->geterror();
+		if (!e.empty()) {
+			oiio_err(err, "%s: %s", path, e);
+			return -EIO;
+		}
 		return 0;
-	});
+	}
 }
 
 extern "C" void img_cache_invalidate(struct img_cache *c, const char *path)
 {
 	try {
+		forget_broken(c, path);
 		c->ic->invalidate(ustring(path), true);
 	} catch (...) {
 	}
@@ -464,8 +522,10 @@ extern "C" bool img_cache_set_version(struct img_cache *c, const char *path, con
 		// First sight: whatever was cached under this name before (read without a version)
 		// goes only if OIIO sees a newer mtime; a version change goes unconditionally (mtimes
 		// in whole seconds miss a file rewritten within the second).
-		if (first || changed)
+		if (first || changed) {
+			forget_broken(c, path);
 			c->ic->invalidate(ustring(path), changed);
+		}
 		return changed;
 	} catch (const std::bad_alloc &) {
 		oom();

@@ -3,7 +3,8 @@
  * antimeridian, sub-region bounds with fill, filtering at coarse levels (no aliasing),
  * nodata, colour channel expansion, parameter errors with file:line, the content hash, and
  * the image cache a planet shares between nodes (one open file per path; a changed file is
- * reread). */
+ * reread); load-time checks (truncated files, kind mismatches, georeferencing read from
+ * GeoTIFF tags or refused) and a run-time read failure reported once. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -16,11 +17,18 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <gdal/gdal.h>
+#include <gdal/ogr_srs_api.h>
+
+#include "common/grid.h"
 #include "common/img.h"
 #include "common/ini.h"
 #include "common/xthread.h"
+#include "engine/fault.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
@@ -679,6 +687,235 @@ static void changed_file_reread(void **state)
 	img_cache_unref(ic);
 }
 
+/* A GeoTIFF made with GDAL (what users bring): W..E × S..N at 0.05°, int16 100 except a
+ * nodata (-32768) block in its north-east quarter; crs 4326 or the UTM zone 33N. */
+static void write_geotiff_here(const char *name, double W, double N, int epsg, bool with_gt)
+{
+	GDALAllRegister();
+	int w = 200, h = 200;
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath(name), w, h, 1, GDT_Int16,
+				     NULL);
+	assert_non_null(ds);
+	if (with_gt) {
+		double gt[6] = { W, epsg == 4326 ? 0.05 : 100, 0, N, 0, epsg == 4326 ? -0.05 : -100 };
+		assert_int_equal(GDALSetGeoTransform(ds, gt), CE_None);
+		OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+		assert_int_equal(OSRImportFromEPSG(srs, epsg), OGRERR_NONE);
+		assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+		OSRDestroySpatialReference(srs);
+	}
+	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
+	assert_int_equal(GDALSetRasterNoDataValue(b, -32768), CE_None);
+	int16_t *px = malloc((size_t)w * h * sizeof *px);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++)
+			px[y * w + x] = x >= w / 2 && y < h / 2 ? -32768 : 100;
+	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, px, w, h, GDT_Int16, 0, 0), CE_None);
+	free(px);
+	GDALClose(ds);
+}
+
+/* write_geotiff_here in a child process: GDAL's GeoTIFF driver changes libtiff's process-wide
+ * state (tag extenders, error handlers), which the file node's process never has. */
+static void write_geotiff(const char *name, double W, double N, int epsg, bool with_gt)
+{
+	fflush(NULL);
+	pid_t pid = fork();
+	assert_true(pid >= 0);
+	if (pid == 0) {
+		write_geotiff_here(name, W, N, epsg, with_gt);
+		_exit(0);
+	}
+	int st;
+	assert_int_equal(waitpid(pid, &st, 0), pid);
+	assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 0);
+}
+
+/* Issue 19: a plain GeoTIFF without a bounds key lands at its georeferenced bounds (not
+ * stretched over the globe), and its nodata takes the fill (not -32768 m). */
+static void geotiff_placed(void **state)
+{
+	(void)state;
+	double W = 10, E = 20, S = 50, N = 60;
+	write_geotiff("geo.tif", W, N, 4326, true);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = geo.tif\nfill = -5\n");
+	struct tile *t = gen(&f, 3, 2, 4, 0, 64); /* lon 0..45, lat 90..45 */
+	int data = 0, nodata = 0, outside = 0;
+	for (uint32_t j = 0; j < 64; j++) {
+		for (uint32_t i = 0; i < 64; i++) {
+			double lon, lat;
+			grid_texel_center(&t->key, 64, i, j, &lon, &lat);
+			float v = tile_f32(t)[j * 64 + i];
+			if (lon < W || lon > E || lat < S || lat > N) {
+				if (v != -5)
+					fail_msg("outside at %g,%g: %g", lon, lat, v);
+				outside++;
+			} else if (lon > 15.8 && lat > 55.8 && lon < E - 0.8 && lat < N - 0.8) {
+				if (v != -5) /* nodata → fill */
+					fail_msg("nodata at %g,%g: %g", lon, lat, v);
+				nodata++;
+			} else if ((lon < 14.2 || lat < 54.2) && lon > W + 0.8 && lat > S + 0.8 &&
+				   lon < E - 0.8 && lat < N - 0.8) {
+				if (v != 100)
+					fail_msg("data at %g,%g: %g", lon, lat, v);
+				data++;
+			}
+		}
+	}
+	if (!(data > 60 && nodata > 10 && outside > 3800))
+		fail_msg("data %d nodata %d outside %d", data, nodata, outside);
+	tile_unref(t);
+	fnode_fini(&f);
+
+	/* A bounds key that contradicts the georeferencing is refused; one that agrees is not. */
+	char err[256] = "";
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = geo.tif\n"
+				    "bounds = -180,-90,180,90\n", err), -EINVAL);
+	assert_non_null(strstr(err, "test.ini:4: bounds: "));
+	assert_non_null(strstr(err, "contradicts the georeferencing"));
+	assert_non_null(strstr(err, "geo.tif (10,50,20,60)"));
+	fnode_fini(&f);
+	fnode_ok(&f, "[node x]\ntype = file\npath = geo.tif\nbounds = 10,50,20,60\n");
+	fnode_fini(&f);
+
+	/* Projected (UTM): refused, pointing at clipmapctl import. */
+	write_geotiff("utm.tif", 500000, 5600000, 32633, true);
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = utm.tif\n", err), -EINVAL);
+	assert_non_null(strstr(err, "test.ini:1: bounds: missing"));
+	assert_non_null(strstr(err, "EPSG:32633"));
+	assert_non_null(strstr(err, "clipmapctl import"));
+	fnode_fini(&f);
+}
+
+/* Issue 19: no georeferencing and no bounds key: refused, naming the file and the key. */
+static void no_georef_refused(void **state)
+{
+	(void)state;
+	write_fn("plain.tif", 32, 16, -180, -90, 180, 90);
+	write_geotiff("gdal_plain.tif", 0, 0, 4326, false);
+	static const char *const files[] = { "plain.tif", "gdal_plain.tif" };
+	for (int i = 0; i < 2; i++) {
+		struct fnode f;
+		char err[256] = "", text[256];
+		snprintf(text, sizeof text, "[node x]\ntype = file\npath = %s\n", files[i]);
+		assert_int_equal(fnode_init(&f, text, err), -EINVAL);
+		if (!strstr(err, "test.ini:1: bounds: missing") || !strstr(err, files[i]) ||
+		    !strstr(err, "has no georeferencing") || !strstr(err, "add bounds = W,S,E,N"))
+			fail_msg("%s: %s", files[i], err);
+		fnode_fini(&f);
+	}
+}
+
+/* Issue 14: a truncated TIFF is refused at load, naming the file (not every tile failing
+ * later with a bare EIO). */
+static void truncated_refused(void **state)
+{
+	(void)state;
+	int w = 512, h = 256;
+	float *px = malloc((size_t)w * h * sizeof *px);
+	for (int i = 0; i < w * h; i++)
+		px[i] = (float)(i % 977) * 1.37f; /* does not compress to nothing */
+	char err[256];
+	assert_int_equal(img_write_tiled(tpath("cut.tif"), w, h, 1, IMG_F32, px, 64, true, err), 0);
+	free(px);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = cut.tif\n" GLOBAL);
+	fnode_fini(&f);
+	struct stat st;
+	assert_int_equal(stat(tpath("cut.tif"), &st), 0);
+	/* Cut at several points: each time refused at load. */
+	for (int k = 1; k <= 3; k++) {
+		off_t len = st.st_size * (4 - k) / 4 - 100;
+		assert_int_equal(truncate(tpath("cut.tif"), len), 0);
+		char e2[256] = "";
+		int rc = fnode_init(&f, "[node x]\ntype = file\npath = cut.tif\n" GLOBAL, e2);
+		if (rc != -EINVAL || !strstr(e2, "test.ini:3: path: ") || !strstr(e2, tpath("cut.tif")))
+			fail_msg("cut to %lld of %lld: rc %d: %s", (long long)len,
+				 (long long)st.st_size, rc, e2);
+		fnode_fini(&f);
+	}
+}
+
+static char fault_line[512];
+static int faults;
+static void catch_fault(const char *line)
+{
+	snprintf(fault_line, sizeof fault_line, "%s", line);
+	faults++;
+}
+
+/* Issue 14: a file that breaks after load (cut short on disk): its tiles fail, and the
+ * failure is reported once, naming the file, the level and the region. */
+static void runtime_failure_reported_once(void **state)
+{
+	(void)state;
+	int w = 1024, h = 512;
+	float *px = malloc((size_t)w * h * sizeof *px);
+	for (int i = 0; i < w * h; i++)
+		px[i] = (float)(i % 977) * 1.37f;
+	char err[256];
+	assert_int_equal(img_write_tiled(tpath("late.tif"), w, h, 1, IMG_F32, px, 64, false, err), 0);
+	free(px);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = late.tif\n" GLOBAL);
+	struct stat st;
+	assert_int_equal(stat(tpath("late.tif"), &st), 0);
+	assert_int_equal(truncate(tpath("late.tif"), st.st_size / 3), 0);
+	engine_fault_sink(catch_fault);
+	faults = 0;
+	struct tile_key k = { .node = f.n.hash, .x = 7, .y = 2, .lx = 3, .ly = 2 };
+	for (int i = 0; i < 3; i++) {
+		struct tile *t = tile_create(&k, f.n.out, 64);
+		assert_int_equal(f.n.type->generate(&f.n, &f.g, &k, NULL, 0, t), -EIO);
+		tile_unref(t);
+	}
+	engine_fault_sink(NULL);
+	assert_int_equal(faults, 1);
+	if (!strstr(fault_line, tpath("late.tif")) || !strstr(fault_line, "read failed at MIP level ") ||
+	    !strstr(fault_line, "pixels ["))
+		fail_msg("%s", fault_line);
+	fnode_fini(&f);
+}
+
+/* Issue 14: the file's channels must fit the kind. */
+static void kind_mismatch_refused(void **state)
+{
+	(void)state;
+	uint8_t rgb[32 * 16 * 3] = { 0 };
+	float hf[32 * 16] = { 0 };
+	int16_t hi[32 * 16] = { 0 };
+	char err[256];
+	assert_int_equal(img_write(tpath("colour.tif"), 32, 16, 3, IMG_U8, rgb, err), 0);
+	assert_int_equal(img_write(tpath("hf.tif"), 32, 16, 1, IMG_F32, hf, err), 0);
+	assert_int_equal(img_write(tpath("hi.tif"), 32, 16, 1, IMG_I16, hi, err), 0);
+	static const struct {
+		const char *text, *want[3];
+	} cases[] = {
+		{ "[node x]\ntype = file\npath = colour.tif\n" GLOBAL,
+		  { "test.ini:1: kind: node x: ", "colour.tif has 3 uint8 channels",
+		    "kind = height expects one channel" } },
+		{ "[node x]\ntype = file\npath = hf.tif\nkind = color\n" GLOBAL,
+		  { "test.ini:4: kind: node x: ", "hf.tif has 1 float channel",
+		    "kind = color expects 8-bit" } },
+		{ "[node x]\ntype = file\npath = hi.tif\nkind = color\n" GLOBAL,
+		  { "test.ini:4: kind: node x: ", "hi.tif has 1 int16 channel", "kind = color" } },
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		struct fnode f;
+		char e[256] = "";
+		int rc = fnode_init(&f, cases[i].text, e);
+		if (rc != -EINVAL || strncmp(e, cases[i].want[0], strlen(cases[i].want[0])) ||
+		    !strstr(e, cases[i].want[1]) || !strstr(e, cases[i].want[2]))
+			fail_msg("case %zu: rc %d: %s", i, rc, e);
+		fnode_fini(&f);
+	}
+	/* With channel = N the user says which one holds heights: accepted. */
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = colour.tif\nchannel = 1\n" GLOBAL);
+	fnode_fini(&f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -693,6 +930,11 @@ int main(void)
 		cmocka_unit_test(concurrent_generate),
 		cmocka_unit_test(shared_cache),
 		cmocka_unit_test(changed_file_reread),
+		cmocka_unit_test(geotiff_placed),
+		cmocka_unit_test(no_georef_refused),
+		cmocka_unit_test(truncated_refused),
+		cmocka_unit_test(runtime_failure_reported_once),
+		cmocka_unit_test(kind_mismatch_refused),
 	};
 	return cmocka_run_group_tests_name("file_node", tests, setup, teardown);
 }

@@ -35,12 +35,15 @@ static int read_region(const struct file_source *f, int m, const struct file_axi
 					(char *)dst + (size_t)(c - ax->lo) * px, stride, err);
 		if (rc) {
 			/* The tile fails with -EIO; the why (file, level, region) is told once. */
+			size_t pl = strlen(f->path);
+			const char *why = strncmp(err, f->path, pl) == 0 && err[pl] == ':'
+						  ? err + pl + 2 : err; /* err names the file too */
 			if (!atomic_exchange(&f->poles->read_failed, true))
 				engine_fault("%s: read failed at MIP level %d, pixels [%lld,%lld) x "
 					     "[%lld,%lld): %s (tiles of this file fail; further "
 					     "failures not reported)", f->path, m, (long long)s,
 					     (long long)(s + len), (long long)ay->lo,
-					     (long long)ay->hi, err);
+					     (long long)ay->hi, why);
 			return rc;
 		}
 		c += len;
