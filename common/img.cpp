@@ -6,6 +6,7 @@
 // (size, mtime, inode...) its users last saw, so a changed file is invalidated once.
 #include "errbuf.h"
 #include "img.h"
+#include "img_tiff.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
@@ -1202,5 +1203,8 @@ int check_impl(const char *path, char *err)
 
 extern "C" int img_check_readable(const char *path, char err[256])
 {
-	return guarded(path, err, [&] { return check_impl(path, err); });
+	return guarded(path, err, [&] {
+		int rc = check_impl(path, err);
+		return rc ? rc : img_tiff_check_extents(path, err);
+	});
 }

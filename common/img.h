@@ -133,8 +133,9 @@ int img_cache_description(struct img_cache *c, const char *path, char *buf, size
 			  char err[256]);
 
 /* Checks that path is readable to its end, cheaply: for every MIP level (and subimage) the
- * file itself stores, its first and last tile (or scanline) are read and decoded; a file cut
- * short (a truncated download or copy) fails there. Virtual (automip) levels are not read:
+ * file itself stores, its first and last tile (or scanline) are read and decoded, and for a
+ * TIFF every tile's or strip's extent is checked against the file's size (directories only);
+ * a file cut short (a truncated download or copy) fails there, wherever the cut. Virtual (automip) levels are not read:
  * they come from level 0. Returns 0, or -ENOENT / -EIO with err naming the file, the level
  * and the region that cannot be read. */
 int img_check_readable(const char *path, char err[256]);

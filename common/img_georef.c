@@ -1,4 +1,5 @@
-/* img_georef — img_georef_read (img.h): a TIFF's own GeoTIFF georeferencing, read with libtiff
+/* img_georef — the libtiff side of img.h: img_georef_read and, for img_check_readable,
+ * img_tiff_check_extents (img_tiff.h). img_georef_read: a TIFF's own GeoTIFF georeferencing, read with libtiff
  * (the tags as libtiff's anonymous fields: ModelPixelScale 33550, ModelTiepoint 33922,
  * ModelTransformation 34264, GeoKeyDirectory 34735, GDAL_NODATA 42113). The bounds come from
  * a north-up transform whose model type is geographic (GTModelTypeGeoKey = 2), snapped as
@@ -20,6 +21,7 @@
 #include <tiffio.h>
 
 #include "errbuf.h"
+#include "img_tiff.h"
 
 enum {
 	TAG_PIXEL_SCALE = 33550,
@@ -186,4 +188,44 @@ int img_georef_read(const char *path, struct img_georef *out, char err[256])
 	}
 	TIFFClose(tif);
 	return 0;
+}
+
+int img_tiff_check_extents(const char *path, char err[256])
+{
+	struct stat st;
+	if (stat(path, &st) != 0)
+		return 0; /* the caller's open reports it */
+	TIFFOpenOptions *opts = TIFFOpenOptionsAlloc();
+	if (!opts)
+		return 0;
+	TIFFOpenOptionsSetErrorHandlerExtR(opts, quiet, NULL);
+	TIFFOpenOptionsSetWarningHandlerExtR(opts, quiet, NULL);
+	TIFF *tif = TIFFOpenExt(path, "rm", opts);
+	TIFFOpenOptionsFree(opts);
+	if (!tif)
+		return 0; /* not a TIFF */
+	int rc = 0, dir = 0;
+	do {
+		bool tiled = TIFFIsTiled(tif);
+		uint32_t n = tiled ? TIFFNumberOfTiles(tif) : TIFFNumberOfStrips(tif);
+		uint64_t *off = NULL, *cnt = NULL;
+		if (!TIFFGetField(tif, tiled ? TIFFTAG_TILEOFFSETS : TIFFTAG_STRIPOFFSETS, &off) ||
+		    !TIFFGetField(tif, tiled ? TIFFTAG_TILEBYTECOUNTS : TIFFTAG_STRIPBYTECOUNTS, &cnt) ||
+		    !off || !cnt)
+			n = 0; /* no extents to check (libtiff's own reads will say more) */
+		for (uint32_t i = 0; i < n; i++) {
+			if (cnt[i] && off[i] + cnt[i] > (uint64_t)st.st_size) {
+				err_set(err, "%s: truncated: %s %u of %u in directory %d (MIP level or "
+					"subimage) ends at byte %llu, the file has %llu", path,
+					tiled ? "tile" : "strip", i, n, dir,
+					(unsigned long long)(off[i] + cnt[i]),
+					(unsigned long long)st.st_size);
+				rc = -EIO;
+				break;
+			}
+		}
+		dir++;
+	} while (rc == 0 && TIFFReadDirectory(tif));
+	TIFFClose(tif);
+	return rc;
 }
