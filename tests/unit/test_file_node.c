@@ -916,6 +916,41 @@ static void kind_mismatch_refused(void **state)
 	fnode_fini(&f);
 }
 
+/* Issue 19: GDAL's -1e34 nodata never becomes heights, at the data's level or at coarse ones
+ * (where MIP averaging mixes it with data). */
+static void huge_nodata_coarse(void **state)
+{
+	(void)state;
+	int w = 720, h = 360;
+	float *px = malloc((size_t)w * h * sizeof *px);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++)
+			px[y * w + x] = x >= 301 && x < 423 && y >= 101 && y < 203 ? -1e34f : 1000;
+	char err[256];
+	assert_int_equal(img_write(tpath("huge.tif"), w, h, 1, IMG_F32, px, err), 0);
+	free(px);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = huge.tif\nnodata = -1e34\nfill = -5\n" GLOBAL);
+	static const int lv[][2] = { { 1, 0 }, { 2, 1 }, { 3, 2 }, { 4, 3 } };
+	for (int l = 0; l < 4; l++) {
+		int fills = 0;
+		for (uint32_t x = 0; x < 1u << lv[l][0]; x++) {
+			for (uint32_t y = 0; y < 1u << lv[l][1]; y++) {
+				struct tile *t = gen(&f, lv[l][0], lv[l][1], x, y, 64);
+				for (int i = 0; i < 64 * 64; i++) {
+					float v = tile_f32(t)[i];
+					if (v != 1000 && v != -5)
+						fail_msg("level %d tile %u,%u texel %d: %g", l, x, y, i, v);
+					fills += v == -5;
+				}
+				tile_unref(t);
+			}
+		}
+		assert_true(fills > 0);
+	}
+	fnode_fini(&f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -935,6 +970,7 @@ int main(void)
 		cmocka_unit_test(truncated_refused),
 		cmocka_unit_test(runtime_failure_reported_once),
 		cmocka_unit_test(kind_mismatch_refused),
+		cmocka_unit_test(huge_nodata_coarse),
 	};
 	return cmocka_run_group_tests_name("file_node", tests, setup, teardown);
 }

@@ -87,8 +87,15 @@ static bool to_float(const struct file_source *f, const void *raw, float *dst, f
 		return false;
 	bool nd = f->has_nodata;
 	float v = f->nodata;
+	/* A huge float nodata (-1e34, -3.4e38: GDAL's favourites) averaged into a coarser MIP
+	 * level (OIIO's automip, or the file's own pyramid) no longer equals itself but stays
+	 * beyond 1e20 in magnitude (diluted at most 4^m-fold: 1e34 / 4^20 ≈ 9e21 at level 20 of
+	 * a 2^20-pixel image): no height or colour is that large, so such a sample is missing
+	 * too. A moderate nodata (-9999, int16 -32768) mixed into coarse levels cannot be told
+	 * from data: import such files (float nodata becomes NaN, which averaging keeps). */
+	float huge = nd && f->rtype == IMG_F32 && fabsf(v) >= 1e30f ? 1e20f : INFINITY;
 	for (size_t i = 0; i < n; i++) {
-		bool bad = dst[i] != dst[i] || (nd && dst[i] == v);
+		bool bad = dst[i] != dst[i] || (nd && dst[i] == v) || fabsf(dst[i]) >= huge;
 		mask[i] = bad ? 0.0f : 1.0f;
 		dst[i] = bad ? 0.0f : dst[i];
 		missing |= bad;

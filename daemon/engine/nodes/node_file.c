@@ -36,6 +36,7 @@
 #include "engine/node_types.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -206,8 +207,8 @@ static int parse_height(struct node_parse *p, struct file_source *f, const struc
 		return rc;
 	f->offset = (float)v;
 	double b[4], fnd;
-	if (ini_find(p->sec, "nodata")) {
-		if ((rc = np_double(p, "nodata", 0, -1e30, 1e30, &v)))
+	if (ini_find(p->sec, "nodata")) { /* any float: GDAL's -1e34 and -3.4028235e38 too */
+		if ((rc = np_double(p, "nodata", 0, -FLT_MAX, FLT_MAX, &v)))
 			return rc;
 		f->has_nodata = true;
 		f->nodata = (float)v;
