@@ -197,7 +197,8 @@ demo: deps
 	@$(MAKE) --no-print-directory all
 	@sh scripts/demo.sh $(BUILD)
 
-# libFuzzer targets (clang): each tests/fuzz/fuzz_NAME.c runs FUZZ_SECONDS on its corpus.
+# libFuzzer targets (clang): each tests/fuzz/fuzz_NAME.c runs FUZZ_SECONDS on its corpus
+# (fuzz_ini also reads the shipped planet files as seeds).
 FUZZ_SECONDS ?= 60
 FUZZ_SRC := $(wildcard tests/fuzz/fuzz_*.c)
 FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/pixfmt.c common/grid.c \
@@ -229,7 +230,8 @@ fuzz: deps $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%)
 	@for f in $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%); do \
 		mkdir -p $$f-corpus; \
 		echo "== $$f: $(FUZZ_SECONDS) s"; \
-		if $$f -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 $$f-corpus >$$f.log 2>&1; \
+		seeds=; [ $$f = build-fuzz/fuzz_ini ] && seeds=conf/planets; \
+		if $$f -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 $$f-corpus $$seeds >$$f.log 2>&1; \
 		then grep -E 'stat::number_of_executed_units' $$f.log; \
 		else tail -n 40 $$f.log; echo "$$f: found a failure (crash input saved in ./)"; exit 1; fi; \
 	done

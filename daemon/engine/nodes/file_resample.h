@@ -48,6 +48,11 @@
  * weighted mean of its valid samples when they carry at least half of its weight, and gets
  * the fill otherwise — so a coastline neither grows nor shrinks by a texel.
  * Colour is filtered as straight (not premultiplied) RGBA.
+ *
+ * Read failures. A read that fails (the file cut short or changed on disk after load) fails
+ * the tile with -EIO and is reported once per node through engine_fault (engine/fault.h) with
+ * the file, the MIP level and the pixel region; the img_cache keeps the file failed until it
+ * changes (OIIO would otherwise serve the unreadable tiles as zeros from then on).
  */
 #ifndef CLIPMAP_FILE_RESAMPLE_H
 #define CLIPMAP_FILE_RESAMPLE_H
