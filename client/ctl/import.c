@@ -292,7 +292,8 @@ static double warp_nodata(GDALRasterBandH b, bool *from_src)
 }
 
 /* A projected (or rotated) source: j->ds becomes a warped VRT over it in geographic degrees
- * (GDAL's warper, o->resample), north-up, with nodata outside the source. Returns 0 (also
+ * (GDAL's warper, o->resample), north-up, with nodata outside the source (8-bit grey or RGB
+ * without nodata: an added alpha band, 0 outside). Returns 0 (also
  * when nothing is to be done) or -EINVAL with err filled. */
 static int warp_source(struct job *j, const struct import_opts *o, char *err)
 {
@@ -332,6 +333,15 @@ static int warp_source(struct job *j, const struct import_opts *o, char *err)
 		CPLFree(wo->padfSrcNoDataReal);
 		wo->padfSrcNoDataReal = NULL;
 	}
+	/* 8-bit imagery without nodata (grey, RGB): an alpha band instead, so the wedges
+	 * outside the source are transparent rather than black. */
+	bool alpha = !any_src_nd && (nb == 1 || nb == 3) &&
+		     GDALGetRasterDataType(GDALGetRasterBand(j->ds, 1)) == GDT_Byte;
+	if (alpha) {
+		CPLFree(wo->padfDstNoDataReal);
+		wo->padfDstNoDataReal = NULL;
+		wo->nDstAlphaBand = nb + 1;
+	}
 	wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "INIT_DEST", "NO_DATA");
 	CPLErrorReset();
 	GDALDatasetH v = GDALAutoCreateWarpedVRTEx(j->ds, NULL, wkt, wo->eResampleAlg, 0.125, wo,
@@ -343,7 +353,7 @@ static int warp_source(struct job *j, const struct import_opts *o, char *err)
 		err_set(err, "%s: cannot reproject to geographic degrees: %s", j->src, gdal_msg());
 		return -EINVAL;
 	}
-	for (int i = 0; i < nb; i++) /* the VRT's bands carry the destination nodata */
+	for (int i = 0; i < nb && !alpha; i++) /* the VRT's bands carry the destination nodata */
 		GDALSetRasterNoDataValue(GDALGetRasterBand(v, i + 1),
 					 warp_nodata(GDALGetRasterBand(j->ds, i + 1), &(bool){ 0 }));
 	j->src_ds = j->ds;

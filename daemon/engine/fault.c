@@ -5,7 +5,7 @@
 #include <stdio.h>
 #include <unistd.h>
 
-static engine_fault_fn sink;
+static engine_fault_fn sink; /* set before threads start (fault.h) */
 
 void engine_fault_sink(engine_fault_fn fn)
 {
@@ -24,7 +24,7 @@ void engine_fault(const char *fmt, ...)
 		return;
 	}
 	char out[600];
-	int n = snprintf(out, sizeof out, "warning: %s\n", line);
-	if (n > 0 && write(STDERR_FILENO, out, (size_t)(n < (int)sizeof out ? n : (int)sizeof out - 1)) < 0)
-		return;
+	int n = snprintf(out, sizeof out, "warning: %s\n", line); /* fits: line < 512 */
+	if (n > 0 && write(STDERR_FILENO, out, (size_t)n) < 0)
+		return; /* nowhere left to say it */
 }

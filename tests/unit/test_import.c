@@ -577,6 +577,58 @@ static void reimport_keeps_bounds(void **state)
 	free(px);
 }
 
+/* A UTM RGB image (8-bit, no nodata) gains an alpha band: opaque over the source,
+ * transparent in the wedges outside it (not black). */
+static void utm_rgb_alpha(void **state)
+{
+	(void)state;
+	int w = 120, h = 80;
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath("rgb_utm.tif"), w, h, 3,
+				     GDT_Byte, NULL);
+	assert_non_null(ds);
+	double gt[6] = { 400000, 100, 0, 5600000, 0, -100 };
+	assert_int_equal(GDALSetGeoTransform(ds, gt), CE_None);
+	OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(srs, 32633), OGRERR_NONE);
+	assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+	OSRDestroySpatialReference(srs);
+	uint8_t *buf = malloc((size_t)w * h);
+	for (int b = 1; b <= 3; b++) {
+		memset(buf, 40 * b, (size_t)w * h);
+		assert_int_equal(GDALRasterIO(GDALGetRasterBand(ds, b), GF_Write, 0, 0, w, h, buf, w,
+					      h, GDT_Byte, 0, 0), CE_None);
+	}
+	free(buf);
+	GDALClose(ds);
+	struct import_result r;
+	char err[256] = "";
+	if (import_raster(tpath("rgb_utm.tif"), tpath("rgb_out.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	assert_true(r.reprojected);
+	assert_int_equal(r.channels, 4);
+	assert_int_equal(r.type, IMG_U8);
+	GDALDatasetH out = GDALOpen(tpath("rgb_out.tif"), GA_ReadOnly);
+	assert_non_null(out);
+	int ow = GDALGetRasterXSize(out), oh = GDALGetRasterYSize(out);
+	uint8_t *px = malloc((size_t)ow * oh * 4);
+	int bands[4] = { 1, 2, 3, 4 };
+	assert_int_equal(GDALDatasetRasterIO(out, GF_Read, 0, 0, ow, oh, px, ow, oh, GDT_Byte, 4,
+					     bands, 4, (GSpacing)ow * 4, 1), CE_None);
+	GDALClose(out);
+	int opaque = 0, clear = 0;
+	for (int i = 0; i < ow * oh; i++) {
+		const uint8_t *p = px + 4 * i;
+		if (p[3] == 255 && p[0] == 40 && p[1] == 80 && p[2] == 120)
+			opaque++;
+		else if (p[3] == 0)
+			clear++;
+	}
+	free(px);
+	/* the rest: the source's edge, partly covered */
+	if (!(opaque > ow * oh / 2 && clear > 0 && opaque + clear > ow * oh * 9 / 10))
+		fail_msg("%dx%d: %d opaque, %d transparent", ow, oh, opaque, clear);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -587,6 +639,7 @@ int main(void)
 		cmocka_unit_test(truncated_source),
 		cmocka_unit_test(utm_reprojected),
 		cmocka_unit_test(reimport_keeps_bounds),
+		cmocka_unit_test(utm_rgb_alpha),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
