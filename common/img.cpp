@@ -680,6 +680,8 @@ struct img_tiled_out {
 	std::vector<char> tilebuf;
 	int spool = -1;
 	bool failed = false;
+	bool has_nd = false; // img_tiled_set_nodata: averages skip nd samples
+	float nd = 0;
 };
 
 namespace {
@@ -747,6 +749,26 @@ int flush_band(img_tiled_out *o, img_tiled_out::level &L, char *err)
 
 int push_row(img_tiled_out *o, size_t k, const float *row, char *err);
 
+// The (w-weighted; NULL: equal) mean of the samples of v that are not nd, or nd when none
+// is (with a weight); `all` when every one is valid (the plain average, bit for bit).
+float mean_valid(const float *v, const float *w, int n, float nd, float all)
+{
+	float sum = 0, wsum = 0;
+	bool any_nd = false;
+	for (int i = 0; i < n; i++) {
+		float wi = w ? w[i] : 1.0f;
+		if (v[i] == nd) {
+			any_nd = true;
+			continue;
+		}
+		sum += wi * v[i];
+		wsum += wi;
+	}
+	if (!any_nd)
+		return all;
+	return wsum > 0 ? sum / wsum : nd;
+}
+
 // Level k + 1's next row is in L.next: store it (stored type) and feed it on.
 int emit_row(img_tiled_out *o, size_t k, char *err)
 {
@@ -790,6 +812,15 @@ int push_row(img_tiled_out *o, size_t k, const float *row, char *err)
 		}
 		for (size_t i = 0; i < dn; i++)
 			L.next[i] = (float)(0.5f * (L.s0[i] + L.s1[i]));
+		if (o->has_nd) { // a box holding nodata: the mean of its other samples, or nodata
+			for (size_t i = 0, x = 0; x < (size_t)D.w; x++) {
+				for (int c = 0; c < nch; c++, i++) {
+					size_t s = 2 * x * nch + c;
+					const float v[4] = { a[s], a[s + nch], b[s], b[s + nch] };
+					L.next[i] = mean_valid(v, nullptr, 4, o->nd, L.next[i]);
+				}
+			}
+		}
 		return emit_row(o, k, err);
 	}
 	// resize_block_ / interppixel_NDC with WrapClamp, the same float expressions.
@@ -820,6 +851,16 @@ int push_row(img_tiled_out *o, size_t k, const float *row, char *err)
 			bilerp(ra + (size_t)xa * nch, ra + (size_t)xb * nch, rb + (size_t)xa * nch,
 			       rb + (size_t)xb * nch, L.xf[(size_t)x], yfrac, nch,
 			       L.next.data() + (size_t)x * nch);
+			if (o->has_nd) {
+				float s = L.xf[(size_t)x], s1 = 1 - s, t1 = 1 - yfrac;
+				const float w[4] = { t1 * s1, t1 * s, yfrac * s1, yfrac * s };
+				for (int c = 0; c < nch; c++) {
+					const float v[4] = { ra[(size_t)xa * nch + c], ra[(size_t)xb * nch + c],
+							     rb[(size_t)xa * nch + c], rb[(size_t)xb * nch + c] };
+					float *r = L.next.data() + (size_t)x * nch + c;
+					*r = mean_valid(v, w, 4, o->nd, *r);
+				}
+			}
 		}
 		int rc = emit_row(o, k, err);
 		if (rc)
@@ -1089,6 +1130,32 @@ extern "C" int img_tiled_open(struct img_tiled_out **out, const char *path, int 
 		}
 		return -EIO;
 	}
+}
+
+extern "C" void img_tiled_set_nodata(struct img_tiled_out *o, double nodata)
+{
+	// The cascade holds OIIO's float conversion of the stored values (integers normalised):
+	// nodata goes through the same conversion, so it compares equal.
+	unsigned char raw[4];
+	size_t sz = o->td.size();
+	if (o->td == TypeDesc::UINT8) {
+		uint8_t v = (uint8_t)nodata;
+		std::memcpy(raw, &v, 1);
+	} else if (o->td == TypeDesc::UINT16) {
+		uint16_t v = (uint16_t)nodata;
+		std::memcpy(raw, &v, 2);
+	} else if (o->td == TypeDesc::INT16) {
+		int16_t v = (int16_t)nodata;
+		std::memcpy(raw, &v, 2);
+	} else {
+		float v = (float)nodata;
+		std::memcpy(raw, &v, 4);
+	}
+	float f = 0;
+	if (sz > sizeof raw || !convert_pixel_values(o->td, raw, TypeFloat, &f, 1))
+		return;
+	o->has_nd = true;
+	o->nd = f;
 }
 
 extern "C" int img_tiled_rows(struct img_tiled_out *o, const void *rows, int n, char err[256])

@@ -118,6 +118,11 @@ struct img_tiled_out;
 int img_tiled_open(struct img_tiled_out **out, const char *path, int width, int height,
 		   int channels, enum img_type type, int tile, bool mip, const char *description,
 		   char err[256]);
+/* From now on the coarser MIP levels treat `nodata` (in the stored type's values) as missing:
+ * a box or bilinear tap holding it takes the mean of its other samples, or nodata when all
+ * are missing (a void stays a void instead of dragging its neighbours towards nodata). Call
+ * before the first img_tiled_rows. Without it, every level is make_texture's, bit for bit. */
+void img_tiled_set_nodata(struct img_tiled_out *o, double nodata);
 /* Appends n rows (packed, `type`, channels interleaved) below those written so far. n must be
  * a multiple of the tile size unless these rows complete the image. Returns 0, -EINVAL (bad
  * n) or -EIO with err filled; after an error only img_tiled_abort is allowed. */

@@ -537,6 +537,8 @@ static int write_tiled(struct job *j, const struct import_opts *o, const char *d
 	struct img_tiled_out *tw = NULL;
 	int rc = img_tiled_open(&tw, dst, (int)j->w, (int)j->h, j->nch, j->type, tile,
 				!o->no_mip, desc, err);
+	if (rc == 0 && j->r.has_nodata) /* integer nodata: voids stay voids in the pyramid */
+		img_tiled_set_nodata(tw, j->r.nodata);
 	for (int64_t y0 = 0; rc == 0 && y0 < j->h; y0 += band) {
 		int n = (int)(j->h - y0 < band ? j->h - y0 : band);
 		if ((rc = read_rows(j, y0, n, buf, sz, err)))

@@ -3,7 +3,8 @@
  * fastest: tiled 256², box-filtered MIP pyramid, zip-compressed TIFF (BigTIFF when large),
  * north-up, west→east, with its bounds recorded in the ImageDescription:
  *     clipmap:bounds=W,S,E,N [clipmap:nodata=V]
- * (degrees; the `file` node takes them when the planet file gives no `bounds`; a re-import
+ * (degrees; the `file` node takes them when the planet file gives no `bounds`; integer
+ * nodata is left out of the MIP levels' averages (img_tiled_set_nodata); a re-import
  * keeps them). A projected source (UTM, national grids) or a rotated one is reprojected with
  * GDAL's warper onto geographic degrees (WGS 84 for the Earth's ellipsoids, else the source's
  * own geographic CRS), nodata outside the source.

@@ -629,6 +629,55 @@ static void utm_rgb_alpha(void **state)
 		fail_msg("%dx%d: %d opaque, %d transparent", ow, oh, opaque, clear);
 }
 
+/* Integer nodata in the imported pyramid: a void stays a void at every level, and the
+ * texels around it keep data values (not dragged towards -32768 by averaging). */
+static void nodata_pyramid(void **state)
+{
+	(void)state;
+	int w = 256, h = 128;
+	const double gt[6] = { 0, 0.1, 0, 50, 0, -0.1 };
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath("void.tif"), w, h, 1,
+				     GDT_Int16, NULL);
+	assert_non_null(ds);
+	assert_int_equal(GDALSetGeoTransform(ds, (double *)gt), CE_None);
+	OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(srs, 4326), OGRERR_NONE);
+	assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+	OSRDestroySpatialReference(srs);
+	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
+	assert_int_equal(GDALSetRasterNoDataValue(b, -32768), CE_None);
+	int16_t *buf = malloc(sizeof *buf * (size_t)w * h);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++) /* a void not aligned to any MIP box */
+			buf[(size_t)y * w + x] = x >= 77 && x < 141 && y >= 33 && y < 91 ? -32768
+											 : (int16_t)(500 + x);
+	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, buf, w, h, GDT_Int16, 0, 0), CE_None);
+	free(buf);
+	GDALClose(ds);
+	char err[256] = "";
+	struct import_result r;
+	if (import_raster(tpath("void.tif"), tpath("void_out.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	int16_t *lv[16];
+	int lw[16], lh[16];
+	int n = read_levels(tpath("void_out.tif"), lv, lw, lh);
+	assert_true(n > 4);
+	for (int m = 1; m < n; m++) {
+		int voids = 0;
+		for (int i = 0; i < lw[m] * lh[m]; i++) {
+			int v = lv[m][i];
+			if (v == -32768)
+				voids++;
+			else if (v < 500 || v > 756)
+				fail_msg("level %d pixel %d: %d", m, i, v);
+		}
+		if (m <= 3 && !voids)
+			fail_msg("level %d: the void vanished", m);
+		free(lv[m]);
+	}
+	free(lv[0]);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -640,6 +689,7 @@ int main(void)
 		cmocka_unit_test(utm_reprojected),
 		cmocka_unit_test(reimport_keeps_bounds),
 		cmocka_unit_test(utm_rgb_alpha),
+		cmocka_unit_test(nodata_pyramid),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
