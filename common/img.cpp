@@ -1225,7 +1225,7 @@ bool read_at(ImageInput *in, const ImageSpec &s, int x, int y, std::vector<char>
 	return in->read_scanline(y, s.z, s.format, buf.data());
 }
 
-int check_impl(const char *path, char *err)
+int check_impl(const char *path, int *levels, char *err)
 {
 	ImageSpec config;
 	config.attribute("oiio:UnassociatedAlpha", 1);
@@ -1237,6 +1237,8 @@ int check_impl(const char *path, char *err)
 	std::vector<char> buf;
 	for (int sub = 0; in->seek_subimage(sub, 0); sub++) {
 		for (int m = 0; in->seek_subimage(sub, m); m++) {
+			if (sub == 0 && levels)
+				*levels = m + 1;
 			ImageSpec s = in->spec();
 			if (s.width <= 0 || s.height <= 0)
 				continue;
@@ -1268,10 +1270,12 @@ int check_impl(const char *path, char *err)
 
 } // namespace
 
-extern "C" int img_check_readable(const char *path, char err[256])
+extern "C" int img_check_readable(const char *path, int *levels, char err[256])
 {
+	if (levels)
+		*levels = 0;
 	return guarded(path, err, [&] {
-		int rc = check_impl(path, err);
+		int rc = check_impl(path, levels, err);
 		return rc ? rc : img_tiff_check_extents(path, err);
 	});
 }

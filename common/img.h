@@ -141,9 +141,10 @@ int img_cache_description(struct img_cache *c, const char *path, char *buf, size
  * file itself stores, its first and last tile (or scanline) are read and decoded, and for a
  * TIFF every tile's or strip's extent is checked against the file's size (directories only);
  * a file cut short (a truncated download or copy) fails there, wherever the cut. Virtual (automip) levels are not read:
- * they come from level 0. Returns 0, or -ENOENT / -EIO with err naming the file, the level
- * and the region that cannot be read. */
-int img_check_readable(const char *path, char err[256]);
+ * they come from level 0. *levels (may be NULL) gets the MIP levels the file stores for its
+ * first subimage (1: none beyond the image; coarser ones would be OIIO's automip). Returns 0,
+ * or -ENOENT / -EIO with err naming the file, the level and the region that cannot be read. */
+int img_check_readable(const char *path, int *levels, char err[256]);
 
 /* Where a file says it lies: a TIFF's GeoTIFF tags, read with libtiff (img_georef.c);
  * nothing is guessed, so a plain TIFF without georeferencing gives georeferenced = false. */

@@ -367,7 +367,8 @@ static void nodata(void **state)
 			px[y * w + x] = (x >= 100 && x < 140 && y >= 50 && y < 90) ? INT16_MIN
 										     : (int16_t)(100 + x);
 	char err[256];
-	assert_int_equal(img_write(tpath("nd.tif"), w, h, 1, IMG_I16, px, err), 0);
+	/* With MIP levels of its own (without, nodata would be refused: automip averages it). */
+	assert_int_equal(img_write_tiled(tpath("nd.tif"), w, h, 1, IMG_I16, px, 64, true, err), 0);
 	free(px);
 	struct fnode f;
 	fnode_ok(&f, "[node x]\ntype = file\npath = nd.tif\nnodata = -32768\nfill = -7\n" GLOBAL);
@@ -687,14 +688,17 @@ static void changed_file_reread(void **state)
 	img_cache_unref(ic);
 }
 
-/* A GeoTIFF made with GDAL (what users bring): W..E × S..N at 0.05°, int16 100 except a
- * nodata (-32768) block in its north-east quarter; crs 4326 or the UTM zone 33N. */
-static void write_geotiff_here(const char *name, double W, double N, int epsg, bool with_gt)
+/* A GeoTIFF made with GDAL (what users bring): W..E × S..N at 0.05°, 100 except a nodata
+ * block in its north-east quarter: int16 with nodata -32768, or (huge) float32 with GDAL's
+ * -1e34; crs 4326 or the UTM zone 33N. */
+static void write_geotiff_here(const char *name, double W, double N, int epsg, bool with_gt,
+			       bool huge)
 {
 	GDALAllRegister();
 	int w = 200, h = 200;
-	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath(name), w, h, 1, GDT_Int16,
-				     NULL);
+	GDALDataType t = huge ? GDT_Float32 : GDT_Int16;
+	double nd = huge ? -1e34 : -32768;
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath(name), w, h, 1, t, NULL);
 	assert_non_null(ds);
 	if (with_gt) {
 		double gt[6] = { W, epsg == 4326 ? 0.05 : 100, 0, N, 0, epsg == 4326 ? -0.05 : -100 };
@@ -705,25 +709,26 @@ static void write_geotiff_here(const char *name, double W, double N, int epsg, b
 		OSRDestroySpatialReference(srs);
 	}
 	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
-	assert_int_equal(GDALSetRasterNoDataValue(b, -32768), CE_None);
-	int16_t *px = malloc((size_t)w * h * sizeof *px);
+	assert_int_equal(GDALSetRasterNoDataValue(b, nd), CE_None);
+	double *px = malloc((size_t)w * h * sizeof *px);
 	for (int y = 0; y < h; y++)
 		for (int x = 0; x < w; x++)
-			px[y * w + x] = x >= w / 2 && y < h / 2 ? -32768 : 100;
-	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, px, w, h, GDT_Int16, 0, 0), CE_None);
+			px[y * w + x] = x >= w / 2 && y < h / 2 ? nd : 100;
+	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, px, w, h, GDT_Float64, 0, 0), CE_None);
 	free(px);
 	GDALClose(ds);
 }
 
 /* write_geotiff_here in a child process: GDAL's GeoTIFF driver changes libtiff's process-wide
  * state (tag extenders, error handlers), which the file node's process never has. */
-static void write_geotiff(const char *name, double W, double N, int epsg, bool with_gt)
+static void write_geotiff(const char *name, double W, double N, int epsg, bool with_gt,
+			  bool huge)
 {
 	fflush(NULL);
 	pid_t pid = fork();
 	assert_true(pid >= 0);
 	if (pid == 0) {
-		write_geotiff_here(name, W, N, epsg, with_gt);
+		write_geotiff_here(name, W, N, epsg, with_gt, huge);
 		_exit(0);
 	}
 	int st;
@@ -732,12 +737,12 @@ static void write_geotiff(const char *name, double W, double N, int epsg, bool w
 }
 
 /* Issue 19: a plain GeoTIFF without a bounds key lands at its georeferenced bounds (not
- * stretched over the globe), and its nodata takes the fill (not -32768 m). */
+ * stretched over the globe), and its nodata (GDAL's -1e34) takes the fill. */
 static void geotiff_placed(void **state)
 {
 	(void)state;
 	double W = 10, E = 20, S = 50, N = 60;
-	write_geotiff("geo.tif", W, N, 4326, true);
+	write_geotiff("geo.tif", W, N, 4326, true, true);
 	struct fnode f;
 	fnode_ok(&f, "[node x]\ntype = file\npath = geo.tif\nfill = -5\n");
 	struct tile *t = gen(&f, 3, 2, 4, 0, 64); /* lon 0..45, lat 90..45 */
@@ -779,8 +784,19 @@ static void geotiff_placed(void **state)
 	fnode_ok(&f, "[node x]\ntype = file\npath = geo.tif\nbounds = 10,50,20,60\n");
 	fnode_fini(&f);
 
+	/* int16 -32768 without MIP levels of its own: OIIO's automip would average it into
+	 * coarse heights: refused, pointing at clipmapctl import (which builds levels around
+	 * the voids). */
+	write_geotiff("geo_flat.tif", W, N, 4326, true, false);
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = geo_flat.tif\n", err),
+			 -EINVAL);
+	if (!strstr(err, "test.ini:3: path: ") || !strstr(err, "geo_flat.tif: no MIP levels") ||
+	    !strstr(err, "clipmapctl import"))
+		fail_msg("%s", err);
+	fnode_fini(&f);
+
 	/* Projected (UTM): refused, pointing at clipmapctl import. */
-	write_geotiff("utm.tif", 500000, 5600000, 32633, true);
+	write_geotiff("utm.tif", 500000, 5600000, 32633, true, false);
 	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = utm.tif\n", err), -EINVAL);
 	assert_non_null(strstr(err, "test.ini:1: bounds: missing"));
 	assert_non_null(strstr(err, "EPSG:32633"));
@@ -793,7 +809,7 @@ static void no_georef_refused(void **state)
 {
 	(void)state;
 	write_fn("plain.tif", 32, 16, -180, -90, 180, 90);
-	write_geotiff("gdal_plain.tif", 0, 0, 4326, false);
+	write_geotiff("gdal_plain.tif", 0, 0, 4326, false, false);
 	static const char *const files[] = { "plain.tif", "gdal_plain.tif" };
 	for (int i = 0; i < 2; i++) {
 		struct fnode f;

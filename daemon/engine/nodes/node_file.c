@@ -317,7 +317,8 @@ static int file_create(struct node *nd, struct node_parse *p)
 		return np_error(p, "path", "cannot open %s", err);
 
 	/* Readable to the end: a truncated file is refused here, not by every tile. */
-	if (img_check_readable(f->path, err))
+	int stored_levels;
+	if (img_check_readable(f->path, &stored_levels, err))
 		return np_error(p, "path", "%s", err);
 
 	int kind;
@@ -339,7 +340,19 @@ static int file_create(struct node *nd, struct node_parse *p)
 	f->wrap = wrap & 1;
 	if (f->wrap && !global)
 		return np_error(p, "lon_wrap", "needs bounds spanning 360 degrees of longitude");
-	return kind == FILE_KIND_COLOR ? parse_color(p, f) : parse_height(p, f, &geo);
+	if (kind == FILE_KIND_COLOR)
+		return parse_color(p, f);
+	if ((rc = parse_height(p, f, &geo)))
+		return rc;
+	/* OIIO's automip averages nodata into the coarser levels as if it were a height (-32768
+	 * mixed into a box: -8000 m). A huge float nodata stays recognisable (file_resample.c);
+	 * any other needs levels built around it: clipmapctl import builds them. */
+	if (f->has_nodata && !(f->rtype == IMG_F32 && fabsf(f->nodata) >= 1e30f) &&
+	    stored_levels <= 1 && f->nlev > 1)
+		return np_error(p, "path", "%s: no MIP levels, so nodata %g would be averaged into "
+				"coarse heights: convert it with clipmapctl import", f->path,
+				f->nodata);
+	return 0;
 }
 
 static int file_generate(const struct node *nd, struct gen_ctx *g, const struct tile_key *k,
