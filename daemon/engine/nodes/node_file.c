@@ -27,7 +27,9 @@
  *             planet's, sized by clipmapd's [engine] image_cache_mb. Not hashed.
  * Checked at load: the file reads to its end (img_check_readable: a truncated file is refused
  * naming it and the level), and its channels fit the kind (kind = height refuses 3+ channels
- * unless `channel` is given; kind = color wants 8-bit, or 16-bit RGB[A]).
+ * unless `channel` is given; kind = color wants 8-bit, or 16-bit RGB[A]), and a height file
+ * with nodata has MIP levels of its own (or a huge float nodata: file_resample.c), since
+ * OIIO's automip would average nodata into heights.
  * The file's size, mtime and inode are hashed: a changed file gets new tile names after a
  * reload, and the shared cache forgets the old file's pixels (img_cache_set_version).
  * How tiles are made (the MIP level, anisotropic taps, the polar caps, missing data):
