@@ -802,6 +802,13 @@ static void geotiff_placed(void **state)
 	assert_non_null(strstr(err, "EPSG:32633"));
 	assert_non_null(strstr(err, "clipmapctl import"));
 	fnode_fini(&f);
+	/* ... and a bounds key cannot place it (it would be stretched, not warped). */
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = utm.tif\n"
+				    "bounds = 13,50,14,51\n", err), -EINVAL);
+	if (!strstr(err, "test.ini:4: bounds: ") || !strstr(err, "projected") ||
+	    !strstr(err, "clipmapctl import"))
+		fail_msg("%s", err);
+	fnode_fini(&f);
 }
 
 /* Issue 19: no georeferencing and no bounds key: refused, naming the file and the key. */

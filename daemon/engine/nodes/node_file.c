@@ -9,7 +9,7 @@
  *   path      the image (relative paths resolve against the planet file's directory)
  *   kind      height | color: PIX_HEIGHT or PIX_COLOR output (default height)
  *   bounds    W,S,E,N in degrees covered by the image (default: the file's own georeferencing
- *             (GeoTIFF tags, read with GDAL), else the bounds `clipmapctl import` recorded in
+ *             (GeoTIFF tags, read with libtiff), else the bounds `clipmapctl import` recorded in
  *             it; a file with none of these and no key is refused, a key contradicting the
  *             georeferencing too: nothing is guessed). Row 0 is the north edge, column 0
  *             the west edge; pixels are areas with centres at +0.5. S and N may reach half
@@ -162,6 +162,12 @@ static int parse_bounds(struct node_parse *p, struct file_source *f, const struc
 			return no_bounds(p, f, g);
 	} else if (nb != 4) {
 		return np_error(p, "bounds", "expected 4 numbers W,S,E,N (degrees), got %d", nb);
+	} else if (g->projected || g->rotated) {
+		/* Degrees cannot place a projected grid: it would be stretched, not warped. */
+		return np_error(p, "bounds", "%s is %s (%s): bounds cannot place it; reproject it "
+				"with `clipmapctl import`", f->path,
+				g->projected ? "in a projected coordinate system" : "rotated or flipped",
+				g->crs[0] ? g->crs : "?");
 	} else if (g->georeferenced) {
 		double tx = 0.5 * (g->east - g->west) / f->info.width;
 		double ty = 0.5 * (g->north - g->south) / f->info.height;
