@@ -569,6 +569,11 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 	if (!o)
 		o = &defaults;
 	pthread_once(&reg_once, reg);
+	if (o->resample && !import_resample_ok(o->resample)) {
+		err_set(err, "resampling \"%s\": use near, bilinear, cubic, cubicspline, lanczos, "
+			"average or mode", o->resample);
+		return -EINVAL;
+	}
 
 	struct stat st;
 	if (stat(src, &st) != 0 && strchr(src, ':') == NULL) {

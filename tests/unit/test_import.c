@@ -547,6 +547,8 @@ static void utm_reprojected(void **state)
 		fail_msg("%s", err);
 	assert_true(r.reprojected);
 	assert_false(import_resample_ok("bicubic"));
+	o.resample = "bicubic";
+	expect_error(tpath("utm.tif"), tpath("utm_bad.tif"), &o, -EINVAL, "bicubic", "lanczos");
 	assert_true(import_resample_ok("lanczos"));
 }
 
