@@ -41,7 +41,7 @@ struct img_cache {
 	std::unordered_map<std::string, std::string> versions;
 	// Files a read failed on, with the message: OIIO serves a tile it could not read as
 	// black from then on, without an error, so every later read of the file fails here
-	// until the file changes (img_cache_set_version) or is invalidated.
+	// until the next img_cache_set_version (a load or reload) or img_cache_invalidate.
 	std::unordered_map<std::string, std::string> broken;
 	std::atomic<int> nbroken{ 0 };
 };
@@ -451,11 +451,13 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 }
 
 namespace {
-void forget_broken(struct img_cache *c, const char *path)
+bool forget_broken(struct img_cache *c, const char *path)
 {
 	std::lock_guard<std::mutex> lk(c->mu);
-	if (c->broken.erase(path))
-		c->nbroken.fetch_sub(1, std::memory_order_release);
+	if (!c->broken.erase(path))
+		return false;
+	c->nbroken.fetch_sub(1, std::memory_order_release);
+	return true;
 }
 } // namespace
 
@@ -523,10 +525,11 @@ extern "C" bool img_cache_set_version(struct img_cache *c, const char *path, con
 		// First sight: whatever was cached under this name before (read without a version)
 		// goes only if OIIO sees a newer mtime; a version change goes unconditionally (mtimes
 		// in whole seconds miss a file rewritten within the second).
-		if (first || changed) {
-			forget_broken(c, path);
-			c->ic->invalidate(ustring(path), changed);
-		}
+		// A file that failed a read is retried from scratch by the next load (a reload after
+		// the operator fixed it): OIIO still holds its unreadable tiles as black.
+		bool was_broken = forget_broken(c, path);
+		if (first || changed || was_broken)
+			c->ic->invalidate(ustring(path), changed || was_broken);
 		return changed;
 	} catch (const std::bad_alloc &) {
 		oom();

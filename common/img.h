@@ -80,7 +80,10 @@ int img_cache_level_size(struct img_cache *c, const char *path, int miplevel, in
 
 /* Reads pixels [x0, x1) × [y0, y1) (row y0 first, inside the level's data window), channels
  * [chbegin, chend), converted to `type`, into dst (borrowed), rows dst_stride bytes apart
- * (0: packed). Returns 0, -EINVAL (bad region or channels) or -EIO with err filled. */
+ * (0: packed). Returns 0, -EINVAL (bad region or channels) or -EIO with err filled. After a
+ * read of path fails (a tile OIIO cannot read, which it would serve as black from then on),
+ * every read of path fails with that message until the next img_cache_set_version or
+ * img_cache_invalidate of it (a load or reload retries the file from scratch). */
 int img_cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1, int y0,
 		   int y1, int chbegin, int chend, enum img_type type, void *dst, size_t dst_stride,
 		   char err[256]);
