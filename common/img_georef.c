@@ -13,6 +13,8 @@
 
 #include <errno.h>
 #include <math.h>
+#include <stdarg.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -39,6 +41,24 @@ static int quiet(TIFF *tif, void *user, const char *module, const char *fmt, va_
 {
 	(void)tif, (void)user, (void)module, (void)fmt, (void)ap;
 	return 1; /* handled: libtiff prints nothing */
+}
+
+/* An error handler that remembers the first error (user: a struct tiff_err). */
+struct tiff_err {
+	bool seen;
+	char msg[160];
+};
+
+static int remember(TIFF *tif, void *user, const char *module, const char *fmt, va_list ap)
+{
+	(void)tif;
+	(void)module;
+	struct tiff_err *e = user;
+	if (!e->seen) {
+		e->seen = true;
+		vsnprintf(e->msg, sizeof e->msg, fmt, ap);
+	}
+	return 1;
 }
 
 static double snap(double v, double q, double p)
@@ -198,12 +218,13 @@ int img_tiff_check_extents(const char *path, char err[256])
 	TIFFOpenOptions *opts = TIFFOpenOptionsAlloc();
 	if (!opts)
 		return 0;
-	TIFFOpenOptionsSetErrorHandlerExtR(opts, quiet, NULL);
+	struct tiff_err te = { 0 };
+	TIFFOpenOptionsSetErrorHandlerExtR(opts, remember, &te);
 	TIFFOpenOptionsSetWarningHandlerExtR(opts, quiet, NULL);
 	TIFF *tif = TIFFOpenExt(path, "rm", opts);
 	TIFFOpenOptionsFree(opts);
 	if (!tif)
-		return 0; /* not a TIFF */
+		return 0; /* not a TIFF (or unreadable: the caller's open said so) */
 	int rc = 0, dir = 0;
 	do {
 		bool tiled = TIFFIsTiled(tif);
@@ -226,6 +247,13 @@ int img_tiff_check_extents(const char *path, char err[256])
 		}
 		dir++;
 	} while (rc == 0 && TIFFReadDirectory(tif));
+	/* The chain of directories (one per MIP level) broken: a file cut where a level's
+	 * directory was, which would otherwise look like a file with fewer levels. */
+	if (rc == 0 && te.seen) {
+		err_set(err, "%s: truncated or corrupt after directory %d (MIP level or subimage): "
+			"%s", path, dir - 1, te.msg);
+		rc = -EIO;
+	}
 	TIFFClose(tif);
 	return rc;
 }
