@@ -10,7 +10,7 @@ BUILD   ?= build
 .DEFAULT_GOAL := all
 CC      ?= cc
 CXX     ?= g++
-PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libtiff-4
+PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libmicrohttpd zlib libtiff-4
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -177,11 +177,15 @@ shader-check:
 asan: export ASAN_OPTIONS = detect_leaks=1:abort_on_error=0
 asan: export LSAN_OPTIONS = suppressions=$(CURDIR)/tests/lsan.supp:print_suppressions=0
 asan: export UBSAN_OPTIONS = print_stacktrace=1:halt_on_error=1
+asan: export CLIPMAP_TEST_SLOW = 2
 asan:
 	@$(MAKE) --no-print-directory BUILD=build-asan OPT="-O1 -g" \
 	  SAN="-fsanitize=address,undefined -fno-omit-frame-pointer -fno-sanitize-recover=all" test
 
 tsan: export TSAN_OPTIONS = suppressions=$(CURDIR)/tests/tsan.supp:halt_on_error=1:second_deadlock_stack=1
+# Deadlines in the GL tests scaled (tests/support/slow.h): TSan makes synthesis 5-15x slower.
+tsan: export CLIPMAP_TEST_SLOW = 8
+tsan: export TEST_TIMEOUT ?= 1800
 tsan:
 	@$(MAKE) --no-print-directory BUILD=build-tsan OPT="-O1 -g" SAN="-fsanitize=thread" test
 

@@ -1,6 +1,7 @@
 /* pixfmt — see pixfmt.h. */
 #include "pixfmt.h"
 
+#include <math.h>
 #include <string.h>
 
 size_t pix_bytes(enum pix_type t)
@@ -47,4 +48,15 @@ enum pix_type pix_format_parse(const char *s)
 		if (strcmp(s, pix_format_name(t)) == 0)
 			return t;
 	return PIX_NONE;
+}
+
+void pix_normals_rgb(const unsigned char *rg, unsigned char *rgb, size_t n)
+{
+	for (size_t i = 0; i < n; i++) {
+		double e = rg[2 * i] / 127.5 - 1.0, no = rg[2 * i + 1] / 127.5 - 1.0;
+		double up2 = 1.0 - e * e - no * no;
+		rgb[3 * i] = rg[2 * i];
+		rgb[3 * i + 1] = rg[2 * i + 1];
+		rgb[3 * i + 2] = (unsigned char)lrint(((up2 > 0 ? sqrt(up2) : 0) + 1.0) * 127.5);
+	}
 }

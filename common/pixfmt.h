@@ -26,5 +26,9 @@ const char *pix_type_name(enum pix_type t);   /* "height", "color", "normal"; "n
 enum pix_type pix_type_parse(const char *s);  /* PIX_NONE when unknown */
 const char *pix_format_name(enum pix_type t); /* "f32", "rgba8", "rg8"; "none" when invalid */
 enum pix_type pix_format_parse(const char *s); /* PIX_NONE when unknown */
+/* Expands n RG8 normals (east, north) to RGB8 with the implied up component, each mapped
+ * (c + 1) · 127.5: the picture form of a normal tile, shared by every writer (clipmapctl
+ * render and tile, the HTTP endpoint) so their bytes agree. */
+void pix_normals_rgb(const unsigned char *rg, unsigned char *rgb, size_t n);
 
 #endif

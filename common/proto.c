@@ -45,9 +45,14 @@ static const struct type_info types[] = {
 	{ PROTO_STATS, "STATS", 8u << 20, FROM_SERVER },
 	{ PROTO_CACHE_LS, "CACHE_LS", 512, FROM_CLIENT },
 	{ PROTO_CACHE_ENTRIES, "CACHE_ENTRIES", 512u << 10, FROM_SERVER },
+	{ PROTO_CACHE_OP, "CACHE_OP", 512, FROM_CLIENT },
+	{ PROTO_CACHE_STAT, "CACHE_STAT", 4u << 20, FROM_SERVER },
+	{ PROTO_CACHE_DONE, "CACHE_DONE", 64, FROM_SERVER },
 	{ PROTO_PREFETCH, "PREFETCH", 128u << 10, FROM_CLIENT },
 	{ PROTO_PREFETCH_PROGRESS, "PREFETCH_PROGRESS", 64, FROM_SERVER },
 	{ PROTO_PREFETCH_CANCEL, "PREFETCH_CANCEL", 4, FROM_CLIENT },
+	{ PROTO_PREFETCH_DRY, "PREFETCH_DRY", 128u << 10, FROM_CLIENT },
+	{ PROTO_PREFETCH_ESTIMATE, "PREFETCH_ESTIMATE", 1024, FROM_SERVER },
 };
 
 static const char *const code_names[PROTO_E_COUNT] = {
@@ -664,6 +669,75 @@ static void decode_cache_entries(struct rd *r, struct proto_cache_entries *c)
 	}
 }
 
+static void decode_cache_op(struct rd *r, struct proto_cache_op *c)
+{
+	c->req = rd_u32(r, "req");
+	c->op = rd_u8(r, "op");
+	c->planet = rd_str(r, PROTO_MAX_NAME, false, "planet");
+	c->filter = rd_u8(r, "filter");
+	c->bbox.west = rd_f64(r, "west");
+	c->bbox.south = rd_f64(r, "south");
+	c->bbox.east = rd_f64(r, "east");
+	c->bbox.north = rd_f64(r, "north");
+	c->lmin = rd_u8(r, "lmin");
+	c->lmax = rd_u8(r, "lmax");
+	if (r->err)
+		return;
+	const struct geo_rect *b = &c->bbox;
+	if (c->op < PROTO_COP_STAT || c->op > PROTO_COP_VERIFY)
+		rd_fail(r, PROTO_ERR_FIELD, "cache op %u", c->op);
+	else if (c->filter & ~(PROTO_COF_BBOX | PROTO_COF_LEVELS))
+		rd_fail(r, PROTO_ERR_FIELD, "unknown filter bits 0x%x", c->filter);
+	else if (c->filter && c->op != PROTO_COP_PURGE)
+		rd_fail(r, PROTO_ERR_FIELD, "filters go with purge");
+	else if (c->op == PROTO_COP_PURGE && !c->planet[0])
+		rd_fail(r, PROTO_ERR_FIELD, "purge without a planet");
+	else if (c->op == PROTO_COP_GC && c->planet[0])
+		rd_fail(r, PROTO_ERR_FIELD, "gc takes no planet");
+	else if ((c->filter & PROTO_COF_BBOX) &&
+		 !(fabs(b->west) <= 180 && fabs(b->east) <= 180 && b->south >= -90 &&
+		   b->north <= 90 && b->south < b->north && b->west != b->east))
+		rd_fail(r, PROTO_ERR_FIELD, "bbox");
+	else if ((c->filter & PROTO_COF_LEVELS) &&
+		 (c->lmin > c->lmax || c->lmax > GRID_MAX_LEVEL))
+		rd_fail(r, PROTO_ERR_FIELD, "level range %u..%u", c->lmin, c->lmax);
+}
+
+static void decode_cache_stat(struct rd *r, struct proto_cache_stat *c)
+{
+	c->req = rd_u32(r, "req");
+	c->more = rd_u8(r, "more");
+	c->count = rd_u32(r, "row count");
+	if (!r->err && c->more > 1)
+		rd_fail(r, PROTO_ERR_FIELD, "more = %u", c->more);
+	struct proto_cache_stat_row *w = rd_array(r, c->count, PROTO_MAX_STAT_ROWS, 22,
+						  sizeof(*w), "stat rows");
+	c->rows = w;
+	for (uint32_t i = 0; i < c->count && !r->err; i++) {
+		w[i].planet = rd_str(r, PROTO_MAX_NAME, false, "planet");
+		w[i].layer = rd_str(r, PROTO_MAX_NAME, false, "layer");
+		w[i].ly = rd_u8(r, "ly");
+		w[i].tier = rd_u8(r, "tier");
+		w[i].tiles = rd_u64(r, "tiles");
+		w[i].bytes = rd_u64(r, "bytes");
+		if (!r->err && (w[i].ly > GRID_MAX_LEVEL || w[i].tier < PROTO_TIER_MEMORY ||
+				w[i].tier > PROTO_TIER_REMOTE))
+			rd_fail(r, PROTO_ERR_FIELD, "row %u: level %u tier %u", i, w[i].ly, w[i].tier);
+	}
+}
+
+static void decode_cache_done(struct rd *r, struct proto_cache_done *c)
+{
+	c->req = rd_u32(r, "req");
+	c->op = rd_u8(r, "op");
+	c->checked = rd_u64(r, "checked");
+	c->removed = rd_u64(r, "removed");
+	c->bytes = rd_u64(r, "bytes");
+	c->corrupt = rd_u64(r, "corrupt");
+	if (!r->err && (c->op < PROTO_COP_STAT || c->op > PROTO_COP_VERIFY))
+		rd_fail(r, PROTO_ERR_FIELD, "cache op %u", c->op);
+}
+
 static void decode_prefetch(struct rd *r, struct proto_prefetch *p)
 {
 	p->id = rd_u32(r, "id");
@@ -686,7 +760,7 @@ static void decode_prefetch(struct rd *r, struct proto_prefetch *p)
 		if (!r->err && !(p->bbox.south < p->bbox.north && p->bbox.west != p->bbox.east))
 			rd_fail(r, PROTO_ERR_FIELD, "empty bbox");
 	} else if (p->shape == PROTO_SHAPE_PATH) {
-		p->width_m = rd_range(r, 0, 1e12, "width");
+		p->width_m = rd_range(r, 0, PROTO_MAX_WIDTH, "width");
 		p->npoints = rd_u32(r, "point count");
 		if (!r->err && p->npoints == 0)
 			rd_fail(r, PROTO_ERR_FIELD, "path without points");
@@ -699,6 +773,30 @@ static void decode_prefetch(struct rd *r, struct proto_prefetch *p)
 		}
 	} else {
 		rd_fail(r, PROTO_ERR_FIELD, "shape %u", p->shape);
+	}
+}
+
+static void decode_estimate(struct rd *r, struct proto_prefetch_estimate *e)
+{
+	e->id = rd_u32(r, "id");
+	e->tier = rd_u8(r, "tier");
+	e->tiles = rd_u64(r, "tiles");
+	e->bytes = rd_u64(r, "bytes");
+	e->budget = rd_u64(r, "budget");
+	e->used = rd_u64(r, "used");
+	e->max_tiles = rd_u64(r, "max_tiles");
+	e->nlevels = rd_u8(r, "level count");
+	if (!r->err && (e->tier < PROTO_TIER_MEMORY || e->tier > PROTO_TIER_REMOTE))
+		rd_fail(r, PROTO_ERR_FIELD, "tier %u", e->tier);
+	struct proto_estimate_level *l = rd_array(r, e->nlevels, GRID_MAX_LEVEL + 1, 17,
+						  sizeof(*l), "estimate levels");
+	e->levels = l;
+	for (uint32_t i = 0; i < e->nlevels && !r->err; i++) {
+		l[i].ly = rd_u8(r, "ly");
+		l[i].tiles = rd_u64(r, "level tiles");
+		l[i].bytes = rd_u64(r, "level bytes");
+		if (!r->err && l[i].ly > GRID_MAX_LEVEL)
+			rd_fail(r, PROTO_ERR_FIELD, "level %u", l[i].ly);
 	}
 }
 
@@ -749,9 +847,14 @@ int proto_decode_payload(uint16_t type, const void *payload, size_t len, struct 
 	case PROTO_STATS: decode_stats(&r, &m->stats); break;
 	case PROTO_CACHE_LS: decode_cache_ls(&r, &m->cache_ls); break;
 	case PROTO_CACHE_ENTRIES: decode_cache_entries(&r, &m->cache_entries); break;
+	case PROTO_CACHE_OP: decode_cache_op(&r, &m->cache_op); break;
+	case PROTO_CACHE_STAT: decode_cache_stat(&r, &m->cache_stat); break;
+	case PROTO_CACHE_DONE: decode_cache_done(&r, &m->cache_done); break;
 	case PROTO_PREFETCH: decode_prefetch(&r, &m->prefetch); break;
 	case PROTO_PREFETCH_PROGRESS: decode_progress(&r, &m->prefetch_progress); break;
 	case PROTO_PREFETCH_CANCEL: m->prefetch_cancel.req = rd_u32(&r, "id"); break;
+	case PROTO_PREFETCH_DRY: decode_prefetch(&r, &m->prefetch_dry); break;
+	case PROTO_PREFETCH_ESTIMATE: decode_estimate(&r, &m->prefetch_estimate); break;
 	}
 	if (!r.err && r.off != r.n)
 		rd_fail(&r, PROTO_ERR_FIELD, "%zu trailing bytes", r.n - r.off);

@@ -37,6 +37,7 @@
 #define PROTO_MAX_STATS 1024
 #define PROTO_MAX_CACHE_ENTRIES 16384 /* per CACHE_ENTRIES message */
 #define PROTO_MAX_PATH 4096	       /* prefetch path points */
+#define PROTO_MAX_WIDTH 2e7	       /* prefetch corridor width, metres */
 
 enum proto_type {
 	PROTO_NONE = 0,
@@ -55,9 +56,14 @@ enum proto_type {
 	PROTO_STATS = 49,	/* S→C */
 	PROTO_CACHE_LS = 50,	/* C→S */
 	PROTO_CACHE_ENTRIES = 51, /* S→C */
+	PROTO_CACHE_OP = 52,	  /* C→S: stat, purge, gc, verify */
+	PROTO_CACHE_STAT = 53,	  /* S→C */
+	PROTO_CACHE_DONE = 54,	  /* S→C */
 	PROTO_PREFETCH = 64,	/* C→S */
 	PROTO_PREFETCH_PROGRESS = 65, /* S→C */
 	PROTO_PREFETCH_CANCEL = 66,   /* C→S */
+	PROTO_PREFETCH_DRY = 67,      /* C→S: a PREFETCH only estimated */
+	PROTO_PREFETCH_ESTIMATE = 68, /* S→C */
 };
 
 /* Decoder errors: one distinct negative errno per malformed class. */
@@ -281,6 +287,40 @@ struct proto_cache_entries {
 	const struct proto_cache_entry *entries;
 };
 
+enum proto_cache_opk { PROTO_COP_STAT = 1, PROTO_COP_PURGE = 2, PROTO_COP_GC = 3,
+		       PROTO_COP_VERIFY = 4 };
+#define PROTO_COF_BBOX 1u   /* cache_op.filter bits (purge) */
+#define PROTO_COF_LEVELS 2u
+#define PROTO_MAX_STAT_ROWS 4096 /* per CACHE_STAT message */
+
+struct proto_cache_op {
+	uint32_t req;
+	uint8_t op;	    /* enum proto_cache_opk */
+	const char *planet; /* stat, verify: "" every planet; purge: required; gc: "" */
+	uint8_t filter;	    /* purge: PROTO_COF_* bits */
+	struct geo_rect bbox; /* with PROTO_COF_BBOX: tiles touching it (west > east crosses) */
+	uint8_t lmin, lmax;   /* with PROTO_COF_LEVELS: ly range */
+};
+
+struct proto_cache_stat_row {
+	const char *planet, *layer; /* both "": tiles of a node no planet uses (gc's garbage) */
+	uint8_t ly, tier;
+	uint64_t tiles, bytes;
+};
+
+struct proto_cache_stat {
+	uint32_t req;
+	uint8_t more; /* 1: another CACHE_STAT follows for this req */
+	uint32_t count; /* ≤ PROTO_MAX_STAT_ROWS */
+	const struct proto_cache_stat_row *rows;
+};
+
+struct proto_cache_done {
+	uint32_t req;
+	uint8_t op;
+	uint64_t checked, removed, bytes, corrupt;
+};
+
 enum proto_shape { PROTO_SHAPE_NONE = 0, PROTO_SHAPE_BBOX = 1, PROTO_SHAPE_PATH = 2 };
 
 struct proto_lonlat { double lon, lat; };
@@ -307,6 +347,23 @@ struct proto_prefetch_progress {
 	double rate;	      /* tiles per second, recent */
 };
 
+/* PREFETCH_ESTIMATE: what a PREFETCH_DRY (or the PREFETCH it describes) would take. */
+struct proto_estimate_level {
+	uint8_t ly;
+	uint64_t tiles, bytes; /* every layer */
+};
+
+struct proto_prefetch_estimate {
+	uint32_t id;	      /* the PREFETCH_DRY's */
+	uint8_t tier;	      /* enum proto_tier the job's tiles would go to */
+	uint64_t tiles, bytes; /* estimated, every level and layer; bytes as held in that tier */
+	uint64_t budget;      /* that tier's byte budget */
+	uint64_t used;	      /* bytes that tier holds now */
+	uint64_t max_tiles;   /* this session's limit per job */
+	uint8_t nlevels;      /* ≤ GRID_MAX_LEVEL + 1 */
+	const struct proto_estimate_level *levels;
+};
+
 struct proto_arena;
 
 struct proto_msg {
@@ -329,6 +386,11 @@ struct proto_msg {
 		struct proto_prefetch prefetch;
 		struct proto_prefetch_progress prefetch_progress;
 		struct proto_req prefetch_cancel; /* req = the job id */
+		struct proto_prefetch prefetch_dry;
+		struct proto_cache_op cache_op;
+		struct proto_cache_stat cache_stat;
+		struct proto_cache_done cache_done;
+		struct proto_prefetch_estimate prefetch_estimate;
 	};
 	struct proto_arena *arena; /* owned storage of a decoded message */
 };

@@ -395,6 +395,76 @@ static void enc_prefetch_progress(struct wr *w, const struct proto_msg *m)
 	wf64(w, p->rate);
 }
 
+static void enc_cache_op(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_cache_op *c = &m->cache_op;
+	w32(w, c->req);
+	w8(w, c->op);
+	wstr(w, c->planet, "planet");
+	w8(w, c->filter);
+	wf64(w, c->bbox.west);
+	wf64(w, c->bbox.south);
+	wf64(w, c->bbox.east);
+	wf64(w, c->bbox.north);
+	w8(w, c->lmin);
+	w8(w, c->lmax);
+}
+
+static void enc_cache_stat(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_cache_stat *c = &m->cache_stat;
+	w32(w, c->req);
+	w8(w, c->more);
+	w32(w, c->count);
+	if (!wcount(w, c->count, PROTO_MAX_STAT_ROWS, "stat rows"))
+		return;
+	for (uint32_t i = 0; i < c->count; i++) {
+		wstr(w, c->rows[i].planet, "planet");
+		wstr(w, c->rows[i].layer, "layer");
+		w8(w, c->rows[i].ly);
+		w8(w, c->rows[i].tier);
+		w64(w, c->rows[i].tiles);
+		w64(w, c->rows[i].bytes);
+	}
+}
+
+static void enc_cache_done(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_cache_done *c = &m->cache_done;
+	w32(w, c->req);
+	w8(w, c->op);
+	w64(w, c->checked);
+	w64(w, c->removed);
+	w64(w, c->bytes);
+	w64(w, c->corrupt);
+}
+
+static void enc_prefetch_dry(struct wr *w, const struct proto_msg *m)
+{
+	struct proto_msg p = { .type = PROTO_PREFETCH, .prefetch = m->prefetch_dry };
+	enc_prefetch(w, &p);
+}
+
+static void enc_prefetch_estimate(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_prefetch_estimate *e = &m->prefetch_estimate;
+	w32(w, e->id);
+	w8(w, e->tier);
+	w64(w, e->tiles);
+	w64(w, e->bytes);
+	w64(w, e->budget);
+	w64(w, e->used);
+	w64(w, e->max_tiles);
+	w8(w, e->nlevels);
+	if (!wcount(w, e->nlevels, GRID_MAX_LEVEL + 1, "estimate levels"))
+		return;
+	for (uint32_t i = 0; i < e->nlevels; i++) {
+		w8(w, e->levels[i].ly);
+		w64(w, e->levels[i].tiles);
+		w64(w, e->levels[i].bytes);
+	}
+}
+
 typedef void enc_fn(struct wr *w, const struct proto_msg *m);
 
 /* The body encoder of every message type; NULL: no body (BYE). */
@@ -417,9 +487,14 @@ static const struct {
 	{ PROTO_STATS, enc_stats },
 	{ PROTO_CACHE_LS, enc_cache_ls },
 	{ PROTO_CACHE_ENTRIES, enc_cache_entries },
+	{ PROTO_CACHE_OP, enc_cache_op },
+	{ PROTO_CACHE_STAT, enc_cache_stat },
+	{ PROTO_CACHE_DONE, enc_cache_done },
 	{ PROTO_PREFETCH, enc_prefetch },
 	{ PROTO_PREFETCH_PROGRESS, enc_prefetch_progress },
 	{ PROTO_PREFETCH_CANCEL, enc_req },
+	{ PROTO_PREFETCH_DRY, enc_prefetch_dry },
+	{ PROTO_PREFETCH_ESTIMATE, enc_prefetch_estimate },
 };
 
 /* m's payload; its type is known (proto_type_name gave it a name). */
@@ -503,7 +578,8 @@ static bool from_client(uint16_t type)
 	switch (type) {
 	case PROTO_HELLO: case PROTO_BYE: case PROTO_ERROR: case PROTO_LIST_PLANETS:
 	case PROTO_OPEN: case PROTO_WANT: case PROTO_STATS_REQ: case PROTO_CACHE_LS:
-	case PROTO_PREFETCH: case PROTO_PREFETCH_CANCEL:
+	case PROTO_PREFETCH: case PROTO_PREFETCH_CANCEL: case PROTO_PREFETCH_DRY:
+	case PROTO_CACHE_OP:
 		return true;
 	default:
 		return false;
@@ -515,7 +591,8 @@ static bool from_server(uint16_t type)
 	switch (type) {
 	case PROTO_HELLO_OK: case PROTO_BYE: case PROTO_ERROR: case PROTO_PLANETS:
 	case PROTO_OPENED: case PROTO_TILE: case PROTO_TILE_FAIL: case PROTO_STATS:
-	case PROTO_CACHE_ENTRIES: case PROTO_PREFETCH_PROGRESS:
+	case PROTO_CACHE_ENTRIES: case PROTO_PREFETCH_PROGRESS: case PROTO_PREFETCH_ESTIMATE:
+	case PROTO_CACHE_STAT: case PROTO_CACHE_DONE:
 		return true;
 	default:
 		return false;

@@ -26,6 +26,8 @@
 #include "engine/sched.h"
 #include "engine/store.h"
 #include "conf.h"
+#include "http.h"
+#include "metrics.h"
 #include "server.h"
 
 #define DEFAULT_CONF "/etc/clipmap/clipmapd.conf"
@@ -39,6 +41,8 @@ struct daemon {
 	struct store *store; /* the disk tier, NULL without [store] path */
 	struct store_stats store_seen; /* its counters at the last tick */
 	bool store_failing;	       /* its writes fail (logged once) */
+	struct http *http;	       /* the HTTP endpoint, NULL without [http] listen */
+	uint64_t metrics_ns;	       /* when its /metrics text was last gathered */
 };
 
 static void usage(FILE *f)
@@ -99,7 +103,8 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 }
 
 /* Re-reads clipmapd.conf and applies the keys that can change while running: [log] level,
- * [engine] planets and strict_planets, [listen] max_sessions, [session] max_want, max_rate,
+ * [engine] planets and strict_planets, [listen] max_sessions, max_preauth, max_preauth_per_peer,
+ * handshake_timeout, frame_timeout, [session] max_want, max_rate,
  * max_pending_kb, max_frame_kb, max_jobs. The others keep their running values (a warning
  * names each one that changed). A file that does not load changes nothing. */
 static void reload_conf(struct daemon *d)
@@ -118,6 +123,10 @@ static void reload_conf(struct daemon *d)
 	c->strict_planets = nc.strict_planets;
 	c->log_level = nc.log_level;
 	c->max_sessions = nc.max_sessions;
+	c->max_preauth = nc.max_preauth;
+	c->max_preauth_per_peer = nc.max_preauth_per_peer;
+	c->handshake_timeout = nc.handshake_timeout;
+	c->frame_timeout = nc.frame_timeout;
 	c->max_want = nc.max_want;
 	c->max_rate = nc.max_rate;
 	c->max_pending = nc.max_pending;
@@ -148,6 +157,8 @@ static void reload(struct daemon *d)
 				kept += planet_set_has_node(old, ps->planets[i]->nodes[j]->hash);
 			}
 		server_set_planets(d->srv, ps);
+		if (d->http)
+			http_set_planets(d->http, ps);
 		log_msg(LOG_INFO, "reloaded %zu planets from %s: %zu of %zu nodes unchanged%s", ps->n,
 			d->conf.planets_dir, kept, nodes, ps->nskipped ? " (some files skipped)" : "");
 	}
@@ -195,9 +206,48 @@ static void store_watch(struct daemon *d)
 	*old = st;
 }
 
+/* The STATS figures plus the HTTP endpoint's own, as /metrics text: gathered on the loop
+ * thread (where the figures live) once a second. */
+static void gather_metrics(struct daemon *d)
+{
+	uint64_t now = clock_now_ns();
+	if (now - d->metrics_ns < 1000000000ull)
+		return;
+	d->metrics_ns = now;
+	enum { CAP = PROTO_MAX_STATS };
+	struct proto_stat *it = calloc(CAP, sizeof *it);
+	char(*keys)[128] = calloc(CAP, sizeof *keys);
+	if (!it || !keys) {
+		free(it);
+		free(keys);
+		return;
+	}
+	size_t n = server_stats(d->srv, it, keys, CAP - 10);
+	struct http_stats hs;
+	http_get_stats(d->http, &hs);
+	const struct { const char *k; uint64_t v; } h[] = {
+		{ "http.requests", hs.requests },	{ "http.tiles.sent", hs.tiles },
+		{ "http.not_modified.sent", hs.not_modified }, { "http.client_errors.sent", hs.client_errors },
+		{ "http.server_errors.sent", hs.server_errors }, { "http.auth_failures", hs.auth_failures },
+		{ "http.bytes.sent", hs.bytes },
+		{ "http.cache.hits", hs.cache_hits }, { "http.cache.misses", hs.cache_misses },
+		{ "http.cache.bytes", hs.cache_bytes },
+	};
+	for (size_t i = 0; i < sizeof h / sizeof h[0]; i++, n++)
+		it[n] = (struct proto_stat){ .key = h[i].k, .kind = PROTO_STAT_U64, .u = h[i].v };
+	size_t len;
+	char *text = metrics_format(it, n, CLIPMAP_VERSION, &len);
+	http_set_metrics(d->http, text, len);
+	free(text);
+	free(it);
+	free(keys);
+}
+
 static void on_tick(void *ud)
 {
 	struct daemon *d = ud;
+	if (d->http)
+		gather_metrics(d);
 	if (d->store)
 		store_watch(d);
 	if (!d->watchdog_usec)
@@ -336,6 +386,68 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 		d->conf.cache_bytes >> 20, CLIPMAP_VERSION);
 }
 
+/* Where CesiumJS is for the browser page: [http] cesium, else the build tree's copy beside
+ * the program (build/npm/..., from make deps). NULL (no page) when neither has Cesium.js. */
+static char *find_cesium(const struct conf *c, char *buf, size_t n)
+{
+	if (c->http_cesium)
+		snprintf(buf, n, "%s", c->http_cesium);
+	else {
+		char exe[512];
+		ssize_t k = readlink("/proc/self/exe", exe, sizeof exe - 1);
+		if (k <= 0)
+			return NULL;
+		exe[k] = '\0';
+		char *slash = strrchr(exe, '/');
+		if (slash)
+			*slash = '\0';
+		if (snprintf(buf, n, "%.400s/npm/node_modules/cesium/Build/Cesium", exe) >= (int)n)
+			return NULL;
+	}
+	char js[600];
+	snprintf(js, sizeof js, "%.500s/Cesium.js", buf);
+	if (access(js, R_OK) == 0)
+		return buf;
+	if (c->http_cesium)
+		log_msg(LOG_WARN, "http: no Cesium.js in %s: the browser page is off", buf);
+	return NULL;
+}
+
+/* The HTTP endpoint of [http], with the token where the listener is not loopback (or
+ * require_token asks for it everywhere) unless `open`. */
+static int start_http(struct daemon *d, struct sched *sched, struct cache *cache,
+		      struct planet_set *ps)
+{
+	const struct conf *c = &d->conf;
+	size_t tlen;
+	const uint8_t *tok = server_token(d->srv, &tlen);
+	bool need = tok && !c->http_open &&
+		    (!conf_addr_is_loopback(c->http_listen) || c->require_token != CONF_TOKEN_AUTO);
+	char err[256], cesium[512];
+	const char *cdir = find_cesium(c, cesium, sizeof cesium);
+	int rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
+						  .cache = cache, .planets = ps,
+						  .token = need ? tok : NULL, .token_len = need ? tlen : 0,
+						  .threads = c->http_threads,
+						  .max_conns = c->http_max_conns,
+						  .max_per_addr = c->http_max_per_addr,
+						  .timeout_s = c->http_timeout_s,
+						  .max_age_s = c->http_max_age_s,
+						  .cache_bytes = (size_t)c->http_cache_mb << 20,
+						  .cesium_dir = cdir },
+			     &d->http, err);
+	if (rc) {
+		log_msg(LOG_ERROR, "%s", err);
+		return rc;
+	}
+	char host[256], port[16];
+	conf_split_hostport(c->http_listen, host, sizeof host, port, sizeof port);
+	log_msg(LOG_INFO, "http: listening on http://%s%s%s:%u/%s%s", strchr(host, ':') ? "[" : "",
+		host, strchr(host, ':') ? "]" : "", http_port(d->http),
+		need ? " (bearer token required)" : "", cdir ? " (browser viewer)" : "");
+	return 0;
+}
+
 /* The cache, the workers and the server over the planets ps (taken), run until a signal
  * stops them. Returns the exit status. */
 static int serve(struct daemon *d, struct planet_set *ps)
@@ -375,6 +487,8 @@ static int serve(struct daemon *d, struct planet_set *ps)
 		return rc == -EINVAL ? 2 : 1;
 	}
 	bool ran = false;
+	if (d->conf.http_listen && (rc = start_http(d, sched, cache, ps)))
+		goto out;
 	if ((rc = server_watch_fd(d->srv, d->sigfd, on_signal, d))) {
 		log_msg(LOG_ERROR, "signalfd: %s", strerror(-rc));
 		goto out;
@@ -388,6 +502,8 @@ static int serve(struct daemon *d, struct planet_set *ps)
 	ran = true;
 	sd_notify(0, "STOPPING=1");
 out:
+	http_destroy(d->http); /* before the scheduler its requests use */
+	d->http = NULL;
 	server_destroy(d->srv);
 	sched_destroy(sched);
 	cache_destroy(cache);

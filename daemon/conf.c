@@ -18,7 +18,7 @@
 #include "common/proto.h"
 #include "common/xalloc.h"
 
-enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG, K_BOOL };
+enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG, K_BOOL, K_ADDR };
 
 struct row {
 	const char *sec, *key;
@@ -37,6 +37,10 @@ static const struct row rows[] = {
 	{ "listen", "token_file", K_PATH, 0, 0, NULL },
 	{ "listen", "require_token", K_ENUM, 0, 0, token_names },
 	{ "listen", "max_sessions", K_INT, 1, 100000, NULL },
+	{ "listen", "max_preauth", K_INT, 1, 100000, NULL },
+	{ "listen", "max_preauth_per_peer", K_INT, 1, 100000, NULL },
+	{ "listen", "handshake_timeout", K_INT, 1, 3600, NULL },
+	{ "listen", "frame_timeout", K_INT, 1, 3600, NULL },
 	{ "engine", "planets", K_PATH, 0, 0, NULL },
 	{ "engine", "strict_planets", K_BOOL, 0, 1, NULL },
 	{ "engine", "workers", K_INT, 0, 1024, NULL },
@@ -49,9 +53,23 @@ static const struct row rows[] = {
 	{ "session", "max_frame_kb", K_SIZE_KB, 0, 16384, NULL },
 	{ "session", "max_jobs", K_INT, 0, 64, NULL },
 	{ "session", "compress", K_ENUM, 0, 0, compress_names },
+	{ "prefetch", "max_tiles", K_INT, 1, 1L << 26, NULL },
+	{ "prefetch", "max_tiles_local", K_INT, 0, 1L << 26, NULL },
+	{ "prefetch", "max_jobs_local", K_INT, 0, 64, NULL },
+	{ "prefetch", "max_jobs_total", K_INT, 1, 4096, NULL },
+	{ "prefetch", "max_tiles_total", K_INT, 1, 1L << 32, NULL },
 	{ "log", "level", K_LOG, 0, 0, NULL },
 	{ "store", "path", K_PATH, 0, 0, NULL },
 	{ "store", "disk_mb", K_SIZE_MB, 1, 1L << 26, NULL },
+	{ "http", "listen", K_ADDR, 0, 0, NULL },
+	{ "http", "open", K_BOOL, 0, 1, NULL },
+	{ "http", "cesium", K_PATH, 0, 0, NULL },
+	{ "http", "threads", K_INT, 1, 64, NULL },
+	{ "http", "max_connections", K_INT, 1, 100000, NULL },
+	{ "http", "max_per_address", K_INT, 0, 100000, NULL },
+	{ "http", "timeout_s", K_INT, 1, 3600, NULL },
+	{ "http", "max_age_s", K_INT, 0, 31536000, NULL },
+	{ "http", "cache_mb", K_INT, 1, 1 << 20, NULL },
 };
 
 static int __attribute__((format(printf, 5, 6)))
@@ -140,6 +158,10 @@ static void defaults(struct conf *c)
 	c->tcp[0] = xstrdup("127.0.0.1:7878");
 	c->ntcp = 1;
 	c->max_sessions = 256;
+	c->max_preauth = 32;
+	c->max_preauth_per_peer = 8;
+	c->handshake_timeout = 10;
+	c->frame_timeout = 30;
 	c->planets_dir = xstrdup("/etc/clipmap/planets");
 	c->worker_nice = 5;
 	c->cache_bytes = (size_t)1024 << 20;
@@ -149,8 +171,19 @@ static void defaults(struct conf *c)
 	c->max_pending = (uint64_t)8 << 20;
 	c->max_frame = 0;
 	c->max_jobs = 4;
+	c->pf_max_tiles = 4000000;
+	c->pf_max_tiles_local = 250000;
+	c->pf_max_jobs_local = 1;
+	c->pf_max_jobs_total = 16;
+	c->pf_max_tiles_total = 16000000;
 	c->log_level = LOG_INFO;
 	c->store_bytes = (uint64_t)1024 << 20;
+	c->http_threads = 2;
+	c->http_max_conns = 256;
+	c->http_max_per_addr = 32;
+	c->http_timeout_s = 15;
+	c->http_max_age_s = 600;
+	c->http_cache_mb = 64;
 }
 
 static int set_tcp(struct conf *c, const char *path, const struct ini_entry *e, char *err)
@@ -193,6 +226,7 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		char **dst = strcmp(r->key, "unix") == 0	 ? &c->unix_path
 			     : strcmp(r->key, "token_file") == 0 ? &c->token_file
 			     : strcmp(r->key, "path") == 0	 ? &c->store_path
+			     : strcmp(r->key, "cesium") == 0	 ? &c->http_cesium
 								 : &c->planets_dir;
 		free(*dst);
 		*dst = NULL;
@@ -204,14 +238,29 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	}
 	case K_TCP:
 		return set_tcp(c, path, e, err);
-	case K_BOOL: /* the only one: strict_planets */
+	case K_BOOL: {
+		bool *dst = strcmp(r->key, "open") == 0 ? &c->http_open : &c->strict_planets;
 		if (strcmp(v, "true") == 0 || strcmp(v, "yes") == 0 || strcmp(v, "1") == 0)
-			c->strict_planets = true;
+			*dst = true;
 		else if (strcmp(v, "false") == 0 || strcmp(v, "no") == 0 || strcmp(v, "0") == 0)
-			c->strict_planets = false;
+			*dst = false;
 		else
 			return cerr(err, path, e->line, e->key, "\"%s\": expected true or false", v);
 		return 0;
+	}
+	case K_ADDR: { /* [http] listen: one host:port, or empty for none */
+		char host[256], port[16];
+		free(c->http_listen);
+	free(c->http_cesium);
+		c->http_listen = NULL;
+		if (!*v)
+			return 0;
+		if (conf_split_hostport(v, host, sizeof host, port, sizeof port))
+			return cerr(err, path, e->line, e->key,
+				    "\"%s\" is not host:port (IPv6 as [addr]:port, port 0-65535)", v);
+		c->http_listen = xstrdup(v);
+		return 0;
+	}
 	case K_LOG:
 		if (log_parse_level(v, &c->log_level))
 			return cerr(err, path, e->line, e->key,
@@ -246,6 +295,14 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	const char *k = r->key;
 	if (strcmp(k, "max_sessions") == 0)
 		c->max_sessions = (int)n;
+	else if (strcmp(k, "max_preauth") == 0)
+		c->max_preauth = (int)n;
+	else if (strcmp(k, "max_preauth_per_peer") == 0)
+		c->max_preauth_per_peer = (int)n;
+	else if (strcmp(k, "handshake_timeout") == 0)
+		c->handshake_timeout = (int)n;
+	else if (strcmp(k, "frame_timeout") == 0)
+		c->frame_timeout = (int)n;
 	else if (strcmp(k, "workers") == 0)
 		c->workers = (int)n;
 	else if (strcmp(k, "worker_nice") == 0)
@@ -264,8 +321,30 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->max_frame = (uint32_t)n << 10;
 	else if (strcmp(k, "max_jobs") == 0)
 		c->max_jobs = (uint32_t)n;
+	else if (strcmp(k, "max_tiles") == 0)
+		c->pf_max_tiles = (uint64_t)n;
+	else if (strcmp(k, "max_tiles_local") == 0)
+		c->pf_max_tiles_local = (uint64_t)n;
+	else if (strcmp(k, "max_jobs_local") == 0)
+		c->pf_max_jobs_local = (uint32_t)n;
+	else if (strcmp(k, "max_jobs_total") == 0)
+		c->pf_max_jobs_total = (uint32_t)n;
+	else if (strcmp(k, "max_tiles_total") == 0)
+		c->pf_max_tiles_total = (uint64_t)n;
 	else if (strcmp(k, "disk_mb") == 0)
 		c->store_bytes = (uint64_t)n << 20;
+	else if (strcmp(k, "threads") == 0)
+		c->http_threads = (int)n;
+	else if (strcmp(k, "max_connections") == 0)
+		c->http_max_conns = (int)n;
+	else if (strcmp(k, "max_per_address") == 0)
+		c->http_max_per_addr = (int)n;
+	else if (strcmp(k, "timeout_s") == 0)
+		c->http_timeout_s = (int)n;
+	else if (strcmp(k, "max_age_s") == 0)
+		c->http_max_age_s = (int)n;
+	else if (strcmp(k, "cache_mb") == 0 && strcmp(r->sec, "http") == 0)
+		c->http_cache_mb = (int)n;
 	return 0;
 }
 
@@ -273,7 +352,7 @@ static int check(struct conf *c, const struct ini_file *f, char *err)
 {
 	const char *path = f->path;
 	/* The line to blame for a cross-key error: the key that asked for the listener. */
-	int tcp_line = 0, tok_line = 0, unix_line = 0, frame_line = 0;
+	int tcp_line = 0, tok_line = 0, unix_line = 0, frame_line = 0, http_line = 0;
 	for (size_t i = 0; i < f->n; i++)
 		for (size_t j = 0; j < f->sections[i].n; j++) {
 			const struct ini_entry *e = &f->sections[i].entries[j];
@@ -287,6 +366,8 @@ static int check(struct conf *c, const struct ini_file *f, char *err)
 			if (strcmp(f->sections[i].name, "session") == 0 &&
 			    strcmp(e->key, "max_frame_kb") == 0)
 				frame_line = e->line;
+			if (strcmp(f->sections[i].name, "http") == 0 && strcmp(e->key, "listen") == 0)
+				http_line = e->line;
 		}
 	if (!c->token_file) {
 		for (int i = 0; i < c->ntcp; i++) {
@@ -300,6 +381,12 @@ static int check(struct conf *c, const struct ini_file *f, char *err)
 			return cerr(err, path, tok_line, "require_token",
 				    "\"all\" requires a token: set token_file");
 	}
+	if (c->http_listen && !c->http_open && !c->token_file &&
+	    !conf_addr_is_loopback(c->http_listen))
+		return cerr(err, path, http_line, "listen",
+			    "HTTP on %s (not loopback) requires a token (set [listen] token_file) "
+			    "or open = true",
+			    c->http_listen);
 	if (c->unix_path && strlen(c->unix_path) >= 108)
 		return cerr(err, path, unix_line, "unix", "path longer than 107 bytes");
 	if (!c->unix_path && c->ntcp == 0)
@@ -345,7 +432,7 @@ int conf_parse(const char *path, const char *text, size_t len, struct conf *c, c
 					  "key outside any section");
 			else
 				rc = cerr(err, path, s->line, NULL,
-					  "unknown section [%s] (expected listen, engine, session, log, store)",
+					  "unknown section [%s] (expected listen, engine, session, log, store, http)",
 					  s->name);
 			break;
 		}
@@ -422,5 +509,7 @@ void conf_fini(struct conf *c)
 	free(c->token_file);
 	free(c->planets_dir);
 	free(c->store_path);
+	free(c->http_listen);
+	free(c->http_cesium);
 	memset(c, 0, sizeof *c);
 }

@@ -38,7 +38,11 @@ struct conf {
 	int ntcp;
 	char *token_file;   /* NULL: no token (then no listener may require one) */
 	enum conf_token_policy require_token;
-	int max_sessions;
+	int max_sessions;	  /* authenticated sessions (the Unix socket has UNIX_RESERVE more) */
+	int max_preauth;	  /* connections before HELLO_OK, per listener kind (Unix, TCP) */
+	int max_preauth_per_peer; /* of those, per TCP peer address */
+	int handshake_timeout;	  /* s from accept to HELLO_OK */
+	int frame_timeout;	  /* s a frame may take to arrive once its first byte has */
 	/* [engine] */
 	char *planets_dir;
 	bool strict_planets; /* a bad planet file stops the daemon (else it is skipped) */
@@ -50,11 +54,24 @@ struct conf {
 	uint32_t max_want, max_rate, max_frame, max_jobs;
 	uint64_t max_pending;
 	enum conf_compress compress;
+	/* [prefetch] (prefetch.h's struct prefetch_limits) */
+	uint64_t pf_max_tiles, pf_max_tiles_local, pf_max_tiles_total;
+	uint32_t pf_max_jobs_local, pf_max_jobs_total;
 	/* [log] */
 	enum log_level log_level;
 	/* [store] */
 	char *store_path;     /* the disk tier's LMDB file; NULL: no disk tier */
 	uint64_t store_bytes; /* its budget at rest (disk_mb) */
+	/* [http] */
+	char *http_listen;     /* "host:port"; NULL: no HTTP endpoint */
+	char *http_cesium;     /* CesiumJS's Build/Cesium; NULL: beside the program (build tree) */
+	bool http_open;	       /* non-loopback without the token */
+	int http_threads;      /* libmicrohttpd's thread pool */
+	int http_max_conns;    /* connections at once */
+	int http_max_per_addr; /* per client address; 0: no limit */
+	int http_timeout_s;    /* an idle or slow connection is closed after it */
+	int http_max_age_s;    /* Cache-Control max-age of tiles */
+	int http_cache_mb;     /* encoded tiles kept by ETag, MiB */
 };
 
 /* Reads and checks a config file into c (zeroed by the call). Returns 0 or -errno with err

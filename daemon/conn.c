@@ -62,20 +62,35 @@ ssize_t conn_recv(struct conn *c)
 	}
 }
 
-ssize_t conn_decode(struct conn *c, uint32_t max_frame, struct proto_msg *m, uint16_t *code,
-		    uint16_t *type, char err[256])
+ssize_t conn_decode(struct conn *c, enum proto_state st, uint32_t max_frame, struct proto_msg *m,
+		    uint16_t *code, uint16_t *type, char err[256])
 {
 	struct proto_hdr h = { 0 };
 	size_t need = 0;
 	err[0] = '\0';
 	ssize_t r = proto_frame_check(c->in.data, c->in.len, &h, &need, err);
-	if (r >= 0 && c->in.len >= PROTO_HDR && max_frame &&
-	    (uint64_t)h.length + PROTO_HDR > max_frame) {
-		*code = PROTO_E_LIMIT;
-		*type = h.type;
-		err_set(err, "frame of %u bytes exceeds this session's limit of %u",
-			h.length + PROTO_HDR, max_frame);
-		return -EPROTO;
+	if (r >= 0 && c->in.len >= PROTO_HDR) {
+		/* Decided at the header, so a body that may not come costs nothing. */
+		if (proto_check_state(st, false, h.type, err)) {
+			*code = PROTO_E_STATE;
+			*type = h.type;
+			return -EPROTO;
+		}
+		uint64_t size = (uint64_t)h.length + PROTO_HDR;
+		if (st == PROTO_ST_HANDSHAKE && size > CONN_PREAUTH_FRAME) {
+			*code = PROTO_E_LIMIT;
+			*type = h.type;
+			err_set(err, "frame of %llu bytes before the handshake exceeds the limit of %u",
+				(unsigned long long)size, CONN_PREAUTH_FRAME);
+			return -EPROTO;
+		}
+		if (max_frame && size > max_frame) {
+			*code = PROTO_E_LIMIT;
+			*type = h.type;
+			err_set(err, "frame of %llu bytes exceeds this session's limit of %u",
+				(unsigned long long)size, max_frame);
+			return -EPROTO;
+		}
 	}
 	if (r == 0)
 		return 0;
@@ -130,4 +145,13 @@ void conn_throttle(struct conn *c, uint64_t max_pending)
 		c->reading = true; /* resume input once the peer reads again */
 	else if (c->reading && pend > 2 * max_pending)
 		c->reading = false;
+}
+
+void conn_compact(struct conn *c)
+{
+	if (!c->out_off)
+		return;
+	memmove(c->out.data, c->out.data + c->out_off, c->out.len - c->out_off);
+	c->out.len -= c->out_off;
+	c->out_off = 0;
 }

@@ -36,12 +36,20 @@ uint64_t conn_pending(const struct conn *c);
 /* Receives once (up to 64 KiB) into `in`. Returns the bytes read (> 0), 0 at end of stream,
  * -EAGAIN when nothing is waiting, or another -errno. */
 ssize_t conn_recv(struct conn *c);
+/* The largest frame (header included) a peer may send before its HELLO is answered: a HELLO
+ * at its wire cap. */
+#define CONN_PREAUTH_FRAME (PROTO_HDR + 2048u)
+
 /* Decodes the frame at the start of `in` into m (zeroed). Returns its size (> 0: handle m,
  * proto_msg_fini it, then conn_consume that size), 0 when more bytes are needed, or -EPROTO
  * when the stream cannot go on: *code is the ERROR code to answer with, *type the frame's
- * type (0 when its header has not arrived), err the message. max_frame 0: no cap. */
-ssize_t conn_decode(struct conn *c, uint32_t max_frame, struct proto_msg *m, uint16_t *code,
-		    uint16_t *type, char err[256]);
+ * type (0 when its header has not arrived), err the message. As soon as the header is in, and
+ * before any of the body is kept: a type the client may not send in state st (a server-to-
+ * client type at any time, anything but HELLO and BYE before the handshake) is `state`; a
+ * frame over max_frame (0: no cap), or over CONN_PREAUTH_FRAME before the handshake, is
+ * `limit`. */
+ssize_t conn_decode(struct conn *c, enum proto_state st, uint32_t max_frame, struct proto_msg *m,
+		    uint16_t *code, uint16_t *type, char err[256]);
 void conn_consume(struct conn *c, size_t n);
 /* Writes what the socket takes and updates want_out; the bytes written are added to *sent.
  * Returns 0 or -errno (the connection failed). */
@@ -49,5 +57,7 @@ int conn_flush(struct conn *c, uint64_t *sent);
 /* Output backpressure: stops reading above 2 × max_pending unsent bytes, resumes below
  * max_pending. */
 void conn_throttle(struct conn *c, uint64_t max_pending);
+/* Moves the unsent output to the start of the buffer (before growing it). */
+void conn_compact(struct conn *c);
 
 #endif

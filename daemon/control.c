@@ -1,7 +1,9 @@
-/* control — see control.h. CACHE_LS walks the cache under its lock (cache_foreach), so the
- * filter is cheap and the entries are copied out before any reply is encoded. A job's ready
- * reports come back through the ready queue naming the job; one finished or cancelled since
- * is recognised by its absence from the job list.
+/* control — see control.h. CACHE_LS and CACHE_OP run on a thread of their own (cacheop.h)
+ * whose end comes back through the ready queue (err OP_DONE, the op's slot in the job field);
+ * their replies are then sent in one go. A job's ready reports come back through the ready
+ * queue naming the job; one finished or cancelled since is recognised by its absence from the
+ * job list. Jobs are sized (prefetch_estimate) and checked against the [prefetch] caps and
+ * the budget of the tier they fill before anything is enumerated.
  */
 #include "control.h"
 
@@ -10,13 +12,13 @@
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <string.h>
 
+#include "cacheop.h"
 #include "common/clock.h"
 #include "common/log.h"
 #include "common/xalloc.h"
 
-#define CACHE_LS_DEFAULT 10000u
-#define CACHE_LS_MAX (1u << 20)
 
 static void __attribute__((format(printf, 5, 6)))
 errorf(struct control *c, uint16_t code, uint16_t ref_type, uint32_t ref_id, const char *fmt, ...)
@@ -35,112 +37,130 @@ void control_init(struct control *c, const struct session_env *env,
 	*c = (struct control){ .env = env, .host = *host };
 }
 
-/* ---- CACHE_LS --------------------------------------------------------------------------- */
+/* ---- CACHE_OP ----------------------------------------------------------------------------- */
 
-struct lsctx {
-	const struct proto_cache_ls *q;
-	const uint64_t *nodes;
-	size_t nnodes;
-	struct proto_cache_entry *out;
-	size_t n, limit;
-	uint64_t total;
-	uint64_t now_ns; /* cache_now_ns() when the listing started */
+#define CONTROL_MAX_OPS 4 /* CACHE_LS / CACHE_OP running at once per session */
+#define OP_DONE 2 /* a ready item's err: its job pointer is a struct control_op whose op is done */
+
+struct control_op {
+	struct control *c;
+	struct cacheop *op;
 };
 
-/* Great-circle distance (metres, mean Earth-like radius r) from (lon, lat) to the nearest
- * point of the tile's rectangle: a spherical approximation, good enough for a listing filter
- * and cheap enough to run under the cache lock. */
-static double rect_distance(const struct geo_rect *rc, double lon, double lat, double r)
+/* Runs on the op's thread: only tells the loop. The ready item's job field carries the slot
+ * (never dereferenced as a job: control_job_ready looks at err first). */
+static void op_done_cb(void *ud)
 {
-	double clat = fmin(fmax(lat, rc->south), rc->north);
-	double w = rc->west, e = rc->east, l = fmod(lon + 540.0, 360.0) - 180.0;
-	double clon;
-	if (l >= w && l <= e) {
-		clon = l;
-	} else {
-		double dw = fmod(w - l + 720.0, 360.0), de = fmod(l - e + 720.0, 360.0);
-		clon = dw < de ? w : e;
-	}
-	double p1 = lat * M_PI / 180, p2 = clat * M_PI / 180;
-	double dl = (clon - l) * M_PI / 180;
-	double h = sin((p2 - p1) / 2) * sin((p2 - p1) / 2) +
-		   cos(p1) * cos(p2) * sin(dl / 2) * sin(dl / 2);
-	return 2 * r * asin(fmin(1.0, sqrt(h)));
+	struct control_op *slot = ud;
+	const struct control *c = slot->c;
+	struct ready_item it = { .s = c->host.s, .job = (struct prefetch_job *)(void *)slot,
+				 .err = OP_DONE };
+	readyq_push(c->env->ready, &it);
 }
 
-static int ls_fn(void *ud, const struct tile *t, uint64_t used_ns)
+static void op_remove(struct control *c, size_t i)
 {
-	struct lsctx *c = ud;
-	const struct proto_cache_ls *q = c->q;
-	if (q->filter & PROTO_CLS_PLANET) {
-		bool found = false;
-		for (size_t i = 0; i < c->nnodes && !found; i++)
-			found = c->nodes[i] == t->key.node;
-		if (!found)
-			return 0;
-	}
-	if ((q->filter & PROTO_CLS_LEVEL) &&
-	    ((q->lx != PROTO_ANY_LX && t->key.lx != q->lx) || t->key.ly != q->ly))
-		return 0;
-	if (q->filter & PROTO_CLS_NEAR) {
-		struct geo_rect rc;
-		grid_tile_rect(&t->key, &rc);
-		if (rect_distance(&rc, q->lon, q->lat, 6371008.8) > q->radius_m)
-			return 0;
-	}
-	c->total++;
-	uint64_t age = c->now_ns > used_ns ? (c->now_ns - used_ns) / 1000000000ull : 0;
-	if (c->n < c->limit)
-		c->out[c->n++] = (struct proto_cache_entry){ .key = t->key, .format = (uint8_t)t->type,
-							    .tier = PROTO_TIER_MEMORY,
-							    .bytes = (uint32_t)t->nbytes,
-							    .age_s = age > UINT32_MAX ? UINT32_MAX
-										      : (uint32_t)age };
-	return 0;
+	cacheop_destroy(c->ops[i]->op);
+	free(c->ops[i]);
+	c->ops[i] = c->ops[--c->nops];
 }
 
-void control_cache_ls(struct control *ctl, const struct proto_cache_ls *q)
+/* Whether another listing or maintenance op may start (each has a thread): else ERROR busy. */
+static bool op_room(struct control *c, uint16_t ref_type, uint32_t req)
 {
-	struct lsctx c = { .q = q };
-	uint64_t *nodes = NULL;
-	if (q->filter & PROTO_CLS_PLANET) {
-		const struct planet *p = planet_set_find(*ctl->env->planets, q->planet);
-		if (!p) {
-			errorf(ctl, PROTO_E_NOT_FOUND, PROTO_CACHE_LS, q->req, "no planet \"%s\"",
-			       q->planet);
-			return;
-		}
-		nodes = xmalloc((p->nnodes + 1) * sizeof *nodes);
-		for (size_t i = 0; i < p->nnodes; i++)
-			nodes[i] = p->nodes[i]->hash;
-		c.nodes = nodes;
-		c.nnodes = p->nnodes;
-	}
-	c.limit = q->limit ? q->limit : CACHE_LS_DEFAULT;
-	if (c.limit > CACHE_LS_MAX)
-		c.limit = CACHE_LS_MAX;
-	struct cache_stats cs;
-	cache_stats(ctl->env->cache, &cs);
-	size_t cap = cs.tiles + 64 < c.limit ? cs.tiles + 64 : c.limit;
-	c.out = xmalloc((cap ? cap : 1) * sizeof *c.out);
-	c.limit = cap;
-	c.now_ns = cache_now_ns();
-	cache_foreach(ctl->env->cache, ls_fn, &c);
-	size_t off = 0;
-	do {
-		size_t k = c.n - off > PROTO_MAX_CACHE_ENTRIES ? PROTO_MAX_CACHE_ENTRIES : c.n - off;
-		struct proto_msg m = { .type = PROTO_CACHE_ENTRIES,
-				       .cache_entries = { .req = q->req, .more = off + k < c.n,
-							  .total = c.total, .count = (uint32_t)k,
-							  .entries = c.out + off } };
-		ctl->host.send(ctl->host.s, &m);
-		off += k;
-	} while (off < c.n);
-	free(c.out);
-	free(nodes);
+	if (c->nops < CONTROL_MAX_OPS)
+		return true;
+	errorf(c, PROTO_E_BUSY, ref_type, req,
+	       "%zu cache listings or operations running: this session's limit is %d", c->nops,
+	       CONTROL_MAX_OPS);
+	return false;
 }
 
-/* ---- PREFETCH --------------------------------------------------------------------------- */
+void control_cache_op(struct control *c, const struct proto_cache_op *q)
+{
+	if (!op_room(c, PROTO_CACHE_OP, q->req))
+		return;
+	struct control_op *slot = xcalloc(1, sizeof *slot);
+	slot->c = c;
+	char err[256];
+	int rc = cacheop_start(q, *c->env->planets, c->env->cache, sched_store(c->env->sched),
+			       op_done_cb, slot, &slot->op, err);
+	if (rc) {
+		free(slot);
+		errorf(c, rc == -ENOENT ? PROTO_E_NOT_FOUND : PROTO_E_UNAVAILABLE, PROTO_CACHE_OP,
+		       q->req, "%s", err);
+		return;
+	}
+	c->ops = xrealloc(c->ops, (c->nops + 1) * sizeof *c->ops);
+	c->ops[c->nops++] = slot;
+}
+
+/* The op of slot is done: its replies, then it goes. Returns whether it was still ours. */
+static bool op_finished(struct control *c, const struct control_op *slot)
+{
+	for (size_t i = 0; i < c->nops; i++) {
+		if (c->ops[i] != slot)
+			continue;
+		const struct proto_msg *msgs;
+		size_t n = cacheop_replies(slot->op, &msgs);
+		for (size_t k = 0; k < n; k++)
+			c->host.send(c->host.s, &msgs[k]);
+		if (n && msgs[n - 1].type == PROTO_CACHE_DONE && msgs[n - 1].cache_done.removed)
+			log_msg(LOG_INFO, "session %llu: cache op %u removed %llu entries",
+				(unsigned long long)c->host.id, msgs[n - 1].cache_done.op,
+				(unsigned long long)msgs[n - 1].cache_done.removed);
+		op_remove(c, i);
+		return true;
+	}
+	return false;
+}
+
+void control_cache_ls(struct control *c, const struct proto_cache_ls *q)
+{
+	if (!op_room(c, PROTO_CACHE_LS, q->req))
+		return;
+	struct control_op *slot = xcalloc(1, sizeof *slot);
+	slot->c = c;
+	char err[256];
+	int rc = cacheop_start_ls(q, *c->env->planets, c->env->cache, sched_store(c->env->sched),
+				  op_done_cb, slot, &slot->op, err);
+	if (rc) {
+		free(slot);
+		errorf(c, rc == -ENOENT ? PROTO_E_NOT_FOUND : PROTO_E_INTERNAL, PROTO_CACHE_LS,
+		       q->req, "%s", err);
+		return;
+	}
+	c->ops = xrealloc(c->ops, (c->nops + 1) * sizeof *c->ops);
+	c->ops[c->nops++] = slot;
+}
+
+/* ---- PREFETCH ---------------------------------------------------------------------------- */
+
+#define JOB_FED 1 /* a ready item's err: the job's builder has keys (not a tile report) */
+/* Jobs take no new keys while the disk tier has this many writes queued: bulk work waits for
+ * the writer rather than have its writes dropped (viewers' writes keep the rest of the queue). */
+#define STORE_QUEUE_HOLD 256
+
+/* Whether the disk tier's writer is behind (jobs pause until the next tick). */
+static bool store_behind(const struct control *c)
+{
+	struct store *st = sched_store(c->env->sched);
+	if (!st)
+		return false;
+	struct store_stats ss;
+	store_stat(st, &ss);
+	return ss.queued >= STORE_QUEUE_HOLD;
+}
+
+bool control_token_ok(const struct session_env *env, const struct proto_hello *h)
+{
+	if (!env->have_token || h->token_len != env->token_len)
+		return false;
+	unsigned diff = 0;
+	for (size_t i = 0; i < env->token_len; i++)
+		diff |= env->token[i] ^ h->token[i];
+	return diff == 0;
+}
 
 static void send_progress(struct control *c, struct prefetch_job *j)
 {
@@ -167,6 +187,11 @@ static void retire(struct control *c, struct planet_set *ps)
 
 static void job_remove(struct control *c, size_t i)
 {
+	struct prefetch_limits *lim = c->env->prefetch;
+	if (lim) {
+		lim->jobs--;
+		lim->tiles -= c->jobs[i]->charged;
+	}
 	prefetch_job_destroy(c->jobs[i]); /* stops its scheduler request first */
 	retire(c, c->jobsets[i]);
 	c->njobs--;
@@ -184,14 +209,126 @@ static void job_ready_cb(void *ud, const struct want *w, struct tile *t, int err
 	readyq_push(c->env->ready, &it);
 }
 
+/* Runs on the job's builder thread: keys are queued; only tells the loop. */
+static void job_fed_cb(void *ud)
+{
+	struct prefetch_job *j = ud;
+	const struct control *c = j->owner;
+	struct ready_item it = { .s = c->host.s, .job = j, .err = JOB_FED };
+	readyq_push(c->env->ready, &it);
+}
+
+/* Where a job's tiles go and what they take there: the disk tier when there is one (bytes at
+ * rest: the store's mean value size once it holds a few tiles, else the raw size, an upper
+ * bound), else the memory cache (raw bytes). */
+struct budget {
+	uint8_t tier;
+	uint64_t budget, used;
+	double per_raw; /* bytes held per raw tile byte */
+};
+
+static void tier_budget(const struct control *c, struct budget *b)
+{
+	struct store *st = sched_store(c->env->sched);
+	if (st) {
+		struct store_stats ss;
+		store_stat(st, &ss);
+		*b = (struct budget){ .tier = PROTO_TIER_DISK, .budget = ss.budget, .used = ss.bytes,
+				      .per_raw = 1.0 };
+		return;
+	}
+	struct cache_stats cs;
+	cache_stats(c->env->cache, &cs);
+	*b = (struct budget){ .tier = PROTO_TIER_MEMORY, .budget = cs.budget, .used = cs.bytes,
+			      .per_raw = 1.0 };
+}
+
+/* Bytes for n tiles whose raw size averages raw bytes each. */
+static uint64_t est_bytes(const struct control *c, const struct budget *b, uint64_t n,
+			  double raw)
+{
+	double per = raw;
+	struct store *st = b->tier == PROTO_TIER_DISK ? sched_store(c->env->sched) : NULL;
+	if (st) {
+		struct store_stats ss;
+		store_stat(st, &ss);
+		if (ss.tiles >= 64)
+			per = fmin((double)ss.bytes / (double)ss.tiles, raw + 4096.0);
+		else
+			per = raw + 4096.0; /* uncompressed, a page of header and index */
+	}
+	double v = per * (double)n;
+	return v >= 1.8e19 ? UINT64_MAX : (uint64_t)v;
+}
+
+static uint64_t job_limit(const struct control *c)
+{
+	const struct prefetch_limits *lim = c->env->prefetch;
+	if (!lim)
+		return PREFETCH_MAX_TILES;
+	uint64_t t = c->authed ? lim->max_tiles : lim->max_tiles_local;
+	return t < PREFETCH_MAX_TILES ? t : PREFETCH_MAX_TILES;
+}
+
+static double mib(uint64_t b) { return (double)b / (1024.0 * 1024.0); }
+
+/* Estimates m; on a failure answers the ERROR (ref_type) and returns false. */
+static bool estimate(struct control *c, uint16_t ref_type, const struct proto_prefetch *m,
+		     const struct planet **pp, struct prefetch_estimate *e)
+{
+	const struct planet *p = planet_set_find(*c->env->planets, m->planet);
+	if (!p) {
+		errorf(c, PROTO_E_NOT_FOUND, ref_type, m->id, "no planet \"%s\"", m->planet);
+		return false;
+	}
+	char err[256];
+	if (prefetch_estimate(p, m, e, err)) {
+		errorf(c, PROTO_E_INVALID, ref_type, m->id, "%s", err);
+		return false;
+	}
+	*pp = p;
+	return true;
+}
+
+static unsigned nlayers_of(const struct planet *p, const struct proto_prefetch *m)
+{
+	unsigned n = 0;
+	for (size_t i = 0; i < p->nlayers && i < 64; i++)
+		n += m->layers == 0 || (m->layers >> i) & 1;
+	return n ? n : 1;
+}
+
+void control_prefetch_dry(struct control *c, const struct proto_prefetch *m)
+{
+	const struct planet *p;
+	struct prefetch_estimate e;
+	if (!estimate(c, PROTO_PREFETCH_DRY, m, &p, &e))
+		return;
+	struct budget b;
+	tier_budget(c, &b);
+	double raw = (double)e.tile_bytes / nlayers_of(p, m);
+	struct proto_estimate_level lv[GRID_MAX_LEVEL + 1];
+	uint8_t n = 0;
+	uint64_t bytes = 0;
+	for (int ly = e.lmin; ly <= e.lmax; ly++) {
+		lv[n] = (struct proto_estimate_level){ .ly = (uint8_t)ly,
+						       .tiles = e.level_tiles[ly],
+						       .bytes = est_bytes(c, &b, e.level_tiles[ly], raw) };
+		bytes = bytes + lv[n].bytes < bytes ? UINT64_MAX : bytes + lv[n].bytes;
+		n++;
+	}
+	struct proto_msg r = { .type = PROTO_PREFETCH_ESTIMATE,
+			       .prefetch_estimate = { .id = m->id, .tier = b.tier, .tiles = e.tiles,
+						      .bytes = bytes, .budget = b.budget,
+						      .used = b.used, .max_tiles = job_limit(c),
+						      .nlevels = n, .levels = lv } };
+	c->host.send(c->host.s, &r);
+}
+
 void control_prefetch(struct control *c, const struct proto_prefetch *m)
 {
 	const struct session_env *env = c->env;
-	const struct planet *p = planet_set_find(*env->planets, m->planet);
-	if (!p) {
-		errorf(c, PROTO_E_NOT_FOUND, PROTO_PREFETCH, m->id, "no planet \"%s\"", m->planet);
-		return;
-	}
+	struct prefetch_limits *lim = env->prefetch;
 	for (size_t i = 0; i < c->njobs; i++) {
 		if (c->jobs[i]->id == m->id) {
 			errorf(c, PROTO_E_INVALID, PROTO_PREFETCH, m->id, "job %u is already running",
@@ -199,15 +336,63 @@ void control_prefetch(struct control *c, const struct proto_prefetch *m)
 			return;
 		}
 	}
-	if (c->njobs >= env->max_jobs) {
+	uint32_t max_jobs = env->max_jobs;
+	if (lim && !c->authed && lim->max_jobs_local < max_jobs)
+		max_jobs = lim->max_jobs_local;
+	if (c->njobs >= max_jobs) {
 		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, m->id,
-		       "%zu prefetch jobs running: this session's limit is %u", c->njobs,
-		       env->max_jobs);
+		       "%zu prefetch jobs running: this session's limit is %u%s", c->njobs, max_jobs,
+		       !c->authed && lim && max_jobs == lim->max_jobs_local
+			       ? " ([prefetch] max_jobs_local: no token presented)"
+			       : "");
+		return;
+	}
+	if (lim && lim->jobs >= lim->max_jobs_total) {
+		errorf(c, PROTO_E_BUSY, PROTO_PREFETCH, m->id,
+		       "%u prefetch jobs running on this server: its limit is %u", lim->jobs,
+		       lim->max_jobs_total);
+		return;
+	}
+	/* Sized before anything is enumerated. */
+	const struct planet *p;
+	struct prefetch_estimate e;
+	if (!estimate(c, PROTO_PREFETCH, m, &p, &e))
+		return;
+	uint64_t limit = job_limit(c);
+	if (e.tiles > limit) {
+		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, m->id,
+		       "prefetch job %u: about %llu tiles (levels %u-%u) exceeds this session's "
+		       "limit of %llu tiles per job%s",
+		       m->id, (unsigned long long)e.tiles, m->lmin, m->lmax,
+		       (unsigned long long)limit,
+		       c->authed ? " ([prefetch] max_tiles)"
+				 : " ([prefetch] max_tiles_local: no token presented)");
+		return;
+	}
+	if (lim && lim->tiles + e.tiles > lim->max_tiles_total) {
+		errorf(c, PROTO_E_BUSY, PROTO_PREFETCH, m->id,
+		       "prefetch job %u: about %llu tiles; running jobs hold %llu of this server's "
+		       "%llu ([prefetch] max_tiles_total)",
+		       m->id, (unsigned long long)e.tiles, (unsigned long long)lim->tiles,
+		       (unsigned long long)lim->max_tiles_total);
+		return;
+	}
+	struct budget b;
+	tier_budget(c, &b);
+	uint64_t bytes = est_bytes(c, &b, e.tiles, (double)e.tile_bytes / nlayers_of(p, m));
+	if (b.budget && bytes > b.budget) {
+		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, m->id,
+		       "prefetch job %u: about %llu tiles, %.1f MiB in the %s tier (levels %u-%u), "
+		       "exceeds its budget of %.1f MiB (%s): it would evict itself",
+		       m->id, (unsigned long long)e.tiles, mib(bytes),
+		       b.tier == PROTO_TIER_DISK ? "disk" : "memory", m->lmin, m->lmax,
+		       mib(b.budget),
+		       b.tier == PROTO_TIER_DISK ? "[store] disk_mb" : "[engine] cache_mb");
 		return;
 	}
 	struct prefetch_job *j;
 	char err[256];
-	int rc = prefetch_job_create(p, m, clock_now_ns(), &j, err);
+	int rc = prefetch_job_create(p, m, limit, e.tiles, clock_now_ns(), &j, err);
 	if (rc) {
 		errorf(c, rc == -E2BIG ? PROTO_E_LIMIT : PROTO_E_INVALID, PROTO_PREFETCH, m->id, "%s",
 		       err);
@@ -220,30 +405,33 @@ void control_prefetch(struct control *c, const struct proto_prefetch *m)
 	/* The job borrows p: it keeps the set holding it (a reload does not move jobs). */
 	c->jobsets[c->njobs] = planet_set_ref(*env->planets);
 	c->jobs[c->njobs++] = j;
-	log_msg(LOG_INFO, "session %llu: prefetch job %u on %s: %llu tiles, levels %u-%u",
+	if (lim) {
+		lim->jobs++;
+		lim->tiles += e.tiles;
+		j->charged = e.tiles;
+	}
+	if ((rc = prefetch_job_start(j, job_fed_cb, j))) {
+		errorf(c, PROTO_E_INTERNAL, PROTO_PREFETCH, m->id, "prefetch job %u: no thread: %s",
+		       m->id, strerror(-rc));
+		job_remove(c, c->njobs - 1);
+		return;
+	}
+	log_msg(LOG_INFO, "session %llu: prefetch job %u on %s: about %llu tiles, levels %u-%u",
 		(unsigned long long)c->host.id, j->id, p->name, (unsigned long long)j->total,
 		m->lmin, m->lmax);
 	send_progress(c, j);
-	prefetch_job_start(j);
-	if (j->state != PROTO_JOB_RUNNING) { /* nothing to do */
-		send_progress(c, j);
-		job_remove(c, c->njobs - 1);
-	}
 }
 
-bool control_job_ready(struct control *c, const struct ready_item *it)
+/* Job i has finished: its last report, then it goes. */
+static void job_finished(struct control *c, size_t i)
 {
-	size_t i = 0;
-	while (i < c->njobs && c->jobs[i] != it->job)
-		i++;
-	if (i == c->njobs)
-		return false; /* cancelled since */
-	struct prefetch_job *j = it->job;
-	if (!prefetch_job_ready(j, &it->key, it->err))
-		return false;
+	struct prefetch_job *j = c->jobs[i];
 	prefetch_job_tick(j, clock_now_ns());
 	send_progress(c, j);
-	if (j->state == PROTO_JOB_FAILED)
+	if (j->state == PROTO_JOB_FAILED && j->err[0])
+		errorf(c, PROTO_E_LIMIT, PROTO_PREFETCH, j->id, "prefetch job %u stopped: %s", j->id,
+		       j->err);
+	else if (j->state == PROTO_JOB_FAILED)
 		errorf(c, PROTO_E_UNAVAILABLE, PROTO_PREFETCH, j->id,
 		       "prefetch job %u: %llu of %llu tiles failed", j->id,
 		       (unsigned long long)j->failed, (unsigned long long)j->total);
@@ -251,6 +439,22 @@ bool control_job_ready(struct control *c, const struct ready_item *it)
 		(unsigned long long)c->host.id, j->id, (unsigned long long)j->done,
 		(unsigned long long)j->failed);
 	job_remove(c, i);
+}
+
+bool control_job_ready(struct control *c, const struct ready_item *it)
+{
+	if (it->err == OP_DONE)
+		return op_finished(c, (const struct control_op *)(const void *)it->job);
+	size_t i = 0;
+	while (i < c->njobs && c->jobs[i] != it->job)
+		i++;
+	if (i == c->njobs)
+		return false; /* cancelled since */
+	struct prefetch_job *j = it->job;
+	j->paused = store_behind(c);
+	if (!(it->err == JOB_FED ? prefetch_job_fed(j) : prefetch_job_ready(j, &it->key, it->err)))
+		return false;
+	job_finished(c, i);
 	return true;
 }
 
@@ -271,11 +475,23 @@ void control_prefetch_cancel(struct control *c, uint32_t id)
 
 bool control_tick(struct control *c, uint64_t now_ns)
 {
-	for (size_t i = 0; i < c->njobs; i++) {
-		prefetch_job_tick(c->jobs[i], now_ns);
-		send_progress(c, c->jobs[i]);
+	bool sent = c->njobs > 0;
+	bool behind = c->njobs && store_behind(c);
+	for (size_t i = 0; i < c->njobs;) {
+		struct prefetch_job *j = c->jobs[i];
+		if (j->paused && !behind) { /* resume a job the writer held */
+			j->paused = false;
+			if (prefetch_job_fed(j)) {
+				prefetch_job_tick(j, now_ns);
+				job_finished(c, i); /* removes it: i now names the next */
+				continue;
+			}
+		}
+		prefetch_job_tick(j, now_ns);
+		send_progress(c, j);
+		i++;
 	}
-	return c->njobs > 0;
+	return sent;
 }
 
 void control_cancel_all(struct control *c)
@@ -292,6 +508,8 @@ void control_stop(struct control *c)
 {
 	while (c->njobs)
 		job_remove(c, c->njobs - 1);
+	while (c->nops)
+		op_remove(c, c->nops - 1);
 }
 
 void control_fini(struct control *c)
@@ -299,6 +517,7 @@ void control_fini(struct control *c)
 	control_stop(c);
 	free(c->jobs);
 	free(c->jobsets);
+	free(c->ops);
 	for (size_t i = 0; i < c->nretired; i++)
 		planet_set_unref(c->retired[i]);
 	free(c->retired);

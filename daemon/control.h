@@ -1,6 +1,7 @@
-/* control — a session's control requests: CACHE_LS (the memory cache's tiles, filtered by
- * planet, level or distance) and PREFETCH / PREFETCH_CANCEL with the prefetch jobs they start
- * (prefetch.h enumerates a job's tiles; here they are run, reported and cancelled).
+/* control — a session's control requests: CACHE_LS (the memory and disk tiers' tiles,
+ * filtered by planet, level or distance), CACHE_OP (stat, purge, gc, verify), PREFETCH_DRY,
+ * and PREFETCH / PREFETCH_CANCEL with the prefetch jobs they start (prefetch.h enumerates a
+ * job's tiles; here they are sized, capped, run, reported and cancelled).
  *
  * Threads: the loop thread; a job's scheduler callback only pushes onto env->ready.
  * Ownership: a control belongs to one session and owns its jobs and the planet-set references
@@ -35,6 +36,9 @@ struct control {
 	size_t njobs;
 	struct planet_set **retired; /* sets of finished jobs, released by control_fini */
 	size_t nretired;
+	bool authed; /* the client presented the token: [prefetch] max_tiles, else the _local caps */
+	struct control_op **ops; /* CACHE_OPs running (cacheop.h) */
+	size_t nops;
 };
 
 void control_init(struct control *c, const struct session_env *env,
@@ -44,10 +48,16 @@ void control_stop(struct control *c);
 /* control_stop, then releases the retired sets. */
 void control_fini(struct control *c);
 void control_cache_ls(struct control *c, const struct proto_cache_ls *q);
+/* CACHE_OP: stat, purge, gc or verify, run off the loop; its replies follow when it is done. */
+void control_cache_op(struct control *c, const struct proto_cache_op *q);
 void control_prefetch(struct control *c, const struct proto_prefetch *m);
 void control_prefetch_cancel(struct control *c, uint32_t id);
-/* A ready report of one of the jobs (it->job). Returns true when it finished a job (its last
- * report was sent: flush). */
+/* PREFETCH_DRY: the job's estimate (PREFETCH_ESTIMATE), nothing started. */
+void control_prefetch_dry(struct control *c, const struct proto_prefetch *m);
+/* Whether HELLO h carries the server's token (constant time in the token's content). */
+bool control_token_ok(const struct session_env *env, const struct proto_hello *h);
+/* A ready report of one of the jobs (it->job), or of a CACHE_OP done. Returns true when it
+ * finished a job or an op (its last reply was sent: flush). */
 bool control_job_ready(struct control *c, const struct ready_item *it);
 /* Progress reports of every running job. Returns true when one was sent. */
 bool control_tick(struct control *c, uint64_t now_ns);

@@ -22,6 +22,10 @@
 #include "common/log.h"
 
 #define UNIX_SNDBUF (4 << 20) /* bytes asked for per Unix session */
+/* Connections the kernel queues before accept (capped by net.core.somaxconn): deep, so a
+ * burst of connections (an attacker's) does not make the kernel drop a client's SYN, which
+ * costs it a 1 s retransmission; the pre-auth pools bound what is accepted. */
+#define BACKLOG 4096
 
 static bool sa_loopback(const struct sockaddr_storage *ss)
 {
@@ -71,28 +75,63 @@ static void classify(const struct conf *c, struct listener *l)
 		      (c->compress == CONF_COMPRESS_AUTO && !l->is_unix && !l->loopback);
 }
 
-/* Returns the listening fd or -errno with err filled. */
-static int listen_unix(const struct conf *c, const char *path, char err[256])
+/* Whether a server answers on the Unix socket at path: 0 when none does (the file is stale:
+ * the connection is refused), -EADDRINUSE when one accepts or its backlog is full, another
+ * -errno when the path cannot be tried (err filled). */
+static int probe_unix(const struct sockaddr_un *sa, char err[256])
 {
-	struct sockaddr_un sa = { .sun_family = AF_UNIX };
-	snprintf(sa.sun_path, sizeof sa.sun_path, "%s", path);
 	int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
 	if (fd < 0) {
 		int e = -errno;
 		err_set(err, "unix socket: %s", strerror(-e));
 		return e;
 	}
+	int rc = connect(fd, (const struct sockaddr *)sa, sizeof *sa) ? -errno : 0;
+	close(fd);
+	if (rc == -ECONNREFUSED)
+		return 0;
+	if (rc == 0 || rc == -EAGAIN || rc == -EINPROGRESS) {
+		err_set(err, "%s: already in use by a running server (it accepted a connection); "
+			"stop it first, or set another [listen] unix path", sa->sun_path);
+		return -EADDRINUSE;
+	}
+	err_set(err, "%s: exists and cannot be tried: %s", sa->sun_path, strerror(-rc));
+	return rc;
+}
+
+/* Opens l's listening fd on path. Returns 0 or -errno with err filled. */
+static int listen_unix(const struct conf *c, const char *path, struct listener *l, char err[256])
+{
+	struct sockaddr_un sa = { .sun_family = AF_UNIX };
+	if (strlen(path) >= sizeof sa.sun_path) {
+		err_set(err, "%s: longer than a Unix socket path may be (%zu bytes)", path,
+			sizeof sa.sun_path - 1);
+		return -ENAMETOOLONG;
+	}
+	snprintf(sa.sun_path, sizeof sa.sun_path, "%s", path);
 	struct stat st;
-	if (lstat(path, &st) == 0 && S_ISSOCK(st.st_mode))
+	if (lstat(path, &st) == 0 && S_ISSOCK(st.st_mode)) {
+		int rc = probe_unix(&sa, err);
+		if (rc)
+			return rc;
 		unlink(path); /* a stale socket from a previous run */
-	if (bind(fd, (struct sockaddr *)&sa, sizeof sa) || chmod(path, c->unix_mode) ||
-	    listen(fd, 128)) {
+	}
+	int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+	if (fd < 0) {
+		int e = -errno;
+		err_set(err, "unix socket: %s", strerror(-e));
+		return e;
+	}
+	if (bind(fd, (struct sockaddr *)&sa, sizeof sa) || lstat(path, &st) ||
+	    chmod(path, c->unix_mode) || listen(fd, BACKLOG)) {
 		int e = -errno;
 		err_set(err, "%s: %s", path, strerror(-e));
 		close(fd);
 		return e;
 	}
-	return fd;
+	*l = (struct listener){ .fd = fd, .own_path = true, .path_dev = st.st_dev,
+				.path_ino = st.st_ino };
+	return 0;
 }
 
 /* Returns the listening fd or -errno with err filled. */
@@ -114,7 +153,7 @@ static int listen_tcp(const char *hostport, char err[256])
 	int fd = socket(ai->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
 	int one = 1;
 	if (fd < 0 || setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one) ||
-	    bind(fd, ai->ai_addr, ai->ai_addrlen) || listen(fd, 128)) {
+	    bind(fd, ai->ai_addr, ai->ai_addrlen) || listen(fd, BACKLOG)) {
 		int e = -errno;
 		err_set(err, "%s: %s", hostport, strerror(-e));
 		if (fd >= 0)
@@ -156,9 +195,10 @@ int listen_open(const struct conf *c, struct listener *ls, int *n, char err[256]
 			return rc;
 	} else {
 		if (c->unix_path) {
-			if ((fd = listen_unix(c, c->unix_path, err)) < 0)
-				return fd;
-			ls[(*n)++] = (struct listener){ .fd = fd };
+			int rc = listen_unix(c, c->unix_path, &ls[*n], err);
+			if (rc)
+				return rc;
+			(*n)++;
 		}
 		for (int i = 0; i < c->ntcp; i++) {
 			if ((fd = listen_tcp(c->tcp[i], err)) < 0)
@@ -177,16 +217,24 @@ void listen_close(const struct conf *c, struct listener *l)
 		return;
 	if (close(l->fd))
 		log_msg(LOG_WARN, "%s: close: %s", l->name, strerror(errno));
-	if (l->is_unix && c->unix_path && sd_listen_fds(0) <= 0 &&
-	    strcmp(l->name + 5, c->unix_path) == 0)
-		unlink(c->unix_path);
+	/* Only the file this listener created: a daemon started since on the same path (after
+	 * this one's was removed by hand) keeps its socket. */
+	struct stat st;
+	if (l->own_path && c->unix_path && lstat(c->unix_path, &st) == 0 &&
+	    st.st_dev == l->path_dev && st.st_ino == l->path_ino && unlink(c->unix_path))
+		log_msg(LOG_WARN, "%s: unlink: %s", c->unix_path, strerror(errno));
 	l->fd = -1;
+	l->own_path = false;
 }
 
-int listen_accept(const struct listener *l)
+int listen_accept(const struct listener *l, struct sockaddr_storage *peer)
 {
 	for (;;) {
-		int fd = accept4(l->fd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
+		socklen_t len = sizeof *peer;
+		if (peer)
+			memset(peer, 0, sizeof *peer);
+		int fd = accept4(l->fd, (struct sockaddr *)peer, peer ? &len : NULL,
+				 SOCK_NONBLOCK | SOCK_CLOEXEC);
 		if (fd >= 0)
 			return fd;
 		if (errno == EINTR || errno == ECONNABORTED)

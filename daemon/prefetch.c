@@ -5,12 +5,25 @@
  * antimeridian), enumerated arithmetically. A path level is materialised as a sorted,
  * deduplicated list of keys: focus points every tile along each geodesic (GeographicLib) and
  * across the corridor (perpendicular to the geodesic's bearing at that point), each adding its
- * window and ring. Levels are built one at a time, so a job holds one level at most (and at
- * most PREFETCH_MAX_TILES keys in total are accepted). */
+ * window and ring. Levels are built one at a time, so a job holds one level at most, and a
+ * level larger than the iterator's limit stops the job (-E2BIG) as soon as it is seen.
+ *
+ * The estimate (prefetch_estimate) is analytic and touches nothing per tile: a bbox level's
+ * rows are sampled (at most ESTIMATE_ROWS of them), a corridor is cut into pieces (up to
+ * ESTIMATE_PIECES per geodesic, on a sphere) and each piece counts the area it sweeps — its
+ * length by the corridor's width plus the width a viewer's window and ring sweep moving along
+ * it — in tiles of the lx used at its latitude. Levels are capped at what they hold.
+ *
+ * A job's iterator runs on a builder thread of its own, which fills a bounded queue of keys
+ * (FEED_CAP) that the owner's thread takes from; the owner never builds a level.
+ */
 #include "prefetch.h"
 
 #include <errno.h>
 #include <math.h>
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -18,6 +31,12 @@
 #include "common/errbuf.h"
 #include "common/geo.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
+
+#define ESTIMATE_ROWS 4096  /* bbox rows sampled per level */
+#define ESTIMATE_PIECES 16  /* pieces per geodesic */
+#define ESTIMATE_MAX 1e15   /* the estimate saturates there */
+#define FEED_CAP 8192	    /* keys queued between a builder and its job */
 
 /* A run of tiles in one row: (x0 .. x0 + n − 1 wrapping, y) at level (lx, ly). */
 struct segment {
@@ -47,6 +66,14 @@ struct prefetch_iter {
 	/* path level */
 	struct tile_key *list;
 	size_t nlist;
+	/* limits and totals */
+	uint64_t max_tiles;  /* per level, every layer */
+	uint64_t counted;    /* tiles (every layer) of the levels entered */
+	struct prefetch_estimate est;
+	bool started, done;
+	int err;
+	char errmsg[256];
+	const atomic_bool *cancel; /* the builder's: stops a level being built (may be NULL) */
 };
 
 static int cmp_key(const void *a, const void *b)
@@ -168,25 +195,32 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 			/* across: a tile of longitude is cos(lat) shorter */
 			double c = fmax(cos(lat * M_PI / 180.0), 0.02);
 			double step = tile_m * c;
-			int kmax = (int)ceil(it->width * 0.5 / step);
+			double kd = ceil(it->width * 0.5 / step); /* no int conversion: huge */
+			if (kd > (double)(it->max_tiles / it->nlayers) + 4096.0)
+				return -E2BIG;
+			uint64_t kmax = (uint64_t)kd;
+			samples += 1 + 2 * kmax;
+			if (samples > it->max_tiles / it->nlayers + 4096)
+				return -E2BIG;
 			add_focus(it, &cap, &compacted, ly, lat, lon);
-			for (int k = 1; k <= kmax; k++) {
-				double off = fmin(k * step, it->width * 0.5), la, lo;
+			for (uint64_t k = 1; k <= kmax; k++) {
+				double off = fmin((double)k * step, it->width * 0.5), la, lo;
 				geo_direct(body, lat, lon, azi + 90.0, off, &la, &lo);
 				add_focus(it, &cap, &compacted, ly, la, lo);
 				geo_direct(body, lat, lon, azi - 90.0, off, &la, &lo);
 				add_focus(it, &cap, &compacted, ly, la, lo);
 			}
-			samples += 1 + 2 * (uint64_t)kmax;
-			if (samples > (uint64_t)PREFETCH_MAX_TILES / 8)
+			if (it->nlist > 4 * (it->max_tiles / it->nlayers) + 65536)
 				return -E2BIG;
+			if (it->cancel && atomic_load_explicit(it->cancel, memory_order_relaxed))
+				return -ECANCELED;
 			if (s >= s12)
 				break;
 			s = fmin(s + step, s12);
 		}
 	}
 	compact(it);
-	return 0;
+	return it->nlist * it->nlayers > it->max_tiles ? -E2BIG : 0;
 }
 
 /* Tile row y's latitude band at level ly. */
@@ -197,23 +231,26 @@ static void row_lats(int ly, uint32_t y, double *south, double *north)
 	*south = *north - h;
 }
 
-static void bbox_level(struct prefetch_iter *it, int ly)
+/* The rows of a bbox level, every stride-th one: with segs, stores each row's segments (and
+ * stops past it->max_tiles tiles: returns UINT64_MAX); without, only counts. Returns the tiles
+ * of one layer in the rows visited. */
+static uint64_t bbox_rows(struct prefetch_iter *it, int ly, uint32_t stride, bool segs,
+			  uint64_t *nrows)
 {
 	const struct geo_rect *b = &it->bbox;
-	free(it->segs);
-	it->segs = NULL;
-	it->nsegs = 0;
-	it->ntiles = 0;
 	size_t cap = 0;
+	uint64_t n_tiles = 0;
 	/* rows: from the northernmost viewer's window to the southernmost's */
 	uint32_t ya, yb, y0, y1;
 	window_rows(it, ly, b->north, &y0, &ya);
 	window_rows(it, ly, b->south, &yb, &y1);
 	(void)ya;
 	(void)yb;
+	*nrows = (uint64_t)y1 - y0 + 1;
 	double span = b->west <= b->east ? b->east - b->west : b->east + 360.0 - b->west;
 	double reach = (CLIPMAP_REACH_TILES + 1) * 180.0 / (double)grid_tiles_y(ly);
-	for (uint32_t y = y0; y <= y1; y++) {
+	for (uint64_t yy = y0; yy <= y1; yy += stride) {
+		uint32_t y = (uint32_t)yy;
 		/* the viewers in the bbox whose window or ring may reach row y */
 		double rs, rn;
 		row_lats(ly, y, &rs, &rn);
@@ -225,14 +262,34 @@ static void bbox_level(struct prefetch_iter *it, int ly)
 		for (int lx = lxa; lx <= lxb; lx++) {
 			uint32_t x0, n;
 			window_cols(it, lx, b->west, span, &x0, &n);
+			n_tiles += n;
+			if (!segs)
+				continue;
+			if (n_tiles * it->nlayers > it->max_tiles)
+				return UINT64_MAX;
 			if (it->nsegs == cap) {
 				cap = cap ? cap * 2 : 64;
 				it->segs = xrealloc(it->segs, cap * sizeof *it->segs);
 			}
 			it->segs[it->nsegs++] = (struct segment){ x0, n, y, (uint8_t)lx };
-			it->ntiles += n;
 		}
 	}
+	return n_tiles;
+}
+
+static int bbox_level(struct prefetch_iter *it, int ly)
+{
+	free(it->segs);
+	it->segs = NULL;
+	it->nsegs = 0;
+	uint64_t rows;
+	uint64_t n = bbox_rows(it, ly, 1, true, &rows);
+	if (n == UINT64_MAX) {
+		it->ntiles = 0;
+		return -E2BIG;
+	}
+	it->ntiles = n;
+	return 0;
 }
 
 static int enter_level(struct prefetch_iter *it, int ly, struct geo_body *body)
@@ -242,78 +299,277 @@ static int enter_level(struct prefetch_iter *it, int ly, struct geo_body *body)
 	it->li = 0;
 	it->seg = 0;
 	it->col = 0;
-	if (it->shape == PROTO_SHAPE_BBOX) {
-		bbox_level(it, ly);
-		return 0;
-	}
+	if (it->shape == PROTO_SHAPE_BBOX)
+		return bbox_level(it, ly);
 	int rc = build_path_level(it, ly, body);
-	it->ntiles = it->nlist;
+	it->ntiles = rc ? 0 : it->nlist;
 	return rc;
 }
 
-int prefetch_iter_create(const struct planet *p, const struct proto_prefetch *m,
-			 struct prefetch_iter **out, uint64_t *total, char err[256])
+int prefetch_check(const struct planet *p, const struct proto_prefetch *m, char err[256])
 {
-	*out = NULL;
 	if (m->lmax > p->max_level) {
 		err_set(err, "level %u is finer than planet %s's max_level %d", m->lmax, p->name,
 			p->max_level);
+		return -EINVAL;
+	}
+	if (m->lmin > m->lmax) {
+		err_set(err, "level range %u..%u", m->lmin, m->lmax);
 		return -EINVAL;
 	}
 	if (m->shape != PROTO_SHAPE_BBOX && m->shape != PROTO_SHAPE_PATH) {
 		err_set(err, "unknown shape %u", m->shape);
 		return -EINVAL;
 	}
-	struct prefetch_iter *it = xcalloc(1, sizeof *it);
+	if (m->shape == PROTO_SHAPE_PATH && (m->npoints == 0 || !(m->width_m >= 0))) {
+		err_set(err, "a path needs points and a width ≥ 0");
+		return -EINVAL;
+	}
+	if (p->nlayers == 0 || (p->nlayers < 64 && m->layers >> p->nlayers)) {
+		err_set(err, "layer mask 0x%llx names layers planet %s does not have (it has %zu)",
+			(unsigned long long)m->layers, p->name, p->nlayers);
+		return -EINVAL;
+	}
+	return 0;
+}
+
+/* Fills it's request fields (no level entered). */
+static void iter_init(struct prefetch_iter *it, const struct planet *p,
+		      const struct proto_prefetch *m)
+{
 	it->p = p;
 	it->shape = m->shape;
 	it->lmin = m->lmin;
 	it->lmax = m->lmax;
 	it->bbox = m->bbox;
 	it->width = m->width_m;
-	for (size_t i = 0; i < p->nlayers; i++)
+	for (size_t i = 0; i < p->nlayers && i < PROTO_MAX_LAYERS; i++)
 		if (m->layers == 0 || (m->layers >> i) & 1)
 			it->layers[it->nlayers++] = (int)i;
-	if (m->layers >> p->nlayers || it->nlayers == 0) {
-		err_set(err, "layer mask 0x%llx names layers planet %s does not have (it has %zu)",
-			(unsigned long long)m->layers, p->name, p->nlayers);
-		free(it);
-		return -EINVAL;
+	it->npts = m->shape == PROTO_SHAPE_PATH ? m->npoints : 0;
+}
+
+static double bbox_level_estimate(struct prefetch_iter *it, int ly)
+{
+	uint64_t rows;
+	/* one pass to learn the row count, without visiting more than two rows */
+	(void)bbox_rows(it, ly, UINT32_MAX, false, &rows);
+	uint64_t stride64 = (rows + ESTIMATE_ROWS - 1) / ESTIMATE_ROWS;
+	uint32_t stride = stride64 ? (uint32_t)stride64 : 1;
+	uint64_t n = bbox_rows(it, ly, stride, false, &rows);
+	uint64_t visited = (rows + stride - 1) / stride;
+	return (double)n * (double)rows / (double)(visited ? visited : 1);
+}
+
+struct piece {
+	double ds, lat; /* metres along the path; latitude of its middle */
+	double e, n;	/* its direction: east and north components of a unit vector */
+};
+
+/* The point at fraction t of the great circle from v1 to v2 (ang apart): lat, lon degrees. */
+static void slerp(const double v1[3], const double v2[3], double ang, double t, double *lat,
+		  double *lon)
+{
+	double v[3];
+	if (ang < 1e-9) {
+		memcpy(v, v1, sizeof v);
+	} else {
+		double s = sin(ang), wa = sin((1 - t) * ang) / s, wb = sin(t * ang) / s;
+		for (int i = 0; i < 3; i++)
+			v[i] = wa * v1[i] + wb * v2[i];
 	}
-	if (m->shape == PROTO_SHAPE_PATH) {
-		it->npts = m->npoints;
+	*lat = atan2(v[2], sqrt(v[0] * v[0] + v[1] * v[1])) * 180.0 / M_PI;
+	*lon = atan2(v[1], v[0]) * 180.0 / M_PI;
+}
+
+/* The path's pieces on a sphere of radius a: ESTIMATE_PIECES per geodesic. Returns an owned
+ * array of *n. */
+static struct piece *path_pieces(const struct proto_prefetch *m, double a, size_t *n_out)
+{
+	const double d2r = M_PI / 180.0;
+	/* at most ESTIMATE_PIECES per geodesic, PROTO_MAX_PATH in all */
+	size_t nseg = m->npoints > 1 ? m->npoints - 1 : 0;
+	int per = nseg ? (int)(PROTO_MAX_PATH / nseg) : 1;
+	per = per < 1 ? 1 : per > ESTIMATE_PIECES ? ESTIMATE_PIECES : per;
+	size_t cap = nseg ? nseg * (size_t)per : 1;
+	struct piece *pc = xmalloc(cap * sizeof *pc);
+	*n_out = 0;
+	for (uint32_t i = 0; i + 1 < m->npoints; i++) {
+		double p1 = m->points[i].lat * d2r, l1 = m->points[i].lon * d2r;
+		double p2 = m->points[i + 1].lat * d2r, l2 = m->points[i + 1].lon * d2r;
+		double v1[3] = { cos(p1) * cos(l1), cos(p1) * sin(l1), sin(p1) };
+		double v2[3] = { cos(p2) * cos(l2), cos(p2) * sin(l2), sin(p2) };
+		double dot = v1[0] * v2[0] + v1[1] * v2[1] + v1[2] * v2[2];
+		double ang = acos(fmax(-1.0, fmin(1.0, dot)));
+		for (int k = 0; k < per; k++) {
+			double la0, lo0, la1, lo1, lam, lom;
+			slerp(v1, v2, ang, (double)k / per, &la0, &lo0);
+			slerp(v1, v2, ang, (k + 1.0) / per, &la1, &lo1);
+			slerp(v1, v2, ang, (k + 0.5) / per, &lam, &lom);
+			double dl = fmod(lo1 - lo0 + 540.0, 360.0) - 180.0;
+			double e = dl * cos(lam * d2r), n = la1 - la0, h = hypot(e, n);
+			pc[(*n_out)++] = (struct piece){ ang * a / per, lam,
+							 h > 0 ? e / h : 0, h > 0 ? n / h : 1 };
+		}
+	}
+	return pc;
+}
+
+/* Tiles of one layer at level ly that a corridor piece of length ds (metres; 0 for an end)
+ * sweeps at latitude lat: its length by the corridor's width plus a window and ring, over
+ * every lx a viewer there may use. An end adds half a window's length. */
+/* The lx range viewers use at a latitude, per level, memoised in 1/8° bins (the estimate asks
+ * for it once per piece and level: up to PROTO_MAX_PATH pieces). */
+#define LX_BINS (180 * 8 + 1)
+struct lx_memo {
+	int ly;
+	int8_t lo[LX_BINS], hi[LX_BINS]; /* -1: not yet */
+};
+
+static void lx_range(struct lx_memo *mm, int ly, double lat, int *lxa, int *lxb)
+{
+	if (mm->ly != ly) {
+		mm->ly = ly;
+		memset(mm->lo, -1, sizeof mm->lo);
+	}
+	int b = (int)lround((fmax(-90.0, fmin(90.0, lat)) + 90.0) * 8.0);
+	if (mm->lo[b] < 0) {
+		int lo, hi;
+		double bl = b / 8.0 - 90.0;
+		clipmap_level_lx_range(ly, bl, bl, &lo, &hi);
+		mm->lo[b] = (int8_t)lo;
+		mm->hi[b] = (int8_t)hi;
+	}
+	*lxa = mm->lo[b];
+	*lxb = mm->hi[b];
+}
+
+static double piece_tiles(struct lx_memo *mm, double a, int ly, double lat, double ds, double w,
+			  double e, double n, bool end)
+{
+	const double K = CLIPMAP_WINDOW_TILES + 2; /* window and ring, in tiles */
+	double th = M_PI * a / (double)grid_tiles_y(ly);
+	int lxa, lxb;
+	lx_range(mm, ly, lat, &lxa, &lxb);
+	double sum = 0;
+	for (int lx = lxa; lx <= lxb; lx++) {
+		double cols = (double)grid_tiles_x(lx);
+		double tw = fmax(2 * M_PI * a * cos(lat * M_PI / 180.0) / cols, 1e-9 * th);
+		double mx = fmax(th, tw);
+		/* a window K tiles square moving along (e, n) sweeps this wide across it */
+		double sweep = K * (tw * fabs(n) + th * fabs(e));
+		double len = end ? 0.5 * K * mx : ds;
+		double area = len * (w + (end ? K * mx : sweep)) / (th * tw);
+		double bound = ((len + w) / th + K) * cols; /* rows it can reach, every column */
+		sum += fmin(area, bound);
+	}
+	return sum;
+}
+
+int prefetch_estimate(const struct planet *p, const struct proto_prefetch *m,
+		      struct prefetch_estimate *e, char err[256])
+{
+	*e = (struct prefetch_estimate){ .lmin = m->lmin, .lmax = m->lmax };
+	int rc = prefetch_check(p, m, err);
+	if (rc)
+		return rc;
+	struct prefetch_iter it = { 0 };
+	iter_init(&it, p, m);
+	for (int i = 0; i < it.nlayers; i++) {
+		const struct node *n = p->layers[it.layers[i]].node;
+		e->tile_bytes += (uint64_t)p->tile_size * p->tile_size * pix_bytes(n->out);
+	}
+	double a = p->a, total = 0;
+	size_t npc = 0;
+	struct piece *pc = m->shape == PROTO_SHAPE_PATH ? path_pieces(m, a, &npc) : NULL;
+	struct lx_memo *mm = pc ? xmalloc(sizeof *mm) : NULL;
+	if (mm)
+		mm->ly = -1;
+	for (int ly = m->lmin; ly <= m->lmax; ly++) {
+		double t;
+		if (m->shape == PROTO_SHAPE_BBOX) {
+			t = bbox_level_estimate(&it, ly);
+		} else {
+			double w = fmin(m->width_m, M_PI * a); /* wider wraps round the planet */
+			t = piece_tiles(mm, a, ly, m->points[0].lat, 0, w, 0, 1, true) +
+			    piece_tiles(mm, a, ly, m->points[m->npoints - 1].lat, 0, w, 0, 1,
+					true);
+			for (size_t i = 0; i < npc; i++)
+				t += piece_tiles(mm, a, ly, pc[i].lat, pc[i].ds, w, pc[i].e,
+						 pc[i].n, false);
+		}
+		/* never more than the level holds on the lx viewers use there */
+		int lxa, lxb;
+		clipmap_level_lx_range(ly, 0, 90, &lxa, &lxb);
+		double all = 0;
+		for (int lx = lxa; lx <= lxb; lx++)
+			all += (double)grid_tiles_x(lx) * (double)grid_tiles_y(ly);
+		t = fmin(ceil(t), all) * it.nlayers;
+		t = fmin(t, ESTIMATE_MAX);
+		e->level_tiles[ly] = (uint64_t)t;
+		total = fmin(total + t, ESTIMATE_MAX);
+	}
+	free(pc);
+	free(mm);
+	e->tiles = (uint64_t)total;
+	return 0;
+}
+
+int prefetch_iter_create(const struct planet *p, const struct proto_prefetch *m,
+			 uint64_t max_tiles, struct prefetch_iter **out, char err[256])
+{
+	*out = NULL;
+	struct prefetch_estimate est;
+	int rc = prefetch_estimate(p, m, &est, err);
+	if (rc)
+		return rc;
+	struct prefetch_iter *it = xcalloc(1, sizeof *it);
+	iter_init(it, p, m);
+	it->est = est;
+	it->max_tiles = max_tiles ? max_tiles : PREFETCH_MAX_TILES;
+	if (it->npts) {
 		it->pts = xmalloc(m->npoints * sizeof *it->pts);
 		memcpy(it->pts, m->points, m->npoints * sizeof *it->pts);
 	}
-	uint64_t t = 0;
-	int rc = 0;
-	for (int ly = it->lmin; ly <= it->lmax && !rc; ly++) {
-		rc = enter_level(it, ly, p->body);
-		t += it->ntiles * (uint64_t)it->nlayers;
-		if (!rc && t > PREFETCH_MAX_TILES)
-			rc = -E2BIG;
-	}
-	if (!rc)
-		rc = enter_level(it, it->lmin, p->body);
-	if (rc) {
-		err_set(err, "prefetch job too large: more than %u tiles", PREFETCH_MAX_TILES);
-		prefetch_iter_destroy(it);
-		return rc;
-	}
-	*total = t;
 	*out = it;
 	return 0;
+}
+
+/* Enters level ly, counting it; on an error the iteration stops with it. */
+static bool iter_enter(struct prefetch_iter *it, int ly)
+{
+	it->started = true;
+	int rc = enter_level(it, ly, it->p->body);
+	if (rc) {
+		it->err = rc;
+		it->done = true;
+		if (rc == -E2BIG)
+			err_set(it->errmsg,
+				"level %d has more than %llu tiles (every layer): the job's limit", ly,
+				(unsigned long long)it->max_tiles);
+		else
+			err_set(it->errmsg, "level %d: %s", ly, strerror(-rc));
+		return false;
+	}
+	it->counted += it->ntiles * (uint64_t)it->nlayers;
+	return true;
 }
 
 size_t prefetch_iter_next(struct prefetch_iter *it, struct want *out, size_t n)
 {
 	size_t k = 0;
+	if (it->done)
+		return 0;
+	if (!it->started && !iter_enter(it, it->lmin))
+		return 0;
 	while (k < n) {
 		if (it->pos >= it->ntiles) {
-			if (it->ly >= it->lmax)
+			if (it->ly >= it->lmax) {
+				it->done = true;
 				break;
-			if (enter_level(it, it->ly + 1, it->p->body))
-				break; /* counted at creation: cannot happen */
+			}
+			if (!iter_enter(it, it->ly + 1))
+				break;
 			continue;
 		}
 		struct tile_key key;
@@ -341,6 +597,23 @@ size_t prefetch_iter_next(struct prefetch_iter *it, struct want *out, size_t n)
 	return k;
 }
 
+int prefetch_iter_error(const struct prefetch_iter *it, char err[256])
+{
+	if (it->err)
+		err_set(err, "%s", it->errmsg);
+	return it->err;
+}
+
+uint64_t prefetch_iter_total(const struct prefetch_iter *it)
+{
+	if (it->done && !it->err)
+		return it->counted;
+	uint64_t t = it->counted;
+	for (int ly = it->started ? it->ly + 1 : it->lmin; ly <= it->lmax; ly++)
+		t += it->est.level_tiles[ly];
+	return t;
+}
+
 void prefetch_iter_destroy(struct prefetch_iter *it)
 {
 	if (!it)
@@ -351,41 +624,163 @@ void prefetch_iter_destroy(struct prefetch_iter *it)
 	free(it);
 }
 
+/* ---- the builder thread and its feed ------------------------------------------------------ */
+
+struct prefetch_feed {
+	pthread_mutex_t mu;
+	pthread_cond_t room; /* the builder waits here while the queue is full */
+	struct want q[FEED_CAP]; /* a ring */
+	size_t head, n;
+	bool done;	/* the builder has queued its last key */
+	int err;	/* and stopped with this error (0: the iteration completed) */
+	char errmsg[256];
+	uint64_t total; /* prefetch_iter_total, as last seen */
+	bool starving;	/* the owner found the queue empty: wake it when keys come */
+	atomic_bool cancel;
+	int refs; /* the job's and the builder's */
+	struct prefetch_iter *it; /* the builder's */
+	const struct planet *p;	  /* a reference, the builder's */
+	void (*wake)(void *ud);
+	void *wake_ud;
+};
+
+static void feed_unref(struct prefetch_feed *f)
+{
+	xmutex_lock(&f->mu);
+	bool last = --f->refs == 0;
+	xmutex_unlock(&f->mu);
+	if (!last)
+		return;
+	prefetch_iter_destroy(f->it);
+	planet_unref(f->p);
+	xcond_destroy(&f->room);
+	xmutex_destroy(&f->mu);
+	free(f);
+}
+
+static void *builder_main(void *arg)
+{
+	struct prefetch_feed *f = arg;
+	struct want tmp[512];
+	for (;;) {
+		xmutex_lock(&f->mu);
+		while (f->n == FEED_CAP && !atomic_load(&f->cancel))
+			xcond_wait(&f->room, &f->mu);
+		size_t room = FEED_CAP - f->n;
+		xmutex_unlock(&f->mu);
+		if (atomic_load(&f->cancel))
+			break;
+		size_t got = prefetch_iter_next(f->it, tmp, room < 512 ? room : 512);
+		xmutex_lock(&f->mu);
+		for (size_t i = 0; i < got; i++)
+			f->q[(f->head + f->n + i) % FEED_CAP] = tmp[i];
+		f->n += got;
+		f->total = prefetch_iter_total(f->it);
+		if (got == 0) {
+			f->done = true;
+			f->err = prefetch_iter_error(f->it, f->errmsg);
+		}
+		bool cancelled = atomic_load(&f->cancel);
+		if (f->starving && !cancelled) {
+			f->starving = false;
+			f->wake(f->wake_ud); /* under mu: destroy cannot have begun */
+		}
+		bool end = f->done || cancelled;
+		xmutex_unlock(&f->mu);
+		if (end)
+			break;
+	}
+	feed_unref(f);
+	return NULL;
+}
+
+/* Takes keys from the feed into the window (owner's thread; bounded: one window). */
 static void refill(struct prefetch_job *j)
 {
-	if (!j->exhausted && j->nwin <= PREFETCH_WINDOW / 2) {
-		size_t got = prefetch_iter_next(j->it, j->win + j->nwin, PREFETCH_WINDOW - j->nwin);
-		if (got == 0)
+	if (!j->exhausted && !j->paused && j->nwin <= PREFETCH_WINDOW / 2) {
+		struct prefetch_feed *f = j->feed;
+		size_t got = 0, want = PREFETCH_WINDOW - j->nwin;
+		xmutex_lock(&f->mu);
+		while (got < want && f->n) {
+			j->win[j->nwin + got++] = f->q[f->head];
+			f->head = (f->head + 1) % FEED_CAP;
+			f->n--;
+		}
+		if (got)
+			xcond_signal(&f->room);
+		j->total = f->total;
+		if (f->n == 0 && f->done) {
 			j->exhausted = true;
+			if (f->err)
+				snprintf(j->err, sizeof j->err, "%s", f->errmsg);
+		} else if (f->n == 0) {
+			f->starving = true;
+		}
+		xmutex_unlock(&f->mu);
 		if (got) {
 			j->nwin += got;
 			(void)sched_req_want(j->req, j->win, j->nwin);
 		}
 	}
+	if (j->total < j->done)
+		j->total = j->done;
 	if (j->exhausted && j->nwin == 0 && j->state == PROTO_JOB_RUNNING)
-		j->state = j->failed ? PROTO_JOB_FAILED : PROTO_JOB_DONE;
+		j->state = j->failed || j->err[0] ? PROTO_JOB_FAILED : PROTO_JOB_DONE;
 }
 
-int prefetch_job_create(const struct planet *p, const struct proto_prefetch *m, uint64_t now_ns,
+int prefetch_job_create(const struct planet *p, const struct proto_prefetch *m,
+			uint64_t max_tiles, uint64_t est_total, uint64_t now_ns,
 			struct prefetch_job **out, char err[256])
 {
 	*out = NULL;
-	struct prefetch_job *j = xcalloc(1, sizeof *j);
-	int rc = prefetch_iter_create(p, m, &j->it, &j->total, err);
-	if (rc) {
-		free(j);
+	struct prefetch_iter *it;
+	int rc = prefetch_iter_create(p, m, max_tiles, &it, err);
+	if (rc)
 		return rc;
-	}
+	struct prefetch_feed *f = xcalloc(1, sizeof *f);
+	xmutex_init(&f->mu);
+	xcond_init(&f->room);
+	atomic_init(&f->cancel, false);
+	f->it = it;
+	it->cancel = &f->cancel;
+	planet_ref(p);
+	f->p = p;
+	f->refs = 1;
+	f->total = est_total;
+	struct prefetch_job *j = xcalloc(1, sizeof *j);
+	j->feed = f;
 	j->id = m->id;
+	j->total = est_total;
 	j->state = PROTO_JOB_RUNNING;
 	j->t0_ns = j->last_ns = now_ns;
 	*out = j;
 	return 0;
 }
 
-void prefetch_job_start(struct prefetch_job *j)
+int prefetch_job_start(struct prefetch_job *j, void (*wake)(void *ud), void *ud)
+{
+	struct prefetch_feed *f = j->feed;
+	f->wake = wake;
+	f->wake_ud = ud;
+	f->starving = true; /* the first keys wake the owner */
+	f->refs = 2;
+	pthread_t th;
+	pthread_attr_t at;
+	pthread_attr_init(&at);
+	pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
+	int rc = pthread_create(&th, &at, builder_main, f);
+	pthread_attr_destroy(&at);
+	if (rc) {
+		f->refs = 1;
+		return -rc;
+	}
+	return 0;
+}
+
+bool prefetch_job_fed(struct prefetch_job *j)
 {
 	refill(j);
+	return j->state != PROTO_JOB_RUNNING;
 }
 
 bool prefetch_job_ready(struct prefetch_job *j, const struct tile_key *k, int err)
@@ -422,6 +817,11 @@ void prefetch_job_destroy(struct prefetch_job *j)
 		return;
 	if (j->req)
 		sched_req_destroy(j->req);
-	prefetch_iter_destroy(j->it);
+	struct prefetch_feed *f = j->feed;
+	xmutex_lock(&f->mu);
+	atomic_store(&f->cancel, true); /* under mu: no wake after this */
+	xcond_signal(&f->room);
+	xmutex_unlock(&f->mu);
+	feed_unref(f);
 	free(j);
 }

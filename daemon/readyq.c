@@ -13,6 +13,27 @@
 #include "common/xalloc.h"
 #include "common/xthread.h"
 
+struct ready_src *ready_src_new(struct readyq *q, struct session *s)
+{
+	struct ready_src *src = xcalloc(1, sizeof *src);
+	atomic_init(&src->refs, 1);
+	src->s = s;
+	src->q = q;
+	return src;
+}
+
+struct ready_src *ready_src_ref(struct ready_src *src)
+{
+	atomic_fetch_add_explicit(&src->refs, 1, memory_order_relaxed);
+	return src;
+}
+
+void ready_src_unref(struct ready_src *src)
+{
+	if (src && atomic_fetch_sub_explicit(&src->refs, 1, memory_order_acq_rel) == 1)
+		free(src);
+}
+
 int readyq_init(struct readyq *q)
 {
 	*q = (struct readyq){ .evfd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC) };
@@ -26,8 +47,10 @@ void readyq_fini(struct readyq *q)
 {
 	if (q->evfd < 0)
 		return;
-	for (size_t i = 0; i < q->n; i++)
+	for (size_t i = 0; i < q->n; i++) {
 		tile_unref(q->items[i].t);
+		ready_src_unref(q->items[i].src);
+	}
 	free(q->items);
 	close(q->evfd);
 	xmutex_destroy(&q->mu);
@@ -73,9 +96,10 @@ void readyq_purge(struct readyq *q, const struct session *s)
 	xmutex_lock(&q->mu);
 	size_t k = 0;
 	for (size_t i = 0; i < q->n; i++) {
-		if (q->items[i].s == s)
+		if (q->items[i].s == s) {
 			tile_unref(q->items[i].t);
-		else
+			ready_src_unref(q->items[i].src);
+		} else
 			q->items[k++] = q->items[i];
 	}
 	q->n = k;

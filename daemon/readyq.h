@@ -9,6 +9,7 @@
 #ifndef CLIPMAP_READYQ_H
 #define CLIPMAP_READYQ_H
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stddef.h>
 
@@ -17,9 +18,31 @@
 
 struct session;
 struct prefetch_job;
+struct readyq;
+
+/* A requester's handle that outlives it: the scheduler may still report tiles for a session
+ * after the session closed (its request is released without waiting for the manager), so
+ * such reports carry a reference to the handle instead of trusting the session pointer. The
+ * loop marks it dead when the session closes and then drops every item that names it.
+ * Reference-counted (any thread); `dead` and `s` are read and written on the loop thread
+ * only, `q` is fixed. */
+struct ready_src {
+	atomic_int refs;
+	bool dead;
+	struct session *s;
+	struct readyq *q;
+};
+
+/* A handle for s on q with one reference (the caller's). */
+struct ready_src *ready_src_new(struct readyq *q, struct session *s);
+struct ready_src *ready_src_ref(struct ready_src *src);
+/* Drops a reference and frees the handle at zero; NULL is a no-op. */
+void ready_src_unref(struct ready_src *src);
 
 struct ready_item {
-	struct session *s;	  /* the requester (borrowed; outlives its items: readyq_purge) */
+	struct session *s;	  /* the requester (borrowed; outlives its items: readyq_purge),
+				   * unless src is set: then valid only while !src->dead */
+	struct ready_src *src;	  /* NULL, or an owned reference (see struct ready_src) */
 	struct prefetch_job *job; /* the session's job that wanted it; NULL: the want-set */
 	struct tile_key key;
 	struct tile *t; /* owned reference, or NULL when err < 0 */
@@ -41,9 +64,10 @@ void readyq_fini(struct readyq *q);
 /* Queues *it (any thread; takes it->t's reference) and wakes the loop when needed. */
 void readyq_push(struct readyq *q, const struct ready_item *it);
 /* Takes every queued item (loop thread, after the eventfd fired). Returns them as an owned
- * array of *n items (free it; their tile references are the caller's), NULL when empty. */
+ * array of *n items (free it; their tile and src references are the caller's), NULL when
+ * empty. */
 struct ready_item *readyq_take(struct readyq *q, size_t *n);
-/* Drops the items of session s (after its scheduler requests are destroyed). */
+/* Drops the items of session s (after its scheduler requests are destroyed or released). */
 void readyq_purge(struct readyq *q, const struct session *s);
 
 #endif

@@ -3,17 +3,33 @@
  * iteration. A closed session's record stays allocated (the graveyard) until the iteration
  * ends, so pointers in the current epoll batch or ready batch never dangle. The sessions see
  * the server only through srv->env: the callbacks below are its half of that contract.
+ * Every iteration's work (from epoll_wait's return to its end) goes into the loop.*
+ * histogram (loopstat.h). Memory that closed sessions held goes back to the system at the
+ * next tick (malloc_trim, on a thread of its own so that its tens of milliseconds never
+ * block the loop: glibc keeps freed heap otherwise, see clipmapd.c's mallopt).
+ *
+ * Admission: a connection is first not yet authenticated (pre-auth). Pre-auth connections
+ * have pools of their own, one per listener kind (Unix, TCP) of max_preauth each, and on TCP
+ * at most max_preauth_per_peer per peer address; a new connection over a cap closes the
+ * oldest pre-auth one of its pool (or of its peer) rather than being refused, so idle
+ * connections that hold every slot cannot lock a client out, and those on a TCP listener
+ * never touch the Unix socket's. max_sessions counts authenticated sessions only, checked at
+ * HELLO; the Unix socket has UNIX_RESERVE slots beyond it that TCP sessions cannot take.
  */
 #include "server.h"
 
 #include <errno.h>
 #include <fcntl.h>
+#include <malloc.h>
 #include <math.h>
 #include <stdarg.h>
+#include <stdatomic.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <netinet/in.h>
 #include <sys/epoll.h>
+#include <sys/socket.h>
 #include <sys/timerfd.h>
 #include <unistd.h>
 
@@ -22,13 +38,21 @@
 #include "common/log.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "common/xthread.h"
+#include "loopstat.h"
+#include "prefetch.h"
 #include "readyq.h"
 #include "session.h"
 
 #define TICK_NS 250000000ull
-#define STOP_GRACE_NS 2000000000ull
+#define STOP_GRACE_NS 1250000000ull /* + one tick + teardown: SIGTERM done within 2 s */
 #define MAX_WATCH 4
 #define MAX_FOCI 512
+#define LOOP_OUT_BUDGET (4u << 20) /* output bytes produced per loop iteration */
+#define TRIM_EVERY_NS 1000000000ull /* at most one malloc_trim a second */
+#define ACCEPT_BATCH 16
+#define UNIX_RESERVE 8		       /* sessions over max_sessions kept for the Unix socket */
+#define EVICT_WARN_NS 10000000000ull /* at most one eviction warning per 10 s */
 
 enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH };
 
@@ -45,7 +69,10 @@ struct session_link {
 	uint64_t id;
 	int fd;
 	bool in_pump, dead;
-	struct session_link *prev, *next; /* the live sessions */
+	bool preauth, is_unix;
+	struct sockaddr_storage peer;		  /* TCP: the per-peer cap compares addresses */
+	struct session_link *pre_prev, *pre_next; /* its pre-auth pool, oldest first */
+	struct session_link *prev, *next;	  /* the live sessions */
 	struct session_link *pump_next;	  /* the pump list */
 	struct session_link *grave_next;  /* closed this iteration */
 };
@@ -65,6 +92,7 @@ struct server {
 	uint8_t token[PROTO_MAX_TOKEN];
 	size_t token_len;
 	bool have_token;
+	struct prefetch_limits prefetch; /* caps from the conf, counts from the sessions */
 
 	int epfd, timerfd;
 	struct evsrc ev_ready, ev_timer;
@@ -80,7 +108,12 @@ struct server {
 	uint64_t stop_deadline_ns;
 
 	struct session_link *sessions; /* doubly linked */
-	size_t nsessions;
+	size_t nsessions;	       /* every connection */
+	struct session_link *pre_head[2], *pre_tail[2]; /* [is_unix]: pre-auth pools */
+	size_t npre[2], nauth;
+	uint64_t evicted, refused, evict_warn_ns;
+	bool accept_unix; /* the connection being accepted (for sess_attach) */
+	struct sockaddr_storage accept_peer;
 	uint64_t next_session_id, sessions_total;
 	struct session_link *pump;	/* sessions with more output to produce */
 	struct session_link *graveyard; /* closed this iteration, freed at its end */
@@ -90,6 +123,14 @@ struct server {
 	uint64_t start_ns;
 	struct session_counters counters;
 	struct session_env env; /* lent to every session */
+
+	struct loopstat loop;	/* iteration times */
+	bool trim_due;		/* sessions were freed since the last trim */
+	uint64_t last_trim_ns;
+	pthread_t trimmer;	/* the last trim's thread, joined before the next */
+	bool trimmer_started;
+	atomic_bool trimming;	/* the trimmer runs */
+	atomic_uint_fast64_t trims, trim_max_ns; /* written by the trimmer */
 };
 
 static int ep_add(struct server *srv, int fd, struct evsrc *ev)
@@ -118,7 +159,52 @@ static struct session_link *sess_attach(void *ud, struct session *s, int fd, uin
 	srv->sessions = l;
 	srv->nsessions++;
 	srv->sessions_total++;
+	/* into its pre-auth pool, newest last */
+	int k = l->is_unix = srv->accept_unix;
+	l->peer = srv->accept_peer;
+	l->preauth = true;
+	l->pre_prev = srv->pre_tail[k];
+	if (srv->pre_tail[k])
+		srv->pre_tail[k]->pre_next = l;
+	else
+		srv->pre_head[k] = l;
+	srv->pre_tail[k] = l;
+	srv->npre[k]++;
 	return l;
+}
+
+static void pre_unlink(struct server *srv, struct session_link *l)
+{
+	int k = l->is_unix;
+	if (l->pre_prev)
+		l->pre_prev->pre_next = l->pre_next;
+	else
+		srv->pre_head[k] = l->pre_next;
+	if (l->pre_next)
+		l->pre_next->pre_prev = l->pre_prev;
+	else
+		srv->pre_tail[k] = l->pre_prev;
+	l->pre_prev = l->pre_next = NULL;
+	l->preauth = false;
+	srv->npre[k]--;
+}
+
+static int sess_authenticated(void *ud, struct session_link *l)
+{
+	struct server *srv = ud;
+	size_t cap = (size_t)srv->conf->max_sessions + (l->is_unix ? UNIX_RESERVE : 0);
+	if (!l->preauth)
+		return 0;
+	if (srv->nauth >= cap) {
+		srv->refused++;
+		log_msg(LOG_WARN, "session %llu: refused at HELLO: %zu sessions (max_sessions %d%s)",
+			(unsigned long long)l->id, srv->nauth, srv->conf->max_sessions,
+			l->is_unix ? " + the Unix socket's reserve" : "");
+		return -EBUSY;
+	}
+	pre_unlink(srv, l);
+	srv->nauth++;
+	return 0;
 }
 
 static void sess_interest(void *ud, struct session_link *l, uint32_t events)
@@ -154,6 +240,10 @@ static void sess_detach(void *ud, struct session_link *l)
 	if (l->next)
 		l->next->prev = l->prev;
 	srv->nsessions--;
+	if (l->preauth)
+		pre_unlink(srv, l);
+	else
+		srv->nauth--;
 	l->grave_next = srv->graveyard;
 	srv->graveyard = l;
 }
@@ -264,6 +354,26 @@ static void stat_store(struct statb *b, struct store *st)
 	stat_u(b, "store.disk.write_drops", s.write_drops);
 	stat_u(b, "store.disk.write_errors", s.write_errors);
 	stat_u(b, "store.disk.queued", s.queued);
+	stat_u(b, "store.disk.recovered", s.recovered);
+}
+
+/* The loop-iteration histogram: count, maximum, p99 (a bucket bound), per bucket. */
+static void stat_loop(struct statb *b, const struct loopstat *ls)
+{
+	stat_u(b, "loop.iterations", ls->n);
+	stat_f(b, "loop.max_ms", (double)ls->max_ns * 1e-6);
+	stat_f(b, "loop.p99_ms", loopstat_quantile_ms(ls, 0.99));
+	stat_u(b, "loop.over_50ms", loopstat_over(ls, 50));
+	for (int i = 0; i < LOOPSTAT_NB; i++) {
+		struct proto_stat *st =
+			i < LOOPSTAT_NB - 1
+				? stat_add(b, "loop.le_%ums", loopstat_bound_ms(i))
+				: stat_add(b, "loop.gt_%ums", loopstat_bound_ms(LOOPSTAT_NB - 2));
+		if (st) {
+			st->kind = PROTO_STAT_U64;
+			st->u = ls->b[i];
+		}
+	}
 }
 
 static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap)
@@ -278,6 +388,9 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_f(&b, "uptime_s", (double)(clock_now_ns() - srv->start_ns) * 1e-9);
 	stat_u(&b, "sessions", srv->nsessions);
 	stat_u(&b, "sessions.total", srv->sessions_total);
+	stat_u(&b, "sessions.preauth", srv->npre[0] + srv->npre[1]);
+	stat_u(&b, "sessions.preauth.evicted", srv->evicted);
+	stat_u(&b, "sessions.refused", srv->refused);
 	stat_u(&b, "sched.queued.visible", ss.queued[SCHED_VISIBLE]);
 	stat_u(&b, "sched.queued.prefetch", ss.queued[SCHED_PREFETCH]);
 	stat_u(&b, "sched.queued.bulk", ss.queued[SCHED_BULK]);
@@ -303,14 +416,23 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "tiles.stale", c->tiles_stale);
 	stat_u(&b, "bytes.sent", c->bytes_sent);
 	stat_u(&b, "errors.sent", c->errors_sent);
+	stat_u(&b, "tiles.parked", c->tiles_parked);
+	stat_u(&b, "tiles.relooked", c->tiles_relooked);
+	stat_u(&b, "tiles.rewanted", c->tiles_rewanted);
+	stat_u(&b, "sessions.pauses", c->pauses);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
 	stat_u(&b, "planets.skipped", srv->planets->nskipped); /* files that did not load */
-	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0;
+	uint64_t njobs = 0, pend = 0, pend_max = 0, ready = 0, held = 0, held_max = 0, outb = 0;
+	uint64_t paused = 0;
 	for (const struct session_link *l = srv->sessions; l; l = l->next) {
 		struct session_load ld;
 		session_get_load(l->s, &ld);
 		njobs += ld.jobs;
+		held += ld.held_bytes;
+		held_max = ld.held_bytes > held_max ? ld.held_bytes : held_max;
+		outb += ld.out_bytes;
+		paused += ld.paused;
 		pend += ld.pending_bytes;
 		pend_max = ld.pending_bytes > pend_max ? ld.pending_bytes : pend_max;
 		ready += ld.ready_tiles;
@@ -318,9 +440,29 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "sessions.pending_bytes", pend);
 	stat_u(&b, "sessions.pending_bytes.max", pend_max);
 	stat_u(&b, "sessions.ready_tiles", ready);
+	stat_u(&b, "sessions.held_bytes", held);
+	stat_u(&b, "sessions.held_bytes.max", held_max);
+	stat_u(&b, "sessions.out_bytes", outb);
+	stat_u(&b, "sessions.paused", paused);
+	/* the per-session allowance: held tiles and queued output, max_pending each */
+	stat_u(&b, "sessions.allowance_bytes", 2 * srv->limits.max_pending);
+	stat_loop(&b, &srv->loop);
+	stat_u(&b, "memory.trims", atomic_load(&srv->trims));
+	stat_f(&b, "memory.trim_max_ms", (double)atomic_load(&srv->trim_max_ns) * 1e-6);
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_nodes(&b, srv->planets);
 	return b.n;
+}
+
+size_t server_stats(struct server *srv, struct proto_stat *items, char (*keys)[128], size_t cap)
+{
+	return fill_stats(srv, items, keys, cap);
+}
+
+const uint8_t *server_token(const struct server *srv, size_t *len)
+{
+	*len = srv->have_token ? srv->token_len : 0;
+	return srv->have_token ? srv->token : NULL;
 }
 
 /* ---- setup ------------------------------------------------------------------------------ */
@@ -354,6 +496,17 @@ static int load_token(struct server *srv, char err[256])
 	return 0;
 }
 
+/* [prefetch] caps (the running jobs' counts are kept). */
+static void set_prefetch_caps(struct server *srv)
+{
+	const struct conf *c = srv->conf;
+	srv->prefetch.max_tiles = c->pf_max_tiles;
+	srv->prefetch.max_tiles_local = c->pf_max_tiles_local;
+	srv->prefetch.max_jobs_local = c->pf_max_jobs_local;
+	srv->prefetch.max_jobs_total = c->pf_max_jobs_total;
+	srv->prefetch.max_tiles_total = c->pf_max_tiles_total;
+}
+
 void server_conf_changed(struct server *srv)
 {
 	const struct conf *c = srv->conf;
@@ -361,6 +514,9 @@ void server_conf_changed(struct server *srv)
 					     .max_pending = c->max_pending,
 					     .max_frame = c->max_frame };
 	srv->env.max_jobs = c->max_jobs;
+	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
+	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
+	set_prefetch_caps(srv);
 }
 
 static void init_env(struct server *srv)
@@ -370,9 +526,14 @@ static void init_env(struct server *srv)
 		.cache = srv->cache, .ready = &srv->ready, .codec = srv->codec,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,
-		.attach = sess_attach, .interest = sess_interest, .pump = sess_pump,
-		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats
+		.handshake_ns = (uint64_t)srv->conf->handshake_timeout * 1000000000u,
+		.frame_ns = (uint64_t)srv->conf->frame_timeout * 1000000000u,
+		.attach = sess_attach, .authenticated = sess_authenticated,
+		.interest = sess_interest, .pump = sess_pump,
+		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats,
+		.prefetch = &srv->prefetch
 	};
+	set_prefetch_caps(srv);
 }
 
 /* The ready eventfd and the housekeeping timer in the epoll set. */
@@ -464,6 +625,7 @@ static void free_graveyard(struct server *srv)
 		session_free(g->s);
 		free(g);
 		g = next;
+		srv->trim_due = true;
 	}
 }
 
@@ -475,7 +637,12 @@ void server_destroy(struct server *srv)
 		session_close(srv->sessions->s, "server exiting");
 	free_graveyard(srv);
 	close_listeners(srv);
+	/* Released requests may still report into the ready queue until the manager frees them. */
+	if (srv->sessions_total)
+		sched_barrier(srv->sched);
 	readyq_fini(&srv->ready);
+	if (srv->trimmer_started)
+		xthread_join(srv->trimmer);
 	if (srv->epfd >= 0)
 		close(srv->epfd);
 	if (srv->timerfd >= 0)
@@ -521,30 +688,115 @@ static void on_ready(struct server *srv)
 	size_t n;
 	struct ready_item *batch = readyq_take(&srv->ready, &n);
 	/* Sessions closed while this batch runs stay allocated (graveyard) until the iteration
-	 * ends; session_on_ready ignores them. */
-	for (size_t i = 0; i < n; i++)
-		session_on_ready(batch[i].s, &batch[i]);
+	 * ends; session_on_ready ignores them. An item marked with a handle whose session closed
+	 * (it may be freed already) is dropped without looking at the session. */
+	for (size_t i = 0; i < n; i++) {
+		struct ready_item *it = &batch[i];
+		if (it->src) {
+			bool dead = it->src->dead;
+			ready_src_unref(it->src);
+			it->src = NULL;
+			if (dead) {
+				tile_unref(it->t);
+				continue;
+			}
+		}
+		session_on_ready(it->s, it);
+	}
 	free(batch);
+}
+
+/* Whether two TCP peers have the same address (ports aside). */
+static bool same_host(const struct sockaddr_storage *a, const struct sockaddr_storage *b)
+{
+	if (a->ss_family != b->ss_family)
+		return false;
+	if (a->ss_family == AF_INET)
+		return ((const struct sockaddr_in *)a)->sin_addr.s_addr ==
+		       ((const struct sockaddr_in *)b)->sin_addr.s_addr;
+	if (a->ss_family == AF_INET6)
+		return memcmp(&((const struct sockaddr_in6 *)a)->sin6_addr,
+			      &((const struct sockaddr_in6 *)b)->sin6_addr, sizeof(struct in6_addr)) == 0;
+	return false;
+}
+
+/* Closes the pre-auth connection victim to make room for a new one (why: which cap). */
+static void evict(struct server *srv, struct session_link *victim, const struct listener *l,
+		  const char *why)
+{
+	srv->evicted++;
+	uint64_t now = clock_now_ns();
+	if (now >= srv->evict_warn_ns) {
+		srv->evict_warn_ns = now + EVICT_WARN_NS;
+		log_msg(LOG_WARN, "%s: %s reached: closing the oldest connections that have not "
+			"completed HELLO (%llu so far)", l->name, why,
+			(unsigned long long)srv->evicted);
+	}
+	session_close(victim->s, why);
+}
+
+/* Brings the pre-auth pool of a new connection from peer back within its caps, closing the
+ * oldest connections first (the new one is the newest: it stays). */
+static void enforce_preauth(struct server *srv, const struct listener *l,
+			    const struct sockaddr_storage *peer)
+{
+	int k = l->is_unix;
+	if (!l->is_unix) {
+		for (;;) {
+			struct session_link *oldest = NULL;
+			int same = 0;
+			for (struct session_link *p = srv->pre_head[0]; p; p = p->pre_next) {
+				if (same_host(&p->peer, peer)) {
+					oldest = oldest ? oldest : p;
+					same++;
+				}
+			}
+			if (same <= srv->conf->max_preauth_per_peer)
+				break;
+			evict(srv, oldest, l, "max_preauth_per_peer");
+		}
+	}
+	while (srv->npre[k] > (size_t)srv->conf->max_preauth && srv->pre_head[k])
+		evict(srv, srv->pre_head[k], l, "max_preauth");
 }
 
 static void on_accept(struct server *srv, struct listener *l)
 {
-	for (;;) {
-		int fd = listen_accept(l);
+	/* A batch at a time (the listener stays readable), so a flood of connections does not
+	 * keep the sessions' input waiting. */
+	for (int i = 0; i < ACCEPT_BATCH; i++) {
+		struct sockaddr_storage peer;
+		int fd = listen_accept(l, &peer);
 		if (fd < 0) {
 			if (fd != -EAGAIN)
 				log_msg(LOG_WARN, "%s: accept: %s", l->name, strerror(-fd));
 			return;
 		}
-		if (srv->nsessions >= (size_t)srv->conf->max_sessions) {
-			log_msg(LOG_WARN, "%s: refusing a connection: %zu sessions (max_sessions)",
-				l->name, srv->nsessions);
-			close(fd);
-			continue;
-		}
 		listen_tune(l, fd);
-		session_create(&srv->env, fd, l);
+		srv->accept_unix = l->is_unix;
+		srv->accept_peer = peer;
+		struct session *ss = session_create(&srv->env, fd, l);
+		if (!ss)
+			continue;
+		/* A client sends HELLO with its connect: read it now, so a well-behaved one leaves
+		 * the pre-auth pool at once and costs no one a slot; then the caps. */
+		session_on_event(ss, EPOLLIN);
+		enforce_preauth(srv, l, &peer);
 	}
+}
+
+/* The trimmer thread: one malloc_trim, timed. */
+static void *trim_main(void *arg)
+{
+	struct server *srv = arg;
+	uint64_t t0 = clock_now_ns();
+	malloc_trim(0);
+	uint64_t dt = clock_now_ns() - t0;
+	if (dt > atomic_load(&srv->trim_max_ns))
+		atomic_store(&srv->trim_max_ns, dt);
+	atomic_fetch_add(&srv->trims, 1);
+	atomic_store(&srv->trimming, false);
+	return NULL;
 }
 
 static void on_timer(struct server *srv)
@@ -562,6 +814,18 @@ static void on_timer(struct server *srv)
 	if (srv->stopping && now > srv->stop_deadline_ns)
 		while (srv->sessions)
 			session_close(srv->sessions->s, "shutdown: flush timed out");
+	if (srv->trim_due && !srv->stopping && now - srv->last_trim_ns > TRIM_EVERY_NS &&
+	    !atomic_load(&srv->trimming)) {
+		/* give back what closed sessions held (their tiles, buffers) */
+		if (srv->trimmer_started)
+			xthread_join(srv->trimmer); /* finished: trimming is false */
+		atomic_store(&srv->trimming, true);
+		srv->trimmer_started = xthread_create(&srv->trimmer, trim_main, srv) == 0;
+		if (!srv->trimmer_started)
+			atomic_store(&srv->trimming, false);
+		srv->trim_due = false;
+		srv->last_trim_ns = now;
+	}
 }
 
 void server_set_planets(struct server *srv, struct planet_set *ps)
@@ -621,19 +885,32 @@ int server_run(struct server *srv)
 			log_msg(LOG_ERROR, "epoll_wait: %s", strerror(-e));
 			return e;
 		}
+		uint64_t t0 = clock_now_ns();
 		for (int i = 0; i < n; i++)
 			dispatch(srv, &evs[i]);
+		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (encoding and copying
+		 * scale with bytes): sessions not reached stay listed, at the front, for the next
+		 * iteration, which then does not wait. */
 		struct session_link *p = srv->pump;
 		srv->pump = NULL;
+		size_t budget = LOOP_OUT_BUDGET;
+		while (p && budget) {
+			struct session_link *next = p->pump_next;
+			p->pump_next = NULL;
+			p->in_pump = false;
+			if (session_pump(p->s, &budget))
+				sess_pump(srv, p);
+			p = next;
+		}
 		while (p) {
 			struct session_link *next = p->pump_next;
 			p->pump_next = NULL;
 			p->in_pump = false;
-			if (session_pump(p->s))
-				sess_pump(srv, p);
+			sess_pump(srv, p);
 			p = next;
 		}
 		free_graveyard(srv);
+		loopstat_add(&srv->loop, clock_now_ns() - t0);
 	}
 	free_graveyard(srv);
 	return 0;

@@ -12,6 +12,7 @@
 #define CLIPMAP_SERVER_H
 #include <stddef.h>
 
+#include "common/proto.h"
 #include "engine/cache.h"
 #include "engine/planets.h"
 #include "engine/sched.h"
@@ -44,11 +45,15 @@ void server_stop(struct server *srv);
  * layers changed is dropped from the session with an ERROR. Loop thread only. */
 void server_set_planets(struct server *srv, struct planet_set *ps);
 /* The conf given to server_create changed in place (a reload): the session limits (max_want,
- * max_rate, max_pending, max_frame, max_jobs) and max_sessions follow it from now on. Loop
- * thread. */
+ * max_rate, max_pending, max_frame, max_jobs), max_sessions, the pre-auth caps and the
+ * handshake and frame timeouts follow it from now on. Loop thread. */
 void server_conf_changed(struct server *srv);
 /* The current planet set (borrowed: valid until the next server_set_planets). */
 const struct planet_set *server_planets(const struct server *srv);
+/* The STATS figures (what clipmapctl status shows), keys written into keys[i]. Loop thread. */
+size_t server_stats(struct server *srv, struct proto_stat *items, char (*keys)[128], size_t cap);
+/* The token read from token_file (NULL, *len 0 without one); borrowed. */
+const uint8_t *server_token(const struct server *srv, size_t *len);
 /* The listeners (borrowed), for logs and tests ("tcp:127.0.0.1:41234" after binding port 0). */
 size_t server_listeners(const struct server *srv, const struct listener **out);
 

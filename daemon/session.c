@@ -5,6 +5,19 @@
  * (header space reserved, payload encoded after it, header written last) so a tile is copied
  * once. A closed session stays allocated until the server frees it at the end of the loop
  * iteration, so pointers in the current epoll batch or ready batch never dangle.
+ *
+ * Memory: ready tiles waiting for output room are held up to the session's allowance
+ * (max_pending bytes of raw tiles, the same figure that caps its queued output); beyond it
+ * they are parked (released) and looked up in the cache again when room appears, or wanted
+ * again when the cache let them go. A session thus holds at most about 2 × max_pending, and
+ * its output buffer is given back whenever it drains. Once it parks with its output full, its
+ * wants are withdrawn from the scheduler (paused: nothing is made for a client that does not
+ * read) until the output drains to half of max_pending; then the want-set's WANTED entries
+ * are submitted again, in order, so coarse-first and replacement work as before.
+ *
+ * Closing never waits for the scheduler: the request is released (sched_req_release) and the
+ * manager frees it later; reports for it that still come are marked with the session's
+ * ready_src, which the close marks dead, and the loop drops them.
  */
 #include "session.h"
 
@@ -29,6 +42,7 @@
 #define PUMP_BUDGET (4u << 20) /* output bytes produced per pump call (fairness) */
 #define READ_BUDGET (1u << 20) /* input bytes read per event */
 #define CLOSE_GRACE_NS 2000000000ull
+#define OUT_KEEP (1u << 20) /* a drained output buffer above this is freed */
 
 struct sopen {
 	struct planet *p;	/* NULL: dropped by a reload (the id may be given again) */
@@ -42,6 +56,9 @@ struct session {
 	uint64_t id;
 	char name[64];
 	char peer[64]; /* "127.0.0.1:40312", "[::1]:40312", "unix" (pid when known) */
+	const struct listener *l;
+	uint64_t born_ns;    /* accepted: the handshake deadline counts from here */
+	uint64_t partial_ns; /* when the frame at the head of the input started to wait; 0: none */
 	bool need_token, compress;
 	enum proto_state st;
 	bool closing, dead;
@@ -61,6 +78,8 @@ struct session {
 	struct wantset_entry *scratch; /* a WANT's entries, reused */
 	size_t capscratch;
 	struct sched_req *req;
+	struct ready_src *src; /* this session's handle on the ready queue (reference) */
+	bool paused; /* its wants are withdrawn while its output is full (see the top) */
 	bool has_focus;
 	double lon, lat, vel[3];
 
@@ -82,6 +101,18 @@ static void pump_add(struct session *s)
 		s->env->pump(s->env->ud, s->link);
 }
 
+static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
+
+/* A paused session's wants go back in once its output drained to half of max_pending. */
+static void resume_if_drained(struct session *s)
+{
+	if (s->paused && !s->closing && !s->dead &&
+	    conn_pending(&s->c) <= s->env->limits->max_pending / 2) {
+		s->paused = false;
+		submit_wants(s, 0, 0);
+	}
+}
+
 /* Writes what it can. Returns 0, or -errno after closing the session. */
 static int flush(struct session *s)
 {
@@ -100,6 +131,12 @@ static int flush(struct session *s)
 		}
 	} else {
 		conn_throttle(&s->c, s->env->limits->max_pending);
+	}
+	resume_if_drained(s); /* the client reads again */
+	if (!s->c.want_out && s->c.out.cap > OUT_KEEP) {
+		/* drained: a burst's buffer is not kept for the session's lifetime */
+		pbuf_fini(&s->c.out);
+		pbuf_init(&s->c.out);
 	}
 	if (was != conn_events(&s->c))
 		update_interest(s);
@@ -129,10 +166,16 @@ send_error(struct session *s, uint16_t code, uint16_t ref_type, uint32_t ref_id,
 					  .message = msg } };
 	send_msg(s, &m);
 	s->env->counters->errors_sent++;
-	/* a failed authentication is an operator's business: a warning, with the peer */
-	log_msg(code == PROTO_E_SHUTDOWN ? LOG_DEBUG : code == PROTO_E_AUTH ? LOG_WARN : LOG_INFO,
-		"session %llu (%s, %s): error %s: %s", (unsigned long long)s->id, s->name, s->peer,
-		proto_code_name(code), msg);
+	/* A failed authentication is an operator's business: a warning, with the peer. Errors
+	 * before the handshake are otherwise chatter (a garbage flood must not flood the log). */
+	enum log_level lv = LOG_INFO;
+	if (code == PROTO_E_AUTH)
+		lv = LOG_WARN;
+	else if (code == PROTO_E_SHUTDOWN || s->st == PROTO_ST_HANDSHAKE)
+		lv = LOG_DEBUG;
+	char esc[700];
+	log_msg(lv, "session %llu (%s, %s): error %s: %s", (unsigned long long)s->id, s->name,
+		s->peer, proto_code_name(code), log_escape(esc, sizeof esc, msg));
 }
 
 /* control's way out (control_host). */
@@ -194,8 +237,20 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 	size_t bound = tilecodec_bound(codec, t->nbytes);
 	size_t head = PROTO_HDR + 44;
 	struct pbuf *out = &s->c.out;
-	if (pbuf_reserve(out, head + bound))
-		return;
+	size_t need = out->len + head + bound;
+	if (need > out->cap && s->c.out_off) {
+		conn_compact(&s->c); /* room from what went out before growing */
+		need = out->len + head + bound;
+	}
+	if (need > out->cap) {
+		/* Grow to what is needed, doubling only up to the session's cap (max_pending plus
+		 * this tile): a buffer twice max_pending would be resident for nothing. */
+		size_t cap = out->cap * 2, lim = (size_t)s->env->limits->max_pending + head + bound;
+		cap = cap > lim ? lim : cap;
+		cap = cap < need ? need : cap;
+		out->data = xrealloc(out->data, cap);
+		out->cap = cap;
+	}
 	uint8_t *at = out->data + out->len;
 	struct proto_tile pt = { .seq = e->seq, .planet_id = e->pid, .layer = e->layer,
 				 .key = e->key };
@@ -227,18 +282,38 @@ static bool has_room(const struct session *s)
 	return wantset_nready(&s->ws) && conn_pending(&s->c) < s->env->limits->max_pending;
 }
 
-bool session_pump(struct session *s)
+bool session_pump(struct session *s, size_t *budget)
 {
 	if (s->dead || s->closing)
 		return false;
+	struct session_counters *cnt = s->env->counters;
 	size_t start = s->c.out.len;
-	while (has_room(s) && s->c.out.len - start < PUMP_BUDGET) {
+	size_t lim = *budget < PUMP_BUDGET ? *budget : PUMP_BUDGET;
+	bool rewant = false;
+	while (has_room(s) && s->c.out.len - start < lim) {
 		struct wantset_entry *e = wantset_pop(&s->ws);
 		if (!e)
 			break;
+		if (wantset_parked(e)) {
+			struct tile *t = cache_lookup(s->env->cache, &e->key);
+			if (!t) {
+				/* the cache let it go meanwhile: the scheduler makes it again */
+				wantset_rewant(&s->ws, e);
+				cnt->tiles_rewanted++;
+				rewant = true;
+				continue;
+			}
+			wantset_unpark(&s->ws, e, t);
+			cnt->tiles_relooked++;
+		}
 		encode_tile(s, e);
-		wantset_sent(e);
+		wantset_sent(&s->ws, e);
 	}
+	if (rewant)
+		submit_wants(s, 0, 0); /* when paused: resume_if_drained does it */
+	resume_if_drained(s);
+	size_t made = s->c.out.len - start;
+	*budget = made < *budget ? *budget - made : 0;
 	if (s->c.out.len != start && flush(s))
 		return false;
 	return has_room(s);
@@ -255,22 +330,42 @@ void session_on_ready(struct session *s, struct ready_item *it)
 		tile_unref(it->t);
 		return;
 	}
-	if (wantset_ready(&s->ws, &it->key, it->t, it->err))
+	bool parked;
+	uint64_t max = s->env->limits->max_pending;
+	if (wantset_ready(&s->ws, &it->key, it->t, it->err, max, &parked)) {
+		s->env->counters->tiles_parked += parked;
+		if (parked && !s->paused && conn_pending(&s->c) >= max) {
+			/* held tiles and output both full: make nothing more for it for now */
+			s->paused = true;
+			s->env->counters->pauses++;
+			(void)sched_req_want(s->req, NULL, 0);
+		}
 		pump_add(s);
+	}
 }
 
-/* Runs on the scheduler's manager thread: only hands the report to the loop. */
+/* Runs on the scheduler's manager thread, possibly after the session closed: only hands the
+ * report to the loop, marked with the session's handle (ud, a reference of the request's). */
 static void sess_ready_cb(void *ud, const struct want *w, struct tile *t, int err)
 {
-	struct session *s = ud;
-	struct ready_item it = { .s = s, .key = w->key, .t = t ? tile_ref(t) : NULL, .err = err };
-	readyq_push(s->env->ready, &it);
+	struct ready_src *src = ud;
+	struct ready_item it = { .s = src->s, .src = ready_src_ref(src), .key = w->key,
+				 .t = t ? tile_ref(t) : NULL, .err = err };
+	readyq_push(src->q, &it);
+}
+
+/* The manager is done with the request: its reference on the handle goes. */
+static void sess_req_fin(void *ud)
+{
+	ready_src_unref(ud);
 }
 
 /* Gives the scheduler what is still wanted; a failure is reported as an ERROR referring to
  * (ref_type, ref_id). */
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id)
 {
+	if (s->paused)
+		return; /* flush submits them when the output drains */
 	size_t n;
 	struct want *list = wantset_wants(&s->ws, &n);
 	int rc = sched_req_want(s->req, list, n);
@@ -327,6 +422,16 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 			return;
 		}
 	}
+	if (env->authenticated(env->ud, s->link)) {
+		send_error(s, PROTO_E_BUSY, PROTO_HELLO, 0,
+			   "the server has as many sessions as it takes (max_sessions): try again "
+			   "later");
+		begin_close(s);
+		return;
+	}
+	s->req = sched_req_create(env->sched, sess_ready_cb, ready_src_ref(s->src));
+	/* Presented the token (required or not): prefetch limits of an authenticated client. */
+	s->ctl.authed = s->need_token || control_token_ok(env, h);
 	uint8_t codec = TCODEC_NONE;
 	if (s->compress) {
 		if (h->codecs & (1u << TCODEC_ZSTD))
@@ -336,15 +441,18 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 	}
 	s->codec = codec;
 	s->st = PROTO_ST_READY;
-	snprintf(s->name + strlen(s->name), sizeof s->name - strlen(s->name), " %.20s",
-		 h->name ? h->name : "");
+	char nm[40];
+	snprintf(s->name + strlen(s->name), sizeof s->name - strlen(s->name), " %s",
+		 log_escape(nm, sizeof nm, h->name));
 	struct proto_msg m = { .type = PROTO_HELLO_OK,
 			       .hello_ok = { .version = PROTO_VERSION,
 					     .codecs = codec ? 1u << codec : 0,
 					     .session = s->id, .name = "clipmapd/0.1",
 					     .limits = *env->limits } };
 	send_msg(s, &m);
-	log_msg(LOG_INFO, "session %llu (%s): hello, codec %s", (unsigned long long)s->id, s->name,
+	/* the one info line of a session */
+	log_msg(LOG_INFO, "session %llu (%s) from %s on %s: hello, codec %s",
+		(unsigned long long)s->id, s->name, s->peer, s->l->name,
 		tilecodec_codec_name((enum tcodec)codec));
 }
 
@@ -392,7 +500,8 @@ static void on_open(struct session *s, const struct proto_open *o)
 			       .opened = { .req = o->req, .planet_id = (uint32_t)id } };
 	fill_planet(p, &m.opened.planet, ls);
 	send_msg(s, &m);
-	log_msg(LOG_DEBUG, "session %llu: opened %s as %d", (unsigned long long)s->id, p->name, id);
+	log_msg(LOG_DEBUG, "session %llu (%s, %s): opened %s as %d", (unsigned long long)s->id,
+		s->name, s->peer, p->name, id);
 }
 
 static void on_want(struct session *s, const struct proto_want *w)
@@ -526,6 +635,8 @@ static uint32_t ref_of(const struct proto_msg *m)
 	case PROTO_CACHE_LS: return m->cache_ls.req;
 	case PROTO_PREFETCH: return m->prefetch.id;
 	case PROTO_PREFETCH_CANCEL: return m->prefetch_cancel.req;
+	case PROTO_PREFETCH_DRY: return m->prefetch_dry.id;
+	case PROTO_CACHE_OP: return m->cache_op.req;
 	default: return 0;
 	}
 }
@@ -572,11 +683,14 @@ static void handle(struct session *s, const struct proto_msg *m, size_t frame_le
 		s->st = PROTO_ST_CLOSED;
 		begin_close(s);
 		break;
-	case PROTO_ERROR:
-		log_msg(LOG_INFO, "session %llu: client error %s: %s", (unsigned long long)s->id,
+	case PROTO_ERROR: {
+		char esc[700];
+		log_msg(LOG_INFO, "session %llu (%s, %s): client error %s: %s",
+			(unsigned long long)s->id, s->name, s->peer,
 			proto_code_name(m->error.code) ? proto_code_name(m->error.code) : "?",
-			m->error.message);
+			log_escape(esc, sizeof esc, m->error.message));
 		break;
+	}
 	case PROTO_LIST_PLANETS: on_list(s, m->list_planets.req); break;
 	case PROTO_OPEN: on_open(s, &m->open); break;
 	case PROTO_WANT: on_want(s, &m->want); break;
@@ -584,6 +698,8 @@ static void handle(struct session *s, const struct proto_msg *m, size_t frame_le
 	case PROTO_CACHE_LS: control_cache_ls(&s->ctl, &m->cache_ls); break;
 	case PROTO_PREFETCH: control_prefetch(&s->ctl, &m->prefetch); break;
 	case PROTO_PREFETCH_CANCEL: control_prefetch_cancel(&s->ctl, m->prefetch_cancel.req); break;
+	case PROTO_PREFETCH_DRY: control_prefetch_dry(&s->ctl, &m->prefetch_dry); break;
+	case PROTO_CACHE_OP: control_cache_op(&s->ctl, &m->cache_op); break;
 	default:
 		send_error(s, PROTO_E_STATE, m->type, 0, "%s is not a client message",
 			   proto_type_name(m->type));
@@ -597,17 +713,23 @@ static void process_input(struct session *s)
 		struct proto_msg m = { 0 };
 		uint16_t code = 0, type = 0;
 		char err[256];
-		ssize_t r = conn_decode(&s->c, s->env->limits->max_frame, &m, &code, &type, err);
+		ssize_t r = conn_decode(&s->c, s->st, s->env->limits->max_frame, &m, &code, &type,
+					err);
 		if (r < 0) {
 			send_error(s, code, type, 0, "%s", err);
 			begin_close(s);
 			return;
 		}
-		if (r == 0)
+		if (r == 0) {
+			/* a frame has begun: frame_timeout runs from now (not from its last byte) */
+			if (!s->partial_ns)
+				s->partial_ns = clock_now_ns();
 			return;
+		}
 		handle(s, &m, (size_t)r);
 		proto_msg_fini(&m);
 		conn_consume(&s->c, (size_t)r);
+		s->partial_ns = 0;
 	}
 }
 
@@ -695,6 +817,8 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	s->need_token = l->need_token;
 	s->compress = l->compress;
 	snprintf(s->name, sizeof s->name, "%s", l->is_unix ? "unix" : "tcp");
+	s->l = l;
+	s->born_ns = clock_now_ns();
 	s->link = env->attach(env->ud, s, fd, &s->id);
 	if (!s->link) {
 		conn_close(&s->c);
@@ -705,9 +829,11 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	wantset_init(&s->ws);
 	struct control_host host = { .s = s, .id = s->id, .send = send_msg, .error = ctl_error };
 	control_init(&s->ctl, env, &host);
-	s->req = sched_req_create(env->sched, sess_ready_cb, s);
+	s->src = ready_src_new(env->ready, s);
+	/* The scheduler request comes with the handshake (on_hello): closing a connection that
+	 * never authenticated involves no other thread. */
 	peer_name(fd, s->peer, sizeof s->peer);
-	log_msg(LOG_INFO, "session %llu: connected on %s from %s", (unsigned long long)s->id,
+	log_msg(LOG_DEBUG, "session %llu: connected on %s from %s", (unsigned long long)s->id,
 		l->name, s->peer);
 	return s;
 }
@@ -719,6 +845,22 @@ void session_tick(struct session *s, uint64_t now_ns)
 	if (s->closing) {
 		if (now_ns > s->close_deadline)
 			session_close(s, "close timed out (peer not reading)");
+		return;
+	}
+	const struct session_env *env = s->env;
+	if (s->st == PROTO_ST_HANDSHAKE && now_ns - s->born_ns > env->handshake_ns) {
+		send_error(s, PROTO_E_LIMIT, 0, 0, "no HELLO within %llu s (handshake_timeout): "
+			   "closing", (unsigned long long)(env->handshake_ns / 1000000000u));
+		begin_close(s);
+		return;
+	}
+	if (!s->c.reading && s->partial_ns)
+		s->partial_ns = now_ns; /* our output backpressure, not the peer's slowness */
+	if (s->partial_ns && now_ns - s->partial_ns > env->frame_ns) {
+		send_error(s, PROTO_E_LIMIT, 0, 0, "a frame begun %llu s ago has not arrived "
+			   "(frame_timeout): closing",
+			   (unsigned long long)((now_ns - s->partial_ns) / 1000000000u));
+		begin_close(s);
 		return;
 	}
 	if (control_tick(&s->ctl, now_ns))
@@ -744,7 +886,8 @@ void session_close(struct session *s, const char *why)
 	const struct session_env *env = s->env;
 	s->dead = true;
 	control_stop(&s->ctl);
-	sched_req_destroy(s->req);
+	s->src->dead = true; /* reports still on their way are dropped (server's on_ready) */
+	sched_req_release(s->req, sess_req_fin); /* NULL (never authenticated): nothing */
 	s->req = NULL;
 	readyq_purge(env->ready, s);
 	env->detach(env->ud, s->link);
@@ -752,7 +895,7 @@ void session_close(struct session *s, const char *why)
 	if (rc)
 		log_msg(LOG_WARN, "session %llu: close: %s", (unsigned long long)s->id,
 			strerror(-rc));
-	log_msg(LOG_INFO, "session %llu (%s, %s): closed%s%s; %llu tiles sent, %llu dropped",
+	log_msg(LOG_DEBUG, "session %llu (%s, %s): closed%s%s; %llu tiles sent, %llu dropped",
 		(unsigned long long)s->id, s->name, s->peer, why ? ": " : "", why ? why : "",
 		(unsigned long long)s->tiles_sent, (unsigned long long)s->tiles_dropped);
 	env->focus_changed(env->ud);
@@ -763,6 +906,7 @@ void session_free(struct session *s)
 	if (!s)
 		return;
 	wantset_fini(&s->ws);
+	ready_src_unref(s->src);
 	free(s->scratch);
 	control_fini(&s->ctl);
 	for (int i = 0; i < s->nopened; i++)
@@ -787,6 +931,9 @@ bool session_focus(const struct session *s, double *lon, double *lat, double vel
 void session_get_load(const struct session *s, struct session_load *out)
 {
 	*out = (struct session_load){ .pending_bytes = conn_pending(&s->c),
+				      .out_bytes = s->c.out.cap,
+				      .held_bytes = wantset_held(&s->ws),
+				      .paused = s->paused,
 				      .ready_tiles = wantset_nready(&s->ws),
 				      .jobs = s->ctl.njobs };
 }

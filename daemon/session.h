@@ -23,17 +23,25 @@
 #include "readyq.h"
 
 struct session;
+struct prefetch_limits;
 struct session_link; /* the server's record of a session (opaque here) */
 
 /* Server-wide counters the sessions add to (STATS). */
 struct session_counters {
 	uint64_t tiles_sent, tiles_failed, tiles_dropped, tiles_stale, bytes_sent, errors_sent;
+	/* held-tile allowance: ready tiles released for want of output room, found again in
+	 * the cache when room came, wanted again because the cache had let them go */
+	uint64_t tiles_parked, tiles_relooked, tiles_rewanted;
+	uint64_t pauses; /* times a session's wants were withdrawn while its output was full */
 };
 
 /* What the server lends every session; every pointer is borrowed and outlives the sessions. */
 struct session_env {
 	const struct proto_limits *limits;
 	uint32_t max_jobs; /* prefetch jobs per session */
+	struct prefetch_limits *prefetch; /* the server's caps on prefetch jobs (prefetch.h) */
+	uint64_t handshake_ns; /* accept to HELLO_OK, at most ([listen] handshake_timeout) */
+	uint64_t frame_ns;     /* a frame's first byte to its last, at most (frame_timeout) */
 	struct sched *sched;
 	struct cache *cache;
 	struct readyq *ready;	 /* the scheduler's callbacks push here */
@@ -48,6 +56,10 @@ struct session_env {
 	/* A new session on fd: the server registers fd for input, lists s and gives it an id.
 	 * Returns the server's record of s, or NULL (logged) when fd cannot be watched. */
 	struct session_link *(*attach)(void *ud, struct session *s, int fd, uint64_t *id);
+	/* The session's HELLO passed (version, token): it leaves the not-yet-authenticated pool
+	 * and counts against max_sessions. Returns 0, or -EBUSY when there is no room (the
+	 * session answers ERROR busy and closes). */
+	int (*authenticated)(void *ud, struct session_link *l);
 	/* The epoll events (EPOLLIN, EPOLLRDHUP, EPOLLOUT) the session wants now. */
 	void (*interest)(void *ud, struct session_link *l, uint32_t events);
 	/* The session has ready tiles and output room: call session_pump before the next wait. */
@@ -64,19 +76,25 @@ struct session_env {
 /* One session's share of the server-wide figures. */
 struct session_load {
 	uint64_t pending_bytes, ready_tiles, jobs;
+	uint64_t held_bytes; /* ready tiles' bytes held for output room */
+	uint64_t out_bytes;  /* the output buffer's size */
+	bool paused;	     /* wants withdrawn while the output is full */
 };
 
-/* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed).
+/* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed:
+ * it outlives the session).
  * Returns NULL only when the server cannot watch fd (fd closed). */
 struct session *session_create(const struct session_env *env, int fd, const struct listener *l);
 /* epoll events on the session's socket. */
 void session_on_event(struct session *s, uint32_t events);
 /* A ready item for this session or one of its jobs (takes the item's tile reference). */
 void session_on_ready(struct session *s, struct ready_item *it);
-/* Produces more output if there is room. Returns true while the session still has ready
- * tiles and output room (the server calls it again). */
-bool session_pump(struct session *s);
-/* Housekeeping every 250 ms: prefetch progress, close deadlines. */
+/* Produces more output if there is room, at most *budget bytes (taken off it; the last tile
+ * may overshoot). Returns true while the session still has ready tiles and output room (the
+ * server calls it again). */
+bool session_pump(struct session *s, size_t *budget);
+/* Housekeeping every 250 ms: prefetch progress, close deadlines, the handshake deadline and
+ * the partial-frame timeout (ERROR limit, then close). */
 void session_tick(struct session *s, uint64_t now_ns);
 /* A reload installed ps (borrowed; the session takes references of its own): every planet the
  * session opened is replaced by the planet of the same name in ps when its layers are

@@ -3,6 +3,7 @@
  * entries, so the heap never holds an index into a freed array. */
 #include "wantset.h"
 
+#include <errno.h>
 #include <stdlib.h>
 
 #include "common/xalloc.h"
@@ -127,9 +128,14 @@ static void install(struct wantset *ws, struct wantset nw)
 	free(ws->tab);
 	*ws = nw;
 	ws->nheap = 0;
-	for (size_t i = 0; i < ws->n; i++)
-		if (ws->e[i].state == WS_READY)
-			heap_push(ws, (uint32_t)i);
+	ws->held = 0;
+	for (size_t i = 0; i < ws->n; i++) {
+		if (ws->e[i].state != WS_READY)
+			continue;
+		heap_push(ws, (uint32_t)i);
+		if (ws->e[i].t)
+			ws->held += ws->e[i].t->nbytes;
+	}
 }
 
 void wantset_replace(struct wantset *ws, uint32_t pid, const struct wantset_entry *add_e,
@@ -226,8 +232,10 @@ struct want *wantset_wants(const struct wantset *ws, size_t *n)
 	return list;
 }
 
-bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t, int err)
+bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t, int err,
+		   uint64_t budget, bool *parked)
 {
+	*parked = false;
 	long i = wantset_find(ws, k);
 	if (i < 0 || ws->e[i].state != WS_WANTED) {
 		tile_unref(t);
@@ -235,10 +243,33 @@ bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t,
 	}
 	struct wantset_entry *e = &ws->e[i];
 	e->state = WS_READY;
+	e->err = t ? 0 : (err < 0 ? err : -EIO);
+	if (t && ws->held && ws->held + t->nbytes > budget) {
+		tile_unref(t);
+		t = NULL;
+		*parked = true;
+	}
 	e->t = t;
-	e->err = err;
+	if (t)
+		ws->held += t->nbytes;
 	heap_push(ws, (uint32_t)i);
 	return true;
+}
+
+void wantset_unpark(struct wantset *ws, struct wantset_entry *e, struct tile *t)
+{
+	e->t = t;
+	ws->held += t->nbytes;
+}
+
+void wantset_rewant(struct wantset *ws, struct wantset_entry *e)
+{
+	if (e->t)
+		ws->held -= e->t->nbytes;
+	tile_unref(e->t);
+	e->t = NULL;
+	e->err = 0;
+	e->state = WS_WANTED;
 }
 
 size_t wantset_nready(const struct wantset *ws)
@@ -256,8 +287,10 @@ struct wantset_entry *wantset_pop(struct wantset *ws)
 	return NULL;
 }
 
-void wantset_sent(struct wantset_entry *e)
+void wantset_sent(struct wantset *ws, struct wantset_entry *e)
 {
+	if (e->t)
+		ws->held -= e->t->nbytes;
 	e->state = WS_SENT;
 	tile_unref(e->t);
 	e->t = NULL;

@@ -4,6 +4,11 @@
  * A WANT replaces one planet's part of the set, carrying the state of keys that stay; a reload
  * rebinds every entry to its layer's new node. Pure bookkeeping: no sockets, no scheduler.
  *
+ * Held tiles are budgeted: a READY entry keeps its tile only while the set's tiles total at
+ * most the budget given to wantset_ready; beyond it the entry is READY without a tile
+ * ("parked": t NULL, err 0) and the owner looks it up again (cache) when it comes off the heap,
+ * or wants it afresh (wantset_rewant). Order and replacement work the same for both.
+ *
  * Threads: one owner thread. Ownership: the set owns its READY entries' tile references and
  * borrows their nodes (the owner keeps the planets alive).
  */
@@ -22,7 +27,7 @@ enum wantset_state { WS_WANTED = 0, WS_READY, WS_SENT };
 struct wantset_entry {
 	struct tile_key key;
 	struct node *node; /* borrowed */
-	struct tile *t;	   /* WS_READY: owned reference (NULL when err < 0) */
+	struct tile *t;	   /* WS_READY: owned reference (NULL when err < 0, or parked) */
 	int err;
 	uint32_t pid, seq, order; /* planet id, the WANT's seq, the position in it */
 	uint8_t layer, cls, state;
@@ -35,6 +40,7 @@ struct wantset {
 	size_t tcap;   /* power of two */
 	uint32_t *heap; /* READY entries' indices, by wantset_prio */
 	size_t nheap, capheap;
+	uint64_t held; /* bytes of the tiles READY entries hold */
 };
 
 /* What a replace or rebind let go: entries that left unsent (`dropped`) and generated tiles
@@ -64,14 +70,31 @@ size_t wantset_rebind(struct wantset *ws, wantset_resolve_fn *resolve, void *ud,
 /* The WANTED entries as a scheduler want list: an owned array of *n (free it). */
 struct want *wantset_wants(const struct wantset *ws, size_t *n);
 /* A tile for key is ready (t taken, NULL with err < 0). Returns false, releasing t, when the
- * key is not waiting for one (it left the set, or a repeated report). */
-bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t, int err);
+ * key is not waiting for one (it left the set, or a repeated report). When holding t would
+ * take the held bytes over `budget` (and some are held already), the entry is parked: t is
+ * released and *parked set. */
+bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t, int err,
+		   uint64_t budget, bool *parked);
+/* Whether a popped entry is parked (READY without its tile: look it up again). */
+static inline bool wantset_parked(const struct wantset_entry *e)
+{
+	return e->state == WS_READY && !e->t && e->err == 0;
+}
+/* Gives a popped parked entry its tile back (t taken). */
+void wantset_unpark(struct wantset *ws, struct wantset_entry *e, struct tile *t);
+/* Makes a popped entry WANTED again (its tile is to be asked of the scheduler again). */
+void wantset_rewant(struct wantset *ws, struct wantset_entry *e);
+/* Bytes of tiles held by READY entries. */
+static inline uint64_t wantset_held(const struct wantset *ws)
+{
+	return ws->held;
+}
 /* How many entries wait in the ready heap. */
 size_t wantset_nready(const struct wantset *ws);
 /* Takes the first READY entry off the heap (the caller sends it, then wantset_sent); NULL when
  * the heap holds none. */
 struct wantset_entry *wantset_pop(struct wantset *ws);
-/* Marks e SENT and releases its tile. */
-void wantset_sent(struct wantset_entry *e);
+/* Marks e (popped) SENT and releases its tile. */
+void wantset_sent(struct wantset *ws, struct wantset_entry *e);
 
 #endif

@@ -6,7 +6,7 @@ set -eu
 PKGS="build-essential pkg-config libopenimageio-dev openimageio-tools libgeographiclib-dev
 libcmocka-dev libxxhash-dev libzstd-dev liblmdb-dev liblz4-dev libsystemd-dev systemd clang libgdal-dev libtiff-dev
 libegl-dev libegl-mesa0 libgl1-mesa-dri libgl-dev libosmesa6-dev glslang-tools libglfw3-dev xvfb xauth
-scdoc graphviz"
+scdoc graphviz libmicrohttpd-dev zlib1g-dev gdal-bin curl prometheus"
 missing=""
 for p in $PKGS; do
 	st=$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)
@@ -15,7 +15,21 @@ for p in $PKGS; do
 	*) missing="$missing $p" ;;
 	esac
 done
+# CesiumJS for the browser page and the tests of the Cesium terrain (npm registry), into
+# build/npm; a machine without npm or network gets a warning and those tests skip.
+npm_deps() {
+	dir="$(dirname "$0")/../build/npm"
+	[ -f "$dir/node_modules/cesium/package.json" ] && return 0
+	if ! command -v npm >/dev/null; then
+		echo "make deps: npm not found: the Cesium tests will skip" >&2
+		return 0
+	fi
+	mkdir -p "$dir"
+	npm install --silent --no-audit --no-fund --prefix "$dir" cesium@1.145.0 >/dev/null 2>&1 ||
+		echo "make deps: npm install cesium failed: the Cesium tests will skip" >&2
+}
 if [ -z "$missing" ]; then
+	npm_deps
 	exec sh "$(dirname "$0")/data.sh"
 fi
 cmd="apt-get install -y --no-install-recommends$missing"
@@ -29,4 +43,5 @@ export DEBIAN_FRONTEND=noninteractive
 apt-get update -qq
 # shellcheck disable=SC2086
 apt-get install -y -qq --no-install-recommends $missing >/dev/null
+npm_deps
 exec sh "$(dirname "$0")/data.sh"

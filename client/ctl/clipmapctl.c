@@ -49,11 +49,18 @@ static const struct cmd_usage {
 	{ "tile", "  clipmapctl tile PLANET LAYER LX LY X Y -o FILE     one tile through the "
 		  "daemon\n" },
 	{ "cache", "  clipmapctl cache ls PLANET [--near LAT,LON [--radius KM]] [--level L]\n"
-		   "                          [--limit N] [--json]       what is cached\n" },
+		   "                          [--limit N] [--json]       what is cached\n"
+		   "  clipmapctl cache stat [PLANET] [--json]          tiles and bytes per planet,\n"
+		   "                                                     layer, level and tier\n"
+		   "  clipmapctl cache purge PLANET [--bbox W,S,E,N] [--levels A-B] [--json]\n"
+		   "                                                     drop its tiles from disk\n"
+		   "  clipmapctl cache gc [--json]                     drop disk entries no planet uses\n"
+		   "  clipmapctl cache verify [PLANET] [--json]        check every stored checksum\n" },
 	{ "prefetch",
 	  "  clipmapctl prefetch PLANET --bbox W,S,E,N --levels A-B [--layers a,b]\n"
 	  "  clipmapctl prefetch PLANET --path LAT,LON:LAT,LON --width KM --levels A-B\n"
 	  "                          [--layers a,b]             fill the cache (Ctrl-C cancels)\n"
+	  "      --dry-run [--json]: the estimate per level and the tier's budget, nothing run\n"
 	  "      --bbox: W < E; across the antimeridian write E + 360 (170,-10,190,10)\n" },
 	{ "render",
 	  "  clipmapctl render PLANET LAYER LX LY X Y -o FILE   one tile\n"
@@ -642,6 +649,72 @@ static int cache_option(int c, const char *s, struct ctl_cache_opts *o)
 	}
 }
 
+/* `cache stat|purge|gc|verify`. */
+static int cmd_cache_op(int argc, char **argv, struct ctl_target *t)
+{
+	static const struct option opts[] = {
+		GLOBAL_OPTS,
+		{ "bbox", required_argument, NULL, 'b' }, { "levels", required_argument, NULL, 'l' },
+		{ "json", no_argument, NULL, 'j' },	  { 0, 0, 0, 0 },
+	};
+	static const char *const names[] = { "stat", "purge", "gc", "verify" };
+	struct ctl_cache_op_opts o = { 0 };
+	for (int i = 0; i < 4; i++)
+		if (strcmp(argv[1], names[i]) == 0)
+			o.op = (uint8_t)(PROTO_COP_STAT + i);
+	char what[32];
+	snprintf(what, sizeof what, "cache %.16s", argv[1]);
+	if (!o.op) {
+		fprintf(stderr, "clipmapctl cache: unknown subcommand \"%s\" (ls, stat, purge, gc, "
+				"verify)\n", argv[1]);
+		return 2;
+	}
+	argc--;
+	argv++;
+	int c, status;
+	char err[256];
+	optind = 0;
+	while ((c = next_opt(argc, argv, "s:H:h", opts, t, &status)) != -1) {
+		if (c == OPT_EXIT)
+			return status;
+		switch (c) {
+		case 'b':
+			if (ctl_parse_bbox(optarg, &o.bbox, err))
+				return fail(what, -EINVAL, err);
+			o.filter |= PROTO_COF_BBOX;
+			break;
+		case 'l':
+			if (ctl_parse_levels(optarg, GRID_MAX_LEVEL, &o.lmin, &o.lmax, err))
+				return fail(what, -EINVAL, err);
+			o.filter |= PROTO_COF_LEVELS;
+			break;
+		case 'j': o.json = true; break;
+		default: cmd_usage(stderr); return 2;
+		}
+	}
+	int npos = argc - optind;
+	const char *why = NULL;
+	if (o.filter && o.op != PROTO_COP_PURGE)
+		why = "--bbox and --levels go with purge";
+	else if (o.op == PROTO_COP_PURGE && npos != 1)
+		why = "want PLANET";
+	else if (o.op == PROTO_COP_GC && npos != 0)
+		why = "takes no PLANET";
+	else if (npos > 1)
+		why = "want at most one PLANET";
+	if (why) {
+		fprintf(stderr, "clipmapctl %s: %s\n", what, why);
+		return 2;
+	}
+	o.planet = npos ? argv[optind] : NULL;
+	struct net_conn *conn;
+	if (connect_or_complain(t, &conn))
+		return 1;
+	int rc = ctl_cache_op(conn, &o, t->timeout_ms, stdout, err);
+	net_close(conn);
+	return rc ? fail(what, rc, err) : 0;
+}
+
 static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 {
 	static const struct option opts[] = {
@@ -654,8 +727,10 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 		cmd_usage(stdout);
 		return 0;
 	}
-	if (argc < 2 || strcmp(argv[1], "ls") != 0) {
-		fprintf(stderr, "clipmapctl cache: the only subcommand is \"ls\"\n");
+	if (argc >= 2 && strcmp(argv[1], "ls") != 0)
+		return cmd_cache_op(argc, argv, t);
+	if (argc < 2) {
+		fprintf(stderr, "clipmapctl cache: want ls, stat, purge, gc or verify\n");
 		return 2;
 	}
 	argc--;
@@ -687,7 +762,7 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 struct prefetch_args {
 	struct ctl_prefetch_opts o;
 	struct proto_lonlat *pts; /* --path, owned (free()) */
-	bool levels, width;
+	bool levels, width, dry_run;
 };
 
 /* Takes prefetch option c with its argument s into pa. Returns 0, or the exit status after
@@ -719,6 +794,8 @@ static int prefetch_option(int c, const char *s, struct prefetch_args *pa)
 		pa->levels = true;
 		return 0;
 	case 'y': o->layers = s; return 0;
+	case 'n': pa->dry_run = true; return 0;
+	case 'j': o->json = true; return 0;
 	default: cmd_usage(stderr); return 2;
 	}
 }
@@ -737,6 +814,8 @@ static int check_prefetch_args(const struct prefetch_args *pa, int npos)
 		why = "--path needs --width KM";
 	else if (pa->o.shape == PROTO_SHAPE_BBOX && pa->width)
 		why = "--width goes with --path";
+	else if (pa->o.json && !pa->dry_run)
+		why = "--json goes with --dry-run";
 	if (!why)
 		return 0;
 	fprintf(stderr, "clipmapctl prefetch: %s\n", why);
@@ -752,7 +831,8 @@ static int parse_prefetch_args(int argc, char **argv, struct ctl_target *t,
 		GLOBAL_OPTS,
 		{ "bbox", required_argument, NULL, 'b' },   { "path", required_argument, NULL, 'p' },
 		{ "width", required_argument, NULL, 'w' },  { "levels", required_argument, NULL, 'l' },
-		{ "layers", required_argument, NULL, 'y' }, { 0, 0, 0, 0 },
+		{ "layers", required_argument, NULL, 'y' }, { "dry-run", no_argument, NULL, 'n' },
+		{ "json", no_argument, NULL, 'j' },	    { 0, 0, 0, 0 },
 	};
 	*pa = (struct prefetch_args){ 0 };
 	int c, status;
@@ -816,8 +896,19 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 {
 	struct prefetch_args pa;
 	int status = parse_prefetch_args(argc, argv, t, &pa);
-	if (status < 0)
+	if (status < 0 && pa.dry_run) {
+		struct net_conn *conn;
+		if (connect_or_complain(t, &conn)) {
+			status = 1;
+		} else {
+			char err[256];
+			int rc = ctl_prefetch_dry(conn, &pa.o, t->timeout_ms, stdout, err);
+			net_close(conn);
+			status = rc ? fail("prefetch", rc, err) : 0;
+		}
+	} else if (status < 0) {
 		status = prefetch(t, &pa.o);
+	}
 	free(pa.pts);
 	return status;
 }

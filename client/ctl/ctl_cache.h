@@ -28,4 +28,20 @@ int ctl_cache_print(struct proto_cache_entry *e, size_t n, uint64_t total,
 int ctl_cache_ls(struct net_conn *c, const struct ctl_cache_opts *o, int timeout_ms, FILE *out,
 		 char err[256]);
 
+/* `cache stat [PLANET]`, `cache purge PLANET [--bbox] [--levels]`, `cache gc`, `cache
+ * verify [PLANET]`: one CACHE_OP, its replies printed (stat: a row per planet, layer, level and
+ * tier with totals; the others: what was checked and removed). */
+struct ctl_cache_op_opts {
+	uint8_t op;	    /* enum proto_cache_opk */
+	const char *planet; /* NULL or "": every planet (stat, verify) */
+	uint8_t filter;	    /* PROTO_COF_* (purge) */
+	struct geo_rect bbox;
+	uint8_t lmin, lmax;
+	bool json;
+};
+
+/* Returns 0 or -errno with err filled. timeout_ms bounds the whole wait (0: 10 minutes). */
+int ctl_cache_op(struct net_conn *c, const struct ctl_cache_op_opts *o, int timeout_ms,
+		 FILE *out, char err[256]);
+
 #endif

@@ -149,23 +149,103 @@ static int drain(struct net_conn *c, struct run *r, double *last_msg, char err[2
 	}
 }
 
-int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
-		     const struct ctl_prefetch_ui *ui, struct proto_prefetch_progress *final,
-		     char err[256])
+/* Opens o's planet and turns --layers into a mask. Returns 0 or -errno with err. */
+static int open_layers(struct net_conn *c, const struct ctl_prefetch_opts *o, int timeout_ms,
+		       uint64_t *mask, char err[256])
 {
 	struct proto_msg op = { 0 };
 	int rc = net_open_planet(c, o->planet, &op,
-				 ui->timeout_ms ? ui->timeout_ms : NET_DEFAULT_TIMEOUT_MS, err);
+				 timeout_ms ? timeout_ms : NET_DEFAULT_TIMEOUT_MS, err);
 	if (rc)
 		return rc;
-	uint64_t mask = 0;
-	rc = ctl_parse_layers(o->layers, &op.opened.planet, &mask, err);
+	*mask = 0;
+	rc = ctl_parse_layers(o->layers, &op.opened.planet, mask, err);
 	if (rc == 0 && o->lmax > op.opened.planet.max_level) {
 		err_set(err, "--levels %u-%u: planet %.64s has levels 0-%u", o->lmin, o->lmax,
 			o->planet, op.opened.planet.max_level);
 		rc = -EINVAL;
 	}
 	proto_msg_fini(&op);
+	return rc;
+}
+
+static const char *tier_name(uint8_t t)
+{
+	return t == PROTO_TIER_DISK ? "disk" : t == PROTO_TIER_REMOTE ? "remote" : "memory";
+}
+
+int ctl_prefetch_dry(struct net_conn *c, const struct ctl_prefetch_opts *o, int timeout_ms,
+		     FILE *out, char err[256])
+{
+	uint64_t mask;
+	int rc = open_layers(c, o, timeout_ms, &mask, err);
+	if (rc)
+		return rc;
+	struct proto_msg q = { .type = PROTO_PREFETCH_DRY,
+			       .prefetch_dry = { .id = net_next_req(c), .planet = o->planet,
+						 .layers = mask, .shape = o->shape, .lmin = o->lmin,
+						 .lmax = o->lmax, .bbox = o->bbox,
+						 .width_m = o->width_m, .npoints = o->npoints,
+						 .points = o->points } };
+	if ((rc = net_send(c, &q, err)))
+		return rc;
+	struct proto_msg r = { 0 };
+	rc = net_expect(c, PROTO_PREFETCH_ESTIMATE, &r,
+			timeout_ms ? timeout_ms : NET_DEFAULT_TIMEOUT_MS, NULL, NULL, err);
+	if (rc)
+		return rc;
+	const struct proto_prefetch_estimate *e = &r.prefetch_estimate;
+	bool over_tiles = e->tiles > e->max_tiles, over_bytes = e->budget && e->bytes > e->budget;
+	if (o->json) {
+		fprintf(out,
+			"{\"planet\": \"%s\", \"tiles\": %llu, \"bytes\": %llu, \"tier\": \"%s\", "
+			"\"budget\": %llu, \"used\": %llu, \"max_tiles\": %llu, \"fits\": %s, "
+			"\"levels\": [",
+			o->planet, (unsigned long long)e->tiles, (unsigned long long)e->bytes,
+			tier_name(e->tier), (unsigned long long)e->budget,
+			(unsigned long long)e->used, (unsigned long long)e->max_tiles,
+			over_tiles || over_bytes ? "false" : "true");
+		for (uint8_t i = 0; i < e->nlevels; i++)
+			fprintf(out, "%s{\"level\": %u, \"tiles\": %llu, \"bytes\": %llu}",
+				i ? ", " : "", e->levels[i].ly, (unsigned long long)e->levels[i].tiles,
+				(unsigned long long)e->levels[i].bytes);
+		fprintf(out, "]}\n");
+	} else {
+		char b[32], bud[32], used[32];
+		fprintf(out, "%-6s %14s %12s\n", "level", "tiles", "bytes");
+		for (uint8_t i = 0; i < e->nlevels; i++) {
+			ctl_fmt_bytes(e->levels[i].bytes, b, sizeof b);
+			fprintf(out, "%-6u %14llu %12s\n", e->levels[i].ly,
+				(unsigned long long)e->levels[i].tiles, b);
+		}
+		ctl_fmt_bytes(e->bytes, b, sizeof b);
+		fprintf(out, "%-6s %14llu %12s\n", "total", (unsigned long long)e->tiles, b);
+		ctl_fmt_bytes(e->budget, bud, sizeof bud);
+		ctl_fmt_bytes(e->used, used, sizeof used);
+		fprintf(out, "%s tier: budget %s, %s held now; the job would take %.1f %% of it\n",
+			tier_name(e->tier), bud, used,
+			e->budget ? 100.0 * (double)e->bytes / (double)e->budget : 0.0);
+		fprintf(out, "this session's limit: %llu tiles per job\n",
+			(unsigned long long)e->max_tiles);
+		if (over_tiles)
+			fprintf(out, "would be refused: more tiles than this session's limit\n");
+		else if (over_bytes)
+			fprintf(out, "would be refused: larger than the %s tier's budget\n",
+				tier_name(e->tier));
+		else
+			fprintf(out, "would run\n");
+	}
+	fflush(out);
+	proto_msg_fini(&r);
+	return 0;
+}
+
+int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
+		     const struct ctl_prefetch_ui *ui, struct proto_prefetch_progress *final,
+		     char err[256])
+{
+	uint64_t mask;
+	int rc = open_layers(c, o, ui->timeout_ms, &mask, err);
 	if (rc)
 		return rc;
 

@@ -20,6 +20,7 @@ struct ctl_prefetch_opts {
 	uint32_t npoints;
 	double width_m;
 	uint8_t lmin, lmax;
+	bool json; /* --dry-run: the estimate as JSON */
 };
 
 struct ctl_prefetch_ui {
@@ -38,5 +39,11 @@ struct ctl_prefetch_ui {
 int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 		     const struct ctl_prefetch_ui *ui, struct proto_prefetch_progress *final,
 		     char err[256]);
+
+/* `prefetch --dry-run`: asks the daemon for the job's estimate (PREFETCH_DRY) and prints the
+ * tile count and bytes per level, the tier the tiles would go to with its budget, and whether
+ * the job would run (text, or JSON with o->json) to out. Returns 0, or -errno with err. */
+int ctl_prefetch_dry(struct net_conn *c, const struct ctl_prefetch_opts *o, int timeout_ms,
+		     FILE *out, char err[256]);
 
 #endif

@@ -1,5 +1,5 @@
 /* ctl_tile — see ctl_tile.h. Pictures are built like the offline renderer's (normals through
- * render_normals_rgb), so `tile` and `render` write the same bytes. */
+ * pix_normals_rgb), so `tile` and `render` write the same bytes. */
 #include "ctl_tile.h"
 
 #include <errno.h>
@@ -42,7 +42,7 @@ int ctl_tile_image(enum pix_type format, uint32_t T, const void *texels,
 	} else {
 		out->channels = 3;
 		unsigned char *d = xmalloc(n * 3);
-		render_normals_rgb(texels, d, n);
+		pix_normals_rgb(texels, d, n);
 		out->pixels = d;
 	}
 	return 0;
@@ -122,6 +122,9 @@ int ctl_tile_fetch(struct net_conn *c, const struct ctl_tile_req *r, int timeout
 				err_set(err, "%s: tile in unknown format %u", net_peer(c),
 					m.tile.enc.format);
 				rc = -EPROTO;
+			} else if (rc == 0) {
+				grid_tile_rect(&m.tile.key, &out->bounds);
+				out->georef = 1;
 			}
 			free(tex);
 			proto_msg_fini(&m);

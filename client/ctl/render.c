@@ -88,7 +88,7 @@ static void blit(struct render_image *im, const struct tile *t, const struct til
 			memcpy(dst, src + (size_t)j * T * 4, (size_t)T * 4);
 		} else {
 			unsigned char *dst = (unsigned char *)im->pixels + (y * (size_t)im->width + x0) * 3;
-			render_normals_rgb(src + (size_t)j * T * 2, dst, T);
+			pix_normals_rgb(src + (size_t)j * T * 2, dst, T);
 		}
 	}
 	free(tmp);
@@ -161,6 +161,11 @@ int render_layer(const struct planet *p, const char *layer, const struct render_
 	}
 	out->width = (int)(cols * T);
 	out->height = (int)(rows * T);
+	out->georef = 1;
+	out->bounds = (struct geo_rect){ .west = grid_u_to_lon(lx, T, (double)rg->x * T),
+					 .east = grid_u_to_lon(lx, T, (double)(rg->x + cols) * T),
+					 .north = grid_v_to_lat(ly, T, (double)rg->y * T),
+					 .south = grid_v_to_lat(ly, T, (double)(rg->y + rows) * T) };
 	out->channels = L->type == PIX_HEIGHT ? 1 : L->type == PIX_COLOR ? 4 : 3;
 	out->is_float = L->type == PIX_HEIGHT;
 	out->hmin = INFINITY;

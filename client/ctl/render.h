@@ -8,6 +8,7 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "common/grid.h"
 #include "engine/planet.h"
 
 struct render_opts {
@@ -24,6 +25,8 @@ struct render_image {
 	int is_float;
 	void *pixels; /* rows north → south */
 	double hmin, hmax; /* heights: the range found */
+	struct geo_rect bounds; /* the area covered (east may pass 180 across the antimeridian) */
+	int georef;		/* bounds are set: .tif files are written as EPSG:4326 GeoTIFFs */
 };
 
 /* A block of tiles at one level: cols × rows tiles from (x, y); x wraps around the
@@ -44,12 +47,11 @@ void render_region_around(int lx, int ly, double lat, double lon, uint32_t n,
 int render_layer(const struct planet *p, const char *layer, const struct render_region *rg,
 		 const struct render_opts *o, struct render_image *out, char err[256]);
 /* Writes the picture by the file's extension: heights as .tif/.tiff/.exr (float) or .png
- * (16-bit, min..max mapped to 0..65535 — *scale_note tells how); colour and normals as .png.
+ * (16-bit, min..max mapped to 0..65535 — *scale_note tells how); colour and normals as .png
+ * or .tif. A .tif of a georeferenced picture is a GeoTIFF (EPSG:4326, its bounds), written
+ * through GDAL, that gdalinfo and QGIS place on the map.
  * Returns 0 or -errno with err filled. */
 int render_write(const struct render_image *im, const char *path, char note[256], char err[256]);
 void render_image_free(struct render_image *im);
-/* Expands n RG8 normals (east, north) to RGB8 with the implied up component — the picture
- * form of a normal tile, shared by every writer so their bytes agree. */
-void render_normals_rgb(const unsigned char *rg, unsigned char *rgb, size_t n);
 
 #endif

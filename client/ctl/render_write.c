@@ -9,6 +9,7 @@
 #include <strings.h>
 
 #include "common/errbuf.h"
+#include "common/geoimg.h"
 #include "common/img.h"
 #include "common/xalloc.h"
 #include "render.h"
@@ -26,6 +27,13 @@ int render_write(const struct render_image *im, const char *path, char note[256]
 	if (!png && !ends_with(path, ".tif") && !ends_with(path, ".tiff") && !ends_with(path, ".exr")) {
 		err_set(err, "%s: unknown picture type: use .png, .tif, .tiff or .exr", path);
 		return -EINVAL;
+	}
+	if (im->georef && !png && !ends_with(path, ".exr")) {
+		struct geoimg g = { .width = im->width, .height = im->height,
+				    .channels = im->is_float ? 1 : im->channels,
+				    .type = im->is_float ? IMG_F32 : IMG_U8, .pixels = im->pixels,
+				    .bounds = &im->bounds };
+		return geoimg_write(&g, GEOIMG_TIFF, path, err);
 	}
 	if (!im->is_float) {
 		if (!png && ends_with(path, ".exr")) {
@@ -51,17 +59,6 @@ int render_write(const struct render_image *im, const char *path, char note[256]
 		snprintf(note, 256, "heights %.2f .. %.2f m: metres = %.6f + value * %.9f", lo, hi, lo,
 			 scale);
 	return rc;
-}
-
-void render_normals_rgb(const unsigned char *rg, unsigned char *rgb, size_t n)
-{
-	for (size_t i = 0; i < n; i++) {
-		double e = rg[2 * i] / 127.5 - 1.0, no = rg[2 * i + 1] / 127.5 - 1.0;
-		double up2 = 1.0 - e * e - no * no;
-		rgb[3 * i] = rg[2 * i];
-		rgb[3 * i + 1] = rg[2 * i + 1];
-		rgb[3 * i + 2] = (unsigned char)lrint(((up2 > 0 ? sqrt(up2) : 0) + 1.0) * 127.5);
-	}
 }
 
 void render_image_free(struct render_image *im)

@@ -223,7 +223,7 @@ static void unref_all(struct tile **tiles, size_t n)
 	free(tiles);
 }
 
-void cache_insert(struct cache *c, struct tile *t)
+static void insert(struct cache *c, struct tile *t, bool cold)
 {
 	uint64_t h = grid_key_hash(&t->key);
 	struct tile **ev = NULL;
@@ -232,13 +232,15 @@ void cache_insert(struct cache *c, struct tile *t)
 	xmutex_lock(&c->mu);
 	struct centry *e = find(c, &t->key, h);
 	if (e) {
-		e->stamp = ++c->clock;
-		e->used_ns = now;
+		if (!cold) {
+			e->stamp = ++c->clock;
+			e->used_ns = now;
+		}
 	} else {
 		e = xmalloc(sizeof *e);
 		e->t = tile_ref(t);
 		e->hash = h;
-		e->stamp = ++c->clock;
+		e->stamp = cold ? 0 : ++c->clock;
 		e->used_ns = now;
 		e->next = c->buckets[h & (c->nbuckets - 1)];
 		c->buckets[h & (c->nbuckets - 1)] = e;
@@ -253,6 +255,16 @@ void cache_insert(struct cache *c, struct tile *t)
 	}
 	xmutex_unlock(&c->mu);
 	unref_all(ev, nev);
+}
+
+void cache_insert(struct cache *c, struct tile *t)
+{
+	insert(c, t, false);
+}
+
+void cache_insert_cold(struct cache *c, struct tile *t)
+{
+	insert(c, t, true);
 }
 
 void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, uint32_t tile_size)

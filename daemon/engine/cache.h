@@ -40,6 +40,10 @@ bool cache_contains(struct cache *c, const struct tile_key *k);
 /* Publishes t (the cache takes its own reference; the caller keeps theirs). If k is already
  * cached the old tile stays. Prunes when over budget. */
 void cache_insert(struct cache *c, struct tile *t);
+/* As cache_insert, but a new entry is stamped least recently used (an entry already there
+ * keeps its stamp): among tiles as far from every focus it is evicted first. For bulk work
+ * (prefetch) that must not push out what viewers use. */
+void cache_insert_cold(struct cache *c, struct tile *t);
 /* Replaces the focus points pruning measures distance to (copied). */
 void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, uint32_t tile_size);
 /* Evicts until at most `target` bytes remain (farthest first, then least recent). */

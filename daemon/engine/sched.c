@@ -15,7 +15,8 @@
  * which want entries wait on each job; then cancel queued and waiting jobs the pass did not
  * reach); process finished jobs incrementally (report to the waiting entries, hand the tile
  * to dependents); push newly ready jobs; run the callbacks with no lock held; finally free
- * destroyed requests and wake whoever waits in sched_req_destroy.
+ * destroyed requests (calling a released request's fin) and wake whoever waits in
+ * sched_req_destroy.
  */
 #include "sched.h"
 
@@ -48,6 +49,7 @@ struct sched_req {
 	size_t npending;
 	bool has_pending, destroy, in_changes;
 	bool *ack; /* the destroyer's flag; NULL when destroyed on the manager thread */
+	void (*fin)(void *ud); /* sched_req_release's: called when r is freed */
 	struct sched_req *next_change;
 
 	/* Manager only. */
@@ -306,8 +308,11 @@ static void deliver(struct sched *s)
 	s->nbatch = 0;
 }
 
+/* Frees r (with in_mu held by the manager, or at sched_destroy); r's fin runs first. */
 static void free_req(struct sched_req *r)
 {
+	if (r->fin)
+		r->fin(r->ud);
 	free(r->pending);
 	free(r->pend_m);
 	free(r->list);
@@ -407,14 +412,15 @@ static void lower_priority(struct sched *s)
 }
 
 /* A from_store job: the tile from the store, else the job goes back to the manager with no
- * result to be generated. */
-static void load(struct sched *s, struct tilecodec *tc, struct job *j)
+ * result to be generated. Bulk work (prefetch) finding it there leaves the memory cache alone. */
+static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;
 	struct tile *t = NULL;
 	int rc = store_get(s->store, &j->key, n->out, n->planet->tile_size, tc, &t);
 	if (rc == 0) {
-		cache_insert(s->cache, t);
+		if (cls != SCHED_BULK)
+			cache_insert(s->cache, t);
 		atomic_fetch_add(&s->loaded, 1);
 	}
 	j->result = t;
@@ -422,7 +428,10 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j)
 }
 
 /* cls: the class the job was queued with; bulk work (operator prefetch) is kept on disk
- * ahead of what viewers happened to ask for. */
+ * ahead of what viewers happened to ask for, and does not flush the memory cache viewers use:
+ * with a store its stored tiles are written through to the store only, the others
+ * (intermediate nodes, or a tile the store's full queue dropped) go in at the cache's cold
+ * end; without one its layer tiles warm the memory cache as any others. */
 static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;
@@ -431,11 +440,15 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
-		cache_insert(s->cache, t);
+		bool bulk = cls == SCHED_BULK, stored = false;
 		if (s->store && store_keeps(n))
 			/* Write-behind: never waits; a full queue drops it. */
-			store_put(s->store, t,
-				  cls == SCHED_BULK ? STORE_KEEP_PREFETCHED : STORE_KEEP_INCIDENTAL);
+			stored = store_put(s->store, t,
+					   bulk ? STORE_KEEP_PREFETCHED : STORE_KEEP_INCIDENTAL) == 0;
+		if (!bulk || (!s->store && store_keeps(n)))
+			cache_insert(s->cache, t); /* without a disk tier, prefetch warms memory */
+		else if (!stored)
+			cache_insert_cold(s->cache, t);
 		atomic_fetch_add(&j->node->generated, 1);
 		atomic_fetch_add(&j->node->gen_ns, dt);
 		atomic_fetch_add(&s->generated, 1);
@@ -470,7 +483,7 @@ static void *worker_main(void *arg)
 		xmutex_unlock(&s->q_mu);
 
 		if (j->from_store)
-			load(s, tc, j);
+			load(s, tc, j, cls);
 		else
 			generate(s, &g, j, cls);
 
@@ -627,6 +640,35 @@ void sched_req_destroy(struct sched_req *r)
 	while (!on_manager && !done)
 		xcond_wait(&s->ack_cv, &s->in_mu);
 	xmutex_unlock(&s->in_mu);
+}
+
+void sched_req_release(struct sched_req *r, void (*fin)(void *ud))
+{
+	if (!r)
+		return;
+	struct sched *s = r->s;
+	bool on_manager = pthread_equal(pthread_self(), s->manager);
+	xmutex_lock(&s->in_mu);
+	r->destroy = true;
+	r->ack = NULL;
+	r->fin = fin;
+	if (on_manager)
+		r->dead = true; /* no further callbacks in this iteration's batch */
+	post_change(s, r);
+	xmutex_unlock(&s->in_mu);
+}
+
+static void barrier_cb(void *ud, const struct want *w, struct tile *t, int err)
+{
+	(void)ud, (void)w, (void)t, (void)err;
+}
+
+void sched_barrier(struct sched *s)
+{
+	/* The manager takes the whole change list at once and frees its destroyed requests at the
+	 * end of that iteration: once this request's destroy is acknowledged, every change posted
+	 * before it went through the same iteration or an earlier one. */
+	sched_req_destroy(sched_req_create(s, barrier_cb, NULL));
 }
 
 struct fetch {

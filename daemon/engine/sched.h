@@ -81,6 +81,16 @@ int sched_req_want(struct sched_req *r, const struct want *w, size_t n);
  * request) it returns at once and r's pending callbacks are dropped. */
 void sched_req_destroy(struct sched_req *r);
 
+/* Stops the request without waiting (what an event loop calls): the manager frees it at its
+ * next iteration. Until then r's callback may still run (on the manager thread), so ud must
+ * stay valid: fin(ud), when not NULL, is called once on the manager thread after the last
+ * callback for r (or by sched_destroy), the place to release ud. fin must be quick and must
+ * not call into the scheduler. r must not be used after this call. */
+void sched_req_release(struct sched_req *r, void (*fin)(void *ud));
+/* Waits until every request released (or destroyed) before the call is freed and its fin
+ * called. Not from a ready callback. */
+void sched_barrier(struct sched *s);
+
 /* Blocking convenience for offline use and tests: generates (or finds) every wanted tile and
  * stores an owned reference in out[i] (NULL where generation failed). Returns 0 if all
  * succeeded, else the first error (in list order). Never call it from a ready callback: it

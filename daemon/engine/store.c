@@ -142,6 +142,19 @@ void store_value_encode(struct tilecodec *tc, const struct tile *t, int level, v
 	*n = STORE_HDR_LEN + (size_t)len;
 }
 
+int store_value_check(const uint8_t kb[STORE_KEY_LEN], const void *vp, size_t n)
+{
+	const uint8_t *v = vp;
+	if (n < STORE_HDR_LEN || get_le32(v) != MAGIC || v[4] != VERSION ||
+	    get_le32(v + 16) != n - STORE_HDR_LEN ||
+	    get_le64(v + 32) != value_sum(v, kb, v + STORE_HDR_LEN, n - STORE_HDR_LEN))
+		return -EBADMSG;
+	struct tilecodec_hdr h = { .format = v[5], .codec = v[6], .filter = v[7],
+				   .size = get_le32(v + 8), .raw_len = get_le32(v + 12),
+				   .checksum = get_le64(v + 24) };
+	return tilecodec_hdr_check(&h, NULL) ? -EBADMSG : 0;
+}
+
 int store_value_decode(struct tilecodec *tc, const uint8_t kb[STORE_KEY_LEN], const void *vp,
 		       size_t n, const struct tile_key *k, enum pix_type type, uint32_t size,
 		       struct tile **out)

@@ -46,6 +46,8 @@ struct store_stats {
 	uint64_t write_drops; /* puts dropped because the write queue was full */
 	uint64_t write_errors; /* batches that failed to commit (disk full, I/O error) */
 	uint64_t queued;      /* writes queued or being committed */
+	uint64_t recovered;   /* times the file failed at run time (MDB_PANIC, MDB_CORRUPTED…)
+			       * and was moved aside and recreated empty */
 };
 
 /* Why a tile was stored, which decides the eviction order: incidental tiles (what viewers
@@ -65,6 +67,9 @@ struct store_entry {
 };
 
 typedef int (*store_iter_fn)(void *ud, const struct store_entry *e);
+/* verify's report: an entry, and whether its value passed (ok) — a damaged one was counted
+ * (corrupt) and its removal queued. Non-zero stops. */
+typedef int (*store_verify_fn)(void *ud, const struct store_entry *e, bool ok);
 
 struct store;
 
@@ -87,6 +92,10 @@ struct store_ops {
 	/* Calls fn for every entry (key order) from one consistent snapshot; stops when fn
 	 * returns non-zero and returns that, else 0 or -errno. fn must not call the store. */
 	int (*iterate)(struct store *s, store_iter_fn fn, void *ud);
+	/* Checks every value (header, checksum over key and payload; not decoded) from one
+	 * snapshot, calling fn for each; stops when fn returns non-zero and returns that, else 0
+	 * or -errno. fn must not call the store. */
+	int (*verify)(struct store *s, store_verify_fn fn, void *ud);
 	void (*stat)(struct store *s, struct store_stats *out);
 	/* Waits until every write queued before the call is committed; 0 or the first write
 	 * error since the last flush. */
@@ -126,6 +135,10 @@ static inline int store_iterate(struct store *s, store_iter_fn fn, void *ud)
 	return s->ops->iterate(s, fn, ud);
 }
 static inline void store_stat(struct store *s, struct store_stats *out) { s->ops->stat(s, out); }
+static inline int store_verify(struct store *s, store_verify_fn fn, void *ud)
+{
+	return s->ops->verify(s, fn, ud);
+}
 static inline int store_flush(struct store *s) { return s->ops->flush(s); }
 void store_destroy(struct store *s); /* NULL is a no-op */
 
@@ -141,7 +154,10 @@ struct store_lmdb_desc {
 
 /* Opens (creating) the store file. Returns 0 with *out owned, or -errno with err filled. A
  * file LMDB cannot read (damaged, not LMDB) is renamed PATH.corrupt-TIME and an empty store
- * created: then 0 is returned with err saying so (err[0] is '\0' otherwise — clear it first). */
+ * created: then 0 is returned with err saying so (err[0] is '\0' otherwise — clear it first).
+ * The same happens at run time when LMDB reports the file damaged (MDB_PANIC, MDB_CORRUPTED,
+ * MDB_PAGE_NOTFOUND) to a read or a write: the writer thread moves it aside and recreates it
+ * (counted in store_stats.recovered); reads meanwhile miss, and the caller generates. */
 int store_lmdb_open(const struct store_lmdb_desc *d, struct store **out, char err[256]);
 
 /* ---- the value format (shared by backends; pure) ---- */
@@ -157,6 +173,9 @@ int store_key_decode(const void *p, size_t n, struct tile_key *k);
  * header + tile codec payload (codec zstd at `level`, the format's default filter). */
 void store_value_encode(struct tilecodec *tc, const struct tile *t, int level, void **out,
 			size_t *n);
+/* Whether value v (n bytes) stored under kb has a sound header and checksum (the payload is
+ * not decoded). Returns 0 or -EBADMSG. */
+int store_value_check(const uint8_t kb[STORE_KEY_LEN], const void *v, size_t n);
 /* Verifies value v (n bytes, borrowed: may point into a map) stored under kb and decodes it
  * into a new tile of the expected type and size (*out, owned). Returns 0, -ENOENT (a tile of
  * another type or size: not this one), or -EBADMSG (checksum, header or payload damaged). */

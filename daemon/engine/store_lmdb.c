@@ -19,8 +19,13 @@
  * pages; each entry adds a fixed estimate for its three index records. The map is the budget
  * plus half of it plus 32 MiB, room for copy-on-write pages of a batch and the free list.
  *
- * Locks: mu protects the queue, the stop flag, the flush sequence numbers and the write
- * error; nothing is encoded or written under it. Counters are atomics. The writer alone
+ * Reads see writes not yet committed: a miss in the file looks through the queue and the batch
+ * being committed (newest first; a delete hides an older put), so a tile put a moment ago is
+ * found — bulk work written only to the store is not generated twice while it waits.
+ *
+ * Locks: mu protects the queue, the batch's count (inflight: the batch's keys and tiles may
+ * be read under mu while it is non-zero), the stop flag, the flush sequence numbers and the
+ * write error; nothing is encoded or written under it. Counters are atomics. The writer alone
  * writes the accounted bytes, tile count and stamp (atomics, read by stat).
  */
 #include <errno.h>
@@ -67,6 +72,10 @@ struct lstore {
 	uint64_t qbytes_max;
 
 	pthread_t writer;
+	/* Readers and the writer's transactions hold it shared; the writer holds it exclusive
+	 * while it replaces a damaged file (env is NULL if that failed). */
+	pthread_rwlock_t envlock;
+	atomic_bool broken; /* LMDB said the file is damaged: the writer replaces it */
 	pthread_mutex_t mu; /* protects the fields up to `stop` */
 	pthread_cond_t cv;  /* the writer waits for work */
 	pthread_cond_t done_cv; /* flushers wait for done_seq */
@@ -83,7 +92,37 @@ struct lstore {
 
 	atomic_uint_fast64_t bytes, ntiles, stamp;
 	atomic_uint_fast64_t hits, misses, puts, evictions, corrupt, drops, werrs, queued;
+	atomic_uint_fast64_t recovered;
 };
+
+/* Whether an LMDB code says the file itself is damaged (not one entry). */
+static bool fatal(int rc)
+{
+	return rc == MDB_PANIC || rc == MDB_CORRUPTED || rc == MDB_PAGE_NOTFOUND;
+}
+
+/* A read or write met a damaged file: the writer replaces it at its next turn. */
+static void mark_broken(struct lstore *s)
+{
+	atomic_store(&s->broken, true);
+	xmutex_lock(&s->mu);
+	xcond_signal(&s->cv);
+	xmutex_unlock(&s->mu);
+}
+
+static void rdlock(struct lstore *s)
+{
+	if (pthread_rwlock_rdlock(&s->envlock))
+		abort();
+}
+
+static void rwunlock(struct lstore *s)
+{
+	if (pthread_rwlock_unlock(&s->envlock))
+		abort();
+}
+
+static int open_env(struct lstore *s, char err[256]);
 
 static int mdb_errno(int rc)
 {
@@ -342,13 +381,40 @@ static int apply(struct lstore *s, struct wop *ops, size_t n, uint64_t extra_evi
 	return rc;
 }
 
+/* Moves the damaged file aside (PATH.corrupt-TIME) and opens an empty one in its place;
+ * nobody reads meanwhile. Writer thread. */
+static void replace_file(struct lstore *s)
+{
+	if (pthread_rwlock_wrlock(&s->envlock))
+		abort();
+	atomic_store(&s->broken, false);
+	if (s->env)
+		mdb_env_close(s->env);
+	s->env = NULL;
+	char aside[600], lock[600], err[256];
+	snprintf(aside, sizeof aside, "%s.corrupt-%lld", s->path, (long long)time(NULL));
+	snprintf(lock, sizeof lock, "%s-lock", s->path);
+	if (rename(s->path, aside) != 0)
+		unlink(s->path);
+	unlink(lock);
+	if (open_env(s, err) == 0)
+		atomic_fetch_add(&s->recovered, 1);
+	rwunlock(s);
+}
+
 static void *writer_main(void *arg)
 {
 	struct lstore *s = arg;
 	xmutex_lock(&s->mu);
 	for (;;) {
-		while (!s->stop && s->qn == 0)
+		while (!s->stop && s->qn == 0 && !atomic_load(&s->broken))
 			xcond_wait(&s->cv, &s->mu);
+		if (atomic_load(&s->broken)) {
+			xmutex_unlock(&s->mu);
+			replace_file(s);
+			xmutex_lock(&s->mu);
+			continue;
+		}
 		if (s->qn == 0)
 			break; /* stopping and drained */
 		size_t n = s->qn < BATCH_MAX ? s->qn : BATCH_MAX;
@@ -368,19 +434,30 @@ static void *writer_main(void *arg)
 			if (op->kind == W_PUT)
 				store_value_encode(s->tc, op->t, s->level, &op->val, &op->vlen);
 		}
-		int rc = apply(s, s->batch, n, 0);
+		rdlock(s);
+		int rc = s->env ? apply(s, s->batch, n, 0) : EIO;
 		if (rc == MDB_MAP_FULL)
 			rc = apply(s, s->batch, n, s->budget / 4 + (uint64_t)s->psize * 64);
+		rwunlock(s);
 		if (rc)
 			atomic_fetch_add(&s->werrs, 1);
+		/* MDB_BAD_TXN: LMDB met a damaged page inside the transaction (it flags the
+		 * transaction and fails what follows) */
+		if (fatal(rc) || rc == MDB_BAD_TXN)
+			mark_broken(s); /* the batch is lost; the file is replaced next */
+
+		xmutex_lock(&s->mu);
+		s->inflight = 0; /* readers no longer look at the batch */
+		xmutex_unlock(&s->mu);
 		for (size_t i = 0; i < n; i++) {
 			free(s->batch[i].val);
+			s->batch[i].val = NULL;
 			tile_unref(s->batch[i].t);
+			s->batch[i].t = NULL;
 		}
 
 		xmutex_lock(&s->mu);
 		s->done_seq = seq;
-		s->inflight = 0;
 		atomic_store(&s->queued, s->qn);
 		if (rc && !s->flush_err)
 			s->flush_err = mdb_errno(rc);
@@ -392,6 +469,27 @@ static void *writer_main(void *arg)
 
 /* ---- the vtable ---- */
 
+/* The newest queued or in-flight put or delete of k (not yet committed): a new reference to
+ * the put's tile in *t (NULL for a delete). Returns whether there is one. */
+static bool pending(struct lstore *s, const struct tile_key *k, struct tile **t)
+{
+	bool found = false;
+	*t = NULL;
+	xmutex_lock(&s->mu);
+	for (size_t i = s->qn; i-- > 0 && !found;)
+		if (s->q[i].kind != W_TOUCH && grid_key_equal(&s->q[i].key, k)) {
+			found = true;
+			*t = s->q[i].kind == W_PUT ? tile_ref(s->q[i].t) : NULL;
+		}
+	for (size_t i = s->inflight; i-- > 0 && !found;)
+		if (s->batch[i].kind != W_TOUCH && grid_key_equal(&s->batch[i].key, k)) {
+			found = true;
+			*t = s->batch[i].kind == W_PUT ? tile_ref(s->batch[i].t) : NULL;
+		}
+	xmutex_unlock(&s->mu);
+	return found;
+}
+
 static int l_get(struct store *base, const struct tile_key *k, enum pix_type type, uint32_t size,
 		 struct tilecodec *tc, struct tile **out)
 {
@@ -400,16 +498,35 @@ static int l_get(struct store *base, const struct tile_key *k, enum pix_type typ
 	uint8_t kb[STORE_KEY_LEN];
 	store_key_encode(k, kb);
 	MDB_txn *txn;
-	int rc = mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn);
-	if (rc)
-		return mdb_errno(rc);
+	rdlock(s);
+	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	if (rc) {
+		rwunlock(s);
+		if (fatal(rc))
+			mark_broken(s);
+		atomic_fetch_add(&s->misses, 1);
+		return -ENOENT; /* the caller generates */
+	}
 	MDB_val key = { STORE_KEY_LEN, kb }, v;
 	rc = mdb_get(txn, s->tiles, &key, &v);
+	bool broken = fatal(rc);
 	if (rc == 0)
 		rc = store_value_decode(tc, kb, v.mv_data, v.mv_size, k, type, size, out);
 	else
-		rc = mdb_errno(rc);
+		rc = broken ? -ENOENT : mdb_errno(rc);
 	mdb_txn_abort(txn);
+	rwunlock(s);
+	if (broken)
+		mark_broken(s);
+	struct tile *pt;
+	if (rc == -ENOENT && pending(s, k, &pt)) {
+		if (pt && pt->type == type && pt->size == size) {
+			atomic_fetch_add(&s->hits, 1);
+			*out = pt;
+			return 0;
+		}
+		tile_unref(pt);
+	}
 	if (rc == -EBADMSG) {
 		atomic_fetch_add(&s->corrupt, 1);
 		enqueue(s, &(struct wop){ .kind = W_DEL, .key = *k });
@@ -428,11 +545,27 @@ static bool l_contains(struct store *base, const struct tile_key *k)
 	uint8_t kb[STORE_KEY_LEN];
 	store_key_encode(k, kb);
 	MDB_txn *txn;
-	if (mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn))
+	rdlock(s);
+	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	if (rc) {
+		rwunlock(s);
+		if (fatal(rc))
+			mark_broken(s);
+		atomic_fetch_add(&s->misses, 1);
 		return false;
+	}
 	MDB_val key = { STORE_KEY_LEN, kb }, v;
-	bool found = mdb_get(txn, s->tiles, &key, &v) == 0;
+	rc = mdb_get(txn, s->tiles, &key, &v);
+	bool found = rc == 0;
 	mdb_txn_abort(txn);
+	rwunlock(s);
+	if (fatal(rc))
+		mark_broken(s);
+	struct tile *pt;
+	if (!found && pending(s, k, &pt)) {
+		found = pt != NULL;
+		tile_unref(pt);
+	}
 	if (!found)
 		atomic_fetch_add(&s->misses, 1);
 	return found;
@@ -460,11 +593,17 @@ static int l_iterate(struct store *base, store_iter_fn fn, void *ud)
 	struct lstore *s = (struct lstore *)base;
 	MDB_txn *txn;
 	MDB_cursor *c;
-	int rc = mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn);
-	if (rc)
+	rdlock(s);
+	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	if (rc) {
+		rwunlock(s);
+		if (fatal(rc))
+			mark_broken(s);
 		return mdb_errno(rc);
+	}
 	if ((rc = mdb_cursor_open(txn, s->meta, &c))) {
 		mdb_txn_abort(txn);
+		rwunlock(s);
 		return mdb_errno(rc);
 	}
 	MDB_val k, m;
@@ -482,6 +621,56 @@ static int l_iterate(struct store *base, store_iter_fn fn, void *ud)
 	}
 	mdb_cursor_close(c);
 	mdb_txn_abort(txn);
+	rwunlock(s);
+	if (fatal(rc))
+		mark_broken(s);
+	if (r)
+		return r;
+	return rc == MDB_NOTFOUND ? 0 : mdb_errno(rc);
+}
+
+static int l_verify(struct store *base, store_verify_fn fn, void *ud)
+{
+	struct lstore *s = (struct lstore *)base;
+	MDB_txn *txn;
+	MDB_cursor *c;
+	rdlock(s);
+	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	if (rc) {
+		rwunlock(s);
+		if (fatal(rc))
+			mark_broken(s);
+		return mdb_errno(rc);
+	}
+	if ((rc = mdb_cursor_open(txn, s->tiles, &c))) {
+		mdb_txn_abort(txn);
+		rwunlock(s);
+		return mdb_errno(rc);
+	}
+	MDB_val k, v, m;
+	int r = 0;
+	for (rc = mdb_cursor_get(c, &k, &v, MDB_FIRST); rc == 0 && r == 0;
+	     rc = mdb_cursor_get(c, &k, &v, MDB_NEXT)) {
+		struct store_entry e = { .bytes = (uint32_t)v.mv_size };
+		if (k.mv_size != STORE_KEY_LEN || store_key_decode(k.mv_data, k.mv_size, &e.key))
+			continue;
+		struct meta md;
+		if (mdb_get(txn, s->meta, &k, &m) == 0 && meta_read(&m, &md) == 0) {
+			e.stamp = md.stamp;
+			e.keep = (enum store_keep)md.keep;
+		}
+		bool ok = store_value_check(k.mv_data, v.mv_data, v.mv_size) == 0;
+		if (!ok) {
+			atomic_fetch_add(&s->corrupt, 1);
+			enqueue(s, &(struct wop){ .kind = W_DEL, .key = e.key });
+		}
+		r = fn(ud, &e, ok);
+	}
+	mdb_cursor_close(c);
+	mdb_txn_abort(txn);
+	rwunlock(s);
+	if (fatal(rc))
+		mark_broken(s);
 	if (r)
 		return r;
 	return rc == MDB_NOTFOUND ? 0 : mdb_errno(rc);
@@ -497,7 +686,7 @@ static void l_stat(struct store *base, struct store_stats *o)
 		.misses = atomic_load(&s->misses), .puts = atomic_load(&s->puts),
 		.evictions = atomic_load(&s->evictions), .corrupt = atomic_load(&s->corrupt),
 		.write_drops = atomic_load(&s->drops), .write_errors = atomic_load(&s->werrs),
-		.queued = atomic_load(&s->queued),
+		.queued = atomic_load(&s->queued), .recovered = atomic_load(&s->recovered),
 		.file_bytes = stat(s->path, &st) == 0 ? (uint64_t)st.st_size : 0 };
 }
 
@@ -529,6 +718,7 @@ static void free_store(struct lstore *s)
 	xmutex_destroy(&s->mu);
 	xcond_destroy(&s->cv);
 	xcond_destroy(&s->done_cv);
+	pthread_rwlock_destroy(&s->envlock);
 	free(s->q);
 	free(s->batch);
 	free(s->path);
@@ -550,7 +740,7 @@ static void l_destroy(struct store *base)
 
 static const struct store_ops lmdb_ops = {
 	.name = "lmdb", .get = l_get, .contains = l_contains, .put = l_put, .del = l_del,
-	.iterate = l_iterate, .stat = l_stat, .flush = l_flush, .destroy = l_destroy,
+	.iterate = l_iterate, .verify = l_verify, .stat = l_stat, .flush = l_flush, .destroy = l_destroy,
 };
 
 /* ---- opening ---- */
@@ -661,6 +851,8 @@ int store_lmdb_open(const struct store_lmdb_desc *d, struct store **out, char er
 	xmutex_init(&s->mu);
 	xcond_init(&s->cv);
 	xcond_init(&s->done_cv);
+	pthread_rwlock_init(&s->envlock, NULL);
+	atomic_init(&s->broken, false);
 	if ((rc = xthread_create(&s->writer, writer_main, s))) {
 		err_set(err, "store writer thread: %s", strerror(-rc));
 		free_store(s);

@@ -222,8 +222,9 @@ static void prefetch_completes(void **state)
 	if (!strstr(out, want))
 		fail_msg("%s not listed:\n%s", want, out);
 
+	/* (one layer: all three, ~76 MiB, would not fit the memory cache and are refused) */
 	rc = ctl(e, out, sizeof out, "prefetch", "procedural", "--path", "45,5:47,9", "--width",
-		 "10", "--levels", "2-4", NULL);
+		 "10", "--levels", "2-4", "--layers", "height", NULL);
 	if (rc)
 		fprintf(stderr, "%s", out);
 	assert_int_equal(rc, 0);
@@ -231,6 +232,57 @@ static void prefetch_completes(void **state)
 	assert_non_null(sum);
 	assert_int_equal(sscanf(sum, "prefetch procedural: %llu of %llu tiles", &done, &total), 2);
 	assert_int_equal(done, total);
+}
+
+/* --dry-run prints the estimate per level and the tier's budget and runs nothing; a job over
+ * that budget (here the 64 MiB memory cache: no store) is refused with the same estimate. */
+static void prefetch_dry_run(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char out[16384];
+	int rc = ctl(e, out, sizeof out, "prefetch", "procedural", "--bbox", "5,40,15,50",
+		     "--levels", "3-7", "--dry-run", NULL);
+	printf("%s", out);
+	assert_int_equal(rc, 0);
+	for (int l = 3; l <= 7; l++) {
+		char row[16];
+		snprintf(row, sizeof row, "\n%-6d ", l);
+		assert_non_null(strstr(out, row));
+	}
+	assert_non_null(strstr(out, "memory tier: budget 64.0 MiB"));
+	assert_non_null(strstr(out, "would be refused: larger than the memory tier's budget"));
+	const char *tot = strstr(out, "\ntotal ");
+	assert_non_null(tot);
+	unsigned long long tiles = 0;
+	assert_int_equal(sscanf(tot, "\ntotal %llu", &tiles), 1);
+	rc = ctl(e, out, sizeof out, "prefetch", "procedural", "--bbox", "5,40,15,50", "--levels",
+		 "3-7", "--dry-run", "--json", NULL);
+	assert_int_equal(rc, 0);
+	char want[64];
+	snprintf(want, sizeof want, "\"tiles\": %llu,", tiles);
+	assert_non_null(strstr(out, want));
+	assert_non_null(strstr(out, "\"tier\": \"memory\""));
+	assert_non_null(strstr(out, "\"fits\": false"));
+	assert_non_null(strstr(out, "{\"level\": 7, \"tiles\": "));
+	/* run: refused with that estimate, nothing generated */
+	rc = ctl(e, out, sizeof out, "prefetch", "procedural", "--bbox", "5,40,15,50", "--levels",
+		 "3-7", NULL);
+	printf("%s", out);
+	assert_int_equal(rc, 1);
+	snprintf(want, sizeof want, "about %llu tiles", tiles);
+	assert_non_null(strstr(out, want));
+	assert_non_null(strstr(out, "[engine] cache_mb"));
+	/* a small one fits */
+	rc = ctl(e, out, sizeof out, "prefetch", "procedural", "--bbox", "5,40,15,50", "--levels",
+		 "0-1", "--layers", "height", "--dry-run", NULL);
+	assert_int_equal(rc, 0);
+	assert_non_null(strstr(out, "would run"));
+	/* --json alone is a usage error */
+	rc = ctl(e, out, sizeof out, "prefetch", "procedural", "--bbox", "5,40,15,50", "--levels",
+		 "0-1", "--json", NULL);
+	assert_int_equal(rc, 2);
+	assert_non_null(strstr(out, "--json goes with --dry-run"));
 }
 
 static void bad_socket(void **state)
@@ -252,6 +304,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(tile_equals_render_and_is_listed),
 		cmocka_unit_test(prefetch_completes),
+		cmocka_unit_test(prefetch_dry_run),
 		cmocka_unit_test(bad_socket),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

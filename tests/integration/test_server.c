@@ -653,10 +653,10 @@ static void test_prefetch_and_cache_ls(void **state)
 	assert_true(c->m.prefetch_progress.total > 0);
 	assert_int_equal(c->m.prefetch_progress.done, c->m.prefetch_progress.total);
 
-	/* A big job, cancelled. */
+	/* A big job, cancelled (within max_tiles_local and the 256 MiB cache: ~12 k tiles). */
 	m.prefetch = (struct proto_prefetch){ .id = 3, .planet = "test", .shape = PROTO_SHAPE_BBOX,
-					      .lmin = 10, .lmax = 11,
-					      .bbox = { -180, -90, 180, 90 } };
+					      .lmin = 9, .lmax = 10,
+					      .bbox = { 0, 0, 10, 10 } };
 	cl_send(c, &m);
 	cl_expect(c, PROTO_PREFETCH_PROGRESS, 5000);
 	struct proto_msg cancel = { .type = PROTO_PREFETCH_CANCEL, .prefetch_cancel = { .req = 3 } };

@@ -30,6 +30,7 @@
 #include "common/clock.h"
 #include "common/img.h"
 #include "support/daemon_env.h"
+#include "support/slow.h"
 
 struct env {
 	struct daemon_env d;
@@ -63,8 +64,10 @@ static int view(struct env *e, char *out, size_t n, const char *camera, const ch
 {
 	char exe[600];
 	snprintf(exe, sizeof exe, "%s/clipmapview", e->d.bindir);
+	char limit[32];
+	snprintf(limit, sizeof limit, "%.0f", test_slow(60));
 	char *argv[32] = { exe, "--camera", (char *)camera, "--size", "320x240", "--wait-complete",
-			   "--timeout", "60", "-o", (char *)png };
+			   "--timeout", limit, "-o", (char *)png };
 	int argc = 10;
 	va_list ap;
 	va_start(ap, a0);

@@ -13,6 +13,7 @@
 #include <setjmp.h>
 #include <cmocka.h>
 
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -43,23 +44,34 @@ static int cmp_key(const void *a, const void *b)
 	return 0;
 }
 
-/* Every key the job yields (one layer), sorted; fails on a duplicate. */
+/* Every key the job yields (one layer), sorted; fails on a duplicate. The job's total, exact
+ * once done, matches; the estimate made before is within a small factor of it. */
 static void job_keys(const struct planet *p, const struct proto_prefetch *m, struct keyset *ks)
 {
 	struct prefetch_iter *it;
-	uint64_t total;
 	char err[256];
-	if (prefetch_iter_create(p, m, &it, &total, err) != 0)
+	if (prefetch_iter_create(p, m, PREFETCH_MAX_TILES, &it, err) != 0)
 		fail_msg("prefetch_iter_create: %s", err);
-	ks->k = xmalloc(total * sizeof *ks->k);
+	uint64_t est = prefetch_iter_total(it);
+	size_t cap = 1 << 16;
+	ks->k = xmalloc(cap * sizeof *ks->k);
 	ks->n = 0;
 	struct want w[512];
 	size_t got;
-	while ((got = prefetch_iter_next(it, w, 512)) > 0)
+	while ((got = prefetch_iter_next(it, w, 512)) > 0) {
+		if (ks->n + got > cap) {
+			cap *= 2;
+			ks->k = xrealloc(ks->k, cap * sizeof *ks->k);
+		}
 		for (size_t i = 0; i < got; i++)
 			ks->k[ks->n++] = w[i].key;
+	}
+	assert_int_equal(prefetch_iter_error(it, err), 0);
+	assert_int_equal(ks->n, prefetch_iter_total(it));
 	prefetch_iter_destroy(it);
-	assert_int_equal(ks->n, total);
+	double ratio = (double)est / (double)ks->n;
+	printf("  estimate %llu for %zu tiles (x%.2f)\n", (unsigned long long)est, ks->n, ratio);
+	assert_true(ratio >= 0.5 && ratio <= 4.0);
 	qsort(ks->k, ks->n, sizeof *ks->k, cmp_key);
 	for (size_t i = 1; i < ks->n; i++)
 		if (cmp_key(&ks->k[i - 1], &ks->k[i]) == 0)
@@ -209,11 +221,95 @@ static void corridor_keeps_width(void **state)
 	planet_unref(p);
 }
 
+/* The estimate against the count for corridors of several widths and latitudes, levels and a
+ * single point (tiles of one layer): within a factor of 0.5-4 (job_keys asserts it). */
+static void estimate_near_count(void **state)
+{
+	(void)state;
+	struct planet *p = load();
+	static const struct {
+		struct proto_lonlat a, b;
+		double width;
+		int lmin, lmax;
+		uint32_t npts;
+	} cases[] = {
+		{ { 139.69, 35.69 }, { -122.42, 37.77 }, 200e3, 5, 9, 2 }, /* Tokyo-San Francisco */
+		{ { 10.75, 59.91 }, { -149.9, 61.22 }, 0, 6, 10, 2 },	   /* Oslo-Anchorage */
+		{ { 8.0, 46.5 }, { 9.0, 46.6 }, 5e3, 10, 13, 2 },	   /* the Alps */
+		{ { -60.0, -70.0 }, { 60.0, -70.0 }, 50e3, 4, 8, 2 },	   /* 70°S */
+		{ { 0.0, 89.0 }, { 180.0, 89.0 }, 20e3, 4, 9, 2 },	   /* over the pole */
+		{ { 20.0, 0.3 }, { 0, 0 }, 30e3, 8, 12, 1 },		   /* a point */
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		struct proto_lonlat pts[2] = { cases[i].a, cases[i].b };
+		struct proto_prefetch m = { .id = 3, .layers = 1, .shape = PROTO_SHAPE_PATH,
+					    .lmin = (uint8_t)cases[i].lmin,
+					    .lmax = (uint8_t)cases[i].lmax, .width_m = cases[i].width,
+					    .npoints = cases[i].npts, .points = pts };
+		printf("path %zu:\n", i);
+		struct keyset ks;
+		job_keys(p, &m, &ks);
+		free(ks.k);
+	}
+	planet_unref(p);
+}
+
+/* Hostile sizes (issue 14) are seen by the estimate, which enumerates nothing: the 67-byte
+ * corridor 9.55e6 m wide at level 22 and the whole planet at level 11 (25 M tiles); an
+ * iterator whose level passes its limit stops with -E2BIG. */
+static void hostile_sizes(void **state)
+{
+	(void)state;
+	struct planet *p = load();
+	char err[256];
+	struct prefetch_estimate e;
+	struct proto_lonlat pt = { 8.0, 46.0 };
+	struct proto_prefetch wide = { .id = 4, .planet = "procedural", .layers = 0,
+				       .shape = PROTO_SHAPE_PATH, .lmin = 22, .lmax = 22,
+				       .width_m = 9.55e6, .npoints = 1, .points = &pt };
+	assert_int_equal(prefetch_estimate(p, &wide, &e, err), 0);
+	printf("wide corridor: about %llu tiles\n", (unsigned long long)e.tiles);
+	assert_true(e.tiles > 4000000); /* [prefetch] max_tiles' default */
+	struct proto_prefetch planet = { .id = 5, .layers = 0, .shape = PROTO_SHAPE_BBOX,
+					 .lmin = 0, .lmax = 11,
+					 .bbox = { -180, -90, 180, 90 } };
+	assert_int_equal(prefetch_estimate(p, &planet, &e, err), 0);
+	printf("whole planet to level 11: about %llu tiles (level 11: %llu)\n",
+	       (unsigned long long)e.tiles, (unsigned long long)e.level_tiles[11]);
+	assert_true(e.tiles > 20000000 && e.tiles < 80000000);
+	/* the finest level every lx: rows × columns × lx in use */
+	struct prefetch_iter *it;
+	planet.lmin = planet.lmax = 9;
+	assert_int_equal(prefetch_iter_create(p, &planet, 100000, &it, err), 0);
+	struct want w[64];
+	assert_int_equal(prefetch_iter_next(it, w, 64), 0);
+	assert_int_equal(prefetch_iter_error(it, err), -E2BIG);
+	printf("%s\n", err);
+	assert_non_null(strstr(err, "level 9 has more than 100000 tiles"));
+	prefetch_iter_destroy(it);
+	wide.lmin = wide.lmax = 16;
+	wide.width_m = 2e6;
+	assert_int_equal(prefetch_iter_create(p, &wide, 100000, &it, err), 0);
+	assert_int_equal(prefetch_iter_next(it, w, 64), 0);
+	assert_int_equal(prefetch_iter_error(it, err), -E2BIG);
+	prefetch_iter_destroy(it);
+	/* bad requests */
+	planet.lmax = 23;
+	assert_int_equal(prefetch_estimate(p, &planet, &e, err), -EINVAL);
+	assert_non_null(strstr(err, "max_level 22"));
+	planet.lmax = 9;
+	planet.layers = 1u << 5;
+	assert_int_equal(prefetch_estimate(p, &planet, &e, err), -EINVAL);
+	planet_unref(p);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(bbox_covers_viewers),
 		cmocka_unit_test(corridor_keeps_width),
+		cmocka_unit_test(estimate_near_count),
+		cmocka_unit_test(hostile_sizes),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

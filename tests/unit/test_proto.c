@@ -40,7 +40,7 @@ struct fixture {
 	struct proto_cache_entry entries[PROTO_MAX_CACHE_ENTRIES];
 	struct proto_lonlat points[PROTO_MAX_PATH];
 	uint8_t payload[64 * 64 * 4];
-	struct proto_msg msgs[24];
+	struct proto_msg msgs[40];
 	int nmsgs;
 };
 
@@ -173,6 +173,32 @@ static struct fixture *fixture_create(void)
 		.prefetch_progress = { .id = 1, .state = PROTO_JOB_FAILED, .done = UINT64_MAX,
 				       .total = 0, .rate = 1234.5 } };
 	*m++ = (struct proto_msg){ .type = PROTO_PREFETCH_CANCEL, .prefetch_cancel = { .req = 1 } };
+	static const struct proto_cache_stat_row rows[2] = {
+		{ "earth", "height", 12, PROTO_TIER_DISK, 1234, 5678 },
+		{ "", "", 0, PROTO_TIER_MEMORY, UINT64_MAX, 0 } };
+	*m++ = (struct proto_msg){ .type = PROTO_CACHE_OP,
+				   .cache_op = { .req = 3, .op = PROTO_COP_PURGE, .planet = "earth",
+						 .filter = PROTO_COF_BBOX | PROTO_COF_LEVELS,
+						 .bbox = { 170, -10, -170, 10 }, .lmin = 2,
+						 .lmax = 30 } };
+	*m++ = (struct proto_msg){ .type = PROTO_CACHE_STAT,
+				   .cache_stat = { .req = 3, .more = 1, .count = 2, .rows = rows } };
+	*m++ = (struct proto_msg){ .type = PROTO_CACHE_DONE,
+				   .cache_done = { .req = 3, .op = PROTO_COP_VERIFY, .checked = 9,
+						   .removed = 1, .bytes = 4096, .corrupt = 1 } };
+	*m++ = (struct proto_msg){
+		.type = PROTO_PREFETCH_DRY,
+		.prefetch_dry = { .id = 9, .planet = "earth", .layers = 0, .shape = PROTO_SHAPE_PATH,
+				  .lmin = 3, .lmax = 9, .width_m = PROTO_MAX_WIDTH, .npoints = 2,
+				  .points = f->points } };
+	static const struct proto_estimate_level lv[GRID_MAX_LEVEL + 1] = {
+		{ 0, 36, 1 << 20 }, { 30, UINT64_MAX, 0 } };
+	*m++ = (struct proto_msg){
+		.type = PROTO_PREFETCH_ESTIMATE,
+		.prefetch_estimate = { .id = 9, .tier = PROTO_TIER_DISK, .tiles = 1234567,
+				       .bytes = UINT64_MAX, .budget = 1u << 30, .used = 7,
+				       .max_tiles = 250000, .nlevels = GRID_MAX_LEVEL + 1,
+				       .levels = lv } };
 	f->nmsgs = (int)(m - f->msgs);
 	return f;
 }
@@ -225,6 +251,57 @@ static void round_trip_every_type(void **state)
 	for (int t = 0; t < 70; t++)
 		if (proto_type_name((uint16_t)t))
 			assert_true(seen[t]);
+}
+
+/* A corridor wider than PROTO_MAX_WIDTH is a bad field (issue 14: 9.55e6 m passes the decoder
+ * and is sized by the server; 1e12 m no longer does). */
+static void prefetch_width_bounded(void **state)
+{
+	(void)state;
+	struct proto_lonlat pt = { 8, 46 };
+	const double ok = 9.55e6;
+	struct proto_msg m = { .type = PROTO_PREFETCH,
+			       .prefetch = { .id = 1, .planet = "earth", .shape = PROTO_SHAPE_PATH,
+					     .lmin = 22, .lmax = 22, .width_m = ok, .npoints = 1,
+					     .points = &pt } };
+	struct pbuf a;
+	pbuf_init(&a);
+	char err[256];
+	assert_true(proto_encode(&a, &m, err) > 0);
+	struct proto_msg d;
+	size_t need;
+	assert_int_equal(proto_decode(a.data, a.len, &d, &need, err), (ssize_t)a.len);
+	proto_msg_fini(&d);
+	/* the same frame with the width's bytes replaced (either byte order) */
+	double bad[] = { 2.0000001e7, 1e12 };
+	uint8_t okb[8], okr[8];
+	memcpy(okb, &ok, 8);
+	for (int i = 0; i < 8; i++)
+		okr[i] = okb[7 - i];
+	size_t at = SIZE_MAX;
+	bool rev = false;
+	for (size_t i = 0; i + 8 <= a.len && at == SIZE_MAX; i++) {
+		if (memcmp((uint8_t *)a.data + i, okb, 8) == 0)
+			at = i;
+		else if (memcmp((uint8_t *)a.data + i, okr, 8) == 0)
+			at = i, rev = true;
+	}
+	assert_true(at != SIZE_MAX);
+	for (int k = 0; k < 2; k++) {
+		uint8_t wb[8];
+		memcpy(wb, &bad[k], 8);
+		for (int i = 0; i < 8; i++)
+			((uint8_t *)a.data)[at + i] = rev ? wb[7 - i] : wb[i];
+		assert_int_equal(proto_decode(a.data, a.len, &d, &need, err), -EINVAL);
+		assert_non_null(strstr(err, "width"));
+		/* and the encoder refuses it too */
+		struct pbuf b;
+		pbuf_init(&b);
+		m.prefetch.width_m = bad[k];
+		assert_true(proto_encode(&b, &m, err) < 0);
+		pbuf_fini(&b);
+	}
+	pbuf_fini(&a);
 }
 
 /* Decoded fields are what was sent (a few spot checks beyond the byte equality above). */
@@ -721,6 +798,7 @@ static void session_limits(void **state)
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(prefetch_width_bounded),
 		cmocka_unit_test_setup_teardown(round_trip_every_type, setup, teardown),
 		cmocka_unit_test_setup_teardown(decoded_fields, setup, teardown),
 		cmocka_unit_test(byte_layout),

@@ -719,6 +719,79 @@ static void destroy_stops_callbacks(void **state)
 	world_free(w);
 }
 
+/* sched_req_release (what the event loop uses): returns at once even while the request's
+ * callback runs on the manager thread; fin comes once, after the last callback; a released
+ * request's queued work is cancelled; sched_barrier waits for every earlier release. */
+static atomic_int fin_calls;
+
+static void fin_slow(void *ud)
+{
+	struct slow_cb *c = ud;
+	xmutex_lock(&c->rec.mu);
+	c->rec.closed = true; /* a callback after this is a bug (rec.bad) */
+	xmutex_unlock(&c->rec.mu);
+	atomic_fetch_add(&fin_calls, 1);
+}
+
+static void release_never_waits(void **state)
+{
+	(void)state;
+	struct world *w = world_new(1, 0);
+	struct slow_cb *c = calloc(1, sizeof *c);
+	assert_non_null(c);
+	rec_init(&c->rec);
+	atomic_store(&fin_calls, 0);
+	struct sched_req *q = sched_req_create(w->sched, on_ready_slow, c);
+	struct want m = sync_marker(w, 1);
+	assert_int_equal(sched_req_want(q, &m, 1), 0);
+	xmutex_lock(&c->rec.mu);
+	uint64_t dl = deadline();
+	while (!atomic_load(&c->in_cb))
+		if (!xcond_wait_until(&c->rec.cv, &c->rec.mu, dl))
+			break;
+	xmutex_unlock(&c->rec.mu);
+	assert_true(atomic_load(&c->in_cb));
+	/* The manager is held inside q's callback: a waiting destroy would block here. */
+	sched_req_release(q, fin_slow);
+	assert_false(atomic_load(&c->cb_done));
+	assert_int_equal(atomic_load(&fin_calls), 0);
+	xmutex_lock(&c->rec.mu);
+	atomic_store(&c->release, true);
+	xcond_broadcast(&c->rec.cv);
+	xmutex_unlock(&c->rec.mu);
+	sched_barrier(w->sched);
+	assert_int_equal(atomic_load(&fin_calls), 1);
+	assert_int_equal(c->rec.bad, 0);
+
+	/* Released with queued work behind a closed gate: no callback after fin, and the work
+	 * is cancelled (not generated for nobody). */
+	struct slow_cb *d = calloc(1, sizeof *d);
+	assert_non_null(d);
+	rec_init(&d->rec);
+	atomic_store(&d->release, true);
+	gate_close(w);
+	struct sched_req *r = sched_req_create(w->sched, on_ready_slow, d);
+	struct want l[] = { mkwant(&w->a, 4, 0, 0, SCHED_VISIBLE),
+			    mkwant(&w->a, 4, 1, 0, SCHED_VISIBLE),
+			    mkwant(&w->a, 4, 2, 0, SCHED_VISIBLE) };
+	assert_int_equal(sched_req_want(r, l, 3), 0);
+	gate_wait(w, 1); /* one runs, two wait in the queue */
+	sched_req_release(r, fin_slow);
+	sched_barrier(w->sched);
+	assert_int_equal(atomic_load(&fin_calls), 2);
+	gate_open(w);
+	struct tile *out[1];
+	assert_int_equal(sched_fetch(w->sched, &l[0], 1, out), 0); /* the running one finished */
+	tile_unref(out[0]);
+	assert_int_equal(d->rec.bad, 0);
+	assert_int_equal(count_of(w, &w->a, 4, 2, 0), 0); /* cancelled, never generated */
+	world_free(w);
+	rec_fini(&c->rec);
+	rec_fini(&d->rec);
+	free(c);
+	free(d);
+}
+
 /* Destroying another request from inside a callback (on the manager thread). */
 struct cross {
 	struct rec ra, rb;
@@ -904,6 +977,7 @@ int main(void)
 		cmocka_unit_test(duplicates_merged),
 		cmocka_unit_test(cancellation),
 		cmocka_unit_test(failure_delivered),
+		cmocka_unit_test(release_never_waits),
 		cmocka_unit_test(destroy_stops_callbacks),
 		cmocka_unit_test(destroy_from_callback),
 		cmocka_unit_test(workers_lower_priority),

@@ -31,6 +31,7 @@
 #include "common/geo.h"
 #include "common/img.h"
 #include "common/xalloc.h"
+#include "support/slow.h"
 #include "support/synth_source.h"
 
 #define DEG (M_PI / 180.0)
@@ -400,7 +401,7 @@ static void fly_frame(struct ctx *c, struct view *v, const struct view_camera *c
 		      struct verdict *sum)
 {
 	struct view_frame_stats st;
-	int rc = view_frame_complete(v, cam, 60, &st, NULL);
+	int rc = view_frame_complete(v, cam, test_slow(60), &st, NULL);
 	if (rc < 0 || !st.complete)
 		fail_msg("%s frame %d: not complete (%d)", name, k, rc);
 	struct view_camera lc;

@@ -22,6 +22,7 @@
 #include "common/geo.h"
 #include "common/img.h"
 #include "common/xalloc.h"
+#include "support/slow.h"
 #include "support/synth_source.h"
 
 #define DEG (M_PI / 180.0)
@@ -232,7 +233,7 @@ static void toroidal_after_moves(void **state)
 	for (size_t k = 0; k < sizeof path / sizeof path[0]; k++) {
 		struct view_camera cam = { path[k][0], path[k][1], path[k][2], 0, -30, 60, 0, 0 };
 		struct view_frame_stats st;
-		assert_int_equal(view_frame_complete(v, &cam, 20, &st, NULL), 0);
+		assert_int_equal(view_frame_complete(v, &cam, test_slow(20), &st, NULL), 0);
 		assert_true(st.complete);
 		assert_int_equal(view_clipmap_read(view_get_clipmap(v), VIEW_HEIGHT, hbuf,
 						   (size_t)S * S * nl * 4), 0);
@@ -272,7 +273,7 @@ static void marker_case(struct gl_context *ctx, double lat, double lon, double a
 	struct view *v = make_view(ctx, src, W, H);
 	struct view_camera cam = { lat, lon, agl, heading, pitch, 60, 0, 0 };
 	struct view_frame_stats st;
-	assert_int_equal(view_frame_complete(v, &cam, 30, &st, NULL), 0);
+	assert_int_equal(view_frame_complete(v, &cam, test_slow(30), &st, NULL), 0);
 	assert_true(st.complete);
 	if (fabs(st.ground - height) > 1e-3)
 		fail_msg("ground %g, want %g (complete %d, levels %d..%d drawn %d..%d)", st.ground, height, st.complete, st.lmin, st.lmax, st.lfirst, st.llast);
@@ -373,7 +374,7 @@ static void coverage_case(struct view *v, struct geo_body *gb, const struct view
 			  const char *name, int *inside_px)
 {
 	struct view_frame_stats st;
-	assert_int_equal(view_frame_complete(v, cam, 60, &st, NULL), 0);
+	assert_int_equal(view_frame_complete(v, cam, test_slow(60), &st, NULL), 0);
 	struct view_camera c;
 	view_last_camera(v, &c);
 	int W = c.width, H = c.height;
@@ -487,7 +488,7 @@ static void culling_keeps_pixels(void **state)
 		const struct view_camera *c = &cases[i].c;
 		struct view_frame_stats s1, s0;
 		view_set_culling(v, true);
-		assert_int_equal(view_frame_complete(v, c, 300, &s1, NULL), 0);
+		assert_int_equal(view_frame_complete(v, c, test_slow(300), &s1, NULL), 0);
 		view_read_rgba(v, on);
 		view_set_culling(v, false);
 		assert_int_equal(view_frame(v, c, 0, &s0), 0);

@@ -25,6 +25,7 @@
 #include "client/view/view_source_local.h"
 #include "common/xalloc.h"
 #include "support/synth_source.h"
+#include "support/slow.h"
 
 #define W 64
 #define H 64
@@ -90,7 +91,7 @@ static bool render_stats(const struct flat *s, const struct view_look *look, flo
 	if (rc < 0)
 		fail_msg("view_create: %s", err);
 	struct view_frame_stats st;
-	assert_int_equal(view_frame_complete(v, cam, 30, &st, NULL), 0);
+	assert_int_equal(view_frame_complete(v, cam, test_slow(30), &st, NULL), 0);
 	if (stp)
 		*stp = st;
 	assert_int_equal(view_read_rgba(v, px), 0);

@@ -27,6 +27,7 @@
 #include "client/view/view.h"
 #include "client/view/view_source_local.h"
 #include "common/img.h"
+#include "support/slow.h"
 
 #define FW 320
 #define FH 180
@@ -112,7 +113,7 @@ static void fly_poles(const struct pole_planet *pp)
 						   .heading = 0, .pitch = -90, .width = FW,
 						   .height = FH };
 			struct view_frame_stats st;
-			int rc = view_frame_complete(v, &cam, 120, &st, NULL);
+			int rc = view_frame_complete(v, &cam, test_slow(120), &st, NULL);
 			if (rc < 0 || !st.complete)
 				fail_msg("%s %s pole %.0f m: frame not complete (%d)", pp->name,
 					 pole ? "south" : "north", alts[a], rc);

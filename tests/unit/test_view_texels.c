@@ -32,6 +32,7 @@
 #include "client/view/gl_context.h"
 #include "client/view/view.h"
 #include "common/xalloc.h"
+#include "support/slow.h"
 #include "support/synth_source.h"
 
 #define T 256
@@ -155,7 +156,7 @@ static void texels_per_pixel(void **state)
 	int bad = 0;
 	for (size_t c = 0; c < sizeof cams / sizeof cams[0]; c++) {
 		struct view_frame_stats st;
-		assert_int_equal(view_frame_complete(v, &cams[c], 300, &st, NULL), 0);
+		assert_int_equal(view_frame_complete(v, &cams[c], test_slow(300), &st, NULL), 0);
 		assert_int_equal(view_read_rgba(v, px), 0);
 		const char *dump = getenv("TEXELS_PPM"); /* a directory: the pictures as PPM */
 		if (dump) {

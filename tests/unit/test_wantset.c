@@ -31,6 +31,9 @@ static struct tile *mk_tile(const struct tile_key *k)
 	return tile_create(k, PIX_HEIGHT, 4);
 }
 
+#define ALL UINT64_MAX /* no budget for held tiles */
+static bool parked;
+
 static int refs(struct tile *t)
 {
 	return atomic_load(&t->refs);
@@ -62,7 +65,7 @@ static void test_ready_order(void **state)
 	assert_int_equal(nwanted(&ws), n);
 	assert_int_equal(d.dropped, 0);
 	for (size_t i = n; i-- > 0;)
-		assert_true(wantset_ready(&ws, &add[i].key, mk_tile(&add[i].key), 0));
+		assert_true(wantset_ready(&ws, &add[i].key, mk_tile(&add[i].key), 0, ALL, &parked));
 	assert_int_equal(wantset_nready(&ws), n);
 	assert_int_equal(nwanted(&ws), 0);
 	const size_t expect[] = { 1, 2, 0, 4, 3 }; /* ly 2 (order 1, 2), ly 5, ly 9, prefetch */
@@ -71,7 +74,7 @@ static void test_ready_order(void **state)
 		assert_non_null(e);
 		assert_int_equal(e->order, expect[i]);
 		assert_int_equal(e->state, WS_READY);
-		wantset_sent(e);
+		wantset_sent(&ws, e);
 		assert_int_equal(e->state, WS_SENT);
 		assert_null(e->t);
 	}
@@ -88,20 +91,20 @@ static void test_ready_unknown(void **state)
 	struct wantset_entry e = ent(&node_a, 1, 3, 2, 1, SCHED_VISIBLE, 0);
 	struct tile *t = mk_tile(&e.key);
 	tile_ref(t);
-	assert_false(wantset_ready(&ws, &e.key, t, 0)); /* empty set */
+	assert_false(wantset_ready(&ws, &e.key, t, 0, ALL, &parked)); /* empty set */
 	assert_int_equal(refs(t), 1);
 	struct wantset_drops d = { 0 };
 	wantset_replace(&ws, 1, &e, 1, &d);
 	tile_ref(t);
-	assert_true(wantset_ready(&ws, &e.key, t, 0));
+	assert_true(wantset_ready(&ws, &e.key, t, 0, ALL, &parked));
 	tile_ref(t);
-	assert_false(wantset_ready(&ws, &e.key, t, 0)); /* repeated */
+	assert_false(wantset_ready(&ws, &e.key, t, 0, ALL, &parked)); /* repeated */
 	assert_int_equal(refs(t), 2);
 	/* A failed generation is ready too, without a tile. */
 	struct wantset_entry f = ent(&node_a, 1, 3, 3, 1, SCHED_VISIBLE, 1);
 	struct wantset_entry both[] = { e, f };
 	wantset_replace(&ws, 1, both, 2, &d);
-	assert_true(wantset_ready(&ws, &f.key, NULL, -5));
+	assert_true(wantset_ready(&ws, &f.key, NULL, -5, ALL, &parked));
 	assert_int_equal(wantset_nready(&ws), 2);
 	wantset_fini(&ws); /* releases the ready tile */
 	assert_int_equal(refs(t), 1);
@@ -135,10 +138,10 @@ static void test_replace_carries_state(void **state)
 	tile_unref(t[3]); /* never reported ready: the set never holds it */
 	for (int i = 0; i < 5; i++)
 		if (i != 3)
-			assert_true(wantset_ready(&ws, &p1[i].key, t[i], 0));
+			assert_true(wantset_ready(&ws, &p1[i].key, t[i], 0, ALL, &parked));
 	struct wantset_entry *e = wantset_pop(&ws);
 	assert_int_equal(e->order, 0);
-	wantset_sent(e);
+	wantset_sent(&ws, e);
 	/* pop the next two, send only the one of order 4 */
 	struct wantset_entry *a = wantset_pop(&ws), *b = wantset_pop(&ws);
 	assert_int_equal(a->order, 1);
@@ -148,7 +151,7 @@ static void test_replace_carries_state(void **state)
 	while ((e = wantset_pop(&ws)) && e->order != 4)
 		;
 	assert_non_null(e);
-	wantset_sent(e);
+	wantset_sent(&ws, e);
 
 	struct wantset_entry next[] = {
 		ent(&node_a, 1, 1, 0, 0, SCHED_VISIBLE, 0), ent(&node_a, 1, 1, 1, 0, SCHED_VISIBLE, 1),
@@ -210,9 +213,9 @@ static void test_rebind(void **state)
 	wantset_replace(&ws, 1, p1, 2, &d);
 	wantset_replace(&ws, 2, p2, 3, &d);
 	struct tile *t = tile_ref(mk_tile(&p1[1].key));
-	assert_true(wantset_ready(&ws, &p1[1].key, t, 0));
-	assert_true(wantset_ready(&ws, &p2[0].key, mk_tile(&p2[0].key), 0));
-	wantset_sent(wantset_pop(&ws)); /* p1's x 1 or p2's x 0: both ly 2, order 0 vs 1 */
+	assert_true(wantset_ready(&ws, &p1[1].key, t, 0, ALL, &parked));
+	assert_true(wantset_ready(&ws, &p2[0].key, mk_tile(&p2[0].key), 0, ALL, &parked));
+	wantset_sent(&ws, wantset_pop(&ws)); /* p1's x 1 or p2's x 0: both ly 2, order 0 vs 1 */
 	/* p2's x 0 has order 0: it went; p1's x 1 is still ready */
 	long k = wantset_find(&ws, &p2[0].key);
 	assert_int_equal(ws.e[k].state, WS_SENT);
@@ -248,6 +251,72 @@ static void test_rebind(void **state)
 	tile_unref(t);
 }
 
+/* Held tiles stay within the budget: beyond it a ready tile is parked (released, still READY
+ * in its place in the order); popped, it gets its tile back or is wanted again; held bytes
+ * follow sends, replaces and rewants. */
+static void test_held_budget(void **state)
+{
+	(void)state;
+	struct wantset ws;
+	wantset_init(&ws);
+	struct wantset_entry add[] = {
+		ent(&node_a, 1, 5, 0, 0, SCHED_VISIBLE, 0), ent(&node_a, 1, 2, 1, 0, SCHED_VISIBLE, 1),
+		ent(&node_a, 1, 2, 0, 0, SCHED_VISIBLE, 2), ent(&node_a, 1, 7, 0, 0, SCHED_VISIBLE, 3),
+	};
+	struct wantset_drops d = { 0 };
+	wantset_replace(&ws, 1, add, 4, &d);
+	struct tile *t[4];
+	for (int i = 0; i < 4; i++) {
+		t[i] = mk_tile(&add[i].key);
+		tile_ref(t[i]); /* the test's, as the cache's would be */
+	}
+	size_t one = t[0]->nbytes;
+	uint64_t budget = 2 * one; /* two tiles */
+	assert_true(wantset_ready(&ws, &add[0].key, t[0], 0, budget, &parked));
+	assert_false(parked);
+	assert_true(wantset_ready(&ws, &add[3].key, t[3], 0, budget, &parked));
+	assert_false(parked);
+	assert_int_equal(wantset_held(&ws), 2 * one);
+	assert_true(wantset_ready(&ws, &add[1].key, t[1], 0, budget, &parked));
+	assert_true(parked);
+	assert_int_equal(refs(t[1]), 1); /* released */
+	assert_true(wantset_ready(&ws, &add[2].key, t[2], 0, budget, &parked));
+	assert_true(parked);
+	assert_int_equal(wantset_held(&ws), 2 * one);
+	assert_int_equal(wantset_nready(&ws), 4);
+	/* Coarse first all the same: order 1 (parked), 2 (parked), 0, 3. */
+	struct wantset_entry *e = wantset_pop(&ws);
+	assert_int_equal(e->order, 1);
+	assert_true(wantset_parked(e));
+	wantset_unpark(&ws, e, tile_ref(t[1])); /* found in the cache */
+	assert_int_equal(wantset_held(&ws), 3 * one);
+	wantset_sent(&ws, e);
+	assert_int_equal(wantset_held(&ws), 2 * one);
+	assert_int_equal(refs(t[1]), 1);
+	e = wantset_pop(&ws);
+	assert_int_equal(e->order, 2);
+	assert_true(wantset_parked(e));
+	wantset_rewant(&ws, e); /* not in the cache any more */
+	assert_int_equal(nwanted(&ws), 1);
+	assert_true(wantset_ready(&ws, &add[2].key, tile_ref(t[2]), 0, ALL, &parked));
+	assert_false(parked);
+	assert_int_equal(wantset_held(&ws), 3 * one);
+	/* A replace that drops the held tiles drops their bytes. */
+	wantset_replace(&ws, 1, &add[1], 1, &d);
+	assert_int_equal(wantset_held(&ws), 0);
+	for (int i = 0; i < 4; i++) {
+		assert_int_equal(refs(t[i]), 1);
+		tile_unref(t[i]);
+	}
+	/* A failed generation is never taken for a parked tile. */
+	wantset_replace(&ws, 1, add, 1, &d);
+	assert_true(wantset_ready(&ws, &add[0].key, NULL, -5, 0, &parked));
+	e = wantset_pop(&ws);
+	assert_false(wantset_parked(e));
+	assert_int_equal(e->err, -5);
+	wantset_fini(&ws);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -255,6 +324,7 @@ int main(void)
 		cmocka_unit_test(test_ready_unknown),
 		cmocka_unit_test(test_replace_carries_state),
 		cmocka_unit_test(test_rebind),
+		cmocka_unit_test(test_held_budget),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -24,13 +24,25 @@
  * texel size over NOISE_POLE_BEND) fade to 0 on the two rows nearest it (noise.h), so every
  * level's pole rows are independent of longitude.
  *   input          optional height node: output = input + offset + amplitude · noise
+ *   from_parent    true | false (default false), fBm only: build each tile from its parent
+ *                  level (noise.h, "building a tile from its parent"): the octaves of at least
+ *                  NOISE_CARRY_TEXELS texels come upsampled from the parent level's carry, the
+ *                  rest are evaluated. The carry is a hidden node of this one (its tiles named
+ *                  by its own hash, from the noise parameters alone), an explicit dependency:
+ *                  the scheduler resolves it like any input, so a tile never depends on what
+ *                  happened to be cached. Ridged noise is refused (its crests are kinks no
+ *                  upsample keeps: see noise.h). The node's generation time (STATS
+ *                  node.*.mean_ms) includes its carry tiles'.
  * Output: height (f32 metres). Thread-safety: the impl is immutable after create.
  */
 #include <errno.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <xxhash.h>
 
+#include "common/clock.h"
 #include "common/xalloc.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
@@ -39,7 +51,13 @@
 struct noise_impl {
 	struct noise nz;
 	float amplitude, offset;
+	bool from_parent;
+	struct node carry; /* with from_parent: the hidden carry node (impl = this struct) */
+	struct node *owner; /* the noise node: its gen_ns also counts its carry tiles' time */
+	char carry_name[96];
 };
+
+static const struct node_type node_type_noise_carry;
 
 static const struct node_slot slots[] = {
 	{ .name = "input", .type = PIX_HEIGHT, .optional = true },
@@ -48,9 +66,10 @@ static const struct node_slot slots[] = {
 static int noise_create(struct node *n, struct node_parse *p)
 {
 	static const char *const kinds[] = { "fbm", "ridged", NULL };
+	static const char *const bools[] = { "false", "true", NULL };
 	struct noise_params np = { 0 };
 	long seed, octaves;
-	int kind, rc;
+	int kind, rc, from_parent;
 	double amplitude, offset;
 	if ((rc = np_int(p, "seed", 0, 0, 4294967295L, &seed)) ||
 	    (rc = np_enum(p, "kind", kinds, 0, &kind)) ||
@@ -63,8 +82,13 @@ static int noise_create(struct node *n, struct node_parse *p)
 	    (rc = np_double(p, "ridge_offset", 1.0, 0.0, 2.0, &np.ridge_offset)) ||
 	    (rc = np_double(p, "ridge_gain", 2.0, 0.0, 16.0, &np.ridge_gain)) ||
 	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)) ||
-	    (rc = np_double(p, "stretch", 1.0, 1.0, 16.0, &np.stretch)))
+	    (rc = np_double(p, "stretch", 1.0, 1.0, 16.0, &np.stretch)) ||
+	    (rc = np_enum(p, "from_parent", bools, 0, &from_parent)))
 		return rc;
+	if (from_parent && kind == 1)
+		return np_error(p, "from_parent",
+				"ridged noise cannot be built from its parent (its crests would be "
+				"rounded off); use it with kind = fbm");
 	if (!n->planet || !(n->planet->a > 0))
 		return np_error(p, NULL, "noise node \"%s\": the planet has no radius", n->name);
 	np.seed = (uint32_t)seed;
@@ -79,6 +103,37 @@ static int noise_create(struct node *n, struct node_parse *p)
 	}
 	im->amplitude = (float)amplitude;
 	im->offset = (float)offset;
+	im->from_parent = from_parent;
+	memset(&im->carry, 0, sizeof im->carry);
+	if (from_parent) {
+		/* The carry depends on the noise field alone (not on the input, amplitude or
+		 * offset): named by a hash of its type, version and the field's parameters, so
+		 * equal fields share carry tiles. */
+		snprintf(im->carry_name, sizeof im->carry_name, "%s~carry", n->name);
+		im->carry.name = im->carry_name;
+		im->carry.type = &node_type_noise_carry;
+		im->carry.out = PIX_HEIGHT;
+		im->carry.planet = n->planet;
+		im->carry.impl = im;
+		im->carry.line = n->line;
+		im->owner = n;
+		XXH3_state_t *st = XXH3_createState();
+		if (!st)
+			abort();
+		XXH3_64bits_reset(st);
+		XXH3_64bits_update(st, node_type_noise_carry.name,
+				   strlen(node_type_noise_carry.name) + 1);
+		XXH3_64bits_update(st, &node_type_noise_carry.version,
+				   sizeof node_type_noise_carry.version);
+		const double v[] = { np.wavelength, np.lacunarity, np.gain, np.max_wavelength,
+				     np.radius, np.stretch, np.pole_amplitude,
+				     (double)np.seed, (double)np.octaves, (double)n->planet->tile_size };
+		XXH3_64bits_update(st, v, sizeof v);
+		im->carry.hash = XXH3_64bits_digest(st);
+		XXH3_freeState(st);
+		if (im->carry.hash == 0)
+			im->carry.hash = 1;
+	}
 	n->impl = im;
 	n->out = PIX_HEIGHT;
 	return 0;
@@ -94,6 +149,15 @@ static int noise_generate(const struct node *n, struct gen_ctx *g, const struct 
 	const struct tile *src;
 	if (node_opt_height_input(n, in, nin, T, &src))
 		return -EINVAL;
+	if (im->from_parent && noise_carry_upsampled(&im->nz, k->lx, k->ly, T)) {
+		const struct tile *c = nin > 0 ? in[nin - 1] : NULL;
+		if (!c || c->type != PIX_HEIGHT || c->size != T || c == src)
+			return -EINVAL;
+		return noise_tile_from_carry(&im->nz, k, T, NOISE_ISA_AUTO,
+					     gen_scratch(g, noise_scratch_size(T)), tile_f32(c),
+					     src ? tile_f32(src) : NULL, im->amplitude, im->offset,
+					     tile_f32(out));
+	}
 	/* out = input + (offset + amplitude · noise), each row while it is in cache */
 	int rc = noise_tile_scaled(&im->nz, k, T, NOISE_ISA_AUTO,
 				   gen_scratch(g, noise_scratch_size(T)), src ? tile_f32(src) : NULL,
@@ -103,18 +167,73 @@ static int noise_generate(const struct node *n, struct gen_ctx *g, const struct 
 	return 0;
 }
 
+/* key k on the input (if any), then the carry at key k */
+static int noise_deps(const struct node *n, const struct tile_key *k, struct node_dep *out)
+{
+	const struct noise_impl *im = n->impl;
+	int m = node_default_deps(n, k, out);
+	if (im->from_parent && noise_carry_upsampled(&im->nz, k->lx, k->ly, n->planet->tile_size)) {
+		out[m].node = (struct node *)&im->carry;
+		out[m].key = *k;
+		out[m].key.node = im->carry.hash;
+		m++;
+	}
+	return m;
+}
+
+static int carry_deps(const struct node *n, const struct tile_key *k, struct node_dep *out)
+{
+	struct tile_key keys[NOISE_CARRY_MAX_DEPS];
+	const struct noise_impl *im = n->impl;
+	int m = noise_carry_deps(&im->nz, k, n->planet->tile_size, n->hash, keys);
+	for (int i = 0; i < m; i++) {
+		out[i].node = (struct node *)n;
+		out[i].key = keys[i];
+	}
+	return m;
+}
+
+static int carry_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
+			  struct tile *const *in, int nin, struct tile *out)
+{
+	const struct noise_impl *im = n->impl;
+	uint32_t T = out->size;
+	if (out->type != PIX_HEIGHT)
+		return -EINVAL;
+	uint64_t t0 = clock_now_ns();
+	int rc = noise_carry_tile(&im->nz, k, T, NOISE_ISA_AUTO,
+				  gen_scratch(g, noise_carry_scratch_size(T)), in, nin,
+				  tile_f32(out));
+	/* The hidden node is in no planet's list: its time shows in its noise node's mean. */
+	atomic_fetch_add(&im->owner->gen_ns, clock_now_ns() - t0);
+	return rc;
+}
+
+/* Not in the registry: only a from_parent noise node makes one (its impl's carry). */
+static const struct node_type node_type_noise_carry = {
+	.name = "noise~carry",
+	.doc = "internal: a from_parent noise node's octaves of at least NOISE_CARRY_TEXELS texels",
+	.version = 1,
+	.slots = NULL,
+	.nslots = 0,
+	.create = NULL,
+	.destroy = NULL,
+	.deps = carry_deps,
+	.generate = carry_generate,
+};
+
 const struct node_type node_type_noise = {
 	.name = "noise",
 	.doc = "seeded fBm/ridged simplex noise on the sphere (seed, kind=fbm|ridged, octaves, "
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
 	       "max_wavelength m, stretch), band-limited per level; optional input height gets the "
 	       "octaves with wavelength <= max_wavelength added",
-	.version = 4, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice;
-		       * 4: octaves that bend over a texel fade out at the poles */
+	.version = 5, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice;
+		       * 4: octaves that bend over a texel fade out at the poles; 5: from_parent */
 	.slots = slots,
 	.nslots = 1,
 	.create = noise_create,
 	.destroy = node_free_impl,
-	.deps = NULL,
+	.deps = noise_deps,
 	.generate = noise_generate,
 };

@@ -320,14 +320,18 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 	return 0;
 }
 
-/* Octaves a tile of level ly evaluates, with their band weights; returns how many. */
-static int active_octaves(const struct noise *nz, int ly, uint32_t T, int idx[], float w[])
+/* Octaves a tile of level ly evaluates whose shortest wavelength lies in [lo, hi) metres
+ * (the band: [0, ∞) for all), with their band weights; returns how many. */
+static int active_octaves(const struct noise *nz, int ly, uint32_t T, double lo, double hi,
+			  int idx[], float w[])
 {
 	double s = noise_texel_size(nz->p.radius, ly, T);
 	int m = 0;
 	for (int k = 0; k < nz->p.octaves; k++) {
-		if (!included(nz, k))
+		if (!included(nz, k) || nz->oct[k].lmin >= hi)
 			continue;
+		if (nz->oct[k].lmin < lo)
+			break;
 		double bw = noise_band_weight(nz->oct[k].lmin, s);
 		if (bw <= 0)
 			break;
@@ -387,7 +391,7 @@ int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T)
 {
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
-	int m = active_octaves(nz, ly, T, idx, w);
+	int m = active_octaves(nz, ly, T, 0, INFINITY, idx, w);
 	return coarse_count(nz, lx, T, idx, m);
 }
 
@@ -655,11 +659,12 @@ static void coarse_row(struct tile_eval *t, uint32_t j, float *row)
 	}
 }
 
-/* The tile's sum of octaves into out (T×T), with scale put through ns->finish (base: may be
- * NULL). Returns the active octaves' count, or -EINVAL (bad key or T), -ENOTSUP (isa). */
+/* The tile's sum of its octaves with a shortest wavelength in [lo, hi) metres into out (T×T),
+ * with scale put through ns->finish (base: may be NULL); fade: the pole fade applies. Returns
+ * the octaves' count, or -EINVAL (bad key or T), -ENOTSUP (isa). */
 static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T,
 		    enum noise_isa isa, void *scratch, bool scale, const float *base, float amplitude,
-		    float offset, float *out)
+		    float offset, float *out, double lo, double hi, bool fade)
 {
 	if (!grid_key_valid(k) || T < 16 || T > 4096 || T % 16)
 		return -EINVAL;
@@ -676,7 +681,7 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 	const struct noise_sums *ns = t.ns;
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
-	t.m = active_octaves(nz, k->ly, T, idx, w);
+	t.m = active_octaves(nz, k->ly, T, lo, hi, idx, w);
 	t.mc = coarse_count(nz, k->lx, T, idx, t.m);
 	scratch_layout(&t, scratch);
 	if (t.m == 0) {
@@ -691,7 +696,7 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 	 * all rows — its interpolation error is ~1e-6 of the amplitude, no seam to speak of). */
 	double bend[NOISE_MAX_OCTAVES];
 	int pf = t.m; /* the first octave the pole fade touches; m: none */
-	if (nz->p.pole_amplitude > 0 && (k->y == 0 || k->y == grid_tiles_y(k->ly) - 1)) {
+	if (fade && nz->p.pole_amplitude > 0 && (k->y == 0 || k->y == grid_tiles_y(k->ly) - 1)) {
 		double s = noise_texel_size(nz->p.radius, k->ly, T);
 		for (int o = 0; o < t.m; o++) {
 			bend[o] = octave_bend(nz, idx[o], s);
@@ -735,21 +740,22 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 int noise_tile(const struct noise *nz, const struct tile_key *k, uint32_t T, enum noise_isa isa,
 	       void *scratch, float *out)
 {
-	return tile_sum(nz, k, T, isa, scratch, false, NULL, 1, 0, out);
+	return tile_sum(nz, k, T, isa, scratch, false, NULL, 1, 0, out, 0, INFINITY, true);
 }
 
 int noise_tile_scaled(const struct noise *nz, const struct tile_key *k, uint32_t T,
 		      enum noise_isa isa, void *scratch, const float *base, float amplitude,
 		      float offset, float *out)
 {
-	return tile_sum(nz, k, T, isa, scratch, true, base, amplitude, offset, out);
+	return tile_sum(nz, k, T, isa, scratch, true, base, amplitude, offset, out, 0, INFINITY,
+			true);
 }
 
 double noise_point(const struct noise *nz, double lon, double lat, int ly, uint32_t T)
 {
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
-	int m = active_octaves(nz, ly, T, idx, w);
+	int m = active_octaves(nz, ly, T, 0, INFINITY, idx, w);
 	double p0[3], p[3], sum = 0, wt = 1;
 	double ts = noise_texel_size(nz->p.radius, ly, T), tp = noise_pole_texels(lat, ly, T);
 	unit_vector(lon, lat, p0);
@@ -772,4 +778,32 @@ double noise_point(const struct noise *nz, double lon, double lat, int ly, uint3
 		sum += (s - oc->mean) * a;
 	}
 	return sum;
+}
+
+int noise_tile_band(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		    enum noise_isa isa, void *scratch, double lo, double hi, bool fade, float *out)
+{
+	return tile_sum(nz, k, T, isa, scratch, false, NULL, 1, 0, out, lo, hi, fade);
+}
+
+bool noise_pole_fades(const struct noise *nz, const struct tile_key *k, uint32_t T, double lo)
+{
+	if (!(nz->p.pole_amplitude > 0) || (k->y != 0 && k->y != grid_tiles_y(k->ly) - 1))
+		return false;
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	int m = active_octaves(nz, k->ly, T, lo, INFINITY, idx, w);
+	double s = noise_texel_size(nz->p.radius, k->ly, T);
+	for (int o = 0; o < m; o++)
+		if (octave_bend(nz, idx[o], s) > NOISE_POLE_BEND)
+			return true;
+	return false;
+}
+
+int noise_band_full(const struct noise *nz, int lx, int ly, uint32_t T, double lo, double hi)
+{
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	int m = active_octaves(nz, ly, T, lo, hi, idx, w);
+	return m - coarse_count(nz, lx, T, idx, m);
 }

@@ -21,6 +21,7 @@
 
 #include "common/grid.h"
 #include "engine/node.h"
+#include "engine/tile.h"
 
 #define NOISE_MAX_OCTAVES 24
 
@@ -133,6 +134,81 @@ double noise_simplex_ref(double x, double y, double z, uint32_t seed);
 
 /* Octave weight (0..1) for wavelength lambda at texel size s: 0 below 2s, 1 above 4s. */
 double noise_band_weight(double lambda, double s);
+
+/* ---- building a tile from its parent (noise_carry.c; fBm only) ----
+ *
+ * The carry of a tile of level (lx, ly) is the sum of its octaves whose shortest wavelength is
+ * at least NOISE_CARRY_TEXELS texels of level ly (band weight 1 there), at its texel centres,
+ * without the pole fade. At ly = 0 it is evaluated directly. Below, it is the carry of the
+ * parent level, upsampled (a separable C1 cubic Hermite with 4th-order slopes: 6 taps), plus the one band of octaves the parent
+ * did not carry (NOISE_CARRY_TEXELS to twice that). The parent level is (lx − 1, ly − 1) — the
+ * level a viewer at that latitude uses one step coarser, so the chain is the levels it asks
+ * for anyway — where the tile's texels are at most NOISE_CARRY_MAX_ASPECT times wider than
+ * tall (in metres, at its latitude nearest the equator: isotropic levels, and the anisotropic
+ * levels near the latitudes they are made for: the viewer's are 1.37 at 70°N, 1.39 at 80°N),
+ * and (lx, ly − 1) otherwise: an anisotropic tile far from the poles keeps its columns (only
+ * latitude is interpolated, never its wide texels). With (lx, ly − 1) everywhere, a viewer at
+ * 80°N needed carries on levels it never asks for and the whole keys cost 1.3× more than
+ * evaluating directly (bench_noise_parent). Either is a valid level; the choice is a function
+ * of the key. The upsample reads the parent level's texels over the tile's footprint and three
+ * beyond each side: from the parent tile and up to three of its neighbours (x wraps; beyond a
+ * pole, the texels on the far side of it, rows reversed, as in grid_neighbor). A tile's value
+ * is then that carry plus its octaves under NOISE_CARRY_TEXELS texels evaluated directly (2 at
+ * lacunarity 2 instead of up to 8): noise_tile_from_carry.
+ *
+ * Ridged multifractal is not built this way, and should not be: its carry would be the sum of
+ * creased signals (ro − |n|)² and the running weight after them, both with kinks along every
+ * crest, which no interpolation reproduces — a cubic rounds a crest of an octave first carried
+ * at 8 texels per wavelength by ~0.2 of that octave's amplitude (an estimate from the kink's
+ * slope, not measured), and every finer level keeps the rounding (some 300 m for the `ranges`
+ * node of the procedural planet). Carrying each
+ * octave's raw (smooth) value instead is what the in-tile lattice already does for its coarse
+ * octaves; a ridged node keeps the direct path. */
+#define NOISE_CARRY_TEXELS 8.0
+
+/* Whether level (lx, ly) builds its carry from the parent level, and its tiles from their
+ * carry: where that evaluates at least 2 octaves fewer per texel than the direct path (whose
+ * octaves of at least NOISE_MR_MIN_TEXELS texels already cost little, on the lattice), i.e.
+ * where the upsample (about one octave's cost) pays. Elsewhere the carry, wherever a finer
+ * level needs it, is evaluated directly (no parent: the chain stops there) and the tiles are
+ * exactly the direct path's. One decision per level and parameters: every tile agrees. fBm
+ * only (false for ridged). */
+bool noise_carry_upsampled(const struct noise *nz, int lx, int ly, uint32_t T);
+#define NOISE_CARRY_MAX_ASPECT 1.5
+/* Width over height of tile k's texels in metres at its latitude nearest the equator. */
+double noise_carry_aspect(const struct tile_key *k, uint32_t T);
+/* The parent level of tile k for the carry; -EINVAL at ly = 0 (no parent). */
+int noise_carry_parent(const struct tile_key *k, uint32_t T, int *plx, int *ply);
+/* The parent-level tiles the carry of tile k needs (their node field set to `node`), without
+ * duplicates, in a fixed order; none where the level's carry is evaluated directly. Returns
+ * how many (≤ NOISE_CARRY_MAX_DEPS). */
+#define NOISE_CARRY_MAX_DEPS 8
+int noise_carry_deps(const struct noise *nz, const struct tile_key *k, uint32_t T, uint64_t node,
+		     struct tile_key *out);
+/* Scratch for noise_carry_tile (≥ noise_scratch_size). */
+size_t noise_carry_scratch_size(uint32_t T);
+/* The carry of tile k into out[T·T] from the parent-level tiles noise_carry_deps named (in any
+ * order; their keys are matched), or evaluated directly where the level does not upsample. Returns 0, -EINVAL (bad key or size, a kind other than fBm,
+ * a missing or wrong-sized input), -ENOTSUP (isa). */
+int noise_carry_tile(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		     enum noise_isa isa, void *scratch, struct tile *const *in, int nin, float *out);
+/* What noise_tile_scaled gives, from the tile's carry (on a level that upsamples): the carry
+ * plus the octaves under NOISE_CARRY_TEXELS texels, then out = base + (offset + amplitude · value). In a pole tile
+ * where a carried octave would be faded (noise_pole_fades) the tile is evaluated directly.
+ * Returns 0 or as noise_tile. */
+int noise_tile_from_carry(const struct noise *nz, const struct tile_key *k, uint32_t T,
+			  enum noise_isa isa, void *scratch, const float *carry, const float *base,
+			  float amplitude, float offset, float *out);
+
+/* Internal to noise.c and noise_carry.c: noise_tile restricted to the octaves whose shortest
+ * wavelength is in [lo, hi) metres (fade: with the pole fade); whether tile k fades any octave
+ * of at least lo metres at its pole rows. */
+int noise_tile_band(const struct noise *nz, const struct tile_key *k, uint32_t T,
+		    enum noise_isa isa, void *scratch, double lo, double hi, bool fade, float *out);
+bool noise_pole_fades(const struct noise *nz, const struct tile_key *k, uint32_t T, double lo);
+/* How many octaves with a shortest wavelength in [lo, hi) metres a tile of level (lx, ly)
+ * evaluates at every texel (the others of the band go through the lattice). */
+int noise_band_full(const struct noise *nz, int lx, int ly, uint32_t T, double lo, double hi);
 
 /* Near a pole a texel row is a ring around it, and content that is not planar over a texel
  * (it bends: its slope changes by more than NOISE_POLE_BEND radians over one texel) makes the

@@ -1,0 +1,32 @@
+/* loopstat — how long the event loop's iterations took: a fixed histogram of the time from
+ * epoll_wait's return to the end of the iteration (the work, not the wait), its maximum and
+ * count, and the 99th percentile read from the buckets. What STATS exports as loop.* so that
+ * "the loop never blocks longer than 50 ms" can be checked on a running daemon.
+ *
+ * Threads: one owner thread (the loop). Pure: no clock of its own.
+ */
+#ifndef CLIPMAP_LOOPSTAT_H
+#define CLIPMAP_LOOPSTAT_H
+#include <stdint.h>
+
+/* Upper bounds of the buckets in ms; one more bucket holds everything above the last. */
+#define LOOPSTAT_BOUNDS { 1, 2, 5, 10, 20, 50, 100, 200, 500, 1000, 2000, 5000 }
+#define LOOPSTAT_NB 13
+
+struct loopstat {
+	uint64_t n;	 /* iterations */
+	uint64_t max_ns; /* the longest */
+	uint64_t b[LOOPSTAT_NB];
+};
+
+/* Counts one iteration that took ns. */
+void loopstat_add(struct loopstat *ls, uint64_t ns);
+/* The upper bound (ms) of the bucket that holds the p-th quantile (0 < p ≤ 1) of the counted
+ * iterations, the maximum itself when that is the open bucket or smaller; 0 with none. */
+double loopstat_quantile_ms(const struct loopstat *ls, double p);
+/* Bucket i's upper bound in ms (0 for the open bucket, i = LOOPSTAT_NB - 1). */
+unsigned loopstat_bound_ms(int i);
+/* How many iterations took longer than ms (ms one of the bounds). */
+uint64_t loopstat_over(const struct loopstat *ls, unsigned ms);
+
+#endif

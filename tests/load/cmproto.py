@@ -1,0 +1,175 @@
+"""cmproto: the few clipmap protocol messages the load/attack harness needs, written from
+docs/PROTOCOL.md alone (not from the project's C client), so the harness checks the daemon
+against the document. Python 3 standard library only.
+
+Frames: 12-byte header (magic "CLMP", version 2, flags 0, u16 type, u32 payload length),
+little-endian. Encoders return whole frames (bytes); decoders take a payload.
+"""
+import socket
+import struct
+import time
+
+MAGIC = b"CLMP"
+VERSION = 2
+HDR = 12
+
+HELLO, HELLO_OK, BYE, ERROR = 1, 2, 3, 4
+LIST_PLANETS, PLANETS, OPEN, OPENED = 16, 17, 18, 19
+WANT, TILE, TILE_FAIL = 32, 33, 34
+STATS_REQ, STATS = 48, 49
+
+ERROR_CODES = {0: "none", 1: "protocol", 2: "version", 3: "auth", 4: "state", 5: "not-found",
+               6: "limit", 7: "invalid", 8: "unavailable", 9: "busy", 10: "internal",
+               11: "shutdown"}
+
+
+def header(mtype, length):
+    """A frame header announcing `length` payload bytes (the body may never follow)."""
+    return MAGIC + struct.pack("<BBHI", VERSION, 0, mtype, length)
+
+
+def frame(mtype, payload=b""):
+    return header(mtype, len(payload)) + payload
+
+
+def _str(s):
+    b = s.encode("utf-8") if isinstance(s, str) else s
+    return struct.pack("<H", len(b)) + b
+
+
+def hello(name="cmproto/1", token=b"", codecs=0, ver_min=VERSION, ver_max=VERSION):
+    return frame(HELLO, struct.pack("<BBI", ver_min, ver_max, codecs) + _str(token) + _str(name))
+
+
+def bye():
+    return frame(BYE)
+
+
+def stats_req(req=1):
+    return frame(STATS_REQ, struct.pack("<I", req))
+
+
+def open_planet(name, req=1):
+    return frame(OPEN, struct.pack("<I", req) + _str(name))
+
+
+def want(planet_id, seq, entries, lon=0.0, lat=0.0, alt=1e6, vel=(0.0, 0.0, 0.0)):
+    """entries: (layer, cls, lx, ly, x, y) tuples, most wanted first."""
+    p = struct.pack("<II4d2d", planet_id, seq, lon, lat, alt, *vel)
+    p += struct.pack("<I", len(entries))
+    for layer, cls, lx, ly, x, y in entries:
+        p += struct.pack("<BBBBII", layer, cls, lx, ly, x, y)
+    return frame(WANT, p)
+
+
+class Reader:
+    """Cuts a byte stream into (type, payload) frames."""
+
+    def __init__(self):
+        self.buf = b""
+
+    def feed(self, data):
+        self.buf += data
+
+    def next(self):
+        if len(self.buf) < HDR:
+            return None
+        if self.buf[:4] != MAGIC:
+            raise ValueError("bad magic from the server")
+        _, _, mtype, length = struct.unpack_from("<BBHI", self.buf, 4)
+        if len(self.buf) < HDR + length:
+            return None
+        payload = self.buf[HDR:HDR + length]
+        self.buf = self.buf[HDR + length:]
+        return mtype, payload
+
+
+def _rd_str(p, off):
+    (n,) = struct.unpack_from("<H", p, off)
+    return p[off + 2:off + 2 + n].decode("utf-8"), off + 2 + n
+
+
+def decode_hello_ok(p):
+    version, codecs, session, max_want, max_rate, max_pending, max_frame = \
+        struct.unpack_from("<BIQIIQI", p, 0)
+    name, _ = _rd_str(p, 33)
+    return {"version": version, "codecs": codecs, "session": session, "max_want": max_want,
+            "max_rate": max_rate, "max_pending": max_pending, "max_frame": max_frame,
+            "name": name}
+
+
+def decode_error(p):
+    code, ref_type, ref_id = struct.unpack_from("<HHI", p, 0)
+    msg, _ = _rd_str(p, 8)
+    return {"code": code, "name": ERROR_CODES.get(code, "internal"), "ref_type": ref_type,
+            "ref_id": ref_id, "message": msg}
+
+
+def decode_stats(p):
+    req, count = struct.unpack_from("<IH", p, 0)
+    off, out = 6, {}
+    for _ in range(count):
+        key, off = _rd_str(p, off)
+        kind = p[off]
+        off += 1
+        if kind == 1:
+            (v,) = struct.unpack_from("<Q", p, off)
+            off += 8
+        elif kind == 2:
+            (v,) = struct.unpack_from("<d", p, off)
+            off += 8
+        else:
+            v, off = _rd_str(p, off)
+        out[key] = v
+    return req, out
+
+
+def connect(addr, timeout=5.0, source=None):
+    """addr: a Unix socket path, or (host, port). source: a local address for TCP."""
+    if isinstance(addr, str):
+        s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    else:
+        s = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        if source:
+            s.bind((source, 0))
+    s.settimeout(timeout)
+    s.connect(addr)
+    return s
+
+
+def recv_frame(s, reader, deadline):
+    """The next frame, or None at end of stream; socket.timeout past deadline (monotonic)."""
+    while True:
+        f = reader.next()
+        if f:
+            return f
+        left = deadline - time.monotonic()
+        if left <= 0:
+            raise socket.timeout("no frame before the deadline")
+        s.settimeout(left)
+        data = s.recv(65536)
+        if not data:
+            return None
+        reader.feed(data)
+
+
+def handshake(addr, token=b"", name="cmproto/1", timeout=5.0, source=None):
+    """Connects and says HELLO. Returns (socket, reader, HELLO_OK dict, seconds taken);
+    raises RuntimeError naming the ERROR the server sent instead."""
+    t0 = time.monotonic()
+    s = connect(addr, timeout, source)
+    try:
+        s.sendall(hello(name=name, token=token))
+        r = Reader()
+        f = recv_frame(s, r, t0 + timeout)
+        if f is None:
+            raise RuntimeError("closed before HELLO_OK")
+        if f[0] == ERROR:
+            e = decode_error(f[1])
+            raise RuntimeError("ERROR %s: %s" % (e["name"], e["message"]))
+        if f[0] != HELLO_OK:
+            raise RuntimeError("frame type %d instead of HELLO_OK" % f[0])
+        return s, r, decode_hello_ok(f[1]), time.monotonic() - t0
+    except BaseException:
+        s.close()
+        raise
