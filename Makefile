@@ -10,7 +10,7 @@ BUILD   ?= build
 .DEFAULT_GOAL := all
 CC      ?= cc
 CXX     ?= g++
-PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libmicrohttpd zlib
+PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libmicrohttpd zlib libtiff-4
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -201,7 +201,8 @@ demo: deps
 	@$(MAKE) --no-print-directory all
 	@sh scripts/demo.sh $(BUILD)
 
-# libFuzzer targets (clang): each tests/fuzz/fuzz_NAME.c runs FUZZ_SECONDS on its corpus.
+# libFuzzer targets (clang): each tests/fuzz/fuzz_NAME.c runs FUZZ_SECONDS on its corpus
+# (fuzz_ini also reads the shipped planet files as seeds).
 FUZZ_SECONDS ?= 60
 FUZZ_SRC := $(wildcard tests/fuzz/fuzz_*.c)
 FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/pixfmt.c common/grid.c \
@@ -211,11 +212,30 @@ FUZZ_FLAGS := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined 
 build-fuzz/%: tests/fuzz/%.c $(FUZZ_LIBSRC)
 	@mkdir -p build-fuzz
 	clang $(FUZZ_FLAGS) $^ $(shell pkg-config --libs libzstd liblz4 libxxhash) -lm -o $@
+# fuzz_ini parses planet files: it links the engine and all of common, compiled with the
+# fuzzer's instrumentation (not its main) into build-fuzz/obj/.
+FUZZ_OBJ_FLAGS := -g -O1 -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all \
+                  -pthread -iquote . -iquote daemon
+FUZZ_ENGINE_OBJ := $(patsubst %.c,build-fuzz/obj/%.o,$(ENGINE_SRC) $(COMMON_SRC)) \
+                   $(patsubst %.cpp,build-fuzz/obj/%.o,$(COMMON_CXX))
+build-fuzz/obj/%.o: %.c
+	@mkdir -p $(dir $@)
+	clang -std=c11 -D_GNU_SOURCE $(FUZZ_OBJ_FLAGS) $(filter-out -I/usr/include,$(PKG_CFLAGS)) \
+		$(if $(findstring _avx512,$*),$(AVX512_FLAGS),$(if $(findstring _avx2,$*),$(AVX2_FLAGS))) -c $< -o $@
+build-fuzz/obj/%.o: %.cpp
+	@mkdir -p $(dir $@)
+	clang++ -std=c++17 $(FUZZ_OBJ_FLAGS) $(filter-out -I/usr/include,$(PKG_CFLAGS)) -c $< -o $@
+build-fuzz/fuzz_ini: tests/fuzz/fuzz_ini.c $(FUZZ_ENGINE_OBJ)
+	@mkdir -p build-fuzz
+	clang++ -x c -std=c11 -D_GNU_SOURCE $(FUZZ_OBJ_FLAGS) -c tests/fuzz/fuzz_ini.c -o build-fuzz/obj/fuzz_ini.o
+	clang++ -fsanitize=fuzzer,address,undefined build-fuzz/obj/fuzz_ini.o $(FUZZ_ENGINE_OBJ) \
+		$(PKG_LIBS) -pthread -lm -o $@
 fuzz: deps $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%)
 	@for f in $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%); do \
 		mkdir -p $$f-corpus; \
 		echo "== $$f: $(FUZZ_SECONDS) s"; \
-		if $$f -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 $$f-corpus >$$f.log 2>&1; \
+		seeds=; [ $$f = build-fuzz/fuzz_ini ] && seeds=conf/planets; \
+		if $$f -max_total_time=$(FUZZ_SECONDS) -print_final_stats=1 $$f-corpus $$seeds >$$f.log 2>&1; \
 		then grep -E 'stat::number_of_executed_units' $$f.log; \
 		else tail -n 40 $$f.log; echo "$$f: found a failure (crash input saved in ./)"; exit 1; fi; \
 	done

@@ -6,6 +6,7 @@
 // (size, mtime, inode...) its users last saw, so a changed file is invalidated once.
 #include "errbuf.h"
 #include "img.h"
+#include "img_tiff.h"
 
 #include <OpenImageIO/imagebuf.h>
 #include <OpenImageIO/imagebufalgo.h>
@@ -36,8 +37,13 @@ struct img_cache {
 	ImageCache *ic;
 	size_t max_mb;
 	std::atomic<int> refs{ 1 };
-	std::mutex mu; // guards versions
+	std::mutex mu; // guards versions and broken
 	std::unordered_map<std::string, std::string> versions;
+	// Files a read failed on, with the message: OIIO serves a tile it could not read as
+	// black from then on, without an error, so every later read of the file fails here
+	// until the next img_cache_set_version (a load or reload) or img_cache_invalidate.
+	std::unordered_map<std::string, std::string> broken;
+	std::atomic<int> nbroken{ 0 };
 };
 
 namespace {
@@ -410,6 +416,10 @@ extern "C" int img_cache_level_size(struct img_cache *c, const char *path, int m
 	});
 }
 
+static int cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1, int y0,
+	       int y1, int chbegin, int chend, TypeDesc td, size_t tbytes, void *dst,
+	       size_t dst_stride, char *err);
+
 extern "C" int img_cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1,
 			      int y0, int y1, int chbegin, int chend, enum img_type type, void *dst,
 			      size_t dst_stride, char err[256])
@@ -421,25 +431,76 @@ extern "C" int img_cache_read(struct img_cache *c, const char *path, int mipleve
 		return -EINVAL;
 	}
 	return guarded(path, err, [&] {
-		size_t px = img_type_bytes(type) * (size_t)(chend - chbegin);
+		if (c->nbroken.load(std::memory_order_acquire)) {
+			std::lock_guard<std::mutex> lk(c->mu);
+			auto it = c->broken.find(path);
+			if (it != c->broken.end()) {
+				err_set(err, "%s", it->second.c_str());
+				return -EIO;
+			}
+		}
+		int rc = cache_read(c, path, miplevel, x0, x1, y0, y1, chbegin, chend, td,
+				    img_type_bytes(type), dst, dst_stride, err);
+		if (rc == -EIO) {
+			std::lock_guard<std::mutex> lk(c->mu);
+			if (c->broken.emplace(path, err ? err : "read failed").second)
+				c->nbroken.fetch_add(1, std::memory_order_release);
+		}
+		return rc;
+	});
+}
+
+namespace {
+bool forget_broken(struct img_cache *c, const char *path)
+{
+	std::lock_guard<std::mutex> lk(c->mu);
+	if (!c->broken.erase(path))
+		return false;
+	c->nbroken.fetch_sub(1, std::memory_order_release);
+	return true;
+}
+} // namespace
+
+static int cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1, int y0,
+	       int y1, int chbegin, int chend, TypeDesc td, size_t tbytes, void *dst,
+	       size_t dst_stride, char *err)
+{
+	{
+		size_t px = tbytes * (size_t)(chend - chbegin);
 		size_t row = dst_stride ? dst_stride : px * (size_t)(x1 - x0);
 		ustring name(path);
+		if (c->ic->has_error())
+			c->ic->geterror(true); // stale: not this read's
 		if (read_from_tiles(c->ic, name, miplevel, x0, x1, y0, y1, chbegin, chend, td,
-				    (char *)dst, row))
-			return 0;
+				    (char *)dst, row)) {
+			// An automip tile made from unreadable tiles comes back whole, with an
+			// error message: a failure, not zeros.
+			if (!c->ic->has_error())
+				return 0;
+			oiio_err(err, "%s: %s", path, c->ic->geterror());
+			return -EIO;
+		}
 		stride_t xs = (stride_t)px, ys = (stride_t)row;
 		if (!c->ic->get_pixels(name, 0, miplevel, x0, x1, y0, y1, 0, 1, chbegin,
 				       chend, td, dst, xs, ys, AutoStride, chbegin, chend)) {
 			oiio_err(err, "%s: %s", path, c->ic->geterror());
 			return missing_or(path, -EIO);
 		}
+		// A tile that cannot be read (a file cut short) comes back black with success
+		// and an error message: that is a failure, not zeros.
+		std::string e = c->ic->geterror();
+		if (!e.empty()) {
+			oiio_err(err, "%s: %s", path, e);
+			return -EIO;
+		}
 		return 0;
-	});
+	}
 }
 
 extern "C" void img_cache_invalidate(struct img_cache *c, const char *path)
 {
 	try {
+		forget_broken(c, path);
 		c->ic->invalidate(ustring(path), true);
 	} catch (...) {
 	}
@@ -464,8 +525,11 @@ extern "C" bool img_cache_set_version(struct img_cache *c, const char *path, con
 		// First sight: whatever was cached under this name before (read without a version)
 		// goes only if OIIO sees a newer mtime; a version change goes unconditionally (mtimes
 		// in whole seconds miss a file rewritten within the second).
-		if (first || changed)
-			c->ic->invalidate(ustring(path), changed);
+		// A file that failed a read is retried from scratch by the next load (a reload after
+		// the operator fixed it): OIIO still holds its unreadable tiles as black.
+		bool was_broken = forget_broken(c, path);
+		if (first || changed || was_broken)
+			c->ic->invalidate(ustring(path), changed || was_broken);
 		return changed;
 	} catch (const std::bad_alloc &) {
 		oom();
@@ -619,6 +683,8 @@ struct img_tiled_out {
 	std::vector<char> tilebuf;
 	int spool = -1;
 	bool failed = false;
+	bool has_nd = false; // img_tiled_set_nodata: averages skip nd samples
+	float nd = 0;
 };
 
 namespace {
@@ -686,6 +752,26 @@ int flush_band(img_tiled_out *o, img_tiled_out::level &L, char *err)
 
 int push_row(img_tiled_out *o, size_t k, const float *row, char *err);
 
+// The (w-weighted; NULL: equal) mean of the samples of v that are not nd, or nd when none
+// is (with a weight); `all` when every one is valid (the plain average, bit for bit).
+float mean_valid(const float *v, const float *w, int n, float nd, float all)
+{
+	float sum = 0, wsum = 0;
+	bool any_nd = false;
+	for (int i = 0; i < n; i++) {
+		float wi = w ? w[i] : 1.0f;
+		if (v[i] == nd) {
+			any_nd = true;
+			continue;
+		}
+		sum += wi * v[i];
+		wsum += wi;
+	}
+	if (!any_nd)
+		return all;
+	return wsum > 0 ? sum / wsum : nd;
+}
+
 // Level k + 1's next row is in L.next: store it (stored type) and feed it on.
 int emit_row(img_tiled_out *o, size_t k, char *err)
 {
@@ -729,6 +815,15 @@ int push_row(img_tiled_out *o, size_t k, const float *row, char *err)
 		}
 		for (size_t i = 0; i < dn; i++)
 			L.next[i] = (float)(0.5f * (L.s0[i] + L.s1[i]));
+		if (o->has_nd) { // a box holding nodata: the mean of its other samples, or nodata
+			for (size_t i = 0, x = 0; x < (size_t)D.w; x++) {
+				for (int c = 0; c < nch; c++, i++) {
+					size_t s = 2 * x * nch + c;
+					const float v[4] = { a[s], a[s + nch], b[s], b[s + nch] };
+					L.next[i] = mean_valid(v, nullptr, 4, o->nd, L.next[i]);
+				}
+			}
+		}
 		return emit_row(o, k, err);
 	}
 	// resize_block_ / interppixel_NDC with WrapClamp, the same float expressions.
@@ -759,6 +854,16 @@ int push_row(img_tiled_out *o, size_t k, const float *row, char *err)
 			bilerp(ra + (size_t)xa * nch, ra + (size_t)xb * nch, rb + (size_t)xa * nch,
 			       rb + (size_t)xb * nch, L.xf[(size_t)x], yfrac, nch,
 			       L.next.data() + (size_t)x * nch);
+			if (o->has_nd) {
+				float s = L.xf[(size_t)x], s1 = 1 - s, t1 = 1 - yfrac;
+				const float w[4] = { t1 * s1, t1 * s, yfrac * s1, yfrac * s };
+				for (int c = 0; c < nch; c++) {
+					const float v[4] = { ra[(size_t)xa * nch + c], ra[(size_t)xb * nch + c],
+							     rb[(size_t)xa * nch + c], rb[(size_t)xb * nch + c] };
+					float *r = L.next.data() + (size_t)x * nch + c;
+					*r = mean_valid(v, w, 4, o->nd, *r);
+				}
+			}
 		}
 		int rc = emit_row(o, k, err);
 		if (rc)
@@ -1030,6 +1135,32 @@ extern "C" int img_tiled_open(struct img_tiled_out **out, const char *path, int 
 	}
 }
 
+extern "C" void img_tiled_set_nodata(struct img_tiled_out *o, double nodata)
+{
+	// The cascade holds OIIO's float conversion of the stored values (integers normalised):
+	// nodata goes through the same conversion, so it compares equal.
+	unsigned char raw[4];
+	size_t sz = o->td.size();
+	if (o->td == TypeDesc::UINT8) {
+		uint8_t v = (uint8_t)nodata;
+		std::memcpy(raw, &v, 1);
+	} else if (o->td == TypeDesc::UINT16) {
+		uint16_t v = (uint16_t)nodata;
+		std::memcpy(raw, &v, 2);
+	} else if (o->td == TypeDesc::INT16) {
+		int16_t v = (int16_t)nodata;
+		std::memcpy(raw, &v, 2);
+	} else {
+		float v = (float)nodata;
+		std::memcpy(raw, &v, 4);
+	}
+	float f = 0;
+	if (sz > sizeof raw || !convert_pixel_values(o->td, raw, TypeFloat, &f, 1))
+		return;
+	o->has_nd = true;
+	o->nd = f;
+}
+
 extern "C" int img_tiled_rows(struct img_tiled_out *o, const void *rows, int n, char err[256])
 {
 	if (o->failed) {
@@ -1078,4 +1209,76 @@ extern "C" void img_tiled_abort(struct img_tiled_out *o)
 	} catch (...) {
 	}
 	delete o;
+}
+
+namespace {
+
+// Reads the tile (tiled files) or scanline holding pixel (x, y) of the current level of in.
+bool read_at(ImageInput *in, const ImageSpec &s, int x, int y, std::vector<char> &buf)
+{
+	size_t px = (size_t)s.nchannels * s.format.size();
+	if (s.tile_width > 0) {
+		int tx = s.x + (x - s.x) / s.tile_width * s.tile_width;
+		int ty = s.y + (y - s.y) / s.tile_height * s.tile_height;
+		buf.resize((size_t)s.tile_width * (size_t)s.tile_height *
+			   (size_t)std::max(s.tile_depth, 1) * px);
+		return in->read_tile(tx, ty, s.z, s.format, buf.data());
+	}
+	buf.resize((size_t)s.width * px);
+	return in->read_scanline(y, s.z, s.format, buf.data());
+}
+
+int check_impl(const char *path, int *levels, char *err)
+{
+	ImageSpec config;
+	config.attribute("oiio:UnassociatedAlpha", 1);
+	std::unique_ptr<ImageInput> in = ImageInput::open(path, &config);
+	if (!in) {
+		oiio_err(err, "%s: %s", path, OIIO::geterror());
+		return missing_or(path, -EIO);
+	}
+	std::vector<char> buf;
+	for (int sub = 0; in->seek_subimage(sub, 0); sub++) {
+		for (int m = 0; in->seek_subimage(sub, m); m++) {
+			if (sub == 0 && levels)
+				*levels = m + 1;
+			ImageSpec s = in->spec();
+			if (s.width <= 0 || s.height <= 0)
+				continue;
+			int xl = s.x + s.width - 1, yl = s.y + s.height - 1;
+			// The first tile, then the last: files are written in order, so a file cut
+			// short loses the end of some level.
+			bool first = read_at(in.get(), s, s.x, s.y, buf);
+			if (first && read_at(in.get(), s, xl, yl, buf))
+				continue;
+			if (!first)
+				xl = s.x, yl = s.y;
+			{
+				std::string e = in->geterror();
+				char where[128];
+				snprintf(where, sizeof where,
+					 "truncated or corrupt (subimage %d, MIP level %d, %dx%d, "
+					 "cannot read around pixel %d,%d)", sub, m, s.width, s.height,
+					 xl, yl);
+				std::string msg = std::string(where) + ": " +
+						  (e.empty() ? std::string("read failed") : e);
+				oiio_err(err, "%s: %s", path, msg);
+				return -EIO;
+			}
+		}
+	}
+	in->geterror(); // seek_subimage past the end leaves a message: drop it
+	return 0;
+}
+
+} // namespace
+
+extern "C" int img_check_readable(const char *path, int *levels, char err[256])
+{
+	if (levels)
+		*levels = 0;
+	return guarded(path, err, [&] {
+		int rc = check_impl(path, levels, err);
+		return rc ? rc : img_tiff_check_extents(path, err);
+	});
 }

@@ -80,7 +80,10 @@ int img_cache_level_size(struct img_cache *c, const char *path, int miplevel, in
 
 /* Reads pixels [x0, x1) × [y0, y1) (row y0 first, inside the level's data window), channels
  * [chbegin, chend), converted to `type`, into dst (borrowed), rows dst_stride bytes apart
- * (0: packed). Returns 0, -EINVAL (bad region or channels) or -EIO with err filled. */
+ * (0: packed). Returns 0, -EINVAL (bad region or channels) or -EIO with err filled. After a
+ * read of path fails (a tile OIIO cannot read, which it would serve as black from then on),
+ * every read of path fails with that message until the next img_cache_set_version or
+ * img_cache_invalidate of it (a load or reload retries the file from scratch). */
 int img_cache_read(struct img_cache *c, const char *path, int miplevel, int x0, int x1, int y0,
 		   int y1, int chbegin, int chend, enum img_type type, void *dst, size_t dst_stride,
 		   char err[256]);
@@ -118,6 +121,11 @@ struct img_tiled_out;
 int img_tiled_open(struct img_tiled_out **out, const char *path, int width, int height,
 		   int channels, enum img_type type, int tile, bool mip, const char *description,
 		   char err[256]);
+/* From now on the coarser MIP levels treat `nodata` (in the stored type's values) as missing:
+ * a box or bilinear tap holding it takes the mean of its other samples, or nodata when all
+ * are missing (a void stays a void instead of dragging its neighbours towards nodata). Call
+ * before the first img_tiled_rows. Without it, every level is make_texture's, bit for bit. */
+void img_tiled_set_nodata(struct img_tiled_out *o, double nodata);
 /* Appends n rows (packed, `type`, channels interleaved) below those written so far. n must be
  * a multiple of the tile size unless these rows complete the image. Returns 0, -EINVAL (bad
  * n) or -EIO with err filled; after an error only img_tiled_abort is allowed. */
@@ -131,6 +139,31 @@ void img_tiled_abort(struct img_tiled_out *o);
  * Returns 0, -ENODATA (the file has none) or -ENOENT / -EIO with err filled. */
 int img_cache_description(struct img_cache *c, const char *path, char *buf, size_t n,
 			  char err[256]);
+
+/* Checks that path is readable to its end, cheaply: for every MIP level (and subimage) the
+ * file itself stores, its first and last tile (or scanline) are read and decoded, and for a
+ * TIFF every tile's or strip's extent is checked against the file's size (directories only);
+ * a file cut short (a truncated download or copy) fails there, wherever the cut. Virtual (automip) levels are not read:
+ * they come from level 0. *levels (may be NULL) gets the MIP levels the file stores for its
+ * first subimage (1: none beyond the image; coarser ones would be OIIO's automip). Returns 0,
+ * or -ENOENT / -EIO with err naming the file, the level and the region that cannot be read. */
+int img_check_readable(const char *path, int *levels, char err[256]);
+
+/* Where a file says it lies: a TIFF's GeoTIFF tags, read with libtiff (img_georef.c);
+ * nothing is guessed, so a plain TIFF without georeferencing gives georeferenced = false. */
+struct img_georef {
+	bool georeferenced; /* a north-up geotransform in geographic degrees: the bounds below */
+	bool projected;	    /* a geotransform in a projected CRS (UTM...): not usable as degrees */
+	bool rotated;	    /* a rotated or sheared geotransform */
+	bool no_crs;	    /* a geotransform without a coordinate reference system */
+	char crs[96];	    /* the CRS's name when there is one */
+	double west, south, east, north; /* pixel-area edges, degrees (snapped as import does) */
+	bool has_nodata;		 /* the first band's nodata value (GDAL_NODATA) */
+	double nodata;
+};
+/* Fills out (zeroed first). Returns 0 (also for a file that is not a TIFF: nothing known), or
+ * -ENOENT. Reentrant. Other formats (PNG, EXR...) have none: all false. */
+int img_georef_read(const char *path, struct img_georef *out, char err[256]);
 
 /* Reads the whole first image of path, all channels, converted to `type` (IMG_NONE: the
  * file's own img_info.type). *pixels is returned owned (free() it); info may be NULL.

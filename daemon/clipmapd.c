@@ -21,6 +21,7 @@
 #include "common/img.h"
 #include "common/log.h"
 #include "engine/cache.h"
+#include "engine/fault.h"
 #include "engine/planets.h"
 #include "engine/sched.h"
 #include "engine/store.h"
@@ -512,6 +513,12 @@ out:
 	return rc ? 1 : 0;
 }
 
+/* The engine's faults (a file read failing at run time): warnings in the log. */
+static void log_fault(const char *line)
+{
+	log_msg(LOG_WARN, "%s", line);
+}
+
 int main(int argc, char **argv)
 {
 	const char *cfg = DEFAULT_CONF;
@@ -522,6 +529,7 @@ int main(int argc, char **argv)
 	struct daemon d = { .sigfd = -1 };
 	struct planet_set *ps;
 	log_detect_journal();
+	engine_fault_sink(log_fault);
 	if ((status = configure(&d, cfg, &ps)))
 		return status;
 	if (check) {

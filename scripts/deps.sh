@@ -4,7 +4,7 @@
 # otherwise it prints the exact command to run and fails.
 set -eu
 PKGS="build-essential pkg-config libopenimageio-dev openimageio-tools libgeographiclib-dev
-libcmocka-dev libxxhash-dev libzstd-dev liblmdb-dev liblz4-dev libsystemd-dev systemd clang libgdal-dev
+libcmocka-dev libxxhash-dev libzstd-dev liblmdb-dev liblz4-dev libsystemd-dev systemd clang libgdal-dev libtiff-dev
 libegl-dev libegl-mesa0 libgl1-mesa-dri libgl-dev libosmesa6-dev glslang-tools libglfw3-dev xvfb xauth
 scdoc graphviz libmicrohttpd-dev zlib1g-dev gdal-bin curl prometheus"
 missing=""

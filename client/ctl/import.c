@@ -9,7 +9,9 @@
 
 #include <errno.h>
 #include <gdal/cpl_error.h>
+#include <gdal/cpl_string.h>
 #include <gdal/gdal.h>
+#include <gdal/gdalwarper.h>
 #include <gdal/ogr_srs_api.h>
 #include <math.h>
 #include <pthread.h>
@@ -137,8 +139,15 @@ static int georef(GDALDatasetH ds, const char *src, int64_t w, int64_t h,
 	r->georeferenced = GDALGetGeoTransform(ds, gt) == CE_None &&
 			   !(gt[0] == 0 && gt[1] == 1 && gt[2] == 0 && gt[3] == 0 && gt[4] == 0 &&
 			     gt[5] == 1);
-	if (!r->georeferenced)
+	if (!r->georeferenced) {
+		/* A file import wrote (re-imported): its bounds are in the description. */
+		const char *d = GDALGetMetadataItem(ds, "TIFFTAG_IMAGEDESCRIPTION", NULL);
+		const char *b = d ? strstr(d, "clipmap:bounds=") : NULL;
+		if (b && sscanf(b, "clipmap:bounds=%lf,%lf,%lf,%lf", &r->west, &r->south, &r->east,
+				&r->north) == 4)
+			r->georeferenced = true;
 		return 0;
+	}
 	if (gt[2] != 0 || gt[4] != 0) {
 		err_set(err, "%s: rotated or sheared georeferencing is not supported "
 			 "(warp it north-up first)", src);
@@ -177,7 +186,8 @@ static int georef(GDALDatasetH ds, const char *src, int64_t w, int64_t h,
 /* One import: the source, what is read from it, and how it is turned. */
 struct job {
 	const char *src;
-	GDALDatasetH ds;
+	GDALDatasetH ds;	/* the source, or a warped VRT over src_ds */
+	GDALDatasetH src_ds;	/* the source when ds is a warped VRT; else NULL */
 	int64_t w, h;
 	int bands[4], nch;	/* the 1-based bands read, in output channel order */
 	GDALDataType read_as;	/* what GDAL converts the samples to */
@@ -211,6 +221,150 @@ static int open_source(struct job *j, char *err)
 	    j->h > INT32_MAX / 8) {
 		err_set(err, "%s: %lldx%lld pixels is beyond what import handles", j->src,
 			(long long)j->w, (long long)j->h);
+		return -EFBIG;
+	}
+	return 0;
+}
+
+/* The geographic CRS a projected source is warped to: WGS 84 (EPSG:4326, longitude first)
+ * for the Earth's ellipsoids (semi-major axis within 1 % of WGS 84's), else the source's own
+ * geographic CRS (another body's degrees). NULL on failure. */
+static OGRSpatialReferenceH target_srs(OGRSpatialReferenceH srs)
+{
+	OGRErr e = OGRERR_NONE;
+	double a = OSRGetSemiMajor(srs, &e);
+	OGRSpatialReferenceH t;
+	if (e == OGRERR_NONE && fabs(a - 6378137.0) < 0.01 * 6378137.0) {
+		t = OSRNewSpatialReference(NULL);
+		if (t && OSRImportFromEPSG(t, 4326) != OGRERR_NONE) {
+			OSRDestroySpatialReference(t);
+			return NULL;
+		}
+	} else {
+		t = OSRCloneGeogCS(srs);
+	}
+	if (t)
+		OSRSetAxisMappingStrategy(t, OAMS_TRADITIONAL_GIS_ORDER);
+	return t;
+}
+
+static const struct {
+	const char *name;
+	GDALResampleAlg alg;
+} resamplers[] = {
+	{ "near", GRA_NearestNeighbour }, { "bilinear", GRA_Bilinear },
+	{ "cubic", GRA_Cubic },		  { "cubicspline", GRA_CubicSpline },
+	{ "lanczos", GRA_Lanczos },	  { "average", GRA_Average },
+	{ "mode", GRA_Mode },
+};
+
+bool import_resample_ok(const char *s)
+{
+	for (size_t i = 0; i < sizeof resamplers / sizeof resamplers[0]; i++)
+		if (strcmp(s, resamplers[i].name) == 0)
+			return true;
+	return false;
+}
+
+static GDALResampleAlg resample_alg(const char *s)
+{
+	for (size_t i = 0; s && i < sizeof resamplers / sizeof resamplers[0]; i++)
+		if (strcmp(s, resamplers[i].name) == 0)
+			return resamplers[i].alg;
+	return GRA_Bilinear;
+}
+
+/* The nodata value the warp gives pixels outside the source: the source's own, else NaN for
+ * float data and the type's lowest (Int16, Byte) or highest (UInt16) value. */
+static double warp_nodata(GDALRasterBandH b, bool *from_src)
+{
+	int has = 0;
+	double v = GDALGetRasterNoDataValue(b, &has);
+	*from_src = has != 0;
+	if (has)
+		return v;
+	switch (GDALGetRasterDataType(b)) {
+	case GDT_Byte: return 0;
+	case GDT_UInt16: return 65535;
+	case GDT_Int16: return -32768;
+	default: return NAN;
+	}
+}
+
+/* A projected (or rotated) source: j->ds becomes a warped VRT over it in geographic degrees
+ * (GDAL's warper, o->resample), north-up, with nodata outside the source (8-bit grey or RGB
+ * without nodata: an added alpha band, 0 outside). Returns 0 (also
+ * when nothing is to be done) or -EINVAL with err filled. */
+static int warp_source(struct job *j, const struct import_opts *o, char *err)
+{
+	OGRSpatialReferenceH srs = GDALGetSpatialRef(j->ds);
+	double gt[6];
+	bool have_gt = GDALGetGeoTransform(j->ds, gt) == CE_None;
+	if (!srs || !have_gt)
+		return 0;
+	if (!OSRIsProjected(srs) && gt[2] == 0 && gt[4] == 0)
+		return 0; /* geographic and north-up already */
+	OGRSpatialReferenceH t = target_srs(srs);
+	char *wkt = NULL;
+	if (!t || OSRExportToWkt(t, &wkt) != OGRERR_NONE) {
+		if (t)
+			OSRDestroySpatialReference(t);
+		err_set(err, "%s: no geographic coordinate system to reproject onto: %s", j->src,
+			gdal_msg());
+		return -EINVAL;
+	}
+	int nb = GDALGetRasterCount(j->ds);
+	GDALWarpOptions *wo = GDALCreateWarpOptions();
+	wo->eResampleAlg = resample_alg(o->resample);
+	wo->nBandCount = nb;
+	wo->panSrcBands = CPLMalloc(sizeof(int) * (size_t)nb);
+	wo->panDstBands = CPLMalloc(sizeof(int) * (size_t)nb);
+	wo->padfSrcNoDataReal = CPLMalloc(sizeof(double) * (size_t)nb);
+	wo->padfDstNoDataReal = CPLMalloc(sizeof(double) * (size_t)nb);
+	bool any_src_nd = false;
+	for (int i = 0; i < nb; i++) {
+		bool from_src;
+		wo->panSrcBands[i] = wo->panDstBands[i] = i + 1;
+		double nd = warp_nodata(GDALGetRasterBand(j->ds, i + 1), &from_src);
+		wo->padfSrcNoDataReal[i] = wo->padfDstNoDataReal[i] = nd;
+		any_src_nd |= from_src;
+	}
+	if (!any_src_nd) { /* the values chosen are for the destination only */
+		CPLFree(wo->padfSrcNoDataReal);
+		wo->padfSrcNoDataReal = NULL;
+	}
+	/* 8-bit imagery without nodata (grey, RGB): an alpha band instead, so the wedges
+	 * outside the source are transparent rather than black. */
+	bool alpha = !any_src_nd && (nb == 1 || nb == 3) &&
+		     GDALGetRasterDataType(GDALGetRasterBand(j->ds, 1)) == GDT_Byte;
+	if (alpha) {
+		CPLFree(wo->padfDstNoDataReal);
+		wo->padfDstNoDataReal = NULL;
+		wo->nDstAlphaBand = nb + 1;
+	}
+	wo->papszWarpOptions = CSLSetNameValue(wo->papszWarpOptions, "INIT_DEST", "NO_DATA");
+	CPLErrorReset();
+	GDALDatasetH v = GDALAutoCreateWarpedVRTEx(j->ds, NULL, wkt, wo->eResampleAlg, 0.125, wo,
+						   NULL);
+	GDALDestroyWarpOptions(wo);
+	CPLFree(wkt);
+	OSRDestroySpatialReference(t);
+	if (!v) {
+		err_set(err, "%s: cannot reproject to geographic degrees: %s", j->src, gdal_msg());
+		return -EINVAL;
+	}
+	for (int i = 0; i < nb && !alpha; i++) /* the VRT's bands carry the destination nodata */
+		GDALSetRasterNoDataValue(GDALGetRasterBand(v, i + 1),
+					 warp_nodata(GDALGetRasterBand(j->ds, i + 1), &(bool){ 0 }));
+	j->src_ds = j->ds;
+	j->ds = v;
+	j->w = GDALGetRasterXSize(v);
+	j->h = GDALGetRasterYSize(v);
+	j->r.reprojected = true;
+	if (j->w <= 0 || j->h <= 0 || j->w * j->h > IMPORT_MAX_PIXELS || j->w > INT32_MAX / 8 ||
+	    j->h > INT32_MAX / 8) {
+		err_set(err, "%s: reprojected, %lldx%lld pixels is beyond what import handles",
+			j->src, (long long)j->w, (long long)j->h);
 		return -EFBIG;
 	}
 	return 0;
@@ -264,6 +418,13 @@ static int place(struct job *j, const struct import_opts *o, char *err)
 	int rc = georef(j->ds, j->src, j->w, j->h, r, err);
 	if (rc)
 		return rc;
+	const char *d = GDALGetMetadataItem(j->ds, "TIFFTAG_IMAGEDESCRIPTION", NULL);
+	const char *nds = d ? strstr(d, "clipmap:nodata=") : NULL;
+	double ndv;
+	if (!j->has_nd && nds && sscanf(nds, "clipmap:nodata=%lf", &ndv) == 1) {
+		j->has_nd = true; /* re-importing an imported file: its recorded nodata */
+		j->nd = ndv;
+	}
 	j->colflip = r->shifted_cols == -1;
 	r->shifted_cols = 0;
 	if (o->has_bounds) {
@@ -376,6 +537,8 @@ static int write_tiled(struct job *j, const struct import_opts *o, const char *d
 	struct img_tiled_out *tw = NULL;
 	int rc = img_tiled_open(&tw, dst, (int)j->w, (int)j->h, j->nch, j->type, tile,
 				!o->no_mip, desc, err);
+	if (rc == 0 && j->r.has_nodata) /* integer nodata: voids stay voids in the pyramid */
+		img_tiled_set_nodata(tw, j->r.nodata);
 	for (int64_t y0 = 0; rc == 0 && y0 < j->h; y0 += band) {
 		int n = (int)(j->h - y0 < band ? j->h - y0 : band);
 		if ((rc = read_rows(j, y0, n, buf, sz, err)))
@@ -406,6 +569,11 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 	if (!o)
 		o = &defaults;
 	pthread_once(&reg_once, reg);
+	if (o->resample && !import_resample_ok(o->resample)) {
+		err_set(err, "resampling \"%s\": use near, bilinear, cubic, cubicspline, lanczos, "
+			"average or mode", o->resample);
+		return -EINVAL;
+	}
 
 	struct stat st;
 	if (stat(src, &st) != 0 && strchr(src, ':') == NULL) {
@@ -417,6 +585,8 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 	CPLErrorReset();
 	struct job j = { .src = src };
 	int rc = open_source(&j, err);
+	if (!rc)
+		rc = warp_source(&j, o, err);
 	if (!rc)
 		rc = choose_bands(&j, o, err);
 	if (!rc)
@@ -431,6 +601,8 @@ int import_raster(const char *src, const char *dst, const struct import_opts *o,
 	}
 	if (j.ds)
 		GDALClose(j.ds);
+	if (j.src_ds)
+		GDALClose(j.src_ds);
 	CPLPopErrorHandler();
 	return rc;
 }

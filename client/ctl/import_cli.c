@@ -1,5 +1,5 @@
 /* import_cli — `clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N] [--tile N]
- * [--no-mip] [--quiet]`. Argument handling and output only; see import.h. */
+ * [--resample ALG] [--no-mip] [--quiet]`. Argument handling and output only; see import.h. */
 #include "import_cli.h"
 
 #include <errno.h>
@@ -24,7 +24,7 @@ static const char *type_name(enum img_type t)
 
 #define USAGE                                                                                \
 	"usage: clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N] [--tile N] "    \
-	"[--no-mip] [--quiet]\n"
+	"[--resample near|bilinear|cubic|cubicspline|lanczos|average|mode] [--no-mip] [--quiet]\n"
 
 /* `import`'s command line. */
 struct import_args {
@@ -57,7 +57,8 @@ static int parse_import_args(int argc, char **argv, struct import_args *a)
 		{ "output", required_argument, NULL, 'o' }, { "bounds", required_argument, NULL, 'b' },
 		{ "band", required_argument, NULL, 'n' },   { "tile", required_argument, NULL, 't' },
 		{ "no-mip", no_argument, NULL, 'm' },	    { "quiet", no_argument, NULL, 'q' },
-		{ "help", no_argument, NULL, 'h' },	    { 0, 0, 0, 0 },
+		{ "help", no_argument, NULL, 'h' },	    { "resample", required_argument, NULL, 'r' },
+		{ 0, 0, 0, 0 },
 	};
 	*a = (struct import_args){ 0 };
 	int c;
@@ -82,6 +83,15 @@ static int parse_import_args(int argc, char **argv, struct import_args *a)
 				return 2;
 			break;
 		case 'm': a->o.no_mip = true; break;
+		case 'r':
+			if (!import_resample_ok(optarg)) {
+				fprintf(stderr, "clipmapctl import: --resample wants near, bilinear, "
+					"cubic, cubicspline, lanczos, average or mode, got \"%s\"\n",
+					optarg);
+				return 2;
+			}
+			a->o.resample = optarg;
+			break;
 		case 'q': a->quiet = true; break;
 		case 'h': printf(USAGE); return 0;
 		default: return 2;
@@ -101,7 +111,10 @@ static void report(const struct import_args *a, const struct import_result *r)
 	printf("wrote %s: %dx%d, %d channel%s %s, bounds %.6f,%.6f,%.6f,%.6f%s%s", a->dst,
 	       r->width, r->height, r->channels, r->channels == 1 ? "" : "s", type_name(r->type),
 	       r->west, r->south, r->east, r->north,
-	       r->georeferenced ? " (georeferenced)" : a->o.has_bounds ? " (given)" : " (global)",
+	       r->reprojected	 ? " (reprojected to degrees)"
+	       : r->georeferenced ? " (georeferenced)"
+	       : a->o.has_bounds  ? " (given)"
+				  : " (global)",
 	       r->flipped_rows ? ", rows flipped north-up" : "");
 	if (r->shifted_cols)
 		printf(", columns shifted by %d", r->shifted_cols);

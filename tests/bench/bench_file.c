@@ -187,7 +187,8 @@ int main(void)
 	printf("file/memcpy 256 KiB hot (L2): %.0f MB/s\n", mc_hot / 1e6);
 
 	struct bnode b;
-	snprintf(text, sizeof text, "[node bench]\ntype = file\npath = %s\ncache_mb = 512\n", f32);
+	snprintf(text, sizeof text, "[node bench]\ntype = file\npath = %s\ncache_mb = 512\n"
+		 "bounds = -180,-90,180,90\n", f32);
 	bnode_init(&b, &pl, text);
 	/* Cold-ish: a fresh cache, file in the page cache (written or read just before). */
 	double cold = run_level(&b, 5, 4, 256, 0, 16, 1);
@@ -230,7 +231,7 @@ int main(void)
 	bnode_fini(&b);
 
 	snprintf(text, sizeof text, "[node bench]\ntype = file\npath = %s\ncache_mb = 512\n"
-		 "scale = 0.5\noffset = -5000\n", u16);
+		 "scale = 0.5\noffset = -5000\nbounds = -180,-90,180,90\n", u16);
 	bnode_init(&b, &pl, text);
 	for (uint32_t T = 256; T <= 512; T *= 2) {
 		int lx = T == 256 ? 5 : 4;

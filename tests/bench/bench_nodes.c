@@ -41,8 +41,8 @@ static const struct bcase cases[] = {
 	{ "slope (scale: 2 levels up)", "type = slope\ninput = src\nscale = 2000\n", 12 },
 	{ "ramp + slope", "type = ramp\ninput = src\nslope = src2\nsteep_from = 0\nsteep_to = 2\n"
 			  "steep_stops = 0 1 2 3, 1000 200 200 200\n", 8 },
-	{ "file (f32, bilinear)", "type = file\npath = " DIR "/heights.tif\nkind = height\n", 5 },
-	{ "file (f32, MIP 2)", "type = file\npath = " DIR "/heights.tif\nkind = height\n", 2 },
+	{ "file (f32, bilinear)", "type = file\npath = " DIR "/heights.tif\nkind = height\nbounds = -180,-90,180,90\n", 5 },
+	{ "file (f32, MIP 2)", "type = file\npath = " DIR "/heights.tif\nkind = height\nbounds = -180,-90,180,90\n", 2 },
 };
 
 static int write_planet(const char *path, uint32_t T, const struct bcase *c)

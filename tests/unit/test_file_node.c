@@ -3,7 +3,8 @@
  * antimeridian, sub-region bounds with fill, filtering at coarse levels (no aliasing),
  * nodata, colour channel expansion, parameter errors with file:line, the content hash, and
  * the image cache a planet shares between nodes (one open file per path; a changed file is
- * reread). */
+ * reread); load-time checks (truncated files, kind mismatches, georeferencing read from
+ * GeoTIFF tags or refused) and a run-time read failure reported once. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -16,11 +17,18 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <gdal/gdal.h>
+#include <gdal/ogr_srs_api.h>
+
+#include "common/grid.h"
 #include "common/img.h"
 #include "common/ini.h"
 #include "common/xthread.h"
+#include "engine/fault.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
@@ -66,6 +74,9 @@ struct fnode {
 	struct node n;
 	struct gen_ctx g;
 };
+
+/* Bounds for test images without georeferencing (img_write writes none). */
+#define GLOBAL "bounds = -180,-90,180,90\n"
 
 static int fnode_init(struct fnode *f, const char *text, char err[256])
 {
@@ -168,7 +179,7 @@ static void analytic_global(void **state)
 	(void)state;
 	write_fn("g.tif", 512, 256, -180, -90, 180, 90);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = g.tif\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = g.tif\n" GLOBAL);
 	assert_int_equal(f.n.out, PIX_HEIGHT);
 	static const uint32_t xy[][2] = { { 0, 0 }, { 5, 2 }, { 7, 3 }, { 3, 1 } };
 	for (int i = 0; i < 4; i++) {
@@ -199,7 +210,7 @@ static void tiles_join(void **state)
 	(void)state;
 	write_fn("j.tif", 500, 250, -180, -90, 180, 90); /* not a power of two: never aligned */
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = j.tif\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = j.tif\n" GLOBAL);
 	struct tile *big = gen(&f, 3, 2, 3, 1, 64);
 	for (uint32_t q = 0; q < 4; q++) {
 		uint32_t qx = q & 1, qy = q >> 1;
@@ -217,7 +228,7 @@ static void tiles_join(void **state)
 	 * the image's last and first columns. Bilinear error ≤ h²/8·|f''| ≈ 1.1 m; clamping
 	 * instead of wrapping would be off by up to ~17 m. */
 	write_fn("am100.tif", 100, 50, -180, -90, 180, 90);
-	fnode_ok(&f, "[node x]\ntype = file\npath = am100.tif\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = am100.tif\n" GLOBAL);
 	struct tile *west = gen(&f, 4, 3, 0, 2, 32), *east = gen(&f, 4, 3, 15, 2, 32);
 	check_fn(west, 2, 0);
 	check_fn(east, 2, 0);
@@ -313,8 +324,8 @@ static void coarse_is_filtered(void **state)
 	free(g);
 	free(rgb);
 	struct fnode f, c;
-	fnode_ok(&f, "[node x]\ntype = file\npath = cb.png\n");
-	fnode_ok(&c, "[node x]\ntype = file\npath = cbc.png\nkind = color\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = cb.png\n" GLOBAL);
+	fnode_ok(&c, "[node x]\ntype = file\npath = cbc.png\nkind = color\n" GLOBAL);
 	assert_int_equal(c.n.out, PIX_COLOR);
 	static const int lv[][2] = { { 1, 0 }, { 0, 0 }, { 0, 1 } };
 	for (int l = 0; l < 3; l++) {
@@ -356,10 +367,11 @@ static void nodata(void **state)
 			px[y * w + x] = (x >= 100 && x < 140 && y >= 50 && y < 90) ? INT16_MIN
 										     : (int16_t)(100 + x);
 	char err[256];
-	assert_int_equal(img_write(tpath("nd.tif"), w, h, 1, IMG_I16, px, err), 0);
+	/* With MIP levels of its own (without, nodata would be refused: automip averages it). */
+	assert_int_equal(img_write_tiled(tpath("nd.tif"), w, h, 1, IMG_I16, px, 64, true, err), 0);
 	free(px);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = nd.tif\nnodata = -32768\nfill = -7\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = nd.tif\nnodata = -32768\nfill = -7\n" GLOBAL);
 	/* Level (1,0) T=256: 512 texels over 360 pixels (bilinear), and (0,0) T=64 (filtered). */
 	static const int lv[][3] = { { 1, 0, 256 }, { 0, 0, 64 }, { 2, 1, 64 } };
 	for (int l = 0; l < 3; l++) {
@@ -411,7 +423,7 @@ static void nodata(void **state)
 	for (int i = 0; i < 64 * 32; i++)
 		fp[i] = (i % 64 >= 16 && i % 64 < 24) ? NAN : 5.0f;
 	assert_int_equal(img_write(tpath("nan.exr"), 64, 32, 1, IMG_F32, fp, err), 0);
-	fnode_ok(&f, "[node x]\ntype = file\npath = nan.exr\nfill = -1\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = nan.exr\nfill = -1\n" GLOBAL);
 	struct tile *t = gen(&f, 0, 0, 0, 0, 64); /* 64×64 over 64×32: 1:1 in x, 2× in y */
 	for (int j = 0; j < 64; j++)
 		for (int i = 0; i < 64; i++) {
@@ -454,7 +466,7 @@ static void color_channels(void **state)
 		      { "ga.png", { 99, 99, 99, 128 } } };
 	for (int c = 0; c < 3; c++) {
 		struct fnode f;
-		fnode_ok(&f, "[node x]\ntype = file\npath = %s\nkind = color\n", cases[c].file);
+		fnode_ok(&f, "[node x]\ntype = file\npath = %s\nkind = color\n" GLOBAL, cases[c].file);
 		for (int lv = 0; lv < 2; lv++) {
 			struct tile *t = gen(&f, 2 + lv, 1 + lv, 1, 1, 64);
 			for (int i = 0; i < 64 * 64; i++)
@@ -469,7 +481,7 @@ static void color_channels(void **state)
 		rgba[i] = (uint8_t)(i * 13 + i / 1024);
 	assert_int_equal(img_write(tpath("rgba.png"), 256, 128, 4, IMG_U8, rgba, err), 0);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = rgba.png\nkind = color\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = rgba.png\nkind = color\n" GLOBAL);
 	struct tile *t = gen(&f, 2, 1, 3, 1, 64);
 	for (int j = 0; j < 64; j++)
 		assert_memory_equal(t->data + j * 64 * 4, rgba + ((64 + j) * 256 + 192) * 4, 64 * 4);
@@ -483,6 +495,9 @@ static void bad_params(void **state)
 {
 	(void)state;
 	write_fn("ok.tif", 16, 8, -180, -90, 180, 90);
+	uint8_t grey8[16 * 8] = { 0 };
+	char werr[256];
+	assert_int_equal(img_write(tpath("ok8.png"), 16, 8, 1, IMG_U8, grey8, werr), 0);
 	FILE *fp = fopen(tpath("corrupt.png"), "wb");
 	assert_non_null(fp);
 	/* Not a truncated one: OIIO 2.4 leaks a string when libpng longjmps out of a short read. */
@@ -492,11 +507,11 @@ static void bad_params(void **state)
 		const char *text, *want, *also;
 	} cases[] = {
 		{ "[node x]\ntype = file\n", "test.ini:1: path: missing", NULL },
-		{ "[node x]\ntype = file\npath = nope.tif\n", "test.ini:3: path: cannot open ",
+		{ "[node x]\ntype = file\npath = nope.tif\n" GLOBAL, "test.ini:3: path: cannot open ",
 		  "nope.tif" },
-		{ "[node x]\ntype = file\n\npath = corrupt.png\n", "test.ini:4: path: cannot open ",
+		{ "[node x]\ntype = file\n\npath = corrupt.png\n" GLOBAL, "test.ini:4: path: cannot open ",
 		  "corrupt.png" },
-		{ "[node x]\ntype = file\npath = ok.tif\nkind = normal\n", "test.ini:4: kind: ",
+		{ "[node x]\ntype = file\npath = ok.tif\nkind = normal\n" GLOBAL, "test.ini:4: kind: ",
 		  "height, color" },
 		{ "[node x]\ntype = file\npath = ok.tif\nbounds = 1,2,3\n", "test.ini:4: bounds: ",
 		  "4 numbers" },
@@ -504,20 +519,20 @@ static void bad_params(void **state)
 		  "test.ini:4: bounds: ", "W < E" },
 		{ "[node x]\ntype = file\npath = ok.tif\nbounds = 0,-95,10,0\n",
 		  "test.ini:4: bounds: ", "S < N" },
-		{ "[node x]\ntype = file\npath = ok.tif\nchannel = 1\n", "test.ini:4: channel: ",
+		{ "[node x]\ntype = file\npath = ok.tif\nchannel = 1\n" GLOBAL, "test.ini:4: channel: ",
 		  "1 channel" },
-		{ "[node x]\ntype = file\npath = ok.tif\nkind = color\nnodata = 0\n",
+		{ "[node x]\ntype = file\npath = ok8.png\nkind = color\nnodata = 0\n" GLOBAL,
 		  "test.ini:5: nodata: only applies to kind = height", NULL },
 		{ "[node x]\ntype = file\npath = ok.tif\nbounds = 0,0,10,10\nlon_wrap = true\n",
 		  "test.ini:5: lon_wrap: ", "360" },
-		{ "[node x]\ntype = file\npath = ok.tif\nlon_wrap = maybe\n",
+		{ "[node x]\ntype = file\npath = ok.tif\nlon_wrap = maybe\n" GLOBAL,
 		  "test.ini:4: lon_wrap: ", NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\nscale = x\n", "test.ini:4: scale: ", NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\nkind = color\nfill = 1,2\n",
+		{ "[node x]\ntype = file\npath = ok.tif\nscale = x\n" GLOBAL, "test.ini:4: scale: ", NULL },
+		{ "[node x]\ntype = file\npath = ok8.png\nkind = color\nfill = 1,2\n" GLOBAL,
 		  "test.ini:5: fill: ", NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\ncache_mb = 0\n", "test.ini:4: cache_mb: ",
+		{ "[node x]\ntype = file\npath = ok.tif\ncache_mb = 0\n" GLOBAL, "test.ini:4: cache_mb: ",
 		  NULL },
-		{ "[node x]\ntype = file\npath = ok.tif\ncolour = red\n", "test.ini:4: colour: ",
+		{ "[node x]\ntype = file\npath = ok.tif\ncolour = red\n" GLOBAL, "test.ini:4: colour: ",
 		  "unknown key" },
 	};
 	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
@@ -538,13 +553,13 @@ static void content_hash(void **state)
 	(void)state;
 	write_fn("h.tif", 16, 8, -180, -90, 180, 90);
 	struct fnode a, b, c, d;
-	fnode_ok(&a, "[node x]\ntype = file\npath = h.tif\n");
-	fnode_ok(&b, "[node x]\ntype = file\npath = %s\ncache_mb = 8\n", tpath("h.tif"));
-	fnode_ok(&c, "[node x]\ntype = file\npath = h.tif\nfill = 1\n");
+	fnode_ok(&a, "[node x]\ntype = file\npath = h.tif\n" GLOBAL);
+	fnode_ok(&b, "[node x]\ntype = file\npath = %s\ncache_mb = 8\n" GLOBAL, tpath("h.tif"));
+	fnode_ok(&c, "[node x]\ntype = file\npath = h.tif\nfill = 1\n" GLOBAL);
 	assert_true(a.n.hash == b.n.hash);
 	assert_true(a.n.hash != c.n.hash);
 	write_fn("h.tif", 16, 9, -180, -90, 180, 90); /* the file changes */
-	fnode_ok(&d, "[node x]\ntype = file\npath = h.tif\n");
+	fnode_ok(&d, "[node x]\ntype = file\npath = h.tif\n" GLOBAL);
 	assert_true(a.n.hash != d.n.hash);
 	fnode_fini(&a);
 	fnode_fini(&b);
@@ -581,7 +596,7 @@ static void concurrent_generate(void **state)
 	(void)state;
 	write_fn("c.tif", 300, 150, -180, -90, 180, 90);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = c.tif\ncache_mb = 1\n");
+	fnode_ok(&f, "[node x]\ntype = file\npath = c.tif\ncache_mb = 1\n" GLOBAL);
 	struct tile *ref[8];
 	struct job jobs[2];
 	memset(jobs, 0, sizeof jobs);
@@ -616,8 +631,8 @@ static void shared_cache(void **state)
 	assert_non_null(ic);
 	pl.images = ic;
 	struct fnode a, b, c;
-	fnode_ok(&a, "[node x]\ntype = file\npath = s.tif\ncache_mb = 1\n");
-	fnode_ok(&b, "[node x]\ntype = file\npath = %s\nscale = 2\n", tpath("s.tif"));
+	fnode_ok(&a, "[node x]\ntype = file\npath = s.tif\ncache_mb = 1\n" GLOBAL);
+	fnode_ok(&b, "[node x]\ntype = file\npath = %s\nscale = 2\n" GLOBAL, tpath("s.tif"));
 	struct tile *ta = gen(&a, 2, 1, 1, 0, 64), *tb = gen(&b, 2, 1, 1, 0, 64);
 	for (size_t i = 0; i < 64 * 64; i++)
 		if (tile_f32(tb)[i] != 2 * tile_f32(ta)[i])
@@ -628,7 +643,7 @@ static void shared_cache(void **state)
 	assert_int_equal(st.opens, 1);
 	assert_int_equal(st.max_bytes, (uint64_t)16 << 20); /* not cache_mb's 1 */
 	assert_true(st.memory_used > 0);
-	fnode_ok(&c, "[node x]\ntype = file\npath = s2.tif\n");
+	fnode_ok(&c, "[node x]\ntype = file\npath = s2.tif\n" GLOBAL);
 	tile_unref(gen(&c, 2, 1, 1, 0, 64));
 	img_cache_get_stats(ic, &st);
 	assert_int_equal(st.files, 2);
@@ -655,14 +670,14 @@ static void changed_file_reread(void **state)
 		px[i] = 5;
 	assert_int_equal(img_write(tpath("v.tif"), 8, 4, 1, IMG_F32, px, err), 0);
 	struct fnode a, b;
-	fnode_ok(&a, "[node x]\ntype = file\npath = v.tif\n");
+	fnode_ok(&a, "[node x]\ntype = file\npath = v.tif\n" GLOBAL);
 	struct tile *t = gen(&a, 1, 0, 0, 0, 64);
 	assert_true(tile_f32(t)[0] == 5.0f);
 	tile_unref(t);
 	for (int i = 0; i < 8 * 4; i++)
 		px[i] = -9;
 	assert_int_equal(img_write(tpath("v.tif"), 8, 4, 1, IMG_F32, px, err), 0);
-	fnode_ok(&b, "[node x]\ntype = file\npath = v.tif\n");
+	fnode_ok(&b, "[node x]\ntype = file\npath = v.tif\n" GLOBAL);
 	assert_true(a.n.hash != b.n.hash);
 	t = gen(&b, 1, 0, 0, 0, 64);
 	assert_true(tile_f32(t)[0] == -9.0f);
@@ -671,6 +686,292 @@ static void changed_file_reread(void **state)
 	fnode_fini(&b);
 	pl.images = NULL;
 	img_cache_unref(ic);
+}
+
+/* A GeoTIFF made with GDAL (what users bring): W..E × S..N at 0.05°, 100 except a nodata
+ * block in its north-east quarter: int16 with nodata -32768, or (huge) float32 with GDAL's
+ * -1e34; crs 4326 or the UTM zone 33N. */
+static void write_geotiff_here(const char *name, double W, double N, int epsg, bool with_gt,
+			       bool huge)
+{
+	GDALAllRegister();
+	int w = 200, h = 200;
+	GDALDataType t = huge ? GDT_Float32 : GDT_Int16;
+	double nd = huge ? -1e34 : -32768;
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath(name), w, h, 1, t, NULL);
+	assert_non_null(ds);
+	if (with_gt) {
+		double gt[6] = { W, epsg == 4326 ? 0.05 : 100, 0, N, 0, epsg == 4326 ? -0.05 : -100 };
+		assert_int_equal(GDALSetGeoTransform(ds, gt), CE_None);
+		OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+		assert_int_equal(OSRImportFromEPSG(srs, epsg), OGRERR_NONE);
+		assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+		OSRDestroySpatialReference(srs);
+	}
+	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
+	assert_int_equal(GDALSetRasterNoDataValue(b, nd), CE_None);
+	double *px = malloc((size_t)w * h * sizeof *px);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++)
+			px[y * w + x] = x >= w / 2 && y < h / 2 ? nd : 100;
+	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, px, w, h, GDT_Float64, 0, 0), CE_None);
+	free(px);
+	GDALClose(ds);
+}
+
+/* write_geotiff_here in a child process: GDAL's GeoTIFF driver changes libtiff's process-wide
+ * state (tag extenders, error handlers), which the file node's process never has. */
+static void write_geotiff(const char *name, double W, double N, int epsg, bool with_gt,
+			  bool huge)
+{
+	fflush(NULL);
+	pid_t pid = fork();
+	assert_true(pid >= 0);
+	if (pid == 0) {
+		write_geotiff_here(name, W, N, epsg, with_gt, huge);
+		_exit(0);
+	}
+	int st;
+	assert_int_equal(waitpid(pid, &st, 0), pid);
+	assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 0);
+}
+
+/* Issue 19: a plain GeoTIFF without a bounds key lands at its georeferenced bounds (not
+ * stretched over the globe), and its nodata (GDAL's -1e34) takes the fill. */
+static void geotiff_placed(void **state)
+{
+	(void)state;
+	double W = 10, E = 20, S = 50, N = 60;
+	write_geotiff("geo.tif", W, N, 4326, true, true);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = geo.tif\nfill = -5\n");
+	struct tile *t = gen(&f, 3, 2, 4, 0, 64); /* lon 0..45, lat 90..45 */
+	int data = 0, nodata = 0, outside = 0;
+	for (uint32_t j = 0; j < 64; j++) {
+		for (uint32_t i = 0; i < 64; i++) {
+			double lon, lat;
+			grid_texel_center(&t->key, 64, i, j, &lon, &lat);
+			float v = tile_f32(t)[j * 64 + i];
+			if (lon < W || lon > E || lat < S || lat > N) {
+				if (v != -5)
+					fail_msg("outside at %g,%g: %g", lon, lat, v);
+				outside++;
+			} else if (lon > 15.8 && lat > 55.8 && lon < E - 0.8 && lat < N - 0.8) {
+				if (v != -5) /* nodata → fill */
+					fail_msg("nodata at %g,%g: %g", lon, lat, v);
+				nodata++;
+			} else if ((lon < 14.2 || lat < 54.2) && lon > W + 0.8 && lat > S + 0.8 &&
+				   lon < E - 0.8 && lat < N - 0.8) {
+				if (v != 100)
+					fail_msg("data at %g,%g: %g", lon, lat, v);
+				data++;
+			}
+		}
+	}
+	if (!(data > 60 && nodata > 10 && outside > 3800))
+		fail_msg("data %d nodata %d outside %d", data, nodata, outside);
+	tile_unref(t);
+	fnode_fini(&f);
+
+	/* A bounds key that contradicts the georeferencing is refused; one that agrees is not. */
+	char err[256] = "";
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = geo.tif\n"
+				    "bounds = -180,-90,180,90\n", err), -EINVAL);
+	assert_non_null(strstr(err, "test.ini:4: bounds: "));
+	assert_non_null(strstr(err, "contradicts the georeferencing"));
+	assert_non_null(strstr(err, "geo.tif (10,50,20,60)"));
+	fnode_fini(&f);
+	fnode_ok(&f, "[node x]\ntype = file\npath = geo.tif\nbounds = 10,50,20,60\n");
+	fnode_fini(&f);
+
+	/* int16 -32768 without MIP levels of its own: OIIO's automip would average it into
+	 * coarse heights: refused, pointing at clipmapctl import (which builds levels around
+	 * the voids). */
+	write_geotiff("geo_flat.tif", W, N, 4326, true, false);
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = geo_flat.tif\n", err),
+			 -EINVAL);
+	if (!strstr(err, "test.ini:3: path: ") || !strstr(err, "geo_flat.tif: no MIP levels") ||
+	    !strstr(err, "clipmapctl import"))
+		fail_msg("%s", err);
+	fnode_fini(&f);
+
+	/* Projected (UTM): refused, pointing at clipmapctl import. */
+	write_geotiff("utm.tif", 500000, 5600000, 32633, true, false);
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = utm.tif\n", err), -EINVAL);
+	assert_non_null(strstr(err, "test.ini:1: bounds: missing"));
+	assert_non_null(strstr(err, "EPSG:32633"));
+	assert_non_null(strstr(err, "clipmapctl import"));
+	fnode_fini(&f);
+	/* ... and a bounds key cannot place it (it would be stretched, not warped). */
+	assert_int_equal(fnode_init(&f, "[node x]\ntype = file\npath = utm.tif\n"
+				    "bounds = 13,50,14,51\n", err), -EINVAL);
+	if (!strstr(err, "test.ini:4: bounds: ") || !strstr(err, "projected") ||
+	    !strstr(err, "clipmapctl import"))
+		fail_msg("%s", err);
+	fnode_fini(&f);
+}
+
+/* Issue 19: no georeferencing and no bounds key: refused, naming the file and the key. */
+static void no_georef_refused(void **state)
+{
+	(void)state;
+	write_fn("plain.tif", 32, 16, -180, -90, 180, 90);
+	write_geotiff("gdal_plain.tif", 0, 0, 4326, false, false);
+	static const char *const files[] = { "plain.tif", "gdal_plain.tif" };
+	for (int i = 0; i < 2; i++) {
+		struct fnode f;
+		char err[256] = "", text[256];
+		snprintf(text, sizeof text, "[node x]\ntype = file\npath = %s\n", files[i]);
+		assert_int_equal(fnode_init(&f, text, err), -EINVAL);
+		if (!strstr(err, "test.ini:1: bounds: missing") || !strstr(err, files[i]) ||
+		    !strstr(err, "has no georeferencing") || !strstr(err, "add bounds = W,S,E,N"))
+			fail_msg("%s: %s", files[i], err);
+		fnode_fini(&f);
+	}
+}
+
+/* Issue 14: a truncated TIFF is refused at load, naming the file (not every tile failing
+ * later with a bare EIO). */
+static void truncated_refused(void **state)
+{
+	(void)state;
+	int w = 512, h = 256;
+	float *px = malloc((size_t)w * h * sizeof *px);
+	for (int i = 0; i < w * h; i++)
+		px[i] = (float)(i % 977) * 1.37f; /* does not compress to nothing */
+	char err[256];
+	assert_int_equal(img_write_tiled(tpath("cut.tif"), w, h, 1, IMG_F32, px, 64, true, err), 0);
+	free(px);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = cut.tif\n" GLOBAL);
+	fnode_fini(&f);
+	struct stat st;
+	assert_int_equal(stat(tpath("cut.tif"), &st), 0);
+	/* Cut at several points: each time refused at load. */
+	for (int k = 1; k <= 3; k++) {
+		off_t len = st.st_size * (4 - k) / 4 - 100;
+		assert_int_equal(truncate(tpath("cut.tif"), len), 0);
+		char e2[256] = "";
+		int rc = fnode_init(&f, "[node x]\ntype = file\npath = cut.tif\n" GLOBAL, e2);
+		if (rc != -EINVAL || !strstr(e2, "test.ini:3: path: ") || !strstr(e2, tpath("cut.tif")))
+			fail_msg("cut to %lld of %lld: rc %d: %s", (long long)len,
+				 (long long)st.st_size, rc, e2);
+		fnode_fini(&f);
+	}
+}
+
+static char fault_line[512];
+static int faults;
+static void catch_fault(const char *line)
+{
+	snprintf(fault_line, sizeof fault_line, "%s", line);
+	faults++;
+}
+
+/* Issue 14: a file that breaks after load (cut short on disk): its tiles fail, and the
+ * failure is reported once, naming the file, the level and the region. */
+static void runtime_failure_reported_once(void **state)
+{
+	(void)state;
+	int w = 1024, h = 512;
+	float *px = malloc((size_t)w * h * sizeof *px);
+	for (int i = 0; i < w * h; i++)
+		px[i] = (float)(i % 977) * 1.37f;
+	char err[256];
+	assert_int_equal(img_write_tiled(tpath("late.tif"), w, h, 1, IMG_F32, px, 64, false, err), 0);
+	free(px);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = late.tif\n" GLOBAL);
+	struct stat st;
+	assert_int_equal(stat(tpath("late.tif"), &st), 0);
+	assert_int_equal(truncate(tpath("late.tif"), st.st_size / 3), 0);
+	engine_fault_sink(catch_fault);
+	faults = 0;
+	struct tile_key k = { .node = f.n.hash, .x = 7, .y = 2, .lx = 3, .ly = 2 };
+	for (int i = 0; i < 3; i++) {
+		struct tile *t = tile_create(&k, f.n.out, 64);
+		assert_int_equal(f.n.type->generate(&f.n, &f.g, &k, NULL, 0, t), -EIO);
+		tile_unref(t);
+	}
+	engine_fault_sink(NULL);
+	assert_int_equal(faults, 1);
+	if (!strstr(fault_line, tpath("late.tif")) || !strstr(fault_line, "read failed at MIP level ") ||
+	    !strstr(fault_line, "pixels ["))
+		fail_msg("%s", fault_line);
+	fnode_fini(&f);
+}
+
+/* Issue 14: the file's channels must fit the kind. */
+static void kind_mismatch_refused(void **state)
+{
+	(void)state;
+	uint8_t rgb[32 * 16 * 3] = { 0 };
+	float hf[32 * 16] = { 0 };
+	int16_t hi[32 * 16] = { 0 };
+	char err[256];
+	assert_int_equal(img_write(tpath("colour.tif"), 32, 16, 3, IMG_U8, rgb, err), 0);
+	assert_int_equal(img_write(tpath("hf.tif"), 32, 16, 1, IMG_F32, hf, err), 0);
+	assert_int_equal(img_write(tpath("hi.tif"), 32, 16, 1, IMG_I16, hi, err), 0);
+	static const struct {
+		const char *text, *want[3];
+	} cases[] = {
+		{ "[node x]\ntype = file\npath = colour.tif\n" GLOBAL,
+		  { "test.ini:1: kind: node x: ", "colour.tif has 3 uint8 channels",
+		    "kind = height expects one channel" } },
+		{ "[node x]\ntype = file\npath = hf.tif\nkind = color\n" GLOBAL,
+		  { "test.ini:4: kind: node x: ", "hf.tif has 1 float channel",
+		    "kind = color expects 8-bit" } },
+		{ "[node x]\ntype = file\npath = hi.tif\nkind = color\n" GLOBAL,
+		  { "test.ini:4: kind: node x: ", "hi.tif has 1 int16 channel", "kind = color" } },
+	};
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		struct fnode f;
+		char e[256] = "";
+		int rc = fnode_init(&f, cases[i].text, e);
+		if (rc != -EINVAL || strncmp(e, cases[i].want[0], strlen(cases[i].want[0])) ||
+		    !strstr(e, cases[i].want[1]) || !strstr(e, cases[i].want[2]))
+			fail_msg("case %zu: rc %d: %s", i, rc, e);
+		fnode_fini(&f);
+	}
+	/* With channel = N the user says which one holds heights: accepted. */
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = colour.tif\nchannel = 1\n" GLOBAL);
+	fnode_fini(&f);
+}
+
+/* Issue 19: GDAL's -1e34 nodata never becomes heights, at the data's level or at coarse ones
+ * (where MIP averaging mixes it with data). */
+static void huge_nodata_coarse(void **state)
+{
+	(void)state;
+	int w = 720, h = 360;
+	float *px = malloc((size_t)w * h * sizeof *px);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++)
+			px[y * w + x] = x >= 301 && x < 423 && y >= 101 && y < 203 ? -1e34f : 1000;
+	char err[256];
+	assert_int_equal(img_write(tpath("huge.tif"), w, h, 1, IMG_F32, px, err), 0);
+	free(px);
+	struct fnode f;
+	fnode_ok(&f, "[node x]\ntype = file\npath = huge.tif\nnodata = -1e34\nfill = -5\n" GLOBAL);
+	static const int lv[][2] = { { 1, 0 }, { 2, 1 }, { 3, 2 }, { 4, 3 } };
+	for (int l = 0; l < 4; l++) {
+		int fills = 0;
+		for (uint32_t x = 0; x < 1u << lv[l][0]; x++) {
+			for (uint32_t y = 0; y < 1u << lv[l][1]; y++) {
+				struct tile *t = gen(&f, lv[l][0], lv[l][1], x, y, 64);
+				for (int i = 0; i < 64 * 64; i++) {
+					float v = tile_f32(t)[i];
+					if (v != 1000 && v != -5)
+						fail_msg("level %d tile %u,%u texel %d: %g", l, x, y, i, v);
+					fills += v == -5;
+				}
+				tile_unref(t);
+			}
+		}
+		assert_true(fills > 0);
+	}
+	fnode_fini(&f);
 }
 
 int main(void)
@@ -687,6 +988,12 @@ int main(void)
 		cmocka_unit_test(concurrent_generate),
 		cmocka_unit_test(shared_cache),
 		cmocka_unit_test(changed_file_reread),
+		cmocka_unit_test(geotiff_placed),
+		cmocka_unit_test(no_georef_refused),
+		cmocka_unit_test(truncated_refused),
+		cmocka_unit_test(runtime_failure_reported_once),
+		cmocka_unit_test(kind_mismatch_refused),
+		cmocka_unit_test(huge_nodata_coarse),
 	};
 	return cmocka_run_group_tests_name("file_node", tests, setup, teardown);
 }

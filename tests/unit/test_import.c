@@ -15,6 +15,8 @@
 
 #include <errno.h>
 #include <gdal/gdal.h>
+#include <gdal/cpl_conv.h>
+#include <gdal/gdalwarper.h>
 #include <gdal/ogr_srs_api.h>
 #include <math.h>
 #include <stdio.h>
@@ -229,9 +231,6 @@ static void errors(void **state)
 	struct import_opts o = { .band = 3 };
 	expect_error(tpath("b.tif"), tpath("e3.tif"), &o, -EINVAL, "b.tif", "no band 3");
 	expect_error(tpath("b.tif"), tpath("e4.png"), NULL, -EINVAL, "e4.png", "extension");
-	const double gm[6] = { 500000, 1000, 0, 6000000, 0, -1000 };
-	write_geotiff(tpath("utm.tif"), 8, 4, gm, 32633, NULL);
-	expect_error(tpath("utm.tif"), tpath("e5.tif"), NULL, -EINVAL, "utm.tif", "projected");
 }
 
 /* All MIP levels of path as int16, level m at lv[m] (sizes in lw, lh); returns the count. */
@@ -410,6 +409,277 @@ static void truncated_source(void **state)
 	assert_int_equal(access(tpath("t_new.tif.tmp"), F_OK), -1);
 }
 
+/* The plane a UTM test raster holds: metres east and north of its origin, scaled. */
+static double utm_plane(double e, double n)
+{
+	return 0.01 * (e - 400000) + 0.02 * (n - 5580000) + 100;
+}
+
+/* A float32 UTM 33N raster (w×h pixels of 100 m from 400000 E, 5600000 N: about 13.6°E,
+ * 50.5°N) holding utm_plane at pixel centres. */
+static void write_utm(const char *path, int w, int h)
+{
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), path, w, h, 1, GDT_Float32, NULL);
+	assert_non_null(ds);
+	double gt[6] = { 400000, 100, 0, 5600000, 0, -100 };
+	assert_int_equal(GDALSetGeoTransform(ds, gt), CE_None);
+	OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(srs, 32633), OGRERR_NONE);
+	assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+	OSRDestroySpatialReference(srs);
+	float *buf = malloc(sizeof *buf * (size_t)w * h);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++)
+			buf[(size_t)y * w + x] = (float)utm_plane(gt[0] + (x + 0.5) * 100,
+								  gt[3] - (y + 0.5) * 100);
+	assert_int_equal(GDALRasterIO(GDALGetRasterBand(ds, 1), GF_Write, 0, 0, w, h, buf, w, h,
+				      GDT_Float32, 0, 0), CE_None);
+	free(buf);
+	GDALClose(ds);
+}
+
+/* Issue 19: a UTM raster is reprojected at import (not refused): its pixels equal what
+ * GDAL's warper to EPSG:4326 makes of it (gdalwarp -t_srs EPSG:4326 -r bilinear), at the
+ * same place, and every pixel holds the plane at its centre projected back to UTM (checked
+ * with OGR's transform: the place is right, not just the same as the warper's). */
+static void utm_reprojected(void **state)
+{
+	(void)state;
+	int w = 300, h = 200;
+	write_utm(tpath("utm.tif"), w, h);
+	struct import_result r;
+	char err[256] = "";
+	if (import_raster(tpath("utm.tif"), tpath("utm_out.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	assert_true(r.reprojected);
+	assert_true(r.georeferenced);
+	assert_int_equal(r.type, IMG_F32);
+
+	/* The reference: GDAL's warper, as gdalwarp -t_srs EPSG:4326 -r bilinear (the VRT that
+	 * gdalwarp -of VRT makes). */
+	GDALDatasetH src = GDALOpen(tpath("utm.tif"), GA_ReadOnly);
+	assert_non_null(src);
+	OGRSpatialReferenceH geo = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(geo, 4326), OGRERR_NONE);
+	OSRSetAxisMappingStrategy(geo, OAMS_TRADITIONAL_GIS_ORDER);
+	char *wkt = NULL;
+	assert_int_equal(OSRExportToWkt(geo, &wkt), OGRERR_NONE);
+	GDALDatasetH ref = GDALAutoCreateWarpedVRT(src, NULL, wkt, GRA_Bilinear, 0.125, NULL);
+	CPLFree(wkt);
+	assert_non_null(ref);
+	int rw = GDALGetRasterXSize(ref), rh = GDALGetRasterYSize(ref);
+	double rgt[6];
+	assert_int_equal(GDALGetGeoTransform(ref, rgt), CE_None);
+	assert_int_equal(r.width, rw);
+	assert_int_equal(r.height, rh);
+	double tol = 1e-9;
+	if (fabs(r.west - rgt[0]) > tol || fabs(r.north - rgt[3]) > tol ||
+	    fabs(r.east - (rgt[0] + rw * rgt[1])) > tol || fabs(r.south - (rgt[3] + rh * rgt[5])) > tol)
+		fail_msg("bounds %.9f,%.9f,%.9f,%.9f, gdalwarp's %.9f,%.9f,%.9f,%.9f", r.west,
+			 r.south, r.east, r.north, rgt[0], rgt[3] + rh * rgt[5], rgt[0] + rw * rgt[1],
+			 rgt[3]);
+	assert_true(r.west > 13 && r.east < 15 && r.south > 50 && r.north < 51);
+	float *want = malloc(sizeof *want * (size_t)rw * rh);
+	assert_int_equal(GDALRasterIO(GDALGetRasterBand(ref, 1), GF_Read, 0, 0, rw, rh, want, rw, rh,
+				      GDT_Float32, 0, 0), CE_None);
+	GDALClose(ref);
+	GDALClose(src);
+
+	/* The import, read back (GDAL: level 0 of the pyramid). */
+	GDALDatasetH out = GDALOpen(tpath("utm_out.tif"), GA_ReadOnly);
+	assert_non_null(out);
+	const char *desc = GDALGetMetadataItem(out, "TIFFTAG_IMAGEDESCRIPTION", NULL);
+	assert_non_null(desc);
+	assert_non_null(strstr(desc, "clipmap:bounds="));
+	float *got = malloc(sizeof *got * (size_t)rw * rh);
+	assert_int_equal(GDALRasterIO(GDALGetRasterBand(out, 1), GF_Read, 0, 0, rw, rh, got, rw, rh,
+				      GDT_Float32, 0, 0), CE_None);
+	GDALClose(out);
+
+	OGRSpatialReferenceH utm = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(utm, 32633), OGRERR_NONE);
+	OSRSetAxisMappingStrategy(utm, OAMS_TRADITIONAL_GIS_ORDER);
+	OGRCoordinateTransformationH ct = OCTNewCoordinateTransformation(geo, utm);
+	assert_non_null(ct);
+	int inside = 0, outside = 0;
+	double worst = 0;
+	for (int y = 0; y < rh; y++) {
+		for (int x = 0; x < rw; x++) {
+			float a = got[(size_t)y * rw + x], b = want[(size_t)y * rw + x];
+			/* outside the source: gdalwarp without -dstnodata writes 0 (the plane is
+			 * 100..800 inside); the import writes nodata, NaN in a float output */
+			if (b == 0) {
+				if (!isnan(a))
+					fail_msg("pixel %d,%d: %g, gdalwarp: nodata", x, y, a);
+				outside++;
+				continue;
+			}
+			if (!(fabsf(a - b) <= 1e-3f * fabsf(b) + 1e-3f))
+				fail_msg("pixel %d,%d: %.6g, gdalwarp %.6g", x, y, a, b);
+			double lon = r.west + (x + 0.5) * (r.east - r.west) / rw;
+			double lat = r.north - (y + 0.5) * (r.north - r.south) / rh;
+			double e = lon, n = lat;
+			assert_true(OCTTransform(ct, 1, &e, &n, NULL));
+			/* well inside the source (a pixel from its edges): the plane there */
+			if (e > 400100 && e < 400000 + w * 100 - 100 && n < 5599900 &&
+			    n > 5600000 - h * 100 + 100) {
+				double d = fabs(a - utm_plane(e, n));
+				worst = d > worst ? d : worst;
+				inside++;
+			}
+		}
+	}
+	OCTDestroyCoordinateTransformation(ct);
+	OSRDestroySpatialReference(utm);
+	OSRDestroySpatialReference(geo);
+	/* The plane changes 0.0224 per metre (its gradient); the warper's approximate transform
+	 * (gdalwarp's default: within 0.125 pixel, about 12.5 m here) allows 0.28. */
+	if (!(worst < 0.3 && inside > rw * rh / 2 && outside > 0))
+		fail_msg("worst %g over %d pixels inside, %d outside", worst, inside, outside);
+	printf("# UTM import: %dx%d, %d pixels checked, worst %.4f (plane units), %d nodata\n", rw,
+	       rh, inside, worst, outside);
+	free(want);
+	free(got);
+
+	/* --resample near and a bad name. */
+	struct import_opts o = { .resample = "near" };
+	if (import_raster(tpath("utm.tif"), tpath("utm_near.tif"), &o, &r, err))
+		fail_msg("%s", err);
+	assert_true(r.reprojected);
+	assert_false(import_resample_ok("bicubic"));
+	o.resample = "bicubic";
+	expect_error(tpath("utm.tif"), tpath("utm_bad.tif"), &o, -EINVAL, "bicubic", "lanczos");
+	assert_true(import_resample_ok("lanczos"));
+}
+
+/* Issue 19: re-importing an imported file keeps its bounds (and integer nodata); it does not
+ * become global. */
+static void reimport_keeps_bounds(void **state)
+{
+	(void)state;
+	const double gt[6] = { 10, 0.5, 0, 50, 0, -0.5 };
+	double nd = -32768;
+	write_geotiff(tpath("ri.tif"), 40, 20, gt, 4326, &nd);
+	struct import_result r1, r2;
+	char err[256] = "";
+	if (import_raster(tpath("ri.tif"), tpath("ri1.tif"), NULL, &r1, err))
+		fail_msg("%s", err);
+	if (import_raster(tpath("ri1.tif"), tpath("ri2.tif"), NULL, &r2, err))
+		fail_msg("%s", err);
+	assert_true(r2.georeferenced);
+	assert_true(r2.west == 10 && r2.east == 30 && r2.south == 40 && r2.north == 50);
+	assert_true(r2.has_nodata && r2.nodata == -32768);
+	int16_t *px;
+	char desc[256];
+	read_back(tpath("ri2.tif"), 40, 20, &px, desc);
+	assert_string_equal(desc, "clipmap:bounds=10,40,30,50 clipmap:nodata=-32768");
+	for (int y = 0; y < 20; y++)
+		for (int x = 0; x < 40; x++)
+			assert_int_equal(px[y * 40 + x], pix(x, y));
+	free(px);
+}
+
+/* A UTM RGB image (8-bit, no nodata) gains an alpha band: opaque over the source,
+ * transparent in the wedges outside it (not black). */
+static void utm_rgb_alpha(void **state)
+{
+	(void)state;
+	int w = 120, h = 80;
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath("rgb_utm.tif"), w, h, 3,
+				     GDT_Byte, NULL);
+	assert_non_null(ds);
+	double gt[6] = { 400000, 100, 0, 5600000, 0, -100 };
+	assert_int_equal(GDALSetGeoTransform(ds, gt), CE_None);
+	OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(srs, 32633), OGRERR_NONE);
+	assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+	OSRDestroySpatialReference(srs);
+	uint8_t *buf = malloc((size_t)w * h);
+	for (int b = 1; b <= 3; b++) {
+		memset(buf, 40 * b, (size_t)w * h);
+		assert_int_equal(GDALRasterIO(GDALGetRasterBand(ds, b), GF_Write, 0, 0, w, h, buf, w,
+					      h, GDT_Byte, 0, 0), CE_None);
+	}
+	free(buf);
+	GDALClose(ds);
+	struct import_result r;
+	char err[256] = "";
+	if (import_raster(tpath("rgb_utm.tif"), tpath("rgb_out.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	assert_true(r.reprojected);
+	assert_int_equal(r.channels, 4);
+	assert_int_equal(r.type, IMG_U8);
+	GDALDatasetH out = GDALOpen(tpath("rgb_out.tif"), GA_ReadOnly);
+	assert_non_null(out);
+	int ow = GDALGetRasterXSize(out), oh = GDALGetRasterYSize(out);
+	uint8_t *px = malloc((size_t)ow * oh * 4);
+	int bands[4] = { 1, 2, 3, 4 };
+	assert_int_equal(GDALDatasetRasterIO(out, GF_Read, 0, 0, ow, oh, px, ow, oh, GDT_Byte, 4,
+					     bands, 4, (GSpacing)ow * 4, 1), CE_None);
+	GDALClose(out);
+	int opaque = 0, clear = 0;
+	for (int i = 0; i < ow * oh; i++) {
+		const uint8_t *p = px + 4 * i;
+		if (p[3] == 255 && p[0] == 40 && p[1] == 80 && p[2] == 120)
+			opaque++;
+		else if (p[3] == 0)
+			clear++;
+	}
+	free(px);
+	/* the rest: the source's edge, partly covered */
+	if (!(opaque > ow * oh / 2 && clear > 0 && opaque + clear > ow * oh * 9 / 10))
+		fail_msg("%dx%d: %d opaque, %d transparent", ow, oh, opaque, clear);
+}
+
+/* Integer nodata in the imported pyramid: a void stays a void at every level, and the
+ * texels around it keep data values (not dragged towards -32768 by averaging). */
+static void nodata_pyramid(void **state)
+{
+	(void)state;
+	int w = 256, h = 128;
+	const double gt[6] = { 0, 0.1, 0, 50, 0, -0.1 };
+	GDALDatasetH ds = GDALCreate(GDALGetDriverByName("GTiff"), tpath("void.tif"), w, h, 1,
+				     GDT_Int16, NULL);
+	assert_non_null(ds);
+	assert_int_equal(GDALSetGeoTransform(ds, (double *)gt), CE_None);
+	OGRSpatialReferenceH srs = OSRNewSpatialReference(NULL);
+	assert_int_equal(OSRImportFromEPSG(srs, 4326), OGRERR_NONE);
+	assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
+	OSRDestroySpatialReference(srs);
+	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
+	assert_int_equal(GDALSetRasterNoDataValue(b, -32768), CE_None);
+	int16_t *buf = malloc(sizeof *buf * (size_t)w * h);
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++) /* a void not aligned to any MIP box */
+			buf[(size_t)y * w + x] = x >= 77 && x < 141 && y >= 33 && y < 91 ? -32768
+											 : (int16_t)(500 + x);
+	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, buf, w, h, GDT_Int16, 0, 0), CE_None);
+	free(buf);
+	GDALClose(ds);
+	char err[256] = "";
+	struct import_result r;
+	if (import_raster(tpath("void.tif"), tpath("void_out.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	int16_t *lv[16];
+	int lw[16], lh[16];
+	int n = read_levels(tpath("void_out.tif"), lv, lw, lh);
+	assert_true(n > 4);
+	for (int m = 1; m < n; m++) {
+		int voids = 0;
+		for (int i = 0; i < lw[m] * lh[m]; i++) {
+			int v = lv[m][i];
+			if (v == -32768)
+				voids++;
+			else if (v < 500 || v > 756)
+				fail_msg("level %d pixel %d: %d", m, i, v);
+		}
+		if (m <= 3 && !voids)
+			fail_msg("level %d: the void vanished", m);
+		free(lv[m]);
+	}
+	free(lv[0]);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -418,6 +688,10 @@ int main(void)
 		cmocka_unit_test(errors),
 		cmocka_unit_test(streaming_bands),
 		cmocka_unit_test(truncated_source),
+		cmocka_unit_test(utm_reprojected),
+		cmocka_unit_test(reimport_keeps_bounds),
+		cmocka_unit_test(utm_rgb_alpha),
+		cmocka_unit_test(nodata_pyramid),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

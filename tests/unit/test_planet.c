@@ -856,13 +856,13 @@ static void shared_images_and_reload(void **state)
 	/* Two planets, three file nodes on h.tif (cache_mb still accepted), one on g.tif. */
 	write_text(dir, "a.ini",
 		   "[planet]\nname = a\ntile_size = 64\n"
-		   "[node h]\ntype = file\npath = h.tif\ncache_mb = 4\n"
-		   "[node g]\ntype = file\npath = g.tif\n"
+		   "[node h]\ntype = file\npath = h.tif\ncache_mb = 4\nbounds = -180,-90,180,90\n"
+		   "[node g]\ntype = file\npath = g.tif\nbounds = -180,-90,180,90\n"
 		   "[layer height]\nnode = h\n");
 	write_text(dir, "b.ini",
 		   "[planet]\nname = b\ntile_size = 64\n"
-		   "[node h]\ntype = file\npath = h.tif\n"
-		   "[node h2]\ntype = file\npath = h.tif\nscale = 2\n"
+		   "[node h]\ntype = file\npath = h.tif\nbounds = -180,-90,180,90\n"
+		   "[node h2]\ntype = file\npath = h.tif\nscale = 2\nbounds = -180,-90,180,90\n"
 		   "[layer height]\nnode = h2\n");
 	struct img_cache *ic = img_cache_create(16);
 	assert_non_null(ic);

@@ -13,6 +13,7 @@
 #include <string.h>
 
 #include "common/xthread.h"
+#include "engine/fault.h"
 #include "engine/node.h"
 #include "file_plan.h"
 
@@ -28,11 +29,23 @@ static int read_region(const struct file_source *f, int m, const struct file_axi
 		if (s < 0)
 			s += wm;
 		int64_t len = ax->hi - c < wm - s ? ax->hi - c : wm - s;
+		char err[256];
 		int rc = img_cache_read(f->cache, f->path, m, (int)s, (int)(s + len), (int)ay->lo,
 					(int)ay->hi, f->channel, f->channel + f->nch, f->rtype,
-					(char *)dst + (size_t)(c - ax->lo) * px, stride, NULL);
-		if (rc)
+					(char *)dst + (size_t)(c - ax->lo) * px, stride, err);
+		if (rc) {
+			/* The tile fails with -EIO; the why (file, level, region) is told once. */
+			size_t pl = strlen(f->path);
+			const char *why = strncmp(err, f->path, pl) == 0 && err[pl] == ':'
+						  ? err + pl + 2 : err; /* err names the file too */
+			if (!atomic_exchange(&f->poles->read_failed, true))
+				engine_fault("%s: read failed at MIP level %d, pixels [%lld,%lld) x "
+					     "[%lld,%lld): %s (tiles of this file fail; further "
+					     "failures not reported)", f->path, m, (long long)s,
+					     (long long)(s + len), (long long)ay->lo,
+					     (long long)ay->hi, why);
 			return rc;
+		}
 		c += len;
 	}
 	return 0;
@@ -74,8 +87,15 @@ static bool to_float(const struct file_source *f, const void *raw, float *dst, f
 		return false;
 	bool nd = f->has_nodata;
 	float v = f->nodata;
+	/* A huge float nodata (-1e34, -3.4e38: GDAL's favourites) averaged into a coarser MIP
+	 * level (OIIO's automip, or the file's own pyramid) no longer equals itself but stays
+	 * beyond 1e20 in magnitude (diluted at most 4^m-fold: 1e34 / 4^20 ≈ 9e21 at level 20 of
+	 * a 2^20-pixel image): no height or colour is that large, so such a sample is missing
+	 * too. A moderate nodata (-9999, int16 -32768) mixed into coarse levels cannot be told
+	 * from data: import such files (float nodata becomes NaN, which averaging keeps). */
+	float huge = nd && f->rtype == IMG_F32 && fabsf(v) >= 1e30f ? 1e20f : INFINITY;
 	for (size_t i = 0; i < n; i++) {
-		bool bad = dst[i] != dst[i] || (nd && dst[i] == v);
+		bool bad = dst[i] != dst[i] || (nd && dst[i] == v) || fabsf(dst[i]) >= huge;
 		mask[i] = bad ? 0.0f : 1.0f;
 		dst[i] = bad ? 0.0f : dst[i];
 		missing |= bad;

@@ -48,10 +48,16 @@
  * weighted mean of its valid samples when they carry at least half of its weight, and gets
  * the fill otherwise — so a coastline neither grows nor shrinks by a texel.
  * Colour is filtered as straight (not premultiplied) RGBA.
+ *
+ * Read failures. A read that fails (the file cut short or changed on disk after load) fails
+ * the tile with -EIO and is reported once per node through engine_fault (engine/fault.h) with
+ * the file, the MIP level and the pixel region; the img_cache keeps the file failed until it
+ * changes (OIIO would otherwise serve the unreadable tiles as zeros from then on).
  */
 #ifndef CLIPMAP_FILE_RESAMPLE_H
 #define CLIPMAP_FILE_RESAMPLE_H
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stdint.h>
 
@@ -78,6 +84,7 @@ struct file_pole_stats {
 /* The node's pole statistics: a cache, so mutable although the source is not. */
 struct file_poles {
 	pthread_mutex_t mu; /* protects s (never held while reading the file) */
+	atomic_bool read_failed; /* a read failure was reported (engine_fault): once per node */
 	struct file_pole_stats s[FILE_MAX_LEVELS][2]; /* [level][0 north, 1 south] */
 };
 

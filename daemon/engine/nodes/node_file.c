@@ -8,21 +8,28 @@
  * Parameters ([node NAME] with type = file):
  *   path      the image (relative paths resolve against the planet file's directory)
  *   kind      height | color: PIX_HEIGHT or PIX_COLOR output (default height)
- *   bounds    W,S,E,N in degrees covered by the image (default: the bounds `clipmapctl import`
- *             recorded in the file, else -180,-90,180,90). Row 0 is the north edge, column 0
+ *   bounds    W,S,E,N in degrees covered by the image (default: the file's own georeferencing
+ *             (GeoTIFF tags, read with libtiff), else the bounds `clipmapctl import` recorded in
+ *             it; a file with none of these and no key is refused, a key contradicting the
+ *             georeferencing too: nothing is guessed). Row 0 is the north edge, column 0
  *             the west edge; pixels are areas with centres at +0.5. S and N may reach half
  *             a pixel past the poles (pixel-is-point grids with rows centred on the poles).
  *   channel   (height) the channel holding heights (default 0)
  *   scale, offset  (height) height = raw·scale + offset; raw is the stored value, integers
  *             unnormalised (int16 metres: scale 1; uint16 in 0.1 m: scale 0.1)
- *   nodata    (height) a raw value meaning "no data" (default: one recorded by import); NaN
- *             in float files always is
+ *   nodata    (height) a raw value meaning "no data" (default: one recorded by import, else the
+ *             file's own GDAL_NODATA); NaN in float files always is
  *   fill      height in metres (default 0) or colour (default 0,0,0,0) outside the bounds and
  *             where data is missing
  *   lon_wrap  true | false: bilinear wraps across the east/west edges (default true when the
  *             bounds span 360°; only allowed then)
  *   cache_mb  deprecated and ignored (still checked: 1..1048576): the image cache is the
  *             planet's, sized by clipmapd's [engine] image_cache_mb. Not hashed.
+ * Checked at load: the file reads to its end (img_check_readable: a truncated file is refused
+ * naming it and the level), and its channels fit the kind (kind = height refuses 3+ channels
+ * unless `channel` is given; kind = color wants 8-bit, or 16-bit RGB[A]), and a height file
+ * with nodata has MIP levels of its own (or a huge float nodata: file_resample.c), since
+ * OIIO's automip would average nodata into heights.
  * The file's size, mtime and inode are hashed: a changed file gets new tile names after a
  * reload, and the shared cache forgets the old file's pixels (img_cache_set_version).
  * How tiles are made (the MIP level, anisotropic taps, the polar caps, missing data):
@@ -31,6 +38,7 @@
 #include "engine/node_types.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -120,17 +128,54 @@ static int file_desc(struct file_source *f, double b[4], double *nodata)
 	return found;
 }
 
-static int parse_bounds(struct node_parse *p, struct file_source *f)
+/* Why a file without a `bounds` key cannot be placed: the message for np_error. */
+static int no_bounds(struct node_parse *p, const struct file_source *f, const struct img_georef *g)
+{
+	if (g->projected)
+		return np_error(p, "bounds", "missing, and %s is in a projected coordinate system "
+				"(%s), not degrees: reproject it with `clipmapctl import %s -o OUT.tif`",
+				f->path, g->crs, f->path);
+	if (g->rotated)
+		return np_error(p, "bounds", "missing, and %s has rotated, sheared or flipped "
+				"georeferencing: turn it north-up with `clipmapctl import`", f->path);
+	if (g->no_crs)
+		return np_error(p, "bounds", "missing, and %s has a geotransform but no coordinate "
+				"system: add bounds = W,S,E,N (degrees)", f->path);
+	return np_error(p, "bounds", "missing, and %s has no georeferencing (no GeoTIFF tags, no "
+			"bounds recorded by clipmapctl import): add bounds = W,S,E,N (degrees)",
+			f->path);
+}
+
+/* The bounds: the `bounds` key, else the file's own georeferencing (GeoTIFF), else what
+ * clipmapctl import recorded; never guessed. A key contradicting the file's georeferencing
+ * by more than half a pixel is refused (one of them is wrong). */
+static int parse_bounds(struct node_parse *p, struct file_source *f, const struct img_georef *g)
 {
 	double b[4], nd;
 	int nb, rc = np_doubles(p, "bounds", b, 4, &nb);
 	if (rc)
 		return rc;
 	if (nb == 0) {
-		if (!(file_desc(f, b, &nd) & 1))
-			b[0] = -180, b[1] = -90, b[2] = 180, b[3] = 90;
+		if (g->georeferenced)
+			b[0] = g->west, b[1] = g->south, b[2] = g->east, b[3] = g->north;
+		else if (!(file_desc(f, b, &nd) & 1))
+			return no_bounds(p, f, g);
 	} else if (nb != 4) {
 		return np_error(p, "bounds", "expected 4 numbers W,S,E,N (degrees), got %d", nb);
+	} else if (g->projected || g->rotated) {
+		/* Degrees cannot place a projected grid: it would be stretched, not warped. */
+		return np_error(p, "bounds", "%s is %s (%s): bounds cannot place it; reproject it "
+				"with `clipmapctl import`", f->path,
+				g->projected ? "in a projected coordinate system" : "rotated or flipped",
+				g->crs[0] ? g->crs : "?");
+	} else if (g->georeferenced) {
+		double tx = 0.5 * (g->east - g->west) / f->info.width;
+		double ty = 0.5 * (g->north - g->south) / f->info.height;
+		if (fabs(b[0] - g->west) > tx || fabs(b[2] - g->east) > tx ||
+		    fabs(b[1] - g->south) > ty || fabs(b[3] - g->north) > ty)
+			return np_error(p, "bounds", "%g,%g,%g,%g contradicts the georeferencing of "
+					"%s (%.10g,%.10g,%.10g,%.10g): remove the key", b[0], b[1],
+					b[2], b[3], f->path, g->west, g->south, g->east, g->north);
 	}
 	/* A pixel-is-point global grid (ETOPO5: 2161 rows centred from pole to pole) reaches
 	 * half a pixel past each pole; allow that much (and never more than a degree). */
@@ -147,7 +192,7 @@ static int parse_bounds(struct node_parse *p, struct file_source *f)
 	return 0;
 }
 
-static int parse_height(struct node_parse *p, struct file_source *f)
+static int parse_height(struct node_parse *p, struct file_source *f, const struct img_georef *g)
 {
 	long ch;
 	double v;
@@ -170,14 +215,17 @@ static int parse_height(struct node_parse *p, struct file_source *f)
 		return rc;
 	f->offset = (float)v;
 	double b[4], fnd;
-	if (ini_find(p->sec, "nodata")) {
-		if ((rc = np_double(p, "nodata", 0, -1e30, 1e30, &v)))
+	if (ini_find(p->sec, "nodata")) { /* any float: GDAL's -1e34 and -3.4028235e38 too */
+		if ((rc = np_double(p, "nodata", 0, -FLT_MAX, FLT_MAX, &v)))
 			return rc;
 		f->has_nodata = true;
 		f->nodata = (float)v;
 	} else if (file_desc(f, b, &fnd) & 2) {
 		f->has_nodata = true; /* recorded by clipmapctl import; the file's mtime is hashed */
 		f->nodata = (float)fnd;
+	} else if (g->has_nodata && !isnan(g->nodata)) {
+		f->has_nodata = true; /* the file's own (GDAL_NODATA); its mtime is hashed */
+		f->nodata = (float)g->nodata;
 	}
 	if ((rc = np_double(p, "fill", 0, -1e30, 1e30, &v)))
 		return rc;
@@ -198,6 +246,29 @@ static int parse_color(struct node_parse *p, struct file_source *f)
 	f->nch = f->info.channels < 4 ? f->info.channels : 4;
 	f->rtype = IMG_U8;
 	return np_color(p, "fill", clear, f->fill_c);
+}
+
+/* The file's channels and samples must fit the node's kind: a colour image used as heights
+ * (or heights as colour) is a mistake in the planet file, refused naming both. */
+static int check_kind(struct node_parse *p, const struct node *nd, const struct file_source *f)
+{
+	const struct img_info *in = &f->info;
+	if (f->kind == FILE_KIND_HEIGHT) {
+		/* Several channels: colour, unless `channel` says which one holds heights. */
+		if (in->channels >= 3 && !ini_find(p->sec, "channel"))
+			return np_error(p, "kind", "node %s: %s has %d %s channels (a colour image?); "
+					"kind = height expects one channel of heights (or name it "
+					"with channel = N)", nd->name, f->path, in->channels,
+					in->format);
+		return 0;
+	}
+	bool ok = in->type == IMG_U8 || (in->type == IMG_U16 && in->channels >= 3);
+	if (!ok || in->channels > 4)
+		return np_error(p, "kind", "node %s: %s has %d %s channel%s (heights?); kind = color "
+				"expects 8-bit grey, grey+alpha, RGB or RGBA (or 16-bit RGB[A])",
+				nd->name, f->path, in->channels, in->format,
+				in->channels == 1 ? "" : "s");
+	return 0;
 }
 
 static int file_create(struct node *nd, struct node_parse *p)
@@ -253,12 +324,22 @@ static int file_create(struct node *nd, struct node_parse *p)
 	if (f->nlev == 0)
 		return np_error(p, "path", "cannot open %s", err);
 
+	/* Readable to the end: a truncated file is refused here, not by every tile. */
+	int stored_levels;
+	if (img_check_readable(f->path, &stored_levels, err))
+		return np_error(p, "path", "%s", err);
+
 	int kind;
 	if ((rc = np_enum(p, "kind", kind_names, FILE_KIND_HEIGHT, &kind)))
 		return rc;
 	f->kind = kind;
 	nd->out = kind == FILE_KIND_COLOR ? PIX_COLOR : PIX_HEIGHT;
-	if ((rc = parse_bounds(p, f)))
+	if ((rc = check_kind(p, nd, f)))
+		return rc;
+	struct img_georef geo;
+	if (img_georef_read(f->path, &geo, err))
+		return np_error(p, "path", "cannot open %s", err);
+	if ((rc = parse_bounds(p, f, &geo)))
 		return rc;
 	bool global = f->east - f->west == 360; /* exact: parse_bounds snaps near-360 spans */
 	int wrap;
@@ -267,7 +348,19 @@ static int file_create(struct node *nd, struct node_parse *p)
 	f->wrap = wrap & 1;
 	if (f->wrap && !global)
 		return np_error(p, "lon_wrap", "needs bounds spanning 360 degrees of longitude");
-	return kind == FILE_KIND_COLOR ? parse_color(p, f) : parse_height(p, f);
+	if (kind == FILE_KIND_COLOR)
+		return parse_color(p, f);
+	if ((rc = parse_height(p, f, &geo)))
+		return rc;
+	/* OIIO's automip averages nodata into the coarser levels as if it were a height (-32768
+	 * mixed into a box: -8000 m). A huge float nodata stays recognisable (file_resample.c);
+	 * any other needs levels built around it: clipmapctl import builds them. */
+	if (f->has_nodata && !(f->rtype == IMG_F32 && fabsf(f->nodata) >= 1e30f) &&
+	    stored_levels <= 1 && f->nlev > 1)
+		return np_error(p, "path", "%s: no MIP levels, so nodata %g would be averaged into "
+				"coarse heights: convert it with clipmapctl import", f->path,
+				f->nodata);
+	return 0;
 }
 
 static int file_generate(const struct node *nd, struct gen_ctx *g, const struct tile_key *k,

@@ -1,0 +1,111 @@
+/* fuzz_tilecodec — libFuzzer target for the tile codec (common/tilecodec.c), whose decoder
+ * reads bytes from the network. Built and run by `make fuzz`.
+ *
+ * The first 8 bytes choose: the mode (decode or round trip), format, codec, filter, the tile
+ * size (a power of two up to 128, kept small so runs stay fast), a level, and for decode the
+ * header's raw_len and checksum perturbations; the rest is the payload (decode) or the texels
+ * (round trip, repeated to fill the tile).
+ * Properties checked, beyond "no crash, no leak, no undefined behaviour":
+ *  - decode of any header and payload returns 0 or a documented error (-EINVAL, -EBADMSG,
+ *    -EILSEQ) with a message, and never writes past raw_len (the buffer is raw_len bytes,
+ *    followed by a guard checked after the call);
+ *  - encode → decode gives back exactly the texels (every format, codec, filter, level),
+ *    and the payload fits tilecodec_bound;
+ *  - filter → unfilter gives back exactly the texels;
+ *  - flipping one payload byte of a compressed round trip never yields success with other
+ *    texels (the checksum catches it).
+ */
+#include <errno.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "common/tilecodec.h"
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+static struct tilecodec *tc; /* fuzzer-only: reused across inputs */
+
+static void check_rc(int rc, const char *err)
+{
+	if (rc != 0 && rc != -EINVAL && rc != -EBADMSG && rc != -EILSEQ)
+		abort();
+	if (rc && !err[0])
+		abort();
+}
+
+static void decode_any(const uint8_t *h8, const uint8_t *p, size_t n)
+{
+	struct tilecodec_hdr h = {
+		.format = h8[1] % 5,
+		.codec = h8[2] % 4,
+		.filter = h8[3] % 6,
+		.size = h8[4] & 0x80 ? (uint32_t)h8[4] : 1u << (h8[4] % 8),
+	};
+	size_t bpp = h.format >= 1 && h.format <= 3 ? pix_bytes(h.format) : 4;
+	h.raw_len = (uint32_t)((size_t)h.size * h.size * bpp);
+	if (h8[5] & 1)
+		h.raw_len += h8[6]; /* a wrong length */
+	if (h.raw_len > (1u << 20))
+		return;
+	h.checksum = h8[7] & 1 ? tilecodec_checksum(p, n) : (uint64_t)h8[7] * 0x9E3779B97F4A7C15ull;
+	size_t cap = h.raw_len;
+	uint8_t *out = malloc(cap + 16);
+	memset(out + cap, 0xA5, 16);
+	char err[256] = "";
+	int rc = tilecodec_decode(tc, &h, p, n, out, cap, err);
+	check_rc(rc, err);
+	for (int i = 0; i < 16; i++)
+		if (out[cap + (size_t)i] != 0xA5)
+			abort(); /* wrote past the texels */
+	free(out);
+}
+
+static void round_trip(const uint8_t *h8, const uint8_t *p, size_t n)
+{
+	enum pix_type fmt = (enum pix_type)(1 + h8[1] % 3);
+	enum tcodec codec = (enum tcodec)(h8[2] % TCODEC_COUNT);
+	enum tfilter filter = (enum tfilter)(h8[3] % TFILTER_COUNT);
+	uint32_t T = 1u << (h8[4] % 8);
+	int level = h8[5] % 4;
+	size_t raw = (size_t)T * T * pix_bytes(fmt);
+	uint8_t *tex = malloc(raw), *filt = malloc(raw), *back = malloc(raw);
+	for (size_t i = 0; i < raw; i++)
+		tex[i] = n ? p[i % n] : (uint8_t)i;
+	size_t cap = tilecodec_bound(codec, raw);
+	uint8_t *pay = malloc(cap ? cap : 1);
+	struct tilecodec_hdr h;
+	ssize_t k = tilecodec_encode(tc, fmt, T, codec, filter, level, tex, &h, pay, cap);
+	if (k < 0 || (size_t)k > cap || h.raw_len != raw || h.size != T || h.format != fmt)
+		abort();
+	char err[256] = "";
+	if (tilecodec_decode(tc, &h, pay, (size_t)k, back, raw, err) || memcmp(tex, back, raw))
+		abort(); /* the round trip must give back the texels */
+	if (tilecodec_filter(fmt, T, filter, tex, filt) || tilecodec_unfilter(fmt, T, filter, filt, back) ||
+	    memcmp(tex, back, raw))
+		abort();
+	if (k > 0 && h.codec != TCODEC_NONE) { /* one corrupted byte: an error or the texels */
+		pay[h8[6] % (size_t)k] ^= (uint8_t)(1 + h8[7] % 255);
+		int rc = tilecodec_decode(tc, &h, pay, (size_t)k, back, raw, err);
+		check_rc(rc, err);
+		if (rc == 0 && memcmp(tex, back, raw))
+			abort();
+	}
+	free(tex);
+	free(filt);
+	free(back);
+	free(pay);
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
+{
+	if (size < 8 || size > (1u << 18))
+		return 0;
+	if (!tc)
+		tc = tilecodec_create();
+	if (data[0] & 1)
+		round_trip(data, data + 8, size - 8);
+	else
+		decode_any(data, data + 8, size - 8);
+	return 0;
+}
