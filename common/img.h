@@ -164,6 +164,12 @@ struct img_georef {
 /* Fills out (zeroed first). Returns 0 (also for a file that is not a TIFF: nothing known), or
  * -ENOENT. Reentrant. Other formats (PNG, EXR...) have none: all false. */
 int img_georef_read(const char *path, struct img_georef *out, char err[256]);
+/* Adds GeoTIFF tags to the TIFF at path (its first image): EPSG:4326 (WGS 84 degrees; other
+ * bodies read them as their own degrees), pixels as areas, a north-up transform from the
+ * given edges, so gdalinfo and QGIS place the file. The pixel data and the other directories
+ * (MIP levels) are left as they are. Returns 0 or -EIO/-ENOMEM with err filled. */
+int img_georef_write(const char *path, double west, double south, double east, double north,
+		     char err[256]);
 
 /* Reads the whole first image of path, all channels, converted to `type` (IMG_NONE: the
  * file's own img_info.type). *pixels is returned owned (free() it); info may be NULL.

@@ -257,3 +257,50 @@ int img_tiff_check_extents(const char *path, char err[256])
 	TIFFClose(tif);
 	return rc;
 }
+
+int img_georef_write(const char *path, double west, double south, double east, double north,
+		     char err[256])
+{
+	TIFFOpenOptions *opts = TIFFOpenOptionsAlloc();
+	if (!opts)
+		return -ENOMEM;
+	struct tiff_err te = { 0 };
+	TIFFOpenOptionsSetErrorHandlerExtR(opts, remember, &te);
+	TIFFOpenOptionsSetWarningHandlerExtR(opts, quiet, NULL);
+	TIFF *tif = TIFFOpenExt(path, "r+m", opts);
+	TIFFOpenOptionsFree(opts);
+	if (!tif) {
+		err_set(err, "%s: %s", path, te.seen ? te.msg : "cannot open the TIFF to georeference it");
+		return -EIO;
+	}
+	/* The three GeoTIFF tags, known to this handle only (a process-wide tag extender would
+	 * change how OpenImageIO writes TIFFs, as GDAL's does). */
+	static const TIFFFieldInfo fi[] = {
+		{ TAG_PIXEL_SCALE, -1, -1, TIFF_DOUBLE, FIELD_CUSTOM, 1, 1, "ModelPixelScaleTag" },
+		{ TAG_TIEPOINT, -1, -1, TIFF_DOUBLE, FIELD_CUSTOM, 1, 1, "ModelTiepointTag" },
+		{ TAG_GEOKEYS, -1, -1, TIFF_SHORT, FIELD_CUSTOM, 1, 1, "GeoKeyDirectoryTag" },
+	};
+	uint32_t w = 0, h = 0;
+	TIFFGetField(tif, TIFFTAG_IMAGEWIDTH, &w);
+	TIFFGetField(tif, TIFFTAG_IMAGELENGTH, &h);
+	int rc = 0;
+	if (!w || !h || TIFFMergeFieldInfo(tif, fi, 3) != 0) {
+		err_set(err, "%s: cannot add GeoTIFF tags", path);
+		rc = -EIO;
+	} else {
+		double scale[3] = { (east - west) / w, (north - south) / h, 0 };
+		double tie[6] = { 0, 0, 0, west, north, 0 };
+		/* version 1.1.0, 4 keys: geographic model, pixels are areas, WGS 84, degrees */
+		uint16_t keys[20] = { 1, 1, 0, 4, KEY_MODEL_TYPE, 0, 1, 2, KEY_RASTER_TYPE, 0, 1, 1,
+				      KEY_GEOG_TYPE, 0, 1, 4326, 2054, 0, 1, 9102 };
+		if (!TIFFSetField(tif, TAG_PIXEL_SCALE, 3, scale) ||
+		    !TIFFSetField(tif, TAG_TIEPOINT, 6, tie) ||
+		    !TIFFSetField(tif, TAG_GEOKEYS, 20, keys) || !TIFFRewriteDirectory(tif)) {
+			err_set(err, "%s: writing GeoTIFF tags: %s", path,
+				te.seen ? te.msg : "libtiff refused");
+			rc = -EIO;
+		}
+	}
+	TIFFClose(tif);
+	return rc;
+}

@@ -554,6 +554,9 @@ static int write_tiled(struct job *j, const struct import_opts *o, const char *d
 	}
 	double t1 = clock_now_s();
 	rc = img_tiled_finish(tw, err);
+	/* GeoTIFF tags too, so GIS tools place the file (the description is for re-imports) */
+	if (rc == 0)
+		rc = img_georef_write(dst, j->r.west, j->r.south, j->r.east, j->r.north, err);
 	j->r.write_s += clock_now_s() - t1;
 	return rc;
 }

@@ -134,6 +134,23 @@ static void round_trip(void **state)
 				fail_msg("pixel %d,%d = %d, want %d", x, y, px[y * 40 + x], pix(x, y));
 	free(px);
 	assert_string_equal(desc, "clipmap:bounds=10,40,30,50");
+	/* GeoTIFF tags too: GDAL (what gdalinfo and QGIS use) reads EPSG:4326 and the corners */
+	struct img_georef geo;
+	assert_int_equal(img_georef_read(tpath("a_out.tif"), &geo, err), 0);
+	assert_true(geo.georeferenced);
+	assert_true(geo.west == 10 && geo.east == 30 && geo.south == 40 && geo.north == 50);
+	GDALDatasetH gd = GDALOpen(tpath("a_out.tif"), GA_ReadOnly);
+	assert_non_null(gd);
+	double ogt[6];
+	assert_int_equal(GDALGetGeoTransform(gd, ogt), CE_None);
+	assert_true(ogt[0] == 10 && ogt[1] == 0.5 && ogt[3] == 50 && ogt[5] == -0.5);
+	OGRSpatialReferenceH osr = GDALGetSpatialRef(gd);
+	assert_non_null(osr);
+	const char *code = OSRGetAuthorityCode(osr, NULL);
+	assert_non_null(code);
+	assert_string_equal(code, "4326");
+	assert_true(GDALGetRasterCount(gd) == 1 && GDALGetRasterXSize(gd) == 40);
+	GDALClose(gd);
 
 	/* The file node places the image from the recorded bounds alone. */
 	static struct planet pl = { .tile_size = 64, .max_level = 10, .a = 6378137.0 };
