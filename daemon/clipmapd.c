@@ -401,7 +401,15 @@ static char *find_cesium(const struct conf *c, char *buf, size_t n)
 		char *slash = strrchr(exe, '/');
 		if (slash)
 			*slash = '\0';
+		/* build/npm beside the program, or the build tree's for the sanitizer builds
+		 * (build-asan/clipmapd finds build/npm) */
 		if (snprintf(buf, n, "%.400s/npm/node_modules/cesium/Build/Cesium", exe) >= (int)n)
+			return NULL;
+		char js0[600];
+		snprintf(js0, sizeof js0, "%.500s/Cesium.js", buf);
+		if (access(js0, R_OK) != 0 &&
+		    snprintf(buf, n, "%.400s/../build/npm/node_modules/cesium/Build/Cesium", exe) >=
+			    (int)n)
 			return NULL;
 	}
 	char js[600];

@@ -65,7 +65,11 @@ static void ecef(double a, double f, double lat, double lon, double h, double ou
 	out[2] = (N * (1 - e2) + h) * sp;
 }
 
-static uint16_t zigzag(int v) { return (uint16_t)((v << 1) ^ (v >> 31)); }
+/* (v << 1) ^ (v >> 31) in unsigned arithmetic (a negative int shifted left is undefined). */
+static uint16_t zigzag(int v)
+{
+	return (uint16_t)(v < 0 ? ((uint32_t)-(int64_t)v << 1) - 1 : (uint32_t)v << 1);
+}
 
 /* Height at texel-corner (i, j) of a T×T tile, bilinear between texel centres, clamped. */
 static double corner_height(const float *h, uint32_t T, double x, double y)

@@ -334,7 +334,7 @@ static void cesium_terrain(void **state)
 	struct env *e = *state;
 	NEED_DAEMON(e);
 	char npm[700], script[700];
-	snprintf(npm, sizeof npm, "%s/npm", e->d.bindir);
+	snprintf(npm, sizeof npm, "%s/build/npm", e->d.root); /* make deps puts it there */
 	snprintf(script, sizeof script, "%s/tests/http/cesium_heights.mjs", e->d.root);
 	char probe[800];
 	snprintf(probe, sizeof probe, "%s/node_modules/cesium/package.json", npm);
@@ -411,7 +411,7 @@ static void browser_page(void **state)
 	struct env *e = *state;
 	NEED_DAEMON(e);
 	char npm[700], script[700], probe[800], out[8192];
-	snprintf(npm, sizeof npm, "%s/npm", e->d.bindir);
+	snprintf(npm, sizeof npm, "%s/build/npm", e->d.root);
 	snprintf(script, sizeof script, "%s/tests/http/browser_shot.mjs", e->d.root);
 	snprintf(probe, sizeof probe, "%s/node_modules/cesium/Build/Cesium/Cesium.js", npm);
 	char *const which[] = { "chromium", "--version", NULL };
