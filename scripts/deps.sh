@@ -6,7 +6,7 @@ set -eu
 PKGS="build-essential pkg-config libopenimageio-dev openimageio-tools libgeographiclib-dev
 libcmocka-dev libxxhash-dev libzstd-dev liblmdb-dev liblz4-dev libsystemd-dev systemd clang libgdal-dev libtiff-dev
 libegl-dev libegl-mesa0 libgl1-mesa-dri libgl-dev libosmesa6-dev glslang-tools libglfw3-dev xvfb xauth
-scdoc graphviz libmicrohttpd-dev zlib1g-dev gdal-bin curl prometheus"
+scdoc graphviz libmicrohttpd-dev zlib1g-dev gdal-bin curl prometheus chromium wrk"
 missing=""
 for p in $PKGS; do
 	st=$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)
@@ -20,6 +20,12 @@ done
 npm_deps() {
 	dir="$(dirname "$0")/../build/npm"
 	[ -f "$dir/node_modules/cesium/package.json" ] && return 0
+	# Debian's nodejs and npm when there is no npm at all (a NodeSource or other install
+	# is left alone: Debian's npm would conflict with it).
+	if ! command -v npm >/dev/null && [ "$(id -u)" -eq 0 ]; then
+		DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends \
+			nodejs npm >/dev/null 2>&1 || true
+	fi
 	if ! command -v npm >/dev/null; then
 		echo "make deps: npm not found: the Cesium tests will skip" >&2
 		return 0
