@@ -44,6 +44,21 @@ void strbuf_xml(struct strbuf *b, const char *s)
 		}
 }
 
+void strbuf_json(struct strbuf *b, const char *s)
+{
+	strbuf_printf(b, "\"");
+	for (; s && *s; s++) {
+		unsigned char c = (unsigned char)*s;
+		if (c == '"' || c == '\\')
+			strbuf_printf(b, "\\%c", c);
+		else if (c < 0x20)
+			strbuf_printf(b, "\\u%04x", c);
+		else
+			strbuf_printf(b, "%c", c);
+	}
+	strbuf_printf(b, "\"");
+}
+
 char *strbuf_take(struct strbuf *b, size_t *len)
 {
 	strbuf_printf(b, "%s", ""); /* allocated even when nothing was written */

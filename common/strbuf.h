@@ -12,6 +12,8 @@ struct strbuf {
 void strbuf_printf(struct strbuf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
 /* s with XML's five special characters escaped (&amp; &lt; &gt; &quot; &apos;). */
 void strbuf_xml(struct strbuf *b, const char *s);
+/* s as a JSON string, quotes included (\" \\ and control characters escaped). */
+void strbuf_json(struct strbuf *b, const char *s);
 /* The text (malloc'ed; *len bytes without the NUL); b is left empty. */
 char *strbuf_take(struct strbuf *b, size_t *len);
 

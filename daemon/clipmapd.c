@@ -388,36 +388,38 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 
 /* Where CesiumJS is for the browser page: [http] cesium, else the build tree's copy beside
  * the program (build/npm/..., from make deps). NULL (no page) when neither has Cesium.js. */
+static bool has_cesium(const char *dir)
+{
+	char js[600];
+	snprintf(js, sizeof js, "%.500s/Cesium.js", dir);
+	return access(js, R_OK) == 0;
+}
+
 static char *find_cesium(const struct conf *c, char *buf, size_t n)
 {
-	if (c->http_cesium)
+	if (c->http_cesium) {
 		snprintf(buf, n, "%s", c->http_cesium);
-	else {
-		char exe[512];
-		ssize_t k = readlink("/proc/self/exe", exe, sizeof exe - 1);
-		if (k <= 0)
-			return NULL;
-		exe[k] = '\0';
-		char *slash = strrchr(exe, '/');
-		if (slash)
-			*slash = '\0';
-		/* build/npm beside the program, or the build tree's for the sanitizer builds
-		 * (build-asan/clipmapd finds build/npm) */
-		if (snprintf(buf, n, "%.400s/npm/node_modules/cesium/Build/Cesium", exe) >= (int)n)
-			return NULL;
-		char js0[600];
-		snprintf(js0, sizeof js0, "%.500s/Cesium.js", buf);
-		if (access(js0, R_OK) != 0 &&
-		    snprintf(buf, n, "%.400s/../build/npm/node_modules/cesium/Build/Cesium", exe) >=
-			    (int)n)
-			return NULL;
-	}
-	char js[600];
-	snprintf(js, sizeof js, "%.500s/Cesium.js", buf);
-	if (access(js, R_OK) == 0)
-		return buf;
-	if (c->http_cesium)
+		if (has_cesium(buf))
+			return buf;
 		log_msg(LOG_WARN, "http: no Cesium.js in %s: the browser page is off", buf);
+		return NULL;
+	}
+	char exe[512];
+	ssize_t k = readlink("/proc/self/exe", exe, sizeof exe - 1);
+	if (k <= 0)
+		return NULL;
+	exe[k] = '\0';
+	char *slash = strrchr(exe, '/');
+	if (slash)
+		*slash = '\0';
+	/* build/npm beside the program, or the build tree's for the sanitizer builds
+	 * (build-asan/clipmapd finds build/npm) */
+	static const char *const rel[] = { "npm", "../build/npm" };
+	for (size_t i = 0; i < sizeof rel / sizeof rel[0]; i++) {
+		snprintf(buf, n, "%.400s/%s/node_modules/cesium/Build/Cesium", exe, rel[i]);
+		if (has_cesium(buf))
+			return buf;
+	}
 	return NULL;
 }
 

@@ -20,10 +20,9 @@
 char *cesium_layer_json(const struct planet *p, size_t *len)
 {
 	struct strbuf b = { 0 };
-	strbuf_printf(&b, "{\n  \"tilejson\": \"2.1.0\",\n  \"name\": \"");
-	for (const char *s = p->name; *s; s++) /* names are [A-Za-z0-9_.-]: nothing to escape */
-		strbuf_printf(&b, "%c", *s == '"' || *s == '\\' ? '_' : *s);
-	strbuf_printf(&b, "\",\n  \"version\": \"1.0.0\",\n  \"format\": \"quantized-mesh-1.0\",\n"
+	strbuf_printf(&b, "{\n  \"tilejson\": \"2.1.0\",\n  \"name\": ");
+	strbuf_json(&b, p->name);
+	strbuf_printf(&b, ",\n  \"version\": \"1.0.0\",\n  \"format\": \"quantized-mesh-1.0\",\n"
 			  "  \"scheme\": \"tms\",\n  \"tiles\": [\"{z}/{x}/{y}.terrain\"],\n"
 			  "  \"projection\": \"EPSG:4326\",\n  \"bounds\": [-180, -90, 180, 90],\n"
 			  "  \"minzoom\": 0,\n  \"maxzoom\": %d,\n  \"available\": [\n",

@@ -88,21 +88,6 @@ const char *http_page_html(size_t *len)
 	return page;
 }
 
-static void json_str(struct strbuf *b, const char *s)
-{
-	strbuf_printf(b, "\"");
-	for (; s && *s; s++) {
-		unsigned char c = (unsigned char)*s;
-		if (c == '"' || c == '\\')
-			strbuf_printf(b, "\\%c", c);
-		else if (c < 0x20)
-			strbuf_printf(b, "\\u%04x", c);
-		else
-			strbuf_printf(b, "%c", c);
-	}
-	strbuf_printf(b, "\"");
-}
-
 char *http_planets_json(const struct planet_set *ps, size_t *len)
 {
 	struct strbuf b = { 0 };
@@ -113,16 +98,16 @@ char *http_planets_json(const struct planet_set *ps, size_t *len)
 		for (size_t j = 0; j < p->nlayers; j++)
 			heights |= p->layers[j].type == PIX_HEIGHT;
 		strbuf_printf(&b, "%s{\"name\":", i ? "," : "");
-		json_str(&b, p->name);
+		strbuf_json(&b, p->name);
 		strbuf_printf(&b, ",\"description\":");
-		json_str(&b, p->description ? p->description : "");
+		strbuf_json(&b, p->description ? p->description : "");
 		strbuf_printf(&b, ",\"a\":%.17g,\"f\":%.17g,\"max_level\":%d,\"tile_size\":%u,"
 				  "\"heights\":%s,\"air\":%s,\"layers\":[",
 			      p->a, p->f, p->max_level, p->tile_size, heights ? "true" : "false",
 			      p->look.air_density > 0 ? "true" : "false");
 		for (size_t j = 0; j < p->nlayers; j++) {
 			strbuf_printf(&b, "%s{\"name\":", j ? "," : "");
-			json_str(&b, p->layers[j].name);
+			strbuf_json(&b, p->layers[j].name);
 			strbuf_printf(&b, ",\"type\":\"%s\"}", pix_type_name(p->layers[j].type));
 		}
 		strbuf_printf(&b, "]}");

@@ -107,15 +107,13 @@ static void put_histograms(struct strbuf *b, const struct planet_set *ps)
 	for (size_t i = 0; i < ps->n; i++)
 		for (size_t j = 0; j < ps->planets[i]->nnodes; j++) {
 			const struct node *nd = ps->planets[i]->nodes[j];
-			char lab[300];
 			struct strbuf l = { 0 };
 			strbuf_printf(&l, "planet=\"");
 			put_label(&l, ps->planets[i]->name, strlen(ps->planets[i]->name));
 			strbuf_printf(&l, "\",node=\"");
 			put_label(&l, nd->name, strlen(nd->name));
 			strbuf_printf(&l, "\"");
-			snprintf(lab, sizeof lab, "%s", l.s);
-			free(l.s);
+			const char *lab = l.s;
 			uint64_t cum = 0;
 			for (int k = 0; k < NODE_GEN_BUCKETS; k++) {
 				cum += atomic_load(&nd->gen_hist[k]);
@@ -131,6 +129,7 @@ static void put_histograms(struct strbuf *b, const struct planet_set *ps)
 				      (double)atomic_load(&nd->gen_ns) * 1e-9);
 			strbuf_printf(b, "clipmapd_node_generate_seconds_count{%s} %llu\n", lab,
 				      (unsigned long long)cum);
+			free(l.s);
 		}
 }
 
