@@ -63,7 +63,6 @@ struct hreq {
 	struct node *node;
 	const struct planet *terrain; /* Cesium terrain of this planet; NULL: an image */
 	struct tile_key key;
-	enum pix_type type;
 	enum geoimg_format fmt;
 	char etag[64];
 	struct sched_req *req;
@@ -493,7 +492,7 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 	}
 	struct hreq *q = xcalloc(1, sizeof *q);
 	*q = (struct hreq){ .h = h, .c = c, .ps = ps, .node = l->node, .key = key,
-			    .type = l->type, .fmt = rt->fmt, .terrain = terrain ? p : NULL };
+			    .fmt = rt->fmt, .terrain = terrain ? p : NULL };
 	memcpy(q->etag, etag, sizeof etag);
 	pthread_mutex_init(&q->mu, NULL);
 	q->req = sched_req_create(h->sched, on_ready, q);
