@@ -128,11 +128,15 @@ static uint64_t rss_kb(pid_t pid)
 	return kb;
 }
 
-/* Sends m and waits for its first answer: ERROR (returned 1, *out filled), PREFETCH_PROGRESS
- * or PREFETCH_ESTIMATE (0). *ms: how long the answer took. */
+/* Sends m (a PREFETCH or PREFETCH_DRY) and waits for its first answer: ERROR (returned 1,
+ * *out filled), PREFETCH_PROGRESS or PREFETCH_ESTIMATE (0). What answers another job of the
+ * session (the progress a running job sends every tick) is skipped: on a machine where a
+ * tick falls between the request and its answer, that progress is not the answer.
+ * *ms: how long the answer took. */
 static int ask(struct net_conn *c, const struct proto_msg *m, struct proto_msg *out, double *ms)
 {
 	char err[256];
+	uint32_t id = m->type == PROTO_PREFETCH_DRY ? m->prefetch_dry.id : m->prefetch.id;
 	double t0 = clock_now_s();
 	if (net_send(c, m, err))
 		fail_msg("%s", err);
@@ -140,8 +144,10 @@ static int ask(struct net_conn *c, const struct proto_msg *m, struct proto_msg *
 		*out = (struct proto_msg){ 0 };
 		if (net_recv(c, out, 10000, err))
 			fail_msg("no answer: %s", err);
-		if (out->type == PROTO_ERROR || out->type == PROTO_PREFETCH_PROGRESS ||
-		    out->type == PROTO_PREFETCH_ESTIMATE)
+		if ((out->type == PROTO_ERROR && out->error.ref_type == m->type &&
+		     out->error.ref_id == id) ||
+		    (out->type == PROTO_PREFETCH_PROGRESS && out->prefetch_progress.id == id) ||
+		    (out->type == PROTO_PREFETCH_ESTIMATE && out->prefetch_estimate.id == id))
 			break;
 		proto_msg_fini(out);
 	}
