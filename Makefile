@@ -23,6 +23,8 @@ CXXFLAGS += -std=c++17 $(OPT) -Wall -Wextra -Werror -fPIC -pthread -MMD -MP -iqu
            $(filter-out -I/usr/include,$(PKG_CFLAGS))
 LDFLAGS += -pthread $(SAN)
 LDLIBS  += $(PKG_LIBS) -lcmocka -lstdc++ -lm
+# hiredis (the fleet's Redis tier, daemon/store_redis.c): clipmapd and the tests only.
+REDIS_LIBS := $(shell pkg-config --libs hiredis 2>/dev/null || echo -lhiredis)
 
 # Per-ISA kernels: files named *_avx2.c / *_avx512.c get their -m flags (run-time dispatch).
 AVX2_FLAGS   := -mavx2 -mfma -mbmi2
@@ -116,7 +118,7 @@ $(BUILD)/lib%.a:
 	ar rcs $@ $^
 
 $(BUILD)/clipmapd: $(BUILD)/daemon/clipmapd.o $(SERVER_LIB) $(ENGINE_LIB) $(COMMON_LIB)
-	$(CC) $(LDFLAGS) $^ $(LDLIBS) -o $@
+	$(CC) $(LDFLAGS) $^ $(LDLIBS) $(REDIS_LIBS) -o $@
 # clipmapctl-offline: every command. clipmapctl: the online ones (the same main, CTL_THIN),
 # without the engine, and --as-needed drops the shared libraries only the engine uses (GDAL,
 # OpenImageIO: ~260 of them); it runs the offline commands through clipmapctl-offline.
@@ -146,7 +148,7 @@ define prog_rule
 $(BUILD)/tests/$(basename $(notdir $(1))): $(BUILD)/$(1:.c=.o) $(TEST_SUPPORT_OBJ) \
 		$(if $(filter $(1),$(GL_TESTS)),$(VIEW_LIB)) $(TEST_LIBS)
 	@mkdir -p $$(dir $$@)
-	$$(CC) $$(LDFLAGS) $$^ $$(LDLIBS) $(if $(filter $(1),$(GL_TESTS)),$$(GL_LIBS)) -o $$@
+	$$(CC) $$(LDFLAGS) $$^ $$(LDLIBS) $$(REDIS_LIBS) $(if $(filter $(1),$(GL_TESTS)),$$(GL_LIBS)) -o $$@
 endef
 $(foreach t,$(TEST_SRC) $(BENCH_SRC),$(eval $(call prog_rule,$(t))))
 

@@ -25,6 +25,7 @@
 #include "engine/planets.h"
 #include "engine/sched.h"
 #include "engine/store.h"
+#include "store_redis.h"
 #include "conf.h"
 #include "http.h"
 #include "metrics.h"
@@ -39,6 +40,7 @@ struct daemon {
 	uint64_t generation;
 	uint64_t watchdog_usec, last_watchdog_ns;
 	struct store *store; /* the disk tier, NULL without [store] path */
+	struct remote *remote; /* the fleet's Redis tier, NULL without [store] redis */
 	struct store_stats store_seen; /* its counters at the last tick */
 	bool store_failing;	       /* its writes fail (logged once) */
 	struct http *http;	       /* the HTTP endpoint, NULL without [http] listen */
@@ -483,9 +485,20 @@ static int serve(struct daemon *d, struct planet_set *ps)
 			(unsigned long long)(d->store_seen.bytes >> 20),
 			(unsigned long long)(d->store_seen.budget >> 20));
 	}
+	if (d->conf.store_redis &&
+	    (rc = store_redis_open(&(struct store_redis_desc){
+					   .addr = d->conf.store_redis,
+					   .password = d->conf.store_redis_password,
+					   .lease_ms = d->conf.store_redis_lease_ms },
+				   &d->remote, err))) {
+		log_msg(LOG_ERROR, "store: %s", err);
+		planet_set_unref(ps);
+		store_destroy(d->store);
+		return 2;
+	}
 	struct cache *cache = cache_create(d->conf.cache_bytes);
 	struct sched *sched = sched_create(&(struct sched_desc){
-		.cache = cache, .store = d->store, .workers = d->conf.workers,
+		.cache = cache, .store = d->store, .remote = d->remote, .workers = d->conf.workers,
 		.worker_nice = d->conf.worker_nice });
 	rc = server_create(&d->conf, sched, cache, ps, &d->srv, err);
 	if (rc) {
@@ -493,6 +506,7 @@ static int serve(struct daemon *d, struct planet_set *ps)
 		planet_set_unref(ps);
 		sched_destroy(sched);
 		cache_destroy(cache);
+		store_redis_destroy(d->remote);
 		store_destroy(d->store);
 		return rc == -EINVAL ? 2 : 1;
 	}
@@ -517,6 +531,7 @@ out:
 	server_destroy(d->srv);
 	sched_destroy(sched);
 	cache_destroy(cache);
+	store_redis_destroy(d->remote); /* after the scheduler: writes what is queued */
 	store_destroy(d->store); /* commits the writes still queued */
 	if (ran)
 		log_msg(LOG_INFO, "clipmapd stopped");

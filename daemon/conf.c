@@ -18,7 +18,8 @@
 #include "common/proto.h"
 #include "common/xalloc.h"
 
-enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG, K_BOOL, K_ADDR };
+enum kind { K_PATH, K_INT, K_SIZE_MB, K_SIZE_KB, K_MODE, K_ENUM, K_TCP, K_LOG, K_BOOL, K_ADDR,
+	    K_REDIS, K_STR };
 
 struct row {
 	const char *sec, *key;
@@ -61,6 +62,9 @@ static const struct row rows[] = {
 	{ "log", "level", K_LOG, 0, 0, NULL },
 	{ "store", "path", K_PATH, 0, 0, NULL },
 	{ "store", "disk_mb", K_SIZE_MB, 1, 1L << 26, NULL },
+	{ "store", "redis", K_REDIS, 0, 0, NULL },
+	{ "store", "redis_password", K_STR, 0, 0, NULL },
+	{ "store", "redis_lease_ms", K_INT, 50, 600000, NULL },
 	{ "http", "listen", K_ADDR, 0, 0, NULL },
 	{ "http", "open", K_BOOL, 0, 1, NULL },
 	{ "http", "cesium", K_PATH, 0, 0, NULL },
@@ -178,6 +182,7 @@ static void defaults(struct conf *c)
 	c->pf_max_tiles_total = 16000000;
 	c->log_level = LOG_INFO;
 	c->store_bytes = (uint64_t)1024 << 20;
+	c->store_redis_lease_ms = 2000;
 	c->http_threads = 2;
 	c->http_max_conns = 256;
 	c->http_max_per_addr = 32;
@@ -248,6 +253,32 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 			return cerr(err, path, e->line, e->key, "\"%s\": expected true or false", v);
 		return 0;
 	}
+	case K_REDIS: { /* [store] redis: unix:/path (relative to the file) or host:port */
+		char host[256], port[16];
+		free(c->store_redis);
+		c->store_redis = NULL;
+		if (!*v)
+			return 0;
+		if (strncmp(v, "unix:", 5) == 0) {
+			if (!v[5])
+				return cerr(err, path, e->line, e->key, "unix: needs a socket path");
+			char *p = resolve(path, v + 5);
+			size_t len = strlen(p) + 6;
+			c->store_redis = xmalloc(len);
+			snprintf(c->store_redis, len, "unix:%s", p);
+			free(p);
+			return 0;
+		}
+		if (conf_split_hostport(v, host, sizeof host, port, sizeof port) || !host[0])
+			return cerr(err, path, e->line, e->key,
+				    "\"%s\" is not unix:/path or host:port (IPv6 as [addr]:port)", v);
+		c->store_redis = xstrdup(v);
+		return 0;
+	}
+	case K_STR: /* [store] redis_password */
+		free(c->store_redis_password);
+		c->store_redis_password = *v ? xstrdup(v) : NULL;
+		return 0;
 	case K_ADDR: { /* [http] listen: one host:port, or empty for none */
 		char host[256], port[16];
 		free(c->http_listen);
@@ -333,6 +364,8 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->pf_max_tiles_total = (uint64_t)n;
 	else if (strcmp(k, "disk_mb") == 0)
 		c->store_bytes = (uint64_t)n << 20;
+	else if (strcmp(k, "redis_lease_ms") == 0)
+		c->store_redis_lease_ms = (uint32_t)n;
 	else if (strcmp(k, "threads") == 0)
 		c->http_threads = (int)n;
 	else if (strcmp(k, "max_connections") == 0)
@@ -509,6 +542,8 @@ void conf_fini(struct conf *c)
 	free(c->token_file);
 	free(c->planets_dir);
 	free(c->store_path);
+	free(c->store_redis);
+	free(c->store_redis_password);
 	free(c->http_listen);
 	free(c->http_cesium);
 	memset(c, 0, sizeof *c);

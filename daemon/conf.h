@@ -62,6 +62,9 @@ struct conf {
 	/* [store] */
 	char *store_path;     /* the disk tier's LMDB file; NULL: no disk tier */
 	uint64_t store_bytes; /* its budget at rest (disk_mb) */
+	char *store_redis;    /* the shared tier: "unix:/abs/path" or "host:port"; NULL: none */
+	char *store_redis_password; /* AUTH; NULL: none */
+	uint32_t store_redis_lease_ms; /* a generation lease's lifetime (default 2000) */
 	/* [http] */
 	char *http_listen;     /* "host:port"; NULL: no HTTP endpoint */
 	char *http_cesium;     /* CesiumJS's Build/Cesium; NULL: beside the program (build tree) */

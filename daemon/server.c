@@ -357,6 +357,25 @@ static void stat_store(struct statb *b, struct store *st)
 	stat_u(b, "store.disk.recovered", s.recovered);
 }
 
+/* The fleet's Redis tier's counters (store.redis.*), when there is one. */
+static void stat_remote(struct statb *b, struct remote *r)
+{
+	if (!r)
+		return;
+	struct remote_stats s;
+	r->ops->stat(r, &s);
+	stat_u(b, "store.redis.connected", s.connected);
+	stat_u(b, "store.redis.hits", s.hits);
+	stat_u(b, "store.redis.misses", s.misses);
+	stat_u(b, "store.redis.generated", s.generated);
+	stat_u(b, "store.redis.writes", s.writes);
+	stat_u(b, "store.redis.drops", s.drops);
+	stat_u(b, "store.redis.bad", s.bad);
+	stat_u(b, "store.redis.waits", s.waits);
+	stat_u(b, "store.redis.takeovers", s.takeovers);
+	stat_u(b, "store.redis.errors", s.errors);
+}
+
 /* The loop-iteration histogram: count, maximum, p99 (a bucket bound), per bucket. */
 static void stat_loop(struct statb *b, const struct loopstat *ls)
 {
@@ -410,6 +429,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "cache.evictions", cs.evictions);
 	stat_u(&b, "sched.loaded", ss.loaded);
 	stat_store(&b, sched_store(srv->sched));
+	stat_remote(&b, sched_remote(srv->sched));
 	stat_u(&b, "tiles.sent", c->tiles_sent);
 	stat_u(&b, "tiles.failed", c->tiles_failed);
 	stat_u(&b, "tiles.dropped", c->tiles_dropped);

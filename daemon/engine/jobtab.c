@@ -179,9 +179,13 @@ struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct 
 	j->seq = g->seq++;
 	j->heap_idx = -1;
 	jobmap_insert(&g->map, j);
-	if (g->store && store_keeps(node) && store_contains(g->store, key)) {
-		/* A worker loads it; its inputs are resolved only if that fails. */
+	bool keeps = store_keeps(node);
+	bool disk = g->store && keeps && store_contains(g->store, key);
+	if (disk || (g->remote && keeps)) {
+		/* A worker loads it (disk, then the remote tier, which the manager does not ask:
+		 * that is a network round trip); its inputs are resolved only if that fails. */
 		j->from_store = true;
+		j->from_disk = disk;
 		j->mstate = JOB_SUBMITTED;
 		j->next = g->push;
 		g->push = j;
@@ -194,6 +198,8 @@ struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct 
 void jobgraph_regenerate(struct jobgraph *g, struct job *j)
 {
 	j->from_store = false;
+	j->from_disk = false;
+	j->rstate = JOB_R_NONE;
 	j->err = 0;
 	resolve(g, j);
 	for (int k = 0; k < j->nin; k++)

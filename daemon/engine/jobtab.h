@@ -18,6 +18,7 @@
 #include "common/grid.h"
 #include "cache.h"
 #include "node.h"
+#include "remote.h"
 #include "store.h"
 #include "tile.h"
 
@@ -35,6 +36,14 @@ struct job_wanter {
 	uint32_t idx;
 };
 
+/* A from_store job and the remote tier's lease (remote.h). */
+enum job_rstate {
+	JOB_R_NONE = 0,
+	JOB_R_WAIT,   /* the worker found another daemon's lease: park it (remote wait) */
+	JOB_R_PARKED, /* waiting in the remote tier for its wake */
+	JOB_R_WOKEN,  /* woken: ask the remote tier again (a lease taken now is a takeover) */
+};
+
 enum job_mstate {
 	JOB_WAITING = 1, /* some inputs still missing */
 	JOB_SUBMITTED,	 /* handed to the ready queue (queued, running or done, not yet seen) */
@@ -47,7 +56,10 @@ struct job {
 	uint64_t seq;	   /* creation order: the last tie-break */
 	uint64_t hash;
 	struct job *hnext; /* map chain */
-	bool from_store;   /* set by the manager before queueing: load from the store, no inputs */
+	bool from_store;   /* set by the manager before queueing: load from the tiers below
+			    * memory (disk store, then remote), no inputs */
+	bool from_disk;	   /* with from_store: the disk store holds it */
+	uint8_t rstate;	   /* enum job_rstate: the remote tier's wait (worker ↔ manager) */
 
 	/* Manager only. */
 	enum job_mstate mstate;
@@ -95,6 +107,7 @@ struct jobgraph {
 	struct jobmap map;
 	struct cache *cache; /* borrowed: dependency lookups */
 	struct store *store; /* borrowed, optional: tried before generating (store.h) */
+	struct remote *remote; /* borrowed, optional: tried after the store (remote.h) */
 	uint64_t epoch;	     /* of the current marking pass */
 	uint64_t seq;
 	struct job *push;  /* jobs that became ready, linked by next, for the caller to queue */
@@ -112,7 +125,8 @@ void jobgraph_init(struct jobgraph *g, struct cache *c,
 void jobgraph_fini(struct jobgraph *g);
 /* A new job for (node, key), its missing dependencies created depth-first (cached ones are
  * held as tile references). Ready jobs go on g->push, failed ones on g->fails. A key the store
- * holds becomes a from_store job with no inputs, ready at once. */
+ * holds, or any layer tile when there is a remote tier, becomes a from_store job with no
+ * inputs, ready at once. */
 struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct tile_key *key);
 /* A from_store job whose load failed (absent after all, or corrupt): resolves its inputs as
  * for a new job so that it is generated, marking new dependencies with j's priority. */

@@ -76,6 +76,7 @@ struct report {
 struct sched {
 	struct cache *cache;
 	struct store *store; /* borrowed, optional */
+	struct remote *remote; /* borrowed, optional */
 	int nworkers, nice;
 	pthread_t manager;
 	pthread_t *workers;
@@ -359,7 +360,16 @@ static void *manager_main(void *arg)
 		while (done) {
 			struct job *j = done;
 			done = j->next_done;
-			if (j->from_store && !j->result)
+			if (j->from_store && !j->result && j->rstate == JOB_R_WAIT) {
+				/* Another daemon generates it: park it until the remote tier
+				 * wakes it (no worker and no manager time spent waiting). */
+				j->rstate = JOB_R_PARKED;
+				s->remote->ops->wait(s->remote, &j->key, j);
+			} else if (j->from_store && !j->result && j->rstate == JOB_R_WOKEN) {
+				j->from_disk = false; /* ask the remote tier again */
+				j->next = s->g.push;
+				s->g.push = j;
+			} else if (j->from_store && !j->result)
 				jobgraph_regenerate(&s->g, j); /* not loaded after all: generate */
 			else
 				jobgraph_complete(&s->g, j);
@@ -417,14 +427,40 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sche
 {
 	const struct node *n = j->node;
 	struct tile *t = NULL;
-	int rc = store_get(s->store, &j->key, n->out, n->planet->tile_size, tc, &t);
+	int rc = -ENOENT;
+	if (j->from_disk)
+		rc = store_get(s->store, &j->key, n->out, n->planet->tile_size, tc, &t);
 	if (rc == 0) {
-		if (cls != SCHED_BULK)
-			cache_insert(s->cache, t);
 		atomic_fetch_add(&s->loaded, 1);
+	} else if (s->remote) {
+		/* The fleet's tier: another daemon's tile, or this daemon's turn to make it. */
+		bool retry = j->rstate == JOB_R_WOKEN;
+		j->rstate = JOB_R_NONE;
+		rc = s->remote->ops->get(s->remote, &j->key, n->out, n->planet->tile_size, tc,
+					 retry, &t);
+		if (rc == 0 && s->store)
+			store_put(s->store, t, cls == SCHED_BULK ? STORE_KEEP_PREFETCHED
+								 : STORE_KEEP_INCIDENTAL);
+		else if (rc == -EINPROGRESS)
+			j->rstate = JOB_R_WAIT;
 	}
+	if (rc == 0 && cls != SCHED_BULK)
+		cache_insert(s->cache, t);
 	j->result = t;
 	j->err = rc;
+}
+
+/* The remote tier's wake (its own thread): the parked job goes back to the manager. */
+static void remote_wake(void *ud, void *token)
+{
+	struct sched *s = ud;
+	struct job *j = token;
+	j->rstate = JOB_R_WOKEN;
+	xmutex_lock(&s->in_mu);
+	j->next_done = s->done;
+	s->done = j;
+	xcond_signal(&s->in_cv);
+	xmutex_unlock(&s->in_mu);
 }
 
 /* cls: the class the job was queued with; bulk work (operator prefetch) is kept on disk
@@ -449,12 +485,16 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 			cache_insert(s->cache, t); /* without a disk tier, prefetch warms memory */
 		else if (!stored)
 			cache_insert_cold(s->cache, t);
+		if (s->remote && store_keeps(n))
+			s->remote->ops->put(s->remote, t); /* write-behind; releases the lease */
 		node_count_generation(j->node, dt);
 		atomic_fetch_add(&s->generated, 1);
 		j->result = t;
 		j->err = 0;
 	} else {
 		tile_unref(t);
+		if (s->remote && store_keeps(n))
+			s->remote->ops->release(s->remote, &j->key);
 		atomic_fetch_add(&s->g.failed, 1);
 		j->result = NULL;
 		j->err = rc < 0 ? rc : -EIO;
@@ -466,7 +506,8 @@ static void *worker_main(void *arg)
 	struct worker_arg *wa = arg;
 	struct sched *s = wa->s;
 	struct gen_ctx g = { .worker = wa->idx };
-	struct tilecodec *tc = s->store ? tilecodec_create() : NULL; /* this worker's store reads */
+	/* This worker's reads from the store and the remote tier. */
+	struct tilecodec *tc = s->store || s->remote ? tilecodec_create() : NULL;
 	free(wa);
 	lower_priority(s);
 	xmutex_lock(&s->q_mu);
@@ -508,6 +549,11 @@ struct sched *sched_create(const struct sched_desc *d)
 	struct sched *s = xcalloc(1, sizeof *s);
 	s->cache = d->cache;
 	s->store = d->store;
+	s->remote = d->remote;
+	if (s->remote) {
+		s->remote->wake = remote_wake;
+		s->remote->wake_ud = s;
+	}
 	s->nworkers = d->workers;
 	if (s->nworkers <= 0) {
 		long n = sysconf(_SC_NPROCESSORS_ONLN);
@@ -522,6 +568,7 @@ struct sched *sched_create(const struct sched_desc *d)
 	int rc;
 	jobgraph_init(&s->g, s->cache, report_entry, s);
 	s->g.store = s->store;
+	s->g.remote = s->remote;
 	if ((rc = xthread_create(&s->manager, manager_main, s)))
 		die("pthread_create (manager)", -rc);
 	s->workers = xcalloc((size_t)s->nworkers, sizeof *s->workers);
@@ -544,6 +591,9 @@ void sched_destroy(struct sched *s)
 	xcond_broadcast(&s->in_cv);
 	xmutex_unlock(&s->in_mu);
 	xthread_join(s->manager);
+	/* No wait starts now; no wake runs after this (parked jobs are in the graph, freed below). */
+	if (s->remote)
+		s->remote->ops->cancel_waits(s->remote);
 	xmutex_lock(&s->q_mu);
 	s->q_stop = true;
 	xcond_broadcast(&s->q_cv);
@@ -750,6 +800,11 @@ void sched_get_stats(struct sched *s, struct sched_stats *out)
 int sched_worker_nice_error(struct sched *s)
 {
 	return atomic_load(&s->nice_err);
+}
+
+struct remote *sched_remote(struct sched *s)
+{
+	return s->remote;
 }
 
 struct store *sched_store(struct sched *s)

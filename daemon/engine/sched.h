@@ -22,6 +22,7 @@
 
 #include "cache.h"
 #include "node.h"
+#include "remote.h"
 #include "store.h"
 
 enum sched_class {
@@ -47,6 +48,8 @@ struct sched_desc {
 	struct cache *cache; /* borrowed; required */
 	struct store *store; /* borrowed, optional: the tier below the cache (store.h); tried
 			      * before generating, and every generated tile is put there */
+	struct remote *remote; /* borrowed, optional: the shared tier below the store
+				* (remote.h); its wake is set here. Outlives the scheduler. */
 	int workers;	     /* 0: one per online CPU */
 	int worker_nice;     /* added niceness for workers; 0: default (+5); <0: unchanged */
 };
@@ -101,6 +104,8 @@ void sched_get_stats(struct sched *s, struct sched_stats *out);
 /* 0, or the first -errno a worker got lowering its priority (setpriority refusals for lack of
  * privilege, EPERM/EACCES, are not errors: the worker just runs at the default priority). */
 int sched_worker_nice_error(struct sched *s);
+/* The remote tier given at creation (borrowed), or NULL. */
+struct remote *sched_remote(struct sched *s);
 /* The store given at creation (borrowed), or NULL. */
 struct store *sched_store(struct sched *s);
 

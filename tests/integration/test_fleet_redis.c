@@ -1,0 +1,539 @@
+/* test_fleet_redis — the fleet's shared Redis tier ([store] redis) through real clipmapd
+ * processes (tests/support/daemon_env) and a real redis-server the test starts on a Unix socket
+ * in its temporary directory (--port 0, no persistence) and kills at the end. What an operator
+ * would notice:
+ *   - three daemons, a client on each asking for overlapping tile sets: every unique tile is
+ *     generated once fleet-wide (the daemons' store.redis.generated add up to the unique tiles;
+ *     any extra only with a lease takeover counted), and every client gets the same bytes;
+ *   - kill -9 of the daemon holding a tile's lease: a client of another daemon waiting for that
+ *     tile still gets it once the lease has expired (a takeover, counted);
+ *   - Redis stopped mid-run: clients see no error (the daemon generates), the daemon counts it
+ *     and logs it once; Redis restarted: the daemon reconnects and sharing resumes;
+ *   - a daemon whose planet differs (another seed) never reads the others' tiles.
+ * Skipped when build/clipmapd was not built or redis-server is not installed. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <hiredis/hiredis.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+#include <xxhash.h>
+
+#include "client/net.h"
+#include "common/clock.h"
+#include "common/proto.h"
+#include "support/daemon_env.h"
+
+static const char planet_fmt[] =
+	"[planet]\nname = test\nbody = sphere\nradius = 1000000\ntile_size = 64\nmax_level = 12\n"
+	"[node base]\ntype = noise\nseed = %d\noctaves = 4\nwavelength = 300000\namplitude = 500\n"
+	"[node tint]\ntype = ramp\ninput = base\n"
+	"stops = -500 0 0 255, 0 0 128 0, 500 255 255 255\n"
+	"[layer height]\nnode = base\nformat = f32\n"
+	"[layer color]\nnode = tint\nformat = rgba8\n";
+
+#define ND 3
+#define MAXW 1024
+#define MAXSEEN 4096
+
+struct fleet {
+	char dir[64];	     /* the test's own temporary directory (redis socket, its log) */
+	char rsock[128];     /* redis-server's Unix socket */
+	pid_t redis;	     /* 0: not running */
+	struct daemon_env d[ND];
+	bool skip;
+};
+
+static bool redis_installed(void)
+{
+	char out[256];
+	char *const argv[] = { "redis-server", "--version", NULL };
+	return daemon_env_run(argv, out, sizeof out) == 0;
+}
+
+/* Starts redis-server on f->rsock and waits (bounded) until it answers. */
+static int redis_start(struct fleet *f)
+{
+	char log[128];
+	snprintf(log, sizeof log, "%s/redis.log", f->dir);
+	pid_t pid = fork();
+	if (pid < 0)
+		return -errno;
+	if (pid == 0) {
+		execlp("redis-server", "redis-server", "--port", "0", "--unixsocket", f->rsock,
+		       "--unixsocketperm", "700", "--save", "", "--appendonly", "no", "--logfile",
+		       log, "--daemonize", "no", (char *)NULL);
+		_exit(127);
+	}
+	f->redis = pid;
+	uint64_t end = clock_now_ms() + 10000;
+	while (clock_now_ms() < end) {
+		redisContext *c = redisConnectUnix(f->rsock);
+		bool ok = c && !c->err;
+		if (ok) {
+			redisReply *r = redisCommand(c, "PING");
+			ok = r && r->type == REDIS_REPLY_STATUS;
+			if (r)
+				freeReplyObject(r);
+		}
+		if (c)
+			redisFree(c);
+		if (ok)
+			return 0;
+		usleep(10000);
+	}
+	return -ETIMEDOUT;
+}
+
+static void redis_stop(struct fleet *f)
+{
+	if (f->redis <= 0)
+		return;
+	kill(f->redis, SIGKILL);
+	waitpid(f->redis, NULL, 0);
+	f->redis = 0;
+	unlink(f->rsock);
+}
+
+/* Starts daemon i on planet seed `seed` with the shared tier (lease lease_ms). */
+static int daemon_start(struct fleet *f, int i, int seed, int lease_ms)
+{
+	struct daemon_env *e = &f->d[i];
+	char text[1024], tag[32], set_redis[200], set_lease[64];
+	snprintf(tag, sizeof tag, "test_fleet%d", i);
+	snprintf(text, sizeof text, planet_fmt, seed);
+	if (daemon_env_init(e, tag) || daemon_env_planet_text(e, "test.ini", text, NULL))
+		return -1;
+	snprintf(set_redis, sizeof set_redis, "store.redis = unix:%s", f->rsock);
+	snprintf(set_lease, sizeof set_lease, "store.redis_lease_ms = %d", lease_ms);
+	const char *const set[] = { set_redis, set_lease, "engine.workers = 2",
+				    "session.max_rate = 0", "log.level = info", NULL };
+	char err[256];
+	if (daemon_env_start(e, &(struct daemon_env_conf){ .set = set }, err)) {
+		fprintf(stderr, "test_fleet_redis: %s\n", err);
+		return -1;
+	}
+	return 0;
+}
+
+static int setup_n(void **state, int n, const int *seeds, int lease_ms)
+{
+	struct fleet *f = calloc(1, sizeof *f);
+	*state = f;
+	if (!f)
+		return -1;
+	for (int i = 0; i < ND; i++)
+		f->d[i].log_fd = -1;
+	char bindir[512];
+	if (daemon_env_bindir(bindir, sizeof bindir))
+		return -1;
+	char prog[600];
+	snprintf(prog, sizeof prog, "%s/clipmapd", bindir);
+	if (access(prog, X_OK) != 0) {
+		f->skip = true;
+		return 0;
+	}
+	if (!redis_installed()) {
+		fprintf(stderr, "test_fleet_redis: redis-server is not installed (Debian package "
+				"redis-server, `make deps`): skipped\n");
+		f->skip = true;
+		return 0;
+	}
+	snprintf(f->dir, sizeof f->dir, "/tmp/test_fleet_XXXXXX");
+	if (!mkdtemp(f->dir))
+		return -1;
+	snprintf(f->rsock, sizeof f->rsock, "%s/redis.sock", f->dir);
+	if (redis_start(f)) {
+		fprintf(stderr, "test_fleet_redis: redis-server did not start\n");
+		return -1;
+	}
+	for (int i = 0; i < n; i++)
+		if (daemon_start(f, i, seeds[i], lease_ms))
+			return -1;
+	return 0;
+}
+
+static int setup3(void **state)
+{
+	return setup_n(state, 3, (const int[]){ 5, 5, 5 }, 3000);
+}
+
+static int setup_kill(void **state)
+{
+	return setup_n(state, 2, (const int[]){ 5, 5 }, 1500);
+}
+
+static int setup_pair(void **state)
+{
+	return setup_n(state, 2, (const int[]){ 5, 5 }, 3000);
+}
+
+static int setup_other(void **state)
+{
+	return setup_n(state, 2, (const int[]){ 5, 6 }, 3000);
+}
+
+static int teardown(void **state)
+{
+	struct fleet *f = *state;
+	if (!f)
+		return 0;
+	for (int i = 0; i < ND; i++) {
+		if (f->d[i].daemon > 0)
+			daemon_env_stop(&f->d[i], SIGKILL, NULL);
+		if (f->d[i].dir[0])
+			daemon_env_fini(&f->d[i]);
+	}
+	redis_stop(f);
+	if (f->dir[0]) {
+		char p[160];
+		snprintf(p, sizeof p, "%s/redis.log", f->dir);
+		unlink(p);
+		rmdir(f->dir);
+	}
+	free(f);
+	return 0;
+}
+
+#define NEED(f)               \
+	do {                  \
+		if ((f)->skip) \
+			skip(); \
+	} while (0)
+
+static struct net_conn *conn(struct daemon_env *e, uint32_t *pid)
+{
+	struct net_conn *c = NULL;
+	char err[256];
+	if (net_connect(&(struct net_opts){ .socket_path = e->sock, .name = "test_fleet" }, &c,
+			err))
+		fail_msg("%s", err);
+	struct proto_msg m = { 0 };
+	if (net_open_planet(c, "test", &m, 5000, err))
+		fail_msg("%s", err);
+	*pid = m.opened.planet_id;
+	proto_msg_fini(&m);
+	return c;
+}
+
+static uint64_t stat_of(struct net_conn *c, const char *key)
+{
+	char err[256];
+	struct proto_msg m = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
+	if (net_send(c, &m, err))
+		fail_msg("%s", err);
+	struct proto_msg r = { 0 };
+	if (net_expect(c, PROTO_STATS, &r, 5000, NULL, NULL, err))
+		fail_msg("%s", err);
+	uint64_t v = UINT64_MAX;
+	for (uint16_t i = 0; i < r.stats.count; i++)
+		if (strcmp(r.stats.items[i].key, key) == 0)
+			v = r.stats.items[i].u;
+	proto_msg_fini(&r);
+	if (v == UINT64_MAX)
+		fail_msg("no stat %s", key);
+	return v;
+}
+
+/* Both layers of every tile of level (ly + 1, ly) in [x0, x0 + w) × [y0, y0 + h). */
+static uint32_t block(struct proto_want_entry *w, uint32_t n, int ly, uint32_t x0, uint32_t y0,
+		      uint32_t wd, uint32_t h)
+{
+	for (uint32_t y = y0; y < y0 + h; y++)
+		for (uint32_t x = x0; x < x0 + wd; x++)
+			for (uint8_t l = 0; l < 2 && n < MAXW; l++)
+				w[n++] = (struct proto_want_entry){
+					.layer = l, .cls = PROTO_CLASS_VISIBLE, .lx = (uint8_t)(ly + 1),
+					.ly = (uint8_t)ly, .x = x % (2u << ly), .y = y };
+	return n;
+}
+
+/* The tiles every client received: (layer, key) → XXH3 of the texels, to compare across
+ * daemons, and how many distinct there are. */
+struct seen {
+	struct {
+		uint8_t layer;
+		struct tile_key key;
+		uint64_t h;
+	} a[MAXSEEN];
+	size_t n;
+};
+
+static void seen_add(struct seen *s, uint8_t layer, const struct tile_key *k, uint64_t h)
+{
+	for (size_t i = 0; i < s->n; i++)
+		if (s->a[i].layer == layer && s->a[i].key.lx == k->lx && s->a[i].key.ly == k->ly &&
+		    s->a[i].key.x == k->x && s->a[i].key.y == k->y) {
+			if (s->a[i].h != h)
+				fail_msg("layer %u tile (%u,%u) %u,%u: two daemons sent different "
+					 "bytes", layer, k->lx, k->ly, k->x, k->y);
+			return;
+		}
+	assert_true(s->n < MAXSEEN);
+	s->a[s->n].layer = layer;
+	s->a[s->n].key = *k;
+	s->a[s->n++].h = h;
+}
+
+static void send_want(struct net_conn *c, uint32_t pid, uint32_t seq,
+		      const struct proto_want_entry *w, uint32_t n)
+{
+	char err[256];
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = pid, .seq = seq, .count = n, .entries = w } };
+	if (net_send(c, &m, err))
+		fail_msg("%s", err);
+}
+
+/* Receives the n tiles of WANT seq (every one must arrive, none may fail) into s (optional). */
+static void receive(struct net_conn *c, uint32_t seq, uint32_t n, int timeout_ms, struct seen *s)
+{
+	char err[256];
+	uint32_t got = 0;
+	size_t cap = 64 * 64 * 4;
+	uint8_t *px = malloc(cap);
+	while (got < n) {
+		struct proto_msg r = { 0 };
+		if (net_recv(c, &r, timeout_ms, err))
+			fail_msg("after %u of %u tiles: %s", got, n, err);
+		if (r.type == PROTO_TILE_FAIL)
+			fail_msg("TILE_FAIL: %s", r.tile_fail.message);
+		if (r.type == PROTO_ERROR)
+			fail_msg("ERROR from the daemon");
+		if (r.type == PROTO_TILE && r.tile.seq == seq) {
+			if (net_tile_decode(c, &r.tile, px, cap, err))
+				fail_msg("%s", err);
+			if (s)
+				seen_add(s, r.tile.layer, &r.tile.key, XXH3_64bits(px, r.tile.enc.raw_len));
+			got++;
+		}
+		proto_msg_fini(&r);
+	}
+	free(px);
+}
+
+static uint64_t fleet_sum(struct net_conn **c, int n, const char *key)
+{
+	uint64_t s = 0;
+	for (int i = 0; i < n; i++)
+		s += stat_of(c[i], key);
+	return s;
+}
+
+/* Three daemons, overlapping sets: each unique tile generated once fleet-wide. */
+static void generated_once(void **state)
+{
+	struct fleet *f = *state;
+	NEED(f);
+	static struct proto_want_entry w[ND][MAXW];
+	static struct seen seen;
+	seen.n = 0;
+	uint32_t n[ND] = { 0 }, pid[ND];
+	struct net_conn *c[ND];
+	/* Overlapping windows: at level 3 (x 0..15, y 0..7) and level 5, shifted by two columns
+	 * per daemon, so most tiles are wanted by two or three daemons. */
+	for (int i = 0; i < ND; i++) {
+		n[i] = block(w[i], 0, 3, (uint32_t)(2 * i), 0, 10, 8);
+		n[i] = block(w[i], n[i], 5, (uint32_t)(20 + 2 * i), 10, 8, 6);
+		c[i] = conn(&f->d[i], &pid[i]);
+		assert_int_equal(stat_of(c[i], "store.redis.connected"), 1);
+	}
+	for (int i = 0; i < ND; i++)
+		send_want(c[i], pid[i], 1, w[i], n[i]);
+	for (int i = 0; i < ND; i++)
+		receive(c[i], 1, n[i], 60000, &seen);
+	/* The writes are write-behind: wait (bounded) until every generated tile is written. */
+	uint64_t end = clock_now_ms() + 10000;
+	while (fleet_sum(c, ND, "store.redis.writes") < fleet_sum(c, ND, "store.redis.generated") &&
+	       clock_now_ms() < end)
+		usleep(20000);
+	uint64_t gen = fleet_sum(c, ND, "store.redis.generated");
+	uint64_t take = fleet_sum(c, ND, "store.redis.takeovers");
+	uint64_t hits = fleet_sum(c, ND, "store.redis.hits");
+	uint64_t waits = fleet_sum(c, ND, "store.redis.waits");
+	uint64_t all = (uint64_t)n[0] + n[1] + n[2];
+	printf("fleet: %zu unique tiles wanted (%llu wants), %llu generated fleet-wide "
+	       "(%.3f per unique), %llu Redis hits, %llu waits, %llu takeovers\n",
+	       seen.n, (unsigned long long)all, (unsigned long long)gen,
+	       (double)gen / (double)seen.n, (unsigned long long)hits, (unsigned long long)waits,
+	       (unsigned long long)take);
+	assert_true(gen >= seen.n);
+	if (gen > seen.n) /* duplicates only where a lease expired, and counted */
+		assert_true(gen - seen.n <= take);
+	assert_true(gen * 100 <= seen.n * 101);
+	assert_int_equal(fleet_sum(c, ND, "store.redis.bad"), 0);
+	assert_int_equal(fleet_sum(c, ND, "store.redis.drops"), 0);
+	/* What was not generated here came from the fleet: every want is a hit or a generation
+	 * (or a wait, then a hit). */
+	assert_true(hits + gen >= seen.n);
+	assert_true(hits > 0);
+	for (int i = 0; i < ND; i++)
+		net_close(c[i]);
+}
+
+static bool any_lease(redisContext *rc)
+{
+	redisReply *r = redisCommand(rc, "KEYS cm:l:*");
+	bool any = r && r->type == REDIS_REPLY_ARRAY && r->elements > 0;
+	if (r)
+		freeReplyObject(r);
+	return any;
+}
+
+static bool any_value(redisContext *rc)
+{
+	redisReply *r = redisCommand(rc, "KEYS cm:t:*");
+	bool any = r && r->type == REDIS_REPLY_ARRAY && r->elements > 0;
+	if (r)
+		freeReplyObject(r);
+	return any;
+}
+
+/* kill -9 of the daemon holding a lease: the tile still reaches the other daemon's client. */
+static void holder_killed(void **state)
+{
+	struct fleet *f = *state;
+	NEED(f);
+	redisContext *rc = redisConnectUnix(f->rsock);
+	assert_true(rc && !rc->err);
+	uint32_t pa, pb;
+	struct net_conn *a = conn(&f->d[0], &pa), *b = conn(&f->d[1], &pb);
+	/* One height tile at a time on daemon A; A is stopped the moment its lease shows and
+	 * before its tile does (else try the next tile: A was faster than the poll). */
+	struct proto_want_entry w = { 0 };
+	bool caught = false;
+	for (uint32_t x = 0; x < 64 && !caught; x++) {
+		w = (struct proto_want_entry){ .layer = 0, .cls = PROTO_CLASS_VISIBLE, .lx = 9,
+					       .ly = 8, .x = 100 + x, .y = 50 };
+		redisReply *r = redisCommand(rc, "FLUSHALL");
+		if (r)
+			freeReplyObject(r);
+		send_want(a, pa, x + 1, &w, 1);
+		uint64_t end = clock_now_ms() + 5000;
+		while (!any_lease(rc) && !any_value(rc) && clock_now_ms() < end)
+			;
+		kill(f->d[0].daemon, SIGSTOP);
+		caught = any_lease(rc) && !any_value(rc);
+		if (!caught)
+			kill(f->d[0].daemon, SIGCONT);
+	}
+	if (!caught) {
+		redisFree(rc);
+		net_close(a);
+		net_close(b);
+		fail_msg("daemon A never held a lease long enough to be stopped");
+	}
+	assert_int_equal(daemon_env_stop(&f->d[0], SIGKILL, NULL), 0);
+	net_close(a);
+	uint64_t t0 = clock_now_ms();
+	send_want(b, pb, 1, &w, 1);
+	receive(b, 1, 1, 30000, NULL);
+	uint64_t dt = clock_now_ms() - t0;
+	printf("holder killed: tile delivered by the other daemon after %llu ms (lease 1500 ms)\n",
+	       (unsigned long long)dt);
+	assert_true(stat_of(b, "store.redis.waits") >= 1);
+	assert_int_equal(stat_of(b, "store.redis.takeovers"), 1);
+	assert_int_equal(stat_of(b, "store.redis.generated"), 1);
+	assert_true(any_value(rc)); /* and B shared it */
+	net_close(b);
+	redisFree(rc);
+}
+
+/* Redis stopped mid-run: no client error, counted, logged once; restarted: sharing resumes. */
+static void redis_restart(void **state)
+{
+	struct fleet *f = *state;
+	NEED(f);
+	static struct proto_want_entry w[MAXW];
+	uint32_t pa, pb;
+	struct net_conn *a = conn(&f->d[0], &pa), *b = conn(&f->d[1], &pb);
+	uint32_t n = block(w, 0, 4, 0, 0, 6, 4);
+	send_want(a, pa, 1, w, n);
+	receive(a, 1, n, 60000, NULL);
+
+	redis_stop(f);
+	/* B asks for new tiles while Redis is gone: all arrive, generated by B. */
+	n = block(w, 0, 4, 8, 6, 6, 4);
+	uint64_t gen0 = stat_of(b, "store.redis.generated");
+	send_want(b, pb, 2, w, n);
+	receive(b, 2, n, 60000, NULL);
+	assert_int_equal(stat_of(b, "store.redis.generated") - gen0, n);
+	assert_int_equal(stat_of(b, "store.redis.connected"), 0);
+	assert_true(stat_of(b, "store.redis.errors") >= 1);
+	/* More tiles while down: still no error, and the log says it once, not per tile. */
+	n = block(w, 0, 5, 0, 0, 6, 4);
+	send_want(b, pb, 3, w, n);
+	receive(b, 3, n, 60000, NULL);
+	assert_int_equal(daemon_env_log_count(&f->d[1], "unreachable"), 1);
+
+	assert_int_equal(redis_start(f), 0);
+	uint64_t end = clock_now_ms() + 20000;
+	while ((stat_of(a, "store.redis.connected") != 1 ||
+		stat_of(b, "store.redis.connected") != 1) && clock_now_ms() < end)
+		usleep(50000);
+	assert_int_equal(stat_of(a, "store.redis.connected"), 1);
+	assert_int_equal(stat_of(b, "store.redis.connected"), 1);
+	assert_true(daemon_env_log_count(&f->d[1], "connected, sharing tiles") >= 2);
+
+	/* Sharing resumed: what A generates now, B takes from Redis. */
+	n = block(w, 0, 6, 30, 20, 6, 4);
+	send_want(a, pa, 4, w, n);
+	receive(a, 4, n, 60000, NULL);
+	end = clock_now_ms() + 10000;
+	while (stat_of(a, "store.redis.writes") < stat_of(a, "store.redis.generated") &&
+	       clock_now_ms() < end)
+		usleep(20000);
+	uint64_t hits0 = stat_of(b, "store.redis.hits");
+	gen0 = stat_of(b, "store.redis.generated");
+	send_want(b, pb, 4, w, n);
+	receive(b, 4, n, 60000, NULL);
+	assert_int_equal(stat_of(b, "store.redis.hits") - hits0, n);
+	assert_int_equal(stat_of(b, "store.redis.generated"), gen0);
+	net_close(a);
+	net_close(b);
+}
+
+/* A daemon whose planet differs (another seed: other content hashes) never reads the others'
+ * tiles. */
+static void other_planet(void **state)
+{
+	struct fleet *f = *state;
+	NEED(f);
+	static struct proto_want_entry w[MAXW];
+	uint32_t pa, pb;
+	struct net_conn *a = conn(&f->d[0], &pa), *b = conn(&f->d[1], &pb);
+	uint32_t n = block(w, 0, 3, 0, 0, 8, 4);
+	send_want(a, pa, 1, w, n);
+	receive(a, 1, n, 60000, NULL);
+	uint64_t end = clock_now_ms() + 10000;
+	while (stat_of(a, "store.redis.writes") < n && clock_now_ms() < end)
+		usleep(20000);
+	assert_int_equal(stat_of(a, "store.redis.writes"), n);
+	send_want(b, pb, 1, w, n);
+	receive(b, 1, n, 60000, NULL);
+	assert_int_equal(stat_of(b, "store.redis.hits"), 0);
+	assert_int_equal(stat_of(b, "store.redis.waits"), 0);
+	assert_int_equal(stat_of(b, "store.redis.generated"), n);
+	net_close(a);
+	net_close(b);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test_setup_teardown(generated_once, setup3, teardown),
+		cmocka_unit_test_setup_teardown(holder_killed, setup_kill, teardown),
+		cmocka_unit_test_setup_teardown(redis_restart, setup_pair, teardown),
+		cmocka_unit_test_setup_teardown(other_planet, setup_other, teardown),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
