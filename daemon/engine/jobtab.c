@@ -253,6 +253,8 @@ static void drop_job(struct jobgraph *g, struct job *j)
 			remove_dependent(j->dep[k], j);
 	if (j->mstate == JOB_WAITING)
 		atomic_fetch_sub(&g->waiting, 1);
+	if (j->leased && g->remote) /* cancelled or failed before it was generated */
+		g->remote->ops->release(g->remote, &j->key);
 	jobmap_remove(&g->map, j);
 	free_job(j);
 }
@@ -345,6 +347,8 @@ void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel)
 	while (cancel) {
 		struct job *j = cancel;
 		cancel = j->next;
+		if (j->leased && g->remote) /* nobody wants it now: others need not wait */
+			g->remote->ops->release(g->remote, &j->key);
 		jobmap_remove(&g->map, j);
 		free_job(j);
 	}

@@ -60,6 +60,8 @@ struct job {
 			    * memory (disk store, then remote), no inputs */
 	bool from_disk;	   /* with from_store: the disk store holds it */
 	uint8_t rstate;	   /* enum job_rstate: the remote tier's wait (worker ↔ manager) */
+	bool leased;	   /* this daemon may hold the remote tier's lease on key: released
+			    * when the job is dropped without its tile written (remote.h) */
 
 	/* Manager only. */
 	enum job_mstate mstate;

@@ -443,6 +443,8 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sche
 								 : STORE_KEEP_INCIDENTAL);
 		else if (rc == -EINPROGRESS)
 			j->rstate = JOB_R_WAIT;
+		else
+			j->leased = true; /* generate it: the lease is (most likely) ours */
 	}
 	if (rc == 0 && cls != SCHED_BULK)
 		cache_insert(s->cache, t);
@@ -487,6 +489,7 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 			cache_insert_cold(s->cache, t);
 		if (s->remote && store_keeps(n))
 			s->remote->ops->put(s->remote, t); /* write-behind; releases the lease */
+		j->leased = false;
 		node_count_generation(j->node, dt);
 		atomic_fetch_add(&s->generated, 1);
 		j->result = t;
@@ -495,6 +498,7 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 		tile_unref(t);
 		if (s->remote && store_keeps(n))
 			s->remote->ops->release(s->remote, &j->key);
+		j->leased = false;
 		atomic_fetch_add(&s->g.failed, 1);
 		j->result = NULL;
 		j->err = rc < 0 ? rc : -EIO;

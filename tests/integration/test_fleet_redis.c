@@ -9,6 +9,7 @@
  *     tile still gets it once the lease has expired (a takeover, counted);
  *   - Redis stopped mid-run: clients see no error (the daemon generates), the daemon counts it
  *     and logs it once; Redis restarted: the daemon reconnects and sharing resumes;
+ *   - a record damaged in Redis is never served (counted, regenerated, the right bytes);
  *   - a daemon whose planet differs (another seed) never reads the others' tiles.
  * Skipped when build/clipmapd was not built or redis-server is not installed. */
 #include <stdarg.h>
@@ -502,6 +503,50 @@ static void redis_restart(void **state)
 	net_close(b);
 }
 
+/* A record damaged in Redis is never served: counted, regenerated, and the bytes are right. */
+static void bad_record(void **state)
+{
+	struct fleet *f = *state;
+	NEED(f);
+	static struct proto_want_entry w[MAXW];
+	static struct seen seen;
+	seen.n = 0;
+	uint32_t pa, pb;
+	struct net_conn *a = conn(&f->d[0], &pa), *b = conn(&f->d[1], &pb);
+	uint32_t n = block(w, 0, 3, 0, 0, 6, 3);
+	send_want(a, pa, 1, w, n);
+	receive(a, 1, n, 60000, &seen);
+	uint64_t end = clock_now_ms() + 10000;
+	while (stat_of(a, "store.redis.writes") < n && clock_now_ms() < end)
+		usleep(20000);
+	assert_int_equal(stat_of(a, "store.redis.writes"), n);
+	/* One byte flipped at the end of every value (inside the compressed texels). */
+	redisContext *rc = redisConnectUnix(f->rsock);
+	assert_true(rc && !rc->err);
+	redisReply *keys = redisCommand(rc, "KEYS cm:t:*");
+	assert_true(keys && keys->type == REDIS_REPLY_ARRAY);
+	assert_int_equal(keys->elements, n);
+	for (size_t i = 0; i < keys->elements; i++) {
+		redisReply *v = redisCommand(rc, "GET %s", keys->element[i]->str);
+		assert_true(v && v->type == REDIS_REPLY_STRING && v->len > 41);
+		char x = (char)(v->str[v->len - 1] ^ 0x5a);
+		redisReply *r = redisCommand(rc, "SETRANGE %s %lld %b", keys->element[i]->str,
+					     (long long)v->len - 1, &x, (size_t)1);
+		assert_true(r && r->type == REDIS_REPLY_INTEGER);
+		freeReplyObject(r);
+		freeReplyObject(v);
+	}
+	freeReplyObject(keys);
+	send_want(b, pb, 1, w, n);
+	receive(b, 1, n, 60000, &seen); /* the same bytes as A sent */
+	assert_int_equal(stat_of(b, "store.redis.bad"), n);
+	assert_int_equal(stat_of(b, "store.redis.hits"), 0);
+	assert_int_equal(stat_of(b, "store.redis.generated"), n);
+	redisFree(rc);
+	net_close(a);
+	net_close(b);
+}
+
 /* A daemon whose planet differs (another seed: other content hashes) never reads the others'
  * tiles. */
 static void other_planet(void **state)
@@ -533,6 +578,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(generated_once, setup3, teardown),
 		cmocka_unit_test_setup_teardown(holder_killed, setup_kill, teardown),
 		cmocka_unit_test_setup_teardown(redis_restart, setup_pair, teardown),
+		cmocka_unit_test_setup_teardown(bad_record, setup_pair, teardown),
 		cmocka_unit_test_setup_teardown(other_planet, setup_other, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
