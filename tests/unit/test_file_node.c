@@ -33,6 +33,7 @@
 #include "engine/node_types.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
+#include "engine/nodes/file_digest.h"
 
 static char dir[64];
 static struct planet pl;
@@ -567,6 +568,93 @@ static void content_hash(void **state)
 	fnode_fini(&d);
 }
 
+/* Copies a file byte for byte (a fresh inode and mtime). */
+static void copy_file(const char *from, const char *to)
+{
+	FILE *a = fopen(from, "rb"), *b = fopen(to, "wb");
+	assert_non_null(a);
+	assert_non_null(b);
+	int ch;
+	while ((ch = fgetc(a)) != EOF)
+		fputc(ch, b);
+	fclose(a);
+	assert_int_equal(fclose(b), 0);
+}
+
+/* The hash names the data, not where it lies: a copy at another path (another inode, another
+ * mtime: another machine of a fleet) has the same hash; one changed byte another. */
+static void content_hash_copies(void **state)
+{
+	(void)state;
+	float px[16 * 8];
+	char err[256];
+	for (int i = 0; i < 16 * 8; i++)
+		px[i] = (float)i * 0.5f;
+	assert_int_equal(img_write(tpath("orig.tif"), 16, 8, 1, IMG_F32, px, err), 0);
+	assert_int_equal(mkdir(tpath("elsewhere"), 0755), 0);
+	usleep(20000); /* another mtime */
+	copy_file(tpath("orig.tif"), tpath("elsewhere/copy.tif"));
+	/* The same image but one texel a last bit higher. */
+	px[37] = nextafterf(px[37], 1e9f);
+	assert_int_equal(img_write(tpath("changed.tif"), 16, 8, 1, IMG_F32, px, err), 0);
+	struct stat st;
+	assert_int_equal(stat(tpath("orig.tif"), &st), 0);
+	struct fnode a, b, c;
+	fnode_ok(&a, "[node x]\ntype = file\npath = orig.tif\n" GLOBAL);
+	fnode_ok(&b, "[node x]\ntype = file\npath = elsewhere/copy.tif\n" GLOBAL);
+	assert_true(a.n.hash == b.n.hash);
+	uint8_t d1[16], d2[16];
+	struct stat sc;
+	assert_int_equal(stat(tpath("changed.tif"), &sc), 0);
+	assert_int_equal(file_digest(tpath("orig.tif"), &st, UINT64_MAX, d1, err), 0);
+	assert_int_equal(file_digest(tpath("changed.tif"), &sc, UINT64_MAX, d2, err), 0);
+	assert_memory_not_equal(d1, d2, 16);
+	fnode_ok(&c, "[node x]\ntype = file\npath = changed.tif\n" GLOBAL);
+	assert_true(a.n.hash != c.n.hash);
+	fnode_fini(&c);
+	fnode_fini(&a);
+	fnode_fini(&b);
+}
+
+/* From cache_min bytes on the digest is kept in FILE.digest and reused while the file's size,
+ * mtime and inode match; a changed file is hashed again. Smaller files leave no sidecar. */
+static void digest_sidecar(void **state)
+{
+	(void)state;
+	write_fn("side.tif", 16, 8, -180, -90, 180, 90);
+	char err[256], side[160];
+	snprintf(side, sizeof side, "%s.digest", tpath("side.tif"));
+	struct stat st;
+	uint8_t d[16], d2[16];
+	assert_int_equal(stat(tpath("side.tif"), &st), 0);
+	assert_int_equal(file_digest(tpath("side.tif"), &st, UINT64_MAX, d, err), 0);
+	assert_int_not_equal(access(side, F_OK), 0); /* small: no sidecar */
+	assert_int_equal(file_digest(tpath("side.tif"), &st, 0, d2, err), 0);
+	assert_memory_equal(d, d2, 16);
+	assert_int_equal(access(side, F_OK), 0);
+	/* The sidecar is what is used while the stamp matches: forge its digest to see it. */
+	FILE *f = fopen(side, "r");
+	char line[256];
+	assert_non_null(fgets(line, sizeof line, f));
+	fclose(f);
+	char *hex = strrchr(line, ' ') + 1;
+	hex[0] = hex[0] == '0' ? '1' : '0';
+	f = fopen(side, "w");
+	fputs(line, f);
+	fclose(f);
+	assert_int_equal(file_digest(tpath("side.tif"), &st, 0, d2, err), 0);
+	assert_memory_not_equal(d, d2, 16);
+	/* The file changes (rewritten: new mtime and inode): hashed again, sidecar rewritten. */
+	usleep(20000);
+	write_fn("side.tif", 16, 8, -180, -90, 180, 90);
+	assert_int_equal(stat(tpath("side.tif"), &st), 0);
+	assert_int_equal(file_digest(tpath("side.tif"), &st, 0, d2, err), 0);
+	assert_memory_equal(d, d2, 16); /* the same bytes as the first time */
+	/* Unreadable: a clear error naming the file. */
+	assert_int_equal(file_digest(tpath("none.tif"), &st, 0, d2, err), -ENOENT);
+	assert_non_null(strstr(err, "none.tif"));
+}
+
 struct job {
 	struct fnode *f;
 	struct gen_ctx g;
@@ -985,6 +1073,8 @@ int main(void)
 		cmocka_unit_test(color_channels),
 		cmocka_unit_test(bad_params),
 		cmocka_unit_test(content_hash),
+		cmocka_unit_test(content_hash_copies),
+		cmocka_unit_test(digest_sidecar),
 		cmocka_unit_test(concurrent_generate),
 		cmocka_unit_test(shared_cache),
 		cmocka_unit_test(changed_file_reread),

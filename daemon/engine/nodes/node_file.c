@@ -30,8 +30,10 @@
  * unless `channel` is given; kind = color wants 8-bit, or 16-bit RGB[A]), and a height file
  * with nodata has MIP levels of its own (or a huge float nodata: file_resample.c), since
  * OIIO's automip would average nodata into heights.
- * The file's size, mtime and inode are hashed: a changed file gets new tile names after a
- * reload, and the shared cache forgets the old file's pixels (img_cache_set_version).
+ * The file's bytes are hashed (file_digest.h: a digest, kept beside files of 64 MiB or more):
+ * identical copies at other paths or on other machines name the same tiles (a fleet shares
+ * them), a changed file gets new tile names after a reload, and the shared cache forgets the
+ * old file's pixels (img_cache_set_version, keyed by size, mtime and inode).
  * How tiles are made (the MIP level, anisotropic taps, the polar caps, missing data):
  * file_resample.h.
  */
@@ -50,6 +52,7 @@
 #include "common/xthread.h"
 #include "engine/planet.h"
 
+#include "file_digest.h"
 #include "file_resample.h"
 
 static const char *const kind_names[] = { "height", "color", NULL };
@@ -221,10 +224,10 @@ static int parse_height(struct node_parse *p, struct file_source *f, const struc
 		f->has_nodata = true;
 		f->nodata = (float)v;
 	} else if (file_desc(f, b, &fnd) & 2) {
-		f->has_nodata = true; /* recorded by clipmapctl import; the file's mtime is hashed */
+		f->has_nodata = true; /* recorded by clipmapctl import; the file is hashed */
 		f->nodata = (float)fnd;
 	} else if (g->has_nodata && !isnan(g->nodata)) {
-		f->has_nodata = true; /* the file's own (GDAL_NODATA); its mtime is hashed */
+		f->has_nodata = true; /* the file's own (GDAL_NODATA); the file is hashed */
 		f->nodata = (float)g->nodata;
 	}
 	if ((rc = np_double(p, "fill", 0, -1e30, 1e30, &v)))
@@ -294,9 +297,14 @@ static int file_create(struct node *nd, struct node_parse *p)
 	 * file system's timestamp granularity still counts as changed. */
 	int64_t stamp[4] = { (int64_t)st.st_size, (int64_t)st.st_mtim.tv_sec,
 			     (int64_t)st.st_mtim.tv_nsec, (int64_t)st.st_ino };
-	np_hash_bytes(p, "path", 5);
-	np_hash_bytes(p, f->path, strlen(f->path) + 1);
-	np_hash_bytes(p, stamp, sizeof stamp);
+	/* The hash names the data, not where it lies: identical copies (other paths, inodes,
+	 * mtimes: another machine of a fleet) share tiles; any changed byte gives new names. */
+	uint8_t digest[16];
+	char derr[256];
+	if ((rc = file_digest(f->path, &st, FILE_DIGEST_CACHE_MIN, digest, derr)))
+		return np_error(p, "path", "%s", derr);
+	np_hash_bytes(p, "data", 5);
+	np_hash_bytes(p, digest, sizeof digest);
 
 	long cache_mb;
 	if ((rc = parse_cache_mb(p, &cache_mb)))
