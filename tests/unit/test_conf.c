@@ -87,6 +87,29 @@ static void test_values(void **state)
 	conf_fini(&c);
 }
 
+/* [store] redis: a Unix socket relative to the file, or host:port; the lease's default. */
+static void test_redis(void **state)
+{
+	(void)state;
+	struct conf c;
+	char err[256];
+	const char *t = "[store]\nredis = unix:run/redis.sock\nredis_password = s3cret\n";
+	assert_int_equal(conf_parse("/etc/x/d.conf", t, strlen(t), &c, err), 0);
+	assert_string_equal(c.store_redis, "unix:/etc/x/run/redis.sock");
+	assert_string_equal(c.store_redis_password, "s3cret");
+	assert_int_equal(c.store_redis_lease_ms, 2000);
+	conf_fini(&c);
+	t = "[store]\nredis = 10.0.0.5:6379\nredis_lease_ms = 500\n";
+	assert_int_equal(conf_parse("/etc/x/d.conf", t, strlen(t), &c, err), 0);
+	assert_string_equal(c.store_redis, "10.0.0.5:6379");
+	assert_null(c.store_redis_password);
+	assert_int_equal(c.store_redis_lease_ms, 500);
+	conf_fini(&c);
+	assert_int_equal(conf_parse("/etc/x/d.conf", "", 0, &c, err), 0);
+	assert_null(c.store_redis); /* no shared tier unless set */
+	conf_fini(&c);
+}
+
 static void test_errors(void **state)
 {
 	(void)state;
@@ -96,6 +119,11 @@ static void test_errors(void **state)
 	parse_fails("[engine]\ncache_mb = 1\n", "d.conf:2: cache_mb:");
 	parse_fails("[store]\ndisk_mb = 0\n", "d.conf:2: disk_mb: \"0\": expected an integer in [1, ");
 	parse_fails("[store]\nsize = 1\n", "d.conf:2: size: unknown key in [store]");
+	parse_fails("[store]\nredis = localhost\n",
+		    "d.conf:2: redis: \"localhost\" is not unix:/path or host:port");
+	parse_fails("[store]\nredis = unix:\n", "d.conf:2: redis: unix: needs a socket path");
+	parse_fails("[store]\nredis_lease_ms = 10\n",
+		    "d.conf:2: redis_lease_ms: \"10\": expected an integer in [50, 600000]");
 	parse_fails("[engine]\nimage_cache_mb = 8\n",
 		    "d.conf:2: image_cache_mb: \"8\": expected an integer in [16, 1048576]");
 	parse_fails("\n[engine]\nimage_cache_mb = 1G\n", "d.conf:3: image_cache_mb: \"1G\"");
@@ -148,7 +176,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_defaults), cmocka_unit_test(test_shipped_file),
 		cmocka_unit_test(test_values),	 cmocka_unit_test(test_errors),
-		cmocka_unit_test(test_loopback),
+		cmocka_unit_test(test_loopback),	 cmocka_unit_test(test_redis),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
