@@ -37,6 +37,7 @@
 #include "common/grid.h"
 #include "common/proto.h"
 #include "support/daemon_env.h"
+#include "support/net_stat.h"
 
 #define TOKEN "pf-token-123"
 
@@ -399,19 +400,9 @@ static void dry_run_and_budget(void **state)
 static uint64_t stat_of(struct net_conn *c, const char *key)
 {
 	char err[256];
-	struct proto_msg m = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
-	if (net_send(c, &m, err))
+	uint64_t v = 0;
+	if (net_stat_u64(c, key, &v, err))
 		fail_msg("%s", err);
-	struct proto_msg r = { 0 };
-	if (net_expect(c, PROTO_STATS, &r, 5000, NULL, NULL, err))
-		fail_msg("%s", err);
-	uint64_t v = UINT64_MAX;
-	for (uint16_t i = 0; i < r.stats.count; i++)
-		if (strcmp(r.stats.items[i].key, key) == 0)
-			v = r.stats.items[i].u;
-	proto_msg_fini(&r);
-	if (v == UINT64_MAX)
-		fail_msg("no stat %s", key);
 	return v;
 }
 

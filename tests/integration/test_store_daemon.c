@@ -36,6 +36,7 @@
 #include "engine/sched.h"
 #include "engine/store.h"
 #include "support/daemon_env.h"
+#include "support/net_stat.h"
 
 static const char planet_text[] =
 	"[planet]\nname = test\nbody = sphere\nradius = 1000000\ntile_size = 64\nmax_level = 12\n"
@@ -139,19 +140,9 @@ static struct net_conn *conn(struct env *e, uint32_t *pid)
 static uint64_t stat_of(struct net_conn *c, const char *key)
 {
 	char err[256];
-	struct proto_msg m = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
-	if (net_send(c, &m, err))
+	uint64_t v = 0;
+	if (net_stat_u64(c, key, &v, err))
 		fail_msg("%s", err);
-	struct proto_msg r = { 0 };
-	if (net_expect(c, PROTO_STATS, &r, 5000, NULL, NULL, err))
-		fail_msg("%s", err);
-	uint64_t v = UINT64_MAX;
-	for (uint16_t i = 0; i < r.stats.count; i++)
-		if (strcmp(r.stats.items[i].key, key) == 0)
-			v = r.stats.items[i].u;
-	proto_msg_fini(&r);
-	if (v == UINT64_MAX)
-		fail_msg("no stat %s", key);
 	return v;
 }
 
