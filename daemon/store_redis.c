@@ -229,15 +229,21 @@ static int rds_get(struct remote *base, const struct tile_key *k, enum pix_type 
 			return -ENOENT; /* down: every daemon fends for itself */
 		redisReply *rep = redisCommand(c, "EVAL %s 2 %s %s %s %s %s", LEASE_LUA, val, lease,
 					       r->owner, ms, mode);
-		if (!rep || rep->type == REDIS_REPLY_ERROR) {
+		if (!rep) {
 			char why[128];
-			snprintf(why, sizeof why, "%s", rep ? rep->str : c->errstr);
-			if (rep)
-				freeReplyObject(rep);
+			snprintf(why, sizeof why, "%s", c->errstr);
 			redisFree(c);
-			if (attempt == 0 && !rep)
+			if (attempt == 0)
 				continue; /* a stale idle connection (Redis restarted): once more */
 			mark_down(r, why);
+			return -ENOENT;
+		}
+		if (rep->type == REDIS_REPLY_ERROR) {
+			/* Reachable but refusing (OOM under noeviction, a script error): this
+			 * tile is generated here, unshared. */
+			atomic_fetch_add(&r->errors, 1);
+			freeReplyObject(rep);
+			pool_give(r, c, ep);
 			return -ENOENT;
 		}
 		int rc;
@@ -311,11 +317,11 @@ static void rds_release(struct remote *base, const struct tile_key *k)
 }
 
 /* Sends one batch as a pipeline: each tile's SET, then its lease's DEL (after the value, so
- * a waiter never sees neither). Returns 0 or -EIO (connection lost: *c freed). */
-static int write_batch(struct rds *r, redisContext **c, struct tilecodec *tc, struct witem *b,
+ * a waiter never sees neither). Returns how many tiles were written; a lost connection marks
+ * the tier down and frees *c. */
+static uint64_t write_batch(struct rds *r, redisContext **c, struct tilecodec *tc, struct witem *b,
 		       size_t n)
 {
-	size_t sent = 0;
 	for (size_t i = 0; i < n; i++) {
 		char val[NAME_LEN], lease[NAME_LEN];
 		key_names(&b[i].key, val, lease);
@@ -327,32 +333,33 @@ static int write_batch(struct rds *r, redisContext **c, struct tilecodec *tc, st
 			store_value_encode(tc, b[i].t, r->zstd_level, &v, &vn);
 			redisAppendCommand(*c, "SET %s %b", val, v, vn);
 			free(v);
-			sent++;
 		}
 		redisAppendCommand(*c, "DEL %s", lease);
-		sent++;
 	}
+	/* The replies, in order: each item's SET (for a put), then its DEL. */
 	int rc = 0;
-	for (size_t i = 0; i < sent; i++) {
-		redisReply *rep = NULL;
-		if (redisGetReply(*c, (void **)&rep) != REDIS_OK || !rep) {
-			rc = -EIO;
-			break;
+	uint64_t written = 0;
+	for (size_t i = 0; i < n && rc == 0; i++) {
+		for (int cmd = b[i].kind == W_PUT ? 0 : 1; cmd < 2; cmd++) {
+			redisReply *rep = NULL;
+			if (redisGetReply(*c, (void **)&rep) != REDIS_OK || !rep) {
+				rc = -EIO;
+				break;
+			}
+			if (rep->type == REDIS_REPLY_ERROR) /* e.g. OOM under noeviction */
+				atomic_fetch_add(&r->errors, 1);
+			else if (cmd == 0)
+				written++;
+			freeReplyObject(rep);
 		}
-		if (rep->type == REDIS_REPLY_ERROR) /* e.g. OOM with maxmemory and noeviction */
-			atomic_fetch_add(&r->errors, 1);
-		freeReplyObject(rep);
 	}
+	atomic_fetch_add(&r->writes, written);
 	if (rc) {
 		mark_down(r, (*c)->errstr[0] ? (*c)->errstr : "write failed");
 		redisFree(*c);
 		*c = NULL;
-		return rc;
 	}
-	for (size_t i = 0; i < n; i++)
-		if (b[i].kind == W_PUT)
-			atomic_fetch_add(&r->writes, 1);
-	return 0;
+	return written;
 }
 
 static void *writer_main(void *arg)
@@ -385,10 +392,11 @@ static void *writer_main(void *arg)
 			if (!(c = dial(r, why)))
 				mark_down(r, why);
 		}
-		if (!c || write_batch(r, &c, tc, batch, n))
-			for (size_t i = 0; i < n; i++)
-				if (batch[i].kind == W_PUT)
-					atomic_fetch_add(&r->drops, 1);
+		uint64_t puts = 0;
+		for (size_t i = 0; i < n; i++)
+			puts += batch[i].kind == W_PUT;
+		uint64_t written = c ? write_batch(r, &c, tc, batch, n) : 0;
+		atomic_fetch_add(&r->drops, puts - written); /* refused or connection lost */
 		for (size_t i = 0; i < n; i++)
 			tile_unref(batch[i].t);
 

@@ -33,7 +33,7 @@ struct remote_stats {
 	uint64_t hits;	     /* gets that returned a tile */
 	uint64_t misses;     /* gets that found no tile */
 	uint64_t writes;     /* tiles written */
-	uint64_t drops;	     /* writes dropped (queue full, or the tier unreachable) */
+	uint64_t drops;	     /* tiles not written (queue full, tier unreachable, write refused) */
 	uint64_t bad;	     /* records whose checksum or header failed (treated as misses) */
 	uint64_t waits;	     /* gets that found another daemon's lease and waited */
 	uint64_t takeovers;  /* leases taken after a wait whose holder never delivered */
