@@ -360,13 +360,20 @@ static void *manager_main(void *arg)
 		while (done) {
 			struct job *j = done;
 			done = j->next_done;
-			if (j->from_store && !j->result && j->rstate == JOB_R_WAIT) {
+			bool remote = j->from_store && !j->result &&
+				      (j->rstate == JOB_R_WAIT || j->rstate == JOB_R_WOKEN);
+			if (remote && j->mark != s->g.epoch) {
+				/* Another daemon makes it and nobody here wants it any more. */
+				j->mstate = JOB_CANCELLED;
+				j->next = NULL;
+				jobgraph_cancel_unmarked(&s->g, j);
+			} else if (remote && j->rstate == JOB_R_WAIT) {
 				/* Another daemon generates it: park it until the remote tier
 				 * wakes it (no worker and no manager time spent waiting). */
 				j->rstate = JOB_R_PARKED;
 				s->remote->ops->wait(s->remote, &j->key, j);
-			} else if (j->from_store && !j->result && j->rstate == JOB_R_WOKEN) {
-				j->from_disk = false; /* ask the remote tier again */
+			} else if (remote) {
+				j->from_disk = false; /* woken: ask the remote tier again */
 				j->next = s->g.push;
 				s->g.push = j;
 			} else if (j->from_store && !j->result)
