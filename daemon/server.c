@@ -373,6 +373,7 @@ static void stat_remote(struct statb *b, struct remote *r)
 	stat_u(b, "store.redis.bad", s.bad);
 	stat_u(b, "store.redis.waits", s.waits);
 	stat_u(b, "store.redis.takeovers", s.takeovers);
+	stat_u(b, "store.redis.expired", s.expired);
 	stat_u(b, "store.redis.errors", s.errors);
 }
 

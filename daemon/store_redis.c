@@ -7,7 +7,8 @@
  *
  * get is one round trip: a Lua script returns the value if there is one, else takes the lease
  * (SET NX PX; this daemon's own lease is renewed, so a job cancelled and wanted again does not
- * wait for itself) or reports another holder. Waiting is polling, not pub/sub: the waiter
+ * wait for itself) or reports another holder. confirm, right before generating, renews it the
+ * same way (a job may have queued for longer than the lease). Waiting is polling, not pub/sub: the waiter
  * thread sends one pipeline of EXISTS value / EXISTS lease for every due key (backoff per key
  * from 2 ms to 50 ms), which needs no subscriber connection, notices a dead holder's expired
  * lease the same way as a finished tile, and costs one round trip per poll for all waits.
@@ -50,12 +51,32 @@ static const char LEASE_LUA[] =
 	"if l == ARGV[1] then redis.call('PEXPIRE', KEYS[2], ARGV[2]) return 0 end "
 	"return 1";
 
+/* KEYS[1] value, KEYS[2] lease; ARGV[1] owner, ARGV[2] lease ms. Returns 0 (the lease is ours
+ * again, renewed) or 1 (another daemon holds it, or the tile exists). */
+static const char CONFIRM_LUA[] =
+	"if redis.call('EXISTS', KEYS[1]) == 1 then return 1 end "
+	"local l = redis.call('GET', KEYS[2]) "
+	"if l and l ~= ARGV[1] then return 1 end "
+	"redis.call('SET', KEYS[2], ARGV[1], 'PX', ARGV[2]) return 0";
+
+/* KEYS[1] value, KEYS[2] lease; ARGV[1] owner, ARGV[2] the value. Writes the value and drops
+ * the lease if it is still ours: returns 0, or 1 when it was not ours any more (expired). */
+static const char PUT_LUA[] =
+	"redis.call('SET', KEYS[1], ARGV[2]) "
+	"if redis.call('GET', KEYS[2]) == ARGV[1] then redis.call('DEL', KEYS[2]) return 0 end "
+	"return 1";
+
+/* KEYS[1] lease; ARGV[1] owner. Drops the lease if it is ours. */
+static const char RELEASE_LUA[] =
+	"if redis.call('GET', KEYS[1]) == ARGV[1] then redis.call('DEL', KEYS[1]) end return 0";
+
 enum wkind { W_PUT, W_RELEASE };
 
 struct witem {
 	enum wkind kind;
 	struct tile_key key;
 	struct tile *t; /* W_PUT: owned reference */
+	bool leased;	/* W_PUT: generated under this daemon's lease */
 };
 
 struct waitent {
@@ -102,7 +123,8 @@ struct rds {
 	bool a_stop;
 	pthread_t waiter;
 
-	atomic_uint_fast64_t hits, misses, writes, drops, bad, waits, takeovers, generated, errors;
+	atomic_uint_fast64_t hits, misses, writes, drops, bad, waits, takeovers, expired, generated,
+		errors;
 };
 
 static void key_names(const struct tile_key *k, char val[NAME_LEN], char lease[NAME_LEN])
@@ -226,7 +248,7 @@ static int rds_get(struct remote *base, const struct tile_key *k, enum pix_type 
 		unsigned ep;
 		redisContext *c = pool_take(r, &ep);
 		if (!c)
-			return -ENOENT; /* down: every daemon fends for itself */
+			return -ENOLINK; /* down: every daemon fends for itself */
 		redisReply *rep = redisCommand(c, "EVAL %s 2 %s %s %s %s %s", LEASE_LUA, val, lease,
 					       r->owner, ms, mode);
 		if (!rep) {
@@ -236,7 +258,7 @@ static int rds_get(struct remote *base, const struct tile_key *k, enum pix_type 
 			if (attempt == 0)
 				continue; /* a stale idle connection (Redis restarted): once more */
 			mark_down(r, why);
-			return -ENOENT;
+			return -ENOLINK;
 		}
 		if (rep->type == REDIS_REPLY_ERROR) {
 			/* Reachable but refusing (OOM under noeviction, a script error): this
@@ -244,7 +266,7 @@ static int rds_get(struct remote *base, const struct tile_key *k, enum pix_type 
 			atomic_fetch_add(&r->errors, 1);
 			freeReplyObject(rep);
 			pool_give(r, c, ep);
-			return -ENOENT;
+			return -ENOLINK;
 		}
 		int rc;
 		if (rep->type == REDIS_REPLY_STRING) {
@@ -273,13 +295,44 @@ static int rds_get(struct remote *base, const struct tile_key *k, enum pix_type 
 			rc = -EINPROGRESS;
 		} else {
 			atomic_fetch_add(&r->errors, 1);
-			rc = -ENOENT;
+			rc = -ENOLINK;
 		}
 		freeReplyObject(rep);
 		pool_give(r, c, ep);
 		return rc;
 	}
-	return -ENOENT;
+	return -ENOLINK;
+}
+
+static int rds_confirm(struct remote *base, const struct tile_key *k)
+{
+	struct rds *r = (struct rds *)base;
+	char val[NAME_LEN], lease[NAME_LEN], ms[16];
+	key_names(k, val, lease);
+	snprintf(ms, sizeof ms, "%u", r->lease_ms);
+	unsigned ep;
+	redisContext *c = pool_take(r, &ep);
+	if (!c)
+		return 0; /* down: generate */
+	redisReply *rep = redisCommand(c, "EVAL %s 2 %s %s %s %s", CONFIRM_LUA, val, lease,
+				       r->owner, ms);
+	int rc = 0;
+	if (!rep) {
+		char why[128];
+		snprintf(why, sizeof why, "%s", c->errstr);
+		redisFree(c);
+		mark_down(r, why);
+		return 0;
+	}
+	if (rep->type == REDIS_REPLY_INTEGER && rep->integer == 1) {
+		atomic_fetch_add(&r->waits, 1);
+		rc = -EINPROGRESS;
+	} else if (rep->type != REDIS_REPLY_INTEGER) {
+		atomic_fetch_add(&r->errors, 1);
+	}
+	freeReplyObject(rep);
+	pool_give(r, c, ep);
+	return rc;
 }
 
 /* ---- the writer ---- */
@@ -304,11 +357,12 @@ static void enqueue(struct rds *r, const struct witem *it)
 	}
 }
 
-static void rds_put(struct remote *base, struct tile *t)
+static void rds_put(struct remote *base, struct tile *t, bool leased)
 {
 	struct rds *r = (struct rds *)base;
 	atomic_fetch_add(&r->generated, 1);
-	enqueue(r, &(struct witem){ .kind = W_PUT, .key = t->key, .t = tile_ref(t) });
+	enqueue(r, &(struct witem){ .kind = W_PUT, .key = t->key, .t = tile_ref(t),
+				    .leased = leased });
 }
 
 static void rds_release(struct remote *base, const struct tile_key *k)
@@ -316,9 +370,10 @@ static void rds_release(struct remote *base, const struct tile_key *k)
 	enqueue((struct rds *)base, &(struct witem){ .kind = W_RELEASE, .key = *k });
 }
 
-/* Sends one batch as a pipeline: each tile's SET, then its lease's DEL (after the value, so
- * a waiter never sees neither). Returns how many tiles were written; a lost connection marks
- * the tier down and frees *c. */
+/* Sends one batch as a pipeline: each tile's value, dropping its lease if still ours in the
+ * same script (so a waiter never sees neither); a tile generated without a lease is SET
+ * alone; a release drops the lease if ours. Returns how many tiles were written; a lost
+ * connection marks the tier down and frees *c. */
 static uint64_t write_batch(struct rds *r, redisContext **c, struct tilecodec *tc, struct witem *b,
 		       size_t n)
 {
@@ -331,27 +386,33 @@ static uint64_t write_batch(struct rds *r, redisContext **c, struct tilecodec *t
 			size_t vn;
 			store_key_encode(&b[i].key, kb);
 			store_value_encode(tc, b[i].t, r->zstd_level, &v, &vn);
-			redisAppendCommand(*c, "SET %s %b", val, v, vn);
+			if (b[i].leased)
+				redisAppendCommand(*c, "EVAL %s 2 %s %s %s %b", PUT_LUA, val, lease,
+						   r->owner, v, vn);
+			else
+				redisAppendCommand(*c, "SET %s %b", val, v, vn);
 			free(v);
+		} else {
+			redisAppendCommand(*c, "EVAL %s 1 %s %s", RELEASE_LUA, lease, r->owner);
 		}
-		redisAppendCommand(*c, "DEL %s", lease);
 	}
-	/* The replies, in order: each item's SET (for a put), then its DEL. */
+	/* One reply per item, in order. */
 	int rc = 0;
 	uint64_t written = 0;
-	for (size_t i = 0; i < n && rc == 0; i++) {
-		for (int cmd = b[i].kind == W_PUT ? 0 : 1; cmd < 2; cmd++) {
-			redisReply *rep = NULL;
-			if (redisGetReply(*c, (void **)&rep) != REDIS_OK || !rep) {
-				rc = -EIO;
-				break;
-			}
-			if (rep->type == REDIS_REPLY_ERROR) /* e.g. OOM under noeviction */
-				atomic_fetch_add(&r->errors, 1);
-			else if (cmd == 0)
-				written++;
-			freeReplyObject(rep);
+	for (size_t i = 0; i < n; i++) {
+		redisReply *rep = NULL;
+		if (redisGetReply(*c, (void **)&rep) != REDIS_OK || !rep) {
+			rc = -EIO;
+			break;
 		}
+		if (rep->type == REDIS_REPLY_ERROR) { /* e.g. OOM under noeviction */
+			atomic_fetch_add(&r->errors, 1);
+		} else if (b[i].kind == W_PUT) {
+			written++;
+			if (rep->type == REDIS_REPLY_INTEGER && rep->integer == 1)
+				atomic_fetch_add(&r->expired, 1);
+		}
+		freeReplyObject(rep);
 	}
 	atomic_fetch_add(&r->writes, written);
 	if (rc) {
@@ -606,6 +667,7 @@ static void rds_stat(struct remote *base, struct remote_stats *o)
 		.bad = atomic_load(&r->bad),
 		.waits = atomic_load(&r->waits),
 		.takeovers = atomic_load(&r->takeovers),
+		.expired = atomic_load(&r->expired),
 		.generated = atomic_load(&r->generated),
 		.errors = atomic_load(&r->errors),
 		.connected = atomic_load(&r->up) ? 1 : 0,
@@ -614,6 +676,7 @@ static void rds_stat(struct remote *base, struct remote_stats *o)
 
 static const struct remote_ops rds_ops = {
 	.get = rds_get,
+	.confirm = rds_confirm,
 	.put = rds_put,
 	.release = rds_release,
 	.wait = rds_wait,

@@ -4,9 +4,11 @@
  * Redis) and hands it to the scheduler (sched_desc.remote). The scheduler tries memory, then
  * the disk store, then this tier, and generates only what it finds nowhere.
  *
- * A worker asks get(): a hit, or -ENOENT (generate it: this daemon now holds the key's lease,
- * or the tier is unreachable and every daemon fends for itself), or -EINPROGRESS (another
- * daemon holds the lease and is generating it). Then the scheduler parks the job with wait(),
+ * A worker asks get(): a hit, or -ENOENT (generate it: this daemon now holds the key's lease),
+ * or -ENOLINK (generate it, without a lease: the tier is unreachable and every daemon fends
+ * for itself), or -EINPROGRESS (another daemon holds the lease and is generating it). A job may wait in the queue a while before a
+ * worker generates it: confirm() then renews the lease (or says that another daemon took it
+ * over meanwhile, and the job waits after all). Then the scheduler parks the job with wait(),
  * which never blocks: the implementation calls r->wake(r->wake_ud, token) from a thread of its
  * own once the key is worth asking again (the tile arrived, the lease ended — its holder died —,
  * the tier went away, or a bound passed), and the job goes back to a worker (get with
@@ -14,7 +16,7 @@
  * queues it (write-behind, never waits; a full queue drops it, counted) and whose write
  * releases the lease; a failed generation calls release().
  *
- * Threads: get, put and release from any worker; wait from the manager; wake from the
+ * Threads: get, confirm, put and release from any worker; wait from the manager; wake from the
  * implementation's thread. Ownership: the server owns the remote; tiles given to put are
  * borrowed (the implementation takes its own reference); get returns an owned tile.
  */
@@ -37,6 +39,8 @@ struct remote_stats {
 	uint64_t bad;	     /* records whose checksum or header failed (treated as misses) */
 	uint64_t waits;	     /* gets that found another daemon's lease and waited */
 	uint64_t takeovers;  /* leases taken after a wait whose holder never delivered */
+	uint64_t expired;    /* tiles written after their lease had expired (generation outlived
+			      * it: another daemon may have generated the tile too) */
 	uint64_t generated;  /* layer tiles this daemon generated and offered to the tier */
 	uint64_t errors;     /* failed commands and connections */
 	uint64_t connected;  /* 1 while the tier is reachable */
@@ -46,12 +50,19 @@ struct remote;
 
 struct remote_ops {
 	/* The tile for k, decoded with tc (the caller's), as an owned reference in *out; type and
-	 * size as the caller expects (another is a miss). Returns 0, -ENOENT (generate it) or
-	 * -EINPROGRESS (another daemon holds the lease: wait). retry: this get follows a wait. */
+	 * size as the caller expects (another is a miss). Returns 0, -ENOENT (generate it under
+	 * this daemon's lease), -ENOLINK (generate it, no lease: the tier is unreachable or
+	 * refused) or -EINPROGRESS (another daemon holds the lease: wait). retry: this get
+	 * follows a wait. */
 	int (*get)(struct remote *r, const struct tile_key *k, enum pix_type type, uint32_t size,
 		   struct tilecodec *tc, bool retry, struct tile **out);
-	/* Queues generated tile t for writing; the write releases k's lease. Never waits. */
-	void (*put)(struct remote *r, struct tile *t);
+	/* Right before generating k under a lease get gave: renews the lease (taking it again if
+	 * it expired meanwhile) and returns 0 (generate), or -EINPROGRESS when another daemon
+	 * holds it now or its tile exists (wait instead). 0 as well when the tier is down. */
+	int (*confirm)(struct remote *r, const struct tile_key *k);
+	/* Queues generated tile t for writing; leased: generated under this daemon's lease,
+	 * which the write releases. Never waits. */
+	void (*put)(struct remote *r, struct tile *t, bool leased);
 	/* Queues the release of k's lease (its generation failed). Never waits. */
 	void (*release)(struct remote *r, const struct tile_key *k);
 	/* Calls r->wake(r->wake_ud, token) once, later, from another thread (see above). */

@@ -360,7 +360,7 @@ static void *manager_main(void *arg)
 		while (done) {
 			struct job *j = done;
 			done = j->next_done;
-			bool remote = j->from_store && !j->result &&
+			bool remote = !j->result &&
 				      (j->rstate == JOB_R_WAIT || j->rstate == JOB_R_WOKEN);
 			if (remote && j->mark != s->g.epoch) {
 				/* Another daemon makes it and nobody here wants it any more. */
@@ -369,7 +369,15 @@ static void *manager_main(void *arg)
 				jobgraph_cancel_unmarked(&s->g, j);
 			} else if (remote && j->rstate == JOB_R_WAIT) {
 				/* Another daemon generates it: park it until the remote tier
-				 * wakes it (no worker and no manager time spent waiting). */
+				 * wakes it (no worker and no manager time spent waiting), then
+				 * load it. A job found taken over just before its generation
+				 * lets its inputs go (all held: it was ready). */
+				for (int k = 0; k < j->nin; k++)
+					tile_unref(j->in[k]);
+				memset(j->in, 0, sizeof j->in);
+				j->nin = 0;
+				j->from_store = true;
+				j->from_disk = false;
 				j->rstate = JOB_R_PARKED;
 				s->remote->ops->wait(s->remote, &j->key, j);
 			} else if (remote) {
@@ -450,8 +458,8 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sche
 								 : STORE_KEEP_INCIDENTAL);
 		else if (rc == -EINPROGRESS)
 			j->rstate = JOB_R_WAIT;
-		else
-			j->leased = true; /* generate it: the lease is (most likely) ours */
+		else if (rc == -ENOENT)
+			j->leased = true; /* generate it under this daemon's lease */
 	}
 	if (rc == 0 && cls != SCHED_BULK)
 		cache_insert(s->cache, t);
@@ -480,6 +488,14 @@ static void remote_wake(void *ud, void *token)
 static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;
+	if (j->leased && s->remote && s->remote->ops->confirm(s->remote, &j->key) == -EINPROGRESS) {
+		/* The lease expired while the job queued and another daemon took it: wait. */
+		j->leased = false;
+		j->rstate = JOB_R_WAIT;
+		j->result = NULL;
+		j->err = 0;
+		return;
+	}
 	struct tile *t = tile_create(&j->key, n->out, n->planet->tile_size);
 	uint64_t t0 = clock_now_ns();
 	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
@@ -495,7 +511,8 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 		else if (!stored)
 			cache_insert_cold(s->cache, t);
 		if (s->remote && store_keeps(n))
-			s->remote->ops->put(s->remote, t); /* write-behind; releases the lease */
+			s->remote->ops->put(s->remote, t, j->leased); /* write-behind; releases
+								       * the lease */
 		j->leased = false;
 		node_count_generation(j->node, dt);
 		atomic_fetch_add(&s->generated, 1);
@@ -503,7 +520,7 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 		j->err = 0;
 	} else {
 		tile_unref(t);
-		if (s->remote && store_keeps(n))
+		if (j->leased && s->remote)
 			s->remote->ops->release(s->remote, &j->key);
 		j->leased = false;
 		atomic_fetch_add(&s->g.failed, 1);

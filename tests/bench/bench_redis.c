@@ -96,7 +96,7 @@ int main(void)
 	int rc = store_flush(st);
 	uint64_t t0 = clock_now_ns();
 	for (size_t i = 0; i < n; i++)
-		rt->ops->put(rt, t[i]);
+		rt->ops->put(rt, t[i], false);
 	struct remote_stats rs;
 	uint64_t end = t0 + 30000000000ull;
 	do {

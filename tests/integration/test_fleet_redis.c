@@ -7,6 +7,7 @@
  *     any extra only with a lease takeover counted), and every client gets the same bytes;
  *   - kill -9 of the daemon holding a tile's lease: a client of another daemon waiting for that
  *     tile still gets it once the lease has expired (a takeover, counted);
+ *   - leases much shorter than the queues: every tile arrives, duplicates only counted ones;
  *   - Redis stopped mid-run: clients see no error (the daemon generates), the daemon counts it
  *     and logs it once; Redis restarted: the daemon reconnects and sharing resumes;
  *   - a record damaged in Redis is never served (counted, regenerated, the right bytes);
@@ -125,6 +126,11 @@ static int setup_kill(void **state)
 static int setup_pair(void **state)
 {
 	return setup_n(state, 2, (const int[]){ 5, 5 }, 3000);
+}
+
+static int setup_short(void **state)
+{
+	return setup_n(state, 2, (const int[]){ 5, 5 }, 50);
 }
 
 static int setup_other(void **state)
@@ -311,12 +317,13 @@ static void generated_once(void **state)
 		receive(c[i], 1, n[i], 60000, &seen);
 	wait_written(c, ND);
 	uint64_t gen = fleet_sum(c, ND, "store.redis.generated");
-	uint64_t take = fleet_sum(c, ND, "store.redis.takeovers");
+	uint64_t take = fleet_sum(c, ND, "store.redis.takeovers") +
+			fleet_sum(c, ND, "store.redis.expired");
 	uint64_t hits = fleet_sum(c, ND, "store.redis.hits");
 	uint64_t waits = fleet_sum(c, ND, "store.redis.waits");
 	uint64_t all = (uint64_t)n[0] + n[1] + n[2];
 	printf("fleet: %zu unique tiles wanted (%llu wants), %llu generated fleet-wide "
-	       "(%.3f per unique), %llu Redis hits, %llu waits, %llu takeovers\n",
+	       "(%.3f per unique), %llu Redis hits, %llu waits, %llu takeovers or expired leases\n",
 	       seen.n, (unsigned long long)all, (unsigned long long)gen,
 	       (double)gen / (double)seen.n, (unsigned long long)hits, (unsigned long long)waits,
 	       (unsigned long long)take);
@@ -332,6 +339,39 @@ static void generated_once(void **state)
 	assert_true(hits > 0);
 	for (int i = 0; i < ND; i++)
 		net_close(c[i]);
+}
+
+/* Leases far shorter than the queues (50 ms): jobs outlive their leases, are confirmed or
+ * found taken over before generating; every tile still arrives, the same bytes everywhere,
+ * and any duplicate is counted (a takeover or an expired lease). */
+static void short_lease(void **state)
+{
+	struct fleet *f = *state;
+	NEED(f);
+	static struct proto_want_entry w[MAXW];
+	static struct seen seen;
+	seen.n = 0;
+	uint32_t pid[2];
+	struct net_conn *c[2] = { conn(&f->d[0], &pid[0]), conn(&f->d[1], &pid[1]) };
+	uint32_t n = block(w, 0, 5, 0, 0, 12, 8);
+	for (int i = 0; i < 2; i++)
+		send_want(c[i], pid[i], 1, w, n);
+	for (int i = 0; i < 2; i++)
+		receive(c[i], 1, n, 60000, &seen);
+	wait_written(c, 2);
+	uint64_t gen = fleet_sum(c, 2, "store.redis.generated");
+	uint64_t counted = fleet_sum(c, 2, "store.redis.takeovers") +
+			   fleet_sum(c, 2, "store.redis.expired");
+	printf("short lease: %zu unique tiles, %llu generated, %llu waits, %llu takeovers or "
+	       "expired leases\n", seen.n, (unsigned long long)gen,
+	       (unsigned long long)fleet_sum(c, 2, "store.redis.waits"),
+	       (unsigned long long)counted);
+	assert_int_equal(seen.n, n);
+	assert_true(gen >= n);
+	assert_true(gen - n <= counted);
+	assert_int_equal(fleet_sum(c, 2, "store.redis.bad"), 0);
+	net_close(c[0]);
+	net_close(c[1]);
 }
 
 static bool any_lease(redisContext *rc)
@@ -523,6 +563,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_setup_teardown(generated_once, setup3, teardown),
 		cmocka_unit_test_setup_teardown(holder_killed, setup_kill, teardown),
+		cmocka_unit_test_setup_teardown(short_lease, setup_short, teardown),
 		cmocka_unit_test_setup_teardown(redis_restart, setup_pair, teardown),
 		cmocka_unit_test_setup_teardown(bad_record, setup_pair, teardown),
 		cmocka_unit_test_setup_teardown(other_planet, setup_other, teardown),
