@@ -297,7 +297,7 @@ install: $(PROGS) $(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.so
 		$(DESTDIR)$(UNITDIR)/
 	install -m 644 systemd/clipmap.sysusers $(DESTDIR)$(SYSUSERSDIR)/clipmap.conf
 	install -m 644 README.md LICENSE docs/ARCHITECTURE.md docs/PLANETS.md docs/PROTOCOL.md \
-		$(DESTDIR)$(DOCDIR)/
+		docs/FLEET.md conf/redis.conf.example $(DESTDIR)$(DOCDIR)/
 	install -m 644 scripts/clipmapctl.bash-completion $(DESTDIR)$(BASHCOMPDIR)/clipmapctl
 	$(if $(SCDOC),for m in $(MAN_PAGES); do s=$${m##*.}; install -d $(DESTDIR)$(MANDIR)/man$$s && \
 		install -m 644 $$m $(DESTDIR)$(MANDIR)/man$$s/ || exit 1; done, \
