@@ -9,7 +9,8 @@
  *     tile still gets it once the lease has expired (a takeover, counted);
  *   - leases much shorter than the queues: every tile arrives, duplicates only counted ones;
  *   - Redis stopped mid-run: clients see no error (the daemon generates), the daemon counts it
- *     and logs it once; Redis restarted: the daemon reconnects and sharing resumes;
+ *     and logs it once; Redis restarted: the daemon reconnects and sharing resumes; Redis
+ *     not up yet when the daemons start: the same;
  *   - a record damaged in Redis is never served (counted, regenerated, the right bytes);
  *   - a daemon whose planet differs (another seed) never reads the others' tiles.
  * Skipped when build/clipmapd was not built or redis-server is not installed. */
@@ -77,7 +78,9 @@ static int daemon_start(struct fleet *f, int i, int seed, int lease_ms)
 	return 0;
 }
 
-static int setup_n(void **state, int n, const int *seeds, int lease_ms)
+/* n daemons on planet seeds[i] sharing one Redis with leases of lease_ms; with late, Redis is
+ * not started (its socket path is configured all the same). */
+static int setup_fleet(void **state, int n, const int *seeds, int lease_ms, bool late)
 {
 	struct fleet *f = calloc(1, sizeof *f);
 	*state = f;
@@ -103,7 +106,8 @@ static int setup_n(void **state, int n, const int *seeds, int lease_ms)
 	snprintf(f->dir, sizeof f->dir, "/tmp/test_fleet_XXXXXX");
 	if (!mkdtemp(f->dir))
 		return -1;
-	if (redis_env_start(&f->redis, f->dir)) {
+	snprintf(f->redis.sock, sizeof f->redis.sock, "%s/redis.sock", f->dir);
+	if (!late && redis_env_start(&f->redis, f->dir)) {
 		fprintf(stderr, "test_fleet_redis: redis-server did not start\n");
 		return -1;
 	}
@@ -111,6 +115,16 @@ static int setup_n(void **state, int n, const int *seeds, int lease_ms)
 		if (daemon_start(f, i, seeds[i], lease_ms))
 			return -1;
 	return 0;
+}
+
+static int setup_n(void **state, int n, const int *seeds, int lease_ms)
+{
+	return setup_fleet(state, n, seeds, lease_ms, false);
+}
+
+static int setup_late(void **state)
+{
+	return setup_fleet(state, 2, (const int[]){ 5, 5 }, 3000, true);
 }
 
 static int setup3(void **state)
@@ -498,6 +512,38 @@ static void redis_restart(void **state)
 	assert_true(WIFEXITED(st) && WEXITSTATUS(st) == 0);
 }
 
+/* Redis not up when the daemons start: they start and serve all the same (logged once each),
+ * and share once it is. */
+static void redis_late(void **state)
+{
+	struct fleet *f = *state;
+	NEED(f);
+	static struct proto_want_entry w[MAXW];
+	uint32_t pa, pb;
+	struct net_conn *a = conn(&f->d[0], &pa), *b = conn(&f->d[1], &pb);
+	assert_int_equal(stat_of(a, "store.redis.connected"), 0);
+	uint32_t n = block(w, 0, 4, 0, 0, 4, 4);
+	fetch(a, pa, 1, w, n, NULL);
+	assert_int_equal(stat_of(a, "store.redis.generated"), n);
+	assert_int_equal(daemon_env_log_count(&f->d[0], "unreachable"), 1);
+
+	assert_int_equal(redis_env_start(&f->redis, f->dir), 0);
+	uint64_t end = clock_now_ms() + 20000;
+	while ((stat_of(a, "store.redis.connected") != 1 ||
+		stat_of(b, "store.redis.connected") != 1) && clock_now_ms() < end)
+		usleep(50000);
+	assert_int_equal(stat_of(a, "store.redis.connected"), 1);
+	assert_int_equal(stat_of(b, "store.redis.connected"), 1);
+	n = block(w, 0, 5, 10, 10, 4, 4);
+	fetch(a, pa, 2, w, n, NULL);
+	wait_written(&a, 1);
+	fetch(b, pb, 2, w, n, NULL);
+	assert_int_equal(stat_of(b, "store.redis.hits"), n);
+	assert_int_equal(stat_of(b, "store.redis.generated"), 0);
+	net_close(a);
+	net_close(b);
+}
+
 /* A record damaged in Redis is never served: counted, regenerated, and the bytes are right. */
 static void bad_record(void **state)
 {
@@ -565,6 +611,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(holder_killed, setup_kill, teardown),
 		cmocka_unit_test_setup_teardown(short_lease, setup_short, teardown),
 		cmocka_unit_test_setup_teardown(redis_restart, setup_pair, teardown),
+		cmocka_unit_test_setup_teardown(redis_late, setup_late, teardown),
 		cmocka_unit_test_setup_teardown(bad_record, setup_pair, teardown),
 		cmocka_unit_test_setup_teardown(other_planet, setup_other, teardown),
 	};
