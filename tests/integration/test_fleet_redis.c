@@ -459,6 +459,17 @@ static void holder_killed(void **state)
 	redisFree(rc);
 }
 
+/* Waits (bounded: the daemons retry with backoff up to 5 s) until both daemons share again. */
+static void wait_connected(struct net_conn *a, struct net_conn *b)
+{
+	uint64_t end = clock_now_ms() + 20000;
+	while ((stat_of(a, "store.redis.connected") != 1 ||
+		stat_of(b, "store.redis.connected") != 1) && clock_now_ms() < end)
+		usleep(50000);
+	assert_int_equal(stat_of(a, "store.redis.connected"), 1);
+	assert_int_equal(stat_of(b, "store.redis.connected"), 1);
+}
+
 /* Redis stopped mid-run: no client error, counted, logged once; restarted: sharing resumes. */
 static void redis_restart(void **state)
 {
@@ -484,12 +495,7 @@ static void redis_restart(void **state)
 	assert_int_equal(daemon_env_log_count(&f->d[1], "unreachable"), 1);
 
 	assert_int_equal(redis_env_start(&f->redis, f->dir), 0);
-	uint64_t end = clock_now_ms() + 20000;
-	while ((stat_of(a, "store.redis.connected") != 1 ||
-		stat_of(b, "store.redis.connected") != 1) && clock_now_ms() < end)
-		usleep(50000);
-	assert_int_equal(stat_of(a, "store.redis.connected"), 1);
-	assert_int_equal(stat_of(b, "store.redis.connected"), 1);
+	wait_connected(a, b);
 	assert_true(daemon_env_log_count(&f->d[1], "connected, sharing tiles") >= 2);
 
 	/* Sharing resumed: what A generates now, B takes from Redis. */
@@ -528,12 +534,7 @@ static void redis_late(void **state)
 	assert_int_equal(daemon_env_log_count(&f->d[0], "unreachable"), 1);
 
 	assert_int_equal(redis_env_start(&f->redis, f->dir), 0);
-	uint64_t end = clock_now_ms() + 20000;
-	while ((stat_of(a, "store.redis.connected") != 1 ||
-		stat_of(b, "store.redis.connected") != 1) && clock_now_ms() < end)
-		usleep(50000);
-	assert_int_equal(stat_of(a, "store.redis.connected"), 1);
-	assert_int_equal(stat_of(b, "store.redis.connected"), 1);
+	wait_connected(a, b);
 	n = block(w, 0, 5, 10, 10, 4, 4);
 	fetch(a, pa, 2, w, n, NULL);
 	wait_written(&a, 1);
