@@ -97,6 +97,10 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 		{ c->cache_bytes == nc->cache_bytes, "[engine] cache_mb" },
 		{ c->image_cache_mb == nc->image_cache_mb, "[engine] image_cache_mb" },
 		{ c->compress == nc->compress, "[session] compress" },
+		{ same_str(c->store_redis, nc->store_redis), "[store] redis" },
+		{ same_str(c->store_redis_password, nc->store_redis_password),
+		  "[store] redis_password" },
+		{ c->store_redis_lease_ms == nc->store_redis_lease_ms, "[store] redis_lease_ms" },
 	};
 	for (size_t i = 0; i < sizeof k / sizeof k[0]; i++)
 		if (!k[i].same)
