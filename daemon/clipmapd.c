@@ -29,6 +29,7 @@
 #include "http.h"
 #include "metrics.h"
 #include "server.h"
+#include "tls.h"
 
 #define DEFAULT_CONF "/etc/clipmap/clipmapd.conf"
 
@@ -95,6 +96,8 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 		{ c->cache_bytes == nc->cache_bytes, "[engine] cache_mb" },
 		{ c->image_cache_mb == nc->image_cache_mb, "[engine] image_cache_mb" },
 		{ c->compress == nc->compress, "[session] compress" },
+		{ same_str(c->tls_cert, nc->tls_cert), "[tls] cert" },
+		{ same_str(c->tls_key, nc->tls_key), "[tls] key" },
 	};
 	for (size_t i = 0; i < sizeof k / sizeof k[0]; i++)
 		if (!k[i].same)
@@ -278,6 +281,25 @@ static int check_token(const struct conf *c, char err[256])
 	return 0;
 }
 
+/* [tls] cert and key load and match (the server loads them again when it starts). A
+ * certificate out of its dates is a warning. Returns 0 or -errno with err filled. */
+static int check_tls(const struct conf *c, char err[256])
+{
+	if (!c->tls_cert)
+		return 0;
+	struct tls_server *t;
+	char e2[256], warn[256];
+	int rc = tls_server_create(c->tls_cert, c->tls_key, &t, e2, warn);
+	if (rc) {
+		err_set(err, "%s: %s", c->path, e2);
+		return rc;
+	}
+	tls_server_destroy(t);
+	if (warn[0])
+		log_msg(LOG_WARN, "%s", warn);
+	return 0;
+}
+
 /* The command line into *cfg and *check. Returns -1 to go on, else the exit status (0:
  * --help, --version). */
 static int parse_args(int argc, char **argv, const char **cfg, bool *check)
@@ -327,7 +349,7 @@ static int configure(struct daemon *d, const char *cfg, struct planet_set **ps)
 	struct img_cache *images = img_cache_create(d->conf.image_cache_mb); /* the set holds it */
 	int rc = load_planets(d, images, ps, err);
 	img_cache_unref(images);
-	if (rc || check_token(&d->conf, err)) {
+	if (rc || check_token(&d->conf, err) || check_tls(&d->conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
 		planet_set_unref(*ps);
 		*ps = NULL;
@@ -371,10 +393,15 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 {
 	const struct listener *ls;
 	size_t nls = server_listeners(d->srv, &ls);
-	for (size_t i = 0; i < nls; i++)
-		log_msg(LOG_INFO, "listening on %s%s%s", ls[i].name,
+	for (size_t i = 0; i < nls; i++) {
+		log_msg(LOG_INFO, "listening on %s%s%s%s", ls[i].name, ls[i].tls ? " (TLS)" : "",
 			ls[i].need_token ? " (token required)" : "",
 			ls[i].compress ? " (compressed tiles)" : "");
+		if (!ls[i].is_unix && !ls[i].loopback && !ls[i].tls)
+			log_msg(LOG_WARN, "%s is not loopback and has no TLS: %s tiles travel in "
+				"clear (set [tls] cert and key)", ls[i].name,
+				ls[i].need_token ? "the token and the" : "the");
+	}
 	struct sched_stats ss;
 	sched_get_stats(sched, &ss);
 	const struct planet_set *ps = server_planets(d->srv);
