@@ -153,56 +153,38 @@ static int wait_or_fail(struct net_conn *c, short ev, int64_t deadline, const ch
 	return r;
 }
 
-/* write_all over TLS. */
-static int write_all_tls(struct net_conn *c, const uint8_t *p, size_t n, int64_t deadline,
-			 char err[256])
+/* Sends what the socket takes of p[0 .. n) once. Returns the count (0: interrupted, try
+ * again), -EAGAIN, or -errno with err filled. */
+static ssize_t send_some(struct net_conn *c, const uint8_t *p, size_t n, char err[256])
 {
-	while (n) {
-		ssize_t w = net_tls_send(c->tls, p, n, err);
-		if (w > 0) {
-			p += w;
-			n -= (size_t)w;
-			continue;
-		}
-		if (w != -EAGAIN)
-			return (int)w;
-		int rc = wait_or_fail(c, POLLOUT, deadline, "sending", err);
-		if (rc)
-			return rc;
-	}
-	return 0;
+	if (c->tls)
+		return net_tls_send(c->tls, p, n, err);
+	ssize_t w = send(c->fd, p, n, MSG_NOSIGNAL);
+	if (w > 0 || (w < 0 && errno == EINTR))
+		return w > 0 ? w : 0;
+	if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+		return -EAGAIN;
+	int e = w < 0 ? errno : EPIPE;
+	err_set(err, "%s: sending: %s", c->peer, strerror(e));
+	return -e;
 }
 
 /* Writes all of p[0 .. n) before deadline. */
 static int write_all(struct net_conn *c, const uint8_t *p, size_t n, int64_t deadline,
 		     char err[256])
 {
-	if (c->tls)
-		return write_all_tls(c, p, n, deadline, err);
 	while (n) {
-		ssize_t w = send(c->fd, p, n, MSG_NOSIGNAL);
-		if (w > 0) {
-			p += w;
-			n -= (size_t)w;
+		ssize_t w = send_some(c, p, n, err);
+		if (w == -EAGAIN) {
+			int rc = wait_or_fail(c, POLLOUT, deadline, "sending", err);
+			if (rc)
+				return rc;
 			continue;
 		}
-		if (w < 0 && errno == EINTR)
-			continue;
-		if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
-			int r = wait_fd(c->fd, POLLOUT, deadline);
-			if (r == 0) {
-				err_set(err, "%s: timed out sending", c->peer);
-				return -ETIMEDOUT;
-			}
-			if (r < 0) {
-				err_set(err, "%s: poll: %s", c->peer, strerror(-r));
-				return r;
-			}
-			continue;
-		}
-		int e = w < 0 ? errno : EPIPE;
-		err_set(err, "%s: sending: %s", c->peer, strerror(e));
-		return -e;
+		if (w < 0)
+			return (int)w;
+		p += w;
+		n -= (size_t)w;
 	}
 	return 0;
 }

@@ -54,19 +54,26 @@ static int write_text(const char *path, const char *text)
 	return fclose(f) || rc ? -1 : 0;
 }
 
-/* Runs certtool with args (NULL-terminated); fails the setup with its output on error. */
+/* Runs prog (a path, or a program in $PATH) with the arguments a0, ap (NULL-terminated),
+ * its output into out. Returns its exit status. */
+static int vrun(const char *prog, char *out, size_t n, const char *a0, va_list ap)
+{
+	char *argv[32] = { (char *)prog, (char *)a0 };
+	int argc = 2;
+	for (const char *a; a0 && argc < 31 && (a = va_arg(ap, const char *));)
+		argv[argc++] = (char *)a;
+	argv[argc] = NULL;
+	return daemon_env_run(argv, out, n);
+}
+
+/* Runs certtool with args (NULL-terminated); says why when it fails. */
 static int certtool(const char *a0, ...)
 {
-	char *argv[16] = { "certtool", (char *)a0 };
-	int n = 2;
+	static char out[OUT_CAP];
 	va_list ap;
 	va_start(ap, a0);
-	for (const char *a; n < 15 && (a = va_arg(ap, const char *));)
-		argv[n++] = (char *)a;
+	int rc = vrun("certtool", out, sizeof out, a0, ap);
 	va_end(ap);
-	argv[n] = NULL;
-	static char out[OUT_CAP];
-	int rc = daemon_env_run(argv, out, sizeof out);
 	if (rc)
 		fprintf(stderr, "certtool %s: exit %d: %s\n", a0, rc, out);
 	return rc;
@@ -151,15 +158,11 @@ static int ctl(char *out, size_t n, const char *a0, ...)
 {
 	char exe[600];
 	snprintf(exe, sizeof exe, "%s/clipmapctl", E.bindir);
-	char *argv[32] = { exe, (char *)a0 };
-	int argc = 2;
 	va_list ap;
 	va_start(ap, a0);
-	for (const char *a; argc < 31 && (a = va_arg(ap, const char *));)
-		argv[argc++] = (char *)a;
+	int rc = vrun(exe, out, n, a0, ap);
 	va_end(ap);
-	argv[argc] = NULL;
-	return daemon_env_run(argv, out, n);
+	return rc;
 }
 
 static char *token_file(void)
@@ -174,7 +177,8 @@ static char *token_file(void)
 /* Forwards the connections it accepts to the daemon's TCP port, one at a time, and keeps
  * every byte either way. */
 struct relay {
-	int lfd, stop[2], port;
+	int lfd, stop[2];
+	char hp[32]; /* "127.0.0.1:PORT" to give clients */
 	pthread_t th;
 	pthread_mutex_t mu; /* protects buf, len */
 	uint8_t *buf;
@@ -253,7 +257,7 @@ static void relay_start(struct relay *r)
 	assert_int_equal(bind(r->lfd, (struct sockaddr *)&a, sizeof a), 0);
 	assert_int_equal(listen(r->lfd, 8), 0);
 	assert_int_equal(getsockname(r->lfd, (struct sockaddr *)&a, &al), 0);
-	r->port = ntohs(a.sin_port);
+	snprintf(r->hp, sizeof r->hp, "127.0.0.1:%u", (unsigned)ntohs(a.sin_port));
 	assert_int_equal(pipe(r->stop), 0);
 	pthread_mutex_init(&r->mu, NULL);
 	assert_int_equal(pthread_create(&r->th, NULL, relay_main, r), 0);
@@ -311,10 +315,8 @@ static void wrong_ca_is_refused_and_logged(void **state)
 	static char out[OUT_CAP];
 	struct relay r;
 	relay_start(&r);
-	char hp[64];
-	snprintf(hp, sizeof hp, "127.0.0.1:%d", r.port);
 	int before = daemon_env_log_count(&E, "tls: handshake with");
-	int rc = ctl(out, sizeof out, "-H", hp, "--tls-ca", wrong_ca, "--token-file", token_file(),
+	int rc = ctl(out, sizeof out, "-H", r.hp, "--tls-ca", wrong_ca, "--token-file", token_file(),
 		     "status", NULL);
 	fprintf(stderr, "wrong CA: exit %d: %s", rc, out);
 	assert_int_equal(rc, 1);
@@ -355,10 +357,8 @@ static void plain_client_is_told_and_closed(void **state)
 	static char out[OUT_CAP];
 	struct relay r;
 	relay_start(&r);
-	char hp[64];
-	snprintf(hp, sizeof hp, "127.0.0.1:%d", r.port);
 	double t0 = clock_now_s();
-	int rc = ctl(out, sizeof out, "-H", hp, "--token-file", token_file(), "status", NULL);
+	int rc = ctl(out, sizeof out, "-H", r.hp, "--token-file", token_file(), "status", NULL);
 	double took = clock_now_s() - t0;
 	fprintf(stderr, "plain client: exit %d after %.2f s: %s", rc, took, out);
 	assert_int_equal(rc, 1);
@@ -436,10 +436,8 @@ static void token_never_in_clear(void **state)
 	static char out[OUT_CAP];
 	struct relay r;
 	relay_start(&r);
-	char hp[64];
-	snprintf(hp, sizeof hp, "127.0.0.1:%d", r.port);
 	/* a session that authenticates, lists planets and gets stats */
-	int rc = ctl(out, sizeof out, "-H", hp, "--tls-ca", ca, "--token-file", token_file(),
+	int rc = ctl(out, sizeof out, "-H", r.hp, "--tls-ca", ca, "--token-file", token_file(),
 		     "status", NULL);
 	if (rc)
 		fprintf(stderr, "%s", out);
