@@ -156,21 +156,21 @@ void conn_consume(struct conn *c, size_t n)
 	pbuf_consume(&c->in, n);
 }
 
-/* Writes over TLS as far as the socket takes. Returns 1 when that was done (the caller
- * updates the buffer), 0 while the handshake waits with nothing to send (want_out says
- * which way), or -errno. */
+/* Writes over TLS as far as the socket takes (TLS's own unsent records first). Returns 1 when
+ * that was done (the caller updates the buffer), 0 while the handshake waits with nothing to
+ * send (want_out set while the handshake has bytes to write), or -errno. */
 static int flush_tls(struct conn *c, uint64_t *sent)
 {
 	if (!tls_stream_ready(c->tls)) {
 		int rc = tls_stream_handshake(c->tls);
 		if (rc == -EAGAIN && c->out_off == c->out.len) {
-			c->want_out = tls_stream_wants_write(c->tls);
+			c->want_out = tls_stream_unsent(c->tls) > 0;
 			return 0;
 		}
 		if (rc)
 			return rc == -EAGAIN ? -ENOTCONN : rc;
 	}
-	while (c->out_off < c->out.len) {
+	do {
 		ssize_t n = tls_stream_send(c->tls, c->out.data + c->out_off, c->out.len - c->out_off);
 		if (n == -EAGAIN)
 			break;
@@ -178,7 +178,7 @@ static int flush_tls(struct conn *c, uint64_t *sent)
 			return (int)n;
 		c->out_off += (size_t)n;
 		*sent += (uint64_t)n;
-	}
+	} while (c->out_off < c->out.len && !tls_stream_unsent(c->tls));
 	return 1;
 }
 
@@ -209,7 +209,7 @@ int conn_flush(struct conn *c, uint64_t *sent)
 		c->out.len -= c->out_off;
 		c->out_off = 0;
 	}
-	c->want_out = c->out_off < c->out.len;
+	c->want_out = c->out_off < c->out.len || (c->tls && tls_stream_unsent(c->tls));
 	return 0;
 }
 

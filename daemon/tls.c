@@ -2,8 +2,12 @@
  * (no read-ahead), and tls_stream_recv is given room for a whole record, so after a read the
  * only bytes GnuTLS may hold are a record still incomplete: the socket signals when its rest
  * arrives, and epoll (level-triggered) never forgets readable data. tls_stream_pending is
- * there for the caller to make sure of it. Writes that return EAGAIN are resumed with
- * gnutls_record_send(NULL, 0): the record was already encrypted from the caller's bytes.
+ * there for the caller to make sure of it.
+ * Writes: GnuTLS pushes each record (16 KiB at most) on its own; sent straight to the socket
+ * that is a system call per record. Instead its push function appends to the stream's own
+ * buffer, which goes out in one send() per batch of records (up to BATCH bytes of plaintext),
+ * as far as the socket takes; the rest waits there (tls_stream_unsent) for EPOLLOUT. So a
+ * record is never half written inside GnuTLS, and its EAGAIN never happens.
  */
 #include "tls.h"
 
@@ -12,6 +16,7 @@
 #include <gnutls/gnutls.h>
 #include <gnutls/x509.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -31,6 +36,7 @@
 #define FAIL_LOG_LINES 5		      /* per 10 s */
 #define MAX_PEM (1u << 20)
 #define TLS_HANDSHAKE_BYTE 0x16 /* a TLS record of type handshake: a ClientHello begins so */
+#define BATCH (256u << 10)	/* plaintext encrypted per tls_stream_send */
 
 struct tls_server {
 	gnutls_certificate_credentials_t cred;
@@ -47,8 +53,8 @@ struct tls_stream {
 	bool sniffed;	 /* the first byte was looked at */
 	bool ready;	 /* handshake complete */
 	bool failed;
-	bool want_write; /* the handshake waits for the socket to take bytes */
-	bool resend;	 /* a record is half written: resume it */
+	struct pbuf wb;	 /* encrypted records not yet taken by the socket: [wb_off, len) */
+	size_t wb_off;
 	char peer[64];
 	char err[200];
 };
@@ -230,6 +236,71 @@ static void fail(struct tls_stream *s, const char *fmt, ...)
 	t->lines++;
 }
 
+/* GnuTLS's output: appended to wb (sent by write_out). */
+static ssize_t push(gnutls_transport_ptr_t p, const void *data, size_t n)
+{
+	struct tls_stream *s = p;
+	if (pbuf_append(&s->wb, data, n))
+		abort(); /* growable: only ENOMEM, which aborts first */
+	return (ssize_t)n;
+}
+
+static ssize_t pull(gnutls_transport_ptr_t p, void *data, size_t n)
+{
+	struct tls_stream *s = p;
+	ssize_t r;
+	do
+		r = recv(s->fd, data, n, MSG_DONTWAIT);
+	while (r < 0 && errno == EINTR);
+	if (r < 0)
+		gnutls_transport_set_errno(s->s, errno);
+	return r;
+}
+
+/* Only asked with 0 (is anything there?): the stream never waits. */
+static int pull_timeout(gnutls_transport_ptr_t p, unsigned int ms)
+{
+	struct tls_stream *s = p;
+	(void)ms;
+	struct pollfd pf = { .fd = s->fd, .events = POLLIN };
+	int r = poll(&pf, 1, 0);
+	if (r < 0)
+		gnutls_transport_set_errno(s->s, errno);
+	return r;
+}
+
+/* Sends what wb holds as far as the socket takes. Returns 0 or -errno (the peer is gone). */
+static int write_out(struct tls_stream *s)
+{
+	while (s->wb_off < s->wb.len) {
+		ssize_t n = send(s->fd, s->wb.data + s->wb_off, s->wb.len - s->wb_off,
+				 MSG_NOSIGNAL | MSG_DONTWAIT);
+		if (n < 0 && errno == EINTR)
+			continue;
+		if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+			break;
+		if (n < 0) {
+			int e = errno;
+			snprintf(s->err, sizeof s->err, "send: %s", strerror(e));
+			return -e;
+		}
+		s->wb_off += (size_t)n;
+	}
+	if (s->wb_off == s->wb.len) {
+		s->wb.len = s->wb_off = 0;
+	} else if (s->wb_off > BATCH) {
+		memmove(s->wb.data, s->wb.data + s->wb_off, s->wb.len - s->wb_off);
+		s->wb.len -= s->wb_off;
+		s->wb_off = 0;
+	}
+	return 0;
+}
+
+size_t tls_stream_unsent(const struct tls_stream *s)
+{
+	return s->wb.len - s->wb_off;
+}
+
 struct tls_stream *tls_stream_create(struct tls_server *t, int fd)
 {
 	struct tls_stream *s = xcalloc(1, sizeof *s);
@@ -255,6 +326,7 @@ struct tls_stream *tls_stream_create(struct tls_server *t, int fd)
 		free(s);
 		return NULL;
 	}
+	pbuf_init(&s->wb);
 	if (gnutls_priority_set(s->s, t->prio) < 0 ||
 	    gnutls_credentials_set(s->s, GNUTLS_CRD_CERTIFICATE, t->cred) < 0) {
 		gnutls_deinit(s->s);
@@ -263,7 +335,10 @@ struct tls_stream *tls_stream_create(struct tls_server *t, int fd)
 	}
 	gnutls_certificate_server_set_request(s->s, GNUTLS_CERT_IGNORE);
 	gnutls_handshake_set_timeout(s->s, 0); /* the session's handshake_timeout bounds it */
-	gnutls_transport_set_int(s->s, fd);
+	gnutls_transport_set_ptr(s->s, s);
+	gnutls_transport_set_push_function(s->s, push);
+	gnutls_transport_set_pull_function(s->s, pull);
+	gnutls_transport_set_pull_timeout_function(s->s, pull_timeout);
 	return s;
 }
 
@@ -271,9 +346,10 @@ void tls_stream_destroy(struct tls_stream *s)
 {
 	if (!s)
 		return;
-	if (s->ready && !s->failed)
-		(void)gnutls_bye(s->s, GNUTLS_SHUT_WR); /* non-blocking: best effort */
+	if (s->ready && !s->failed && gnutls_bye(s->s, GNUTLS_SHUT_WR) == 0)
+		(void)write_out(s); /* close_notify: best effort, never waits */
 	gnutls_deinit(s->s);
+	pbuf_fini(&s->wb);
 	free(s);
 }
 
@@ -341,15 +417,17 @@ int tls_stream_handshake(struct tls_stream *s)
 	}
 	for (int tries = 0; tries < 16; tries++) {
 		int g = gnutls_handshake(s->s);
+		int w = write_out(s);
+		if (w) {
+			s->failed = true;
+			return w;
+		}
 		if (g == GNUTLS_E_SUCCESS) {
 			s->ready = true;
-			s->want_write = false;
 			return 0;
 		}
-		if (g == GNUTLS_E_AGAIN) {
-			s->want_write = gnutls_record_get_direction(s->s) == 1;
+		if (g == GNUTLS_E_AGAIN)
 			return -EAGAIN;
-		}
 		if (g == GNUTLS_E_INTERRUPTED || !gnutls_error_is_fatal(g))
 			continue; /* a warning alert: go on */
 		if (g == GNUTLS_E_FATAL_ALERT_RECEIVED) {
@@ -358,7 +436,8 @@ int tls_stream_handshake(struct tls_stream *s)
 			     gnutls_alert_get_name(gnutls_alert_get(s->s)));
 			return -EPROTO;
 		}
-		(void)gnutls_alert_send_appropriate(s->s, g);
+		if (gnutls_alert_send_appropriate(s->s, g) == 0)
+			(void)write_out(s);
 		fail(s, "%s", gnutls_strerror(g));
 		return -EPROTO;
 	}
@@ -371,10 +450,6 @@ bool tls_stream_ready(const struct tls_stream *s)
 	return s->ready;
 }
 
-bool tls_stream_wants_write(const struct tls_stream *s)
-{
-	return !s->ready && s->want_write;
-}
 
 ssize_t tls_stream_recv(struct tls_stream *s, void *buf, size_t n)
 {
@@ -402,24 +477,25 @@ size_t tls_stream_pending(const struct tls_stream *s)
 
 ssize_t tls_stream_send(struct tls_stream *s, const void *p, size_t n)
 {
-	for (;;) {
-		ssize_t g = s->resend ? gnutls_record_send(s->s, NULL, 0)
-				      : gnutls_record_send(s->s, p, n);
-		if (g == GNUTLS_E_INTERRUPTED) {
-			s->resend = true;
+	int rc = write_out(s);
+	if (rc)
+		return rc == -EPIPE || rc == -ECONNRESET ? rc : -EPIPE;
+	if (tls_stream_unsent(s))
+		return -EAGAIN; /* the last batch first */
+	size_t done = 0, take = n < BATCH ? n : BATCH;
+	while (done < take) {
+		ssize_t g = gnutls_record_send(s->s, (const uint8_t *)p + done, take - done);
+		if (g == GNUTLS_E_INTERRUPTED)
 			continue;
+		if (g < 0) {
+			snprintf(s->err, sizeof s->err, "TLS: %s", gnutls_strerror((int)g));
+			s->failed = true;
+			return -EPROTO;
 		}
-		if (g == GNUTLS_E_AGAIN) {
-			s->resend = true;
-			return -EAGAIN;
-		}
-		s->resend = false;
-		if (g >= 0)
-			return g;
-		snprintf(s->err, sizeof s->err, "TLS: %s", gnutls_strerror((int)g));
-		s->failed = true;
-		return g == GNUTLS_E_PUSH_ERROR ? -EPIPE : -EPROTO;
+		done += (size_t)g;
 	}
+	rc = write_out(s);
+	return rc ? rc : (ssize_t)done;
 }
 
 const char *tls_stream_error(const struct tls_stream *s)

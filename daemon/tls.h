@@ -38,21 +38,23 @@ struct tls_stream *tls_stream_create(struct tls_server *t, int fd);
  * The fd stays open. NULL is a no-op. */
 void tls_stream_destroy(struct tls_stream *s);
 /* Advances the handshake. Returns 0 once it is complete, -EAGAIN while it waits for the
- * socket (tls_stream_wants_write says which way), -EPROTO when it failed (tls_stream_error
- * says why; the failure was logged). */
+ * socket (to read; or to write while tls_stream_unsent), -EPROTO when it failed
+ * (tls_stream_error says why; the failure was logged), or -errno when the socket failed. */
 int tls_stream_handshake(struct tls_stream *s);
 bool tls_stream_ready(const struct tls_stream *s);
-/* While the handshake waits: whether it waits to write (EPOLLOUT) rather than to read. */
-bool tls_stream_wants_write(const struct tls_stream *s);
+/* Encrypted bytes the socket has not taken yet: while there are, the stream waits for
+ * EPOLLOUT and takes no new plaintext. */
+size_t tls_stream_unsent(const struct tls_stream *s);
 /* Reads decrypted bytes (the handshake must be complete) into buf[0 .. n), n ≥ 16 KiB so a
  * whole record fits. Returns the count (> 0), 0 at the end of the stream (close_notify or
  * the peer closed), -EAGAIN, or -ECONNRESET / -EPROTO (tls_stream_error says why). */
 ssize_t tls_stream_recv(struct tls_stream *s, void *buf, size_t n);
 /* Decrypted bytes GnuTLS holds that the socket will not signal (read them now). */
 size_t tls_stream_pending(const struct tls_stream *s);
-/* Encrypts and writes from p[0 .. n) (at most one record). After -EAGAIN the next call must
- * pass the same bytes (they went into a record that is still being written); it returns the
- * count once that record is out. Returns the count (> 0), -EAGAIN, or -EPIPE / -EPROTO. */
+/* Writes out what earlier calls left unsent, then encrypts p[0 .. n) (up to 256 KiB of it)
+ * and writes that as far as the socket takes (one system call for the batch; the rest stays
+ * unsent, owned by the stream). Returns the plaintext bytes taken (> 0 when n > 0), -EAGAIN
+ * when earlier bytes are still unsent (nothing taken), or -EPIPE / -ECONNRESET / -EPROTO. */
 ssize_t tls_stream_send(struct tls_stream *s, const void *p, size_t n);
 /* Why the stream failed ("" while it has not). Borrowed. */
 const char *tls_stream_error(const struct tls_stream *s);

@@ -2,8 +2,9 @@
  * run: two daemons (tests/support/daemon_env) on one planet, one plain, one with [tls] (a CA
  * and an ECDSA P-256 server certificate made by certtool here), driven by the net.h client:
  * connect + handshake(s) + HELLO_OK (p50, p99), a cached quad's round trip (WANT → 4th TILE),
- * and cached-tile throughput to one session (256² RGBA8, decoded). Prints each figure for
- * both and the ratio TLS / plain. Skips, saying so, without certtool.
+ * and cached-tile throughput to one session (256² RGBA8, decoded), plain and TLS samples taken
+ * in alternation. Prints each figure for both and the ratio TLS / plain. Skips, saying so,
+ * without certtool.
  */
 #include <signal.h>
 #include <stdbool.h>
@@ -67,7 +68,7 @@ static void make_certs(const char *dir)
 		die(out);
 }
 
-/* Starts a daemon on the bench planet; with tls, [tls] on a certificate made here and the CA's
+/* Starts a daemon on bench_server's cheap planet (its tiles stay cached); with tls, [tls] on a certificate made here and the CA's
  * path into ca. */
 static void start(struct daemon_env *d, const char *tag, bool tls, char ca[300])
 {
@@ -121,7 +122,7 @@ static void fetch(struct net_conn *c, uint32_t pid, uint32_t seq, const struct p
 	if (net_send(c, &m, err))
 		die(err);
 	for (uint32_t k = 0; k < n; k++) {
-		if (net_expect(c, PROTO_TILE, &m, 30000, NULL, NULL, err) ||
+		if (net_expect(c, PROTO_TILE, &m, 120000, NULL, NULL, err) ||
 		    net_tile_decode(c, &m.tile, px, sizeof px, err))
 			die(err);
 		proto_msg_fini(&m);
@@ -134,54 +135,31 @@ static int cmp_u64(const void *a, const void *b)
 	return x < y ? -1 : x > y;
 }
 
-struct figures {
-	double connect_p50, connect_p99, quad_p50, quad_p99, tiles_s;
+/* One client of each daemon, measured in alternation (the machine's load changes under a
+ * run: each figure pairs a plain and a TLS sample taken back to back). */
+struct side {
+	int port;
+	const char *ca; /* NULL: plain */
+	struct net_conn *c;
+	uint32_t pid, seq;
+	uint64_t t[512];
 };
 
-static void measure(int port, const char *ca, struct figures *f)
+static double median(uint64_t *t, int n)
 {
-	enum { NC = 200, NQ = 500, ROUNDS = 6 };
-	static uint64_t t[NQ];
-	for (int i = 0; i < NC; i++) {
-		uint64_t t0 = clock_now_ns();
-		struct net_conn *c = conn(port, ca);
-		t[i] = clock_now_ns() - t0;
-		net_close(c);
-	}
-	qsort(t, NC, sizeof t[0], cmp_u64);
-	f->connect_p50 = t[NC / 2] * 1e-6;
-	f->connect_p99 = t[NC * 99 / 100] * 1e-6;
+	qsort(t, (size_t)n, sizeof t[0], cmp_u64);
+	return (double)t[n / 2];
+}
 
-	struct net_conn *c = conn(port, ca);
+static void side_open(struct side *s)
+{
+	s->c = conn(s->port, s->ca);
 	struct proto_msg m;
 	char err[256];
-	if (net_open_planet(c, "b", &m, 30000, err))
+	if (net_open_planet(s->c, "b", &m, 30000, err))
 		die(err);
-	uint32_t pid = m.opened.planet_id, seq = 0;
+	s->pid = m.opened.planet_id;
 	proto_msg_fini(&m);
-	struct proto_want_entry qa[4], qb[4];
-	static struct proto_want_entry big[2][512];
-	set(qa, 5, 10, 10, 2, 2);
-	set(qb, 5, 20, 10, 2, 2);
-	set(big[0], 7, 0, 10, 32, 16);
-	set(big[1], 7, 64, 10, 32, 16);
-	for (int i = 0; i < 2; i++) { /* generated once, then cached */
-		fetch(c, pid, ++seq, i ? qb : qa, 4);
-		fetch(c, pid, ++seq, big[i], 512);
-	}
-	for (int i = 0; i < NQ; i++) {
-		uint64_t t0 = clock_now_ns();
-		fetch(c, pid, ++seq, i & 1 ? qb : qa, 4);
-		t[i] = clock_now_ns() - t0;
-	}
-	qsort(t, NQ, sizeof t[0], cmp_u64);
-	f->quad_p50 = t[NQ / 2] * 1e-6;
-	f->quad_p99 = t[NQ * 99 / 100] * 1e-6;
-	uint64_t t0 = clock_now_ns();
-	for (int r = 0; r < ROUNDS; r++)
-		fetch(c, pid, ++seq, big[r & 1], 512);
-	f->tiles_s = ROUNDS * 512 / ((clock_now_ns() - t0) * 1e-9);
-	net_close(c);
 }
 
 int main(void)
@@ -197,20 +175,62 @@ int main(void)
 	char ca[300];
 	start(&plain, "bench-tls-plain", false, NULL);
 	start(&tls, "bench-tls", true, ca);
-	struct figures p, t;
-	measure(plain.port, NULL, &p);
-	measure(tls.port, ca, &t);
+	struct side sd[2] = { { .port = plain.port }, { .port = tls.port, .ca = ca } };
+
+	enum { NC = 200, NQ = 400, ROUNDS = 12 };
+	for (int i = 0; i < NC; i++)
+		for (int k = 0; k < 2; k++) {
+			uint64_t t0 = clock_now_ns();
+			net_close(conn(sd[k].port, sd[k].ca));
+			sd[k].t[i] = clock_now_ns() - t0;
+		}
+	double cp[2], cq[2], qp[2], qq[2], tp[2];
+	for (int k = 0; k < 2; k++) {
+		cp[k] = median(sd[k].t, NC) * 1e-6;
+		cq[k] = sd[k].t[NC * 99 / 100] * 1e-6;
+	}
+	struct proto_want_entry qa[4], qb[4];
+	static struct proto_want_entry big[2][512];
+	set(qa, 5, 10, 10, 2, 2);
+	set(qb, 5, 20, 10, 2, 2);
+	set(big[0], 7, 0, 10, 32, 16);
+	set(big[1], 7, 64, 10, 32, 16);
+	for (int k = 0; k < 2; k++) {
+		side_open(&sd[k]);
+		for (int i = 0; i < 2; i++) { /* generated once, then cached */
+			fetch(sd[k].c, sd[k].pid, ++sd[k].seq, i ? qb : qa, 4);
+			fetch(sd[k].c, sd[k].pid, ++sd[k].seq, big[i], 512);
+		}
+	}
+	for (int i = 0; i < NQ; i++)
+		for (int k = 0; k < 2; k++) {
+			uint64_t t0 = clock_now_ns();
+			fetch(sd[k].c, sd[k].pid, ++sd[k].seq, i & 1 ? qb : qa, 4);
+			sd[k].t[i] = clock_now_ns() - t0;
+		}
+	for (int k = 0; k < 2; k++) {
+		qp[k] = median(sd[k].t, NQ) * 1e-6;
+		qq[k] = sd[k].t[NQ * 99 / 100] * 1e-6;
+	}
+	for (int r = 0; r < ROUNDS; r++)
+		for (int k = 0; k < 2; k++) {
+			uint64_t t0 = clock_now_ns();
+			fetch(sd[k].c, sd[k].pid, ++sd[k].seq, big[r & 1], 512);
+			sd[k].t[r] = clock_now_ns() - t0;
+		}
+	for (int k = 0; k < 2; k++) {
+		tp[k] = 512 / (median(sd[k].t, ROUNDS) * 1e-9);
+		net_close(sd[k].c);
+	}
 	printf("tls/connect + HELLO_OK loopback: plain p50 %.3f ms p99 %.3f ms, TLS (1.3, ECDSA "
 	       "P-256) p50 %.3f ms p99 %.3f ms, ratio %.1fx\n",
-	       p.connect_p50, p.connect_p99, t.connect_p50, t.connect_p99,
-	       t.connect_p50 / p.connect_p50);
+	       cp[0], cq[0], cp[1], cq[1], cp[1] / cp[0]);
 	printf("tls/cached quad 4x256² rgba8 round trip: plain p50 %.3f ms p99 %.3f ms, TLS p50 "
 	       "%.3f ms p99 %.3f ms, ratio %.2fx\n",
-	       p.quad_p50, p.quad_p99, t.quad_p50, t.quad_p99, t.quad_p50 / p.quad_p50);
-	printf("tls/cached tiles 256² rgba8 to 1 session (net.h, decoded): plain %.0f tiles/s "
-	       "(%.2f GB/s), TLS %.0f tiles/s (%.2f GB/s), TLS/plain %.2f\n",
-	       p.tiles_s, p.tiles_s * 262144e-9, t.tiles_s, t.tiles_s * 262144e-9,
-	       t.tiles_s / p.tiles_s);
+	       qp[0], qq[0], qp[1], qq[1], qp[1] / qp[0]);
+	printf("tls/cached tiles 256² rgba8 to 1 session (net.h, decoded; median of %d rounds of "
+	       "512): plain %.0f tiles/s (%.2f GB/s), TLS %.0f tiles/s (%.2f GB/s), TLS/plain %.2f\n",
+	       ROUNDS, tp[0], tp[0] * 262144e-9, tp[1], tp[1] * 262144e-9, tp[1] / tp[0]);
 	daemon_env_fini(&plain);
 	daemon_env_fini(&tls);
 	return 0;
