@@ -460,9 +460,16 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 	const uint8_t *tok = server_token(d->srv, &tlen);
 	bool need = tok && !c->http_open &&
 		    (!conf_addr_is_loopback(c->http_listen) || c->require_token != CONF_TOKEN_AUTO);
-	char err[256], cesium[512];
+	char err[256], cesium[512], *cert = NULL, *key = NULL;
 	const char *cdir = find_cesium(c, cesium, sizeof cesium);
-	int rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
+	int rc = 0;
+	if (c->tls_cert && ((rc = tls_pem_read("cert", c->tls_cert, &cert, err)) ||
+			    (rc = tls_pem_read("key", c->tls_key, &key, err)))) {
+		log_msg(LOG_ERROR, "http: %s", err);
+		free(cert);
+		return rc;
+	}
+	rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
 						  .cache = cache, .planets = ps,
 						  .token = need ? tok : NULL, .token_len = need ? tlen : 0,
 						  .threads = c->http_threads,
@@ -471,16 +478,21 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 						  .timeout_s = c->http_timeout_s,
 						  .max_age_s = c->http_max_age_s,
 						  .cache_bytes = (size_t)c->http_cache_mb << 20,
-						  .cesium_dir = cdir },
+						  .cesium_dir = cdir, .tls_cert = cert,
+						  .tls_key = key },
 			     &d->http, err);
+	if (key)
+		memset(key, 0, strlen(key));
+	free(key);
+	free(cert);
 	if (rc) {
 		log_msg(LOG_ERROR, "%s", err);
 		return rc;
 	}
 	char host[256], port[16];
 	conf_split_hostport(c->http_listen, host, sizeof host, port, sizeof port);
-	log_msg(LOG_INFO, "http: listening on http://%s%s%s:%u/%s%s", strchr(host, ':') ? "[" : "",
-		host, strchr(host, ':') ? "]" : "", http_port(d->http),
+	log_msg(LOG_INFO, "http: listening on http%s://%s%s%s:%u/%s%s", c->tls_cert ? "s" : "",
+		strchr(host, ':') ? "[" : "", host, strchr(host, ':') ? "]" : "", http_port(d->http),
 		need ? " (bearer token required)" : "", cdir ? " (browser viewer)" : "");
 	return 0;
 }

@@ -95,6 +95,20 @@ static int load_pem(const char *key, const char *path, gnutls_datum_t *d, char e
 	return 0;
 }
 
+int tls_pem_read(const char *key, const char *path, char **out, char err[256])
+{
+	gnutls_datum_t d = { 0 };
+	*out = NULL;
+	int rc = load_pem(key, path, &d, err);
+	if (rc)
+		return rc;
+	*out = xmalloc(d.size + 1);
+	memcpy(*out, d.data, d.size + 1); /* load_pem terminated it */
+	memset(d.data, 0, d.size);
+	gnutls_free(d.data);
+	return 0;
+}
+
 /* "2027-01-31 12:00 UTC" */
 static void fmt_time(time_t t, char *out, size_t n)
 {

@@ -26,6 +26,9 @@ struct tls_stream;
  * refuse (a certificate expired or not yet valid: clients will refuse it), else "". */
 int tls_server_create(const char *cert, const char *key, struct tls_server **out,
 		      char err[256], char warn[256]);
+/* The PEM file [tls] `key` names (key: "cert" or "key", for messages), as a NUL-terminated
+ * string. Returns 0 with *out owned (free), or -errno with err naming the file. */
+int tls_pem_read(const char *key, const char *path, char **out, char err[256]);
 /* Frees the credentials (no stream may remain). NULL is a no-op. */
 void tls_server_destroy(struct tls_server *t);
 /* Failed handshakes so far (all of them, logged or not). */

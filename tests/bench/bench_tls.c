@@ -16,13 +16,10 @@
 #include "client/net.h"
 #include "common/clock.h"
 #include "common/proto.h"
+#include "support/bench_planet.h"
 #include "support/daemon_env.h"
 
-static const char planet[] =
-	"[planet]\nname = b\nbody = sphere\nradius = 1000000\ntile_size = 256\nmax_level = 12\n"
-	"[node base]\ntype = noise\nseed = 3\noctaves = 2\nwavelength = 300000\namplitude = 500\n"
-	"[node tint]\ntype = ramp\ninput = base\nstops = -500 0 0 255, 500 255 255 255\n"
-	"[layer color]\nnode = tint\nformat = rgba8\n";
+static const char planet[] = BENCH_PLANET_INI;
 
 static void die(const char *what)
 {
@@ -98,17 +95,6 @@ static struct net_conn *conn(int port, const char *ca)
 	if (net_connect(&o, &c, err))
 		die(err);
 	return c;
-}
-
-static uint32_t set(struct proto_want_entry *e, int ly, uint32_t x0, uint32_t y0, uint32_t w,
-		    uint32_t h)
-{
-	uint32_t n = 0;
-	for (uint32_t y = y0; y < y0 + h; y++)
-		for (uint32_t x = x0; x < x0 + w; x++)
-			e[n++] = (struct proto_want_entry){ .layer = 0, .cls = 1, .lx = (uint8_t)(ly + 1),
-							    .ly = (uint8_t)ly, .x = x, .y = y };
-	return n;
 }
 
 /* WANT e[0 .. n) and receive (and decode) its n tiles. */
@@ -191,10 +177,10 @@ int main(void)
 	}
 	struct proto_want_entry qa[4], qb[4];
 	static struct proto_want_entry big[2][512];
-	set(qa, 5, 10, 10, 2, 2);
-	set(qb, 5, 20, 10, 2, 2);
-	set(big[0], 7, 0, 10, 32, 16);
-	set(big[1], 7, 64, 10, 32, 16);
+	bench_planet_block(qa, 5, 10, 10, 2, 2);
+	bench_planet_block(qb, 5, 20, 10, 2, 2);
+	bench_planet_block(big[0], 7, 0, 10, 32, 16);
+	bench_planet_block(big[1], 7, 64, 10, 32, 16);
 	for (int k = 0; k < 2; k++) {
 		side_open(&sd[k]);
 		for (int i = 0; i < 2; i++) { /* generated once, then cached */

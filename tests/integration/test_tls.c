@@ -8,7 +8,8 @@
  * a silent connection are closed (the pre-auth guard's handshake_timeout covers the TLS
  * handshake); the token never crosses the wire in clear (a relay thread between client and
  * daemon records every byte; the control: a plain client's HELLO does show it); tiles over TLS
- * are the same bytes as over the Unix socket; clipmapview draws a complete frame over TLS.
+ * are the same bytes as over the Unix socket; clipmapview draws a complete frame over TLS;
+ * the HTTP endpoint is HTTPS on the same certificate (curl, when installed).
  * Bad [tls] files stop clipmapd at start with the file and the problem named.
  * Skipped, saying so, without certtool (package gnutls-bin) or the programs.
  */
@@ -42,6 +43,7 @@
 static struct daemon_env E;
 static bool have_certtool;
 static char ca[200], wrong_ca[200], host_port[64];
+static int http_port; /* [http] listen, HTTPS with [tls] */
 
 /* ---- certificates ------------------------------------------------------------------- */
 
@@ -130,13 +132,17 @@ static int setup(void **state)
 	snprintf(cert, sizeof cert, "tls.cert = %s/server.pem", E.dir);
 	snprintf(key, sizeof key, "tls.key = %s/server.key", E.dir);
 	const char *set[] = { "listen.tcp = 127.0.0.1:0", "listen.handshake_timeout = 2",
-			      "log.level = info", cert, key, NULL };
+			      "http.listen = 127.0.0.1:0", "log.level = info", cert, key, NULL };
 	char err[256];
 	if (daemon_env_start(&E, &(struct daemon_env_conf){ .set = set, .token = TOKEN }, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
 		return -1;
 	}
 	snprintf(host_port, sizeof host_port, "127.0.0.1:%d", E.port);
+	char *log = daemon_env_log_read(&E);
+	const char *h = strstr(log, "http: listening on https://127.0.0.1:");
+	http_port = h ? atoi(h + strlen("http: listening on https://127.0.0.1:")) : 0;
+	free(log);
 	return 0;
 }
 
@@ -568,6 +574,35 @@ static void viewer_draws_a_complete_frame_over_tls(void **state)
 	assert_non_null(strstr(out, "certificate is refused"));
 }
 
+/* [http] with [tls] is HTTPS on the same certificate (checked with curl). */
+static void http_endpoint_is_https(void **state)
+{
+	(void)state;
+	NEED_DAEMON();
+	static char out[OUT_CAP];
+	char *v[] = { "curl", "--version", NULL };
+	if (daemon_env_run(v, out, sizeof out) != 0) {
+		print_message("skipped: curl not found\n");
+		skip();
+	}
+	assert_true(http_port > 0);
+	char url[128], plain[128];
+	snprintf(url, sizeof url, "https://127.0.0.1:%d/healthz", http_port);
+	snprintf(plain, sizeof plain, "http://127.0.0.1:%d/healthz", http_port);
+	char *ok[] = { "curl", "-sS", "-m", "20", "--cacert", ca, url, NULL };
+	int rc = daemon_env_run(ok, out, sizeof out);
+	if (rc)
+		fprintf(stderr, "curl: %s", out);
+	assert_int_equal(rc, 0);
+	assert_non_null(strstr(out, "ok"));
+	char *wrong[] = { "curl", "-sS", "-m", "20", "--cacert", wrong_ca, url, NULL };
+	assert_int_equal(daemon_env_run(wrong, out, sizeof out), 60); /* peer certificate refused */
+	char *clear[] = { "curl", "-sS", "-m", "20", plain, NULL };
+	rc = daemon_env_run(clear, out, sizeof out);
+	fprintf(stderr, "plain HTTP to the HTTPS endpoint: curl exit %d: %s", rc, out);
+	assert_true(rc != 0);
+}
+
 /* Bad [tls] files: clipmapd exits 2 at start naming the file and the problem. */
 static void bad_files_stop_the_daemon(void **state)
 {
@@ -615,6 +650,7 @@ int main(void)
 		cmocka_unit_test(token_never_in_clear),
 		cmocka_unit_test(tiles_over_tls_match_the_unix_socket),
 		cmocka_unit_test(viewer_draws_a_complete_frame_over_tls),
+		cmocka_unit_test(http_endpoint_is_https),
 		cmocka_unit_test(bad_files_stop_the_daemon),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
