@@ -41,7 +41,7 @@
 struct tls_server {
 	gnutls_certificate_credentials_t cred;
 	gnutls_priority_t prio;
-	unsigned long failures, unlogged;
+	unsigned long unlogged; /* failed handshakes not logged since the last line */
 	uint64_t window_ns; /* the current logging window began then */
 	int lines;	    /* lines logged in it */
 };
@@ -215,11 +215,6 @@ void tls_server_destroy(struct tls_server *t)
 	free(t);
 }
 
-unsigned long tls_server_failures(const struct tls_server *t)
-{
-	return t->failures;
-}
-
 /* Records why s failed and logs it, at most FAIL_LOG_LINES times per FAIL_LOG_WINDOW_NS per
  * server. */
 static void fail(struct tls_stream *s, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
@@ -231,7 +226,6 @@ static void fail(struct tls_stream *s, const char *fmt, ...)
 	va_end(ap);
 	s->failed = true;
 	struct tls_server *t = s->srv;
-	t->failures++;
 	uint64_t now = clock_now_ns();
 	if (!t->window_ns || now - t->window_ns >= FAIL_LOG_WINDOW_NS) {
 		t->window_ns = now;

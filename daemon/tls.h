@@ -31,8 +31,6 @@ int tls_server_create(const char *cert, const char *key, struct tls_server **out
 int tls_pem_read(const char *key, const char *path, char **out, char err[256]);
 /* Frees the credentials (no stream may remain). NULL is a no-op. */
 void tls_server_destroy(struct tls_server *t);
-/* Failed handshakes so far (all of them, logged or not). */
-unsigned long tls_server_failures(const struct tls_server *t);
 
 /* A server-side TLS stream on fd (borrowed, non-blocking). Returns NULL only when GnuTLS
  * cannot make a session (out of memory). */
