@@ -28,11 +28,6 @@ int conn_start_tls(struct conn *c, struct tls_server *tls)
 	return c->tls ? 0 : -ENOMEM;
 }
 
-bool conn_is_tls(const struct conn *c)
-{
-	return c->tls != NULL;
-}
-
 const char *conn_strerror(const struct conn *c, int rc)
 {
 	if (c->tls && tls_stream_error(c->tls)[0])

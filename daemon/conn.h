@@ -36,8 +36,6 @@ void conn_init(struct conn *c, int fd);
 /* Speaks TLS from now on (server side of tls, borrowed: it outlives the conn), before any
  * byte was read. Returns 0 or -ENOMEM. */
 int conn_start_tls(struct conn *c, struct tls_server *tls);
-/* Whether the connection is TLS. */
-bool conn_is_tls(const struct conn *c);
 /* What a failed conn_recv / conn_flush (rc) means, for the logs: the TLS layer's reason when
  * it has one, else strerror(-rc). Borrowed until the next call. */
 const char *conn_strerror(const struct conn *c, int rc);

@@ -5,9 +5,10 @@
  * there for the caller to make sure of it.
  * Writes: GnuTLS pushes each record (16 KiB at most) on its own; sent straight to the socket
  * that is a system call per record. Instead its push function appends to the stream's own
- * buffer, which goes out in one send() per batch of records (up to BATCH bytes of plaintext),
- * as far as the socket takes; the rest waits there (tls_stream_unsent) for EPOLLOUT. So a
- * record is never half written inside GnuTLS, and its EAGAIN never happens.
+ * buffer, which goes out in one send() per chunk of records (growing while the socket takes
+ * whole chunks, up to BATCH bytes of plaintext per call), as far as the socket takes; the
+ * rest waits there (tls_stream_unsent) for EPOLLOUT. So a record is never half written inside
+ * GnuTLS, and its EAGAIN never happens.
  */
 #include "tls.h"
 
@@ -487,23 +488,33 @@ ssize_t tls_stream_send(struct tls_stream *s, const void *p, size_t n)
 {
 	int rc = write_out(s);
 	if (rc)
-		return rc == -EPIPE || rc == -ECONNRESET ? rc : -EPIPE;
+		return rc;
 	if (tls_stream_unsent(s))
 		return -EAGAIN; /* the last batch first */
-	size_t done = 0, take = n < BATCH ? n : BATCH;
-	while (done < take) {
-		ssize_t g = gnutls_record_send(s->s, (const uint8_t *)p + done, take - done);
-		if (g == GNUTLS_E_INTERRUPTED)
-			continue;
-		if (g < 0) {
-			snprintf(s->err, sizeof s->err, "TLS: %s", gnutls_strerror((int)g));
-			s->failed = true;
-			return -EPROTO;
+	/* Chunks of 16 KiB, then twice as much each time the socket took all of the last: a
+	 * fast socket gets few system calls, and a slow one (or one held to TCP_NOTSENT_LOWAT)
+	 * leaves at most one chunk encrypted and waiting here, where a new want-set cannot
+	 * recall it. */
+	size_t done = 0, chunk = 16u << 10;
+	while (done < n && done < BATCH && !tls_stream_unsent(s)) {
+		size_t end = done + (chunk < n - done ? chunk : n - done);
+		end = end < BATCH ? end : BATCH;
+		while (done < end) {
+			ssize_t g = gnutls_record_send(s->s, (const uint8_t *)p + done, end - done);
+			if (g == GNUTLS_E_INTERRUPTED)
+				continue;
+			if (g < 0) {
+				snprintf(s->err, sizeof s->err, "TLS: %s", gnutls_strerror((int)g));
+				s->failed = true;
+				return -EPROTO;
+			}
+			done += (size_t)g;
 		}
-		done += (size_t)g;
+		if ((rc = write_out(s)))
+			return rc;
+		chunk *= 2;
 	}
-	rc = write_out(s);
-	return rc ? rc : (ssize_t)done;
+	return (ssize_t)done;
 }
 
 const char *tls_stream_error(const struct tls_stream *s)

@@ -53,8 +53,9 @@ ssize_t tls_stream_recv(struct tls_stream *s, void *buf, size_t n);
 /* Decrypted bytes GnuTLS holds that the socket will not signal (read them now). */
 size_t tls_stream_pending(const struct tls_stream *s);
 /* Writes out what earlier calls left unsent, then encrypts p[0 .. n) (up to 256 KiB of it)
- * and writes that as far as the socket takes (one system call for the batch; the rest stays
- * unsent, owned by the stream). Returns the plaintext bytes taken (> 0 when n > 0), -EAGAIN
+ * in chunks of 16, 32, 64 … KiB, each written with one system call, while the socket takes
+ * whole chunks; what it does not take of the last stays unsent, owned by the stream (at most
+ * that chunk: bytes a new want-set can no longer recall). Returns the plaintext bytes taken (> 0 when n > 0), -EAGAIN
  * when earlier bytes are still unsent (nothing taken), or -EPIPE / -ECONNRESET / -EPROTO. */
 ssize_t tls_stream_send(struct tls_stream *s, const void *p, size_t n);
 /* Why the stream failed ("" while it has not). Borrowed. */

@@ -8,7 +8,8 @@
  * a silent connection are closed (the pre-auth guard's handshake_timeout covers the TLS
  * handshake); the token never crosses the wire in clear (a relay thread between client and
  * daemon records every byte; the control: a plain client's HELLO does show it); tiles over TLS
- * are the same bytes as over the Unix socket; clipmapview draws a complete frame over TLS;
+ * are the same bytes as over the Unix socket, also to a client that stops reading for a while;
+ * clipmapview draws a complete frame over TLS;
  * the HTTP endpoint is HTTPS on the same certificate (curl, when installed).
  * Bad [tls] files stop clipmapd at start with the file and the problem named.
  * Skipped, saying so, without certtool (package gnutls-bin) or the programs.
@@ -533,6 +534,45 @@ static void tiles_over_tls_match_the_unix_socket(void **state)
 	assert_non_null(strstr(err, missing));
 }
 
+/* A client that reads nothing for a while: the daemon's socket fills, its TLS records wait
+ * unsent, and once the client reads every tile still arrives whole (checksums verified). */
+static void slow_reader_gets_every_tile(void **state)
+{
+	(void)state;
+	NEED_DAEMON();
+	char err[256];
+	struct net_conn *c = NULL;
+	struct net_opts o = { .hostport = host_port, .tls_ca = ca, .token_file = token_file() };
+	if (net_connect(&o, &c, err))
+		fail_msg("TLS: %s", err);
+	struct proto_msg m = { 0 };
+	if (net_open_planet(c, "procedural", &m, 20000, err))
+		fail_msg("open: %s", err);
+	uint32_t pid = m.opened.planet_id;
+	proto_msg_fini(&m);
+	enum { N = 64 };
+	struct proto_want_entry e[N];
+	for (uint32_t i = 0; i < N; i++)
+		e[i] = (struct proto_want_entry){ .layer = 0, .cls = PROTO_CLASS_VISIBLE, .lx = 5,
+						  .ly = 4, .x = i % 16, .y = 4 + i / 16 };
+	struct proto_msg w = { .type = PROTO_WANT,
+			       .want = { .planet_id = pid, .seq = 1, .count = N, .entries = e } };
+	assert_int_equal(net_send(c, &w, err), 0);
+	usleep((useconds_t)test_slow(3000) * 1000); /* 16 MiB wanted; the socket holds far less */
+	static float px[256 * 256];
+	bool seen[N] = { false };
+	for (int got = 0; got < N; got++) {
+		if (net_expect(c, PROTO_TILE, &m, (int)test_slow(60000), NULL, NULL, err))
+			fail_msg("tile %d of %d: %s", got, N, err);
+		int i = (int)((m.tile.key.y - 4) * 16 + m.tile.key.x);
+		assert_true(i >= 0 && i < N && !seen[i]);
+		seen[i] = true;
+		assert_int_equal(net_tile_decode(c, &m.tile, px, sizeof px, err), 0);
+		proto_msg_fini(&m);
+	}
+	net_close(c);
+}
+
 static void viewer_draws_a_complete_frame_over_tls(void **state)
 {
 	(void)state;
@@ -649,6 +689,7 @@ int main(void)
 		cmocka_unit_test(garbage_and_silence_are_closed),
 		cmocka_unit_test(token_never_in_clear),
 		cmocka_unit_test(tiles_over_tls_match_the_unix_socket),
+		cmocka_unit_test(slow_reader_gets_every_tile),
 		cmocka_unit_test(viewer_draws_a_complete_frame_over_tls),
 		cmocka_unit_test(http_endpoint_is_https),
 		cmocka_unit_test(bad_files_stop_the_daemon),
