@@ -11,7 +11,8 @@
  * are the same bytes as over the Unix socket, also to a client that stops reading for a while;
  * clipmapview draws a complete frame over TLS;
  * the HTTP endpoint is HTTPS on the same certificate (curl, when installed).
- * Bad [tls] files stop clipmapd at start with the file and the problem named.
+ * Bad [tls] files stop clipmapd at start with the file and the problem named (an expired
+ * certificate is a warning).
  * Skipped, saying so, without certtool (package gnutls-bin) or the programs.
  */
 #include <arpa/inet.h>
@@ -108,6 +109,11 @@ static const char ca_tmpl[] = "cn = \"clipmap test CA\"\nca\ncert_signing_key\n"
 static const char server_tmpl[] = "cn = \"clipmap test server\"\nip_address = \"127.0.0.1\"\n"
 				  "tls_www_server\nsigning_key\nexpiration_days = 2\n";
 
+/* A certificate that expired on 2020-01-01. */
+static const char old_tmpl[] = "cn = \"old\"\nip_address = \"127.0.0.1\"\ntls_www_server\n"
+			       "signing_key\nactivation_date = \"2019-01-01 00:00:00\"\n"
+			       "expiration_date = \"2020-01-01 00:00:00\"\n";
+
 static int setup(void **state)
 {
 	(void)state;
@@ -125,7 +131,7 @@ static int setup(void **state)
 		return 0;
 	}
 	if (make_cert("ca", ca_tmpl, NULL) || make_cert("server", server_tmpl, "ca") ||
-	    make_cert("wrong", ca_tmpl, NULL))
+	    make_cert("wrong", ca_tmpl, NULL) || make_cert("old", old_tmpl, "ca"))
 		return -1;
 	snprintf(ca, sizeof ca, "%s/ca.pem", E.dir);
 	snprintf(wrong_ca, sizeof wrong_ca, "%s/wrong.pem", E.dir);
@@ -643,7 +649,8 @@ static void http_endpoint_is_https(void **state)
 	assert_true(rc != 0);
 }
 
-/* Bad [tls] files: clipmapd exits 2 at start naming the file and the problem. */
+/* Bad [tls] files: clipmapd exits 2 at start naming the file and the problem; an expired
+ * certificate is a warning. */
 static void bad_files_stop_the_daemon(void **state)
 {
 	(void)state;
@@ -677,6 +684,17 @@ static void bad_files_stop_the_daemon(void **state)
 		assert_int_equal(rc, 2);
 		assert_non_null(strstr(out, cases[i].says));
 	}
+	/* An expired certificate starts, with a warning: clients will refuse it. */
+	char text[1200];
+	snprintf(text, sizeof text,
+		 "[listen]\nunix = %s/bad.sock\n[engine]\nplanets = %s\n[tls]\ncert = %s/old.pem\n"
+		 "key = %s/old.key\n", E.dir, E.planets, E.dir, E.dir);
+	assert_int_equal(write_text(conf, text), 0);
+	char *argv[] = { exe, "-c", conf, "--check-config", NULL };
+	int rc = daemon_env_run(argv, out, sizeof out);
+	fprintf(stderr, "expired: exit %d: %s", rc, out);
+	assert_int_equal(rc, 0);
+	assert_non_null(strstr(out, "expired on 2020-01-01"));
 }
 
 int main(void)
