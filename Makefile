@@ -10,7 +10,7 @@ BUILD   ?= build
 .DEFAULT_GOAL := all
 CC      ?= cc
 CXX     ?= g++
-PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libmicrohttpd zlib libtiff-4
+PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libmicrohttpd zlib libtiff-4 gnutls
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 

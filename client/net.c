@@ -21,6 +21,7 @@
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
+#include "net_tls.h"
 
 #define READ_CHUNK 65536
 
@@ -34,6 +35,7 @@ struct net_conn {
 	char server_name[PROTO_MAX_NAME + 1];
 	uint32_t next_req;
 	struct tilecodec *tc; /* created on first tile */
+	struct net_tls *tls;  /* NULL: plain */
 };
 
 /* Milliseconds left until deadline (-1: no deadline), never negative. */
@@ -135,34 +137,54 @@ int net_token_load(const char *file, uint8_t buf[PROTO_MAX_TOKEN], uint16_t *len
 	return 0;
 }
 
+/* Waits for the socket until deadline; what for says what for ("sending"). Returns 0, or
+ * -ETIMEDOUT / -errno with err filled. */
+static int wait_or_fail(struct net_conn *c, short ev, int64_t deadline, const char *what,
+			char err[256])
+{
+	int r = wait_fd(c->fd, ev, deadline);
+	if (r > 0)
+		return 0;
+	if (r == 0) {
+		err_set(err, "%s: timed out %s", c->peer, what);
+		return -ETIMEDOUT;
+	}
+	err_set(err, "%s: poll: %s", c->peer, strerror(-r));
+	return r;
+}
+
+/* Sends what the socket takes of p[0 .. n) once. Returns the count (0: interrupted, try
+ * again), -EAGAIN, or -errno with err filled. */
+static ssize_t send_some(struct net_conn *c, const uint8_t *p, size_t n, char err[256])
+{
+	if (c->tls)
+		return net_tls_send(c->tls, p, n, err);
+	ssize_t w = send(c->fd, p, n, MSG_NOSIGNAL);
+	if (w > 0 || (w < 0 && errno == EINTR))
+		return w > 0 ? w : 0;
+	if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+		return -EAGAIN;
+	int e = w < 0 ? errno : EPIPE;
+	err_set(err, "%s: sending: %s", c->peer, strerror(e));
+	return -e;
+}
+
 /* Writes all of p[0 .. n) before deadline. */
 static int write_all(struct net_conn *c, const uint8_t *p, size_t n, int64_t deadline,
 		     char err[256])
 {
 	while (n) {
-		ssize_t w = send(c->fd, p, n, MSG_NOSIGNAL);
-		if (w > 0) {
-			p += w;
-			n -= (size_t)w;
+		ssize_t w = send_some(c, p, n, err);
+		if (w == -EAGAIN) {
+			int rc = wait_or_fail(c, POLLOUT, deadline, "sending", err);
+			if (rc)
+				return rc;
 			continue;
 		}
-		if (w < 0 && errno == EINTR)
-			continue;
-		if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK)) {
-			int r = wait_fd(c->fd, POLLOUT, deadline);
-			if (r == 0) {
-				err_set(err, "%s: timed out sending", c->peer);
-				return -ETIMEDOUT;
-			}
-			if (r < 0) {
-				err_set(err, "%s: poll: %s", c->peer, strerror(-r));
-				return r;
-			}
-			continue;
-		}
-		int e = w < 0 ? errno : EPIPE;
-		err_set(err, "%s: sending: %s", c->peer, strerror(e));
-		return -e;
+		if (w < 0)
+			return (int)w;
+		p += w;
+		n -= (size_t)w;
 	}
 	return 0;
 }
@@ -205,7 +227,18 @@ int net_recv(struct net_conn *c, struct proto_msg *m, int timeout_ms, char err[2
 		}
 		size_t want = need > READ_CHUNK ? need : READ_CHUNK;
 		pbuf_reserve(&c->rd, want);
-		ssize_t n = recv(c->fd, c->rd.data + c->rd.len, c->rd.cap - c->rd.len, MSG_DONTWAIT);
+		ssize_t n;
+		if (c->tls) {
+			n = net_tls_recv(c->tls, c->rd.data + c->rd.len, c->rd.cap - c->rd.len, err);
+			if (n < 0 && n != -EAGAIN)
+				return (int)n;
+			if (n == -EAGAIN) {
+				n = -1;
+				errno = EAGAIN;
+			}
+		} else {
+			n = recv(c->fd, c->rd.data + c->rd.len, c->rd.cap - c->rd.len, MSG_DONTWAIT);
+		}
 		if (n > 0) {
 			c->rd.len += (size_t)n;
 			continue;
@@ -325,6 +358,28 @@ static int handshake(struct net_conn *c, const struct net_opts *o, char err[256]
 	return rc;
 }
 
+static int split_hostport(const char *hp, char *host, size_t hn, char *port, size_t pn);
+
+/* TLS over c->fd before anything else is said: the certificate checked against o's CA (or the
+ * system's) for the host of o->hostport (else of the peer's name). Returns 0 or -errno. */
+static int start_tls(struct net_conn *c, const struct net_opts *o, char err[256])
+{
+	char host[256], port[32];
+	const char *hp = o->hostport ? o->hostport : c->peer;
+	if (split_hostport(hp, host, sizeof host, port, sizeof port))
+		snprintf(host, sizeof host, "%.255s", hp);
+	int rc = net_tls_create(c->fd, host, o->tls_ca, c->peer, &c->tls, err);
+	if (rc)
+		return rc;
+	int64_t deadline = deadline_of(c->timeout_ms);
+	while ((rc = net_tls_handshake(c->tls, err)) == -EAGAIN) {
+		short ev = net_tls_wants_write(c->tls) ? POLLOUT : POLLIN;
+		if ((rc = wait_or_fail(c, ev, deadline, "in the TLS handshake", err)))
+			return rc;
+	}
+	return rc;
+}
+
 int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct net_conn **out,
 		   char err[256])
 {
@@ -334,8 +389,11 @@ int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct ne
 	c->timeout_ms = o->timeout_ms ? o->timeout_ms : NET_DEFAULT_TIMEOUT_MS;
 	snprintf(c->peer, sizeof c->peer, "%s", peer ? peer : "server");
 	pbuf_init(&c->rd);
-	int rc = handshake(c, o, err);
+	int rc = o->tls_ca || o->tls ? start_tls(c, o, err) : 0;
+	if (!rc)
+		rc = handshake(c, o, err);
 	if (rc) {
+		net_tls_destroy(c->tls);
 		pbuf_fini(&c->rd);
 		close(c->fd);
 		free(c);
@@ -466,10 +524,18 @@ int net_connect(const struct net_opts *o, struct net_conn **out, char err[256])
 	int64_t deadline = deadline_of(t);
 	int fd = -1, rc;
 	const char *peer;
+	struct net_opts to = *o;
 	if (o->hostport) {
 		peer = o->hostport;
+		const char *env = getenv("CLIPMAP_TLS_CA");
+		if (!to.tls_ca && env && *env)
+			to.tls_ca = env;
+		o = &to;
 		rc = connect_tcp(o->hostport, deadline, &fd, err);
 	} else if (o->socket_path) {
+		to.tls_ca = NULL; /* the daemon's Unix socket is always plain */
+		to.tls = false;
+		o = &to;
 		peer = o->socket_path;
 		rc = connect_unix(o->socket_path, deadline, &fd, err);
 	} else {
@@ -488,9 +554,13 @@ void net_close(struct net_conn *c)
 	struct pbuf b;
 	pbuf_init(&b);
 	struct proto_msg bye = { .type = PROTO_BYE };
-	if (proto_encode(&b, &bye, NULL) > 0)
+	char err[256];
+	if (proto_encode(&b, &bye, NULL) > 0 && c->tls)
+		(void)net_tls_send(c->tls, b.data, b.len, err); /* best effort: never waits */
+	else if (b.len)
 		(void)send(c->fd, b.data, b.len, MSG_NOSIGNAL | MSG_DONTWAIT);
 	pbuf_fini(&b);
+	net_tls_destroy(c->tls);
 	close(c->fd);
 	pbuf_fini(&c->rd);
 	tilecodec_destroy(c->tc);
@@ -498,6 +568,7 @@ void net_close(struct net_conn *c)
 }
 
 int net_fd(const struct net_conn *c) { return c->fd; }
+bool net_is_tls(const struct net_conn *c) { return c->tls != NULL; }
 const char *net_peer(const struct net_conn *c) { return c->peer; }
 const struct proto_hello_ok *net_hello(const struct net_conn *c) { return &c->hello; }
 uint32_t net_next_req(struct net_conn *c) { return ++c->next_req; }

@@ -28,22 +28,35 @@ struct net_opts {
 	uint32_t codecs;	 /* tile codecs offered (1 << enum tcodec); 0: all we decode */
 	int timeout_ms;		 /* connect, handshake and send limit; 0: NET_DEFAULT_TIMEOUT_MS,
 				  * < 0: none */
+	/* TLS (TCP only; a Unix socket is always plain). The server's certificate must lead to
+	 * a CA in tls_ca (PEM) and name the host of hostport; the HELLO (and so the token) is
+	 * sent only after that. tls_ca NULL: $CLIPMAP_TLS_CA when set and non-empty (net_connect
+	 * only), else TLS only with `tls`, trusting the system's store. */
+	const char *tls_ca;
+	bool tls;
 };
 
 struct net_conn;
 
-/* Connects and handshakes. Returns 0 with *out owned, or -errno with err filled: connect
- * failures keep the connect errno (-ENOENT, -ECONNREFUSED, …) and read "cannot connect to
- * PEER: REASON"; a refused handshake maps the server's ERROR code (net_code_errno). */
+/* Connects and handshakes (TLS first when asked). Returns 0 with *out owned, or -errno with
+ * err filled: connect failures keep the connect errno (-ENOENT, -ECONNREFUSED, …) and read
+ * "cannot connect to PEER: REASON"; a refused handshake maps the server's ERROR code
+ * (net_code_errno); a TLS failure is -EKEYREJECTED (the certificate: GnuTLS's verification
+ * status in err), -EPROTO (no TLS there, or no common ground) or -ECONNRESET. */
 int net_connect(const struct net_opts *o, struct net_conn **out, char err[256]);
 /* Handshakes over an already connected stream socket fd (taken: closed by net_close, or on
- * failure). peer names it in messages (copied). */
+ * failure). peer names it in messages (copied). TLS when o->tls_ca or o->tls, for the host of
+ * o->hostport (else of peer). */
 int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct net_conn **out,
 		   char err[256]);
 /* Sends BYE (best effort, without waiting) and closes. NULL is a no-op. */
 void net_close(struct net_conn *c);
 
-int net_fd(const struct net_conn *c);			   /* for poll() alongside other fds */
+/* For poll() alongside other fds. Over TLS too: net_recv leaves no decrypted bytes inside
+ * GnuTLS, so when it returned -EAGAIN the fd's readability is the signal to call again. */
+int net_fd(const struct net_conn *c);
+/* Whether the connection is TLS. */
+bool net_is_tls(const struct net_conn *c);
 const char *net_peer(const struct net_conn *c);		   /* "/run/…sock" or "host:port" */
 const struct proto_hello_ok *net_hello(const struct net_conn *c); /* borrowed; name owned by c */
 /* A fresh request id (1, 2, …) for LIST_PLANETS/OPEN/STATS_REQ/CACHE_LS/PREFETCH. */

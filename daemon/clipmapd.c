@@ -30,6 +30,7 @@
 #include "http.h"
 #include "metrics.h"
 #include "server.h"
+#include "tls.h"
 
 #define DEFAULT_CONF "/etc/clipmap/clipmapd.conf"
 
@@ -101,6 +102,8 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 		{ same_str(c->store_redis_password, nc->store_redis_password),
 		  "[store] redis_password" },
 		{ c->store_redis_lease_ms == nc->store_redis_lease_ms, "[store] redis_lease_ms" },
+		{ same_str(c->tls_cert, nc->tls_cert), "[tls] cert" },
+		{ same_str(c->tls_key, nc->tls_key), "[tls] key" },
 	};
 	for (size_t i = 0; i < sizeof k / sizeof k[0]; i++)
 		if (!k[i].same)
@@ -284,6 +287,25 @@ static int check_token(const struct conf *c, char err[256])
 	return 0;
 }
 
+/* [tls] cert and key load and match (the server loads them again when it starts). A
+ * certificate out of its dates is a warning. Returns 0 or -errno with err filled. */
+static int check_tls(const struct conf *c, char err[256])
+{
+	if (!c->tls_cert)
+		return 0;
+	struct tls_server *t;
+	char e2[256], warn[256];
+	int rc = tls_server_create(c->tls_cert, c->tls_key, &t, e2, warn);
+	if (rc) {
+		err_set(err, "%s: %s", c->path, e2);
+		return rc;
+	}
+	tls_server_destroy(t);
+	if (warn[0])
+		log_msg(LOG_WARN, "%s", warn);
+	return 0;
+}
+
 /* The command line into *cfg and *check. Returns -1 to go on, else the exit status (0:
  * --help, --version). */
 static int parse_args(int argc, char **argv, const char **cfg, bool *check)
@@ -333,7 +355,7 @@ static int configure(struct daemon *d, const char *cfg, struct planet_set **ps)
 	struct img_cache *images = img_cache_create(d->conf.image_cache_mb); /* the set holds it */
 	int rc = load_planets(d, images, ps, err);
 	img_cache_unref(images);
-	if (rc || check_token(&d->conf, err)) {
+	if (rc || check_token(&d->conf, err) || check_tls(&d->conf, err)) {
 		fprintf(stderr, "clipmapd: %s\n", err);
 		planet_set_unref(*ps);
 		*ps = NULL;
@@ -377,10 +399,15 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 {
 	const struct listener *ls;
 	size_t nls = server_listeners(d->srv, &ls);
-	for (size_t i = 0; i < nls; i++)
-		log_msg(LOG_INFO, "listening on %s%s%s", ls[i].name,
+	for (size_t i = 0; i < nls; i++) {
+		log_msg(LOG_INFO, "listening on %s%s%s%s", ls[i].name, ls[i].tls ? " (TLS)" : "",
 			ls[i].need_token ? " (token required)" : "",
 			ls[i].compress ? " (compressed tiles)" : "");
+		if (!ls[i].is_unix && !ls[i].loopback && !ls[i].tls)
+			log_msg(LOG_WARN, "%s is not loopback and has no TLS: %s tiles travel in "
+				"clear (set [tls] cert and key)", ls[i].name,
+				ls[i].need_token ? "the token and the" : "the");
+	}
 	struct sched_stats ss;
 	sched_get_stats(sched, &ss);
 	const struct planet_set *ps = server_planets(d->srv);
@@ -439,9 +466,16 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 	const uint8_t *tok = server_token(d->srv, &tlen);
 	bool need = tok && !c->http_open &&
 		    (!conf_addr_is_loopback(c->http_listen) || c->require_token != CONF_TOKEN_AUTO);
-	char err[256], cesium[512];
+	char err[256], cesium[512], *cert = NULL, *key = NULL;
 	const char *cdir = find_cesium(c, cesium, sizeof cesium);
-	int rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
+	int rc = 0;
+	if (c->tls_cert && ((rc = tls_pem_read("cert", c->tls_cert, &cert, err)) ||
+			    (rc = tls_pem_read("key", c->tls_key, &key, err)))) {
+		log_msg(LOG_ERROR, "http: %s", err);
+		free(cert);
+		return rc;
+	}
+	rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
 						  .cache = cache, .planets = ps,
 						  .token = need ? tok : NULL, .token_len = need ? tlen : 0,
 						  .threads = c->http_threads,
@@ -450,16 +484,21 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 						  .timeout_s = c->http_timeout_s,
 						  .max_age_s = c->http_max_age_s,
 						  .cache_bytes = (size_t)c->http_cache_mb << 20,
-						  .cesium_dir = cdir },
+						  .cesium_dir = cdir, .tls_cert = cert,
+						  .tls_key = key },
 			     &d->http, err);
+	if (key)
+		memset(key, 0, strlen(key));
+	free(key);
+	free(cert);
 	if (rc) {
 		log_msg(LOG_ERROR, "%s", err);
 		return rc;
 	}
 	char host[256], port[16];
 	conf_split_hostport(c->http_listen, host, sizeof host, port, sizeof port);
-	log_msg(LOG_INFO, "http: listening on http://%s%s%s:%u/%s%s", strchr(host, ':') ? "[" : "",
-		host, strchr(host, ':') ? "]" : "", http_port(d->http),
+	log_msg(LOG_INFO, "http: listening on http%s://%s%s%s:%u/%s%s", c->tls_cert ? "s" : "",
+		strchr(host, ':') ? "[" : "", host, strchr(host, ':') ? "]" : "", http_port(d->http),
 		need ? " (bearer token required)" : "", cdir ? " (browser viewer)" : "");
 	return 0;
 }

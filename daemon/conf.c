@@ -74,6 +74,8 @@ static const struct row rows[] = {
 	{ "http", "timeout_s", K_INT, 1, 3600, NULL },
 	{ "http", "max_age_s", K_INT, 0, 31536000, NULL },
 	{ "http", "cache_mb", K_INT, 1, 1 << 20, NULL },
+	{ "tls", "cert", K_PATH, 0, 0, NULL },
+	{ "tls", "key", K_PATH, 0, 0, NULL },
 };
 
 static int __attribute__((format(printf, 5, 6)))
@@ -232,6 +234,8 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 			     : strcmp(r->key, "token_file") == 0 ? &c->token_file
 			     : strcmp(r->key, "path") == 0	 ? &c->store_path
 			     : strcmp(r->key, "cesium") == 0	 ? &c->http_cesium
+			     : strcmp(r->key, "cert") == 0	 ? &c->tls_cert
+			     : strcmp(r->key, "key") == 0	 ? &c->tls_key
 								 : &c->planets_dir;
 		free(*dst);
 		*dst = NULL;
@@ -282,7 +286,6 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	case K_ADDR: { /* [http] listen: one host:port, or empty for none */
 		char host[256], port[16];
 		free(c->http_listen);
-	free(c->http_cesium);
 		c->http_listen = NULL;
 		if (!*v)
 			return 0;
@@ -385,7 +388,7 @@ static int check(struct conf *c, const struct ini_file *f, char *err)
 {
 	const char *path = f->path;
 	/* The line to blame for a cross-key error: the key that asked for the listener. */
-	int tcp_line = 0, tok_line = 0, unix_line = 0, frame_line = 0, http_line = 0;
+	int tcp_line = 0, tok_line = 0, unix_line = 0, frame_line = 0, http_line = 0, tls_line = 0;
 	for (size_t i = 0; i < f->n; i++)
 		for (size_t j = 0; j < f->sections[i].n; j++) {
 			const struct ini_entry *e = &f->sections[i].entries[j];
@@ -401,7 +404,13 @@ static int check(struct conf *c, const struct ini_file *f, char *err)
 				frame_line = e->line;
 			if (strcmp(f->sections[i].name, "http") == 0 && strcmp(e->key, "listen") == 0)
 				http_line = e->line;
+			if (strcmp(f->sections[i].name, "tls") == 0)
+				tls_line = e->line;
 		}
+	if (!c->tls_cert != !c->tls_key)
+		return cerr(err, path, tls_line, c->tls_cert ? "cert" : "key",
+			    "[tls] needs both cert and key (%s is not set)",
+			    c->tls_cert ? "key" : "cert");
 	if (!c->token_file) {
 		for (int i = 0; i < c->ntcp; i++) {
 			bool need = c->require_token != CONF_TOKEN_AUTO ||
@@ -465,7 +474,8 @@ int conf_parse(const char *path, const char *text, size_t len, struct conf *c, c
 					  "key outside any section");
 			else
 				rc = cerr(err, path, s->line, NULL,
-					  "unknown section [%s] (expected listen, engine, session, log, store, http)",
+					  "unknown section [%s] (expected listen, engine, session, "
+					  "prefetch, log, store, http, tls)",
 					  s->name);
 			break;
 		}
@@ -546,5 +556,7 @@ void conf_fini(struct conf *c)
 	free(c->store_redis_password);
 	free(c->http_listen);
 	free(c->http_cesium);
+	free(c->tls_cert);
+	free(c->tls_key);
 	memset(c, 0, sizeof *c);
 }

@@ -1,5 +1,5 @@
 /* conf — clipmapd.conf (INI): listeners, token, engine sizing, planets directory, per-session
- * limits, the log level and the persistent store. Every key has a default (a zeroed file is a valid config) and is
+ * limits, the log level, the persistent store, the HTTP endpoint and TLS. Every key has a default (a zeroed file is a valid config) and is
  * documented in conf/clipmapd.conf. Loading refuses unknown sections and keys and reports the
  * first error as "file:line: key: message". Relative paths resolve against the config file's
  * directory.
@@ -75,6 +75,9 @@ struct conf {
 	int http_timeout_s;    /* an idle or slow connection is closed after it */
 	int http_max_age_s;    /* Cache-Control max-age of tiles */
 	int http_cache_mb;     /* encoded tiles kept by ETag, MiB */
+	/* [tls] */
+	char *tls_cert; /* PEM certificate chain: every TCP listener speaks TLS; NULL: plain */
+	char *tls_key;	/* its PEM private key (given together with cert) */
 };
 
 /* Reads and checks a config file into c (zeroed by the call). Returns 0 or -errno with err

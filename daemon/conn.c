@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include "common/errbuf.h"
+#include "tls.h"
 
 #define RECV_CHUNK 65536
 
@@ -21,10 +22,27 @@ void conn_init(struct conn *c, int fd)
 	pbuf_init(&c->out);
 }
 
+int conn_start_tls(struct conn *c, struct tls_server *tls)
+{
+	c->tls = tls_stream_create(tls, c->fd);
+	return c->tls ? 0 : -ENOMEM;
+}
+
+const char *conn_strerror(const struct conn *c, int rc)
+{
+	if (c->tls && tls_stream_error(c->tls)[0])
+		return tls_stream_error(c->tls);
+	if (c->tls && rc == -ENOTCONN)
+		return "output before the TLS handshake completed";
+	return strerror(rc < 0 ? -rc : rc);
+}
+
 int conn_close(struct conn *c)
 {
 	if (c->fd < 0)
 		return 0;
+	tls_stream_destroy(c->tls);
+	c->tls = NULL;
 	int rc = close(c->fd) ? -errno : 0;
 	c->fd = -1;
 	return rc;
@@ -46,8 +64,29 @@ uint64_t conn_pending(const struct conn *c)
 	return c->out.len - c->out_off;
 }
 
+/* conn_recv over TLS: every record GnuTLS holds is taken, so none waits unseen by epoll. */
+static ssize_t recv_tls(struct conn *c)
+{
+	int rc = tls_stream_handshake(c->tls);
+	if (rc)
+		return rc;
+	ssize_t got = 0;
+	do {
+		if ((rc = pbuf_reserve(&c->in, RECV_CHUNK)))
+			return rc;
+		ssize_t n = tls_stream_recv(c->tls, c->in.data + c->in.len, RECV_CHUNK);
+		if (n <= 0)
+			return got ? got : n;
+		c->in.len += (size_t)n;
+		got += n;
+	} while (tls_stream_pending(c->tls));
+	return got;
+}
+
 ssize_t conn_recv(struct conn *c)
 {
+	if (c->tls)
+		return recv_tls(c);
 	int rc = pbuf_reserve(&c->in, RECV_CHUNK);
 	if (rc)
 		return rc;
@@ -112,9 +151,40 @@ void conn_consume(struct conn *c, size_t n)
 	pbuf_consume(&c->in, n);
 }
 
+/* Writes over TLS as far as the socket takes (TLS's own unsent records first). Returns 1 when
+ * that was done (the caller updates the buffer), 0 while the handshake waits with nothing to
+ * send (want_out set while the handshake has bytes to write), or -errno. */
+static int flush_tls(struct conn *c, uint64_t *sent)
+{
+	if (!tls_stream_ready(c->tls)) {
+		int rc = tls_stream_handshake(c->tls);
+		if (rc == -EAGAIN && c->out_off == c->out.len) {
+			c->want_out = tls_stream_unsent(c->tls) > 0;
+			return 0;
+		}
+		if (rc)
+			return rc == -EAGAIN ? -ENOTCONN : rc;
+	}
+	do {
+		ssize_t n = tls_stream_send(c->tls, c->out.data + c->out_off, c->out.len - c->out_off);
+		if (n == -EAGAIN)
+			break;
+		if (n < 0)
+			return (int)n;
+		c->out_off += (size_t)n;
+		*sent += (uint64_t)n;
+	} while (c->out_off < c->out.len && !tls_stream_unsent(c->tls));
+	return 1;
+}
+
 int conn_flush(struct conn *c, uint64_t *sent)
 {
-	while (c->out_off < c->out.len) {
+	if (c->tls) {
+		int rc = flush_tls(c, sent);
+		if (rc <= 0)
+			return rc;
+	}
+	while (!c->tls && c->out_off < c->out.len) {
 		ssize_t n = send(c->fd, c->out.data + c->out_off, c->out.len - c->out_off,
 				 MSG_NOSIGNAL | MSG_DONTWAIT);
 		if (n < 0) {
@@ -134,7 +204,7 @@ int conn_flush(struct conn *c, uint64_t *sent)
 		c->out.len -= c->out_off;
 		c->out_off = 0;
 	}
-	c->want_out = c->out_off < c->out.len;
+	c->want_out = c->out_off < c->out.len || (c->tls && tls_stream_unsent(c->tls));
 	return 0;
 }
 

@@ -4,7 +4,13 @@
  * out as far as the socket takes. Reading pauses while too much output is pending (a peer
  * that does not read cannot make us queue without bound).
  *
- * Threads: one owner thread (the event loop). Ownership: a conn owns its fd and buffers.
+ * With TLS (conn_start_tls, on a TCP listener with [tls]) the same calls carry the stream
+ * through a tls_stream (tls.h): reading and flushing advance its handshake first, and the
+ * frames are records' plaintext; the caller sees no difference but the events it is asked
+ * to wait for.
+ *
+ * Threads: one owner thread (the event loop). Ownership: a conn owns its fd, buffers and TLS
+ * stream.
  */
 #ifndef CLIPMAP_CONN_H
 #define CLIPMAP_CONN_H
@@ -20,12 +26,20 @@ struct conn {
 	struct pbuf out; /* frames to send: the owner appends, bytes [out_off, len) are unsent */
 	size_t out_off;
 	bool reading;  /* wants input (EPOLLIN) */
-	bool want_out; /* has unsent output (EPOLLOUT) */
+	bool want_out; /* has unsent output, or its TLS handshake waits to write (EPOLLOUT) */
+	struct tls_stream *tls; /* NULL: plain */
 };
+struct tls_server;
 
 /* Starts on fd (taken), reading. */
 void conn_init(struct conn *c, int fd);
-/* Closes the fd (once). Returns 0 or -errno. */
+/* Speaks TLS from now on (server side of tls, borrowed: it outlives the conn), before any
+ * byte was read. Returns 0 or -ENOMEM. */
+int conn_start_tls(struct conn *c, struct tls_server *tls);
+/* What a failed conn_recv / conn_flush (rc) means, for the logs: the TLS layer's reason when
+ * it has one, else strerror(-rc). Borrowed until the next call. */
+const char *conn_strerror(const struct conn *c, int rc);
+/* Says close_notify over TLS (best effort) and closes the fd (once). Returns 0 or -errno. */
 int conn_close(struct conn *c);
 /* Frees the buffers (the fd must be closed). */
 void conn_fini(struct conn *c);
@@ -33,8 +47,10 @@ void conn_fini(struct conn *c);
 uint32_t conn_events(const struct conn *c);
 /* Unsent output bytes. */
 uint64_t conn_pending(const struct conn *c);
-/* Receives once (up to 64 KiB) into `in`. Returns the bytes read (> 0), 0 at end of stream,
- * -EAGAIN when nothing is waiting, or another -errno. */
+/* Receives once (up to 64 KiB) into `in`; over TLS, advances the handshake first and reads
+ * every record GnuTLS already holds. Returns the bytes read (> 0), 0 at end of stream,
+ * -EAGAIN when nothing is waiting (also while the TLS handshake goes on), or another -errno
+ * (-EPROTO: the TLS handshake or stream failed, conn_strerror says why). */
 ssize_t conn_recv(struct conn *c);
 /* The largest frame (header included) a peer may send before its HELLO is answered: a HELLO
  * at its wire cap. */
@@ -52,7 +68,9 @@ ssize_t conn_decode(struct conn *c, enum proto_state st, uint32_t max_frame, str
 		    uint16_t *code, uint16_t *type, char err[256]);
 void conn_consume(struct conn *c, size_t n);
 /* Writes what the socket takes and updates want_out; the bytes written are added to *sent.
- * Returns 0 or -errno (the connection failed). */
+ * Over TLS, advances the handshake first; output queued before the handshake completed
+ * cannot go out and fails the connection (-ENOTCONN). Returns 0 or -errno (the connection
+ * failed). */
 int conn_flush(struct conn *c, uint64_t *sent);
 /* Output backpressure: stops reading above 2 × max_pending unsent bytes, resumes below
  * max_pending. */

@@ -45,6 +45,7 @@ struct http {
 	int max_age;
 	uint16_t port;
 	char *cesium_dir; /* NULL: no browser page */
+	char *tls_cert, *tls_key; /* PEM, kept while MHD may read them; NULL: plain HTTP */
 	struct http_cache *bodies; /* encoded tiles by ETag */
 	pthread_mutex_t mu; /* guards the fields below */
 	struct planet_set *ps;
@@ -681,6 +682,11 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 	char host[256], port[16];
 	if (conf_split_hostport(d->listen, host, sizeof host, port, sizeof port))
 		return err_inval(err, "http: \"%s\" is not host:port", d->listen);
+	if (d->tls_cert && MHD_is_feature_supported(MHD_FEATURE_TLS) != MHD_YES) {
+		err_set(err, "http: this libmicrohttpd has no TLS: [http] cannot serve HTTPS with "
+			"[tls] cert and key");
+		return -ENOTSUP;
+	}
 	struct addrinfo hints = { .ai_socktype = SOCK_STREAM, .ai_flags = AI_PASSIVE }, *ai = NULL;
 	int g = getaddrinfo(host, port, &hints, &ai);
 	if (g)
@@ -700,6 +706,15 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 	unsigned flags = MHD_USE_AUTO_INTERNAL_THREAD | MHD_ALLOW_SUSPEND_RESUME;
 	if (ai->ai_family == AF_INET6)
 		flags |= MHD_USE_IPv6;
+	struct MHD_OptionItem tls[3] = { { MHD_OPTION_END, 0, NULL } };
+	if (d->tls_cert) {
+		h->tls_cert = xstrdup(d->tls_cert);
+		h->tls_key = xstrdup(d->tls_key);
+		flags |= MHD_USE_TLS;
+		tls[0] = (struct MHD_OptionItem){ MHD_OPTION_HTTPS_MEM_KEY, 0, h->tls_key };
+		tls[1] = (struct MHD_OptionItem){ MHD_OPTION_HTTPS_MEM_CERT, 0, h->tls_cert };
+		tls[2] = (struct MHD_OptionItem){ MHD_OPTION_END, 0, NULL };
+	}
 	h->d = MHD_start_daemon(
 		flags, 0, NULL, NULL, on_request, h, MHD_OPTION_SOCK_ADDR, ai->ai_addr,
 		MHD_OPTION_THREAD_POOL_SIZE, (unsigned)(d->threads > 0 ? d->threads : 2),
@@ -708,7 +723,7 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 		MHD_OPTION_CONNECTION_TIMEOUT, (unsigned)(d->timeout_s > 0 ? d->timeout_s : 15),
 		/* A request's headers and path fit in 32 KiB (the default is 32 KiB too). */
 		MHD_OPTION_CONNECTION_MEMORY_LIMIT, (size_t)32 << 10, MHD_OPTION_NOTIFY_COMPLETED,
-		on_completed, h, MHD_OPTION_END);
+		on_completed, h, MHD_OPTION_ARRAY, tls, MHD_OPTION_END);
 	freeaddrinfo(ai);
 	if (!h->d) {
 		int e = errno ? errno : EADDRINUSE;
@@ -717,6 +732,8 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 		pthread_mutex_destroy(&h->mu);
 		http_cache_destroy(h->bodies);
 		free(h->cesium_dir);
+		free(h->tls_cert);
+		free(h->tls_key);
 		free(h);
 		return -e;
 	}
@@ -751,6 +768,8 @@ void http_destroy(struct http *h)
 	free(h->metrics);
 	http_cache_destroy(h->bodies);
 	free(h->cesium_dir);
+	free(h->tls_cert);
+	free(h->tls_key);
 	pthread_mutex_destroy(&h->mu);
 	free(h);
 }

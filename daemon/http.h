@@ -29,6 +29,8 @@ struct http_desc {
 	size_t cache_bytes; /* encoded tiles kept by ETag; 0: 64 MiB */
 	const char *cesium_dir; /* CesiumJS's Build/Cesium directory for the browser page; NULL:
 				 * no page ("/" is the plain index) */
+	const char *tls_cert, *tls_key; /* PEM texts ([tls] cert, key; copied): HTTPS; NULL:
+					 * plain HTTP */
 };
 
 struct http_stats {
@@ -38,7 +40,8 @@ struct http_stats {
 
 struct http;
 
-/* Starts listening. Returns 0 or -errno with err filled (address in use, bad address). */
+/* Starts listening. Returns 0 or -errno with err filled (address in use, bad address,
+ * -ENOTSUP: TLS asked of a libmicrohttpd built without it). */
 int http_create(const struct http_desc *d, struct http **out, char err[256]);
 /* Stops listening, answers suspended requests 503, joins the threads, frees. NULL: no-op. */
 void http_destroy(struct http *h);

@@ -16,9 +16,12 @@
 
 #define LISTEN_MAX (CONF_MAX_TCP + 1)
 
+struct tls_server;
+
 struct listener {
 	int fd; /* non-blocking; -1 once closed */
 	bool is_unix, loopback, need_token, compress;
+	struct tls_server *tls; /* TCP with [tls]: its sessions speak TLS (borrowed); NULL: plain */
 	char name[160]; /* "unix:/path" or "tcp:127.0.0.1:7878" */
 	bool own_path;	/* a Unix socket this process bound: the file it created is... */
 	dev_t path_dev; /* ...this one, removed at close only while the path still names it */

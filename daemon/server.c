@@ -43,6 +43,7 @@
 #include "prefetch.h"
 #include "readyq.h"
 #include "session.h"
+#include "tls.h"
 
 #define TICK_NS 250000000ull
 #define STOP_GRACE_NS 1250000000ull /* + one tick + teardown: SIGTERM done within 2 s */
@@ -98,6 +99,7 @@ struct server {
 	struct evsrc ev_ready, ev_timer;
 	struct readyq ready;
 	struct listener ls[LISTEN_MAX];
+	struct tls_server *tls; /* [tls]: the TCP listeners' credentials; NULL: plain */
 	struct evsrc ls_ev[LISTEN_MAX];
 	int nls;
 	struct watch watches[MAX_WATCH];
@@ -601,12 +603,15 @@ int server_create(const struct conf *c, struct sched *s, struct cache *cache,
 	int rc;
 	if ((rc = load_token(srv, err)) || (rc = open_loop_fds(srv, err)))
 		goto fail;
+	if (c->tls_cert && (rc = tls_server_create(c->tls_cert, c->tls_key, &srv->tls, err, NULL)))
+		goto fail;
 	rc = listen_open(c, srv->ls, &srv->nls, err);
 	if (rc)
 		goto fail;
 	for (int i = 0; i < srv->nls; i++) {
 		struct listener *l = &srv->ls[i];
 		srv->ls_ev[i] = (struct evsrc){ EV_LISTENER, l };
+		l->tls = l->is_unix ? NULL : srv->tls;
 		if (l->need_token && !srv->have_token) {
 			err_set(err, "listener %s requires a token: set token_file", l->name);
 			rc = -EINVAL;
@@ -658,6 +663,8 @@ void server_destroy(struct server *srv)
 		session_close(srv->sessions->s, "server exiting");
 	free_graveyard(srv);
 	close_listeners(srv);
+	tls_server_destroy(srv->tls); /* no session is left to use it */
+	srv->tls = NULL;
 	/* Released requests may still report into the ready queue until the manager frees them. */
 	if (srv->sessions_total)
 		sched_barrier(srv->sched);

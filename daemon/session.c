@@ -119,8 +119,8 @@ static int flush(struct session *s)
 	uint32_t was = conn_events(&s->c);
 	int rc = conn_flush(&s->c, &s->env->counters->bytes_sent);
 	if (rc) {
-		char why[96];
-		snprintf(why, sizeof why, "send: %s", strerror(-rc));
+		char why[240];
+		snprintf(why, sizeof why, "send: %s", conn_strerror(&s->c, rc));
 		session_close(s, why);
 		return rc;
 	}
@@ -741,8 +741,8 @@ static void on_readable(struct session *s)
 		if (n == -EAGAIN)
 			break;
 		if (n < 0) {
-			char why[96];
-			snprintf(why, sizeof why, "recv: %s", strerror((int)-n));
+			char why[240];
+			snprintf(why, sizeof why, "recv: %s", conn_strerror(&s->c, (int)n));
 			session_close(s, why);
 			return;
 		}
@@ -816,10 +816,11 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	conn_init(&s->c, fd);
 	s->need_token = l->need_token;
 	s->compress = l->compress;
-	snprintf(s->name, sizeof s->name, "%s", l->is_unix ? "unix" : "tcp");
+	snprintf(s->name, sizeof s->name, "%s", l->is_unix ? "unix" : l->tls ? "tls" : "tcp");
 	s->l = l;
 	s->born_ns = clock_now_ns();
-	s->link = env->attach(env->ud, s, fd, &s->id);
+	s->link = (l->tls && conn_start_tls(&s->c, l->tls)) ? NULL
+							  : env->attach(env->ud, s, fd, &s->id);
 	if (!s->link) {
 		conn_close(&s->c);
 		conn_fini(&s->c);

@@ -38,7 +38,8 @@
 
 #define GLOBAL_USAGE                                                                         \
 	"usage: clipmapctl [-s SOCKET | -H HOST:PORT | --connect SOCKET|HOST:PORT]\n"           \
-	"                  [--token-file FILE] [--timeout SEC] COMMAND ...\n"
+	"                  [--token-file FILE] [--tls-ca FILE | --tls] [--timeout SEC]\n"        \
+	"                  COMMAND ...\n"
 
 /* Each command's lines of the usage, in the order the full usage lists them. */
 static const struct cmd_usage {
@@ -93,7 +94,8 @@ static void usage(FILE *f)
 {
 	fputs(GLOBAL_USAGE
 	      "online (through clipmapd; socket default $CLIPMAP_SOCKET or " CTL_DEFAULT_SOCKET ",\n"
-	      "token default $CLIPMAP_TOKEN):\n",
+	      "token default $CLIPMAP_TOKEN; over TCP, TLS with --tls-ca FILE or\n"
+	      "$CLIPMAP_TLS_CA, or --tls for the system's trust store):\n",
 	      f);
 	for (size_t i = 0; i < sizeof cmd_usages / sizeof cmd_usages[0]; i++) {
 		if (i == ONLINE_CMDS)
@@ -159,6 +161,9 @@ static int parse_u32(const char *s, const char *what, long max, uint32_t *out)
 
 /* ---- options -------------------------------------------------------------------------- */
 
+/* Long-only global options (outside the range of the short ones). */
+enum { OPT_TLS_CA = 1000, OPT_TLS };
+
 /* Options every online command takes (also before the command). Returns 1 if c was one. */
 static int global_opt(int c, struct ctl_target *t)
 {
@@ -172,6 +177,8 @@ static int global_opt(int c, struct ctl_target *t)
 			t->socket_path = optarg;
 		return 1;
 	case 'T': t->token_file = optarg; return 1;
+	case OPT_TLS_CA: t->tls_ca = optarg; return 1;
+	case OPT_TLS: t->tls = true; return 1;
 	case 'W': {
 		uint64_t v;
 		char err[256];
@@ -191,6 +198,7 @@ static int global_opt(int c, struct ctl_target *t)
 	{ "socket", required_argument, NULL, 'S' }, { "host", required_argument, NULL, 'H' },   \
 	{ "connect", required_argument, NULL, 'C' },                                             \
 	{ "token-file", required_argument, NULL, 'T' },                                          \
+	{ "tls-ca", required_argument, NULL, OPT_TLS_CA }, { "tls", no_argument, NULL, OPT_TLS },  \
 	{ "timeout", required_argument, NULL, 'W' }, { "help", no_argument, NULL, 'h' },        \
 	{ "version", no_argument, NULL, 'V' }
 
@@ -245,7 +253,7 @@ static int run_offline(int argc, char **argv, const struct ctl_target *t)
 	char *slash = strrchr(self, '/');
 	*slash = 0;
 	snprintf(path, sizeof path, "%s/clipmapctl-offline", self);
-	char **av = calloc((size_t)argc + 10, sizeof *av), tmo[32];
+	char **av = calloc((size_t)argc + 14, sizeof *av), tmo[32];
 	if (!av)
 		return 1;
 	int k = 0;
@@ -256,6 +264,10 @@ static int run_offline(int argc, char **argv, const struct ctl_target *t)
 		av[k++] = "--host", av[k++] = (char *)t->hostport;
 	if (t->token_file)
 		av[k++] = "--token-file", av[k++] = (char *)t->token_file;
+	if (t->tls_ca)
+		av[k++] = "--tls-ca", av[k++] = (char *)t->tls_ca;
+	if (t->tls)
+		av[k++] = "--tls";
 	if (t->timeout_ms) {
 		snprintf(tmo, sizeof tmo, "%d", t->timeout_ms / 1000);
 		av[k++] = "--timeout", av[k++] = tmo;

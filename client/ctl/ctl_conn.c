@@ -18,7 +18,8 @@ int ctl_connect(const struct ctl_target *t, struct net_conn **c, char err[256])
 {
 	struct net_opts o = { .socket_path = t->hostport ? NULL : ctl_socket_path(t),
 			      .hostport = t->hostport, .token_file = t->token_file,
-			      .name = "clipmapctl/1", .timeout_ms = t->timeout_ms };
+			      .name = "clipmapctl/1", .timeout_ms = t->timeout_ms,
+			      .tls_ca = t->tls_ca, .tls = t->tls };
 	char e2[256];
 	int rc = net_connect(&o, c, e2);
 	if (rc == 0)

@@ -13,6 +13,8 @@ struct ctl_target {
 	const char *socket_path; /* -s; NULL: $CLIPMAP_SOCKET, else CTL_DEFAULT_SOCKET */
 	const char *hostport;	 /* -H HOST:PORT; wins over socket_path */
 	const char *token_file;	 /* --token-file; NULL: $CLIPMAP_TOKEN */
+	const char *tls_ca;	 /* --tls-ca; NULL: $CLIPMAP_TLS_CA (net.h) */
+	bool tls;		 /* --tls: TLS, the system's trust store when no CA is given */
 	int timeout_ms;		 /* 0: NET_DEFAULT_TIMEOUT_MS */
 };
 

@@ -33,6 +33,9 @@ static void usage(FILE *f)
 		"       clipmapview --connect SOCKET|HOST:PORT --planet NAME [--token-file F] [options]\n"
 		"  --connect TARGET    clipmapd's Unix socket path, or HOST:PORT (TCP)\n"
 		"  --token-file F      the daemon's shared secret (default: $CLIPMAP_TOKEN)\n"
+		"  --tls-ca FILE       HOST:PORT over TLS, the daemon's certificate checked against\n"
+		"                      this CA (PEM) and the HOST (default: $CLIPMAP_TLS_CA)\n"
+		"  --tls               TLS with the system's trust store (without --tls-ca)\n"
 		"  --camera LAT,LON,ALT,HEADING,PITCH  degrees; ALT metres above the ground (the\n"
 		"                      water where the planet's sea covers it)\n"
 		"  --flight FILE       CSV of camera keys (lat,lon,alt,heading,pitch per line)\n"
@@ -68,7 +71,8 @@ static void usage(FILE *f)
 
 /* What the command line asks for (parse_args). */
 struct args {
-	const char *planet, *connect_to, *token_file;
+	const char *planet, *connect_to, *token_file, *tls_ca;
+	bool tls;
 	const char *camera, *flight; /* one of them, or neither with --window */
 	const char *outp;	     /* -o: a path, or for a flight a frame-number pattern */
 	const char *statsp, *screenshot;
@@ -206,7 +210,7 @@ static bool parse_backend(const char *s, enum gl_backend *b)
 enum {
 	O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS, O_FOV,
 	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
-	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION
+	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS
 };
 
 static const struct option long_opts[] = {
@@ -230,6 +234,8 @@ static const struct option long_opts[] = {
 	{ "version", no_argument, NULL, O_VERSION },
 	{ "connect", required_argument, NULL, O_CONNECT },
 	{ "token-file", required_argument, NULL, O_TOKEN },
+	{ "tls-ca", required_argument, NULL, O_TLS_CA },
+	{ "tls", no_argument, NULL, O_TLS },
 	{ "exaggerate", required_argument, NULL, O_EXAG },
 	{ "haze", required_argument, NULL, O_HAZE },
 	{ "window", no_argument, NULL, O_WINDOW },
@@ -249,6 +255,8 @@ static bool take_option(int c, const char *s, struct args *a)
 	case O_PLANET: a->planet = s; return true;
 	case O_CONNECT: a->connect_to = s; return true;
 	case O_TOKEN: a->token_file = s; return true;
+	case O_TLS_CA: a->tls_ca = s; return true;
+	case O_TLS: a->tls = true; return true;
 	case O_EXAG:
 		if ((rc = args_double("--exaggerate", s, 0.1, 100, &v, err)) == 0)
 			a->d.exaggeration = (float)v;
@@ -770,14 +778,15 @@ out:
 /* ---- the source of tiles -------------------------------------------------------------- */
 
 /* A TARGET with a colon and no slash is HOST:PORT, anything else a Unix socket path. */
-static int open_net(const char *target, const char *token_file, const char *planet,
-		    struct view_source **src, char err[256])
+static int open_net(const struct args *a, struct view_source **src, char err[256])
 {
+	const char *target = a->connect_to;
 	bool tcp = strchr(target, ':') && !strchr(target, '/');
 	struct net_opts o = { .socket_path = tcp ? NULL : target, .hostport = tcp ? target : NULL,
-			      .token_file = token_file, .name = "clipmapview/1" };
+			      .token_file = a->token_file, .name = "clipmapview/1",
+			      .tls_ca = a->tls_ca, .tls = a->tls };
 	char e2[256];
-	int rc = view_source_net_create(&o, planet, src, e2);
+	int rc = view_source_net_create(&o, a->planet, src, e2);
 	if (rc == 0)
 		return 0;
 	const char *hint = "";
@@ -795,7 +804,7 @@ static int open_source(const struct args *a, struct view_source **src)
 {
 	char err[256] = "";
 	if (a->connect_to) {
-		if (open_net(a->connect_to, a->token_file, a->planet, src, err) < 0) {
+		if (open_net(a, src, err) < 0) {
 			fprintf(stderr, "clipmapview: %s\n", err);
 			return 1;
 		}

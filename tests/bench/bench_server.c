@@ -18,13 +18,10 @@
 #include "common/clock.h"
 #include "common/proto.h"
 #include "common/tilecodec.h"
+#include "support/bench_planet.h"
 #include "support/daemon_env.h"
 
-static const char planet[] =
-	"[planet]\nname = b\nbody = sphere\nradius = 1000000\ntile_size = 256\nmax_level = 12\n"
-	"[node base]\ntype = noise\nseed = 3\noctaves = 2\nwavelength = 300000\namplitude = 500\n"
-	"[node tint]\ntype = ramp\ninput = base\nstops = -500 0 0 255, 500 255 255 255\n"
-	"[layer color]\nnode = tint\nformat = rgba8\n";
+static const char planet[] = BENCH_PLANET_INI;
 
 static void die(const char *what)
 {
@@ -119,17 +116,6 @@ static void want(struct cl *c, uint32_t seq, const struct proto_want_entry *e, u
 	cl_send(c, &m);
 }
 
-static uint32_t set(struct proto_want_entry *e, int ly, uint32_t x0, uint32_t y0, uint32_t w,
-		    uint32_t h)
-{
-	uint32_t n = 0;
-	for (uint32_t y = y0; y < y0 + h; y++)
-		for (uint32_t x = x0; x < x0 + w; x++)
-			e[n++] = (struct proto_want_entry){ .layer = 0, .cls = 1, .lx = (uint8_t)(ly + 1),
-							    .ly = (uint8_t)ly, .x = x, .y = y };
-	return n;
-}
-
 static int cmp_u64(const void *a, const void *b)
 {
 	uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
@@ -165,8 +151,8 @@ int main(void)
 	struct cl *c = cl_tcp(port);
 	cl_open(c);
 	struct proto_want_entry qa[4], qb[4];
-	set(qa, 5, 10, 10, 2, 2);
-	set(qb, 5, 20, 10, 2, 2);
+	bench_planet_block(qa, 5, 10, 10, 2, 2);
+	bench_planet_block(qb, 5, 20, 10, 2, 2);
 	uint32_t seq = 0;
 	for (int i = 0; i < 2; i++) { /* warm the cache */
 		want(c, ++seq, i ? qb : qa, 4);
@@ -188,8 +174,8 @@ int main(void)
 
 	/* Throughput to one session: 512 cached tiles, alternating two sets. */
 	static struct proto_want_entry big[2][512];
-	set(big[0], 7, 0, 10, 32, 16);
-	set(big[1], 7, 64, 10, 32, 16);
+	bench_planet_block(big[0], 7, 0, 10, 32, 16);
+	bench_planet_block(big[1], 7, 64, 10, 32, 16);
 	for (int i = 0; i < 2; i++) {
 		want(c, ++seq, big[i], 512);
 		for (int k = 0; k < 512; k++)
