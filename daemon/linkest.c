@@ -21,11 +21,12 @@ static void set_lowat(struct linkest *le, uint32_t v)
 	le->lowat = v;
 }
 
-void linkest_init(struct linkest *le, int fd, bool tcp, uint64_t now_ns)
+void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, uint64_t now_ns)
 {
 	*le = (struct linkest){ .fd = fd, .tcp = tcp, .win_start = now_ns };
 	if (tcp) {
-		set_lowat(le, LINKEST_LOWAT_MIN);
+		if (lowat)
+			set_lowat(le, LINKEST_LOWAT_MIN);
 		linkest_sample(le, now_ns, true);
 	}
 }
@@ -71,7 +72,7 @@ void linkest_sample(struct linkest *le, uint64_t now_ns, bool force)
 	uint64_t lw = le->rate * LINKEST_LOWAT_MS / 1000;
 	lw = lw < LINKEST_LOWAT_MIN ? LINKEST_LOWAT_MIN : lw > LINKEST_LOWAT_MAX ? LINKEST_LOWAT_MAX : lw;
 	/* only moves of a quarter or more: a setsockopt per sample is for nothing */
-	if (lw * 4 > (uint64_t)le->lowat * 5 || lw * 5 < (uint64_t)le->lowat * 4)
+	if (le->lowat && (lw * 4 > (uint64_t)le->lowat * 5 || lw * 5 < (uint64_t)le->lowat * 4))
 		set_lowat(le, (uint32_t)lw);
 }
 

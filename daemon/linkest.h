@@ -38,9 +38,10 @@ struct linkest {
 	uint32_t lowat;	     /* TCP_NOTSENT_LOWAT set (0: not set) */
 };
 
-/* Starts measuring fd (borrowed); tcp false for a Unix socket. On TCP it sets the first
- * TCP_NOTSENT_LOWAT (LINKEST_LOWAT_MIN). */
-void linkest_init(struct linkest *le, int fd, bool tcp, uint64_t now_ns);
+/* Starts measuring fd (borrowed); tcp false for a Unix socket. On TCP with lowat true it sets
+ * the first TCP_NOTSENT_LOWAT (LINKEST_LOWAT_MIN) and keeps it sized from the rate; false
+ * leaves the kernel's default (send_queue_ms 0). */
+void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, uint64_t now_ns);
 /* Takes a TCP_INFO sample unless one is younger than LINKEST_SAMPLE_NS (force: take it
  * anyway), updates the rate and RTT and, when the rate moved, TCP_NOTSENT_LOWAT. */
 void linkest_sample(struct linkest *le, uint64_t now_ns, bool force);

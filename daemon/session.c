@@ -326,6 +326,8 @@ static bool has_room(const struct session *s)
  * the output (a new want-set: what the viewer left is not worth the link's time). */
 static void recall_unwanted(struct session *s)
 {
+	if (!s->env->queue_ms)
+		return; /* send_queue_ms 0: the queue as it was (bench_link's peer) */
 	struct pbuf *out = &s->c.out;
 	uint64_t shift = 0;
 	size_t keep = 0;
@@ -907,7 +909,7 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	/* The scheduler request comes with the handshake (on_hello): closing a connection that
 	 * never authenticated involves no other thread. */
 	peer_name(fd, s->peer, sizeof s->peer);
-	linkest_init(&s->le, fd, !l->is_unix, s->born_ns);
+	linkest_init(&s->le, fd, !l->is_unix, env->queue_ms > 0, s->born_ns);
 	log_msg(LOG_DEBUG, "session %llu: connected on %s from %s", (unsigned long long)s->id,
 		l->name, s->peer);
 	return s;

@@ -34,14 +34,6 @@
 #define DELAY_MS 40
 #define LOAD_SLACK_MS 400 /* scheduling on a loaded 2-core machine; the figures are printed */
 
-static const char planet[] =
-	"[planet]\nname = test\nbody = sphere\nradius = 1000000\ntile_size = 128\nmax_level = 12\n"
-	"[node base]\ntype = noise\nseed = 3\noctaves = 3\nwavelength = 300000\namplitude = 500\n"
-	"[node tint]\ntype = ramp\ninput = base\n"
-	"stops = -500 0 0 255, 0 0 128 0, 500 255 255 255\n"
-	"[layer height]\nnode = base\nformat = f32\n"
-	"[layer color]\nnode = tint\nformat = rgba8\n";
-
 static struct daemon_env E;
 static struct shaped_link L;
 static char skip_why[256];
@@ -66,7 +58,7 @@ static int setup(void **state)
 			      "session.max_rate = 1000", "log.level = info", NULL };
 	const struct daemon_env_conf conf = { .set = set, .token = TOKEN };
 	if (daemon_env_init(&E, "clipmapd-link") ||
-	    daemon_env_planet_text(&E, "test.ini", planet, NULL) ||
+	    daemon_env_planet_text(&E, "test.ini", shaped_link_planet, NULL) ||
 	    daemon_env_start(&E, &conf, err)) {
 		fprintf(stderr, "test_link_shaped: %s\n", err);
 		daemon_env_fini(&E);
@@ -82,28 +74,6 @@ static int teardown(void **state)
 	daemon_env_fini(&E);
 	shaped_link_fini(&L);
 	return 0;
-}
-
-/* A connected session over the link, the test planet open (its id in *pid). */
-static struct net_conn *connect_link(uint32_t *pid)
-{
-	int fd = shaped_link_connect(&L, E.port);
-	if (fd < 0)
-		fail_msg("connect from the namespace to %s:%d: %s", L.addr, E.port, strerror(-fd));
-	char tokf[160], err[256];
-	snprintf(tokf, sizeof tokf, "%s/token", E.dir);
-	struct net_opts o = { .token_file = tokf, .name = "test_link_shaped", .timeout_ms = 10000 };
-	struct net_conn *c = NULL;
-	char peer[64];
-	snprintf(peer, sizeof peer, "%s:%d", L.addr, E.port);
-	if (net_connect_fd(fd, peer, &o, &c, err))
-		fail_msg("handshake: %s", err);
-	struct proto_msg m = { 0 };
-	if (net_open_planet(c, "test", &m, 10000, err))
-		fail_msg("open: %s", err);
-	*pid = m.opened.planet_id;
-	proto_msg_fini(&m);
-	return c;
 }
 
 /* This session's link figure FIELD from STATS (link.ID.FIELD, ID the largest: the newest
@@ -141,7 +111,9 @@ static void jump_at(unsigned mbit)
 	if (shaped_link_shape(&L, mbit * 1000, DELAY_MS, err))
 		fail_msg("%s", err);
 	uint32_t pid;
-	struct net_conn *c = connect_link(&pid);
+	struct net_conn *c = shaped_link_session(&L, &E, &pid, err);
+	if (!c)
+		fail_msg("%s", err);
 	const struct link_jump_plan plan = { .warm_ms = 2500, .a_lmin = 2, .a_lmax = 9,
 					     .a_side = 6, .b_lmin = 3, .b_lmax = 9, .b_side = 2,
 					     .full = false, .deadline_ms = 30000 };

@@ -339,6 +339,40 @@ out:
 
 /* ---- the jump --------------------------------------------------------------------------- */
 
+const char shaped_link_planet[] =
+	"[planet]\nname = test\nbody = sphere\nradius = 1000000\ntile_size = 128\nmax_level = 12\n"
+	"[node base]\ntype = noise\nseed = 3\noctaves = 3\nwavelength = 300000\namplitude = 500\n"
+	"[node tint]\ntype = ramp\ninput = base\n"
+	"stops = -500 0 0 255, 0 0 128 0, 500 255 255 255\n"
+	"[layer height]\nnode = base\nformat = f32\n"
+	"[layer color]\nnode = tint\nformat = rgba8\n";
+
+struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
+				     uint32_t *pid, char why[256])
+{
+	int fd = shaped_link_connect(sl, e->port);
+	if (fd < 0) {
+		err_set(why, "connect from the namespace to %s:%d: %s", sl->addr, e->port,
+			strerror(-fd));
+		return NULL;
+	}
+	char tokf[160], peer[64];
+	snprintf(tokf, sizeof tokf, "%s/token", e->dir);
+	snprintf(peer, sizeof peer, "%s:%d", sl->addr, e->port);
+	struct net_opts o = { .token_file = tokf, .name = "shaped_link", .timeout_ms = 10000 };
+	struct net_conn *c = NULL;
+	if (net_connect_fd(fd, peer, &o, &c, why))
+		return NULL;
+	struct proto_msg m = { 0 };
+	if (net_open_planet(c, "test", &m, 10000, why)) {
+		net_close(c);
+		return NULL;
+	}
+	*pid = m.opened.planet_id;
+	proto_msg_fini(&m);
+	return c;
+}
+
 /* Both layers of a side×side block of level (ly + 1, ly) around lon, lat. */
 static uint32_t block(struct proto_want_entry *e, int ly, double lon, double lat, int side)
 {

@@ -54,6 +54,15 @@ int shaped_link_connect(struct shaped_link *sl, int port);
 /* Removes the namespace (and with it the link). Idempotent. */
 void shaped_link_fini(struct shaped_link *sl);
 
+/* The scenario's planet (tile_size 128: tiles of 64 KiB raw, about 50 KB with zstd; a height
+ * and a colour layer), to write into the daemon's planets as "test". */
+extern const char shaped_link_planet[];
+struct daemon_env;
+/* A session to the daemon of e (listening on sl->addr, token file DIR/token) from the client's
+ * namespace, planet "test" open (its id in *pid). Returns it, or NULL with why filled. */
+struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
+				     uint32_t *pid, char why[256]);
+
 /* The jump scenario: the planet's layers 0 and 1, VISIBLE. */
 struct link_jump_plan {
 	int warm_ms;	     /* streaming A before the jump */
