@@ -21,9 +21,12 @@ static void set_lowat(struct linkest *le, uint32_t v)
 	le->lowat = v;
 }
 
-void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, uint64_t now_ns)
+void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, bool bbr, uint64_t now_ns)
 {
 	*le = (struct linkest){ .fd = fd, .tcp = tcp, .win_start = now_ns };
+	if (tcp && bbr && setsockopt(fd, IPPROTO_TCP, TCP_CONGESTION, "bbr", 3))
+		log_msg(LOG_DEBUG, "TCP_CONGESTION bbr: %s (the system's default stays)",
+			strerror(errno));
 	if (tcp) {
 		if (lowat)
 			set_lowat(le, LINKEST_LOWAT_MIN);

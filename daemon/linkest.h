@@ -40,8 +40,11 @@ struct linkest {
 
 /* Starts measuring fd (borrowed); tcp false for a Unix socket. On TCP with lowat true it sets
  * the first TCP_NOTSENT_LOWAT (LINKEST_LOWAT_MIN) and keeps it sized from the rate; false
- * leaves the kernel's default (send_queue_ms 0). */
-void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, uint64_t now_ns);
+ * leaves the kernel's default (send_queue_ms 0). bbr: asks for BBR congestion control
+ * (TCP_CONGESTION), which keeps the bottleneck's queue near one bandwidth-delay product where
+ * loss-based CUBIC fills it (seconds of stale bytes in flight on a bloated link); where the
+ * kernel has no BBR or does not allow it, the system's default stays (logged at debug). */
+void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, bool bbr, uint64_t now_ns);
 /* Takes a TCP_INFO sample unless one is younger than LINKEST_SAMPLE_NS (force: take it
  * anyway), updates the rate and RTT and, when the rate moved, TCP_NOTSENT_LOWAT. */
 void linkest_sample(struct linkest *le, uint64_t now_ns, bool force);

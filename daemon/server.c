@@ -592,6 +592,7 @@ void server_conf_changed(struct server *srv)
 					     .max_frame = c->max_frame };
 	srv->env.max_jobs = c->max_jobs;
 	srv->env.queue_ms = c->send_queue_ms;
+	srv->env.bbr = c->bbr;
 	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
 	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
 	set_prefetch_caps(srv);
@@ -601,7 +602,7 @@ static void init_env(struct server *srv)
 {
 	srv->env = (struct session_env){
 		.limits = &srv->limits, .max_jobs = srv->conf->max_jobs, .sched = srv->sched,
-		.queue_ms = srv->conf->send_queue_ms,
+		.queue_ms = srv->conf->send_queue_ms, .bbr = srv->conf->bbr,
 		.cache = srv->cache, .ready = &srv->ready, .codec = srv->codec,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,

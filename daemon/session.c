@@ -909,7 +909,7 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	/* The scheduler request comes with the handshake (on_hello): closing a connection that
 	 * never authenticated involves no other thread. */
 	peer_name(fd, s->peer, sizeof s->peer);
-	linkest_init(&s->le, fd, !l->is_unix, env->queue_ms > 0, s->born_ns);
+	linkest_init(&s->le, fd, !l->is_unix, env->queue_ms > 0, env->bbr, s->born_ns);
 	log_msg(LOG_DEBUG, "session %llu: connected on %s from %s", (unsigned long long)s->id,
 		l->name, s->peer);
 	return s;

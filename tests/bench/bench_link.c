@@ -4,8 +4,9 @@
  * table gives the time to the new place's first tile, to its coarsest level and to all of it
  * (5 levels, 40 tiles of about 50 KB), and the old place's bytes still delivered after the
  * jump — for the daemon as configured (send_queue_ms = 100: the send window sized from the
- * link) and, in the same run, for its peer with send_queue_ms = 0 (the 8 MiB queue, nothing
- * recalled, the kernel's own buffering: the daemon before issue 15). Figures, not pass/fail;
+ * link, BBR asked for) and, in the same run, for its peer with send_queue_ms = 0 and
+ * bbr = false (the 8 MiB queue, nothing recalled, the kernel's own buffering and congestion
+ * control: the daemon before issue 15). Figures, not pass/fail;
  * on a loaded machine read the ratios. Skips (exit 0, saying why) without root or namespaces.
  * LINK_RATES="4 20" picks rates (Mbit/s).
  */
@@ -86,14 +87,15 @@ int main(void)
 	printf("%-10s %-16s %10s %10s %10s %12s %12s\n", "rate", "daemon", "first", "coarse",
 	       "all", "stale", "goodput");
 	struct link_jump_result res[2][8];
-	const char *names[2] = { "send_queue_ms=100", "send_queue_ms=0" };
+	const char *names[2] = { "window 100 ms", "8 MiB queue" };
 	const char *queues[2] = { "session.send_queue_ms = 100", "session.send_queue_ms = 0" };
+	const char *ccs[2] = { "session.bbr = true", "session.bbr = false" };
 	int failed = 0;
 	for (int k = 0; k < 2; k++) {
 		struct daemon_env e;
 		char tcp[64], err[256];
 		snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", sl.addr);
-		const char *set[] = { tcp, queues[k], "engine.workers = 2", "engine.cache_mb = 512",
+		const char *set[] = { tcp, queues[k], ccs[k], "engine.workers = 2", "engine.cache_mb = 512",
 				      "session.max_rate = 1000", "log.level = info", NULL };
 		const struct daemon_env_conf conf = { .set = set, .token = "bench-link-token" };
 		if (daemon_env_init(&e, "clipmapd-bench-link") ||
@@ -123,7 +125,7 @@ int main(void)
 		}
 		daemon_env_fini(&e);
 	}
-	printf("ratios (send_queue_ms=0 over =100; > 1: the window is faster; stale: =100 vs =0)\n");
+	printf("ratios (8 MiB queue over window; > 1: the window is faster; stale: window vs queue)\n");
 	for (int i = 0; i < nr; i++) {
 		const struct link_jump_result *a = &res[0][i], *b = &res[1][i];
 		if (a->full_ms < 0 || b->full_ms < 0) {
