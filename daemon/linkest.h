@@ -20,7 +20,7 @@
 #define LINKEST_FLOOR (32u << 10)		/* bytes: the send window's least size */
 #define LINKEST_WINDOW_NS 1000000000ull	/* the bandwidth filter's window */
 #define LINKEST_SAMPLE_NS 5000000ull	/* TCP_INFO at most this often */
-#define LINKEST_LOWAT_MIN (8u << 10)	/* TCP_NOTSENT_LOWAT's bounds */
+#define LINKEST_LOWAT_MIN (4u << 10)	/* TCP_NOTSENT_LOWAT's bounds */
 #define LINKEST_LOWAT_MAX (1u << 20)
 #define LINKEST_LOWAT_MS 10u		/* TCP_NOTSENT_LOWAT: this much of the rate */
 

@@ -573,6 +573,12 @@ static int load_token(struct server *srv, char err[256])
 	return 0;
 }
 
+/* [session] raw_above_mbit in bits/s, for compress = auto only (0: never raw by speed). */
+static uint64_t raw_above(const struct conf *c)
+{
+	return c->compress == CONF_COMPRESS_AUTO ? (uint64_t)c->raw_above_mbit * 1000000u : 0;
+}
+
 /* [prefetch] caps (the running jobs' counts are kept). */
 static void set_prefetch_caps(struct server *srv)
 {
@@ -593,6 +599,7 @@ void server_conf_changed(struct server *srv)
 	srv->env.max_jobs = c->max_jobs;
 	srv->env.queue_ms = c->send_queue_ms;
 	srv->env.bbr = c->bbr;
+	srv->env.raw_above_bps = raw_above(c);
 	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
 	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
 	set_prefetch_caps(srv);
@@ -603,6 +610,7 @@ static void init_env(struct server *srv)
 	srv->env = (struct session_env){
 		.limits = &srv->limits, .max_jobs = srv->conf->max_jobs, .sched = srv->sched,
 		.queue_ms = srv->conf->send_queue_ms, .bbr = srv->conf->bbr,
+		.raw_above_bps = raw_above(srv->conf),
 		.cache = srv->cache, .ready = &srv->ready, .codec = srv->codec,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,

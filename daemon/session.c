@@ -261,6 +261,9 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 	}
 	const struct tile *t = e->t;
 	enum tcodec codec = (enum tcodec)s->codec;
+	uint64_t fast = s->env->raw_above_bps;
+	if (fast && s->le.tcp && s->le.rate * 8 > fast)
+		codec = TCODEC_NONE; /* the link outruns the encoder (raw is always allowed) */
 	enum tfilter filt = codec == TCODEC_NONE ? TFILTER_NONE : tilecodec_default_filter(t->type);
 	size_t bound = tilecodec_bound(codec, t->nbytes);
 	size_t head = PROTO_HDR + 44;

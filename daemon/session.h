@@ -44,6 +44,9 @@ struct session_env {
 	uint32_t max_jobs; /* prefetch jobs per session */
 	uint32_t queue_ms; /* TCP send window: this much of the measured rate (0: max_pending) */
 	bool bbr;	   /* TCP sessions ask for BBR (where the kernel allows it) */
+	/* compress = auto: a TCP session's tiles go raw while its link is measured faster than
+	 * this (bits/s; 0: never) — there the encoder, not the link, would be the bottleneck */
+	uint64_t raw_above_bps;
 	struct prefetch_limits *prefetch; /* the server's caps on prefetch jobs (prefetch.h) */
 	uint64_t handshake_ns; /* accept to HELLO_OK, at most ([listen] handshake_timeout) */
 	uint64_t frame_ns;     /* a frame's first byte to its last, at most (frame_timeout) */

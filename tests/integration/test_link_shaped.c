@@ -7,6 +7,7 @@
  * tile itself (+ LOAD_SLACK_MS for a loaded machine); the old place's bytes still delivered
  * are at most the link's rate × 150 ms + that one tile in flight; the new place's coarsest
  * level completes; and the session's link figures in STATS (rate, RTT, queue) match the link.
+ * With raw_above_mbit = 10, tiles go raw at 20 Mbit/s and zstd at 1 and 4 (compress auto).
  * The figures are printed (docs/LINKS.md has them, and the daemon's before this change).
  *
  * Skips, saying why, where namespaces cannot be made (not root, no ip/tc/netem).
@@ -55,7 +56,8 @@ static int setup(void **state)
 	char tcp[64];
 	snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", L.addr);
 	const char *set[] = { tcp, "engine.workers = 2", "engine.cache_mb = 256",
-			      "session.max_rate = 1000", "log.level = info", NULL };
+			      "session.max_rate = 1000", "session.raw_above_mbit = 10",
+			      "log.level = info", NULL };
 	const struct daemon_env_conf conf = { .set = set, .token = TOKEN };
 	if (daemon_env_init(&E, "clipmapd-link") ||
 	    daemon_env_planet_text(&E, "test.ini", shaped_link_planet, NULL) ||
@@ -147,6 +149,12 @@ static void jump_at(unsigned mbit)
 	assert_true(est >= rate / 2 && est <= rate * 2);
 	assert_true(srtt >= DELAY_MS - 1 && srtt <= DELAY_MS * 4);
 	assert_true(qms >= 0 && qms < 1000);
+	/* the encoding by the measured link: raw above raw_above_mbit (10), zstd below */
+	printf("new place's tiles sent raw: %u of %u\n", r.b_raw, r.b_tiles);
+	if (mbit > 10)
+		assert_int_equal(r.b_raw, r.b_tiles);
+	else
+		assert_true(r.b_raw * 2 < r.b_tiles);
 	/* and what an operator sees: clipmapctl status lists this session's link */
 	char exe[600], out[16384];
 	snprintf(exe, sizeof exe, "%s/clipmapctl", E.bindir);

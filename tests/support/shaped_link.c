@@ -30,6 +30,7 @@
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/proto.h"
+#include "common/tilecodec.h"
 #include "support/daemon_env.h"
 
 #define NS_PREFIX "clipmap-link-"
@@ -486,6 +487,7 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 					r->first_frame = fb;
 				}
 				r->b_tiles++;
+				r->b_raw += m.tile.enc.codec == TCODEC_NONE;
 				if (m.tile.key.ly == p->b_lmin && ++coarse == (uint32_t)sb)
 					r->coarse_ms = at;
 				if (r->b_tiles == nb)

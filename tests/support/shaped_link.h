@@ -79,6 +79,7 @@ struct link_jump_result {
 	double first_ms, coarse_ms, full_ms; /* after the jump; < 0: not within the deadline */
 	uint64_t stale_bytes, stale_tiles;   /* A's TILE frames received after the jump */
 	uint32_t b_tiles, b_wanted;
+	uint32_t b_raw; /* B's tiles sent raw (codec none) */
 };
 
 /* Runs the scenario on c (HELLO done, planet pid open with at least two layers; A at lon 0,

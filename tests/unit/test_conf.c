@@ -52,6 +52,7 @@ static void test_shipped_file(void **state)
 	assert_int_equal(c.max_pending, (uint64_t)8192 << 10);
 	assert_int_equal(c.send_queue_ms, 100);
 	assert_true(c.bbr);
+	assert_int_equal(c.raw_above_mbit, 800);
 	assert_int_equal(c.image_cache_mb, 256);
 	assert_null(c.store_path); /* no disk tier unless a path is set */
 	assert_int_equal(c.store_bytes, (uint64_t)1024 << 20);
@@ -65,7 +66,7 @@ static void test_values(void **state)
 			"token_file = secret\nrequire_token = tcp\nunix_mode = 0600\n"
 			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\nimage_cache_mb = 48\n"
 			"[session]\nmax_pending_kb = 128\nmax_rate = 0\ncompress = never\n"
-			"send_queue_ms = 0\nbbr = no\n"
+			"send_queue_ms = 0\nbbr = no\nraw_above_mbit = 0\n"
 			"[log]\nlevel = debug\n[store]\npath = tiles.lmdb\ndisk_mb = 512\n";
 	struct conf c;
 	char err[256] = "";
@@ -86,6 +87,7 @@ static void test_values(void **state)
 	assert_int_equal(c.compress, CONF_COMPRESS_NEVER);
 	assert_int_equal(c.send_queue_ms, 0);
 	assert_false(c.bbr);
+	assert_int_equal(c.raw_above_mbit, 0);
 	assert_int_equal(c.log_level, LOG_DEBUG);
 	assert_string_equal(c.store_path, "/etc/x/tiles.lmdb");
 	assert_int_equal(c.store_bytes, (uint64_t)512 << 20);
