@@ -142,7 +142,7 @@ int main(void)
 		printf("  %u Mbit/s: first tile %.1fx, all of B %.1fx, stale bytes %.0f KB vs "
 		       "%.0f KB\n", rates[i], b->first_ms / (a->first_ms > 0 ? a->first_ms : 1),
 		       b->full_ms / (a->full_ms > 0 ? a->full_ms : 1),
-		       (double)b->stale_bytes / 1000, (double)a->stale_bytes / 1000);
+		       (double)a->stale_bytes / 1000, (double)b->stale_bytes / 1000);
 	}
 	shaped_link_fini(&sl);
 	return failed;
