@@ -22,6 +22,14 @@
 
 #define DELAY_MS 40
 
+static struct daemon_env *running; /* stopped with the link on a signal */
+
+static void stop_daemon(void)
+{
+	if (running)
+		daemon_env_fini(running);
+}
+
 static int run_rate(struct shaped_link *sl, struct daemon_env *e, unsigned mbit,
 		    struct link_jump_result *r)
 {
@@ -98,6 +106,8 @@ int main(void)
 		const char *set[] = { tcp, queues[k], ccs[k], "engine.workers = 2", "engine.cache_mb = 512",
 				      "session.max_rate = 1000", "log.level = info", NULL };
 		const struct daemon_env_conf conf = { .set = set, .token = "bench-link-token" };
+		running = &e;
+		shaped_link_on_fini(stop_daemon);
 		if (daemon_env_init(&e, "clipmapd-bench-link") ||
 		    daemon_env_planet_text(&e, "test.ini", shaped_link_planet, NULL) ||
 		    daemon_env_start(&e, &conf, err)) {
@@ -124,6 +134,7 @@ int main(void)
 			fflush(stdout);
 		}
 		daemon_env_fini(&e);
+		running = NULL;
 	}
 	printf("ratios (8 MiB queue over window; > 1: the window is faster; stale: window vs queue)\n");
 	for (int i = 0; i < nr; i++) {

@@ -37,6 +37,12 @@
 #define NETNS_DIR "/var/run/netns"
 
 static struct shaped_link *live; /* the one removed at exit or on a signal */
+static void (*live_fini)(void);	 /* the caller's cleanup, first */
+
+void shaped_link_on_fini(void (*fn)(void))
+{
+	live_fini = fn;
+}
 
 /* Runs a command line (argv built from fmt, split at spaces); its output into out. Returns
  * its exit status (127: not found). */
@@ -87,11 +93,15 @@ void shaped_link_fini(struct shaped_link *sl)
 
 static void at_exit(void)
 {
+	if (live && live_fini)
+		live_fini();
 	shaped_link_fini(live);
 }
 
 static void on_signal(int sig)
 {
+	if (live && live_fini)
+		live_fini();
 	shaped_link_fini(live);
 	signal(sig, SIG_DFL);
 	raise(sig);
@@ -147,6 +157,7 @@ int shaped_link_init(struct shaped_link *sl, char why[256])
 	signal(SIGINT, on_signal);
 	signal(SIGTERM, on_signal);
 	signal(SIGHUP, on_signal);
+	signal(SIGPIPE, on_signal); /* output into a pipe whose reader left (| head) */
 	int rc = 0;
 	if ((rc = cmd(out, sizeof out, "ip netns add %s", sl->mid)) ||
 	    (rc = cmd(out, sizeof out, "ip link add %s gso_max_segs 1 type veth peer name cml%lda "
@@ -290,9 +301,11 @@ int shaped_link_shape(struct shaped_link *sl, unsigned rate_kbit, unsigned delay
 	}
 	if (p == 0) {
 		live = NULL; /* the parent removes the link, not this process */
+		live_fini = NULL;
 		signal(SIGINT, SIG_DFL);
 		signal(SIGTERM, SIG_DFL);
 		signal(SIGHUP, SIG_DFL);
+		signal(SIGPIPE, SIG_DFL);
 		relay_main(sl, rate_kbit, delay_ms);
 	}
 	sl->relay = p;

@@ -8,7 +8,7 @@
  * checksum offload and GSO pass through; the daemon's end sends MTU-sized segments
  * (gso_max_segs 1) so the rate is kept per packet. Client sockets are made inside the
  * namespace (setns around socket+connect). Everything is removed by shaped_link_fini, at exit
- * and on SIGINT/SIGTERM/SIGHUP; namespaces left by a test killed with SIGKILL are removed by
+ * and on SIGINT/SIGTERM/SIGHUP/SIGPIPE; namespaces left by a test killed with SIGKILL are removed by
  * the next setup.
  *
  * Also the jump scenario the shaped-link test and bench_link measure: a session streams a
@@ -53,6 +53,9 @@ int shaped_link_shape(struct shaped_link *sl, unsigned rate_kbit, unsigned delay
 int shaped_link_connect(struct shaped_link *sl, int port);
 /* Removes the namespace (and with it the link). Idempotent. */
 void shaped_link_fini(struct shaped_link *sl);
+/* fn runs first when the link is removed at exit or on a signal (the caller's daemon: stop it
+ * there, so that a test stopped by SIGTERM leaves nothing running). */
+void shaped_link_on_fini(void (*fn)(void));
 
 /* The scenario's planet (tile_size 128: tiles of 64 KiB raw, about 50 KB with zstd; a height
  * and a colour layer), to write into the daemon's planets as "test". */
