@@ -8,8 +8,8 @@
  * checksum offload and GSO pass through; the daemon's end sends MTU-sized segments
  * (gso_max_segs 1) so the rate is kept per packet. Client sockets are made inside the
  * namespace (setns around socket+connect). Everything is removed by shaped_link_fini, at exit
- * and on SIGINT/SIGTERM/SIGHUP/SIGPIPE; namespaces left by a test killed with SIGKILL are removed by
- * the next setup.
+ * and on SIGINT/SIGTERM/SIGHUP/SIGPIPE; namespaces left by a test killed with SIGKILL are
+ * removed by the next setup.
  *
  * Also the jump scenario the shaped-link test and bench_link measure: a session streams a
  * large want-set at place A, then jumps (a new want-set at place B, no tile in common) — how
