@@ -113,9 +113,9 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 
 /* Re-reads clipmapd.conf and applies the keys that can change while running: [log] level,
  * [engine] planets and strict_planets, [listen] max_sessions, max_preauth, max_preauth_per_peer,
- * handshake_timeout, frame_timeout, [session] max_want, max_rate,
- * max_pending_kb, max_frame_kb, max_jobs. The others keep their running values (a warning
- * names each one that changed). A file that does not load changes nothing. */
+ * handshake_timeout, frame_timeout, [session] max_want, max_rate, max_pending_kb,
+ * send_queue_ms, bbr, raw_above_mbit, max_frame_kb, max_jobs. The others keep their running
+ * values (a warning names each one that changed). A file that does not load changes nothing. */
 static void reload_conf(struct daemon *d)
 {
 	struct conf nc;
@@ -139,6 +139,9 @@ static void reload_conf(struct daemon *d)
 	c->max_want = nc.max_want;
 	c->max_rate = nc.max_rate;
 	c->max_pending = nc.max_pending;
+	c->send_queue_ms = nc.send_queue_ms;
+	c->bbr = nc.bbr;
+	c->raw_above_mbit = nc.raw_above_mbit;
 	c->max_frame = nc.max_frame;
 	c->max_jobs = nc.max_jobs;
 	conf_fini(&nc);

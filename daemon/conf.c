@@ -52,6 +52,9 @@ static const struct row rows[] = {
 	{ "session", "max_rate", K_INT, 0, 1000000, NULL },
 	{ "session", "max_pending_kb", K_SIZE_KB, 64, 1L << 22, NULL },
 	{ "session", "max_frame_kb", K_SIZE_KB, 0, 16384, NULL },
+	{ "session", "send_queue_ms", K_INT, 0, 10000, NULL },
+	{ "session", "bbr", K_BOOL, 0, 1, NULL },
+	{ "session", "raw_above_mbit", K_INT, 0, 1000000, NULL },
 	{ "session", "max_jobs", K_INT, 0, 64, NULL },
 	{ "session", "compress", K_ENUM, 0, 0, compress_names },
 	{ "prefetch", "max_tiles", K_INT, 1, 1L << 26, NULL },
@@ -175,6 +178,9 @@ static void defaults(struct conf *c)
 	c->max_want = PROTO_MAX_WANT;
 	c->max_rate = 200;
 	c->max_pending = (uint64_t)8 << 20;
+	c->send_queue_ms = 100;
+	c->bbr = true;
+	c->raw_above_mbit = 800;
 	c->max_frame = 0;
 	c->max_jobs = 4;
 	c->pf_max_tiles = 4000000;
@@ -248,7 +254,9 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	case K_TCP:
 		return set_tcp(c, path, e, err);
 	case K_BOOL: {
-		bool *dst = strcmp(r->key, "open") == 0 ? &c->http_open : &c->strict_planets;
+		bool *dst = strcmp(r->key, "open") == 0	 ? &c->http_open
+			    : strcmp(r->key, "bbr") == 0 ? &c->bbr
+							 : &c->strict_planets;
 		if (strcmp(v, "true") == 0 || strcmp(v, "yes") == 0 || strcmp(v, "1") == 0)
 			*dst = true;
 		else if (strcmp(v, "false") == 0 || strcmp(v, "no") == 0 || strcmp(v, "0") == 0)
@@ -351,6 +359,10 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->max_rate = (uint32_t)n;
 	else if (strcmp(k, "max_pending_kb") == 0)
 		c->max_pending = (uint64_t)n << 10;
+	else if (strcmp(k, "raw_above_mbit") == 0)
+		c->raw_above_mbit = (uint32_t)n;
+	else if (strcmp(k, "send_queue_ms") == 0)
+		c->send_queue_ms = (uint32_t)n;
 	else if (strcmp(k, "max_frame_kb") == 0)
 		c->max_frame = (uint32_t)n << 10;
 	else if (strcmp(k, "max_jobs") == 0)

@@ -53,6 +53,9 @@ struct conf {
 	/* [session] */
 	uint32_t max_want, max_rate, max_frame, max_jobs;
 	uint64_t max_pending;
+	uint32_t send_queue_ms; /* TCP sessions' send window: this much of the measured rate */
+	bool bbr;		/* TCP sessions ask for BBR congestion control */
+	uint32_t raw_above_mbit; /* compress auto: tiles go raw on links measured faster (0: never) */
 	enum conf_compress compress;
 	/* [prefetch] (prefetch.h's struct prefetch_limits) */
 	uint64_t pf_max_tiles, pf_max_tiles_local, pf_max_tiles_total;

@@ -54,6 +54,7 @@
 #define ACCEPT_BATCH 16
 #define UNIX_RESERVE 8		       /* sessions over max_sessions kept for the Unix socket */
 #define EVICT_WARN_NS 10000000000ull /* at most one eviction warning per 10 s */
+#define MAX_LINK_STATS 32	       /* sessions whose link STATS shows */
 
 enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH };
 
@@ -257,12 +258,15 @@ static void update_foci(void *ud)
 	struct cache_focus f[MAX_FOCI];
 	size_t n = 0;
 	for (struct session_link *l = srv->sessions; l && n + 2 <= MAX_FOCI; l = l->next) {
-		double lon, lat, v[3];
-		if (!session_focus(l->s, &lon, &lat, v))
+		double lon, lat, v[3], r;
+		if (!session_focus(l->s, &lon, &lat, v, &r))
 			continue;
 		f[n++] = (struct cache_focus){ lon, lat };
-		/* Where the focus will be in 10 s: keep that ring too (velocity east, north). */
-		double r = 6371008.8, t = 10.0;
+		/* Where the focus will be in 10 s: keep that ring too (velocity east, north, on
+		 * the focus planet's own radius). */
+		double t = 10.0;
+		if (!(r > 0))
+			continue;
 		double c = fmax(cos(lat * M_PI / 180.0), 0.01);
 		double dlat = v[1] * t / r * 180.0 / M_PI, dlon = v[0] * t / (r * c) * 180.0 / M_PI;
 		if (fabs(dlat) + fabs(dlon) > 1e-9 && isfinite(dlat) && isfinite(dlon))
@@ -398,6 +402,55 @@ static void stat_loop(struct statb *b, const struct loopstat *ls)
 	}
 }
 
+/* Each authenticated session's link, the first MAX_LINK_STATS of them: one line to read
+ * (link.ID) and its figures (link.ID.FIELD; rate in bytes/s, 0 where not measured). */
+static void stat_links(struct statb *b, const struct server *srv)
+{
+	int shown = 0;
+	for (const struct session_link *l = srv->sessions; l && shown < MAX_LINK_STATS;
+	     l = l->next) {
+		if (l->preauth)
+			continue;
+		shown++;
+		struct session_load ld;
+		session_get_load(l->s, &ld);
+		struct proto_stat *st = stat_add(b, "link.%llu", (unsigned long long)ld.id);
+		if (!st)
+			return;
+		char *line = b->keys[b->n - 1] + 32; /* the key is short: its tail holds the text */
+		if (!ld.tcp)
+			snprintf(line, 96, "%s: not measured (Unix socket), queue %llu KiB",
+				 ld.peer, (unsigned long long)(ld.queue_bytes >> 10));
+		else
+			snprintf(line, 96, "%s: %.2f Mbit/s, rtt %.1f ms, queue %llu KiB = %.0f ms",
+				 ld.peer, (double)ld.rate * 8e-6, ld.rtt_ms,
+				 (unsigned long long)(ld.queue_bytes >> 10), ld.queue_ms);
+		st->kind = PROTO_STAT_STR;
+		st->s = line;
+		const struct {
+			const char *f;
+			double v;
+			bool u;
+		} fs[] = { { "rate_bps", (double)ld.rate * 8, true },
+			   { "rtt_ms", ld.rtt_ms, false },
+			   { "min_rtt_ms", ld.min_rtt_ms, false },
+			   { "window_bytes", (double)ld.window, true },
+			   { "queue_bytes", (double)ld.queue_bytes, true },
+			   { "queue_ms", ld.queue_ms, false },
+			   { "inflight_bytes", (double)ld.inflight, true } };
+		for (size_t i = 0; i < sizeof fs / sizeof fs[0]; i++) {
+			st = stat_add(b, "link.%llu.%s", (unsigned long long)ld.id, fs[i].f);
+			if (!st)
+				return;
+			st->kind = fs[i].u ? PROTO_STAT_U64 : PROTO_STAT_F64;
+			if (fs[i].u)
+				st->u = (uint64_t)fs[i].v;
+			else
+				st->f = fs[i].v;
+		}
+	}
+}
+
 static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], size_t cap)
 {
 	const struct server *srv = ud;
@@ -443,6 +496,8 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "tiles.relooked", c->tiles_relooked);
 	stat_u(&b, "tiles.rewanted", c->tiles_rewanted);
 	stat_u(&b, "sessions.pauses", c->pauses);
+	stat_u(&b, "tiles.recalled", c->tiles_recalled);
+	stat_u(&b, "bytes.recalled", c->bytes_recalled);
 	stat_u(&b, "planets", srv->planets->n);
 	stat_u(&b, "planets.generation", srv->planets->generation);
 	stat_u(&b, "planets.skipped", srv->planets->nskipped); /* files that did not load */
@@ -473,6 +528,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "memory.trims", atomic_load(&srv->trims));
 	stat_f(&b, "memory.trim_max_ms", (double)atomic_load(&srv->trim_max_ns) * 1e-6);
 	stat_u(&b, "prefetch.jobs", njobs);
+	stat_links(&b, srv);
 	stat_nodes(&b, srv->planets);
 	return b.n;
 }
@@ -519,6 +575,12 @@ static int load_token(struct server *srv, char err[256])
 	return 0;
 }
 
+/* [session] raw_above_mbit in bits/s, for compress = auto only (0: never raw by speed). */
+static uint64_t raw_above(const struct conf *c)
+{
+	return c->compress == CONF_COMPRESS_AUTO ? (uint64_t)c->raw_above_mbit * 1000000u : 0;
+}
+
 /* [prefetch] caps (the running jobs' counts are kept). */
 static void set_prefetch_caps(struct server *srv)
 {
@@ -537,6 +599,9 @@ void server_conf_changed(struct server *srv)
 					     .max_pending = c->max_pending,
 					     .max_frame = c->max_frame };
 	srv->env.max_jobs = c->max_jobs;
+	srv->env.queue_ms = c->send_queue_ms;
+	srv->env.bbr = c->bbr;
+	srv->env.raw_above_bps = raw_above(c);
 	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
 	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
 	set_prefetch_caps(srv);
@@ -546,6 +611,8 @@ static void init_env(struct server *srv)
 {
 	srv->env = (struct session_env){
 		.limits = &srv->limits, .max_jobs = srv->conf->max_jobs, .sched = srv->sched,
+		.queue_ms = srv->conf->send_queue_ms, .bbr = srv->conf->bbr,
+		.raw_above_bps = raw_above(srv->conf),
 		.cache = srv->cache, .ready = &srv->ready, .codec = srv->codec,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,

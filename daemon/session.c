@@ -36,6 +36,7 @@
 #include "common/xalloc.h"
 #include "conn.h"
 #include "control.h"
+#include "linkest.h"
 #include "wantset.h"
 
 #define MAX_OPEN 16	       /* planets per session */
@@ -82,9 +83,25 @@ struct session {
 	bool paused; /* its wants are withdrawn while its output is full (see the top) */
 	bool has_focus;
 	double lon, lat, vel[3];
+	double focus_a; /* the focus planet's equatorial radius (m) */
 
 	struct control ctl;
 	uint64_t tiles_sent, tiles_dropped;
+
+	/* The link and the send window (linkest.h). `flushed` counts the bytes the kernel took,
+	 * so a byte at out index i is stream position flushed + i - out_off; `fr` lists the TILE
+	 * frames still in the output by stream position, oldest first, so that a new want-set
+	 * can take back the ones no longer wanted before the kernel has them. */
+	struct linkest le;
+	uint64_t flushed;
+	struct sframe *fr;
+	size_t nfr, capfr;
+};
+
+/* A TILE frame in the output: stream positions [begin, end). */
+struct sframe {
+	uint64_t begin, end;
+	struct tile_key key;
 };
 
 /* ---- output ----------------------------------------------------------------------------- */
@@ -117,7 +134,18 @@ static void resume_if_drained(struct session *s)
 static int flush(struct session *s)
 {
 	uint32_t was = conn_events(&s->c);
-	int rc = conn_flush(&s->c, &s->env->counters->bytes_sent);
+	uint64_t w = 0;
+	int rc = conn_flush(&s->c, &w);
+	s->flushed += w;
+	s->env->counters->bytes_sent += w;
+	size_t gone = 0; /* frames wholly handed to the kernel */
+	while (gone < s->nfr && s->fr[gone].end <= s->flushed)
+		gone++;
+	if (gone) {
+		memmove(s->fr, s->fr + gone, (s->nfr - gone) * sizeof *s->fr);
+		s->nfr -= gone;
+	}
+	linkest_sample(&s->le, clock_now_ns(), false);
 	if (rc) {
 		char why[240];
 		snprintf(why, sizeof why, "send: %s", conn_strerror(&s->c, rc));
@@ -233,6 +261,9 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 	}
 	const struct tile *t = e->t;
 	enum tcodec codec = (enum tcodec)s->codec;
+	uint64_t fast = s->env->raw_above_bps;
+	if (fast && s->le.tcp && s->le.rate * 8 > fast)
+		codec = TCODEC_NONE; /* the link outruns the encoder (raw is always allowed) */
 	enum tfilter filt = codec == TCODEC_NONE ? TFILTER_NONE : tilecodec_default_filter(t->type);
 	size_t bound = tilecodec_bound(codec, t->nbytes);
 	size_t head = PROTO_HDR + 44;
@@ -264,7 +295,13 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 		pbuf_init_fixed(&hb, at, head);
 		ssize_t h = proto_encode_tile_head(&hb, &pt, err);
 		if (h == (ssize_t)head) {
+			uint64_t begin = s->flushed + conn_pending(&s->c);
 			out->len += head + (size_t)n;
+			if (s->nfr == s->capfr) {
+				s->capfr = s->capfr ? 2 * s->capfr : 16;
+				s->fr = xrealloc(s->fr, s->capfr * sizeof *s->fr);
+			}
+			s->fr[s->nfr++] = (struct sframe){ begin, begin + head + (size_t)n, e->key };
 			s->tiles_sent++;
 			cnt->tiles_sent++;
 			return;
@@ -277,9 +314,49 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 		(unsigned long long)s->id, e->key.lx, e->key.ly, e->key.x, e->key.y, err);
 }
 
+/* The send window: output bytes this session may hold before the kernel takes them. */
+static uint64_t window(const struct session *s)
+{
+	return linkest_window(&s->le, s->env->queue_ms, s->env->limits->max_pending);
+}
+
 static bool has_room(const struct session *s)
 {
-	return wantset_nready(&s->ws) && conn_pending(&s->c) < s->env->limits->max_pending;
+	return wantset_nready(&s->ws) && conn_pending(&s->c) < window(s);
+}
+
+/* Takes the TILE frames the kernel has not begun of keys the want-set no longer holds out of
+ * the output (a new want-set: what the viewer left is not worth the link's time). */
+static void recall_unwanted(struct session *s)
+{
+	if (!s->env->queue_ms)
+		return; /* send_queue_ms 0: the queue as it was (bench_link's peer) */
+	struct pbuf *out = &s->c.out;
+	uint64_t shift = 0;
+	size_t keep = 0;
+	for (size_t i = 0; i < s->nfr; i++) {
+		struct sframe f = s->fr[i];
+		f.begin -= shift;
+		f.end -= shift;
+		if (f.begin >= s->flushed && wantset_find(&s->ws, &f.key) < 0) {
+			size_t at = s->c.out_off + (size_t)(f.begin - s->flushed);
+			size_t len = (size_t)(f.end - f.begin);
+			memmove(out->data + at, out->data + at + len, out->len - at - len);
+			out->len -= len;
+			shift += len;
+			s->env->counters->tiles_recalled++;
+			s->env->counters->bytes_recalled += len;
+			s->env->counters->tiles_dropped++; /* it left unsent after all */
+			s->tiles_dropped++;
+			continue;
+		}
+		s->fr[keep++] = f;
+	}
+	s->nfr = keep;
+	if (shift) {
+		s->c.want_out = s->c.out_off < out->len;
+		update_interest(s);
+	}
 }
 
 bool session_pump(struct session *s, size_t *budget)
@@ -538,10 +615,12 @@ static void on_want(struct session *s, const struct proto_want *w)
 	struct wantset_drops d = { 0 };
 	wantset_replace(&s->ws, w->planet_id, s->scratch, w->count, &d);
 	count_drops(s, &d);
+	recall_unwanted(s);
 	submit_wants(s, PROTO_WANT, w->seq);
 	s->has_focus = true;
 	s->lon = w->lon;
 	s->lat = w->lat;
+	s->focus_a = p->a;
 	memcpy(s->vel, w->vel, sizeof s->vel);
 	s->env->focus_changed(s->env->ud);
 	if (wantset_nready(&s->ws))
@@ -834,6 +913,7 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	/* The scheduler request comes with the handshake (on_hello): closing a connection that
 	 * never authenticated involves no other thread. */
 	peer_name(fd, s->peer, sizeof s->peer);
+	linkest_init(&s->le, fd, !l->is_unix, env->queue_ms > 0, env->bbr, s->born_ns);
 	log_msg(LOG_DEBUG, "session %llu: connected on %s from %s", (unsigned long long)s->id,
 		l->name, s->peer);
 	return s;
@@ -864,6 +944,7 @@ void session_tick(struct session *s, uint64_t now_ns)
 		begin_close(s);
 		return;
 	}
+	linkest_sample(&s->le, now_ns, true); /* the STATS figures stay current when idle */
 	if (control_tick(&s->ctl, now_ns))
 		flush(s);
 }
@@ -909,6 +990,7 @@ void session_free(struct session *s)
 	wantset_fini(&s->ws);
 	ready_src_unref(s->src);
 	free(s->scratch);
+	free(s->fr);
 	control_fini(&s->ctl);
 	for (int i = 0; i < s->nopened; i++)
 		planet_set_unref(s->opened[i].set);
@@ -919,22 +1001,31 @@ void session_free(struct session *s)
 	free(s);
 }
 
-bool session_focus(const struct session *s, double *lon, double *lat, double vel[3])
+bool session_focus(const struct session *s, double *lon, double *lat, double vel[3],
+		   double *radius)
 {
 	if (!s->has_focus || s->dead)
 		return false;
 	*lon = s->lon;
 	*lat = s->lat;
+	*radius = s->focus_a;
 	memcpy(vel, s->vel, sizeof s->vel);
 	return true;
 }
 
 void session_get_load(const struct session *s, struct session_load *out)
 {
+	const struct linkest *le = &s->le;
+	uint64_t q = conn_pending(&s->c) + le->notsent;
 	*out = (struct session_load){ .pending_bytes = conn_pending(&s->c),
 				      .out_bytes = s->c.out.cap,
 				      .held_bytes = wantset_held(&s->ws),
 				      .paused = s->paused,
 				      .ready_tiles = wantset_nready(&s->ws),
-				      .jobs = s->ctl.njobs };
+				      .jobs = s->ctl.njobs,
+				      .tcp = le->tcp, .rate = le->rate,
+				      .rtt_ms = le->rtt_us * 1e-3, .min_rtt_ms = le->min_rtt_us * 1e-3,
+				      .window = window(s), .queue_bytes = q,
+				      .queue_ms = linkest_delay_ms(le, q), .inflight = le->unacked,
+				      .id = s->id, .peer = s->peer };
 }

@@ -32,6 +32,9 @@ struct session_counters {
 	/* held-tile allowance: ready tiles released for want of output room, found again in
 	 * the cache when room came, wanted again because the cache had let them go */
 	uint64_t tiles_parked, tiles_relooked, tiles_rewanted;
+	/* encoded tiles taken back out of the output before the kernel had them (a new want-set
+	 * no longer wanted them), and their bytes */
+	uint64_t tiles_recalled, bytes_recalled;
 	uint64_t pauses; /* times a session's wants were withdrawn while its output was full */
 };
 
@@ -39,6 +42,11 @@ struct session_counters {
 struct session_env {
 	const struct proto_limits *limits;
 	uint32_t max_jobs; /* prefetch jobs per session */
+	uint32_t queue_ms; /* TCP send window: this much of the measured rate (0: max_pending) */
+	bool bbr;	   /* TCP sessions ask for BBR (where the kernel allows it) */
+	/* compress = auto: a TCP session's tiles go raw while its link is measured faster than
+	 * this (bits/s; 0: never) — there the encoder, not the link, would be the bottleneck */
+	uint64_t raw_above_bps;
 	struct prefetch_limits *prefetch; /* the server's caps on prefetch jobs (prefetch.h) */
 	uint64_t handshake_ns; /* accept to HELLO_OK, at most ([listen] handshake_timeout) */
 	uint64_t frame_ns;     /* a frame's first byte to its last, at most (frame_timeout) */
@@ -79,6 +87,16 @@ struct session_load {
 	uint64_t held_bytes; /* ready tiles' bytes held for output room */
 	uint64_t out_bytes;  /* the output buffer's size */
 	bool paused;	     /* wants withdrawn while the output is full */
+	/* the link (linkest.h): TCP only; 0 when not measured (Unix sockets, no sample yet) */
+	bool tcp;
+	uint64_t rate;	      /* bytes/s */
+	double rtt_ms, min_rtt_ms;
+	uint64_t window;      /* the send window: output bytes allowed before the kernel's */
+	uint64_t queue_bytes; /* committed, not yet on the wire: output + the kernel's unsent */
+	double queue_ms;      /* queue_bytes at the rate */
+	uint64_t inflight;    /* sent, not yet acknowledged */
+	uint64_t id;
+	const char *peer;
 };
 
 /* Starts a session on an accepted, non-blocking socket fd (taken) of listener l (borrowed:
@@ -111,8 +129,10 @@ void session_shutdown(struct session *s);
 void session_close(struct session *s, const char *why);
 /* Frees a closed session. NULL is a no-op. */
 void session_free(struct session *s);
-/* Whether a focus is known, and it (for cache pruning). */
-bool session_focus(const struct session *s, double *lon, double *lat, double vel[3]);
+/* Whether a focus is known, and it (for cache pruning), with the equatorial radius (m) of the
+ * planet it is on. */
+bool session_focus(const struct session *s, double *lon, double *lat, double vel[3],
+		   double *radius);
 void session_get_load(const struct session *s, struct session_load *out);
 
 #endif

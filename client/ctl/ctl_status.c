@@ -24,6 +24,17 @@ static bool is_node_key(const char *k)
 	       strchr(strchr(k, '.') + 1, '.') != NULL;
 }
 
+/* "link.ID.FIELD": a session's link figure, for --json; the text shows its line "link.ID". */
+static bool is_link_field(const char *k)
+{
+	if (strncmp(k, "link.", 5) != 0)
+		return false;
+	const char *p = k + 5;
+	while (*p >= '0' && *p <= '9')
+		p++;
+	return p > k + 5 && *p == '.';
+}
+
 static bool ends_with(const char *s, const char *suf)
 {
 	size_t a = strlen(s), b = strlen(suf);
@@ -221,6 +232,8 @@ int ctl_status_print(const struct proto_stats *st, const char *peer, bool json, 
 			have_nodes = true;
 			continue;
 		}
+		if (is_link_field(s->key))
+			continue;
 		struct row *r = &rows[nr++];
 		const char *dot = strchr(s->key, '.');
 		if (dot) {

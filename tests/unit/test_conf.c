@@ -50,6 +50,9 @@ static void test_shipped_file(void **state)
 		fail_msg("%s", err);
 	assert_string_equal(c.planets_dir, "/etc/clipmap/planets");
 	assert_int_equal(c.max_pending, (uint64_t)8192 << 10);
+	assert_int_equal(c.send_queue_ms, 100);
+	assert_true(c.bbr);
+	assert_int_equal(c.raw_above_mbit, 800);
 	assert_int_equal(c.image_cache_mb, 256);
 	assert_null(c.store_path); /* no disk tier unless a path is set */
 	assert_int_equal(c.store_bytes, (uint64_t)1024 << 20);
@@ -63,6 +66,7 @@ static void test_values(void **state)
 			"token_file = secret\nrequire_token = tcp\nunix_mode = 0600\n"
 			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\nimage_cache_mb = 48\n"
 			"[session]\nmax_pending_kb = 128\nmax_rate = 0\ncompress = never\n"
+			"send_queue_ms = 0\nbbr = no\nraw_above_mbit = 0\n"
 			"[log]\nlevel = debug\n[store]\npath = tiles.lmdb\ndisk_mb = 512\n";
 	struct conf c;
 	char err[256] = "";
@@ -81,6 +85,9 @@ static void test_values(void **state)
 	assert_int_equal(c.image_cache_mb, 48);
 	assert_int_equal(c.max_pending, 128u << 10);
 	assert_int_equal(c.compress, CONF_COMPRESS_NEVER);
+	assert_int_equal(c.send_queue_ms, 0);
+	assert_false(c.bbr);
+	assert_int_equal(c.raw_above_mbit, 0);
 	assert_int_equal(c.log_level, LOG_DEBUG);
 	assert_string_equal(c.store_path, "/etc/x/tiles.lmdb");
 	assert_int_equal(c.store_bytes, (uint64_t)512 << 20);
@@ -124,6 +131,9 @@ static void test_errors(void **state)
 	parse_fails("[store]\nredis = unix:\n", "d.conf:2: redis: unix: needs a socket path");
 	parse_fails("[store]\nredis_lease_ms = 10\n",
 		    "d.conf:2: redis_lease_ms: \"10\": expected an integer in [50, 600000]");
+	parse_fails("[session]\nsend_queue_ms = -5\n",
+		    "d.conf:2: send_queue_ms: \"-5\": expected an integer in [0, 10000]");
+	parse_fails("[session]\nbbr = maybe\n", "d.conf:2: bbr: \"maybe\": expected true or false");
 	parse_fails("[engine]\nimage_cache_mb = 8\n",
 		    "d.conf:2: image_cache_mb: \"8\": expected an integer in [16, 1048576]");
 	parse_fails("\n[engine]\nimage_cache_mb = 1G\n", "d.conf:3: image_cache_mb: \"1G\"");

@@ -1,0 +1,57 @@
+/* linkest — one session's link, measured: throughput and round-trip time from the kernel's
+ * TCP_INFO (tcpi_delivery_rate, tcpi_rtt, tcpi_min_rtt, tcpi_bytes_acked) on TCP sockets, and
+ * the send window sized from them: how many bytes the session may keep encoded but not yet
+ * handed to the kernel (send_queue_ms of the measured rate, at least LINKEST_FLOOR, at most
+ * max_pending), and the TCP_NOTSENT_LOWAT the kernel keeps (a few milliseconds of the rate),
+ * so that a new want-set finds little already committed. A Unix socket is not measured: it is
+ * treated as fast (the window is max_pending, as before).
+ *
+ * The rate is a windowed maximum of the delivery-rate samples over the last two windows of
+ * LINKEST_WINDOW_NS (BBR's bandwidth filter, coarser): samples the kernel marks
+ * application-limited count only when they raise it, so an idle session keeps its figure.
+ *
+ * Threads: the event loop's. Ownership: borrows the fd.
+ */
+#ifndef CLIPMAP_LINKEST_H
+#define CLIPMAP_LINKEST_H
+#include <stdbool.h>
+#include <stdint.h>
+
+#define LINKEST_FLOOR (32u << 10)		/* bytes: the send window's least size */
+#define LINKEST_WINDOW_NS 1000000000ull	/* the bandwidth filter's window */
+#define LINKEST_SAMPLE_NS 5000000ull	/* TCP_INFO at most this often */
+#define LINKEST_LOWAT_MIN (4u << 10)	/* TCP_NOTSENT_LOWAT's bounds */
+#define LINKEST_LOWAT_MAX (1u << 20)
+#define LINKEST_LOWAT_MS 10u		/* TCP_NOTSENT_LOWAT: this much of the rate */
+
+struct linkest {
+	int fd;
+	bool tcp;	    /* measured; false: a Unix socket, treated as fast */
+	uint64_t last_ns;   /* the last sample */
+	uint64_t rate;	    /* bytes/s: the estimate (0: none yet) */
+	uint64_t win_max[2]; /* the filter: this window's and the last one's maximum */
+	uint64_t win_start;
+	uint32_t rtt_us, min_rtt_us; /* smoothed and least RTT (0: none yet) */
+	uint64_t acked;	     /* tcpi_bytes_acked at the last sample */
+	uint64_t notsent;    /* tcpi_notsent_bytes: in the kernel, not yet sent */
+	uint64_t unacked;    /* bytes sent, not yet acknowledged (tcpi_unacked × mss) */
+	uint32_t lowat;	     /* TCP_NOTSENT_LOWAT set (0: not set) */
+};
+
+/* Starts measuring fd (borrowed); tcp false for a Unix socket. On TCP with lowat true it sets
+ * the first TCP_NOTSENT_LOWAT (LINKEST_LOWAT_MIN) and keeps it sized from the rate; false
+ * leaves the kernel's default (send_queue_ms 0). bbr: asks for BBR congestion control
+ * (TCP_CONGESTION), which keeps the bottleneck's queue near one bandwidth-delay product where
+ * loss-based CUBIC fills it (seconds of stale bytes in flight on a bloated link); where the
+ * kernel has no BBR or does not allow it, the system's default stays (logged at debug). */
+void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, bool bbr, uint64_t now_ns);
+/* Takes a TCP_INFO sample unless one is younger than LINKEST_SAMPLE_NS (force: take it
+ * anyway), updates the rate and RTT and, when the rate moved, TCP_NOTSENT_LOWAT. */
+void linkest_sample(struct linkest *le, uint64_t now_ns, bool force);
+/* The send window in bytes: queue_ms of the rate, within [LINKEST_FLOOR, cap]; cap on a Unix
+ * socket. queue_ms 0: cap (the window is not sized from the link). */
+uint64_t linkest_window(const struct linkest *le, uint32_t queue_ms, uint64_t cap);
+/* How long `bytes` take at the measured rate, in milliseconds (0 when not measured). */
+double linkest_delay_ms(const struct linkest *le, uint64_t bytes);
+
+#endif
