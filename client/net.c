@@ -373,8 +373,9 @@ static void conn_free(struct net_conn *c)
 	free(c);
 }
 
-/* Starts a non-blocking connect to the Unix socket path. */
-static int start_unix(struct net_conn *c, const char *path, char err[256])
+/* Connects to the Unix socket path; the socket is left non-blocking. may_wait: a full listen
+ * queue is waited for (blocking connect), else it fails the attempt (EAGAIN). */
+static int start_unix(struct net_conn *c, const char *path, bool may_wait, char err[256])
 {
 	struct sockaddr_un a = { .sun_family = AF_UNIX };
 	if (strlen(path) >= sizeof a.sun_path) {
@@ -383,18 +384,25 @@ static int start_unix(struct net_conn *c, const char *path, char err[256])
 		return -ENAMETOOLONG;
 	}
 	memcpy(a.sun_path, path, strlen(path) + 1);
-	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | SOCK_NONBLOCK, 0);
+	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | (may_wait ? 0 : SOCK_NONBLOCK), 0);
 	if (s < 0) {
 		int e = errno;
 		err_set(err, "cannot connect to %s: socket: %s", path, strerror(e));
 		return -e;
 	}
-	/* A Unix connect does not wait for the peer; EAGAIN: its listen queue is full. */
+	/* A Unix connect does not wait for the peer, only for room in its listen queue. */
+	int fl;
 	while (connect(s, (struct sockaddr *)&a, sizeof a) < 0) {
 		if (errno == EINTR)
 			continue;
 		int e = errno;
 		err_set(err, "cannot connect to %s: %s", path, strerror(e));
+		close(s);
+		return -e;
+	}
+	if (may_wait && ((fl = fcntl(s, F_GETFL)) < 0 || fcntl(s, F_SETFL, fl | O_NONBLOCK) < 0)) {
+		int e = errno;
+		err_set(err, "cannot connect to %s: fcntl: %s", path, strerror(e));
 		close(s);
 		return -e;
 	}
@@ -475,7 +483,9 @@ static int start_tcp(struct net_conn *c, const char *hp, char err[256])
 	return try_next_address(c, -ECONNREFUSED, err);
 }
 
-int net_connect_start(const struct net_opts *o, struct net_conn **out, char err[256])
+/* net_connect_start; may_wait: see start_unix. */
+static int connect_begin(const struct net_opts *o, bool may_wait, struct net_conn **out,
+			 char err[256])
 {
 	*out = NULL;
 	const char *peer = o->hostport ? o->hostport : o->socket_path;
@@ -487,13 +497,19 @@ int net_connect_start(const struct net_opts *o, struct net_conn **out, char err[
 	int rc = conn_new(-1, peer, o, &c, err);
 	if (rc)
 		return rc;
-	rc = o->hostport ? start_tcp(c, o->hostport, err) : start_unix(c, o->socket_path, err);
+	rc = o->hostport ? start_tcp(c, o->hostport, err)
+			 : start_unix(c, o->socket_path, may_wait, err);
 	if (rc) {
 		conn_free(c);
 		return rc;
 	}
 	*out = c;
 	return 0;
+}
+
+int net_connect_start(const struct net_opts *o, struct net_conn **out, char err[256])
+{
+	return connect_begin(o, false, out, err);
 }
 
 short net_connect_events(const struct net_conn *c)
@@ -634,7 +650,7 @@ int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct ne
 int net_connect(const struct net_opts *o, struct net_conn **out, char err[256])
 {
 	struct net_conn *c;
-	int rc = net_connect_start(o, &c, err);
+	int rc = connect_begin(o, true, &c, err);
 	return rc ? rc : connect_finish(c, out, err);
 }
 
