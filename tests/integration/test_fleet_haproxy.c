@@ -22,7 +22,6 @@
 #include <netinet/in.h>
 #include <setjmp.h>
 #include <signal.h>
-#include <stdarg.h>
 #include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -36,9 +35,9 @@
 #include <cmocka.h>
 
 #include "common/clock.h"
-#include "common/img.h"
 #include "common/proto.h"
 #include "support/daemon_env.h"
+#include "support/picture.h"
 #include "support/slow.h"
 
 #define NDAEMONS 3
@@ -318,10 +317,34 @@ static void skip_without_gl(const char *log)
 	}
 }
 
-/* Starts clipmapview flying csv (keys) through target with --stats into stats; more
- * arguments after (NULL-terminated). */
+/* Waits (up to timeout_s) for the viewer to end; it must end with status 0 (its log is
+ * printed when not). */
+static void viewer_done(struct env *e, double timeout_s)
+{
+	int rc = reap(e->viewer, timeout_s);
+	e->viewer = 0;
+	if (rc != 0) {
+		skip_without_gl(e->viewer_log);
+		print_file("viewer", e->viewer_log);
+	}
+	assert_int_equal(rc, 0);
+}
+
+/* The viewer's stderr says both a and b. */
+static void viewer_said(struct env *e, const char *a, const char *b)
+{
+	char *log = slurp(e->viewer_log);
+	bool ok = log && strstr(log, a) && strstr(log, b);
+	free(log);
+	if (!ok)
+		print_file("viewer", e->viewer_log);
+	assert_true(ok);
+}
+
+/* Starts clipmapview flying keys (CSV lines) through target at 10 frames a second with
+ * --stats into stats, and -o png (a frame pattern) unless NULL. */
 static void fly(struct env *e, const char *dir, const char *target, const char *keys, int steps,
-		const char *stats, const char *a0, ...)
+		const char *stats, const char *png)
 {
 	char exe[600], csv[200], st[16];
 	snprintf(exe, sizeof exe, "%s/clipmapview", e->d[0].bindir);
@@ -332,16 +355,9 @@ static void fly(struct env *e, const char *dir, const char *target, const char *
 	assert_non_null(f);
 	fprintf(f, "lat,lon,alt,heading,pitch\n%s", keys);
 	assert_int_equal(fclose(f), 0);
-	char *argv[32] = { exe, "--connect", (char *)target, "--planet", "procedural", "--flight",
-			   csv, "--steps", st, "--fps", "10", "--size", "160x120", "--stats",
-			   (char *)stats };
-	int argc = 15;
-	va_list ap;
-	va_start(ap, a0);
-	for (const char *a = a0; a && argc < 31; a = va_arg(ap, const char *))
-		argv[argc++] = (char *)a;
-	va_end(ap);
-	argv[argc] = NULL;
+	char *argv[] = { exe, "--connect", (char *)target, "--planet", "procedural", "--flight",
+			 csv, "--steps", st, "--fps", "10", "--size", "160x120", "--stats",
+			 (char *)stats, png ? "-o" : NULL, (char *)png, NULL };
 	e->viewer = spawn(argv, e->viewer_log);
 	assert_true(e->viewer > 0);
 }
@@ -372,23 +388,6 @@ static void frames_free(struct frames *fr)
 	for (int i = 0; i < fr->n; i++)
 		free(fr->line[i]);
 	free(fr->line);
-}
-
-/* Whether the picture has terrain in it (not one flat colour). */
-static double spread(const char *path)
-{
-	void *p;
-	struct img_info in;
-	assert_int_equal(img_read(path, IMG_U8, &p, &in, NULL), 0);
-	const unsigned char *x = p;
-	int lo = 255, hi = 0;
-	for (size_t i = 0; i < (size_t)in.width * in.height; i++) {
-		int g = x[i * (size_t)in.channels + 1];
-		lo = g < lo ? g : lo;
-		hi = g > hi ? g : hi;
-	}
-	free(p);
-	return hi - lo;
 }
 
 /* ---- the example config ------------------------------------------------------------------ */
@@ -468,7 +467,7 @@ static void viewer_survives_its_daemon_killed(void **state)
 	snprintf(stats, sizeof stats, "%s/kill.jsonl", dir);
 	snprintf(png, sizeof png, "%s/kill_%%03d.png", dir);
 	fly(e, dir, target, "20,30,20000,70,-30\n20.02,30.1,15000,70,-30\n20.02,30.1,15000,70,-30\n",
-	    80, stats, "-o", png, NULL);
+	    80, stats, png);
 	/* Its daemon: the one that sends it tiles. */
 	int victim = -1;
 	end = clock_now_s() + test_slow(30);
@@ -493,11 +492,7 @@ static void viewer_survives_its_daemon_killed(void **state)
 	assert_int_equal(daemon_env_stop(&e->d[victim], SIGKILL, NULL), 0);
 	fprintf(stderr, "killed daemon d%d with SIGKILL\n", victim);
 
-	int rc = reap(e->viewer, test_slow(120));
-	e->viewer = 0;
-	if (rc != 0)
-		print_file("viewer", e->viewer_log);
-	assert_int_equal(rc, 0);
+	viewer_done(e, test_slow(120));
 	/* Another daemon took it over and sent it tiles. */
 	bool other = false;
 	for (int i = 0; i < NDAEMONS; i++)
@@ -532,11 +527,8 @@ static void viewer_survives_its_daemon_killed(void **state)
 	assert_non_null(strstr(fr.line[fr.n - 1], "\"link\":\"up\""));
 	frames_free(&fr);
 	snprintf(png, sizeof png, "%s/kill_160.png", dir);
-	assert_true(spread(png) > 40);
-	char *log = slurp(e->viewer_log);
-	assert_non_null(strstr(log, "lost the connection to 127.0.0.1:"));
-	assert_non_null(strstr(log, "reconnected to 127.0.0.1:"));
-	free(log);
+	assert_true(picture_spread(png) > 40);
+	viewer_said(e, "lost the connection to 127.0.0.1:", "reconnected to 127.0.0.1:");
 }
 
 /* ---- directly on one daemon ------------------------------------------------------------- */
@@ -569,11 +561,7 @@ static void frames_go_on_while_the_daemon_is_away(void **state)
 	sleep_s(3);
 	if (daemon_env_restart(d, err))
 		fail_msg("restart: %s", err);
-	int rc = reap(e->viewer, test_slow(120));
-	e->viewer = 0;
-	if (rc != 0)
-		print_file("viewer", e->viewer_log);
-	assert_int_equal(rc, 0);
+	viewer_done(e, test_slow(120));
 
 	struct frames fr;
 	frames_read(stats, &fr);
@@ -614,10 +602,7 @@ static void frames_go_on_while_the_daemon_is_away(void **state)
 	assert_true(num(fr.line[fr.n - 1], "ldetail") >= detail_away);
 	assert_int_equal((int)num(fr.line[fr.n - 1], "reconnects"), 1);
 	frames_free(&fr);
-	char *log = slurp(e->viewer_log);
-	assert_non_null(strstr(log, "reconnect attempt 1 failed: cannot connect to"));
-	assert_non_null(strstr(log, "reconnected to"));
-	free(log);
+	viewer_said(e, "reconnect attempt 1 failed: cannot connect to", "reconnected to");
 }
 
 /* A viewer started before its daemon (--connect-wait) connects once the daemon is up. */
@@ -647,18 +632,9 @@ static void viewer_waits_for_a_daemon_started_later(void **state)
 	static const char *const set[] = { "engine.workers = 1", NULL };
 	if (daemon_env_start(d, &(struct daemon_env_conf){ .set = set }, err))
 		fail_msg("%s", err);
-	int rc = reap(e->viewer, test_slow(90));
-	e->viewer = 0;
-	if (rc != 0) {
-		skip_without_gl(e->viewer_log);
-		print_file("viewer", e->viewer_log);
-	}
-	assert_int_equal(rc, 0);
-	char *log = slurp(e->viewer_log);
-	assert_non_null(strstr(log, "clipmapview: connected to "));
-	assert_non_null(strstr(log, " at attempt "));
-	free(log);
-	assert_true(spread(png) > 40);
+	viewer_done(e, test_slow(90));
+	viewer_said(e, "clipmapview: connected to ", " at attempt ");
+	assert_true(picture_spread(png) > 40);
 }
 
 int main(void)
