@@ -500,35 +500,38 @@ static struct view_camera flight_camera(const struct key *keys, size_t nkeys, in
 struct link_report {
 	const struct view_source *net;
 	struct view_net_link now; /* at the last frame */
-	bool was_up;
+	unsigned said_lost, said_reconnects; /* losses and reconnects reported on stderr */
 	unsigned said_attempt; /* the last failed attempt reported on stderr */
 	double t0;	       /* clock_now_s at the start, for "t" in --stats */
 };
 
-/* After a frame: the link's state into r->now, its changes on stderr (a loss, failed attempts
- * 1, 2, 4, 8, …, the reconnect). */
+/* After a frame: the link's state into r->now, what happened since the last frame on stderr
+ * (a loss, failed attempts 1, 2, 4, 8, …, the reconnect; a loss and its reconnect may both
+ * fall between two frames). */
 static void link_note(struct link_report *r)
 {
 	if (!r->net)
 		return;
 	view_source_net_link(r->net, &r->now);
 	const struct view_net_link *l = &r->now;
-	if (!l->up && r->was_up)
+	if (l->lost > r->said_lost) {
 		fprintf(stderr, "clipmapview: lost the connection to %s: %s; reconnecting\n",
-			l->peer, l->why);
-	else if (!l->up && l->attempt > r->said_attempt && l->why[0] &&
-		 !(l->attempt & (l->attempt - 1)) && l->attempt > 0) {
-		fprintf(stderr, "clipmapview: reconnect attempt %u failed: %s\n", l->attempt,
+			l->peer, l->lost_why);
+		r->said_lost = l->lost;
+		r->said_attempt = 0;
+	}
+	if (!l->up && l->failed > r->said_attempt && !(l->failed & (l->failed - 1))) {
+		fprintf(stderr, "clipmapview: reconnect attempt %u failed: %s\n", l->failed,
 			l->why);
-		r->said_attempt = l->attempt;
-	} else if (l->up && !r->was_up)
+		r->said_attempt = l->failed;
+	}
+	if (l->reconnects > r->said_reconnects) {
 		fprintf(stderr, "clipmapview: reconnected to %s after %u attempt%s (%.1f s down); "
 			"%u reconnect%s so far\n", l->peer, l->last_attempts,
 			l->last_attempts == 1 ? "" : "s", l->last_down_s, l->reconnects,
 			l->reconnects == 1 ? "" : "s");
-	if (l->up)
-		r->said_attempt = 0;
-	r->was_up = l->up;
+		r->said_reconnects = l->reconnects;
+	}
 }
 
 /* "up" or "reconnecting (attempt N)" into buf. */
@@ -918,8 +921,7 @@ int main(int argc, char **argv)
 		fprintf(stderr, "clipmapview: %s: %s\n", a.statsp, strerror(errno));
 		goto out;
 	}
-	struct link_report lr = { .net = a.connect_to ? src : NULL, .was_up = true,
-				  .t0 = clock_now_s() };
+	struct link_report lr = { .net = a.connect_to ? src : NULL, .t0 = clock_now_s() };
 	if (a.window)
 		status = run_window(&a, src, keys, stats, &lr);
 	else

@@ -57,7 +57,8 @@ struct net_source {
 	double last_down_ms;	/* and how long the link was down then */
 	unsigned seed;
 	double lost_ms, next_ms, attempt_ms; /* clock_now_ms: lost, next attempt, this one began */
-	char why[256];
+	char why[256];	    /* why the link is down: the loss, then the last attempt's failure */
+	char lost_why[256]; /* why it was lost last */
 	void *spare[8]; /* released buffers of spare_len bytes, for the next tiles */
 	int nspare;
 	size_t spare_len;
@@ -130,6 +131,7 @@ static void link_down(struct net_source *ns, const char *why)
 		ns->attempt = 0;
 		ns->lost++;
 		ns->lost_ms = now;
+		snprintf(ns->lost_why, sizeof ns->lost_why, "%s", why);
 	}
 	ns->state = LINK_WAIT;
 	snprintf(ns->why, sizeof ns->why, "%s", why);
@@ -411,10 +413,12 @@ void view_source_net_link(const struct view_source *s, struct view_net_link *out
 {
 	const struct net_source *ns = (const struct net_source *)s;
 	bool up = ns->state == LINK_UP;
-	*out = (struct view_net_link){ .up = up, .attempt = up ? 0 : ns->attempt,
+	unsigned failed = up ? 0 : ns->state == LINK_WAIT ? ns->attempt : ns->attempt - 1;
+	*out = (struct view_net_link){ .up = up, .attempt = up ? 0 : ns->attempt, .failed = failed,
 				       .reconnects = ns->reconnects, .lost = ns->lost,
 				       .down_s = up ? 0 : (clock_now_ms() - ns->lost_ms) / 1e3,
-				       .why = up ? "" : ns->why, .peer = ns->target,
+				       .why = up ? "" : ns->why, .lost_why = ns->lost_why,
+				       .peer = ns->target,
 				       .last_attempts = ns->last_attempts,
 				       .last_down_s = ns->last_down_ms / 1e3 };
 }

@@ -34,12 +34,15 @@ int view_source_net_create_wait(const struct net_opts *o, const char *planet, do
 /* The state of the source's link to the daemon. */
 struct view_net_link {
 	bool up;	     /* a session is open and the want-set sent */
-	unsigned attempt;    /* while down: attempts made since it was lost */
+	unsigned attempt;    /* while down: attempts made since it was lost (the last one may
+			      * still be going on) */
+	unsigned failed;     /* while down: of those, the ones that failed (why: the last) */
 	unsigned reconnects; /* links restored since the start */
 	unsigned lost;	     /* links lost since the start */
 	double down_s;	     /* while down: seconds since it was lost */
 	const char *why;     /* while down: why (the loss, then the last attempt's failure);
 			      * borrowed until the next call on the source */
+	const char *lost_why; /* why the link was lost the last time ("" never); borrowed */
 	const char *peer;    /* the target (socket or HOST:PORT), borrowed */
 	unsigned last_attempts; /* the last reconnect: attempts it took */
 	double last_down_s;	/* and how long the link was down */

@@ -8,6 +8,8 @@
  *  - The check marks the decoy down and the daemons up.
  *  - A viewer flies through HAProxy; its daemon is killed with kill -9 mid-flight; the viewer
  *    reconnects through HAProxy to another daemon, keeps drawing, and its flight completes.
+ *  - The same with a daemon that hangs (SIGSTOP: its sockets stay open): the health check
+ *    marks it down, HAProxy cuts its sessions, the viewer reconnects to the third daemon.
  *  - Directly on a daemon's socket: the daemon is down for 3 s; frames go on at their pace
  *    (no frame waits for the reconnect), drawing what is resident, saying "reconnecting
  *    (attempt N)"; when the daemon is back the viewer reconnects, sends its want-set again
@@ -298,8 +300,10 @@ static int teardown(void **state)
 	}
 	if (e->decoy >= 0)
 		close(e->decoy);
-	for (int i = 0; i < NDAEMONS; i++)
+	for (int i = 0; i < NDAEMONS; i++) {
+		daemon_env_signal(&e->d[i], SIGCONT); /* a hung one, so that it can stop */
 		daemon_env_fini(&e->d[i]);
+	}
 	daemon_env_fini(&e->solo);
 	free(e);
 	return 0;
@@ -431,6 +435,96 @@ static void example_config_checks_with_the_protocol(void **state)
 
 /* ---- through HAProxy ------------------------------------------------------------------- */
 
+/* A flight through HAProxy (60 frames over 0.1° and down, then 100 hovering, 10 a second);
+ * mid-flight its daemon gets sig: SIGKILL (dead: its sockets close), or SIGSTOP (hung: its
+ * sockets stay open; the health check marks it down and HAProxy cuts its sessions, SIGCONT
+ * afterwards). The viewer must reconnect through HAProxy to another daemon, keep its pace
+ * and complete frames, and end with status 0. */
+static void lose_daemon_mid_flight(struct env *e, int sig, const char *tag)
+{
+	const char *dir = e->d[0].dir;
+	char target[64], stats[200], png[200];
+	double sent_before[NDAEMONS];
+	for (int i = 0; i < NDAEMONS; i++)
+		sent_before[i] = e->d[i].daemon > 0 ? dstat(&e->d[i], "tiles.sent") : -1;
+	snprintf(target, sizeof target, "127.0.0.1:%d", e->front);
+	snprintf(stats, sizeof stats, "%s/%s.jsonl", dir, tag);
+	snprintf(png, sizeof png, "%s/%s_%%03d.png", dir, tag);
+	fly(e, dir, target, "20,30,20000,70,-30\n20.02,30.1,15000,70,-30\n20.02,30.1,15000,70,-30\n",
+	    80, stats, png);
+	/* Its daemon: the one that sends it tiles. */
+	int victim = -1;
+	double end = clock_now_s() + test_slow(30);
+	while (victim < 0 && clock_now_s() < end) {
+		for (int i = 0; i < NDAEMONS && victim < 0; i++)
+			if (sent_before[i] >= 0 && dstat(&e->d[i], "tiles.sent") > sent_before[i])
+				victim = i;
+		if (victim < 0)
+			sleep_s(0.2);
+		if (waitpid(e->viewer, NULL, WNOHANG) == e->viewer) {
+			e->viewer = 0;
+			skip_without_gl(e->viewer_log);
+			print_file("viewer", e->viewer_log);
+			fail_msg("the viewer ended before any daemon sent a tile");
+		}
+	}
+	assert_true(victim >= 0);
+	sleep_s(1.5); /* mid-flight, tiles coming in */
+	for (int i = 0; i < NDAEMONS; i++)
+		if (sent_before[i] >= 0)
+			sent_before[i] = dstat(&e->d[i], "tiles.sent");
+	if (sig == SIGKILL)
+		assert_int_equal(daemon_env_stop(&e->d[victim], SIGKILL, NULL), 0);
+	else
+		assert_int_equal(daemon_env_signal(&e->d[victim], sig), 0);
+	fprintf(stderr, "daemon d%d: signal %d (%s)\n", victim, sig, strsignal(sig));
+
+	viewer_done(e, test_slow(120));
+	/* Another daemon took it over and sent it tiles. */
+	bool other = false;
+	for (int i = 0; i < NDAEMONS; i++)
+		if (i != victim && sent_before[i] >= 0 &&
+		    dstat(&e->d[i], "tiles.sent") > sent_before[i])
+			other = true;
+	if (sig == SIGSTOP)
+		assert_int_equal(daemon_env_signal(&e->d[victim], SIGCONT), 0);
+	assert_true(other);
+
+	struct frames fr;
+	frames_read(stats, &fr);
+	assert_int_equal(fr.n, 161);
+	int after = 0, complete_after = 0;
+	double prev_t = -1;
+	bool lost = false;
+	for (int i = 0; i < fr.n; i++) {
+		const char *l = fr.line[i];
+		/* From the loss on, no frame waits on the network: each is short and they keep
+		 * their pace (the first frames, which compile shaders, are not the point). */
+		lost |= strstr(l, "\"link\":\"reconnecting") || num(l, "reconnects") >= 1;
+		double t = num(l, "t");
+		if (lost && num(l, "ms") >= 1000)
+			fail_msg("frame %d took %.0f ms: %s", i, num(l, "ms"), l);
+		if (lost && t - prev_t > 1.5)
+			fail_msg("frame %d came %.2f s after the one before: %s", i, t - prev_t, l);
+		prev_t = t;
+		if (num(l, "reconnects") >= 1) {
+			after++;
+			assert_true(num(l, "levels_drawn") >= 1);
+			complete_after += strstr(l, "\"complete\":true") != NULL;
+		}
+	}
+	fprintf(stderr, "%d frames after the reconnect, %d of them complete\n", after,
+		complete_after);
+	assert_true(after >= 20);
+	assert_true(complete_after >= 1);
+	assert_true(num(fr.line[fr.n - 1], "reconnects") >= 1);
+	assert_non_null(strstr(fr.line[fr.n - 1], "\"link\":\"up\""));
+	frames_free(&fr);
+	snprintf(png, sizeof png, "%s/%s_160.png", dir, tag);
+	assert_true(picture_spread(png) > 40);
+	viewer_said(e, "lost the connection to 127.0.0.1:", "reconnected to 127.0.0.1:");
+}
+
 static void viewer_survives_its_daemon_killed(void **state)
 {
 	struct env *e = *state;
@@ -460,75 +554,18 @@ static void viewer_survives_its_daemon_killed(void **state)
 	}
 	assert_true(ready);
 
-	/* A flight through HAProxy: 60 frames over 0.1° and down, then 100 hovering (10/s). */
-	const char *dir = e->d[0].dir;
-	char target[64], stats[200], png[200];
-	snprintf(target, sizeof target, "127.0.0.1:%d", e->front);
-	snprintf(stats, sizeof stats, "%s/kill.jsonl", dir);
-	snprintf(png, sizeof png, "%s/kill_%%03d.png", dir);
-	fly(e, dir, target, "20,30,20000,70,-30\n20.02,30.1,15000,70,-30\n20.02,30.1,15000,70,-30\n",
-	    80, stats, png);
-	/* Its daemon: the one that sends it tiles. */
-	int victim = -1;
-	end = clock_now_s() + test_slow(30);
-	while (victim < 0 && clock_now_s() < end) {
-		for (int i = 0; i < NDAEMONS && victim < 0; i++)
-			if (dstat(&e->d[i], "tiles.sent") > 0)
-				victim = i;
-		if (victim < 0)
-			sleep_s(0.2);
-		if (waitpid(e->viewer, NULL, WNOHANG) == e->viewer) {
-			e->viewer = 0;
-			skip_without_gl(e->viewer_log);
-			print_file("viewer", e->viewer_log);
-			fail_msg("the viewer ended before any daemon sent a tile");
-		}
-	}
-	assert_true(victim >= 0);
-	sleep_s(1.5); /* mid-flight, tiles coming in */
-	double sent_before[NDAEMONS];
-	for (int i = 0; i < NDAEMONS; i++)
-		sent_before[i] = i == victim ? 0 : dstat(&e->d[i], "tiles.sent");
-	assert_int_equal(daemon_env_stop(&e->d[victim], SIGKILL, NULL), 0);
-	fprintf(stderr, "killed daemon d%d with SIGKILL\n", victim);
+	lose_daemon_mid_flight(e, SIGKILL, "kill");
+}
 
-	viewer_done(e, test_slow(120));
-	/* Another daemon took it over and sent it tiles. */
-	bool other = false;
-	for (int i = 0; i < NDAEMONS; i++)
-		if (i != victim && dstat(&e->d[i], "tiles.sent") > sent_before[i])
-			other = true;
-	assert_true(other);
-
-	struct frames fr;
-	frames_read(stats, &fr);
-	assert_int_equal(fr.n, 161);
-	int after = 0, complete_after = 0;
-	double prev_t = -1;
-	for (int i = 0; i < fr.n; i++) {
-		const char *l = fr.line[i];
-		/* No frame waits on the network: each is short and they keep their pace. */
-		assert_true(num(l, "ms") < 1000);
-		double t = num(l, "t");
-		if (prev_t >= 0 && t - prev_t > 1.5)
-			fail_msg("frame %d came %.2f s after the one before: %s", i, t - prev_t, l);
-		prev_t = t;
-		if (num(l, "reconnects") >= 1) {
-			after++;
-			assert_true(num(l, "levels_drawn") >= 1);
-			complete_after += strstr(l, "\"complete\":true") != NULL;
-		}
-	}
-	fprintf(stderr, "%d frames after the reconnect, %d of them complete\n", after,
-		complete_after);
-	assert_true(after >= 20);
-	assert_true(complete_after >= 1);
-	assert_true(num(fr.line[fr.n - 1], "reconnects") >= 1);
-	assert_non_null(strstr(fr.line[fr.n - 1], "\"link\":\"up\""));
-	frames_free(&fr);
-	snprintf(png, sizeof png, "%s/kill_160.png", dir);
-	assert_true(picture_spread(png) > 40);
-	viewer_said(e, "lost the connection to 127.0.0.1:", "reconnected to 127.0.0.1:");
+/* A daemon that hangs (SIGSTOP) keeps its sockets open: the viewer cannot tell, but the
+ * health check can; HAProxy marks it down and cuts its sessions (on-marked-down
+ * shutdown-sessions), and the viewer reconnects to another. */
+static void viewer_leaves_a_hung_daemon(void **state)
+{
+	struct env *e = *state;
+	if (!e->built || !e->haproxy)
+		skip();
+	lose_daemon_mid_flight(e, SIGSTOP, "hang");
 }
 
 /* ---- directly on one daemon ------------------------------------------------------------- */
@@ -642,6 +679,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(example_config_checks_with_the_protocol),
 		cmocka_unit_test(viewer_survives_its_daemon_killed),
+		cmocka_unit_test(viewer_leaves_a_hung_daemon),
 		cmocka_unit_test(frames_go_on_while_the_daemon_is_away),
 		cmocka_unit_test(viewer_waits_for_a_daemon_started_later),
 	};

@@ -229,6 +229,8 @@ static void reconnects_without_waiting(void **state)
 		}
 		view_source_net_link(s, &l);
 		if (!l.up) {
+			assert_true(l.failed <= l.attempt && l.attempt <= l.failed + 1);
+			assert_non_null(strstr(l.lost_why, d.sock)); /* the loss, naming the peer */
 			max_attempt = l.attempt > max_attempt ? l.attempt : max_attempt;
 			saw_shape |= strstr(l.why, "another shape") != NULL;
 		}
