@@ -165,7 +165,17 @@ haproxy -c -q -f "$OUT/haproxy.cfg" || { echo "fleet: bad $OUT/haproxy.cfg" >&2;
 haproxy -db -f "$OUT/haproxy.cfg" >"$OUT/haproxy.log" 2>&1 &
 HPID=$!
 PIDS="$PIDS $HPID"
-wait_status "$OUT/fleet.sock" "haproxy" "$OUT/haproxy.log"
+# Ready when its stats answer (not a session through the front: the table counts viewers).
+n=0
+until [ -S "$OUT/fleet.sock" ] && curl -sf --unix-socket "$OUT/stats.sock" "http://haproxy/;csv" >/dev/null; do
+	n=$((n + 1))
+	if [ $n -ge 300 ] || ! kill -0 $HPID 2>/dev/null; then
+		echo "fleet: haproxy did not start; its log:" >&2
+		cat "$OUT/haproxy.log" >&2
+		exit 1
+	fi
+	sleep 0.1
+done
 echo "fleet: haproxy in front: $OUT/fleet.sock${FLEET_PORT:+ and 127.0.0.1:$FLEET_PORT}"
 
 # HAProxy's CSV line for server dN: pxname,svname,qcur,qmax,scur,smax,slim,stot,…,status (18)
