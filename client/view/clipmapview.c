@@ -492,8 +492,6 @@ static struct view_camera flight_camera(const struct key *keys, size_t nkeys, in
 	return cam;
 }
 
-/* ---- output --------------------------------------------------------------------------- */
-
 /* ---- the link to the daemon ---------------------------------------------------------- */
 
 /* What the HUD, --stats and stderr say about the link (net: NULL in-process). */
@@ -543,6 +541,8 @@ static const char *link_text(const struct view_net_link *l, char *buf, size_t n)
 		snprintf(buf, n, "reconnecting (attempt %u)", l->attempt ? l->attempt : 1);
 	return buf;
 }
+
+/* ---- output --------------------------------------------------------------------------- */
 
 static void stats_line(FILE *f, int frame, const struct view_frame_stats *s,
 		       const struct link_report *lr)
