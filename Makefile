@@ -96,7 +96,7 @@ $(BUILD)/gen/version.txt: FORCE
 	@if cmp -s $@.tmp $@; then rm -f $@.tmp; else mv $@.tmp $@; fi
 FORCE:
 
-.PHONY: all check test layers asan tsan bench bench-keepup deps clean demo data shader-check fuzz install
+.PHONY: all check test layers asan tsan bench bench-keepup deps clean demo data shader-check fuzz install fleet-demo
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 
@@ -202,6 +202,12 @@ bench-keepup: all
 demo: deps
 	@$(MAKE) --no-print-directory all
 	@sh scripts/demo.sh $(BUILD)
+
+# A fleet on this machine: 3 clipmapd behind HAProxy, viewers flying through it, one daemon
+# killed midway, a table (scripts/fleet.sh; docs/FLEET.md).
+fleet-demo: deps
+	@$(MAKE) --no-print-directory all
+	@sh scripts/fleet.sh $(BUILD)
 
 # libFuzzer targets (clang): each tests/fuzz/fuzz_NAME.c runs FUZZ_SECONDS on its corpus
 # (fuzz_ini also reads the shipped planet files as seeds).

@@ -36,6 +36,21 @@ struct net_conn {
 	uint32_t next_req;
 	struct tilecodec *tc; /* created on first tile */
 	struct net_tls *tls;  /* NULL: plain */
+	/* Until the handshake is done (net_connect_step): */
+	enum {
+		PH_READY = 0,
+		PH_CONNECTING,
+		PH_CONNECTED,
+		PH_TLS,
+		PH_HELLO_SEND,
+		PH_HELLO_WAIT
+	} phase;
+	uint32_t offered;		    /* codecs offered in HELLO */
+	struct pbuf out;		    /* HELLO's bytes not yet sent */
+	struct addrinfo *ai_list, *ai;	    /* a TCP name's addresses, the one being tried */
+	bool use_tls;			    /* TLS before HELLO: */
+	char *tls_ca;			    /* its CA file (NULL: the system's trust store) */
+	char tls_host[256];		    /* the name its certificate must carry */
 };
 
 /* Milliseconds left until deadline (-1: no deadline), never negative. */
@@ -316,86 +331,88 @@ int net_expect(struct net_conn *c, uint16_t type, struct proto_msg *m, int timeo
 	}
 }
 
-static int handshake(struct net_conn *c, const struct net_opts *o, char err[256])
+/* The HELLO for o, encoded into b (the token read as net_token_load reads it). */
+static int hello_encode(const struct net_opts *o, uint32_t codecs, struct pbuf *b, char err[256])
 {
 	uint8_t tok[PROTO_MAX_TOKEN];
 	uint16_t toklen = 0;
 	int rc = net_token_load(o->token_file, tok, &toklen, err);
 	if (rc)
 		return rc;
-	uint32_t codecs = o->codecs ? o->codecs : TCODEC_ALL_MASK;
 	struct proto_msg h = { .type = PROTO_HELLO,
 			       .hello = { .ver_min = PROTO_VERSION, .ver_max = PROTO_VERSION,
 					  .codecs = codecs, .token = tok, .token_len = toklen,
 					  .name = o->name ? o->name : "clipmap-client/1" } };
-	rc = net_send(c, &h, err);
-	if (rc)
-		return rc;
-	struct proto_msg m = { 0 };
-	rc = net_recv(c, &m, c->timeout_ms, err);
-	if (rc)
-		return rc;
-	if (m.type == PROTO_ERROR) {
-		const char *name = proto_code_name(m.error.code);
-		err_set(err, "%s refused the connection: %s: %s", c->peer,
-			name ? name : "internal", m.error.message ? m.error.message : "");
-		rc = -net_code_errno(m.error.code);
-	} else if (m.type != PROTO_HELLO_OK) {
-		const char *t = proto_type_name(m.type);
-		err_set(err, "%s: expected HELLO_OK, got %s", c->peer, t ? t : "?");
-		rc = -EPROTO;
-	} else if (m.hello_ok.version != PROTO_VERSION || (m.hello_ok.codecs & ~codecs)) {
-		err_set(err, "%s: server chose version %u and codecs 0x%x, we offered %u and "
-			"0x%x", c->peer, m.hello_ok.version, m.hello_ok.codecs, PROTO_VERSION, codecs);
-		rc = -EPROTO;
-	} else {
-		c->hello = m.hello_ok;
-		snprintf(c->server_name, sizeof c->server_name, "%s",
-			 m.hello_ok.name ? m.hello_ok.name : "");
-		c->hello.name = c->server_name;
+	char e2[256];
+	ssize_t n = proto_encode(b, &h, e2);
+	if (n < 0) {
+		err_set(err, "cannot encode HELLO: %s", e2);
+		return (int)n;
 	}
-	proto_msg_fini(&m);
-	return rc;
+	return 0;
+}
+
+/* The server's answer m to HELLO: HELLO_OK is kept in c, anything else is the error. */
+static int hello_answer(struct net_conn *c, const struct proto_msg *m, char err[256])
+{
+	uint32_t codecs = c->offered;
+	if (m->type == PROTO_ERROR) {
+		const char *name = proto_code_name(m->error.code);
+		err_set(err, "%s refused the connection: %s: %s", c->peer,
+			name ? name : "internal", m->error.message ? m->error.message : "");
+		return -net_code_errno(m->error.code);
+	}
+	if (m->type != PROTO_HELLO_OK) {
+		const char *t = proto_type_name(m->type);
+		err_set(err, "%s: expected HELLO_OK, got %s", c->peer, t ? t : "?");
+		return -EPROTO;
+	}
+	if (m->hello_ok.version != PROTO_VERSION || (m->hello_ok.codecs & ~codecs)) {
+		err_set(err, "%s: server chose version %u and codecs 0x%x, we offered %u and "
+			"0x%x", c->peer, m->hello_ok.version, m->hello_ok.codecs, PROTO_VERSION, codecs);
+		return -EPROTO;
+	}
+	c->hello = m->hello_ok;
+	snprintf(c->server_name, sizeof c->server_name, "%s",
+		 m->hello_ok.name ? m->hello_ok.name : "");
+	c->hello.name = c->server_name;
+	return 0;
 }
 
 static int split_hostport(const char *hp, char *host, size_t hn, char *port, size_t pn);
 
-/* TLS over c->fd before anything else is said: the certificate checked against o's CA (or the
- * system's) for the host of o->hostport (else of the peer's name). Returns 0 or -errno. */
-static int start_tls(struct net_conn *c, const struct net_opts *o, char err[256])
+/* A connection in phase PH_CONNECTED over fd (or PH_CONNECTING with fd -1), its HELLO
+ * encoded. Returns 0 or -errno with err filled (nothing allocated then). */
+static int conn_new(int fd, const char *peer, const struct net_opts *o, struct net_conn **out,
+		    char err[256])
 {
-	char host[256], port[32];
-	const char *hp = o->hostport ? o->hostport : c->peer;
-	if (split_hostport(hp, host, sizeof host, port, sizeof port))
-		snprintf(host, sizeof host, "%.255s", hp);
-	int rc = net_tls_create(c->fd, host, o->tls_ca, c->peer, &c->tls, err);
-	if (rc)
-		return rc;
-	int64_t deadline = deadline_of(c->timeout_ms);
-	while ((rc = net_tls_handshake(c->tls, err)) == -EAGAIN) {
-		short ev = net_tls_wants_write(c->tls) ? POLLOUT : POLLIN;
-		if ((rc = wait_or_fail(c, ev, deadline, "in the TLS handshake", err)))
-			return rc;
-	}
-	return rc;
-}
-
-int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct net_conn **out,
-		   char err[256])
-{
-	*out = NULL;
 	struct net_conn *c = xcalloc(1, sizeof *c);
 	c->fd = fd;
 	c->timeout_ms = o->timeout_ms ? o->timeout_ms : NET_DEFAULT_TIMEOUT_MS;
+	c->offered = o->codecs ? o->codecs : TCODEC_ALL_MASK;
+	c->phase = fd >= 0 ? PH_CONNECTED : PH_CONNECTING;
 	snprintf(c->peer, sizeof c->peer, "%s", peer ? peer : "server");
+	/* TLS over TCP (the daemon's Unix socket is always plain): --tls-ca, $CLIPMAP_TLS_CA or
+	 * --tls; the certificate must name the host of o->hostport (else of the peer's name). */
+	const char *ca = o->tls_ca;
+	const char *env = getenv("CLIPMAP_TLS_CA");
+	if (!ca && o->hostport && env && *env)
+		ca = env;
+	c->use_tls = (ca || o->tls) && !(fd < 0 && !o->hostport);
+	if (c->use_tls) {
+		char port[32];
+		const char *hp = o->hostport ? o->hostport : c->peer;
+		if (split_hostport(hp, c->tls_host, sizeof c->tls_host, port, sizeof port))
+			snprintf(c->tls_host, sizeof c->tls_host, "%.255s", hp);
+		c->tls_ca = ca ? xstrdup(ca) : NULL;
+	}
 	pbuf_init(&c->rd);
-	int rc = o->tls_ca || o->tls ? start_tls(c, o, err) : 0;
-	if (!rc)
-		rc = handshake(c, o, err);
+	pbuf_init(&c->out);
+	int rc = hello_encode(o, c->offered, &c->out, err);
 	if (rc) {
-		net_tls_destroy(c->tls);
+		pbuf_fini(&c->out);
 		pbuf_fini(&c->rd);
-		close(c->fd);
+		free(c->tls_ca);
 		free(c);
 		return rc;
 	}
@@ -403,7 +420,24 @@ int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct ne
 	return 0;
 }
 
-static int connect_unix(const char *path, int64_t deadline, int *fd, char err[256])
+/* Frees c without a word to the server (a connection that never completed its handshake). */
+static void conn_free(struct net_conn *c)
+{
+	net_tls_destroy(c->tls);
+	free(c->tls_ca);
+	if (c->fd >= 0)
+		close(c->fd);
+	if (c->ai_list)
+		freeaddrinfo(c->ai_list);
+	pbuf_fini(&c->out);
+	pbuf_fini(&c->rd);
+	tilecodec_destroy(c->tc);
+	free(c);
+}
+
+/* Connects to the Unix socket path; the socket is left non-blocking. may_wait: a full listen
+ * queue is waited for (blocking connect), else it fails the attempt (EAGAIN). */
+static int start_unix(struct net_conn *c, const char *path, bool may_wait, char err[256])
 {
 	struct sockaddr_un a = { .sun_family = AF_UNIX };
 	if (strlen(path) >= sizeof a.sun_path) {
@@ -412,13 +446,14 @@ static int connect_unix(const char *path, int64_t deadline, int *fd, char err[25
 		return -ENAMETOOLONG;
 	}
 	memcpy(a.sun_path, path, strlen(path) + 1);
-	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	int s = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC | (may_wait ? 0 : SOCK_NONBLOCK), 0);
 	if (s < 0) {
 		int e = errno;
 		err_set(err, "cannot connect to %s: socket: %s", path, strerror(e));
 		return -e;
 	}
-	(void)deadline; /* a Unix connect does not wait for the peer */
+	/* A Unix connect does not wait for the peer, only for room in its listen queue. */
+	int fl;
 	while (connect(s, (struct sockaddr *)&a, sizeof a) < 0) {
 		if (errno == EINTR)
 			continue;
@@ -427,7 +462,14 @@ static int connect_unix(const char *path, int64_t deadline, int *fd, char err[25
 		close(s);
 		return -e;
 	}
-	*fd = s;
+	if (may_wait && ((fl = fcntl(s, F_GETFL)) < 0 || fcntl(s, F_SETFL, fl | O_NONBLOCK) < 0)) {
+		int e = errno;
+		err_set(err, "cannot connect to %s: fcntl: %s", path, strerror(e));
+		close(s);
+		return -e;
+	}
+	c->fd = s;
+	c->phase = PH_HELLO_SEND;
 	return 0;
 }
 
@@ -458,7 +500,34 @@ static int split_hostport(const char *hp, char *host, size_t hn, char *port, siz
 	return 0;
 }
 
-static int connect_tcp(const char *hp, int64_t deadline, int *fd, char err[256])
+/* Tries c->ai and the addresses after it until a connect succeeds or is in progress.
+ * rc: the last failure so far (for the message when every address fails). */
+static int try_next_address(struct net_conn *c, int rc, char err[256])
+{
+	for (; c->ai; c->ai = c->ai->ai_next) {
+		struct addrinfo *ai = c->ai;
+		int s = socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK,
+			       ai->ai_protocol);
+		if (s < 0) {
+			rc = -errno;
+			continue;
+		}
+		int r;
+		while ((r = connect(s, ai->ai_addr, ai->ai_addrlen)) < 0 && errno == EINTR)
+			;
+		if (r == 0 || errno == EINPROGRESS) {
+			c->fd = s;
+			c->phase = r == 0 ? PH_CONNECTED : PH_CONNECTING;
+			return 0;
+		}
+		rc = -errno;
+		close(s);
+	}
+	err_set(err, "cannot connect to %s: %s", c->peer, strerror(-rc));
+	return rc;
+}
+
+static int start_tcp(struct net_conn *c, const char *hp, char err[256])
 {
 	char host[256], port[32];
 	if (split_hostport(hp, host, sizeof host, port, sizeof port)) {
@@ -466,85 +535,200 @@ static int connect_tcp(const char *hp, int64_t deadline, int *fd, char err[256])
 		return -EINVAL;
 	}
 	struct addrinfo hints = { .ai_family = AF_UNSPEC, .ai_socktype = SOCK_STREAM };
-	struct addrinfo *res = NULL;
-	int g = getaddrinfo(host, port, &hints, &res);
+	int g = getaddrinfo(host, port, &hints, &c->ai_list);
 	if (g) {
+		c->ai_list = NULL;
 		err_set(err, "cannot connect to %s: %s", hp, gai_strerror(g));
 		return g == EAI_SYSTEM ? -errno : g == EAI_NONAME ? -ENOENT : -EHOSTUNREACH;
 	}
-	int rc = -ECONNREFUSED;
-	for (struct addrinfo *ai = res; ai; ai = ai->ai_next) {
-		int s = socket(ai->ai_family, ai->ai_socktype | SOCK_CLOEXEC | SOCK_NONBLOCK,
-			       ai->ai_protocol);
-		if (s < 0) {
-			rc = -errno;
-			continue;
+	c->ai = c->ai_list;
+	return try_next_address(c, -ECONNREFUSED, err);
+}
+
+/* net_connect_start; may_wait: see start_unix. */
+static int connect_begin(const struct net_opts *o, bool may_wait, struct net_conn **out,
+			 char err[256])
+{
+	*out = NULL;
+	const char *peer = o->hostport ? o->hostport : o->socket_path;
+	if (!peer) {
+		err_set(err, "no socket path or HOST:PORT to connect to");
+		return -EINVAL;
+	}
+	struct net_conn *c;
+	int rc = conn_new(-1, peer, o, &c, err);
+	if (rc)
+		return rc;
+	rc = o->hostport ? start_tcp(c, o->hostport, err)
+			 : start_unix(c, o->socket_path, may_wait, err);
+	if (rc) {
+		conn_free(c);
+		return rc;
+	}
+	*out = c;
+	return 0;
+}
+
+int net_connect_start(const struct net_opts *o, struct net_conn **out, char err[256])
+{
+	return connect_begin(o, false, out, err);
+}
+
+short net_connect_events(const struct net_conn *c)
+{
+	if (c->phase == PH_TLS)
+		return c->tls && net_tls_wants_write(c->tls) ? POLLOUT : POLLIN;
+	return c->phase == PH_CONNECTING || c->phase == PH_HELLO_SEND ? POLLOUT : POLLIN;
+}
+
+/* PH_CONNECTING: the connect's outcome, when there is one. */
+static int step_connecting(struct net_conn *c, char err[256])
+{
+	struct pollfd p = { .fd = c->fd, .events = POLLOUT };
+	int r = poll(&p, 1, 0);
+	if (r < 0 && errno != EINTR) {
+		int e = errno;
+		err_set(err, "cannot connect to %s: poll: %s", c->peer, strerror(e));
+		return -e;
+	}
+	if (r <= 0)
+		return -EAGAIN;
+	int soerr = 0;
+	socklen_t sl = sizeof soerr;
+	if (getsockopt(c->fd, SOL_SOCKET, SO_ERROR, &soerr, &sl) < 0)
+		soerr = errno;
+	if (soerr) { /* this address refused: the name's next one, if any */
+		close(c->fd);
+		c->fd = -1;
+		c->ai = c->ai->ai_next;
+		int rc = try_next_address(c, -soerr, err);
+		return rc ? rc : -EAGAIN;
+	}
+	c->phase = PH_CONNECTED;
+	return 0;
+}
+
+int net_connect_step(struct net_conn *c, char err[256])
+{
+	int rc;
+	if (c->phase == PH_CONNECTING && (rc = step_connecting(c, err)))
+		return rc;
+	if (c->phase == PH_CONNECTED) {
+		int one = 1;
+		if (c->ai_list &&
+		    setsockopt(c->fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one) < 0) {
+			int e = errno;
+			err_set(err, "cannot connect to %s: TCP_NODELAY: %s", c->peer, strerror(e));
+			return -e;
 		}
-		int r = connect(s, ai->ai_addr, ai->ai_addrlen);
-		if (r < 0 && (errno == EINPROGRESS || errno == EINTR)) {
-			int w = wait_fd(s, POLLOUT, deadline);
-			if (w == 0) {
-				rc = -ETIMEDOUT;
-			} else if (w < 0) {
-				rc = w;
-			} else {
-				int soerr = 0;
-				socklen_t sl = sizeof soerr;
-				if (getsockopt(s, SOL_SOCKET, SO_ERROR, &soerr, &sl) < 0)
-					soerr = errno;
-				rc = soerr ? -soerr : 0;
-			}
-		} else {
-			rc = r < 0 ? -errno : 0;
+		c->phase = c->use_tls ? PH_TLS : PH_HELLO_SEND;
+		if (c->use_tls &&
+		    (rc = net_tls_create(c->fd, c->tls_host, c->tls_ca, c->peer, &c->tls, err)))
+			return rc;
+	}
+	if (c->phase == PH_TLS) { /* the certificate checked before a byte of HELLO leaves */
+		if ((rc = net_tls_handshake(c->tls, err)))
+			return rc;
+		c->phase = PH_HELLO_SEND;
+	}
+	if (c->phase == PH_HELLO_SEND) {
+		while (c->out.len) { /* a HELLO (≤ 2 KiB) into an empty socket buffer */
+			ssize_t w = send_some(c, c->out.data, c->out.len, err);
+			if (w < 0)
+				return (int)w; /* -EAGAIN: the socket is full; or the error */
+			pbuf_consume(&c->out, (size_t)w);
 		}
-		if (rc == 0) {
-			int fl = fcntl(s, F_GETFL);
-			int one = 1;
-			if (fl < 0 || fcntl(s, F_SETFL, fl & ~O_NONBLOCK) < 0 ||
-			    setsockopt(s, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one) < 0) {
-				rc = -errno;
-				close(s);
-				continue;
-			}
-			*fd = s;
+		c->phase = PH_HELLO_WAIT;
+	}
+	if (c->phase == PH_HELLO_WAIT) {
+		struct proto_msg m = { 0 };
+		if ((rc = net_recv(c, &m, 0, err)))
+			return rc;
+		rc = hello_answer(c, &m, err);
+		proto_msg_fini(&m);
+		if (rc)
+			return rc;
+		int fl = fcntl(c->fd, F_GETFL);
+		if (fl < 0 || fcntl(c->fd, F_SETFL, fl & ~O_NONBLOCK) < 0) {
+			int e = errno;
+			err_set(err, "%s: fcntl: %s", c->peer, strerror(e));
+			return -e;
+		}
+		if (c->ai_list) {
+			freeaddrinfo(c->ai_list);
+			c->ai_list = c->ai = NULL;
+		}
+		c->phase = PH_READY;
+	}
+	return 0;
+}
+
+/* Drives a started connection to its end, waiting at most the connection's timeout for the
+ * connect and again for the handshake. Frees c on failure. */
+static int connect_finish(struct net_conn *c, struct net_conn **out, char err[256])
+{
+	int64_t deadline = deadline_of(c->timeout_ms);
+	bool connecting = c->phase == PH_CONNECTING;
+	int rc;
+	while ((rc = net_connect_step(c, err)) == -EAGAIN) {
+		if (connecting && c->phase != PH_CONNECTING) {
+			connecting = false; /* the handshake has its own time */
+			deadline = deadline_of(c->timeout_ms);
+		}
+		int w = wait_fd(c->fd, net_connect_events(c), deadline);
+		if (w == 0 && connecting)
+			err_set(err, "cannot connect to %s: %s", c->peer, strerror(ETIMEDOUT));
+		else if (w == 0 && c->phase == PH_HELLO_SEND)
+			err_set(err, "%s: timed out sending", c->peer);
+		else if (w == 0 && c->phase == PH_TLS)
+			err_set(err, "%s: timed out in the TLS handshake", c->peer);
+		else if (w == 0)
+			err_set(err, "%s: no answer from the server within %.1f s", c->peer,
+				c->timeout_ms / 1000.0);
+		else if (w < 0)
+			err_set(err, "%s: poll: %s", c->peer, strerror(-w));
+		if (w <= 0) {
+			rc = w ? w : -ETIMEDOUT;
 			break;
 		}
-		close(s);
 	}
-	freeaddrinfo(res);
-	if (rc)
-		err_set(err, "cannot connect to %s: %s", hp, strerror(-rc));
-	return rc;
+	if (rc) {
+		conn_free(c);
+		return rc;
+	}
+	*out = c;
+	return 0;
+}
+
+int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct net_conn **out,
+		   char err[256])
+{
+	*out = NULL;
+	struct net_conn *c;
+	int rc = conn_new(fd, peer, o, &c, err);
+	if (rc) {
+		close(fd);
+		return rc;
+	}
+	return connect_finish(c, out, err);
 }
 
 int net_connect(const struct net_opts *o, struct net_conn **out, char err[256])
 {
-	*out = NULL;
-	int t = o->timeout_ms ? o->timeout_ms : NET_DEFAULT_TIMEOUT_MS;
-	int64_t deadline = deadline_of(t);
-	int fd = -1, rc;
-	const char *peer;
-	struct net_opts to = *o;
-	if (o->hostport) {
-		peer = o->hostport;
-		const char *env = getenv("CLIPMAP_TLS_CA");
-		if (!to.tls_ca && env && *env)
-			to.tls_ca = env;
-		o = &to;
-		rc = connect_tcp(o->hostport, deadline, &fd, err);
-	} else if (o->socket_path) {
-		to.tls_ca = NULL; /* the daemon's Unix socket is always plain */
-		to.tls = false;
-		o = &to;
-		peer = o->socket_path;
-		rc = connect_unix(o->socket_path, deadline, &fd, err);
-	} else {
-		err_set(err, "no socket path or HOST:PORT to connect to");
-		return -EINVAL;
-	}
-	if (rc)
-		return rc;
-	return net_connect_fd(fd, peer, o, out, err);
+	struct net_conn *c;
+	int rc = connect_begin(o, true, &c, err);
+	return rc ? rc : connect_finish(c, out, err);
+}
+
+int net_backoff_ms(unsigned attempt, int base_ms, int cap_ms, unsigned *seed)
+{
+	int64_t d = base_ms > 0 ? base_ms : 1;
+	for (unsigned i = 1; i < attempt && d < cap_ms; i++)
+		d *= 2;
+	if (d > cap_ms)
+		d = cap_ms;
+	int64_t half = d / 2;
+	return (int)(d - (half ? rand_r(seed) % (half + 1) : 0));
 }
 
 void net_close(struct net_conn *c)
@@ -555,16 +739,14 @@ void net_close(struct net_conn *c)
 	pbuf_init(&b);
 	struct proto_msg bye = { .type = PROTO_BYE };
 	char err[256];
-	if (proto_encode(&b, &bye, NULL) > 0 && c->tls)
-		(void)net_tls_send(c->tls, b.data, b.len, err); /* best effort: never waits */
-	else if (b.len)
-		(void)send(c->fd, b.data, b.len, MSG_NOSIGNAL | MSG_DONTWAIT);
+	if (c->phase == PH_READY && proto_encode(&b, &bye, NULL) > 0) {
+		if (c->tls)
+			(void)net_tls_send(c->tls, b.data, b.len, err); /* best effort: never waits */
+		else
+			(void)send(c->fd, b.data, b.len, MSG_NOSIGNAL | MSG_DONTWAIT);
+	}
 	pbuf_fini(&b);
-	net_tls_destroy(c->tls);
-	close(c->fd);
-	pbuf_fini(&c->rd);
-	tilecodec_destroy(c->tc);
-	free(c);
+	conn_free(c);
 }
 
 int net_fd(const struct net_conn *c) { return c->fd; }

@@ -49,6 +49,26 @@ int net_connect(const struct net_opts *o, struct net_conn **out, char err[256]);
  * o->hostport (else of peer). */
 int net_connect_fd(int fd, const char *peer, const struct net_opts *o, struct net_conn **out,
 		   char err[256]);
+/* Connecting without waiting, for a caller that must not block (the viewer's frame loop while
+ * it reconnects): net_connect_start opens the socket and starts connecting (a TCP connect
+ * goes on in the background; name resolution, getaddrinfo, may still wait: numeric addresses
+ * and /etc/hosts names do not), and returns the connection in *out. net_connect_step then
+ * advances it without blocking: the connect's outcome (the next address of the name when one
+ * is refused), HELLO, HELLO_OK. Returns 0 once the handshake is done (the connection is then
+ * as net_connect's), -EAGAIN while it goes on (wait on net_fd for net_connect_events), or
+ * -errno with err filled as net_connect fills it; the caller net_closes it either way. Neither
+ * bounds the time: the caller gives up when it has waited long enough. */
+int net_connect_start(const struct net_opts *o, struct net_conn **out, char err[256]);
+int net_connect_step(struct net_conn *c, char err[256]);
+/* POLLOUT while the connect is in progress, else POLLIN. */
+short net_connect_events(const struct net_conn *c);
+
+/* The delay before reconnect attempt `attempt` (1, 2, …), milliseconds: base_ms doubling with
+ * each attempt up to cap_ms, of which a random half is taken away ("equal jitter": in
+ * [d/2, d]) so that clients cut off together do not come back together. *seed is the
+ * caller's random state (rand_r). */
+int net_backoff_ms(unsigned attempt, int base_ms, int cap_ms, unsigned *seed);
+
 /* Sends BYE (best effort, without waiting) and closes. NULL is a no-op. */
 void net_close(struct net_conn *c);
 

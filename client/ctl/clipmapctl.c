@@ -521,10 +521,17 @@ static int cmd_layers(int argc, char **argv)
 
 /* ---- online commands ------------------------------------------------------------------ */
 
-/* The exit code for a failed online command: request errors the user can fix are usage. */
+/* The exit code for a failed online command: request errors the user can fix are usage. A
+ * connection lost in the middle is said as such and not retried: behind a load balancer the
+ * retry would reach another daemon (other figures, none of the jobs this one ran). */
 static int fail(const char *cmd, int rc, const char *err)
 {
-	fprintf(stderr, "clipmapctl %s: %s\n", cmd, err);
+	if (rc == -ECONNRESET || rc == -EPIPE)
+		fprintf(stderr, "clipmapctl %s: lost the connection: %s \xe2\x80\x94 the daemon "
+			"stopped or restarted during the command; not retried (run it again)\n",
+			cmd, err);
+	else
+		fprintf(stderr, "clipmapctl %s: %s\n", cmd, err);
 	return rc == -EINVAL || rc == -ENOENT ? 2 : 1;
 }
 

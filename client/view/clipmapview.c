@@ -36,6 +36,9 @@ static void usage(FILE *f)
 		"  --tls-ca FILE       HOST:PORT over TLS, the daemon's certificate checked against\n"
 		"                      this CA (PEM) and the HOST (default: $CLIPMAP_TLS_CA)\n"
 		"  --tls               TLS with the system's trust store (without --tls-ca)\n"
+		"  --connect-wait S    at the start, keep trying to reach the daemon for up to S\n"
+		"                      seconds (default 0: fail at once); a connection lost later\n"
+		"                      is always retried (backoff 0.1 s doubling to 5 s)\n"
 		"  --camera LAT,LON,ALT,HEADING,PITCH  degrees; ALT metres above the ground (the\n"
 		"                      water where the planet's sea covers it)\n"
 		"  --flight FILE       CSV of camera keys (lat,lon,alt,heading,pitch per line)\n"
@@ -73,6 +76,7 @@ static void usage(FILE *f)
 struct args {
 	const char *planet, *connect_to, *token_file, *tls_ca;
 	bool tls;
+	double connect_wait; /* --connect-wait, seconds */
 	const char *camera, *flight; /* one of them, or neither with --window */
 	const char *outp;	     /* -o: a path, or for a flight a frame-number pattern */
 	const char *statsp, *screenshot;
@@ -210,7 +214,8 @@ static bool parse_backend(const char *s, enum gl_backend *b)
 enum {
 	O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS, O_FOV,
 	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
-	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS
+	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS,
+	O_CONNECT_WAIT
 };
 
 static const struct option long_opts[] = {
@@ -236,6 +241,7 @@ static const struct option long_opts[] = {
 	{ "token-file", required_argument, NULL, O_TOKEN },
 	{ "tls-ca", required_argument, NULL, O_TLS_CA },
 	{ "tls", no_argument, NULL, O_TLS },
+	{ "connect-wait", required_argument, NULL, O_CONNECT_WAIT },
 	{ "exaggerate", required_argument, NULL, O_EXAG },
 	{ "haze", required_argument, NULL, O_HAZE },
 	{ "window", no_argument, NULL, O_WINDOW },
@@ -257,6 +263,9 @@ static bool take_option(int c, const char *s, struct args *a)
 	case O_TOKEN: a->token_file = s; return true;
 	case O_TLS_CA: a->tls_ca = s; return true;
 	case O_TLS: a->tls = true; return true;
+	case O_CONNECT_WAIT:
+		rc = args_double("--connect-wait", s, 0, 86400, &a->connect_wait, err);
+		break;
 	case O_EXAG:
 		if ((rc = args_double("--exaggerate", s, 0.1, 100, &v, err)) == 0)
 			a->d.exaggeration = (float)v;
@@ -319,6 +328,8 @@ static int check_args(const struct args *a)
 		      "--screenshot)";
 	else if (!a->window && (a->exit_after || a->screenshot))
 		why = "--exit-after and --screenshot need --window";
+	else if (a->connect_wait > 0 && !a->connect_to)
+		why = "--connect-wait needs --connect";
 	else if (!a->planet)
 		why = "--planet is required (a planet file, or with --connect a planet name)";
 	else if (!a->window && !a->camera == !a->flight)
@@ -490,12 +501,70 @@ static struct view_camera flight_camera(const struct key *keys, size_t nkeys, in
 	return cam;
 }
 
+/* ---- the link to the daemon ---------------------------------------------------------- */
+
+/* What the HUD, --stats and stderr say about the link (net: NULL in-process). */
+struct link_report {
+	const struct view_source *net;
+	struct view_net_link now; /* at the last frame */
+	unsigned said_lost, said_reconnects; /* losses and reconnects reported on stderr */
+	unsigned said_attempt; /* the last failed attempt reported on stderr */
+	double t0;	       /* clock_now_s at the start, for "t" in --stats */
+};
+
+/* After a frame: the link's state into r->now, what happened since the last frame on stderr
+ * (a loss, failed attempts 1, 2, 4, 8, …, the reconnect; a loss and its reconnect may both
+ * fall between two frames). */
+static void link_note(struct link_report *r)
+{
+	if (!r->net)
+		return;
+	view_source_net_link(r->net, &r->now);
+	const struct view_net_link *l = &r->now;
+	if (l->lost > r->said_lost) {
+		fprintf(stderr, "clipmapview: lost the connection to %s: %s; reconnecting\n",
+			l->peer, l->lost_why);
+		r->said_lost = l->lost;
+		r->said_attempt = 0;
+	}
+	if (!l->up && l->failed > r->said_attempt && !(l->failed & (l->failed - 1))) {
+		fprintf(stderr, "clipmapview: reconnect attempt %u failed: %s\n", l->failed,
+			l->why);
+		r->said_attempt = l->failed;
+	}
+	if (l->reconnects > r->said_reconnects) {
+		fprintf(stderr, "clipmapview: reconnected to %s after %u attempt%s (%.1f s down); "
+			"%u reconnect%s so far\n", l->peer, l->last_attempts,
+			l->last_attempts == 1 ? "" : "s", l->last_down_s, l->reconnects,
+			l->reconnects == 1 ? "" : "s");
+		r->said_reconnects = l->reconnects;
+	}
+}
+
+/* "up" or "reconnecting (attempt N)" into buf. */
+static const char *link_text(const struct view_net_link *l, char *buf, size_t n)
+{
+	if (l->up)
+		snprintf(buf, n, "up");
+	else
+		snprintf(buf, n, "reconnecting (attempt %u)", l->attempt ? l->attempt : 1);
+	return buf;
+}
+
 /* ---- output --------------------------------------------------------------------------- */
 
-static void stats_line(FILE *f, int frame, const struct view_frame_stats *s)
+static void stats_line(FILE *f, int frame, const struct view_frame_stats *s,
+		       const struct link_report *lr)
 {
+	if (lr->net) {
+		char lt[64];
+		fprintf(f, "{\"t\":%.3f,\"link\":\"%s\",\"reconnects\":%u,", clock_now_s() - lr->t0,
+			link_text(&lr->now, lt, sizeof lt), lr->now.reconnects);
+	} else {
+		fprintf(f, "{\"t\":%.3f,", clock_now_s() - lr->t0);
+	}
 	fprintf(f,
-		"{\"frame\":%d,\"ms\":%.3f,\"lmin\":%d,\"lmax\":%d,\"lfirst\":%d,\"llast\":%d,"
+		"\"frame\":%d,\"ms\":%.3f,\"lmin\":%d,\"lmax\":%d,\"lfirst\":%d,\"llast\":%d,"
 		"\"levels_drawn\":%d,\"dmax\":%d,\"ldetail\":%d,\"triangles\":%llu,\"bytes_uploaded\":%llu,\"tiles_received\":%d,"
 		"\"wants_sent\":%zu,\"complete\":%s,\"alt\":%.3f,\"agl\":%.3f}\n",
 		frame, s->cpu_ms, s->lmin, s->lmax, s->lfirst, s->llast, s->levels_drawn, s->dmax,
@@ -525,6 +594,7 @@ struct window_opts {
 	long exit_after; /* frames; 0: until closed */
 	const char *screenshot;
 	FILE *stats;
+	struct link_report *link;
 };
 
 static void fly_input(const struct gl_window_input *in, struct view_fly_input *f)
@@ -557,7 +627,8 @@ struct hud {
 
 /* Counts frame st in; twice a second refreshes the title. */
 static void hud_frame(struct hud *h, struct gl_window *w, const char *title,
-		      const struct view_frame_stats *st, const struct view_camera *cam)
+		      const struct view_frame_stats *st, const struct view_camera *cam,
+		      const struct link_report *lr)
 {
 	h->frames++;
 	h->tiles += st->tiles_received;
@@ -566,13 +637,19 @@ static void hud_frame(struct hud *h, struct gl_window *w, const char *title,
 	if (now - h->since < 0.5)
 		return;
 	double dt = now - h->since;
-	char text[256];
+	char text[384], link[96] = "";
+	if (lr->net && !lr->now.up)
+		snprintf(link, sizeof link, " | reconnecting (attempt %u)",
+			 lr->now.attempt ? lr->now.attempt : 1);
+	else if (lr->net && lr->now.reconnects)
+		snprintf(link, sizeof link, " | %u reconnect%s", lr->now.reconnects,
+			 lr->now.reconnects == 1 ? "" : "s");
 	snprintf(text, sizeof text,
 		 "%s | %.1f fps | levels %d-%d (%d drawn, texels %d) of %d-%d%s | %.0f tiles/s"
-		 " | %.2f MB/s | %.4f, %.4f, %.0f m",
+		 " | %.2f MB/s | %.4f, %.4f, %.0f m%s",
 		 title, h->frames / dt, st->lfirst, st->llast, st->levels_drawn, st->ldetail,
 		 st->lmin, st->lmax, st->complete ? " ready" : "", h->tiles / dt, h->bytes / dt / 1e6, cam->lat,
-		 cam->lon, st->agl);
+		 cam->lon, st->agl, link);
 	gl_window_set_title(w, text);
 	*h = (struct hud){ .since = now };
 }
@@ -616,11 +693,12 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 			fprintf(stderr, "clipmapview: frame %ld: %s\n", frames, strerror(-rc));
 			return 1;
 		}
+		link_note(o->link);
 		if (o->stats)
-			stats_line(o->stats, (int)frames, &st);
+			stats_line(o->stats, (int)frames, &st, o->link);
 		gl_window_present(w, view_framebuffer(v), fw, fh);
 		frames++;
-		hud_frame(&hud, w, o->title, &st, &fly.cam);
+		hud_frame(&hud, w, o->title, &st, &fly.cam, o->link);
 		if (o->exit_after > 0 && frames >= o->exit_after)
 			break;
 		/* 60 Hz (vsync already waited when the frame took a full period); tiles that
@@ -646,7 +724,7 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 /* --window: the views of src in a window, starting at the first key (or above the whole
  * planet). Returns the exit status. */
 static int run_window(const struct args *a, struct view_source *src, const struct key *keys,
-		      FILE *stats)
+		      FILE *stats, struct link_report *lr)
 {
 	char title[128], err[256];
 	struct gl_window *win = NULL;
@@ -677,7 +755,7 @@ static int run_window(const struct args *a, struct view_source *src, const struc
 		home.pitch = keys->v[4];
 	}
 	struct window_opts wo = { title, a->width, a->height, a->exit_after, a->screenshot,
-				  stats };
+				  stats, lr };
 	status = window_loop(win, v, &home, radius, &wo);
 out:
 	view_destroy(v);
@@ -690,7 +768,7 @@ out:
 /* Renders the frames of the keys (one camera, or a flight) into v, writing each picture
  * when -o asks, in real time (--fps) or complete (--wait-complete). Returns the exit status. */
 static int render_frames(const struct args *a, struct view *v, const struct key *keys,
-			 size_t nkeys, FILE *stats)
+			 size_t nkeys, FILE *stats, struct link_report *lr)
 {
 	unsigned char *pix = xmalloc((size_t)a->width * a->height * 4);
 	size_t nframes = nkeys == 1 ? 1 : (nkeys - 1) * (size_t)a->steps + 1;
@@ -714,8 +792,9 @@ static int render_frames(const struct args *a, struct view *v, const struct key 
 			fprintf(stderr, "clipmapview: frame %zu: %s\n", f, strerror(-rc));
 			goto out;
 		}
+		link_note(lr);
 		if (stats)
-			stats_line(stats, (int)f, &st);
+			stats_line(stats, (int)f, &st, lr);
 		if (a->outp) {
 			char path[4096];
 			if (!a->flight)
@@ -749,7 +828,7 @@ out:
 /* Offline: an OpenGL context without a display, a view of src in it, the frames. Returns the
  * exit status. */
 static int run_offline(const struct args *a, struct view_source *src, const struct key *keys,
-		       size_t nkeys, FILE *stats)
+		       size_t nkeys, FILE *stats, struct link_report *lr)
 {
 	char err[256];
 	struct gl_context *ctx = NULL;
@@ -768,7 +847,7 @@ static int run_offline(const struct args *a, struct view_source *src, const stru
 		fprintf(stderr, "clipmapview: %s\n", err);
 		goto out;
 	}
-	status = render_frames(a, v, keys, nkeys, stats);
+	status = render_frames(a, v, keys, nkeys, stats, lr);
 out:
 	view_destroy(v);
 	gl_context_destroy(ctx);
@@ -786,15 +865,24 @@ static int open_net(const struct args *a, struct view_source **src, char err[256
 			      .token_file = a->token_file, .name = "clipmapview/1",
 			      .tls_ca = a->tls_ca, .tls = a->tls };
 	char e2[256];
-	int rc = view_source_net_create(&o, a->planet, src, e2);
-	if (rc == 0)
+	unsigned attempts = 0;
+	int rc = view_source_net_create_wait(&o, a->planet, a->connect_wait, &attempts, src, e2);
+	if (rc == 0) {
+		if (attempts > 1)
+			fprintf(stderr, "clipmapview: connected to %s at attempt %u\n", target,
+				attempts);
 		return 0;
+	}
 	const char *hint = "";
 	if (strncmp(e2, "cannot connect", 14) == 0)
 		hint = " \xe2\x80\x94 is clipmapd running and listening there? (--connect)";
 	else if (rc == -EACCES)
 		hint = " (--token-file)";
-	err_set(err, "%.180s%s", e2, hint);
+	if (a->connect_wait > 0)
+		err_set(err, "%.150s%s (gave up after %u attempts, --connect-wait %g)", e2, hint,
+			attempts, a->connect_wait);
+	else
+		err_set(err, "%.180s%s", e2, hint);
 	return rc;
 }
 
@@ -843,10 +931,15 @@ int main(int argc, char **argv)
 		fprintf(stderr, "clipmapview: %s: %s\n", a.statsp, strerror(errno));
 		goto out;
 	}
+	struct link_report lr = { .net = a.connect_to ? src : NULL, .t0 = clock_now_s() };
 	if (a.window)
-		status = run_window(&a, src, keys, stats);
+		status = run_window(&a, src, keys, stats, &lr);
 	else
-		status = run_offline(&a, src, keys, nkeys, stats);
+		status = run_offline(&a, src, keys, nkeys, stats, &lr);
+	if (lr.net && lr.now.lost)
+		fprintf(stderr, "clipmapview: the connection was lost %u time%s, restored %u "
+			"time%s\n", lr.now.lost, lr.now.lost == 1 ? "" : "s", lr.now.reconnects,
+			lr.now.reconnects == 1 ? "" : "s");
 out:
 	if (stats && fclose(stats) != 0 && status == 0) {
 		fprintf(stderr, "clipmapview: %s: %s\n", a.statsp, strerror(errno));

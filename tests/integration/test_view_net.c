@@ -30,6 +30,7 @@
 #include "common/clock.h"
 #include "common/img.h"
 #include "support/daemon_env.h"
+#include "support/picture.h"
 #include "support/slow.h"
 
 struct env {
@@ -109,24 +110,6 @@ static void compare(const char *a, const char *b, double *mad, double *share)
 	free(pb);
 }
 
-/* Whether the picture has terrain in it (not one flat colour): a broken source shows the
- * clear colour only, and two such pictures would compare equal. */
-static double spread(const char *path)
-{
-	void *p;
-	struct img_info in;
-	assert_int_equal(img_read(path, IMG_U8, &p, &in, NULL), 0);
-	const unsigned char *x = p;
-	int lo = 255, hi = 0;
-	for (size_t i = 0; i < (size_t)in.width * in.height; i++) {
-		int g = x[i * (size_t)in.channels + 1];
-		lo = g < lo ? g : lo;
-		hi = g > hi ? g : hi;
-	}
-	free(p);
-	return hi - lo;
-}
-
 static void connect_equals_local(void **state)
 {
 	struct env *e = *state;
@@ -158,7 +141,7 @@ static void connect_equals_local(void **state)
 		compare(a, b, &mad, &share);
 		fprintf(stderr, "camera %s: mean |diff| %.3f, pixels off by > 8: %.4f%%\n", cams[i],
 			mad, 100 * share);
-		assert_true(spread(a) > 40);
+		assert_true(picture_spread(a) > 40);
 		assert_true(mad < 0.5);
 		assert_true(share < 0.002);
 	}

@@ -7,6 +7,7 @@
  * Scripts run on their own thread and report failure by a return code checked after join. */
 #include <errno.h>
 #include <math.h>
+#include <poll.h>
 #include <pthread.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -838,6 +839,18 @@ static void cli_exit_codes(void **state)
 	assert_int_equal(rc, 130);
 	assert_non_null(strstr(out, "prefetch: 3/1000 tiles"));
 	assert_non_null(strstr(out, "interrupted after 4 of 1000 tiles"));
+	/* the daemon gone in the middle of the answer: said so, not retried, exit 1 */
+	char *a4[] = { exe, "-s", sock, "status", NULL };
+	struct srv s2 = { .listen_fd = l, .script = script_eof_mid_frame };
+	pbuf_init(&s2.rb);
+	assert_int_equal(xthread_create(&s2.th, srv_main, &s2), 0);
+	pid = spawn(a4, &fd);
+	rc = finish(pid, fd, out, sizeof out);
+	assert_int_equal(srv_join(&s2), 0);
+	assert_int_equal(rc, 1);
+	assert_non_null(strstr(out, "clipmapctl status: lost the connection: "));
+	assert_non_null(strstr(out, "closed by the server in the middle of a message"));
+	assert_non_null(strstr(out, "not retried (run it again)"));
 	close(l);
 	unlink(sock);
 	rmdir(dir);
@@ -1029,6 +1042,101 @@ static void tile_to_picture(void **state)
 	assert_int_equal(ctl_tile_image(PIX_NONE, 2, rgba, &im), -EINVAL);
 }
 
+/* ---- connecting without waiting (the viewer's reconnects) ------------------------------- */
+
+/* net_connect_start/step against a Unix socket driven by hand from this thread: every step
+ * returns at once (-EAGAIN while the server is silent), the handshake completes when it
+ * answers, a refusal and a server that hangs up come back as errors. */
+static void connect_without_waiting(void **state)
+{
+	(void)state;
+	char dir[] = "/tmp/test_net_XXXXXX";
+	assert_non_null(mkdtemp(dir));
+	char sock[64];
+	snprintf(sock, sizeof sock, "%s/d.sock", dir);
+	struct net_opts o = { .socket_path = sock, .name = "test/1" };
+	struct net_conn *c = NULL;
+	char err[256] = "";
+	/* nobody there: the start itself fails, naming the path */
+	assert_int_equal(net_connect_start(&o, &c, err), -ENOENT);
+	assert_null(c);
+	assert_non_null(strstr(err, "cannot connect to "));
+	assert_non_null(strstr(err, sock));
+
+	int l = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	struct sockaddr_un a = { .sun_family = AF_UNIX };
+	snprintf(a.sun_path, sizeof a.sun_path, "%s", sock);
+	assert_int_equal(bind(l, (struct sockaddr *)&a, sizeof a), 0);
+	assert_int_equal(listen(l, 4), 0);
+	for (int round = 0; round < 3; round++) {
+		assert_int_equal(net_connect_start(&o, &c, err), 0);
+		/* a silent server: each step returns at once */
+		double t0 = clock_now_ms();
+		for (int i = 0; i < 100; i++)
+			assert_int_equal(net_connect_step(c, err), -EAGAIN);
+		assert_true(clock_now_ms() - t0 < 1000);
+		assert_int_equal(net_connect_events(c), POLLIN); /* HELLO sent, answer awaited */
+		struct srv s = { .fd = accept(l, NULL, NULL), .listen_fd = -1 };
+		assert_true(s.fd >= 0);
+		pbuf_init(&s.rb);
+		if (round == 0) { /* answered: done */
+			assert_int_equal(srv_handshake(&s), 0);
+			int rc;
+			while ((rc = net_connect_step(c, err)) == -EAGAIN)
+				;
+			assert_int_equal(rc, 0);
+			assert_string_equal(net_hello(c)->name, "fake/1");
+			assert_int_equal(net_connect_step(c, err), 0); /* stays done */
+		} else if (round == 1) { /* refused */
+			s.token = "not-this";
+			assert_int_equal(srv_handshake(&s), 1);
+			int rc;
+			while ((rc = net_connect_step(c, err)) == -EAGAIN)
+				;
+			assert_int_equal(rc, -EACCES);
+			assert_non_null(strstr(err, "refused the connection: auth: wrong token"));
+		} else { /* hung up before answering */
+			close(s.fd);
+			s.fd = -1;
+			int rc;
+			while ((rc = net_connect_step(c, err)) == -EAGAIN)
+				;
+			assert_int_equal(rc, -ECONNRESET); /* an EOF or a reset (HELLO unread) */
+			assert_non_null(strstr(err, sock));
+		}
+		net_close(c);
+		c = NULL;
+		if (s.fd >= 0)
+			close(s.fd);
+		pbuf_fini(&s.rb);
+	}
+	close(l);
+	unlink(sock);
+	rmdir(dir);
+}
+
+/* The reconnect delays: base doubling to the cap, each in [d/2, d], not all alike. */
+static void backoff_doubles_with_jitter(void **state)
+{
+	(void)state;
+	unsigned seed = 7;
+	int expect[] = { 100, 200, 400, 800, 1600, 3200, 5000, 5000, 5000 };
+	for (unsigned a = 1; a <= 9; a++) {
+		int d = expect[a - 1], lo = d, hi = 0;
+		for (int i = 0; i < 200; i++) {
+			int ms = net_backoff_ms(a, 100, 5000, &seed);
+			assert_true(ms >= d / 2);
+			assert_true(ms <= d);
+			lo = ms < lo ? ms : lo;
+			hi = ms > hi ? ms : hi;
+		}
+		assert_true(hi - lo > d / 4); /* jitter: spread over the range */
+	}
+	/* far attempts stay at the cap (no overflow) */
+	int ms = net_backoff_ms(100000, 100, 5000, &seed);
+	assert_true(ms >= 2500 && ms <= 5000);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1049,6 +1157,8 @@ int main(void)
 		cmocka_unit_test(status_table_and_json),
 		cmocka_unit_test(cache_listing),
 		cmocka_unit_test(tile_to_picture),
+		cmocka_unit_test(connect_without_waiting),
+		cmocka_unit_test(backoff_doubles_with_jitter),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
