@@ -194,7 +194,7 @@ static void on_signal(void *ud)
 }
 
 /* Says what went wrong in the store (the engine only counts): damaged entries once per tick
- * in which some were found; failing writes (disk full, I/O) once when they start and once
+ * in which some were found; a damaged file replaced; failing writes (disk full, I/O) once when they start and once
  * when a batch commits again; a full write queue the first time. */
 static void store_watch(struct daemon *d)
 {
@@ -212,6 +212,10 @@ static void store_watch(struct daemon *d)
 		log_msg(LOG_INFO, "store %s: writes succeed again", d->conf.store_path);
 		d->store_failing = false;
 	}
+	if (st.recovered > old->recovered)
+		log_msg(LOG_WARN, "store %s: the file was damaged (LMDB could not read it): moved "
+			"aside as %s.corrupt-TIME and started empty; its tiles will be generated "
+			"again", d->conf.store_path, d->conf.store_path);
 	if (st.write_drops > 0 && old->write_drops == 0)
 		log_msg(LOG_WARN, "store %s: write queue full, tiles left unstored (counted as "
 			"store.disk.write_drops)", d->conf.store_path);

@@ -829,6 +829,8 @@ static void damaged_file_replaced_at_run_time(void **state)
 	}
 	closedir(d);
 	assert_true(found);
+	/* the operator is told, once (the tick after the counter moved) */
+	assert_true(daemon_env_log_wait(&e->d, "was damaged (LMDB could not read it)", 1, 5000));
 	/* it goes on: the tiles generated again are written to the new file */
 	wait_written(op);
 	struct net_conn *v2 = conn(e, false);
