@@ -14,10 +14,15 @@
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
  *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
  *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
- *   range the level's slices hold, placed in doubles as the shader does, inflated by the
- *   patch's bulge) against the frustum's side planes, the plane behind the camera and the
- *   horizon cap, and draws the visible ranges, contiguous ones merged. The triangle order is
- *   the same with culling off, so the pixels are too.
+ *   range the two levels' slices hold within the ring's disk — not the whole window, ten
+ *   times wider —, placed in doubles as the shader does, inflated by the patch's bulge)
+ *   against the frustum's side planes, the plane behind the camera and the horizon cap, and
+ *   draws the visible ranges, contiguous ones merged. The triangle order is the same with
+ *   culling off, so the pixels are too.
+ * - Order: front to back, so that the depth test rejects hidden ground before it is shaded
+ *   (llvmpipe tests depth first): levels fine → coarse, and within a sector the circles near
+ *   → far (a hill's near side before what it hides), each quad's triangles starting with the
+ *   circle the previous row shared (llvmpipe's vertex cache then reuses it).
  * - Blending: over the outer part of a ring (from θ̃ = 2^(−j0/m)·R, about 0.74 R, to 0.95 R)
  *   the height, colour and normal fade to the next coarser level, reaching it on the boundary,
  *   so neighbouring rings share their boundary vertices (no cracks) and no level boundary
@@ -242,17 +247,17 @@ static void build_geometry(struct view *v)
 			int i = ip / 2, c0 = i * m + (ip % 2 ? v->j0 : 0);
 			int c1 = ip % 2 ? (i + 1) * m : i * m + v->j0;
 			v->sec_first[ip * v->nsec + sec] = q;
-			for (int c = c0; c < c1; c++)
+			for (int c = c1 - 1; c >= c0; c--)
 				for (int k = sector_k(v, sec); k < sector_k(v, sec + 1); k++) {
 					uint32_t a = (uint32_t)(c * n + k);
 					uint32_t b = (uint32_t)(c * n + (k + 1) % n);
 					uint32_t a2 = a + (uint32_t)n, b2 = b + (uint32_t)n;
-					idx[q++] = a;
-					idx[q++] = b;
-					idx[q++] = b2;
-					idx[q++] = a;
 					idx[q++] = b2;
 					idx[q++] = a2;
+					idx[q++] = a;
+					idx[q++] = b2;
+					idx[q++] = a;
+					idx[q++] = b;
 				}
 		}
 	v->sec_first[NR * 2 * v->nsec] = q;
@@ -521,18 +526,27 @@ static void draw_sector(struct view *v, const struct view_body *b, struct ranges
 	*drawn += count;
 }
 
-/* The heights level l's slice draws: what it holds, lifted to the water's surface where the
- * planet has a sea (the vertex shader draws the sea there, not its floor). Returns 0, or
- * -ENOENT before its first upload. */
-static int drawn_range(struct view *v, int l, double *lo, double *hi)
+/* The heights level l's slice draws within angle r of the camera's nadir (r < 0: the whole
+ * slice): what it holds there, lifted to the water's surface where the planet has a sea (the
+ * vertex shader draws the sea there, not its floor). Returns 0, or -ENOENT before its first
+ * upload. */
+static int drawn_range_near(struct view *v, int l, double r, double *lo, double *hi)
 {
-	int rc = view_clipmap_height_range(v->cm, l, lo, hi);
+	int rc = r < 0 ? view_clipmap_height_range(v->cm, l, lo, hi)
+		       : view_clipmap_height_range_near(v->cm, l, v->last.lon, v->last.lat, r, lo,
+							hi);
 	const struct view_look *look = &v->src->planet.look;
 	if (rc == 0 && look->sea) {
 		*lo = fmax(*lo, look->sea_level);
 		*hi = fmax(*hi, look->sea_level);
 	}
 	return rc;
+}
+
+/* The same over the whole slice. */
+static int drawn_range(struct view *v, int l, double *lo, double *hi)
+{
+	return drawn_range_near(v, l, -1, lo, hi);
 }
 
 /* Binds the program of variant bits for drawing level i (fine) blended towards level c
@@ -599,7 +613,9 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 	 * through that ground hides whatever of the level lies beyond its horizon. */
 	struct view_body b = v->body;
 	double lo[2], hi[2];
-	if (drawn_range(v, i, &lo[0], &hi[0]) == 0 && drawn_range(v, c, &lo[1], &hi[1]) == 0) {
+	double near = fmin(clipmap_ring_radius(i), cap);
+	if (drawn_range_near(v, i, near, &lo[0], &hi[0]) == 0 &&
+	    drawn_range_near(v, c, near, &lo[1], &hi[1]) == 0) {
 		double e = v->d.exaggeration;
 		b.hmin = fmin(lo[0], lo[1]) * e;
 		b.hmax = fmax(hi[0], hi[1]) * e;
@@ -622,8 +638,8 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 		if (bind_program(v, bits | (pass ? VAR_BLEND : 0), i, c, ring ? 1.0f : (float)fade) < 0)
 			return -EINVAL;
 		struct ranges r = { gl, 0, 0 };
-		for (int j = i; j <= last; j++)
-			for (int part = 0; part < 2; part++) {
+		for (int j = last; j >= i; j--) /* near → far */
+			for (int part = 1; part >= 0; part--) {
 				bool blended = fading || (j == i && part == 0 && c != i);
 				if (blended != (pass == 1))
 					continue;

@@ -75,6 +75,12 @@ int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, d
 /* The range of the heights a level's height slice holds (metres, not exaggerated): what the
  * shader can sample there, for culling. 0, or -ENOENT before the level's first upload. */
 int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, double *hi);
+/* The same over what the shader can sample for points within angle r of (lon, lat) (a ring's
+ * disk): tighter culling bounds than the whole slice's. Falls back to the whole slice where
+ * the disk holds a pole or leaves the window. The last two disks per level are remembered
+ * until the slice changes. 0, or -ENOENT before the level's first upload. */
+int view_clipmap_height_range_near(struct view_clipmap *cm, int level, double lon, double lat,
+				   double r, double *lo, double *hi);
 
 unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r); /* 0: absent */
 /* Reads every slice of a role's texture (S × S × nlevels texels, slice-major) into out.
