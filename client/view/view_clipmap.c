@@ -588,6 +588,25 @@ static void texel_range(const struct view_clipmap *cm, const float *h, int64_t u
 	*hi = b;
 }
 
+int view_clipmap_height_range_box(struct view_clipmap *cm, int level, double x0, double x1,
+				  double y0, double y1, double *lo, double *hi)
+{
+	struct level *L = &cm->lv[level];
+	if (!L->has_held || !L->hmirror)
+		return -ENOENT;
+	/* Texel centres sit at +0.5: a sample at x reads texels floor(x - 0.5) and the next; a
+	 * texel more on each side for the shader's float rounding. */
+	int64_t u0 = (int64_t)floor(x0 - 0.5) - 1, u1 = (int64_t)floor(x1 - 0.5) + 2;
+	int64_t v0 = (int64_t)floor(y0 - 0.5) - 1, v1 = (int64_t)floor(y1 - 0.5) + 2;
+	if (!(u1 - u0 + 1 < (int64_t)cm->S && v1 - v0 + 1 < (int64_t)cm->S))
+		return view_clipmap_height_range(cm, level, lo, hi);
+	float a, b;
+	texel_range(cm, L->hmirror, u0, u1, v0, v1, &a, &b);
+	*lo = a;
+	*hi = b;
+	return 0;
+}
+
 int view_clipmap_height_range_near(struct view_clipmap *cm, int level, double lon, double lat,
 				   double r, double *lo, double *hi)
 {
@@ -603,23 +622,21 @@ int view_clipmap_height_range_near(struct view_clipmap *cm, int level, double lo
 		}
 	}
 	double ext = clipmap_lon_extent(lat, r);
+	if (ext >= M_PI || !view_window_covers(&L->held, lon, lat, r, 1.5))
+		return view_clipmap_height_range(cm, level, lo, hi);
 	double p[6];
 	view_level_params(&L->held, lon, lat, p);
-	/* Texel centres sit at +0.5: a sample at x reads texels floor(x - 0.5) and the next; a
-	 * texel more on each side for the shader's float rounding. */
 	double du = ext * p[2], dv = r * p[3];
-	double x0 = p[0] - du - 0.5, x1 = p[0] + du - 0.5;
-	double y0 = fmax(p[1] - dv, p[4]) - 0.5, y1 = fmin(p[1] + dv, p[5]) - 0.5;
-	int64_t u0 = (int64_t)floor(x0) - 1, u1 = (int64_t)floor(x1) + 2;
-	int64_t v0 = (int64_t)floor(y0) - 1, v1 = (int64_t)floor(y1) + 2;
-	if (ext >= M_PI || u1 - u0 + 1 >= (int64_t)cm->S || v1 - v0 + 1 >= (int64_t)cm->S ||
-	    !view_window_covers(&L->held, lon, lat, r, 1.5))
-		return view_clipmap_height_range(cm, level, lo, hi);
-	float a, b;
-	texel_range(cm, L->hmirror, u0, u1, v0, v1, &a, &b);
-	L->near[L->near_next] = (struct near_range){ lon, lat, r, L->hver, a, b };
+	int rc = view_clipmap_height_range_box(cm, level, p[0] - du, p[0] + du,
+					       fmax(p[1] - dv, p[4]), fmin(p[1] + dv, p[5]), lo, hi);
+	if (rc == 0)
+		L->near[L->near_next] = (struct near_range){ lon, lat, r, L->hver, (float)*lo,
+							     (float)*hi };
 	L->near_next ^= 1;
-	*lo = a;
-	*hi = b;
-	return 0;
+	return rc;
+}
+
+uint64_t view_clipmap_height_version(const struct view_clipmap *cm, int level)
+{
+	return cm->lv[level].hver;
 }
