@@ -77,7 +77,8 @@ static const char *const uniform_names[U_COUNT] = {
 /* Horizon culling's per-level results, kept while the camera and the heights stay. */
 struct hcache {
 	bool valid;
-	double key[8];	      /* camera lon, lat, alt, heading, pitch, fov, frame cap, last */
+	double key[9];	      /* camera lon, lat, alt, heading, pitch, fov, frame cap, last,
+			       * whether it is an occluder */
 	uint64_t hver[2];     /* the two levels' height versions */
 	int c;		      /* the level it blends towards */
 	double hz[32 * 4];    /* its ring's contribution per subsector (-∞: none) */
@@ -96,6 +97,7 @@ static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG"
 /* Horizon culling's cells: subsectors per sector, cells across a ring. */
 #define HSUB_PH 4
 #define HSUB_TH 4
+#define HORIZON_LEVELS 8
 #define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
 /* A camera step longer than this many heights above the ground between two frames is a jump,
  * not flight (view_fly moves about one height a frame at most). */
@@ -1063,12 +1065,12 @@ static void horizon_add(struct view *v, int i)
 }
 
 /* The level's cache entry for this frame's camera and heights (emptied when they changed). */
-static void hcache_check(struct view *v, int i, int c, int last)
+static void hcache_check(struct view *v, int i, int c, int last, bool occluder)
 {
 	const struct view_camera *cam = &v->last;
 	struct hcache *h = &v->hc[i];
-	double key[8] = { cam->lon, cam->lat, cam->alt, cam->heading, cam->pitch, cam->fov_y,
-			  v->frame_cap, last };
+	double key[9] = { cam->lon, cam->lat, cam->alt, cam->heading, cam->pitch, cam->fov_y,
+			  v->frame_cap, last, occluder };
 	uint64_t hv[2] = { view_clipmap_height_version(v->cm, i),
 			   view_clipmap_height_version(v->cm, c) };
 	if (h->valid && h->c == c && memcmp(h->key, key, sizeof key) == 0 &&
@@ -1085,7 +1087,8 @@ static void hcache_check(struct view *v, int i, int c, int last)
 	double r0 = clipmap_ring_radius(i + 1), r1 = fmin(clipmap_ring_radius(i), v->frame_cap);
 	for (int s = 0; s < ns; s++) {
 		h->hz[s] = -INFINITY;
-		if (!v->need[s / HSUB_PH] || r0 >= r1 || fabs(cam->lat) + 2 * r1 / DEG >= 89)
+		if (!occluder || !v->need[s / HSUB_PH] || r0 >= r1 ||
+		    fabs(cam->lat) + 2 * r1 / DEG >= 89)
 			continue;
 		double ph0 = 2 * M_PI * sector_k(v, s / HSUB_PH) / v->d.n_phi;
 		double ph1 = 2 * M_PI * sector_k(v, s / HSUB_PH + 1) / v->d.n_phi;
@@ -1136,7 +1139,9 @@ static int frame_draw(struct view *v, struct frame *f)
 		int to = k + 1 < f->nd ? v->drawn[k + 1] - 1 : (i > f->lmin ? i : f->lmin) + 2;
 		if (to > v->nlevels - 1)
 			to = v->nlevels - 1;
-		hcache_check(v, i, k > 0 ? v->drawn[k - 1] : i, to);
+		/* the nearest ground hides the most: the finest HORIZON_LEVELS levels drawn are
+		 * the occluders (each costs its cells' texels on the CPU when the camera moves) */
+		hcache_check(v, i, k > 0 ? v->drawn[k - 1] : i, to, k >= f->nd - HORIZON_LEVELS);
 		int64_t tri = draw_level(v, i, k > 0 ? v->drawn[k - 1] : i, to, k + 1 == f->nd,
 					 v->fade[i], f->cap, &f->s.triangles_culled);
 		if (tri < 0) {

@@ -283,9 +283,12 @@ static double elevation(const struct view_body *b, const struct view_camera *c, 
 }
 
 /* The margin for the points between the samples (φ̃: the ellipsoid's small part; θ̃: the
- * flat top of a peak), radians: about a fiftieth of a pixel at 720p. */
+ * flat top of a peak), radians: about a fiftieth of a pixel at 720p; samples of φ̃ no more
+ * than ELEV_DPH apart. */
 #define ELEV_MARGIN 3e-4
-#define ELEV_NPH 5
+#define ELEV_DPH (2.9 * M_PI / 180)
+
+static int elev_nph(double ph0, double ph1) { return 1 + (int)ceil((ph1 - ph0) / ELEV_DPH); }
 
 /* At a fixed height the elevation rises with θ̃ up to the line of sight's tangent point (for
  * ground below the camera) and falls after it: its least over [th0, th1] is at an end, its
@@ -295,8 +298,9 @@ double view_sector_elev_min(const struct view_body *b, const struct view_camera 
 			    double th1, double ph0, double ph1, double h)
 {
 	double e = INFINITY;
-	for (int j = 0; j < ELEV_NPH; j++) {
-		double ph = ph0 + (ph1 - ph0) * j / (ELEV_NPH - 1);
+	int nph = elev_nph(ph0, ph1);
+	for (int j = 0; j < nph; j++) {
+		double ph = ph0 + (ph1 - ph0) * j / (nph - 1);
 		e = fmin(e, fmin(elevation(b, c, th0, ph, h), elevation(b, c, th1, ph, h)));
 	}
 	return e - ELEV_MARGIN;
@@ -314,8 +318,9 @@ double view_sector_elev_max(const struct view_body *b, const struct view_camera 
 			ths[nt++] = tt;
 	}
 	double e = -INFINITY;
-	for (int j = 0; j < ELEV_NPH; j++) {
-		double ph = ph0 + (ph1 - ph0) * j / (ELEV_NPH - 1);
+	int nph = elev_nph(ph0, ph1);
+	for (int j = 0; j < nph; j++) {
+		double ph = ph0 + (ph1 - ph0) * j / (nph - 1);
 		for (int t = 0; t < nt; t++)
 			e = fmax(e, elevation(b, c, ths[t], ph, h));
 	}
