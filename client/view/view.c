@@ -14,10 +14,22 @@
  * - Culling: each ring is split into an outer and an inner part (below), each part (and the
  *   fan) into NSEC sectors of φ̃, each one index range (ring, part, sector, circle). Per frame
  *   the CPU tests each sector's bounds (view_sector_visible: its θ̃ × φ̃ patch at the height
- *   range the level's slices hold, placed in doubles as the shader does, inflated by the
- *   patch's bulge) against the frustum's side planes, the plane behind the camera and the
- *   horizon cap, and draws the visible ranges, contiguous ones merged. The triangle order is
- *   the same with culling off, so the pixels are too.
+ *   range the two levels' slices hold within the ring's disk — not the whole window, ten
+ *   times wider —, placed in doubles as the shader does, inflated by the patch's bulge)
+ *   against the frustum's side planes, the plane behind the camera and the horizon cap, and
+ *   draws the visible ranges, contiguous ones merged. Then the horizon (near the ground
+ *   most levels lie behind the nearer ground): as each level is drawn, fine → coarse, each
+ *   of its ring's cells (HSUB_PH per sector × HSUB_TH across the ring) gives the least
+ *   elevation its lowest ground (its texels, on the CPU) can be seen at; the ground being
+ *   continuous from the nadir out, every line of sight in those directions meets ground at
+ *   least that high before the ring's edge, so a coarser sector whose highest ground (its
+ *   own texels) stays below the horizon of its directions is hidden and not drawn. Per
+ *   level, cached while the camera and its heights stay. The triangle order is the same
+ *   with culling off, so the pixels are too (test_view_gl compares them).
+ * - Order: front to back, so that the depth test rejects hidden ground before it is shaded
+ *   (llvmpipe tests depth first): levels fine → coarse, and within a sector the circles near
+ *   → far (a hill's near side before what it hides), each quad's triangles starting with the
+ *   circle the previous row shared (llvmpipe's vertex cache then reuses it).
  * - Blending: over the outer part of a ring (from θ̃ = 2^(−j0/m)·R, about 0.74 R, to 0.95 R)
  *   the height, colour and normal fade to the next coarser level, reaching it on the boundary,
  *   so neighbouring rings share their boundary vertices (no cracks) and no level boundary
@@ -62,6 +74,18 @@ static const char *const uniform_names[U_COUNT] = {
 	"u_haze", "u_exag", "u_sea",
 };
 
+/* Horizon culling's per-level results, kept while the camera and the heights stay. */
+struct hcache {
+	bool valid;
+	double key[9];	      /* camera lon, lat, alt, heading, pitch, fov, frame cap, last,
+			       * whether it is an occluder */
+	uint64_t hver[2];     /* the two levels' height versions */
+	int c;		      /* the level it blends towards */
+	double hz[32 * 4];    /* its ring's contribution per subsector (-∞: none) */
+	double hi[3][32];     /* per sector, its highest ground over its ring's outer part, inner
+			       * part, every ring it draws (NAN: not yet) */
+};
+
 /* Program variants: the shaders' #defines (see their headers). */
 enum {
 	VAR_BLEND = 1, VAR_GEO_FRAG = 2, VAR_HAZE = 4, VAR_EXAG = 8, VAR_COLOR = 16, VAR_NORMAL = 32,
@@ -70,6 +94,10 @@ enum {
 static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG",
 					     "COLOR", "NORMAL",	  "SEA",  "UNLIT" };
 
+/* Horizon culling's cells: subsectors per sector, cells across a ring. */
+#define HSUB_PH 4
+#define HSUB_TH 4
+#define HORIZON_LEVELS 8
 #define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
 /* A camera step longer than this many heights above the ground between two frames is a jump,
  * not flight (view_fly moves about one height a frame at most). */
@@ -119,6 +147,15 @@ struct view {
 	double last_agl; /* the last frame's camera height above the ground */
 	double *floor;	/* per level: lowest ground it and the finer levels hold (INFINITY: unknown) */
 	double *fade;	/* per level: this frame's fade-in (1: fully shown) */
+	double *horizon; /* per subsector (HSUB_PH per sector), this frame: the least elevation at which the ground drawn
+			  * so far (the finer levels, nearer) meets each line of sight in its
+			  * directions (-∞: none known); what lies lower behind it is hidden */
+	double frame_cap; /* this frame's horizon cap: no vertex lies beyond it */
+	int cur_i, cur_c; /* the level being drawn and the one it blends towards */
+	int cur_last;	  /* and the finest ring it draws */
+	bool need[32];	  /* this frame: sector s or a neighbour can be seen */
+	struct hcache *hc; /* per level: its part of the horizon and its sectors' highest ground,
+			    * for the camera and heights they were found for */
 	int idle_tiles; /* tiles taken by view_idle since the last frame */
 	struct frame_uniforms fu;
 	/* framebuffer */
@@ -242,17 +279,17 @@ static void build_geometry(struct view *v)
 			int i = ip / 2, c0 = i * m + (ip % 2 ? v->j0 : 0);
 			int c1 = ip % 2 ? (i + 1) * m : i * m + v->j0;
 			v->sec_first[ip * v->nsec + sec] = q;
-			for (int c = c0; c < c1; c++)
+			for (int c = c1 - 1; c >= c0; c--)
 				for (int k = sector_k(v, sec); k < sector_k(v, sec + 1); k++) {
 					uint32_t a = (uint32_t)(c * n + k);
 					uint32_t b = (uint32_t)(c * n + (k + 1) % n);
 					uint32_t a2 = a + (uint32_t)n, b2 = b + (uint32_t)n;
-					idx[q++] = a;
-					idx[q++] = b;
-					idx[q++] = b2;
-					idx[q++] = a;
 					idx[q++] = b2;
 					idx[q++] = a2;
+					idx[q++] = a;
+					idx[q++] = b2;
+					idx[q++] = a;
+					idx[q++] = b;
 				}
 		}
 	v->sec_first[NR * 2 * v->nsec] = q;
@@ -383,6 +420,8 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->ready_since = xcalloc((size_t)v->nlevels, sizeof *v->ready_since);
 	v->floor = xcalloc((size_t)v->nlevels, sizeof *v->floor);
 	v->fade = xcalloc((size_t)v->nlevels, sizeof *v->fade);
+	v->horizon = xcalloc(32 * HSUB_PH, sizeof *v->horizon); /* nsec ≤ 32 */
+	v->hc = xcalloc((size_t)v->nlevels, sizeof *v->hc);
 	v->drawn = xcalloc((size_t)v->nlevels, sizeof *v->drawn);
 	v->detail = xcalloc((size_t)v->nlevels, sizeof *v->detail);
 	int rc = view_clipmap_create(gl, src, v->nlevels, &v->cm, err);
@@ -433,6 +472,8 @@ void view_destroy(struct view *v)
 	free(v->ready_since);
 	free(v->floor);
 	free(v->fade);
+	free(v->horizon);
+	free(v->hc);
 	free(v->drawn);
 	free(v->detail);
 	free(v);
@@ -505,6 +546,46 @@ static void ranges_add(struct ranges *r, size_t first, size_t count)
 	r->count = count;
 }
 
+static bool cell_range(struct view *v, int i, int c, double th0, double th1, double ph0,
+		       double ph1, double *lo_out, double *hi_out);
+
+/* Whether the ground of sector s over θ̃ ∈ [th0, th1], no higher than b->hmax, lies below the
+ * horizon the finer levels drew in its directions (its subsectors' and the two next to them:
+ * the ellipsoid turns a ring point's azimuth from its φ̃ by up to ~0.4°), so behind their
+ * ground. */
+static bool occluded(struct view *v, const struct view_body *b, double th0, double th1,
+		     int s)
+{
+	int ns = v->nsec * HSUB_PH;
+	double hz = INFINITY;
+	for (int q = s * HSUB_PH - 1; q <= (s + 1) * HSUB_PH; q++)
+		hz = fmin(hz, v->horizon[(q + ns) % ns]);
+	th1 = fmin(th1, v->frame_cap);
+	if (!(hz > -M_PI / 2) || th0 >= th1)
+		return false;
+	double ph0 = 2 * M_PI * sector_k(v, s) / v->d.n_phi;
+	double ph1 = 2 * M_PI * sector_k(v, s + 1) / v->d.n_phi;
+	if (view_sector_elev_max(b, &v->last, th0, th1, ph0, ph1, b->hmax) < hz)
+		return true;
+	/* the sector's own highest ground, not the ring's: over the part of the level's ring
+	 * (0: outer, 1: inner) the sector spans, or every ring it draws (2) */
+	double r0 = clipmap_ring_radius(v->cur_i + 1);
+	int part = th0 < r0 * (1 - 1e-9) ? 2 : th0 > r0 * (1 + 1e-9) ? 0 : 1;
+	double *hi = &v->hc[v->cur_i].hi[part][s];
+	if (isnan(*hi)) {
+		double lo, r1 = fmin(clipmap_ring_radius(v->cur_i), v->frame_cap);
+		if (part == 2)
+			r0 = clipmap_ring_radius(v->cur_last + 1);
+		if (part < 2) {
+			r0 = th0;
+			r1 = fmin(th1, r1);
+		}
+		if (!(r0 < r1) || !cell_range(v, v->cur_i, v->cur_c, r0, r1, ph0, ph1, &lo, hi))
+			*hi = INFINITY;
+	}
+	return view_sector_elev_max(b, &v->last, th0, th1, ph0, ph1, fmin(*hi, b->hmax)) < hz;
+}
+
 /* Draws sector s of the geometry over θ̃ ∈ [th0, th1] (indices [first, first + count)) if
  * visible; counts its indices in *drawn or *culled. */
 static void draw_sector(struct view *v, const struct view_body *b, struct ranges *r, double th0,
@@ -513,7 +594,8 @@ static void draw_sector(struct view *v, const struct view_body *b, struct ranges
 {
 	double ph0 = 2 * M_PI * sector_k(v, s) / v->d.n_phi;
 	double ph1 = 2 * M_PI * sector_k(v, s + 1) / v->d.n_phi;
-	if (v->cull && !view_sector_visible(b, &v->last, th0, th1, ph0, ph1, cap)) {
+	if (v->cull && (!view_sector_visible(b, &v->last, th0, th1, ph0, ph1, cap) ||
+			occluded(v, b, th0, th1, s))) {
 		*culled += count;
 		return;
 	}
@@ -521,18 +603,27 @@ static void draw_sector(struct view *v, const struct view_body *b, struct ranges
 	*drawn += count;
 }
 
-/* The heights level l's slice draws: what it holds, lifted to the water's surface where the
- * planet has a sea (the vertex shader draws the sea there, not its floor). Returns 0, or
- * -ENOENT before its first upload. */
-static int drawn_range(struct view *v, int l, double *lo, double *hi)
+/* The heights level l's slice draws within angle r of the camera's nadir (r < 0: the whole
+ * slice): what it holds there, lifted to the water's surface where the planet has a sea (the
+ * vertex shader draws the sea there, not its floor). Returns 0, or -ENOENT before its first
+ * upload. */
+static int drawn_range_near(struct view *v, int l, double r, double *lo, double *hi)
 {
-	int rc = view_clipmap_height_range(v->cm, l, lo, hi);
+	int rc = r < 0 ? view_clipmap_height_range(v->cm, l, lo, hi)
+		       : view_clipmap_height_range_near(v->cm, l, v->last.lon, v->last.lat, r, lo,
+							hi);
 	const struct view_look *look = &v->src->planet.look;
 	if (rc == 0 && look->sea) {
 		*lo = fmax(*lo, look->sea_level);
 		*hi = fmax(*hi, look->sea_level);
 	}
 	return rc;
+}
+
+/* The same over the whole slice. */
+static int drawn_range(struct view *v, int l, double *lo, double *hi)
+{
+	return drawn_range_near(v, l, -1, lo, hi);
 }
 
 /* Binds the program of variant bits for drawing level i (fine) blended towards level c
@@ -599,7 +690,9 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 	 * through that ground hides whatever of the level lies beyond its horizon. */
 	struct view_body b = v->body;
 	double lo[2], hi[2];
-	if (drawn_range(v, i, &lo[0], &hi[0]) == 0 && drawn_range(v, c, &lo[1], &hi[1]) == 0) {
+	double near = fmin(clipmap_ring_radius(i), cap);
+	if (drawn_range_near(v, i, near, &lo[0], &hi[0]) == 0 &&
+	    drawn_range_near(v, c, near, &lo[1], &hi[1]) == 0) {
 		double e = v->d.exaggeration;
 		b.hmin = fmin(lo[0], lo[1]) * e;
 		b.hmax = fmax(hi[0], hi[1]) * e;
@@ -612,6 +705,9 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 			cap = fmin(cap, view_horizon_cap(&occ, v->last.alt));
 		}
 	}
+	v->cur_i = i;
+	v->cur_c = c;
+	v->cur_last = last;
 	uint64_t idx = 0, cidx = 0;
 	for (int pass = 0; pass < 2; pass++) {
 		/* pass 0: one level; pass 1: blended (the outer part of ring i, all when fading) */
@@ -622,8 +718,8 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 		if (bind_program(v, bits | (pass ? VAR_BLEND : 0), i, c, ring ? 1.0f : (float)fade) < 0)
 			return -EINVAL;
 		struct ranges r = { gl, 0, 0 };
-		for (int j = i; j <= last; j++)
-			for (int part = 0; part < 2; part++) {
+		for (int j = last; j >= i; j--) /* near → far */
+			for (int part = 1; part >= 0; part--) {
 				bool blended = fading || (j == i && part == 0 && c != i);
 				if (blended != (pass == 1))
 					continue;
@@ -901,11 +997,139 @@ static void level_floors(struct view *v, int lmax)
 	}
 }
 
+/* The lowest and highest ground levels i and c can draw over the cell θ̃ ∈ [th0, th1],
+ * φ̃ ∈ [ph0, ph1] (their texels in a box around it: 3 × 3 samples of its (Δlon, Δlat), a
+ * quarter of its size added), exaggerated, lifted to the sea. Returns false where unknown or
+ * near a pole. */
+static bool cell_range(struct view *v, int i, int c, double th0, double th1, double ph0,
+		       double ph1, double *lo_out, double *hi_out)
+{
+	const struct view_camera *cam = &v->last;
+	double g0[2] = { INFINITY, INFINITY }, g1[2] = { -INFINITY, -INFINITY };
+	for (int a = 0; a < 3; a++)
+		for (int k = 0; k < 3; k++) {
+			double g[2];
+			view_geo_delta(cam->lat, th0 + (th1 - th0) * a / 2, ph0 + (ph1 - ph0) * k / 2,
+				       &g[0], &g[1]);
+			for (int x = 0; x < 2; x++) {
+				g0[x] = fmin(g0[x], g[x]);
+				g1[x] = fmax(g1[x], g[x]);
+			}
+		}
+	if (g1[0] - g0[0] > M_PI / 2)
+		return false;
+	for (int x = 0; x < 2; x++) {
+		double pad = 0.25 * (g1[x] - g0[x]);
+		g0[x] -= pad;
+		g1[x] += pad;
+	}
+	double lo = INFINITY, hi = -INFINITY;
+	for (int l = 0; l < 2; l++) {
+		int lv = l ? c : i;
+		double p[6], a, b;
+		view_level_params(view_clipmap_held(v->cm, lv), cam->lon, cam->lat, p);
+		if (view_clipmap_height_range_box(v->cm, lv, p[0] + g0[0] * p[2], p[0] + g1[0] * p[2],
+						  fmax(p[1] - g1[1] * p[3], p[4]),
+						  fmin(p[1] - g0[1] * p[3], p[5]), &a, &b) < 0)
+			return false;
+		lo = fmin(lo, a);
+		hi = fmax(hi, b);
+	}
+	const struct view_look *look = &v->src->planet.look;
+	if (look->sea) {
+		lo = fmax(lo, look->sea_level);
+		hi = fmax(hi, look->sea_level);
+	}
+	*lo_out = lo * v->d.exaggeration;
+	*hi_out = hi * v->d.exaggeration;
+	return true;
+}
+
+/* After level i (blended towards c) is drawn: raises the horizon of each subsector to the
+ * greatest over its ring's cells (HSUB_TH across the ring) of the least elevation of the
+ * cell's lowest ground (cell_range): every line of sight in the subsector's directions
+ * crosses each cell (the ground is continuous from the nadir out), so meets ground at least
+ * that high no farther than the ring's outer edge. Near a pole, nothing. */
+static void horizon_add(struct view *v, int i)
+{
+	double r0 = clipmap_ring_radius(i + 1), r1 = fmin(clipmap_ring_radius(i), v->frame_cap);
+	const struct view_camera *cam = &v->last;
+	struct hcache *h = &v->hc[i];
+	int ns = v->nsec * HSUB_PH;
+	if (!v->cull || r0 >= r1 || fabs(cam->lat) + 2 * r1 / DEG >= 89)
+		return;
+	for (int s = 0; s < ns; s++) {
+		if (h->hz[s] > -INFINITY && v->need[s / HSUB_PH])
+			v->horizon[s] = fmax(v->horizon[s], h->hz[s]);
+	}
+}
+
+/* The level's cache entry for this frame's camera and heights (emptied when they changed). */
+static void hcache_check(struct view *v, int i, int c, int last, bool occluder)
+{
+	const struct view_camera *cam = &v->last;
+	struct hcache *h = &v->hc[i];
+	double key[9] = { cam->lon, cam->lat, cam->alt, cam->heading, cam->pitch, cam->fov_y,
+			  v->frame_cap, last, occluder };
+	uint64_t hv[2] = { view_clipmap_height_version(v->cm, i),
+			   view_clipmap_height_version(v->cm, c) };
+	if (h->valid && h->c == c && memcmp(h->key, key, sizeof key) == 0 &&
+	    memcmp(h->hver, hv, sizeof hv) == 0)
+		return;
+	h->valid = true;
+	h->c = c;
+	memcpy(h->key, key, sizeof key);
+	memcpy(h->hver, hv, sizeof hv);
+	for (int p = 0; p < 3; p++)
+		for (int s = 0; s < 32; s++)
+			h->hi[p][s] = NAN;
+	int ns = v->nsec * HSUB_PH;
+	double r0 = clipmap_ring_radius(i + 1), r1 = fmin(clipmap_ring_radius(i), v->frame_cap);
+	for (int s = 0; s < ns; s++) {
+		h->hz[s] = -INFINITY;
+		if (!occluder || !v->need[s / HSUB_PH] || r0 >= r1 ||
+		    fabs(cam->lat) + 2 * r1 / DEG >= 89)
+			continue;
+		double ph0 = 2 * M_PI * sector_k(v, s / HSUB_PH) / v->d.n_phi;
+		double ph1 = 2 * M_PI * sector_k(v, s / HSUB_PH + 1) / v->d.n_phi;
+		double q0 = ph0 + (ph1 - ph0) * (s % HSUB_PH) / HSUB_PH;
+		double q1 = ph0 + (ph1 - ph0) * (s % HSUB_PH + 1) / HSUB_PH;
+		for (int b = 0; b < HSUB_TH; b++) {
+			double th0 = r0 * pow(r1 / r0, (double)b / HSUB_TH);
+			double th1 = r0 * pow(r1 / r0, (double)(b + 1) / HSUB_TH);
+			double lo, hi;
+			if (cell_range(v, i, c, th0, th1, q0, q1, &lo, &hi))
+				h->hz[s] = fmax(h->hz[s], view_sector_elev_min(&v->body, cam, th0,
+									       th1, q0, q1, lo));
+		}
+	}
+}
+
+/* The sectors whose horizon can matter this frame: those that can be seen and their
+ * neighbours (occluded() reads a neighbour's next subsector). */
+static void horizon_need(struct view *v)
+{
+	bool seen[32];
+	for (int s = 0; s < v->nsec; s++) {
+		double ph0 = 2 * M_PI * sector_k(v, s) / v->d.n_phi;
+		double ph1 = 2 * M_PI * sector_k(v, s + 1) / v->d.n_phi;
+		seen[s] = !v->cull || view_sector_visible(&v->body, &v->last, 0, v->frame_cap, ph0,
+							  ph1, v->frame_cap);
+	}
+	for (int s = 0; s < v->nsec; s++)
+		v->need[s] = seen[s] || seen[(s + 1) % v->nsec] ||
+			     seen[(s + v->nsec - 1) % v->nsec];
+}
+
 /* Draws the plan's levels fine → coarse: the nearer ground first, so the depth test rejects
  * what it hides before that is shaded (llvmpipe tests depth before running the fragment
  * shader). Returns 0, or -EINVAL if a program failed (the geometry unbound). */
 static int frame_draw(struct view *v, struct frame *f)
 {
+	v->frame_cap = f->cap;
+	for (int s = 0; s < v->nsec * HSUB_PH; s++)
+		v->horizon[s] = -INFINITY;
+	horizon_need(v);
 	for (int k = f->nd - 1; k >= 0; k--) {
 		int i = v->drawn[k];
 		/* A disk's geometry: its ring and the two finer ones, then a fan to the
@@ -915,6 +1139,9 @@ static int frame_draw(struct view *v, struct frame *f)
 		int to = k + 1 < f->nd ? v->drawn[k + 1] - 1 : (i > f->lmin ? i : f->lmin) + 2;
 		if (to > v->nlevels - 1)
 			to = v->nlevels - 1;
+		/* the nearest ground hides the most: the finest HORIZON_LEVELS levels drawn are
+		 * the occluders (each costs its cells' texels on the CPU when the camera moves) */
+		hcache_check(v, i, k > 0 ? v->drawn[k - 1] : i, to, k >= f->nd - HORIZON_LEVELS);
 		int64_t tri = draw_level(v, i, k > 0 ? v->drawn[k - 1] : i, to, k + 1 == f->nd,
 					 v->fade[i], f->cap, &f->s.triangles_culled);
 		if (tri < 0) {
@@ -922,6 +1149,7 @@ static int frame_draw(struct view *v, struct frame *f)
 			return (int)tri;
 		}
 		f->s.triangles += (uint64_t)tri;
+		horizon_add(v, i);
 	}
 	return 0;
 }

@@ -38,6 +38,13 @@ struct level {
 	float *hmirror; /* S × S heights, toroidal like the texture; NULL until first upload */
 	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
 	float hlo, hhi; /* the heights' range over the whole slice */
+	uint64_t hver;	/* counts hmirror's changes (from 1) */
+	struct near_range {
+		double lon, lat, r; /* the disk */
+		uint64_t hver;	    /* hmirror's version then (0: unset) */
+		float lo, hi;
+	} near[2]; /* the last two disks asked of view_clipmap_height_range_near */
+	int near_next; /* the entry the next one replaces */
 };
 
 struct view_clipmap {
@@ -426,6 +433,7 @@ static void mirror_region(struct view_clipmap *cm, struct level *L, const struct
 			memcpy(L->hmirror + (size_t)(r->y + j) * S + x,
 			       tile + ((size_t)(r->sy + j) * T + r->sx) * 4, (size_t)r->w * 4);
 	L->hdirty = true;
+	L->hver++;
 }
 
 int view_clipmap_update(struct view_clipmap *cm, int level)
@@ -554,4 +562,81 @@ int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, do
 	*lo = L->hlo;
 	*hi = L->hhi;
 	return 0;
+}
+
+/* The range of heights over texels [u0, u1] × [v0, v1] of the slice (u wraps, v in 0..S-1). */
+static void texel_range(const struct view_clipmap *cm, const float *h, int64_t u0, int64_t u1,
+			int64_t v0, int64_t v1, float *lo, float *hi)
+{
+	int64_t S = cm->S;
+	float a = INFINITY, b = -INFINITY;
+	int64_t s0 = ((u0 % S) + S) % S, n = u1 - u0 + 1;
+	for (int64_t y = v0; y <= v1; y++) {
+		const float *row = h + (size_t)(((y % S) + S) % S) * (size_t)S;
+		/* the row's span in at most two pieces (the torus' seam) */
+		for (int64_t x = s0, left = n; left > 0;) {
+			int64_t run = S - x < left ? S - x : left;
+			for (int64_t k = 0; k < run; k++) {
+				a = row[x + k] < a ? row[x + k] : a;
+				b = row[x + k] > b ? row[x + k] : b;
+			}
+			left -= run;
+			x = 0;
+		}
+	}
+	*lo = a;
+	*hi = b;
+}
+
+int view_clipmap_height_range_box(struct view_clipmap *cm, int level, double x0, double x1,
+				  double y0, double y1, double *lo, double *hi)
+{
+	struct level *L = &cm->lv[level];
+	if (!L->has_held || !L->hmirror)
+		return -ENOENT;
+	/* Texel centres sit at +0.5: a sample at x reads texels floor(x - 0.5) and the next; a
+	 * texel more on each side for the shader's float rounding. */
+	int64_t u0 = (int64_t)floor(x0 - 0.5) - 1, u1 = (int64_t)floor(x1 - 0.5) + 2;
+	int64_t v0 = (int64_t)floor(y0 - 0.5) - 1, v1 = (int64_t)floor(y1 - 0.5) + 2;
+	if (!(u1 - u0 + 1 < (int64_t)cm->S && v1 - v0 + 1 < (int64_t)cm->S))
+		return view_clipmap_height_range(cm, level, lo, hi);
+	float a, b;
+	texel_range(cm, L->hmirror, u0, u1, v0, v1, &a, &b);
+	*lo = a;
+	*hi = b;
+	return 0;
+}
+
+int view_clipmap_height_range_near(struct view_clipmap *cm, int level, double lon, double lat,
+				   double r, double *lo, double *hi)
+{
+	struct level *L = &cm->lv[level];
+	if (!L->has_held || !L->hmirror)
+		return -ENOENT;
+	for (int k = 0; k < 2; k++) {
+		const struct near_range *c = &L->near[k];
+		if (c->hver == L->hver && c->lon == lon && c->lat == lat && c->r == r) {
+			*lo = c->lo;
+			*hi = c->hi;
+			return 0;
+		}
+	}
+	double ext = clipmap_lon_extent(lat, r);
+	if (ext >= M_PI || !view_window_covers(&L->held, lon, lat, r, 1.5))
+		return view_clipmap_height_range(cm, level, lo, hi);
+	double p[6];
+	view_level_params(&L->held, lon, lat, p);
+	double du = ext * p[2], dv = r * p[3];
+	int rc = view_clipmap_height_range_box(cm, level, p[0] - du, p[0] + du,
+					       fmax(p[1] - dv, p[4]), fmin(p[1] + dv, p[5]), lo, hi);
+	if (rc == 0)
+		L->near[L->near_next] = (struct near_range){ lon, lat, r, L->hver, (float)*lo,
+							     (float)*hi };
+	L->near_next ^= 1;
+	return rc;
+}
+
+uint64_t view_clipmap_height_version(const struct view_clipmap *cm, int level)
+{
+	return cm->lv[level].hver;
 }

@@ -75,6 +75,16 @@ int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, d
 /* The range of the heights a level's height slice holds (metres, not exaggerated): what the
  * shader can sample there, for culling. 0, or -ENOENT before the level's first upload. */
 int view_clipmap_height_range(struct view_clipmap *cm, int level, double *lo, double *hi);
+/* The same over what the shader can sample for points within angle r of (lon, lat) (a ring's
+ * disk): tighter culling bounds than the whole slice's. Falls back to the whole slice where
+ * the disk holds a pole or leaves the window. The last two disks per level are remembered
+ * until the slice changes. 0, or -ENOENT before the level's first upload. */
+int view_clipmap_height_range_near(struct view_clipmap *cm, int level, double lon, double lat,
+				   double r, double *lo, double *hi);
+/* The same over what the shader can sample at texel coordinates [x0, x1] × [y0, y1] of the
+ * level (view_level_params' units: u may leave 0..S, it wraps; v clamped by the caller). */
+int view_clipmap_height_range_box(struct view_clipmap *cm, int level, double x0, double x1,
+				  double y0, double y1, double *lo, double *hi);
 
 unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r); /* 0: absent */
 /* Reads every slice of a role's texture (S × S × nlevels texels, slice-major) into out.
@@ -82,6 +92,8 @@ unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r); 
 int view_clipmap_read(const struct view_clipmap *cm, enum view_role r, void *out, size_t size);
 uint32_t view_clipmap_tile_size(const struct view_clipmap *cm);
 uint32_t view_clipmap_window_size(const struct view_clipmap *cm); /* S */
+/* Changes whenever a level's heights (its slice's mirror) change. */
+uint64_t view_clipmap_height_version(const struct view_clipmap *cm, int level);
 int view_clipmap_levels(const struct view_clipmap *cm);
 void view_clipmap_get_stats(const struct view_clipmap *cm, struct view_clipmap_stats *out);
 

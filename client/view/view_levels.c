@@ -260,3 +260,69 @@ bool view_sector_visible(const struct view_body *b, const struct view_camera *c,
 			return false;
 	return true;
 }
+
+void view_geo_delta(double lat_deg, double th, double ph, double *dlon, double *dlat)
+{
+	double sl = sin(lat_deg * DEG), cl = cos(lat_deg * DEG);
+	double st = sin(th), sh = sin(0.5 * th);
+	double d[3] = { st * sin(ph), st * cos(ph), -2 * sh * sh };
+	double dx = cl * (1 + d[2]) - sl * d[1], dy = d[0], dz = sl * (1 + d[2]) + cl * d[1];
+	double rho = sqrt(dx * dx + dy * dy);
+	double cr = dx > 0 ? d[1] - sl * dy * dy / (rho + dx) : cl * dz - sl * rho;
+	double dt = cl * rho + sl * dz;
+	*dlon = atan2(dy, dx);
+	*dlat = atan2(cr, dt);
+}
+
+static double elevation(const struct view_body *b, const struct view_camera *c, double th,
+			double ph, double h)
+{
+	double p[3];
+	view_ring_point(b, c->lat, c->alt, th, ph, h, p);
+	return atan2(p[2], hypot(p[0], p[1]));
+}
+
+/* The margin for the points between the samples (φ̃: the ellipsoid's small part; θ̃: the
+ * flat top of a peak), radians: about a fiftieth of a pixel at 720p; samples of φ̃ no more
+ * than ELEV_DPH apart. */
+#define ELEV_MARGIN 3e-4
+#define ELEV_DPH (2.9 * M_PI / 180)
+
+static int elev_nph(double ph0, double ph1) { return 1 + (int)ceil((ph1 - ph0) / ELEV_DPH); }
+
+/* At a fixed height the elevation rises with θ̃ up to the line of sight's tangent point (for
+ * ground below the camera) and falls after it: its least over [th0, th1] is at an end, its
+ * greatest at an end or the tangent point. It rises with the height (up tilts towards the
+ * camera for θ̃ < π). */
+double view_sector_elev_min(const struct view_body *b, const struct view_camera *c, double th0,
+			    double th1, double ph0, double ph1, double h)
+{
+	double e = INFINITY;
+	int nph = elev_nph(ph0, ph1);
+	for (int j = 0; j < nph; j++) {
+		double ph = ph0 + (ph1 - ph0) * j / (nph - 1);
+		e = fmin(e, fmin(elevation(b, c, th0, ph, h), elevation(b, c, th1, ph, h)));
+	}
+	return e - ELEV_MARGIN;
+}
+
+double view_sector_elev_max(const struct view_body *b, const struct view_camera *c, double th0,
+			    double th1, double ph0, double ph1, double h)
+{
+	double n = view_body_n(b, sin(c->lat * DEG));
+	double ct = (n + h) / (n + c->alt), ths[3] = { th0, th1, th0 };
+	int nt = 2;
+	if (ct < 1) {
+		double tt = acos(ct);
+		if (tt > th0 && tt < th1)
+			ths[nt++] = tt;
+	}
+	double e = -INFINITY;
+	int nph = elev_nph(ph0, ph1);
+	for (int j = 0; j < nph; j++) {
+		double ph = ph0 + (ph1 - ph0) * j / (nph - 1);
+		for (int t = 0; t < nt; t++)
+			e = fmax(e, elevation(b, c, ths[t], ph, h));
+	}
+	return e + ELEV_MARGIN;
+}

@@ -80,6 +80,19 @@ void view_ring_point(const struct view_body *b, double lat_deg, double alt, doub
  * camera, or beyond the cap (where its triangles collapse onto the cap circle). */
 bool view_sector_visible(const struct view_body *b, const struct view_camera *c, double th0,
 			 double th1, double ph0, double ph1, double cap);
+/* (Δlon, Δlat) from the camera's nadir of the view-space direction (θ̃, φ̃), as terrain.vert
+ * maps it (radians; the camera's geodetic latitude taken as spherical). */
+void view_geo_delta(double lat_deg, double th, double ph, double *dlon, double *dlat);
+/* Bounds of the elevation angle (radians, above the camera's horizontal plane) at which
+ * camera c (c->alt: above the ellipsoid) sees the ring points of the sector θ̃ ∈ [th0, th1],
+ * φ̃ ∈ [ph0, ph1]: the least for heights ≥ h, the greatest for heights ≤ h, with a margin
+ * for the samples between. For horizon culling: every line of sight in the sector's
+ * directions meets ground no lower than the least, none of the sector rises above the
+ * greatest. */
+double view_sector_elev_min(const struct view_body *b, const struct view_camera *c, double th0,
+			    double th1, double ph0, double ph1, double h);
+double view_sector_elev_max(const struct view_body *b, const struct view_camera *c, double th0,
+			    double th1, double ph0, double ph1, double h);
 /* ECEF → the camera's ENU frame (rotation only). */
 void view_ecef_to_enu(double lat_deg, double lon_deg, const double v[3], double out[3]);
 

@@ -454,6 +454,43 @@ static void coverage_views(void **state)
 
 /* ---- frustum culling: the same pixels, fewer triangles ---- */
 
+/* Horizon culling's bounds: every ring point of a sector, at any height in [lo, hi], is seen
+ * at an elevation within [view_sector_elev_min(lo), view_sector_elev_max(hi)] — cameras from
+ * 2 m to orbit, near the equator and a pole, sectors from a metre to a continent. */
+static void elevation_bounds_hold(void **state)
+{
+	(void)state;
+	struct view_body b;
+	view_body_init(&b, 6378137.0, 1 / 298.257223563);
+	static const struct view_camera cams[] = {
+		{ -14, -76, 2, 45, -5, 60, 1280, 720 },	  { 60, 10, 120, 0, 0, 60, 1280, 720 },
+		{ -80, 170, 4000, 0, 0, 60, 1280, 720 }, { 5, 5, 3e5, 0, -30, 60, 1280, 720 },
+	};
+	srand(7);
+	for (size_t ci = 0; ci < sizeof cams / sizeof cams[0]; ci++) {
+		const struct view_camera *c = &cams[ci];
+		for (int t = 0; t < 400; t++) {
+			int lv = 2 + rand() % 20;
+			double th0 = clipmap_ring_radius(lv + 1), th1 = clipmap_ring_radius(lv);
+			double ph0 = 2 * M_PI * (rand() % 32) / 32, ph1 = ph0 + 2 * M_PI / 32;
+			double lo = c->alt - 3000 + rand() % 4000, hi = lo + rand() % 3000;
+			double emin = view_sector_elev_min(&b, c, th0, th1, ph0, ph1, lo);
+			double emax = view_sector_elev_max(&b, c, th0, th1, ph0, ph1, hi);
+			for (int k = 0; k < 200; k++) {
+				double u = rand() / (double)RAND_MAX, w = rand() / (double)RAND_MAX;
+				double th = th0 * pow(th1 / th0, u), ph = ph0 + (ph1 - ph0) * w;
+				double h = lo + (hi - lo) * (rand() / (double)RAND_MAX), p[3];
+				view_ring_point(&b, c->lat, c->alt, th, ph, h, p);
+				double e = atan2(p[2], hypot(p[0], p[1]));
+				if (e < emin || e > emax)
+					fail_msg("camera %zu, level %d, h %.0f: elevation %.6f outside "
+						 "[%.6f, %.6f]",
+						 ci, lv, h, e, emin, emax);
+			}
+		}
+	}
+}
+
 static void culling_keeps_pixels(void **state)
 {
 	(void)state;
@@ -477,11 +514,14 @@ static void culling_keeps_pixels(void **state)
 		struct view_camera c;
 		double max_ratio; /* triangles drawn with culling / without, at most */
 	} cases[] = {
-		{ "2 m, at the horizon", { -14, -76, 2, 45, -5, 60, 0, 0 }, 0.8 },
+		{ "2 m, at the horizon", { -14, -76, 2, 45, -5, 60, 0, 0 }, 0.3 },
 		{ "4 km, at the horizon", { -14, -76, 4000, 200, 0, 60, 0, 0 }, 0.4 },
 		{ "100 m, looking up", { 30, 100, 100, 300, 40, 60, 0, 0 }, 0.8 },
 		{ "orbit", { 20, -30, 15e6, 0, -90, 60, 0, 0 }, 1.0 },
 		{ "oblique orbit", { -60, 120, 3e6, 180, -60, 60, 0, 0 }, 0.7 },
+		/* horizon culling: ground behind the ridges in front */
+		{ "30 m, facing ridges", { -14, -76.01, 30, 200, 3, 60, 0, 0 }, 0.5 },
+		{ "100 m, level", { -14, -76, 100, 45, 0, 60, 0, 0 }, 1.0 },
 	};
 	unsigned char *on = xmalloc((size_t)W * H * 4), *off = xmalloc((size_t)W * H * 4);
 	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
@@ -526,6 +566,7 @@ int main(void)
 		cmocka_unit_test(budget_stops_refining),
 		cmocka_unit_test(marker_projects_to_predicted_pixel),
 		cmocka_unit_test(coverage_views),
+		cmocka_unit_test(elevation_bounds_hold),
 		cmocka_unit_test(culling_keeps_pixels),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
