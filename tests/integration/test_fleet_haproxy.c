@@ -539,7 +539,7 @@ static void viewer_survives_its_daemon_killed(void **state)
 		hap_status(e, "decoy", st);
 		ready = strcmp(st, "DOWN") == 0;
 		for (int i = 0; i < NDAEMONS && ready; i++) {
-			char name[8];
+			char name[16];
 			snprintf(name, sizeof name, "d%d", i);
 			hap_status(e, name, st);
 			ready = strcmp(st, "UP") == 0;
