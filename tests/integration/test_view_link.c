@@ -6,7 +6,9 @@
  * writing one --stats line per frame. From those lines, what the user sees:
  *
  * - issue 15: "at 4 Mbit/s the new place's level 2 is drawn within 2 s": asserted (level 2,
- *   or the coarsest level the viewer wants there when that is finer; + LOAD_SLACK_S);
+ *   or the coarsest level the viewer wants there when that is finer; + LOAD_SLACK_S). On
+ *   this small planet levels 0-2 of the two places share most of their tiles; the printed
+ *   per-level times show the finer ones (level 3 at ~3.5 s);
  * - issue 15: "every wanted level within 5 s (with the lossy encodings)": those encodings do
  *   not exist yet, and with zstd tiles of ~40 KB the viewer's want-set at this place is
  *   ~1.2 MB a level: the link needs 7-9 s for it. So the time is printed against the 5 s, and
@@ -72,16 +74,8 @@ static int setup(void **state)
 	}
 	skip_why[0] = 0;
 	shaped_link_on_fini(stop_daemon);
-	char tcp[64];
-	snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", L.addr);
-	const char *set[] = { tcp, "engine.workers = 2", "engine.cache_mb = 256",
-			      "session.max_rate = 1000", "log.level = info", NULL };
-	const struct daemon_env_conf conf = { .set = set, .token = TOKEN };
-	if (daemon_env_init(&E, "clipmapd-vlink") ||
-	    daemon_env_planet_text(&E, "test.ini", shaped_link_planet, NULL) ||
-	    daemon_env_start(&E, &conf, err)) {
+	if (shaped_link_daemon_start(&L, &E, "clipmapd-vlink", TOKEN, NULL, err)) {
 		fprintf(stderr, "test_view_link: %s\n", err);
-		daemon_env_fini(&E);
 		shaped_link_fini(&L);
 		return -1;
 	}
