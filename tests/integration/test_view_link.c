@@ -20,7 +20,11 @@
  *   holding still stays complete: ≥ 90 % of those);
  * - issue 15: "its HUD/--stats show link rate, RTT and queue delay": every frame's link_bps,
  *   rtt_ms and queue_ms are present; the highest rate is within a factor of two of the link's,
- *   the least RTT at least the link's.
+ *   the least RTT at least the link's; and the mean queue delay the viewer sees is below
+ *   QUEUE_MAX_MS: the daemon keeps ~100 ms of the link's rate queued (docs/LINKS.md), and
+ *   measured 110-130 ms here, where the daemon's old 8 MiB queue (send_queue_ms = 0,
+ *   bbr = false) made it 3.6-3.7 s — with it this test fails only here (its complete frame came
+ *   at 13.5 s, inside the hold, the levels 2.5-5 s later than with the window).
  *
  * Skips, saying why, where namespaces cannot be made or there is no GL context.
  */
@@ -48,6 +52,7 @@
 #define LOAD_SLACK_S 2 /* scheduling and llvmpipe on a loaded 2-core machine */
 #define COARSE_S (2.0 + LOAD_SLACK_S)
 #define ISSUE_FULL_S 5.0 /* issue 15's figure for every wanted level (lossy encodings) */
+#define QUEUE_MAX_MS 1000 /* the viewer's mean queue_ms, at most */
 #define ALT_M 150000 /* metres above the ground (the planet's radius is 1000 km): levels 0-5 */
 
 static struct daemon_env E;
@@ -230,6 +235,7 @@ static void jump_over_4mbit(void **state)
 	assert_true(complete_held * 10 >= held * 9);
 	assert_true(max_bps >= rate / 2 && max_bps <= rate * 2);
 	assert_true(min_rtt >= DELAY_MS - 1 && min_rtt < 1000);
+	assert_true(nq > 0 && sum_q / nq <= QUEUE_MAX_MS);
 }
 
 int main(void)
