@@ -565,6 +565,7 @@ int view_source_net_create_wait(const struct net_opts *o, const char *planet, do
 	ns->base.ops = &ops;
 	ns->c = c;
 	ns->seed = seed;
+	ns->up_ms = clock_now_ms();
 	ns->planet_id = m.opened.planet_id;
 	ns->target = xstrdup(o->hostport ? o->hostport : o->socket_path);
 	ns->token_file = dup_or_null(o->token_file);
