@@ -111,6 +111,10 @@ static void jump_over_4mbit(void **state)
 		fprintf(stderr, "skipped: %s\n", skip_why);
 		skip();
 	}
+	if (!daemon_env_built(&E, "clipmapview")) {
+		fprintf(stderr, "skipped: build/clipmapview was not built\n");
+		skip();
+	}
 	char err[256];
 	if (shaped_link_shape(&L, RATE_KBIT, DELAY_MS, err))
 		fail_msg("%s", err);
