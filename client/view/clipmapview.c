@@ -558,8 +558,11 @@ static void stats_line(FILE *f, int frame, const struct view_frame_stats *s,
 {
 	if (lr->net) {
 		char lt[64];
-		fprintf(f, "{\"t\":%.3f,\"link\":\"%s\",\"reconnects\":%u,", clock_now_s() - lr->t0,
-			link_text(&lr->now, lt, sizeof lt), lr->now.reconnects);
+		fprintf(f, "{\"t\":%.3f,\"link\":\"%s\",\"reconnects\":%u,\"link_bps\":%.0f,"
+			"\"link_bytes\":%llu,\"rtt_ms\":%.1f,\"queue_ms\":%.1f,", clock_now_s() - lr->t0,
+			link_text(&lr->now, lt, sizeof lt), lr->now.reconnects, lr->now.rate_bps,
+			(unsigned long long)lr->now.rx_bytes,
+			lr->now.rtt_ms, lr->now.queue_ms);
 	} else {
 		fprintf(f, "{\"t\":%.3f,", clock_now_s() - lr->t0);
 	}
@@ -637,13 +640,14 @@ static void hud_frame(struct hud *h, struct gl_window *w, const char *title,
 	if (now - h->since < 0.5)
 		return;
 	double dt = now - h->since;
-	char text[384], link[96] = "";
+	char text[448], link[128] = "";
 	if (lr->net && !lr->now.up)
 		snprintf(link, sizeof link, " | reconnecting (attempt %u)",
 			 lr->now.attempt ? lr->now.attempt : 1);
-	else if (lr->net && lr->now.reconnects)
-		snprintf(link, sizeof link, " | %u reconnect%s", lr->now.reconnects,
-			 lr->now.reconnects == 1 ? "" : "s");
+	else if (lr->net)
+		snprintf(link, sizeof link, " | link %.2f Mbit/s, rtt %.0f ms, queue %.0f ms%s",
+			 lr->now.rate_bps * 1e-6, lr->now.rtt_ms, lr->now.queue_ms,
+			 lr->now.reconnects ? ", reconnected" : "");
 	snprintf(text, sizeof text,
 		 "%s | %.1f fps | levels %d-%d (%d drawn, texels %d) of %d-%d%s | %.0f tiles/s"
 		 " | %.2f MB/s | %.4f, %.4f, %.0f m%s",

@@ -30,6 +30,9 @@
 #define BACKOFF_BASE_MS 100
 #define BACKOFF_CAP_MS 5000
 #define ATTEMPT_MS 5000 /* an attempt (connect, handshake, OPEN) that takes longer is given up */
+#define RX_SLOT_MS 100	 /* the received-bytes rate: RX_SLOTS slots of RX_SLOT_MS, */
+#define RX_SLOTS 10	 /* i.e. over the last second */
+#define PING_MS 1000	 /* a STATS request this often: its round trip is the RTT figure */
 
 enum link_state { LINK_UP = 0, LINK_WAIT, LINK_CONNECTING, LINK_OPENING };
 
@@ -59,6 +62,15 @@ struct net_source {
 	double lost_ms, next_ms, attempt_ms; /* clock_now_ms: lost, next attempt, this one began */
 	char why[256];	    /* why the link is down: the loss, then the last attempt's failure */
 	char lost_why[256]; /* why it was lost last */
+	/* The link's figures: tile bytes received per RX_SLOT_MS slot (the newest rx_slot,
+	 * counted in clock_now_ms / RX_SLOT_MS), and the round trips of STATS requests. */
+	uint64_t rx[RX_SLOTS];
+	long rx_slot;
+	uint64_t rx_total; /* since the start, over every connection */
+	double up_ms;			  /* when the link came up */
+	uint32_t ping_req;		  /* the STATS request awaited (0: none) */
+	double ping_ms, next_ping_ms;	  /* sent at; the next one due */
+	double rtt_min_ms, rtt_last_ms;	  /* 0: none yet on this connection */
 	void *spare[8]; /* released buffers of spare_len bytes, for the next tiles */
 	int nspare;
 	size_t spare_len;
@@ -91,6 +103,47 @@ static void got_add(struct net_source *ns, uint8_t layer, const struct tile_key 
 		ns->got = xrealloc(ns->got, ns->cap_got * sizeof *ns->got);
 	}
 	ns->got[ns->n_got++] = got_of(layer, k);
+}
+
+static void link_down(struct net_source *ns, const char *why);
+
+/* Clears the slots that ended since the newest one, now in slot `slot`. */
+static void rx_advance(struct net_source *ns, long slot)
+{
+	if (slot - ns->rx_slot >= RX_SLOTS)
+		memset(ns->rx, 0, sizeof ns->rx);
+	else
+		for (long i = ns->rx_slot + 1; i <= slot; i++)
+			ns->rx[i % RX_SLOTS] = 0;
+	if (slot > ns->rx_slot)
+		ns->rx_slot = slot;
+}
+
+static void rx_count(struct net_source *ns, uint64_t bytes)
+{
+	long slot = (long)(clock_now_ms() / RX_SLOT_MS);
+	rx_advance(ns, slot);
+	ns->rx[slot % RX_SLOTS] += bytes;
+	ns->rx_total += bytes;
+}
+
+/* A STATS request when one is due and none is awaited: its round trip (the link's RTT plus
+ * what queues before the answer: the daemon's send queue, the kernel's, the bottleneck's) is
+ * the RTT figure, the least of them the link's own. */
+static void ping(struct net_source *ns)
+{
+	double now = clock_now_ms();
+	if (ns->ping_req || now < ns->next_ping_ms)
+		return;
+	uint32_t req = net_next_req(ns->c);
+	struct proto_msg m = { .type = PROTO_STATS_REQ, .stats_req = { .req = req } };
+	if (net_send(ns->c, &m, ns->err)) {
+		link_down(ns, ns->err);
+		return;
+	}
+	ns->ping_req = req;
+	ns->ping_ms = now;
+	ns->next_ping_ms = now + PING_MS;
 }
 
 /* Sends the kept want-set: all of it (fresh) or, after a reconnect, less what was delivered
@@ -134,6 +187,8 @@ static void link_down(struct net_source *ns, const char *why)
 		snprintf(ns->lost_why, sizeof ns->lost_why, "%s", why);
 	}
 	ns->state = LINK_WAIT;
+	ns->ping_req = 0; /* the next connection measures afresh */
+	ns->rtt_min_ms = ns->rtt_last_ms = 0;
 	snprintf(ns->why, sizeof ns->why, "%s", why);
 	ns->next_ms = now + net_backoff_ms(ns->attempt + 1, BACKOFF_BASE_MS, BACKOFF_CAP_MS,
 					   &ns->seed);
@@ -220,6 +275,8 @@ static void link_step(struct net_source *ns)
 		rc = step_opening(ns);
 		if (rc == 0) {
 			ns->state = LINK_UP;
+			ns->up_ms = now;
+			ns->next_ping_ms = now;
 			ns->reconnects++;
 			ns->last_attempts = ns->attempt;
 			ns->last_down_ms = now - ns->lost_ms;
@@ -297,6 +354,9 @@ static int ns_poll(struct view_source *s, struct view_tile *out)
 		if (ns->state != LINK_UP)
 			return 0;
 	}
+	ping(ns);
+	if (ns->state != LINK_UP)
+		return 0;
 	for (;;) {
 		struct proto_msg m;
 		int rc = net_recv(ns->c, &m, 0, ns->err);
@@ -305,6 +365,15 @@ static int ns_poll(struct view_source *s, struct view_tile *out)
 		if (rc) {
 			link_down(ns, ns->err);
 			return 0;
+		}
+		if (m.type == PROTO_TILE)
+			rx_count(ns, PROTO_HDR + (uint64_t)m.tile.payload_len);
+		if (m.type == PROTO_STATS && ns->ping_req && m.stats.req == ns->ping_req) {
+			double rtt = clock_now_ms() - ns->ping_ms;
+			ns->rtt_last_ms = rtt;
+			if (ns->rtt_min_ms <= 0 || rtt < ns->rtt_min_ms)
+				ns->rtt_min_ms = rtt;
+			ns->ping_req = 0;
 		}
 		if (m.type == PROTO_TILE && m.tile.planet_id == ns->planet_id) {
 			take_tile(ns, &m, out);
@@ -412,8 +481,18 @@ static const struct view_source_ops ops = {
 
 void view_source_net_link(const struct view_source *s, struct view_net_link *out)
 {
-	const struct net_source *ns = (const struct net_source *)s;
+	struct net_source *ns = (struct net_source *)s; /* the rate's slots move on */
 	bool up = ns->state == LINK_UP;
+	double now = clock_now_ms();
+	rx_advance(ns, (long)(now / RX_SLOT_MS));
+	uint64_t rx = 0;
+	for (int i = 0; i < RX_SLOTS; i++)
+		rx += ns->rx[i];
+	/* the slots span the last second, less what the current slot has not reached yet and
+	 * what came before the link was up */
+	double span = (RX_SLOTS - 1) * RX_SLOT_MS + (now - (double)ns->rx_slot * RX_SLOT_MS);
+	if (now - ns->up_ms < span)
+		span = now - ns->up_ms;
 	unsigned failed = up ? 0 : ns->state == LINK_WAIT ? ns->attempt : ns->attempt - 1;
 	*out = (struct view_net_link){ .up = up, .attempt = up ? 0 : ns->attempt, .failed = failed,
 				       .reconnects = ns->reconnects, .lost = ns->lost,
@@ -421,7 +500,13 @@ void view_source_net_link(const struct view_source *s, struct view_net_link *out
 				       .why = up ? "" : ns->why, .lost_why = ns->lost_why,
 				       .peer = ns->target,
 				       .last_attempts = ns->last_attempts,
-				       .last_down_s = ns->last_down_ms / 1e3 };
+				       .last_down_s = ns->last_down_ms / 1e3,
+				       .rate_bps = up && span > 0 ? (double)rx * 8e3 / span : 0,
+				       .rx_bytes = ns->rx_total,
+				       .rtt_ms = up ? ns->rtt_min_ms : 0,
+				       .queue_ms = up && ns->rtt_last_ms > 0
+							   ? ns->rtt_last_ms - ns->rtt_min_ms
+							   : 0 };
 }
 
 static char *dup_or_null(const char *s)
@@ -480,6 +565,7 @@ int view_source_net_create_wait(const struct net_opts *o, const char *planet, do
 	ns->base.ops = &ops;
 	ns->c = c;
 	ns->seed = seed;
+	ns->up_ms = clock_now_ms();
 	ns->planet_id = m.opened.planet_id;
 	ns->target = xstrdup(o->hostport ? o->hostport : o->socket_path);
 	ns->token_file = dup_or_null(o->token_file);

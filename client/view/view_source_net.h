@@ -46,8 +46,16 @@ struct view_net_link {
 	const char *peer;    /* the target (socket or HOST:PORT), borrowed */
 	unsigned last_attempts; /* the last reconnect: attempts it took */
 	double last_down_s;	/* and how long the link was down */
+	/* What the viewer measures of the link while it is up (0: not yet, or down): */
+	double rate_bps; /* tile bytes received over the last second, in bits per second */
+	uint64_t rx_bytes; /* tile bytes received since the start (each TILE frame's encoded
+			    * texels and 12-byte frame header) */
+	double rtt_ms;	 /* the least round trip of a STATS request (one a second) */
+	double queue_ms; /* the last such round trip less the least: what waits ahead of an
+			  * answer in the daemon's and the link's queues */
 };
-/* s must come from view_source_net_create*. */
+/* s must come from view_source_net_create*. (Not const in effect: the rate's window moves
+ * on to now.) */
 void view_source_net_link(const struct view_source *s, struct view_net_link *out);
 
 #endif

@@ -60,17 +60,9 @@ static int setup(void **state)
 	}
 	skip_why[0] = 0;
 	shaped_link_on_fini(stop_daemon);
-	char tcp[64];
-	snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", L.addr);
-	const char *set[] = { tcp, "engine.workers = 2", "engine.cache_mb = 256",
-			      "session.max_rate = 1000", "session.raw_above_mbit = 10",
-			      "log.level = info", NULL };
-	const struct daemon_env_conf conf = { .set = set, .token = TOKEN };
-	if (daemon_env_init(&E, "clipmapd-link") ||
-	    daemon_env_planet_text(&E, "test.ini", shaped_link_planet, NULL) ||
-	    daemon_env_start(&E, &conf, err)) {
+	const char *extra[] = { "session.raw_above_mbit = 10", NULL };
+	if (shaped_link_daemon_start(&L, &E, "clipmapd-link", TOKEN, extra, err)) {
 		fprintf(stderr, "test_link_shaped: %s\n", err);
-		daemon_env_fini(&E);
 		shaped_link_fini(&L);
 		return -1;
 	}

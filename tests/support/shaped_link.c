@@ -361,6 +361,28 @@ const char shaped_link_planet[] =
 	"[layer height]\nnode = base\nformat = f32\n"
 	"[layer color]\nnode = tint\nformat = rgba8\n";
 
+int shaped_link_daemon_start(const struct shaped_link *sl, struct daemon_env *e, const char *tag,
+			     const char *token, const char *const *extra, char why[256])
+{
+	char tcp[64];
+	snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", sl->addr);
+	const char *set[16] = { tcp, "engine.workers = 2", "engine.cache_mb = 256",
+				"session.max_rate = 1000", "log.level = info" };
+	for (int i = 0, n = 5; extra && i < 8 && extra[i]; i++)
+		set[n++] = extra[i];
+	const struct daemon_env_conf conf = { .set = set, .token = token };
+	why[0] = '\0';
+	if (daemon_env_init(e, tag) ||
+	    daemon_env_planet_text(e, "test.ini", shaped_link_planet, NULL) ||
+	    daemon_env_start(e, &conf, why)) {
+		if (!why[0])
+			err_set(why, "cannot prepare the daemon's directory for %s", tag);
+		daemon_env_fini(e);
+		return -1;
+	}
+	return 0;
+}
+
 struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
 				     uint32_t *pid, char why[256])
 {

@@ -66,6 +66,13 @@ struct daemon_env;
 struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
 				     uint32_t *pid, char why[256]);
 
+/* Starts clipmapd in e (daemon_env_init with tag, the planet above as "test", the token)
+ * listening on sl->addr, with 2 workers, a 256 MB cache, max_rate 1000, log level info and
+ * the config lines in extra (NULL-terminated, may be NULL; at most 8). Returns 0, or -1 with
+ * why filled and e finished. */
+int shaped_link_daemon_start(const struct shaped_link *sl, struct daemon_env *e, const char *tag,
+			     const char *token, const char *const *extra, char why[256]);
+
 /* The jump scenario: the planet's layers 0 and 1, VISIBLE. */
 struct link_jump_plan {
 	int warm_ms;	     /* streaming A before the jump */
