@@ -32,7 +32,7 @@
 #define ATTEMPT_MS 5000 /* an attempt (connect, handshake, OPEN) that takes longer is given up */
 #define RX_SLOT_MS 100	 /* the received-bytes rate: RX_SLOTS slots of RX_SLOT_MS, */
 #define RX_SLOTS 10	 /* i.e. over the last second */
-#define PING_MS 1000	 /* a STATS request this often: its round trip is the RTT figure */
+#define PING_MS 1000	 /* a LIST_PLANETS this often: its round trip is the RTT figure */
 
 enum link_state { LINK_UP = 0, LINK_WAIT, LINK_CONNECTING, LINK_OPENING };
 
@@ -63,12 +63,12 @@ struct net_source {
 	char why[256];	    /* why the link is down: the loss, then the last attempt's failure */
 	char lost_why[256]; /* why it was lost last */
 	/* The link's figures: tile bytes received per RX_SLOT_MS slot (the newest rx_slot,
-	 * counted in clock_now_ms / RX_SLOT_MS), and the round trips of STATS requests. */
+	 * counted in clock_now_ms / RX_SLOT_MS), and the round trips of LIST_PLANETS requests. */
 	uint64_t rx[RX_SLOTS];
 	long rx_slot;
 	uint64_t rx_total; /* since the start, over every connection */
 	double up_ms;			  /* when the link came up */
-	uint32_t ping_req;		  /* the STATS request awaited (0: none) */
+	uint32_t ping_req;		  /* the LIST_PLANETS awaited (0: none) */
 	double ping_ms, next_ping_ms;	  /* sent at; the next one due */
 	double rtt_min_ms, rtt_last_ms;	  /* 0: none yet on this connection */
 	void *spare[8]; /* released buffers of spare_len bytes, for the next tiles */
@@ -127,16 +127,18 @@ static void rx_count(struct net_source *ns, uint64_t bytes)
 	ns->rx_total += bytes;
 }
 
-/* A STATS request when one is due and none is awaited: its round trip (the link's RTT plus
+/* A LIST_PLANETS when one is due and none is awaited: its round trip (the link's RTT plus
  * what queues before the answer: the daemon's send queue, the kernel's, the bottleneck's) is
- * the RTT figure, the least of them the link's own. */
+ * the RTT figure, the least of them the link's own. LIST_PLANETS rather than STATS: its answer
+ * is a few hundred bytes whatever the daemon serves, where STATS grows with every session
+ * (a fleet of viewers asking once a second would cost the loop O(sessions²) a second). */
 static void ping(struct net_source *ns)
 {
 	double now = clock_now_ms();
 	if (ns->ping_req || now < ns->next_ping_ms)
 		return;
 	uint32_t req = net_next_req(ns->c);
-	struct proto_msg m = { .type = PROTO_STATS_REQ, .stats_req = { .req = req } };
+	struct proto_msg m = { .type = PROTO_LIST_PLANETS, .list_planets = { .req = req } };
 	if (net_send(ns->c, &m, ns->err)) {
 		link_down(ns, ns->err);
 		return;
@@ -368,7 +370,7 @@ static int ns_poll(struct view_source *s, struct view_tile *out)
 		}
 		if (m.type == PROTO_TILE)
 			rx_count(ns, PROTO_HDR + (uint64_t)m.tile.payload_len);
-		if (m.type == PROTO_STATS && ns->ping_req && m.stats.req == ns->ping_req) {
+		if (m.type == PROTO_PLANETS && ns->ping_req && m.planets.req == ns->ping_req) {
 			double rtt = clock_now_ms() - ns->ping_ms;
 			ns->rtt_last_ms = rtt;
 			if (ns->rtt_min_ms <= 0 || rtt < ns->rtt_min_ms)
