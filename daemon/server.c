@@ -29,6 +29,7 @@
 #include <string.h>
 #include <netinet/in.h>
 #include <sys/epoll.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/timerfd.h>
 #include <unistd.h>
@@ -72,6 +73,7 @@ struct session_link {
 	int fd;
 	bool in_pump, dead;
 	bool preauth, is_unix;
+	bool heard; /* read once before an eviction (its HELLO may be waiting) */
 	struct sockaddr_storage peer;		  /* TCP: the per-peer cap compares addresses */
 	struct session_link *pre_prev, *pre_next; /* its pre-auth pool, oldest first */
 	struct session_link *prev, *next;	  /* the live sessions */
@@ -830,8 +832,22 @@ static void evict(struct server *srv, struct session_link *victim, const struct 
 	session_close(victim->s, why);
 }
 
+/* Before victim is evicted: when its socket holds bytes the loop has not read yet (a client
+ * whose HELLO arrived in the same instant as a flood of connections), reads them first, once.
+ * Returns true when it did (the pools may have changed: the caller looks again). */
+static bool hear_first(struct session_link *victim)
+{
+	int n = 0;
+	if (victim->heard || ioctl(victim->fd, FIONREAD, &n) < 0 || n <= 0)
+		return false;
+	victim->heard = true;
+	session_on_event(victim->s, EPOLLIN); /* authenticates it, closes it, or neither */
+	return true;
+}
+
 /* Brings the pre-auth pool of a new connection from peer back within its caps, closing the
- * oldest connections first (the new one is the newest: it stays). */
+ * oldest connections first (the new one is the newest: it stays). A connection whose HELLO
+ * waits unread in its socket is heard before it can be chosen. */
 static void enforce_preauth(struct server *srv, const struct listener *l,
 			    const struct sockaddr_storage *peer)
 {
@@ -848,11 +864,13 @@ static void enforce_preauth(struct server *srv, const struct listener *l,
 			}
 			if (same <= srv->conf->max_preauth_per_peer)
 				break;
-			evict(srv, oldest, l, "max_preauth_per_peer");
+			if (!hear_first(oldest))
+				evict(srv, oldest, l, "max_preauth_per_peer");
 		}
 	}
 	while (srv->npre[k] > (size_t)srv->conf->max_preauth && srv->pre_head[k])
-		evict(srv, srv->pre_head[k], l, "max_preauth");
+		if (!hear_first(srv->pre_head[k]))
+			evict(srv, srv->pre_head[k], l, "max_preauth");
 }
 
 static void on_accept(struct server *srv, struct listener *l)

@@ -10,6 +10,7 @@
 #   FLEET_OUT     directory for configs, sockets, logs, stats (default: a temporary one,
 #                 removed at the end unless FLEET_KEEP=1)
 #   FLEET_VIEWERS viewers (default 4)       FLEET_SECONDS  flight length (default 20)
+#   FLEET_DAEMONS clipmapd behind HAProxy (default 3; 1 for the single-daemon peer)
 #   FLEET_KILL    0: kill no daemon (default 1)   FLEET_KILL_AT  seconds in (default 7)
 #   FLEET_PORT    also bind HAProxy's frontend on 127.0.0.1:PORT (default: Unix socket only)
 #   FLEET_PLANET  planet file served (default conf/planets/procedural.ini)
@@ -20,7 +21,7 @@ set -eu
 BUILD=${1:-build}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 case "$BUILD" in /*) ;; *) BUILD="$ROOT/$BUILD" ;; esac
-NDAEMONS=3
+NDAEMONS=${FLEET_DAEMONS:-3}
 VIEWERS=${FLEET_VIEWERS:-4}
 SECONDS_=${FLEET_SECONDS:-20}
 KILL=${FLEET_KILL:-1}
@@ -280,19 +281,23 @@ done
 echo
 printf '%-8s %-10s %18s %12s %16s %16s\n' daemon state "viewer sessions" "tiles sent" \
 	"tiles generated" "from the fleet"
-i=1
+i=1 GEN_ALL=0 RHIT_ALL=0
 while [ $i -le $NDAEMONS ]; do
 	stot=$(hastat $i 8)
 	if [ $i = "$KILLED" ]; then
+		GEN_ALL=$((GEN_ALL + ${K_GEN:-0})) RHIT_ALL=$((RHIT_ALL + ${K_RHIT:-0}))
 		printf '%-8s %-10s %18s %12s %16s %16s\n' "d$i" "killed -9" "${stot:-?}" "$K_SENT" \
 			"$K_GEN" "${K_RHIT:--}"
 	else
 		rhit=$(dstat $i store.redis.hits)
+		gen=$(dstat $i sched.generated)
+		GEN_ALL=$((GEN_ALL + ${gen:-0})) RHIT_ALL=$((RHIT_ALL + ${rhit:-0}))
 		printf '%-8s %-10s %18s %12s %16s %16s\n' "d$i" "$(hastat $i 18)" "${stot:-?}" \
-			"$(dstat $i tiles.sent)" "$(dstat $i sched.generated)" "${rhit:--}"
+			"$(dstat $i tiles.sent)" "${gen:-?}" "${rhit:--}"
 	fi
 	i=$((i + 1))
 done
+printf '%-8s %-10s %18s %12s %16s %16s\n' fleet "" "" "" "$GEN_ALL" "$RHIT_ALL"
 echo "(viewer sessions: HAProxy's count, health checks not included; tiles generated: every"
 echo " node's tiles, intermediate ones included; from the fleet: layer tiles this daemon read"
 if [ "$FLEET_REDIS" = 1 ]; then
@@ -303,11 +308,12 @@ else
 fi
 echo
 printf '%-8s %8s %10s %11s %6s  %s\n' viewer frames complete reconnects exit "last link state"
-v=1
+v=1 FRAMES_ALL=0 COMPLETE_ALL=0
 while [ $v -le "$VIEWERS" ]; do
 	f="$OUT/v$v.jsonl"
 	frames=$(wc -l < "$f" 2>/dev/null || echo 0)
 	complete=$(grep -c '"complete":true' "$f" 2>/dev/null || true)
+	FRAMES_ALL=$((FRAMES_ALL + frames)) COMPLETE_ALL=$((COMPLETE_ALL + ${complete:-0}))
 	rec=$(tail -n 1 "$f" 2>/dev/null | sed -n 's/.*"reconnects":\([0-9]*\).*/\1/p')
 	link=$(tail -n 1 "$f" 2>/dev/null | sed -n 's/.*"link":"\([^"]*\)".*/\1/p')
 	eval "rc=\$VRC$v"
@@ -315,6 +321,7 @@ while [ $v -le "$VIEWERS" ]; do
 		"${link:-?}"
 	v=$((v + 1))
 done
+printf '%-8s %8s %10s\n' all "$FRAMES_ALL" "$COMPLETE_ALL"
 echo
 [ $status -eq 0 ] || { echo "fleet: a viewer failed; its log is in $OUT/v*.log" >&2; KEEP=1; }
 exit $status
