@@ -240,7 +240,9 @@ static void test_ctl_thin(void **state)
 	print_message("clipmapctl: %d shared libraries, %d of them GDAL/OpenImageIO\n", nlibs,
 		      heavy);
 	assert_int_equal(heavy, 0);
-	assert_true(nlibs < 20);
+	/* about 16 (GnuTLS brings nettle, hogweed, gmp, p11-kit, tasn1, idn2, unistring; a
+	 * sanitizer build adds its runtimes) against ~260 with GDAL and OpenImageIO */
+	assert_true(nlibs < 28);
 	/* the offline commands still work through it */
 	const char *layers[] = { "layers", "@P", NULL };
 	assert_int_equal(run(e, CTL, layers, out, sizeof out), 0);

