@@ -150,13 +150,7 @@ static uint64_t stat_of(struct net_conn *c, const char *key)
 static uint32_t block(struct proto_want_entry *w, uint32_t n, int ly, uint32_t x0, uint32_t y0,
 		      uint32_t wd, uint32_t h)
 {
-	for (uint32_t y = y0; y < y0 + h; y++)
-		for (uint32_t x = x0; x < x0 + wd; x++)
-			for (uint8_t l = 0; l < 2 && n < MAXW; l++)
-				w[n++] = (struct proto_want_entry){
-					.layer = l, .cls = PROTO_CLASS_VISIBLE, .lx = (uint8_t)(ly + 1),
-					.ly = (uint8_t)ly, .x = x % (2u << ly), .y = y };
-	return n;
+	return net_want_block(w, n, MAXW, ly, x0, y0, wd, h);
 }
 
 /* The tile in-process, for comparison (owned). */

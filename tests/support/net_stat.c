@@ -28,3 +28,15 @@ int net_stat_u64(struct net_conn *c, const char *key, uint64_t *out, char err[25
 		snprintf(err, 256, "no stat %s", key);
 	return rc;
 }
+
+uint32_t net_want_block(struct proto_want_entry *w, uint32_t n, uint32_t cap, int ly,
+			uint32_t x0, uint32_t y0, uint32_t wd, uint32_t h)
+{
+	for (uint32_t y = y0; y < y0 + h; y++)
+		for (uint32_t x = x0; x < x0 + wd; x++)
+			for (uint8_t l = 0; l < 2 && n < cap; l++)
+				w[n++] = (struct proto_want_entry){
+					.layer = l, .cls = PROTO_CLASS_VISIBLE, .lx = (uint8_t)(ly + 1),
+					.ly = (uint8_t)ly, .x = x % (2u << ly), .y = y };
+	return n;
+}
