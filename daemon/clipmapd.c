@@ -102,8 +102,8 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 		{ same_str(c->store_redis_password, nc->store_redis_password),
 		  "[store] redis_password" },
 		{ c->store_redis_lease_ms == nc->store_redis_lease_ms, "[store] redis_lease_ms" },
-		{ same_str(c->tls_cert, nc->tls_cert), "[tls] cert" },
-		{ same_str(c->tls_key, nc->tls_key), "[tls] key" },
+		/* turning TLS on or off changes the listeners; new files are reloaded */
+		{ !c->tls_cert == !nc->tls_cert, "[tls] cert" },
 	};
 	for (size_t i = 0; i < sizeof k / sizeof k[0]; i++)
 		if (!k[i].same)
@@ -111,10 +111,32 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 				k[i].key, c->path);
 }
 
+/* [tls] cert and key read again (a renewed certificate, or new paths): new TCP connections
+ * get them, open ones keep theirs. Files that do not load change nothing. */
+static void reload_tls(struct daemon *d, struct conf *c, struct conf *nc)
+{
+	char err[256], warn[256];
+	int rc = server_reload_tls(d->srv, nc->tls_cert, nc->tls_key, err, warn);
+	if (rc) {
+		log_msg(LOG_ERROR, "reload: %s; the listeners keep the running certificate", err);
+		return;
+	}
+	if (warn[0])
+		log_msg(LOG_WARN, "reload: %s", warn);
+	char *t = c->tls_cert; /* swapped: nc frees the old ones */
+	c->tls_cert = nc->tls_cert;
+	nc->tls_cert = t;
+	t = c->tls_key;
+	c->tls_key = nc->tls_key;
+	nc->tls_key = t;
+	log_msg(LOG_INFO, "reload: TLS certificate %s loaded for new connections", c->tls_cert);
+}
+
 /* Re-reads clipmapd.conf and applies the keys that can change while running: [log] level,
  * [engine] planets and strict_planets, [listen] max_sessions, max_preauth, max_preauth_per_peer,
  * handshake_timeout, frame_timeout, [session] max_want, max_rate, max_pending_kb,
- * send_queue_ms, bbr, raw_above_mbit, max_frame_kb, max_jobs. The others keep their running
+ * send_queue_ms, bbr, raw_above_mbit, max_frame_kb, max_jobs, [tls] cert and key (read
+ * again even when unchanged: a renewed certificate). The others keep their running
  * values (a warning names each one that changed). A file that does not load changes nothing. */
 static void reload_conf(struct daemon *d)
 {
@@ -144,6 +166,8 @@ static void reload_conf(struct daemon *d)
 	c->raw_above_mbit = nc.raw_above_mbit;
 	c->max_frame = nc.max_frame;
 	c->max_jobs = nc.max_jobs;
+	if (c->tls_cert && nc.tls_cert)
+		reload_tls(d, c, &nc);
 	conf_fini(&nc);
 	log_set_level(c->log_level);
 	server_conf_changed(d->srv);
@@ -302,7 +326,7 @@ static int check_tls(const struct conf *c, char err[256])
 		return 0;
 	struct tls_server *t;
 	char e2[256], warn[256];
-	int rc = tls_server_create(c->tls_cert, c->tls_key, &t, e2, warn);
+	int rc = tls_server_create(c->tls_cert, c->tls_key, NULL, &t, e2, warn);
 	if (rc) {
 		err_set(err, "%s: %s", c->path, e2);
 		return rc;

@@ -103,6 +103,8 @@ struct server {
 	struct readyq ready;
 	struct listener ls[LISTEN_MAX];
 	struct tls_server *tls; /* [tls]: the TCP listeners' credentials; NULL: plain */
+	struct tls_tally tls_tally; /* their handshakes, across reloads */
+	uint64_t tls_reloads;
 	struct evsrc ls_ev[LISTEN_MAX];
 	int nls;
 	struct watch watches[MAX_WATCH];
@@ -498,6 +500,11 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "tiles.relooked", c->tiles_relooked);
 	stat_u(&b, "tiles.rewanted", c->tiles_rewanted);
 	stat_u(&b, "sessions.pauses", c->pauses);
+	if (srv->tls) {
+		stat_u(&b, "tls.handshakes", srv->tls_tally.handshakes);
+		stat_u(&b, "tls.failed", srv->tls_tally.failed);
+		stat_u(&b, "tls.reloads", srv->tls_reloads);
+	}
 	stat_u(&b, "tiles.recalled", c->tiles_recalled);
 	stat_u(&b, "bytes.recalled", c->bytes_recalled);
 	stat_u(&b, "planets", srv->planets->n);
@@ -672,7 +679,8 @@ int server_create(const struct conf *c, struct sched *s, struct cache *cache,
 	int rc;
 	if ((rc = load_token(srv, err)) || (rc = open_loop_fds(srv, err)))
 		goto fail;
-	if (c->tls_cert && (rc = tls_server_create(c->tls_cert, c->tls_key, &srv->tls, err, NULL)))
+	if (c->tls_cert && (rc = tls_server_create(c->tls_cert, c->tls_key, &srv->tls_tally,
+						   &srv->tls, err, NULL)))
 		goto fail;
 	rc = listen_open(c, srv->ls, &srv->nls, err);
 	if (rc)
@@ -698,6 +706,26 @@ fail:
 	srv->planets = NULL; /* not taken on failure */
 	server_destroy(srv);
 	return rc;
+}
+
+int server_reload_tls(struct server *srv, const char *cert, const char *key, char err[256],
+		      char warn[256])
+{
+	if (!srv->tls) {
+		err_set(err, "the listeners were started without TLS");
+		return -EINVAL;
+	}
+	struct tls_server *t;
+	int rc = tls_server_create(cert, key, &srv->tls_tally, &t, err, warn);
+	if (rc)
+		return rc;
+	for (int i = 0; i < srv->nls; i++)
+		if (srv->ls[i].tls)
+			srv->ls[i].tls = t;
+	tls_server_destroy(srv->tls); /* freed when the last connection that began with it ends */
+	srv->tls = t;
+	srv->tls_reloads++;
+	return 0;
 }
 
 static void close_listeners(struct server *srv)

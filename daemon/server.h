@@ -48,6 +48,12 @@ void server_set_planets(struct server *srv, struct planet_set *ps);
  * max_rate, max_pending, max_frame, max_jobs), max_sessions, the pre-auth caps and the
  * handshake and frame timeouts follow it from now on. Loop thread. */
 void server_conf_changed(struct server *srv);
+/* Loads [tls] cert and key again (the same paths or new ones) for the TCP listeners: new
+ * connections get the new certificate, open ones keep theirs. On failure nothing changes and
+ * err says why (-errno; -EINVAL also when the server was started without TLS). warn as
+ * tls_server_create's. Loop thread. */
+int server_reload_tls(struct server *srv, const char *cert, const char *key, char err[256],
+		      char warn[256]);
 /* The current planet set (borrowed: valid until the next server_set_planets). */
 const struct planet_set *server_planets(const struct server *srv);
 /* The STATS figures (what clipmapctl status shows), keys written into keys[i]. Loop thread. */

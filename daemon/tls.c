@@ -42,9 +42,9 @@
 struct tls_server {
 	gnutls_certificate_credentials_t cred;
 	gnutls_priority_t prio;
-	unsigned long unlogged; /* failed handshakes not logged since the last line */
-	uint64_t window_ns; /* the current logging window began then */
-	int lines;	    /* lines logged in it */
+	int refs;		 /* the creator's and one per stream */
+	struct tls_tally *tally; /* borrowed, or own */
+	struct tls_tally own;
 };
 
 struct tls_stream {
@@ -134,8 +134,8 @@ static void check_dates(gnutls_x509_crt_t crt, const char *path, char warn[256])
 	}
 }
 
-int tls_server_create(const char *cert, const char *key, struct tls_server **out,
-		      char err[256], char warn[256])
+int tls_server_create(const char *cert, const char *key, struct tls_tally *tally,
+		      struct tls_server **out, char err[256], char warn[256])
 {
 	*out = NULL;
 	if (warn)
@@ -145,6 +145,8 @@ int tls_server_create(const char *cert, const char *key, struct tls_server **out
 	unsigned ncrt = 0;
 	gnutls_x509_privkey_t pk = NULL;
 	struct tls_server *t = xcalloc(1, sizeof *t);
+	t->refs = 1;
+	t->tally = tally ? tally : &t->own;
 	int rc, g;
 	if ((rc = load_pem("cert", cert, &cd, err)) || (rc = load_pem("key", key, &kd, err)))
 		goto fail;
@@ -207,7 +209,7 @@ fail:
 
 void tls_server_destroy(struct tls_server *t)
 {
-	if (!t)
+	if (!t || --t->refs > 0)
 		return;
 	if (t->prio)
 		gnutls_priority_deinit(t->prio);
@@ -226,7 +228,8 @@ static void fail(struct tls_stream *s, const char *fmt, ...)
 	vsnprintf(s->err, sizeof s->err, fmt, ap);
 	va_end(ap);
 	s->failed = true;
-	struct tls_server *t = s->srv;
+	struct tls_tally *t = s->srv->tally;
+	t->failed++;
 	uint64_t now = clock_now_ns();
 	if (!t->window_ns || now - t->window_ns >= FAIL_LOG_WINDOW_NS) {
 		t->window_ns = now;
@@ -344,6 +347,7 @@ struct tls_stream *tls_stream_create(struct tls_server *t, int fd)
 	}
 	gnutls_certificate_server_set_request(s->s, GNUTLS_CERT_IGNORE);
 	gnutls_handshake_set_timeout(s->s, 0); /* the session's handshake_timeout bounds it */
+	t->refs++;
 	gnutls_transport_set_ptr(s->s, s);
 	gnutls_transport_set_push_function(s->s, push);
 	gnutls_transport_set_pull_function(s->s, pull);
@@ -359,6 +363,7 @@ void tls_stream_destroy(struct tls_stream *s)
 		(void)write_out(s); /* close_notify: best effort, never waits */
 	gnutls_deinit(s->s);
 	pbuf_fini(&s->wb);
+	tls_server_destroy(s->srv);
 	free(s);
 }
 
@@ -433,6 +438,7 @@ int tls_stream_handshake(struct tls_stream *s)
 		}
 		if (g == GNUTLS_E_SUCCESS) {
 			s->ready = true;
+			s->srv->tally->handshakes++;
 			return 0;
 		}
 		if (g == GNUTLS_E_AGAIN)

@@ -7,33 +7,51 @@
  * per 10 s per server: a flood of bad handshakes does not flood the log, and the next line
  * says how many went unlogged.
  *
- * Threads: the event loop's thread only. Ownership: the server owns a tls_server; each
- * tls_stream borrows it (it outlives them) and borrows its fd (the connection owns it).
+ * Credentials are reloaded by making a new tls_server: new connections use it, connections
+ * already open keep the one they began with. So a tls_server is counted: each stream holds a
+ * reference, and tls_server_destroy drops its creator's; the last one frees it.
+ *
+ * Threads: the event loop's thread only. Ownership: the creator owns a reference to the
+ * tls_server and each tls_stream one; a stream borrows its fd (the connection owns it).
  */
 #ifndef CLIPMAP_TLS_H
 #define CLIPMAP_TLS_H
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <sys/types.h>
 
 struct tls_server;
 struct tls_stream;
 
+/* What every generation of a listener's credentials adds to (the caller owns it; it must
+ * outlive every tls_server and stream made with it). The log window of failed handshakes is
+ * here too, so a reload does not reset it. */
+struct tls_tally {
+	uint64_t handshakes; /* completed */
+	uint64_t failed;     /* failed (each also logged, within the window's limit) */
+	unsigned long unlogged; /* failed handshakes not logged since the last line */
+	uint64_t window_ns;	/* the current logging window began then */
+	int lines;		/* lines logged in it */
+};
+
 /* Loads the certificate chain (PEM, server first) and its private key (PEM, unencrypted).
  * Returns 0 with *out owned, or -errno with err naming the file and the problem (-ENOENT and
  * friends for a file that cannot be read, -EINVAL for one that is not PEM, a key that does
  * not match the certificate). warn (may be NULL) receives a warning that is no reason to
- * refuse (a certificate expired or not yet valid: clients will refuse it), else "". */
-int tls_server_create(const char *cert, const char *key, struct tls_server **out,
-		      char err[256], char warn[256]);
+ * refuse (a certificate expired or not yet valid: clients will refuse it), else "".
+ * tally (borrowed, may be NULL: then the server keeps its own) receives the counts. */
+int tls_server_create(const char *cert, const char *key, struct tls_tally *tally,
+		      struct tls_server **out, char err[256], char warn[256]);
 /* The PEM file [tls] `key` names (key: "cert" or "key", for messages), as a NUL-terminated
  * string. Returns 0 with *out owned (free), or -errno with err naming the file. */
 int tls_pem_read(const char *key, const char *path, char **out, char err[256]);
-/* Frees the credentials (no stream may remain). NULL is a no-op. */
+/* Drops the creator's reference: the credentials are freed once no stream uses them either.
+ * NULL is a no-op. */
 void tls_server_destroy(struct tls_server *t);
 
-/* A server-side TLS stream on fd (borrowed, non-blocking). Returns NULL only when GnuTLS
- * cannot make a session (out of memory). */
+/* A server-side TLS stream on fd (borrowed, non-blocking); it holds a reference to t.
+ * Returns NULL only when GnuTLS cannot make a session (out of memory). */
 struct tls_stream *tls_stream_create(struct tls_server *t, int fd);
 /* Says close_notify when the handshake completed (best effort, without blocking) and frees.
  * The fd stays open. NULL is a no-op. */

@@ -12,7 +12,9 @@
  * clipmapview draws a complete frame over TLS;
  * the HTTP endpoint is HTTPS on the same certificate (curl, when installed).
  * Bad [tls] files stop clipmapd at start with the file and the problem named (an expired
- * certificate is a warning).
+ * certificate is a warning). SIGHUP loads a renewed certificate for new connections while an
+ * open one keeps working; a bad renewal is refused and the running certificate kept; the
+ * handshakes are counted in STATS.
  * Skipped, saying so, without certtool (package gnutls-bin) or the programs.
  */
 #include <arpa/inet.h>
@@ -20,6 +22,7 @@
 #include <netinet/in.h>
 #include <poll.h>
 #include <pthread.h>
+#include <signal.h>
 #include <setjmp.h>
 #include <stdarg.h>
 #include <stdbool.h>
@@ -103,6 +106,24 @@ static int make_cert(const char *name, const char *tmpl, const char *ca_name)
 			cap, "--load-ca-privkey", cak, "--template", tp, "--outfile", pem, NULL);
 }
 
+/* Copies DIR/FROM to DIR/TO through a rename, as certificate renewal tools do. Returns 0 or
+ * -1. */
+static int replace_file(const char *from, const char *to)
+{
+	char a[220], b[220], t[240], buf[16384];
+	snprintf(a, sizeof a, "%s/%s", E.dir, from);
+	snprintf(b, sizeof b, "%s/%s", E.dir, to);
+	snprintf(t, sizeof t, "%s.new", b);
+	FILE *in = fopen(a, "rb"), *out = in ? fopen(t, "wb") : NULL;
+	size_t n = in ? fread(buf, 1, sizeof buf, in) : 0;
+	int rc = in && out && n > 0 && n < sizeof buf && fwrite(buf, 1, n, out) == n ? 0 : -1;
+	if (in)
+		fclose(in);
+	if (out && fclose(out))
+		rc = -1;
+	return rc || rename(t, b) ? -1 : 0;
+}
+
 static const char ca_tmpl[] = "cn = \"clipmap test CA\"\nca\ncert_signing_key\n"
 			      "expiration_days = 2\n";
 /* The server's certificate names 127.0.0.1 only: "localhost" is a name it does not carry. */
@@ -131,7 +152,10 @@ static int setup(void **state)
 		return 0;
 	}
 	if (make_cert("ca", ca_tmpl, NULL) || make_cert("server", server_tmpl, "ca") ||
-	    make_cert("wrong", ca_tmpl, NULL) || make_cert("old", old_tmpl, "ca"))
+	    make_cert("wrong", ca_tmpl, NULL) || make_cert("old", old_tmpl, "ca") ||
+	    make_cert("ca2", ca_tmpl, NULL) || make_cert("server2", server_tmpl, "ca2"))
+		return -1;
+	if (replace_file("server.pem", "server-ca.pem") || replace_file("server.key", "server-ca.key"))
 		return -1;
 	snprintf(ca, sizeof ca, "%s/ca.pem", E.dir);
 	snprintf(wrong_ca, sizeof wrong_ca, "%s/wrong.pem", E.dir);
@@ -697,6 +721,67 @@ static void bad_files_stop_the_daemon(void **state)
 	assert_non_null(strstr(out, "expired on 2020-01-01"));
 }
 
+/* The figure key of `clipmapctl status --json` over TLS checked against ca_file, or -1. */
+static long tls_figure(const char *ca_file, const char *key)
+{
+	static char out[OUT_CAP];
+	if (ctl(out, sizeof out, "-H", host_port, "--tls-ca", ca_file, "--token-file",
+		token_file(), "status", "--json", NULL))
+		return -1;
+	char k[80];
+	snprintf(k, sizeof k, "\"%s\":", key);
+	const char *p = strstr(out, k);
+	return p ? atol(p + strlen(k)) : -1;
+}
+
+/* A renewed certificate (another CA here, so the test can tell them apart) is loaded by
+ * SIGHUP for new connections; a connection open before it goes on with the old one; a
+ * renewal whose key does not match is refused and the running certificate stays. */
+static void sighup_reloads_the_certificate(void **state)
+{
+	(void)state;
+	NEED_DAEMON();
+	static char out[OUT_CAP];
+	char err[256], ca2[220];
+	snprintf(ca2, sizeof ca2, "%s/ca2.pem", E.dir);
+	long hs0 = tls_figure(ca, "tls.handshakes"), failed0 = tls_figure(ca, "tls.failed");
+	assert_true(hs0 >= 1 && failed0 >= 1); /* the earlier cases' handshakes, good and bad */
+	struct net_conn *old = NULL;
+	struct net_opts o = { .hostport = host_port, .tls_ca = ca, .token_file = token_file() };
+	if (net_connect(&o, &old, err))
+		fail_msg("TLS: %s", err);
+
+	assert_int_equal(replace_file("server2.pem", "server.pem"), 0);
+	assert_int_equal(replace_file("server2.key", "server.key"), 0);
+	int n = daemon_env_log_count(&E, "TLS certificate");
+	assert_int_equal(daemon_env_signal(&E, SIGHUP), 0);
+	assert_true(daemon_env_log_wait(&E, "TLS certificate", n + 1, 5000));
+	assert_int_equal(tls_figure(ca2, "tls.reloads"), 1); /* new connections: the new CA */
+	int rc = ctl(out, sizeof out, "-H", host_port, "--tls-ca", ca, "--token-file", token_file(),
+		     "status", NULL);
+	assert_int_equal(rc, 1); /* the old CA no longer signs what the listener shows */
+	assert_non_null(strstr(out, "issuer is unknown"));
+	uint8_t *t[2];
+	size_t len[2];
+	fetch_tiles(old, t, len); /* the connection made before the reload still works */
+	free(t[0]);
+	free(t[1]);
+	net_close(old);
+
+	/* A renewal gone wrong: the certificate of ca but server2's key. */
+	assert_int_equal(replace_file("server-ca.pem", "server.pem"), 0);
+	n = daemon_env_log_count(&E, "keep the running certificate");
+	assert_int_equal(daemon_env_signal(&E, SIGHUP), 0);
+	assert_true(daemon_env_log_wait(&E, "keep the running certificate", n + 1, 5000));
+	char *log = daemon_env_log_read(&E);
+	assert_non_null(strstr(log, "is not the key of the certificate"));
+	free(log);
+	assert_int_equal(tls_figure(ca2, "tls.reloads"), 1); /* still server2's */
+	assert_true(tls_figure(ca2, "tls.handshakes") > hs0);
+	assert_true(tls_figure(ca2, "tls.failed") > failed0); /* the refused `status` above */
+	assert_int_equal(replace_file("server-ca.key", "server.key"), 0); /* as it was */
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -711,6 +796,7 @@ int main(void)
 		cmocka_unit_test(viewer_draws_a_complete_frame_over_tls),
 		cmocka_unit_test(http_endpoint_is_https),
 		cmocka_unit_test(bad_files_stop_the_daemon),
+		cmocka_unit_test(sighup_reloads_the_certificate),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
