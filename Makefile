@@ -10,7 +10,7 @@ BUILD   ?= build
 .DEFAULT_GOAL := all
 CC      ?= cc
 CXX     ?= g++
-PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libmicrohttpd zlib libtiff-4 gnutls
+PKGS    := OpenImageIO geographiclib libxxhash libzstd liblz4 libsystemd gdal lmdb libmicrohttpd zlib libtiff-4 gnutls libwebp
 PKG_CFLAGS := $(shell pkg-config --cflags $(PKGS) 2>/dev/null)
 PKG_LIBS   := $(shell pkg-config --libs $(PKGS) 2>/dev/null)
 
@@ -213,13 +213,14 @@ fleet-demo: deps
 # (fuzz_ini also reads the shipped planet files as seeds).
 FUZZ_SECONDS ?= 60
 FUZZ_SRC := $(wildcard tests/fuzz/fuzz_*.c)
-FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/pixfmt.c common/grid.c \
+FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/tilecodec_lossy.c \
+               common/pixfmt.c common/grid.c \
                common/xalloc.c common/errbuf.c
 FUZZ_FLAGS := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
               -fno-sanitize-recover=all -iquote . -iquote daemon
 build-fuzz/%: tests/fuzz/%.c $(FUZZ_LIBSRC)
 	@mkdir -p build-fuzz
-	clang $(FUZZ_FLAGS) $^ $(shell pkg-config --libs libzstd liblz4 libxxhash) -lm -o $@
+	clang $(FUZZ_FLAGS) $^ $(shell pkg-config --libs libzstd liblz4 libxxhash libwebp) -lm -o $@
 # fuzz_ini parses planet files: it links the engine and all of common, compiled with the
 # fuzzer's instrumentation (not its main) into build-fuzz/obj/.
 FUZZ_OBJ_FLAGS := -g -O1 -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all \

@@ -389,7 +389,7 @@ static int conn_new(int fd, const char *peer, const struct net_opts *o, struct n
 	struct net_conn *c = xcalloc(1, sizeof *c);
 	c->fd = fd;
 	c->timeout_ms = o->timeout_ms ? o->timeout_ms : NET_DEFAULT_TIMEOUT_MS;
-	c->offered = o->codecs ? o->codecs : TCODEC_ALL_MASK;
+	c->offered = o->codecs ? o->codecs : TCODEC_LOSSLESS_MASK;
 	c->phase = fd >= 0 ? PH_CONNECTED : PH_CONNECTING;
 	snprintf(c->peer, sizeof c->peer, "%s", peer ? peer : "server");
 	/* TLS over TCP (the daemon's Unix socket is always plain): --tls-ca, $CLIPMAP_TLS_CA or

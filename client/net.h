@@ -25,7 +25,8 @@ struct net_opts {
 	const char *token_file;	 /* token read from this file (trailing whitespace dropped);
 				  * NULL: $CLIPMAP_TOKEN if set, else an empty token */
 	const char *name;	 /* client name for HELLO; NULL: "clipmap-client/1" */
-	uint32_t codecs;	 /* tile codecs offered (1 << enum tcodec); 0: all we decode */
+	uint32_t codecs;	 /* tile codecs offered (1 << enum tcodec); 0: the lossless ones
+				  * (the lossy ones only where the caller asks: a viewer) */
 	int timeout_ms;		 /* connect, handshake and send limit; 0: NET_DEFAULT_TIMEOUT_MS,
 				  * < 0: none */
 	/* TLS (TCP only; a Unix socket is always plain). The server's certificate must lead to

@@ -20,6 +20,7 @@
 #include <zstd.h>
 
 #include "errbuf.h"
+#include "tilecodec_lossy.h"
 #include "xalloc.h"
 
 struct tilecodec {
@@ -29,7 +30,7 @@ struct tilecodec {
 	ZSTD_DCtx *dctx;
 };
 
-static const char *const codec_names[TCODEC_COUNT] = { "none", "lz4", "zstd" };
+static const char *const codec_names[TCODEC_COUNT] = { "none", "lz4", "zstd", "webp", "q16" };
 static const char *const filter_names[TFILTER_COUNT] = { "none", "planes", "delta", "grad",
 							 "xor" };
 
@@ -67,6 +68,17 @@ enum tfilter tilecodec_default_filter(enum pix_type f)
 	}
 }
 
+int tilecodec_codec_fits(unsigned c, unsigned format)
+{
+	if (c >= TCODEC_COUNT || !pix_valid(format))
+		return 0;
+	if (c == TCODEC_WEBP)
+		return format == PIX_COLOR || format == PIX_NORMAL;
+	if (c == TCODEC_Q16)
+		return format == PIX_HEIGHT;
+	return 1;
+}
+
 uint64_t tilecodec_checksum(const void *p, size_t n)
 {
 	return XXH3_64bits(p, n);
@@ -89,6 +101,16 @@ int tilecodec_hdr_check(const struct tilecodec_hdr *h, char err[256])
 	}
 	if (h->filter >= TFILTER_COUNT) {
 		err_set(err, "unknown tile filter %u", h->filter);
+		return -EINVAL;
+	}
+	if (!tilecodec_codec_fits(h->codec, h->format)) {
+		err_set(err, "codec %s cannot code %s tiles", tilecodec_codec_name(h->codec),
+			pix_format_name(h->format));
+		return -EINVAL;
+	}
+	if (tilecodec_is_lossy(h->codec) && h->filter != TFILTER_NONE) {
+		err_set(err, "codec %s takes no filter (filter %s)", tilecodec_codec_name(h->codec),
+			tilecodec_filter_name(h->filter));
 		return -EINVAL;
 	}
 	if (!pow2_size(h->size)) {
@@ -114,6 +136,9 @@ size_t tilecodec_bound(enum tcodec c, size_t raw_len)
 		return raw_len > LZ4_MAX_INPUT_SIZE ? 0 : (size_t)LZ4_compressBound((int)raw_len);
 	case TCODEC_ZSTD:
 		return ZSTD_compressBound(raw_len);
+	case TCODEC_WEBP:
+	case TCODEC_Q16:
+		return raw_len;
 	default:
 		return 0;
 	}
@@ -338,7 +363,8 @@ ssize_t tilecodec_encode(struct tilecodec *tc, enum pix_type format, uint32_t si
 			 enum tcodec codec, enum tfilter filter, int level, const void *texels,
 			 struct tilecodec_hdr *h, void *out, size_t cap)
 {
-	if (filter_args(format, size, filter) || (unsigned)codec >= TCODEC_COUNT)
+	if (filter_args(format, size, filter) || (unsigned)codec >= TCODEC_COUNT ||
+	    tilecodec_is_lossy(codec))
 		return -EINVAL;
 	size_t raw = (size_t)size * size * pix_bytes(format);
 	if (cap < tilecodec_bound(codec, raw))
@@ -368,6 +394,33 @@ ssize_t tilecodec_encode(struct tilecodec *tc, enum pix_type format, uint32_t si
 	return (ssize_t)n;
 }
 
+ssize_t tilecodec_encode_lossy(struct tilecodec *tc, enum pix_type format, uint32_t size,
+			       enum tcodec codec, const struct tilecodec_lossy_opts *o,
+			       const void *texels, struct tilecodec_hdr *h, void *out, size_t cap)
+{
+	if (filter_args(format, size, TFILTER_NONE) || !tilecodec_is_lossy(codec) ||
+	    !tilecodec_codec_fits(codec, format))
+		return -EINVAL;
+	size_t raw = (size_t)size * size * pix_bytes(format);
+	if (cap < tilecodec_bound(TCODEC_ZSTD, raw))
+		return -ENOSPC;
+	/* Room for the raw copy and the lossy scratch; the filter's scratch of a fallback
+	 * below is the same buffer, used after. */
+	size_t need = tilecodec_lossy_scratch(size);
+	unsigned char *s = scratch(tc, need > raw ? need : raw);
+	ssize_t n = tilecodec_lossy_encode(tc->cctx, s, format, size, codec, o, texels, out,
+					   raw - 1);
+	if (n < 0 && n != -ENOSPC)
+		return n;
+	if (n <= 0) /* not smaller, or not codable: lossless */
+		return tilecodec_encode(tc, format, size, TCODEC_ZSTD,
+					tilecodec_default_filter(format), 1, texels, h, out, cap);
+	*h = (struct tilecodec_hdr){ .format = (uint8_t)format, .codec = (uint8_t)codec,
+				     .filter = TFILTER_NONE, .size = size, .raw_len = (uint32_t)raw,
+				     .checksum = XXH3_64bits(out, (size_t)n) };
+	return n;
+}
+
 int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const void *payload,
 		     size_t n, void *texels, size_t cap, char err[256])
 {
@@ -378,6 +431,15 @@ int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const 
 	if (cap < raw) {
 		err_set(err, "output buffer of %zu bytes is smaller than the tile (%zu)", cap, raw);
 		return -EINVAL;
+	}
+	if (tilecodec_is_lossy(h->codec)) {
+		if (n == 0 || n > raw) {
+			err_set(err, "%s payload of %zu bytes for a tile of %zu",
+				tilecodec_codec_name(h->codec), n, raw);
+			return -EBADMSG;
+		}
+		return tilecodec_lossy_decode(tc->dctx, scratch(tc, tilecodec_lossy_scratch(h->size)),
+					      h, payload, n, texels, err);
 	}
 	void *dst = h->filter == TFILTER_NONE ? texels : scratch(tc, raw);
 	switch (h->codec) {

@@ -13,9 +13,12 @@
  *    and the payload fits tilecodec_bound;
  *  - filter → unfilter gives back exactly the texels;
  *  - flipping one payload byte of a compressed round trip never yields success with other
- *    texels (the checksum catches it).
+ *    texels (the checksum catches it);
+ *  - a lossy round trip (webp, q16) decodes, to heights within half the step (q16), and a
+ *    flipped payload byte is an error (the payload's checksum).
  */
 #include <errno.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -38,7 +41,7 @@ static void decode_any(const uint8_t *h8, const uint8_t *p, size_t n)
 {
 	struct tilecodec_hdr h = {
 		.format = h8[1] % 5,
-		.codec = h8[2] % 4,
+		.codec = h8[2] % (TCODEC_COUNT + 1),
 		.filter = h8[3] % 6,
 		.size = h8[4] & 0x80 ? (uint32_t)h8[4] : 1u << (h8[4] % 8),
 	};
@@ -61,10 +64,65 @@ static void decode_any(const uint8_t *h8, const uint8_t *p, size_t n)
 	free(out);
 }
 
+/* A lossy codec's round trip: decodes, heights within half a step (of the range / 65535 or
+ * the asked step), a corrupted byte refused. */
+static void lossy_trip(const uint8_t *h8, const uint8_t *p, size_t n)
+{
+	enum pix_type fmt = (enum pix_type)(1 + h8[1] % 3);
+	enum tcodec codec = fmt == PIX_HEIGHT ? TCODEC_Q16 : TCODEC_WEBP;
+	uint32_t T = 1u << (h8[4] % 8);
+	size_t raw = (size_t)T * T * pix_bytes(fmt);
+	uint8_t *tex = malloc(raw), *back = malloc(raw);
+	for (size_t i = 0; i < raw; i++)
+		tex[i] = n ? p[i % n] : (uint8_t)i;
+	if (fmt == PIX_HEIGHT) /* finite heights of a few km, from the bytes */
+		for (size_t i = 0; i < raw / 4; i++)
+			((float *)(void *)tex)[i] = (float)((int)(tex[i * 4] | tex[i * 4 + 1] << 8) - 32768) *
+						    (float)(1 + h8[5] % 8) * 0.05f;
+	size_t cap = tilecodec_bound(TCODEC_ZSTD, raw);
+	uint8_t *pay = malloc(cap);
+	struct tilecodec_hdr h;
+	struct tilecodec_lossy_opts o = { .quality = h8[6] % 101, .step = (h8[7] % 4) * 0.25 };
+	ssize_t k = tilecodec_encode_lossy(tc, fmt, T, codec, &o, tex, &h, pay, cap);
+	if (k <= 0 || (size_t)k > raw || h.raw_len != raw || h.size != T || h.format != fmt)
+		abort();
+	char err[256] = "";
+	if (tilecodec_decode(tc, &h, pay, (size_t)k, back, raw, err))
+		abort();
+	if (h.codec == TCODEC_Q16) {
+		const float *a = (const float *)(void *)tex, *b = (const float *)(void *)back;
+		float lo = a[0], hi = a[0];
+		for (size_t i = 0; i < raw / 4; i++) {
+			lo = a[i] < lo ? a[i] : lo;
+			hi = a[i] > hi ? a[i] : hi;
+		}
+		double step = ((double)hi - lo) / 65535.0;
+		step = o.step > step ? o.step : step;
+		for (size_t i = 0; i < raw / 4; i++)
+			if (fabs((double)a[i] - b[i]) > step * 0.5 + 1e-3)
+				abort();
+	} else if (h.codec == TCODEC_ZSTD || h.codec == TCODEC_NONE) {
+		if (memcmp(tex, back, raw)) /* the lossless fallback */
+			abort();
+	}
+	if (tilecodec_is_lossy(h.codec)) {
+		pay[h8[6] % (size_t)k] ^= (uint8_t)(1 + h8[7] % 255);
+		if (tilecodec_decode(tc, &h, pay, (size_t)k, back, raw, err) != -EILSEQ)
+			abort();
+	}
+	free(tex);
+	free(back);
+	free(pay);
+}
+
 static void round_trip(const uint8_t *h8, const uint8_t *p, size_t n)
 {
 	enum pix_type fmt = (enum pix_type)(1 + h8[1] % 3);
 	enum tcodec codec = (enum tcodec)(h8[2] % TCODEC_COUNT);
+	if (tilecodec_is_lossy(codec)) {
+		lossy_trip(h8, p, n);
+		return;
+	}
 	enum tfilter filter = (enum tfilter)(h8[3] % TFILTER_COUNT);
 	uint32_t T = 1u << (h8[4] % 8);
 	int level = h8[5] % 4;

@@ -1,10 +1,13 @@
 /* Tile payload codec tests: every format × codec × filter round-trips bit-exactly on
  * realistic data (smooth heights with noise, a colour gradient, random normals) and on odd
  * floats (NaN, ±0, ±inf, denormals, sign changes); compression pays where it should and is
- * skipped where it cannot; corrupted payloads, checksums and headers are detected. */
+ * skipped where it cannot; corrupted payloads, checksums and headers are detected. The lossy
+ * codecs: heights within half the quantisation step, colour and normals within a stated
+ * error, several times smaller than zstd; what they cannot code goes lossless. */
 #include <errno.h>
 #include <math.h>
 #include <setjmp.h>
+#include <stdbool.h>
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -74,7 +77,7 @@ static void round_trip_all(void **state)
 				size_t raw = (size_t)T * T * pix_bytes(fmt);
 				void *tex = make_tile(fmt, T, kind);
 				void *back = xmalloc(raw);
-				for (int c = 0; c < TCODEC_COUNT; c++)
+				for (int c = 0; c <= TCODEC_ZSTD; c++) /* the lossless ones */
 					for (int f = 0; f < TFILTER_COUNT; f++) {
 						size_t cap = tilecodec_bound(c, raw);
 						void *out = xmalloc(cap);
@@ -187,7 +190,7 @@ static void corruption_detected(void **state)
 	size_t raw = (size_t)T * T * 4;
 	float *back = xmalloc(raw);
 	char err[256];
-	for (int c = 0; c < TCODEC_COUNT; c++) {
+	for (int c = 0; c <= TCODEC_ZSTD; c++) {
 		size_t cap = tilecodec_bound(c, raw);
 		uint8_t *out = xmalloc(cap);
 		struct tilecodec_hdr hd;
@@ -284,6 +287,201 @@ static void names(void **state)
 	assert_int_equal(tilecodec_bound(TCODEC_COUNT, 100), 0);
 }
 
+/* Terrain-like colour: a height ramp with slope shading, as a synthesised colour layer. */
+static uint8_t *terrain_color(uint32_t T, bool alpha)
+{
+	uint8_t *p = xmalloc((size_t)T * T * 4);
+	for (uint32_t y = 0; y < T; y++)
+		for (uint32_t x = 0; x < T; x++) {
+			double h = sin(x * 0.05) * cos(y * 0.04) + 0.3 * sin(x * 0.21 + y * 0.17);
+			double sh = 0.8 + 0.2 * cos(x * 0.05) * cos(y * 0.04);
+			uint8_t *t = p + ((size_t)y * T + x) * 4;
+			t[0] = (uint8_t)(sh * (90 + 60 * h));
+			t[1] = (uint8_t)(sh * (110 + 50 * h));
+			t[2] = (uint8_t)(sh * (60 + 30 * h));
+			t[3] = alpha ? (uint8_t)(x < T / 2 ? 255 : 128) : 255;
+		}
+	return p;
+}
+
+/* Normals of a smooth surface, as the normal node makes them (east, north in rg8). */
+static uint8_t *terrain_normals(uint32_t T)
+{
+	uint8_t *p = xmalloc((size_t)T * T * 2);
+	for (uint32_t y = 0; y < T; y++)
+		for (uint32_t x = 0; x < T; x++) {
+			double e = 0.4 * cos(x * 0.05) * cos(y * 0.04), n = -0.4 * sin(x * 0.05) * sin(y * 0.04);
+			p[((size_t)y * T + x) * 2] = (uint8_t)lround((e + 1) * 127.5);
+			p[((size_t)y * T + x) * 2 + 1] = (uint8_t)lround((n + 1) * 127.5);
+		}
+	return p;
+}
+
+/* Encodes lossy and lossless; returns the lossy payload's bytes, *zbytes the zstd's, decodes
+ * into back. */
+static size_t lossy_vs_zstd(struct tilecodec *tc, enum pix_type f, uint32_t T, enum tcodec c,
+			    const struct tilecodec_lossy_opts *o, const void *tex, void *back,
+			    size_t *zbytes, struct tilecodec_hdr *h)
+{
+	size_t raw = (size_t)T * T * pix_bytes(f), cap = tilecodec_bound(TCODEC_ZSTD, raw);
+	uint8_t *out = xmalloc(cap);
+	ssize_t z = tilecodec_encode(tc, f, T, TCODEC_ZSTD, tilecodec_default_filter(f), 1, tex, h,
+				     out, cap);
+	assert_true(z > 0);
+	*zbytes = (size_t)z;
+	ssize_t n = tilecodec_encode_lossy(tc, f, T, c, o, tex, h, out, cap);
+	assert_true(n > 0 && (size_t)n <= raw);
+	assert_int_equal(h->codec, c);
+	assert_int_equal(h->filter, TFILTER_NONE);
+	char err[256];
+	int rc = tilecodec_decode(tc, h, out, (size_t)n, back, raw, err);
+	if (rc)
+		fail_msg("%s: %s", tilecodec_codec_name(c), err);
+	/* one flipped byte: the payload's checksum refuses it */
+	out[n / 2] ^= 0x10;
+	assert_int_equal(tilecodec_decode(tc, h, out, (size_t)n, back, raw, err), -EILSEQ);
+	out[n / 2] ^= 0x10;
+	assert_int_equal(tilecodec_decode(tc, h, out, (size_t)n, back, raw, err), 0);
+	free(out);
+	return (size_t)n;
+}
+
+static void lossy_heights_within_half_a_step(void **state)
+{
+	(void)state;
+	struct tilecodec *tc = tilecodec_create();
+	const uint32_t T = 256;
+	float *h = make_tile(PIX_HEIGHT, T, 1); /* −1.6 … +1.5 km with cm noise */
+	float *back = xmalloc((size_t)T * T * 4);
+	float lo = h[0], hi = h[0];
+	for (size_t i = 0; i < (size_t)T * T; i++) {
+		lo = h[i] < lo ? h[i] : lo;
+		hi = h[i] > hi ? h[i] : hi;
+	}
+	const double steps[] = { 0, 0.1, 2.0 };
+	for (int k = 0; k < 3; k++) {
+		struct tilecodec_lossy_opts o = { .step = steps[k] };
+		struct tilecodec_hdr hd;
+		size_t zb, n = lossy_vs_zstd(tc, PIX_HEIGHT, T, TCODEC_Q16, &o, h, back, &zb, &hd);
+		double step = fmax(((double)hi - lo) / 65535.0, steps[k]), worst = 0;
+		for (size_t i = 0; i < (size_t)T * T; i++)
+			worst = fmax(worst, fabs((double)h[i] - back[i]));
+		print_message("q16 step %.3f m: %zu bytes (zstd %zu, raw %zu), worst error %.4f m\n",
+			      step, n, zb, (size_t)T * T * 4, worst);
+		assert_true(worst <= step / 2 * 1.0001 + 1e-4);
+		assert_true(n < zb); /* smaller than lossless even at the finest step */
+		if (k == 2)
+			assert_true(n * 3 < zb); /* a 2 m step: a third of zstd at most */
+	}
+	/* A tile with a non-finite height is not quantised: lossless, bit for bit. */
+	h[77] = NAN;
+	size_t raw = (size_t)T * T * 4, cap = tilecodec_bound(TCODEC_ZSTD, raw);
+	uint8_t *out = xmalloc(cap);
+	struct tilecodec_hdr hd;
+	ssize_t n = tilecodec_encode_lossy(tc, PIX_HEIGHT, T, TCODEC_Q16, NULL, h, &hd, out, cap);
+	assert_true(n > 0);
+	assert_int_equal(hd.codec, TCODEC_ZSTD);
+	char err[256];
+	assert_int_equal(tilecodec_decode(tc, &hd, out, (size_t)n, back, raw, err), 0);
+	assert_memory_equal(back, h, raw);
+	free(out);
+	free(back);
+	free(h);
+	tilecodec_destroy(tc);
+}
+
+static void lossy_colour_and_normals(void **state)
+{
+	(void)state;
+	struct tilecodec *tc = tilecodec_create();
+	const uint32_t T = 256;
+	size_t n = (size_t)T * T;
+	for (int alpha = 0; alpha < 2; alpha++) {
+		uint8_t *c = terrain_color(T, alpha), *back = xmalloc(n * 4);
+		struct tilecodec_hdr hd;
+		size_t zb, wb = lossy_vs_zstd(tc, PIX_COLOR, T, TCODEC_WEBP, NULL, c, back, &zb, &hd);
+		double se = 0;
+		int amax = 0;
+		for (size_t i = 0; i < n; i++) {
+			for (int k = 0; k < 3; k++)
+				se += pow((double)c[i * 4 + k] - back[i * 4 + k], 2);
+			amax = abs(c[i * 4 + 3] - back[i * 4 + 3]) > amax ? abs(c[i * 4 + 3] - back[i * 4 + 3])
+									 : amax;
+		}
+		double psnr = 10 * log10(255.0 * 255.0 / (se / (double)(n * 3)));
+		print_message("webp colour%s: %zu bytes (zstd %zu), PSNR %.1f dB, alpha error %d\n",
+			      alpha ? " with alpha" : "", wb, zb, psnr, amax);
+		assert_true(psnr > 35);
+		assert_int_equal(amax, 0); /* alpha is kept exactly */
+		assert_true(wb * 4 < zb);
+		free(c);
+		free(back);
+	}
+	uint8_t *nm = terrain_normals(T), *back = xmalloc(n * 2);
+	struct tilecodec_hdr hd;
+	size_t zb, wb = lossy_vs_zstd(tc, PIX_NORMAL, T, TCODEC_WEBP, NULL, nm, back, &zb, &hd);
+	double sum = 0;
+	int worst = 0;
+	for (size_t i = 0; i < n * 2; i++) {
+		int d = abs(nm[i] - back[i]);
+		sum += d;
+		worst = d > worst ? d : worst;
+	}
+	print_message("webp normals: %zu bytes (zstd %zu), mean error %.2f, worst %d (of 255)\n", wb,
+		      zb, sum / (double)(n * 2), worst);
+	assert_true(sum / (double)(n * 2) < 1.5);
+	assert_true(worst <= 16);
+	assert_true(wb * 4 < zb);
+	free(nm);
+	free(back);
+	tilecodec_destroy(tc);
+}
+
+/* Headers a lossy codec cannot have, and payloads that lie about their image. */
+static void lossy_bad_input(void **state)
+{
+	(void)state;
+	struct tilecodec *tc = tilecodec_create();
+	char err[256];
+	struct tilecodec_hdr h = { .format = PIX_HEIGHT, .codec = TCODEC_WEBP, .size = 64,
+				   .raw_len = 64 * 64 * 4 };
+	assert_int_equal(tilecodec_hdr_check(&h, err), -EINVAL);
+	assert_non_null(strstr(err, "cannot code"));
+	h = (struct tilecodec_hdr){ .format = PIX_COLOR, .codec = TCODEC_Q16, .size = 64,
+				    .raw_len = 64 * 64 * 4 };
+	assert_int_equal(tilecodec_hdr_check(&h, err), -EINVAL);
+	h = (struct tilecodec_hdr){ .format = PIX_COLOR, .codec = TCODEC_WEBP, .filter = TFILTER_DELTA,
+				    .size = 64, .raw_len = 64 * 64 * 4 };
+	assert_int_equal(tilecodec_hdr_check(&h, err), -EINVAL);
+	assert_non_null(strstr(err, "takes no filter"));
+	/* a valid 64² WebP announced as a 128² tile (its checksum right): refused by size */
+	uint8_t *c = terrain_color(64, false), *out = xmalloc(1 << 16), *back = xmalloc(128 * 128 * 4);
+	ssize_t n = tilecodec_encode_lossy(tc, PIX_COLOR, 64, TCODEC_WEBP, NULL, c, &h, out, 1 << 16);
+	assert_true(n > 0);
+	h.size = 128;
+	h.raw_len = 128 * 128 * 4;
+	assert_int_equal(tilecodec_decode(tc, &h, out, (size_t)n, back, h.raw_len, err), -EBADMSG);
+	assert_non_null(strstr(err, "64×64"));
+	/* garbage with a right checksum */
+	memset(out, 0x5a, 300);
+	h.checksum = tilecodec_checksum(out, 300);
+	assert_int_equal(tilecodec_decode(tc, &h, out, 300, back, h.raw_len, err), -EBADMSG);
+	h = (struct tilecodec_hdr){ .format = PIX_HEIGHT, .codec = TCODEC_Q16, .size = 64,
+				    .raw_len = 64 * 64 * 4, .checksum = tilecodec_checksum(out, 300) };
+	assert_int_equal(tilecodec_decode(tc, &h, out, 300, back, h.raw_len, err), -EBADMSG);
+	/* the lossless encoder refuses a lossy codec; the lossy one refuses a format it cannot code */
+	assert_int_equal(tilecodec_encode(tc, PIX_COLOR, 64, TCODEC_WEBP, TFILTER_NONE, 0, c, &h, out,
+					  1 << 16),
+			 -EINVAL);
+	assert_int_equal(tilecodec_encode_lossy(tc, PIX_HEIGHT, 64, TCODEC_WEBP, NULL, c, &h, out,
+						1 << 16),
+			 -EINVAL);
+	free(c);
+	free(out);
+	free(back);
+	tilecodec_destroy(tc);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -292,6 +490,9 @@ int main(void)
 		cmocka_unit_test(compression_pays),
 		cmocka_unit_test(corruption_detected),
 		cmocka_unit_test(names),
+		cmocka_unit_test(lossy_heights_within_half_a_step),
+		cmocka_unit_test(lossy_colour_and_normals),
+		cmocka_unit_test(lossy_bad_input),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
