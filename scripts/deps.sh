@@ -4,7 +4,7 @@
 # otherwise it prints the exact command to run and fails.
 set -eu
 PKGS="build-essential pkg-config libopenimageio-dev openimageio-tools libgeographiclib-dev
-libcmocka-dev libxxhash-dev libzstd-dev liblmdb-dev liblz4-dev libsystemd-dev systemd clang libgdal-dev libtiff-dev
+libcmocka-dev libxxhash-dev libzstd-dev liblmdb-dev liblz4-dev libwebp-dev libsystemd-dev systemd clang libgdal-dev libtiff-dev
 libegl-dev libegl-mesa0 libgl1-mesa-dri libgl-dev libosmesa6-dev glslang-tools libglfw3-dev xvfb xauth
 scdoc graphviz libmicrohttpd-dev zlib1g-dev gdal-bin curl prometheus chromium wrk
 redis-server libhiredis-dev haproxy libgnutls28-dev gnutls-bin iproute2"
