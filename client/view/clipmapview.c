@@ -36,6 +36,8 @@ static void usage(FILE *f)
 		"  --tls-ca FILE       HOST:PORT over TLS, the daemon's certificate checked against\n"
 		"                      this CA (PEM) and the HOST (default: $CLIPMAP_TLS_CA)\n"
 		"  --tls               TLS with the system's trust store (without --tls-ca)\n"
+		"  --lossless          refuse the lossy tile codecs (webp, q16) the daemon uses on\n"
+		"                      slow links: exact texels, more bytes\n"
 		"  --connect-wait S    at the start, keep trying to reach the daemon for up to S\n"
 		"                      seconds (default 0: fail at once); a connection lost later\n"
 		"                      is always retried (backoff 0.1 s doubling to 5 s)\n"
@@ -75,7 +77,7 @@ static void usage(FILE *f)
 /* What the command line asks for (parse_args). */
 struct args {
 	const char *planet, *connect_to, *token_file, *tls_ca;
-	bool tls;
+	bool tls, lossless;
 	double connect_wait; /* --connect-wait, seconds */
 	const char *camera, *flight; /* one of them, or neither with --window */
 	const char *outp;	     /* -o: a path, or for a flight a frame-number pattern */
@@ -214,7 +216,7 @@ static bool parse_backend(const char *s, enum gl_backend *b)
 enum {
 	O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS, O_FOV,
 	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
-	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS,
+	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS, O_LOSSLESS,
 	O_CONNECT_WAIT
 };
 
@@ -241,6 +243,7 @@ static const struct option long_opts[] = {
 	{ "token-file", required_argument, NULL, O_TOKEN },
 	{ "tls-ca", required_argument, NULL, O_TLS_CA },
 	{ "tls", no_argument, NULL, O_TLS },
+	{ "lossless", no_argument, NULL, O_LOSSLESS },
 	{ "connect-wait", required_argument, NULL, O_CONNECT_WAIT },
 	{ "exaggerate", required_argument, NULL, O_EXAG },
 	{ "haze", required_argument, NULL, O_HAZE },
@@ -263,6 +266,7 @@ static bool take_option(int c, const char *s, struct args *a)
 	case O_TOKEN: a->token_file = s; return true;
 	case O_TLS_CA: a->tls_ca = s; return true;
 	case O_TLS: a->tls = true; return true;
+	case O_LOSSLESS: a->lossless = true; return true;
 	case O_CONNECT_WAIT:
 		rc = args_double("--connect-wait", s, 0, 86400, &a->connect_wait, err);
 		break;
@@ -867,7 +871,9 @@ static int open_net(const struct args *a, struct view_source **src, char err[256
 	bool tcp = strchr(target, ':') && !strchr(target, '/');
 	struct net_opts o = { .socket_path = tcp ? NULL : target, .hostport = tcp ? target : NULL,
 			      .token_file = a->token_file, .name = "clipmapview/1",
-			      .tls_ca = a->tls_ca, .tls = a->tls };
+			      .tls_ca = a->tls_ca, .tls = a->tls,
+			      /* a picture can take approximate texels; the daemon decides by link */
+			      .codecs = a->lossless ? TCODEC_LOSSLESS_MASK : TCODEC_ALL_MASK };
 	char e2[256];
 	unsigned attempts = 0;
 	int rc = view_source_net_create_wait(&o, a->planet, a->connect_wait, &attempts, src, e2);
