@@ -26,6 +26,8 @@
 struct tilecodec {
 	unsigned char *scratch;
 	size_t scratch_cap;
+	unsigned char *alt; /* tilecodec_encode_lossy's lossless try */
+	size_t alt_cap;
 	ZSTD_CCtx *cctx;
 	ZSTD_DCtx *dctx;
 };
@@ -163,6 +165,7 @@ void tilecodec_destroy(struct tilecodec *tc)
 	ZSTD_freeCCtx(tc->cctx);
 	ZSTD_freeDCtx(tc->dctx);
 	free(tc->scratch);
+	free(tc->alt);
 	free(tc);
 }
 
@@ -346,6 +349,8 @@ int tilecodec_unfilter(enum pix_type format, uint32_t size, enum tfilter filter,
 
 /* ---- codec ------------------------------------------------------------------------------ */
 
+#define LOSSY_SMALL 2048 /* a lossy payload under this many bytes is checked against zstd */
+
 /* Compresses src into out; returns bytes, or 0 when it does not fit (caller falls back). */
 static size_t compress(struct tilecodec *tc, enum tcodec codec, int level, const void *src,
 		       size_t n, void *out, size_t cap)
@@ -415,6 +420,25 @@ ssize_t tilecodec_encode_lossy(struct tilecodec *tc, enum pix_type format, uint3
 	if (n <= 0) /* not smaller, or not codable: lossless */
 		return tilecodec_encode(tc, format, size, TCODEC_ZSTD,
 					tilecodec_default_filter(format), 1, texels, h, out, cap);
+	if (n < LOSSY_SMALL) {
+		/* A near-uniform tile (sea, ice): WebP's few hundred bytes of container and
+		 * headers may be more than zstd needs for it. The smaller goes. */
+		size_t zb = tilecodec_bound(TCODEC_ZSTD, raw);
+		if (tc->alt_cap < zb) {
+			free(tc->alt);
+			tc->alt = xmalloc(zb);
+			tc->alt_cap = zb;
+		}
+		struct tilecodec_hdr zh;
+		ssize_t z = tilecodec_encode(tc, format, size, TCODEC_ZSTD,
+					     tilecodec_default_filter(format), 1, texels, &zh, tc->alt,
+					     zb);
+		if (z > 0 && z < n) {
+			memcpy(out, tc->alt, (size_t)z);
+			*h = zh;
+			return z;
+		}
+	}
 	*h = (struct tilecodec_hdr){ .format = (uint8_t)format, .codec = (uint8_t)codec,
 				     .filter = TFILTER_NONE, .size = size, .raw_len = (uint32_t)raw,
 				     .checksum = XXH3_64bits(out, (size_t)n) };

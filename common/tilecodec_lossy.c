@@ -3,8 +3,10 @@
  *
  * webp: lossy WebP (libwebp) of the tile as an image. Colour whose alpha is all 255 goes as
  * RGB (no alpha plane: a third fewer bytes to code), other colour as RGBA (libwebp keeps the
- * alpha plane lossless). Normals (rg8) go as RGB with blue 0; the receiver keeps red and
- * green. The decoder checks the image's size before decoding into the caller's buffer.
+ * alpha plane lossless). Normals (rg8) go as one grey image of 2T × T pixels, the east
+ * components on the left, the north ones on the right: lossy WebP subsamples colour (4:2:0)
+ * but not grey, so each component keeps its full resolution. The decoder checks the image's
+ * size before decoding into the caller's buffer.
  *
  * q16: heights quantised to a step s ≥ (max − min) / 65535, q = round((h − min) / s), sent
  * as [f64 min][f64 s][zstd(byte planes of the grad residuals of q)]: decoded h' = min + q·s,
@@ -169,14 +171,16 @@ static ssize_t webp_encode(unsigned char *scratch, enum pix_type f, uint32_t T, 
 	if (f == PIX_COLOR) {
 		for (size_t i = 0; i < n && !alpha; i++)
 			alpha = tex[i * 4 + 3] != 255;
-	} else { /* rg8 → rgb, blue 0 */
-		for (size_t i = 0; i < n; i++) {
-			scratch[i * 3] = tex[i * 2];
-			scratch[i * 3 + 1] = tex[i * 2 + 1];
-			scratch[i * 3 + 2] = 0;
-		}
+	} else { /* rg8 → a grey 2T × T image (R = G = B), east | north */
+		for (size_t y = 0; y < T; y++)
+			for (size_t x = 0; x < T; x++) {
+				const unsigned char *t = tex + (y * T + x) * 2;
+				unsigned char *e = scratch + (y * 2 * T + x) * 3, *no = e + (size_t)T * 3;
+				e[0] = e[1] = e[2] = t[0];
+				no[0] = no[1] = no[2] = t[1];
+			}
 		src = scratch;
-		stride = (int)T * 3;
+		stride = (int)T * 6;
 	}
 	WebPConfig cfg;
 	WebPPicture pic;
@@ -184,7 +188,8 @@ static ssize_t webp_encode(unsigned char *scratch, enum pix_type f, uint32_t T, 
 		return 0;
 	cfg.method = WEBP_METHOD;
 	pic.use_argb = 0;
-	pic.width = pic.height = (int)T;
+	pic.width = (int)T * (f == PIX_COLOR ? 1 : 2);
+	pic.height = (int)T;
 	struct webp_out w = { out, 0, cap };
 	pic.writer = webp_write;
 	pic.custom_ptr = &w;
@@ -204,8 +209,10 @@ static int webp_decode(unsigned char *scratch, enum pix_type f, uint32_t T, cons
 		err_set(err, "corrupt webp payload (no WebP header)");
 		return -EBADMSG;
 	}
-	if (w != (int)T || h != (int)T) {
-		err_set(err, "webp payload of %d×%d pixels for a %u² tile", w, h, T);
+	int want_w = (int)T * (f == PIX_COLOR ? 1 : 2);
+	if (w != want_w || h != (int)T) {
+		err_set(err, "webp payload of %d×%d pixels for a %u² %s tile (%d×%u expected)", w, h,
+			T, pix_format_name(f), want_w, T);
 		return -EBADMSG;
 	}
 	size_t n = (size_t)T * T;
@@ -216,14 +223,16 @@ static int webp_decode(unsigned char *scratch, enum pix_type f, uint32_t T, cons
 		}
 		return 0;
 	}
-	if (!WebPDecodeRGBInto(p, len, scratch, n * 3, (int)T * 3)) {
+	if (!WebPDecodeRGBInto(p, len, scratch, n * 6, (int)T * 6)) {
 		err_set(err, "corrupt webp payload");
 		return -EBADMSG;
 	}
-	for (size_t i = 0; i < n; i++) {
-		tex[i * 2] = scratch[i * 3];
-		tex[i * 2 + 1] = scratch[i * 3 + 1];
-	}
+	for (size_t y = 0; y < T; y++)
+		for (size_t x = 0; x < T; x++) {
+			const unsigned char *e = scratch + (y * 2 * T + x) * 3;
+			tex[(y * T + x) * 2] = e[1]; /* green: the least rounded of a grey's decode */
+			tex[(y * T + x) * 2 + 1] = e[(size_t)T * 3 + 1];
+		}
 	return 0;
 }
 
@@ -231,7 +240,7 @@ static int webp_decode(unsigned char *scratch, enum pix_type f, uint32_t T, cons
 
 size_t tilecodec_lossy_scratch(uint32_t T)
 {
-	return (size_t)T * T * 4; /* q16: q and its planes; webp: rgb */
+	return (size_t)T * T * 6; /* q16: q and its planes (4 bytes a texel); webp: 2 rgb */
 }
 
 ssize_t tilecodec_lossy_encode(void *zctx, unsigned char *scratch, enum pix_type f, uint32_t T,

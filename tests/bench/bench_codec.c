@@ -1,7 +1,10 @@
 /* bench_codec — tile payload coding: compression ratio and encode/decode speed per layer type
  * (f32 heights, RGBA8 colour, RG8 normals; 256² each, synthesized to look like terrain), per
  * pre-filter and codec. One line per figure; speeds are MB/s of raw texels, one thread.
- * Also times the frame codec for a WANT of 1024 entries and a TILE head.
+ * Then real tiles of the shipped planets (conf/planets: procedural, and Earth when data/ has
+ * it) at levels 4, 8, 12 and 16 near the Alps: bytes per tile, zstd (what clipmapd sends
+ * below raw_above_mbit) against the lossy codecs with clipmapd's settings (encpick.h), and
+ * their errors. Also times the frame codec for a WANT of 1024 entries and a TILE head.
  */
 #include <math.h>
 #include <stdint.h>
@@ -14,6 +17,10 @@
 #include "common/proto.h"
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
+#include "daemon/encpick.h"
+#include "daemon/engine/cache.h"
+#include "daemon/engine/planet.h"
+#include "daemon/engine/sched.h"
 
 #define T 256
 
@@ -124,6 +131,49 @@ static void bench_one(struct tilecodec *tc, const char *layer, enum pix_type fmt
 	free(back);
 }
 
+/* A lossy codec: bytes, the error, and speeds (encode and decode, MB/s of raw texels). */
+static void bench_lossy(struct tilecodec *tc, const char *layer, enum pix_type fmt,
+			const void *texels, enum tcodec codec, double step)
+{
+	size_t raw = (size_t)T * T * pix_bytes(fmt), cap = tilecodec_bound(TCODEC_ZSTD, raw);
+	unsigned char *out = xmalloc(cap), *back = xmalloc(raw);
+	struct tilecodec_hdr h;
+	struct tilecodec_lossy_opts o = { .step = step };
+	ssize_t n = 0;
+	int reps = 0, dreps = 0, rc = 0;
+	double t0 = clock_now_s(), t1;
+	do {
+		n = tilecodec_encode_lossy(tc, fmt, T, codec, &o, texels, &h, out, cap);
+		reps++;
+	} while ((t1 = clock_now_s()) - t0 < 0.15);
+	double enc = raw * reps / (t1 - t0) / 1e6;
+	t0 = clock_now_s();
+	do {
+		rc |= tilecodec_decode(tc, &h, out, (size_t)n, back, raw, NULL);
+		dreps++;
+	} while ((t1 = clock_now_s()) - t0 < 0.15);
+	double dec = raw * dreps / (t1 - t0) / 1e6, worst = 0, sum = 0;
+	size_t nv = fmt == PIX_HEIGHT ? (size_t)T * T : raw;
+	for (size_t i = 0; i < nv; i++) {
+		double d = fmt == PIX_HEIGHT ? fabs((double)((const float *)texels)[i] - ((float *)(void *)back)[i])
+					     : fabs((double)((const uint8_t *)texels)[i] - back[i]);
+		worst = d > worst ? d : worst;
+		sum += d;
+	}
+	char what[32];
+	if (fmt == PIX_HEIGHT)
+		snprintf(what, sizeof what, " step %.2f m", step);
+	else
+		what[0] = '\0';
+	printf("codec/%s T=%d %s%s: %zd bytes, ratio %.1f, error mean %.3f worst %.3f %s, encode %.0f "
+	       "MB/s, decode %.0f MB/s%s\n",
+	       layer, T, tilecodec_codec_name((enum tcodec)h.codec), what, n, (double)raw / (double)n,
+	       sum / (double)nv, worst, fmt == PIX_HEIGHT ? "m" : "/255", enc, dec,
+	       rc ? " DECODE FAILED" : "");
+	free(out);
+	free(back);
+}
+
 static void bench_frames(void)
 {
 	struct proto_want_entry *e = xcalloc(1024, sizeof(*e));
@@ -158,6 +208,99 @@ static void bench_frames(void)
 	free(e);
 }
 
+/* One real tile of layer l: zstd bytes, lossy bytes and error, as clipmapd would send it on a
+ * slow link. Accumulates into sums[3] (zstd, lossy bytes, error). */
+static void real_tile(struct tilecodec *tc, const struct planet *p, size_t l, const struct tile *t,
+		      int ly, double sums[3])
+{
+	size_t raw = t->nbytes, cap = tilecodec_bound(TCODEC_ZSTD, raw);
+	unsigned char *out = xmalloc(cap), *back = xmalloc(raw);
+	struct tilecodec_hdr h;
+	ssize_t z = tilecodec_encode(tc, t->type, t->size, TCODEC_ZSTD,
+				     tilecodec_default_filter(t->type), 1, t->data, &h, out, cap);
+	struct encpick_policy pol = { .lossless = TCODEC_ZSTD, .offered = TCODEC_ALL_MASK,
+				      .lossy_below_bps = 1 };
+	struct encpick e;
+	encpick(&pol, t->type, ly, t->size, p->a, 0, &e);
+	pol.lossy_below_bps = 50000000;
+	encpick(&pol, t->type, ly, t->size, p->a, 4000000, &e);
+	ssize_t n = tilecodec_encode_lossy(tc, t->type, t->size, e.codec, &e.lossy, t->data, &h, out,
+					   cap);
+	double err = 0;
+	if (n > 0 && tilecodec_decode(tc, &h, out, (size_t)n, back, raw, NULL) == 0) {
+		size_t nv = t->type == PIX_HEIGHT ? raw / 4 : raw;
+		for (size_t i = 0; i < nv; i++)
+			err += t->type == PIX_HEIGHT
+				       ? fabs((double)((const float *)t->data)[i] - ((float *)(void *)back)[i])
+				       : fabs((double)((const uint8_t *)t->data)[i] - back[i]);
+		err /= (double)nv;
+	}
+	sums[0] += (double)z;
+	sums[1] += (double)n;
+	sums[2] += err;
+	(void)l;
+	free(out);
+	free(back);
+}
+
+/* The tiles of a 2×2 block at each level near (7.5°E, 46.5°N), every layer of the planet. */
+static void bench_real(struct tilecodec *tc, const char *path)
+{
+	struct planet *p;
+	char err[256];
+	if (planet_load(path, &p, err)) {
+		printf("codec/real %s: skipped (%s)\n", path, err);
+		return;
+	}
+	struct cache *cache = cache_create(0);
+	struct sched *s = sched_create(&(struct sched_desc){ .cache = cache, .workers = 2 });
+	const int levels[] = { 4, 8, 12, 16 };
+	for (size_t l = 0; l < p->nlayers; l++) {
+		double tot[3] = { 0 }, tiles = 0;
+		for (int li = 0; li < 4; li++) {
+			int ly = levels[li] > p->max_level ? p->max_level : levels[li];
+			int lx = ly + 1;
+			uint32_t x0 = (uint32_t)((7.5 + 180) / 360 * ldexp(1, lx)),
+				 y0 = (uint32_t)((90 - 46.5) / 180 * ldexp(1, ly));
+			struct want w[4];
+			struct tile *t[4] = { 0 };
+			for (int k = 0; k < 4; k++)
+				w[k] = (struct want){ .node = p->layers[l].node, .cls = SCHED_VISIBLE,
+						      .key = { .node = p->layers[l].node->hash,
+							       .lx = (uint8_t)lx, .ly = (uint8_t)ly,
+							       .x = (x0 + (uint32_t)(k & 1)) % (1u << lx),
+							       .y = y0 + (uint32_t)(k >> 1) } };
+			sched_fetch(s, w, 4, t);
+			double sums[3] = { 0 };
+			int got = 0;
+			for (int k = 0; k < 4; k++)
+				if (t[k]) {
+					real_tile(tc, p, l, t[k], ly, sums);
+					tile_unref(t[k]);
+					got++;
+				}
+			if (!got)
+				continue;
+			printf("codec/real %s.%s level %d: zstd %.0f bytes, %s %.0f bytes (%.1f× fewer), "
+			       "mean error %.3g %s\n",
+			       p->name, p->layers[l].name, ly, sums[0] / got,
+			       p->layers[l].type == PIX_HEIGHT ? "q16" : "webp", sums[1] / got,
+			       sums[0] / sums[1], sums[2] / got,
+			       p->layers[l].type == PIX_HEIGHT ? "m" : "/255");
+			for (int k = 0; k < 3; k++)
+				tot[k] += sums[k];
+			tiles += got;
+		}
+		if (tiles)
+			printf("codec/real %s.%s all levels: zstd %.0f, lossy %.0f bytes per tile "
+			       "(%.1f× fewer)\n",
+			       p->name, p->layers[l].name, tot[0] / tiles, tot[1] / tiles, tot[0] / tot[1]);
+	}
+	sched_destroy(s);
+	cache_destroy(cache);
+	planet_unref(p);
+}
+
 int main(void)
 {
 	float *h = xmalloc(sizeof(float) * T * T);
@@ -181,6 +324,15 @@ int main(void)
 			bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, f, TCODEC_ZSTD, 3);
 		}
 	}
+	/* the lossy codecs; q16 at the range's own step and at the steps clipmapd uses for Earth
+	 * levels 8 (1.2 m) and 12 (7.6 cm) */
+	bench_lossy(tc, "height", PIX_HEIGHT, h, TCODEC_Q16, 0);
+	bench_lossy(tc, "height", PIX_HEIGHT, h, TCODEC_Q16, 0.076);
+	bench_lossy(tc, "height", PIX_HEIGHT, h, TCODEC_Q16, 1.2);
+	bench_lossy(tc, "color", PIX_COLOR, c, TCODEC_WEBP, 0);
+	bench_lossy(tc, "normal", PIX_NORMAL, n, TCODEC_WEBP, 0);
+	bench_real(tc, "conf/planets/procedural.ini");
+	bench_real(tc, "conf/planets/earth.ini");
 	bench_frames();
 	tilecodec_destroy(tc);
 	free(h);

@@ -1,6 +1,6 @@
 /* encpick: which codec a session's tile gets — raw on fast links, lossless until the link is
  * measured and on links above lossy_below, the lossy codecs below it only when the client
- * offered them, and q16's step a 256th of the level's texel. */
+ * offered them, and q16's step a 64th of the level's texel. */
 #include <math.h>
 #include <setjmp.h>
 #include <stdarg.h>
@@ -76,12 +76,12 @@ static void step_follows_the_level(void **state)
 	struct encpick e;
 	encpick(&viewer, PIX_HEIGHT, 8, 256, EARTH_A, 4 * MBIT, &e);
 	double texel = M_PI * EARTH_A / (256.0 * 256.0); /* 306 m */
-	assert_true(fabs(e.lossy.step - texel / 256) < 1e-9);
-	assert_true(e.lossy.step > 1.1 && e.lossy.step < 1.3);
+	assert_true(fabs(e.lossy.step - texel / 64) < 1e-9);
+	assert_true(e.lossy.step > 4.7 && e.lossy.step < 4.8); /* heights within 2.4 m */
 	encpick(&viewer, PIX_HEIGHT, 16, 256, EARTH_A, 4 * MBIT, &e);
-	assert_true(e.lossy.step > 0.004 && e.lossy.step < 0.005);
+	assert_true(e.lossy.step > 0.018 && e.lossy.step < 0.019);
 	encpick(&viewer, PIX_HEIGHT, 16, 64, 1737400.0, 4 * MBIT, &e); /* the Moon, 64² tiles */
-	assert_true(fabs(e.lossy.step - M_PI * 1737400.0 / (65536.0 * 64) / 256) < 1e-12);
+	assert_true(fabs(e.lossy.step - M_PI * 1737400.0 / (65536.0 * 64) / 64) < 1e-12);
 }
 
 int main(void)
