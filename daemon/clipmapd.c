@@ -135,7 +135,7 @@ static void reload_tls(struct daemon *d, struct conf *c, struct conf *nc)
 /* Re-reads clipmapd.conf and applies the keys that can change while running: [log] level,
  * [engine] planets and strict_planets, [listen] max_sessions, max_preauth, max_preauth_per_peer,
  * handshake_timeout, frame_timeout, [session] max_want, max_rate, max_pending_kb,
- * send_queue_ms, bbr, raw_above_mbit, max_frame_kb, max_jobs, [tls] cert and key (read
+ * send_queue_ms, bbr, raw_above_mbit, lossy_below_mbit, webp_quality, max_frame_kb, max_jobs, [tls] cert and key (read
  * again even when unchanged: a renewed certificate). The others keep their running
  * values (a warning names each one that changed). A file that does not load changes nothing. */
 static void reload_conf(struct daemon *d)
@@ -164,6 +164,8 @@ static void reload_conf(struct daemon *d)
 	c->send_queue_ms = nc.send_queue_ms;
 	c->bbr = nc.bbr;
 	c->raw_above_mbit = nc.raw_above_mbit;
+	c->lossy_below_mbit = nc.lossy_below_mbit;
+	c->webp_quality = nc.webp_quality;
 	c->max_frame = nc.max_frame;
 	c->max_jobs = nc.max_jobs;
 	if (c->tls_cert && nc.tls_cert)

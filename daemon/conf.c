@@ -55,6 +55,8 @@ static const struct row rows[] = {
 	{ "session", "send_queue_ms", K_INT, 0, 10000, NULL },
 	{ "session", "bbr", K_BOOL, 0, 1, NULL },
 	{ "session", "raw_above_mbit", K_INT, 0, 1000000, NULL },
+	{ "session", "lossy_below_mbit", K_INT, 0, 1000000, NULL },
+	{ "session", "webp_quality", K_INT, 1, 100, NULL },
 	{ "session", "max_jobs", K_INT, 0, 64, NULL },
 	{ "session", "compress", K_ENUM, 0, 0, compress_names },
 	{ "prefetch", "max_tiles", K_INT, 1, 1L << 26, NULL },
@@ -181,6 +183,8 @@ static void defaults(struct conf *c)
 	c->send_queue_ms = 100;
 	c->bbr = true;
 	c->raw_above_mbit = 800;
+	c->lossy_below_mbit = 50;
+	c->webp_quality = 80;
 	c->max_frame = 0;
 	c->max_jobs = 4;
 	c->pf_max_tiles = 4000000;
@@ -361,6 +365,10 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->max_pending = (uint64_t)n << 10;
 	else if (strcmp(k, "raw_above_mbit") == 0)
 		c->raw_above_mbit = (uint32_t)n;
+	else if (strcmp(k, "lossy_below_mbit") == 0)
+		c->lossy_below_mbit = (uint32_t)n;
+	else if (strcmp(k, "webp_quality") == 0)
+		c->webp_quality = (int)n;
 	else if (strcmp(k, "send_queue_ms") == 0)
 		c->send_queue_ms = (uint32_t)n;
 	else if (strcmp(k, "max_frame_kb") == 0)

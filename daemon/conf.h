@@ -56,6 +56,9 @@ struct conf {
 	uint32_t send_queue_ms; /* TCP sessions' send window: this much of the measured rate */
 	bool bbr;		/* TCP sessions ask for BBR congestion control */
 	uint32_t raw_above_mbit; /* compress auto: tiles go raw on links measured faster (0: never) */
+	uint32_t lossy_below_mbit; /* lossy codecs (to clients offering them) on TCP links
+				    * measured slower (0: never) */
+	int webp_quality;	   /* the webp codec's quality, 1–100 */
 	enum conf_compress compress;
 	/* [prefetch] (prefetch.h's struct prefetch_limits) */
 	uint64_t pf_max_tiles, pf_max_tiles_local, pf_max_tiles_total;
