@@ -29,7 +29,7 @@ tojson() { # kind
 }
 {
 	echo '{"type":"FeatureCollection","features":['
-	gmt coast -Rd -Dl -W1 -M | tojson coast
+	gmt coast -Rd -Dl -A0/0/1 -W -M | tojson coast
 	echo ','
 	gmt coast -Rd -Dl -N1 -M | tojson border
 	echo ','
