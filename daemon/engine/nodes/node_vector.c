@@ -462,8 +462,7 @@ static int vector_generate(const struct node *n, struct gen_ctx *g, const struct
 	float *o = mask ? tile_f32(out) : NULL;
 	if (mask)
 		memset(o, 0, tt * sizeof *o);
-	else
-		memset(sc.rgba, 0, 4 * tt * sizeof *sc.rgba);
+	int ry0 = T, ry1 = T; /* rows [ry0, ry1) of sc.rgba hold colour; the rest is clear */
 	/* Colour: each style's fills, then its strokes, composited in style order. Mask: the
 	 * union of everything not transparent, in one accumulation. */
 	for (int st = 0; st < v->nstyles; st++) {
@@ -483,6 +482,15 @@ static int vector_generate(const struct node *n, struct gen_ctx *g, const struct
 				continue;
 			int ya, yb;
 			vr_resolve(&acc, sc.cov, &ya, &yb);
+			if (ya >= yb)
+				continue;
+			/* Grow the rows in use, clearing the ones added. */
+			int na = ry0 < ry1 ? (ya < ry0 ? ya : ry0) : ya;
+			int nb = ry0 < ry1 ? (yb > ry1 ? yb : ry1) : yb;
+			for (int y = na; y < nb; y++)
+				if (ry0 >= ry1 || y < ry0 || y >= ry1)
+					memset(sc.rgba + (size_t)y * T * 4, 0, (size_t)T * 4 * sizeof *sc.rgba);
+			ry0 = na, ry1 = nb;
 			float alpha = fr.st->rgba[3] * (what == 0 ? v->fill_opacity : 1);
 			composite(sc.rgba, sc.cov, T, ya, yb, fr.st->rgba, alpha);
 		}
@@ -493,7 +501,11 @@ static int vector_generate(const struct node *n, struct gen_ctx *g, const struct
 		return 0;
 	}
 	uint8_t *d = out->data;
-	for (size_t i = 0; i < tt; i++) {
+	if (ry0 >= ry1)
+		ry0 = ry1 = 0;
+	memset(d, 0, (size_t)ry0 * T * 4);
+	memset(d + (size_t)ry1 * T * 4, 0, (size_t)(T - ry1) * T * 4);
+	for (size_t i = (size_t)ry0 * T; i < (size_t)ry1 * T; i++) {
 		const float *p = sc.rgba + 4 * i;
 		if (p[3] <= 0) {
 			memset(d + 4 * i, 0, 4);

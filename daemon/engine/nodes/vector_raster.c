@@ -14,7 +14,7 @@ void vr_acc_init(struct vr_acc *acc, float *buf, int w, int h)
 	acc->h = h;
 	acc->y0 = h;
 	acc->y1 = 0;
-	memset(buf, 0, vr_acc_floats(w, h) * sizeof *buf);
+	acc->zeroed = 0;
 }
 
 /* An edge inside the rows [0, H] and the columns [0, W]: font-rs's draw_line. */
@@ -22,6 +22,10 @@ static void line(struct vr_acc *acc, double x0, double y0, double x1, double y1)
 {
 	if (y0 == y1)
 		return;
+	if (!acc->zeroed) {
+		memset(acc->a, 0, vr_acc_floats(acc->w, acc->h) * sizeof *acc->a);
+		acc->zeroed = 1;
+	}
 	double dir = 1;
 	if (y0 > y1) {
 		double t = x0;

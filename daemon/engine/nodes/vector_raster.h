@@ -19,11 +19,13 @@ struct vr_acc {
 	float *a;     /* H rows of W + 2 cells */
 	int w, h;
 	int y0, y1;   /* rows touched since the last clear: [y0, y1) */
+	int zeroed;   /* a is zero (cleared on the first edge: empty tiles skip it) */
 };
 
 /* Scratch floats a vr_acc of w × h needs. */
 static inline size_t vr_acc_floats(int w, int h) { return (size_t)(w + 2) * (size_t)h; }
-/* Points acc at buf (vr_acc_floats(w, h) floats, borrowed) and zeroes it. */
+/* Points acc at buf (vr_acc_floats(w, h) floats, borrowed); it is zeroed before the first
+ * edge lands in it. */
 void vr_acc_init(struct vr_acc *acc, float *buf, int w, int h);
 /* Adds the directed edge (x0, y0) → (x1, y1) in texel coordinates (x east, y south). */
 void vr_edge(struct vr_acc *acc, double x0, double y0, double x1, double y1);
