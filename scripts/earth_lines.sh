@@ -8,9 +8,10 @@
 #          permanent rivers, 2 more major rivers, 3 other permanent rivers)
 # Resolution "low" (-Dl): about 1 km detail, 25 000 segments.
 set -eu
-out=$1
+case $1 in /*) out=$1 ;; *) out=$(pwd)/$1 ;; esac
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
+cd "$tmp" # gmt writes gmt.history and gmt.conf into the working directory
 # GMT's multi-segment text ("> … Level N" headers, then "lon<TAB>lat" lines) to GeoJSON.
 tojson() { # kind
 	awk -v kind="$1" '
