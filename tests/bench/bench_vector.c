@@ -18,42 +18,22 @@
 #include "engine/node_types.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
+#include "support/node_ini.h"
 
 #define T 256
 #define DATA "data/earth/lines.gpkg"
 
 static struct planet pl;
 
-struct bnode {
-	struct ini_file *ini;
-	struct node n;
-};
-
-static int bnode_init(struct bnode *b, const struct node_type *t, const char *text,
-		      struct node *in0, struct node *in1)
+static void bnode_init(struct node_ini *b, const struct node_type *t, const char *text,
+		       struct node *in0, struct node *in1)
 {
 	char err[256];
-	memset(b, 0, sizeof *b);
-	if (ini_parse("bench.ini", text, strlen(text), &b->ini, err))
-		goto fail;
-	struct ini_entry *e = ini_find(&b->ini->sections[0], "type");
-	if (e)
-		e->used = true;
-	b->n.name = "bench";
-	b->n.planet = &pl;
-	b->n.in[0] = in0;
-	b->n.in[1] = in1;
-	if (node_init(&b->n, t, "bench.ini", &b->ini->sections[0], err) == 0)
-		return 0;
-fail:
-	fprintf(stderr, "bench_vector: %s\n", err);
-	exit(1);
-}
-
-static void bnode_fini(struct bnode *b)
-{
-	node_fini(&b->n);
-	ini_free(b->ini);
+	struct node *in[2] = { in0, in1 };
+	if (node_ini_init(b, t, &pl, text, in, 2, err)) {
+		fprintf(stderr, "bench_vector: %s\n", err);
+		exit(1);
+	}
 }
 
 static const char vector_text[] =
@@ -87,7 +67,7 @@ static int place_keys(int ly, struct tile_key *k)
 
 /* Seconds per tile generating keys k[0..n) (each once per round, best of 3 rounds), and the
  * share of tiles with any opaque-ish texel. */
-static double time_tiles(struct bnode *b, struct gen_ctx *g, const struct tile_key *k, int n,
+static double time_tiles(struct node_ini *b, struct gen_ctx *g, const struct tile_key *k, int n,
 			 struct tile *const *in, int nin, double *drawn)
 {
 	double best = INFINITY;
@@ -129,20 +109,20 @@ int main(void)
 	pl.tile_size = T;
 	pl.max_level = 20;
 	double load = INFINITY;
-	struct bnode v;
+	struct node_ini v;
 	for (int r = 0; r < 3; r++) {
 		double t0 = clock_now_s();
 		bnode_init(&v, &node_type_vector, vector_text, NULL, NULL);
 		double dt = clock_now_s() - t0;
 		load = dt < load ? dt : load;
 		if (r < 2)
-			bnode_fini(&v);
+			node_ini_fini(&v);
 	}
 	printf("vector/load %s (read, transform, index): %.0f ms (best of 3)\n", DATA, load * 1e3);
 
 	/* The peer: blend over of two colour tiles. */
 	struct node ca = { .name = "a", .out = PIX_COLOR, .hash = 1 }, cb = { .name = "b", .out = PIX_COLOR, .hash = 2 };
-	struct bnode bl;
+	struct node_ini bl;
 	bnode_init(&bl, &node_type_blend, "[node over]\ntype = blend\nmode = over\n", &ca, &cb);
 	struct tile_key k0 = { .lx = 5, .ly = 4 };
 	struct tile *ta = tile_create(&k0, PIX_COLOR, T), *tb = tile_create(&k0, PIX_COLOR, T);
@@ -179,7 +159,7 @@ int main(void)
 	tile_unref(ta);
 	tile_unref(tb);
 	gen_ctx_fini(&g);
-	bnode_fini(&bl);
-	bnode_fini(&v);
+	node_ini_fini(&bl);
+	node_ini_fini(&v);
 	return 0;
 }

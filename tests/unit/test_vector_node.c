@@ -23,6 +23,7 @@
 #include "engine/node_types.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
+#include "support/node_ini.h"
 
 #define R 6371000.0
 #define T 64
@@ -62,35 +63,12 @@ static int teardown(void **state)
 	return system(cmd) == 0 ? 0 : -1;
 }
 
-struct vnode {
-	struct ini_file *ini;
-	struct node n;
-	struct gen_ctx g;
-};
-
-static int vnode_init(struct vnode *v, const char *text, char err[256])
+static int vnode_init(struct node_ini *v, const char *text, char err[256])
 {
-	memset(v, 0, sizeof *v);
-	int rc = ini_parse("test.ini", text, strlen(text), &v->ini, err);
-	if (rc)
-		return rc;
-	struct ini_section *sec = &v->ini->sections[0];
-	struct ini_entry *t = ini_find(sec, "type");
-	if (t)
-		t->used = true;
-	v->n.name = "x";
-	v->n.planet = &pl;
-	return node_init(&v->n, &node_type_vector, "test.ini", sec, err);
+	return node_ini_init(v, &node_type_vector, &pl, text, NULL, 0, err);
 }
 
-static void vnode_fini(struct vnode *v)
-{
-	node_fini(&v->n);
-	gen_ctx_fini(&v->g);
-	ini_free(v->ini);
-}
-
-static void vnode_ok(struct vnode *v, const char *fmt, ...)
+static void vnode_ok(struct node_ini *v, const char *fmt, ...)
 {
 	char text[2048], err[256] = "";
 	va_list ap;
@@ -102,7 +80,7 @@ static void vnode_ok(struct vnode *v, const char *fmt, ...)
 		fail_msg("node_init: %d %s\n%s", rc, err, text);
 }
 
-static struct tile *gen(struct vnode *v, int lx, int ly, uint32_t x, uint32_t y)
+static struct tile *gen(struct node_ini *v, int lx, int ly, uint32_t x, uint32_t y)
 {
 	struct tile_key k = { .node = v->n.hash, .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
 	struct tile *t = tile_create(&k, v->n.out, T);
@@ -143,7 +121,7 @@ static void write_cap(const char *name, double lon0, double lat0, double th, int
 
 /* Σ coverage × texel area on the sphere over the tiles of level ly (lx = ly + 1) within
  * [w, e] × [s, n] degrees (w > e: across the antimeridian). */
-static double covered_area(struct vnode *v, int ly, double w, double s, double e, double n)
+static double covered_area(struct node_ini *v, int ly, double w, double s, double e, double n)
 {
 	int lx = ly + 1;
 	uint32_t nx = grid_tiles_x(lx), ny = grid_tiles_y(ly);
@@ -176,7 +154,7 @@ static double covered_area(struct vnode *v, int ly, double w, double s, double e
 static void cap_case(double lon0, double lat0, double th, const int *levels, int nlev)
 {
 	write_cap("cap.geojson", lon0, lat0, th, 1440);
-	struct vnode v;
+	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = cap.geojson\noutput = mask\n");
 	double want = 2 * M_PI * R * R * (1 - cos(th * M_PI / 180));
 	double s = fmax(lat0 - th - 0.5, -90), n = fmin(lat0 + th + 0.5, 90);
@@ -193,7 +171,7 @@ static void cap_case(double lon0, double lat0, double th, const int *levels, int
 		if (fabs(rel) > 0.005)
 			fail_msg("cap at level %d: area off by %.3f %%", levels[i], 100 * rel);
 	}
-	vnode_fini(&v);
+	node_ini_fini(&v);
 }
 
 /* A cap in mid-latitudes at levels 3 (texels of 0.7°: the cap is 11 texels across), 6, 9. */
@@ -238,7 +216,7 @@ static void line_width_at(double lat)
 		 "\"coordinates\":[[9.9,%.6f],[10.1,%.6f]]}}]}",
 		 lat - 0.1, lat + 0.1, lat - 0.003, lat - 0.003);
 	write_file("line.geojson", gj);
-	struct vnode v;
+	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = line.geojson\noutput = mask\nwidth = 100m\n");
 	int ly = 14, lx = 15;
 	double tw = 360.0 / grid_tiles_x(lx) / T, th = 180.0 / grid_tiles_y(ly) / T;
@@ -274,7 +252,7 @@ static void line_width_at(double lat)
 	       lat, R * cos(lat * d) * tw * d, R * th * d, checked);
 	assert_true(checked > 40);
 	tile_unref(t);
-	vnode_fini(&v);
+	node_ini_fini(&v);
 }
 
 static void line_width(void **state)
@@ -295,7 +273,7 @@ static void seams(void **state)
 		   "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\","
 		   "\"properties\":{},\"geometry\":{\"type\":\"LineString\",\"coordinates\":"
 		   "[[170,10.3],[179.5,10.3],[-179.5,10.3],[-170,10.3]]}}]}");
-	struct vnode v;
+	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = am.geojson\noutput = mask\nwidth = 3px\n");
 	int ly = 4, lx = 5;
 	uint32_t nx = grid_tiles_x(lx);
@@ -312,7 +290,7 @@ static void seams(void **state)
 	assert_float_equal(sum, 3.0, 1e-3);
 	tile_unref(west);
 	tile_unref(east);
-	vnode_fini(&v);
+	node_ini_fini(&v);
 
 	write_cap("pole.geojson", 0, 90, 1.3, 720);
 	vnode_ok(&v, "[node x]\ntype = vector\npath = pole.geojson\noutput = mask\n");
@@ -339,7 +317,7 @@ static void seams(void **state)
 		tile_unref(t);
 	}
 	tile_unref(t0);
-	vnode_fini(&v);
+	node_ini_fini(&v);
 }
 
 /* The mask as a blend's mask over heights, b a constant target: inside the polygon every
@@ -351,20 +329,16 @@ static void flatten(void **state)
 		   "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\","
 		   "\"properties\":{},\"geometry\":{\"type\":\"Polygon\",\"coordinates\":"
 		   "[[[10.01,45.01],[10.05,45.012],[10.06,45.04],[10.02,45.05],[10.01,45.01]]]}}]}");
-	struct vnode v;
+	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = site.geojson\noutput = mask\n");
 	/* The blend: a = terrain, b = the site's height, mask = the vector node. */
 	struct node terrain = { .name = "terrain", .out = PIX_HEIGHT, .hash = 21 };
 	struct node level = { .name = "level", .out = PIX_HEIGHT, .hash = 22 };
-	const char *bt = "[node f]\ntype = blend\nmode = mask\n";
+	struct node *ins[3] = { &terrain, &level, &v.n };
+	struct node_ini bn;
 	char err[256];
-	struct ini_file *ini;
-	assert_int_equal(ini_parse("t.ini", bt, strlen(bt), &ini, err), 0);
-	struct ini_entry *te = ini_find(&ini->sections[0], "type");
-	te->used = true;
-	struct node blend = { .name = "f", .planet = &pl };
-	blend.in[0] = &terrain, blend.in[1] = &level, blend.in[2] = &v.n;
-	if (node_init(&blend, &node_type_blend, "t.ini", &ini->sections[0], err))
+	if (node_ini_init(&bn, &node_type_blend, &pl, "[node f]\ntype = blend\nmode = mask\n", ins,
+			  3, err))
 		fail_msg("%s", err);
 	int ly = 12, lx = 13;
 	double tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
@@ -378,8 +352,7 @@ static void flatten(void **state)
 		tile_f32(b)[i] = 312.5f;
 	}
 	struct tile *in[3] = { a, b, m };
-	struct gen_ctx g = { 0 };
-	assert_int_equal(node_type_blend.generate(&blend, &g, &k, in, 3, o), 0);
+	assert_int_equal(node_type_blend.generate(&bn.n, &bn.g, &k, in, 3, o), 0);
 	int inside = 0, outside = 0, edge = 0;
 	for (int i = 0; i < T * T; i++) {
 		float c = tile_f32(m)[i], h = tile_f32(o)[i];
@@ -397,10 +370,8 @@ static void flatten(void **state)
 	       outside, edge);
 	assert_true(inside > 200 && outside > 200 && edge < inside);
 	tile_unref(a), tile_unref(b), tile_unref(o), tile_unref(m);
-	gen_ctx_fini(&g);
-	node_fini(&blend);
-	ini_free(ini);
-	vnode_fini(&v);
+	node_ini_fini(&bn);
+	node_ini_fini(&v);
 }
 
 /* Colours picked by an attribute; others in the default colour (here transparent). */
@@ -417,7 +388,7 @@ static void styles(void **state)
 		   "{\"type\":\"LineString\",\"coordinates\":[[-60,30],[-60,60]]}},"
 		   "{\"type\":\"Feature\",\"properties\":{\"kind\":\"lake\"},\"geometry\":"
 		   "{\"type\":\"Point\",\"coordinates\":[-40,45]}}]}");
-	struct vnode v;
+	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = styled.geojson\nstyle_field = kind\n"
 		     "color = #00000000\nstyles = river #0000ff 4px, border #ff0000 4px, lake "
 		     "#00ff0080 10px\n");
@@ -437,18 +408,18 @@ static void styles(void **state)
 	assert_int_equal(o[3], 0);
 	assert_true(l[1] == 255 && l[3] >= 126 && l[3] <= 129);
 	tile_unref(t);
-	vnode_fini(&v);
+	node_ini_fini(&v);
 }
 
 static void refused(const char *text, const char *want)
 {
-	struct vnode v;
+	struct node_ini v;
 	char err[256] = "";
 	int rc = vnode_init(&v, text, err);
 	if (rc != -EINVAL || !strstr(err, want))
 		fail_msg("want -EINVAL and \"%s\", got %d \"%s\"", want, rc, err);
 	printf("# refused: %s\n", err);
-	vnode_fini(&v);
+	node_ini_fini(&v);
 }
 
 static void bad_files(void **state)
@@ -468,13 +439,13 @@ static void bad_files(void **state)
 	refused("[node x]\ntype = vector\n", "path: missing");
 	refused("[node x]\ntype = vector\npath = ok.geojson\nblur = 3\n", "blur");
 	/* An empty source is valid: transparent tiles. */
-	struct vnode v;
+	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = ok.geojson\n");
 	struct tile *t = gen(&v, 1, 0, 1, 0);
 	for (int i = 0; i < T * T * 4; i++)
 		assert_int_equal(t->data[i], 0);
 	tile_unref(t);
-	vnode_fini(&v);
+	node_ini_fini(&v);
 }
 
 int main(void)

@@ -114,18 +114,6 @@ static int parse_hex(const char *s, float rgba[4])
 	return 0;
 }
 
-static char *resolve_path(const struct planet *pl, const char *path)
-{
-	if (path[0] == '/' || !pl || !pl->dir || !pl->dir[0])
-		return xstrdup(path);
-	size_t a = strlen(pl->dir), b = strlen(path);
-	char *s = xmalloc(a + b + 2);
-	memcpy(s, pl->dir, a);
-	s[a] = '/';
-	memcpy(s + a + 1, path, b + 1);
-	return s;
-}
-
 /* `styles`: "VALUE #colour WIDTH, …" into v->styles[1..] and the values (pointers into buf). */
 static int parse_styles(struct node_parse *p, struct vector *v, const char *text, char *buf,
 			const char **values)
@@ -198,12 +186,14 @@ static int vector_create(struct node *n, struct node_parse *p)
 	if (styles && (rc = parse_styles(p, v, styles, buf, values)))
 		return rc;
 	path = pe->value;
-	char *full = resolve_path(pl, path);
-	char err[256];
+	char full[4096], err[256];
+	if (path[0] != '/' && pl->dir && pl->dir[0])
+		snprintf(full, sizeof full, "%s/%s", pl->dir, path);
+	else
+		snprintf(full, sizeof full, "%s", path);
 	struct vec_load_opts o = { .layer = layer, .field = field, .values = values,
 				   .nvalues = v->nstyles - 1 };
 	rc = vec_source_load(full, &o, &v->src, err);
-	free(full);
 	if (rc)
 		return np_error(p, "path", "%s", err);
 	/* The tiles are named by the data read, not by where it lies. */
