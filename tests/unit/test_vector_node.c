@@ -411,6 +411,38 @@ static void styles(void **state)
 	node_ini_fini(&v);
 }
 
+/* polygons = outline: the ring's edge drawn, its inside left clear; both: the inside at the
+ * fill's opacity under the outline. */
+static void outline(void **state)
+{
+	(void)state;
+	write_file("sq.geojson", "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":"
+		   "\"Feature\",\"properties\":{},\"geometry\":{\"type\":\"Polygon\","
+		   "\"coordinates\":[[[-150,20],[-30,20],[-30,70],[-150,70],[-150,20]]]}}]}");
+	static const char *const modes[] = { "outline", "both" };
+	for (int m = 0; m < 2; m++) {
+		struct node_ini v;
+		vnode_ok(&v, "[node x]\ntype = vector\npath = sq.geojson\ncolor = #ff0000\n"
+			     "width = 2px\npolygons = %s\nfill_opacity = 0.5\n", modes[m]);
+		struct tile *t = gen(&v, 1, 0, 0, 0); /* texels of 180/64 = 2.8125° */
+		const uint8_t *p = t->data;
+		double d = 180.0 / T;
+		int jn = (int)((90 - 70) / d), je = (int)((-30 + 180) / d);
+		int jm = (int)((90 - 45) / d), im = (int)((-90 + 180) / d);
+		/* The north edge (lat 70 falls inside a texel row: that row and the next share
+		 * the 2-texel line) and the middle. */
+		int edge_a = p[4 * (jn * T + im) + 3] + p[4 * ((jn + 1) * T + im) + 3];
+		assert_true(edge_a >= 255);
+		assert_int_equal(p[4 * (jn * T + im)], 255);
+		assert_true(p[4 * (jm * T + je) + 3] > 0); /* the east edge */
+		uint8_t mid = p[4 * (jm * T + im) + 3];
+		printf("# %s: north edge alpha %d, middle alpha %d\n", modes[m], edge_a, mid);
+		assert_int_equal(mid, m == 0 ? 0 : 128);
+		tile_unref(t);
+		node_ini_fini(&v);
+	}
+}
+
 static void refused(const char *text, const char *want)
 {
 	struct node_ini v;
@@ -437,6 +469,10 @@ static void bad_files(void **state)
 	refused("[node x]\ntype = vector\npath = ok.geojson\nstyles = a #fff 1px\n",
 		"needs style_field");
 	refused("[node x]\ntype = vector\n", "path: missing");
+	write_file("far.geojson", "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":"
+		   "\"Feature\",\"properties\":{},\"geometry\":{\"type\":\"Point\","
+		   "\"coordinates\":[10,95]}}]}");
+	refused("[node x]\ntype = vector\npath = far.geojson\n", "not a longitude and latitude");
 	refused("[node x]\ntype = vector\npath = ok.geojson\nblur = 3\n", "blur");
 	/* An empty source is valid: transparent tiles. */
 	struct node_ini v;
@@ -457,6 +493,7 @@ int main(void)
 		cmocka_unit_test(seams),
 		cmocka_unit_test(flatten),
 		cmocka_unit_test(styles),
+		cmocka_unit_test(outline),
 		cmocka_unit_test(bad_files),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

@@ -8,6 +8,7 @@
 #include <math.h>
 #include <pthread.h>
 #include <stdarg.h>
+#include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -27,6 +28,7 @@ static void init(void) { GDALAllRegister(); }
 struct build {
 	struct vec_source *s;
 	size_t cpts, cparts, cfeats;
+	bool bad; /* a coordinate that is not a longitude and latitude */
 	const char *path;
 	char *err;
 };
@@ -82,6 +84,11 @@ static void add_part(struct build *b, OGRGeometryH g, int ring)
 	double prev = 0, lat_sum = 0;
 	for (int i = 0; i < n; i++) {
 		double lon = OGR_G_GetX(g, i), lat = OGR_G_GetY(g, i);
+		if (!(fabs(lon) <= 720 && fabs(lat) <= 90.5)) { /* NaN too */
+			b->bad = true;
+			s->npts = first;
+			return;
+		}
 		lat = lat < -90 ? -90 : lat > 90 ? 90 : lat;
 		if (i > 0) /* unwrap: consecutive vertices less than 180° apart */
 			lon += 360 * round((prev - lon) / 360);
@@ -235,6 +242,13 @@ static int read_layer(struct build *b, OGRLayerH L, const struct vec_load_opts *
 			if (g)
 				add_geometry(b, g, style);
 			OGR_G_DestroyGeometry(g);
+			if (b->bad) {
+				rc = fail(b->err, -EINVAL, "%s: layer %s, feature %lld: a coordinate "
+					  "is not a longitude and latitude (NaN, or beyond ±720°, ±90°)",
+					  b->path, lname, (long long)OGR_F_GetFID(f));
+				OGR_F_Destroy(f);
+				break;
+			}
 		}
 		OGR_F_Destroy(f);
 	}
