@@ -194,6 +194,42 @@ static void cap_area_antimeridian_pole(void **state)
 	cap_case(77, -90, 6, lp, 2);
 }
 
+/* The same cap through other formats GDAL/OGR reads — GeoPackage, FlatGeobuf, KML, and a
+ * Shapefile in UTM zone 33N (projected: the node transforms it back to degrees) — covers the
+ * same area as the GeoJSON. Needs ogr2ogr (gdal-bin). */
+static void formats(void **state)
+{
+	(void)state;
+	if (system("command -v ogr2ogr >/dev/null 2>&1") != 0) {
+		print_message("skipped: ogr2ogr (gdal-bin) missing\n");
+		skip();
+	}
+	write_cap("fmt.geojson", 15, 45, 2, 720);
+	static const char *const outs[][2] = { { "fmt.gpkg", "-f GPKG" },
+					       { "fmt.fgb", "-f FlatGeobuf" },
+					       { "fmt.kml", "-f KML" },
+					       { "fmt.shp", "-f 'ESRI Shapefile' -t_srs EPSG:32633" } };
+	double ref = 0;
+	for (int i = -1; i < 4; i++) {
+		const char *name = i < 0 ? "fmt.geojson" : outs[i][0];
+		if (i >= 0) {
+			char cmd[512];
+			snprintf(cmd, sizeof cmd, "ogr2ogr %s '%s' '%s' 2>&1", outs[i][1], tpath(name),
+				 tpath("fmt.geojson"));
+			assert_int_equal(system(cmd), 0);
+		}
+		struct node_ini v;
+		vnode_ok(&v, "[node x]\ntype = vector\npath = %s\noutput = mask\n", name);
+		double a = covered_area(&v, 6, 12, 42.5, 18, 47.5);
+		node_ini_fini(&v);
+		if (i < 0)
+			ref = a;
+		printf("# %s: %.6g km² (%+.5f %% against the GeoJSON)\n", name, a / 1e6,
+		       100 * (a - ref) / ref);
+		assert_true(fabs(a - ref) < 1e-4 * ref);
+	}
+}
+
 /* Width of a line, in metres, across one row (east-west: the line runs north-south) or one
  * column of a tile. */
 static double across(const float *c, int j, bool row, double texel_m)
@@ -489,6 +525,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(cap_area),
 		cmocka_unit_test(cap_area_antimeridian_pole),
+		cmocka_unit_test(formats),
 		cmocka_unit_test(line_width),
 		cmocka_unit_test(seams),
 		cmocka_unit_test(flatten),

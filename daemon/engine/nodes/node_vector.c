@@ -203,8 +203,7 @@ static int vector_create(struct node *n, struct node_parse *p)
 	for (size_t i = 0; i < s->nparts; i++)
 		np_hash_bytes(p, &s->parts[i].n, sizeof s->parts[i].n);
 	for (size_t i = 0; i < s->nfeats; i++) {
-		uint8_t ks[3] = { s->feats[i].kind, (uint8_t)s->feats[i].style,
-				  (uint8_t)s->feats[i].nparts };
+		uint32_t ks[3] = { s->feats[i].kind, s->feats[i].style, s->feats[i].nparts };
 		np_hash_bytes(p, ks, sizeof ks);
 	}
 	/* Index boxes grown by each style's half-width in metres (px widths grow the query):
