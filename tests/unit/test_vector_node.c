@@ -16,6 +16,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "common/grid.h"
 #include "common/ini.h"
@@ -479,6 +480,59 @@ static void outline(void **state)
 	}
 }
 
+/* The shipped layer (earth.ini's `lines` over data/earth/lines.gpkg from make data): the
+ * Egypt–Sudan border, which follows 22°N from 25°E to the Nile (in GSHHG's low resolution
+ * from (25.0022, 21.99969) to (30, 21.99863): 21.99899 at 28.3°E), is a red line there, 1.5
+ * texels wide, at level 6 and at level 12 (texels of 19 m). Skips without the data. */
+static void earth_border(void **state)
+{
+	(void)state;
+	if (access("data/earth/lines.gpkg", R_OK) != 0) {
+		print_message("skipped: data/earth/lines.gpkg missing (make data)\n");
+		skip();
+	}
+	struct planet *p;
+	char err[256];
+	if (planet_load("conf/planets/earth.ini", &p, err))
+		fail_msg("%s", err);
+	struct node *lines = NULL;
+	for (size_t i = 0; i < p->nnodes; i++)
+		if (strcmp(p->nodes[i]->name, "lines") == 0)
+			lines = p->nodes[i];
+	assert_non_null(lines);
+	const uint32_t Tp = p->tile_size;
+	struct gen_ctx g = { 0 };
+	for (int ly = 6; ly <= 12; ly += 6) {
+		int lx = ly + 1;
+		double tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
+		struct tile_key k = { .node = lines->hash, .lx = (uint8_t)lx, .ly = (uint8_t)ly,
+				      .x = (uint32_t)floor((28.3 + 180) / tw),
+				      .y = (uint32_t)floor((90 - 22.01) / th) };
+		struct tile *t = tile_create(&k, PIX_COLOR, Tp);
+		assert_int_equal(lines->type->generate(lines, &g, &k, NULL, 0, t), 0);
+		double west = -180 + k.x * tw, north = 90 - k.y * th;
+		int i = (int)((28.3 - west) / (tw / Tp));
+		double alpha = 0;
+		int jmax = 0, amax = -1;
+		for (uint32_t j = 0; j < Tp; j++) {
+			const uint8_t *q = t->data + 4 * (j * Tp + (uint32_t)i);
+			alpha += q[3] / 255.0;
+			if (q[3] > amax)
+				amax = q[3], jmax = (int)j;
+		}
+		const uint8_t *q = t->data + 4 * ((uint32_t)jmax * Tp + (uint32_t)i);
+		double lat = north - (jmax + 0.5) * th / Tp;
+		printf("# level %d: border at %.4f°N, %.2f texels of alpha, colour %d,%d,%d\n", ly,
+		       lat, alpha, q[0], q[1], q[2]);
+		assert_true(fabs(lat - 21.99899) < th / Tp);
+		assert_true(alpha > 1.2 && alpha < 1.8);
+		assert_true(q[0] > 200 && q[1] < 100 && q[2] < 100);
+		tile_unref(t);
+	}
+	gen_ctx_fini(&g);
+	planet_unref(p);
+}
+
 static void refused(const char *text, const char *want)
 {
 	struct node_ini v;
@@ -531,6 +585,7 @@ int main(void)
 		cmocka_unit_test(flatten),
 		cmocka_unit_test(styles),
 		cmocka_unit_test(outline),
+		cmocka_unit_test(earth_border),
 		cmocka_unit_test(bad_files),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
