@@ -357,6 +357,43 @@ static void seams(void **state)
 	node_ini_fini(&v);
 }
 
+/* Exact area coverage: a texel's coverage is the mean of its four children's, for a polygon
+ * crossing the antimeridian (the children of the level's first and last tiles). */
+static void parent_is_mean(void **state)
+{
+	(void)state;
+	write_cap("pm.geojson", 180, 30, 7, 360);
+	struct node_ini v;
+	vnode_ok(&v, "[node x]\ntype = vector\npath = pm.geojson\noutput = mask\n");
+	int ly = 3, lx = 4;
+	uint32_t nx = grid_tiles_x(lx), y = (uint32_t)floor((90 - 30) / (180.0 / grid_tiles_y(ly)));
+	double worst = 0, sum = 0;
+	for (int side = 0; side < 2; side++) {
+		uint32_t x = side ? 0 : nx - 1;
+		struct tile *p = gen(&v, lx, ly, x, y), *c[4];
+		for (int q = 0; q < 4; q++)
+			c[q] = gen(&v, lx + 1, ly + 1, 2 * x + (q & 1), 2 * y + (q >> 1));
+		const float *pc = tile_f32(p);
+		for (int j = 0; j < T; j++)
+			for (int i = 0; i < T; i++) {
+				const float *cc = tile_f32(c[(j >= T / 2) * 2 + (i >= T / 2)]);
+				int ci = 2 * (i % (T / 2)), cj = 2 * (j % (T / 2));
+				double m = 0.25 * (cc[cj * T + ci] + cc[cj * T + ci + 1] +
+						   cc[(cj + 1) * T + ci] + cc[(cj + 1) * T + ci + 1]);
+				worst = fmax(worst, fabs(m - pc[j * T + i]));
+				sum += pc[j * T + i];
+			}
+		tile_unref(p);
+		for (int q = 0; q < 4; q++)
+			tile_unref(c[q]);
+	}
+	printf("# parent against the mean of its children: worst %.2g over %.0f texels covered\n",
+	       worst, sum);
+	assert_true(sum > 100);
+	assert_true(worst < 1e-4);
+	node_ini_fini(&v);
+}
+
 /* The mask as a blend's mask over heights, b a constant target: inside the polygon every
  * height is the target, outside every height is unchanged (bit for bit). */
 static void flatten(void **state)
@@ -582,6 +619,7 @@ int main(void)
 		cmocka_unit_test(formats),
 		cmocka_unit_test(line_width),
 		cmocka_unit_test(seams),
+		cmocka_unit_test(parent_is_mean),
 		cmocka_unit_test(flatten),
 		cmocka_unit_test(styles),
 		cmocka_unit_test(outline),
