@@ -64,7 +64,6 @@ struct vector {
 	float fill_opacity;
 	int nstyles; /* styles[0] the default, styles[1..] from `styles` */
 	struct vstyle styles[MAX_STYLES + 1];
-	int order[MAX_STYLES + 1]; /* drawing order of style indices (identity) */
 	double a, e2;		   /* the planet's ellipsoid */
 	double max_px;		   /* widest px half-width: the query grows by it */
 };
@@ -118,6 +117,8 @@ static int parse_hex(const char *s, float rgba[4])
 static int parse_styles(struct node_parse *p, struct vector *v, const char *text, char *buf,
 			const char **values)
 {
+	if (strlen(text) >= 4096)
+		return np_error(p, "styles", "longer than 4095 characters");
 	snprintf(buf, 4096, "%s", text);
 	char *save = NULL;
 	for (char *item = strtok_r(buf, ",", &save); item; item = strtok_r(NULL, ",", &save)) {
