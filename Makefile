@@ -271,7 +271,7 @@ MAN_SRC     := $(wildcard docs/man/*.scd)
 MAN_PAGES   := $(MAN_SRC:docs/man/%.scd=$(BUILD)/man/%)
 SCDOC       := $(shell command -v scdoc 2>/dev/null)
 UNIT_SED    := s\#@BINDIR@\#$(BINDIR)\#g; s\#@CONFDIR@\#$(CONFDIR)\#g; s\#@DOCDIR@\#$(DOCDIR)\#g
-PLANET_DATA := $(wildcard data/earth/*.tif data/moon/*.tif data/mars/*.tif)
+PLANET_DATA := $(wildcard data/earth/*.tif data/earth/*.gpkg data/moon/*.tif data/mars/*.tif)
 
 $(BUILD)/man/%: docs/man/%.scd
 	@mkdir -p $(dir $@)
@@ -297,6 +297,8 @@ install: $(PROGS) $(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.so
 	for f in conf/planets/*.ini; do \
 		t=$(DESTDIR)$(CONFDIR)/planets/$$(basename $$f); test -e $$t && continue; \
 		sed 's#^path = \.\./\.\./data/#path = $(STATEDIR)/#' $$f > $$t && chmod 644 $$t || exit 1; done
+	for f in conf/planets/*.geojson; do t=$(DESTDIR)$(CONFDIR)/planets/$$(basename $$f); \
+		test -e $$t || install -m 644 $$f $$t || exit 1; done
 	for f in $(PLANET_DATA); do \
 		d=$(DESTDIR)$(STATEDIR)/$$(basename $$(dirname $$f)); \
 		install -d $$d && install -m 644 $$f $$d/ || exit 1; done

@@ -7,12 +7,15 @@
 #   data/earth/bluemarble.tif NASA Blue Marble (flightgear-data-models: 8 tiles, gutters cut)
 #   data/moon/moon.tif        Moon colour (stellarium-data moon_4k.jpg, USGS/Clementine)
 #   data/mars/mars.tif        Mars colour (openuniverse-common mars.jpg)
+#   data/earth/lines.gpkg     coastlines, national borders, rivers (GSHHG/WDBII in gmt-gshhg-low,
+#                             dumped by gmt: scripts/earth_lines.sh; LGPL, public domain)
 # proj-data brings the EGM96 geoid (/usr/share/proj/egm96_15.gtx).
 set -eu
 BUILD=${BUILD:-build}
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
 cd "$ROOT"
-PKGS="ferret-datasets flightgear-data-models stellarium-data openuniverse-common proj-data"
+PKGS="ferret-datasets flightgear-data-models stellarium-data openuniverse-common proj-data
+gmt gmt-gshhg-low gmt-dcw"
 missing=""
 for p in $PKGS; do
 	st=$(dpkg-query -W -f='${Status}' "$p" 2>/dev/null || true)
@@ -39,7 +42,8 @@ ETOPO=/usr/share/ferret-vis/data/etopo5.cdf
 FG=/usr/share/games/flightgear/Models/Astro/Textures
 MOON=/usr/share/stellarium/textures/moon_4k.jpg
 MARS=/usr/share/openuniverse/textures/mars.jpg
-for f in "$ETOPO" "$MOON" "$MARS" "$FG/world_N1.png" "$FG/world_S4.png"; do
+GSHHG=/usr/share/gmt-gshhg
+for f in "$ETOPO" "$MOON" "$MARS" "$FG/world_N1.png" "$FG/world_S4.png" "$GSHHG/binned_GSHHS_l.nc"; do
 	[ -r "$f" ] || { echo "make data: $f is missing (its package is installed?)" >&2; exit 1; }
 done
 
@@ -60,6 +64,7 @@ stale data/earth/etopo5.tif "$ETOPO" && need=1
 stale data/earth/bluemarble.tif "$FG"/world_[NS][1-4].png && need=1
 stale data/moon/moon.tif "$MOON" && need=1
 stale data/mars/mars.tif "$MARS" && need=1
+stale data/earth/lines.gpkg "$GSHHG"/binned_*_l.nc scripts/earth_lines.sh && need=1
 [ $need -eq 0 ] && exit 0
 ${MAKE:-make} --no-print-directory -s "$CTL"
 mkdir -p data/earth data/moon data/mars
@@ -108,4 +113,9 @@ fi
 # Plain images without georeferencing: global, west edge at -180°.
 stale data/moon/moon.tif "$MOON" && imp data/moon/moon.tif "$MOON"
 stale data/mars/mars.tif "$MARS" && imp data/mars/mars.tif "$MARS"
+if stale data/earth/lines.gpkg "$GSHHG"/binned_*_l.nc scripts/earth_lines.sh; then
+	ts=$(now)
+	sh scripts/earth_lines.sh data/earth/lines.gpkg
+	echo "make data: data/earth/lines.gpkg ($(awk "BEGIN { printf \"%.1f\", $(now) - $ts }") s)"
+fi
 echo "make data: ready in $(awk "BEGIN { printf \"%.1f\", $(now) - $t0 }") s"

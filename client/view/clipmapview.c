@@ -64,6 +64,8 @@ static void usage(FILE *f)
 		"  --haze X            atmosphere density, 1 Earth's, 0 none (default: the\n"
 		"                      planet's atmosphere, from its file)\n"
 		"  --rings N,M         N steps around, M rings per level (default 256,16)\n"
+		"  --color-layer NAME  the colour layer drawn (default: \"color\"; earth: annotated\n"
+		"                      for coast, borders and rivers)\n"
 		"  --backend egl|osmesa, --workers N, --no-prefetch\n"
 		"  --window            fly interactively in a window (--camera optional):\n"
 		"                      left drag orbit, right drag look, wheel zoom, WASD/arrows move,\n"
@@ -217,6 +219,7 @@ enum {
 	O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS, O_FOV,
 	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
 	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS, O_LOSSLESS,
+	O_CLAYER,
 	O_CONNECT_WAIT
 };
 
@@ -247,6 +250,7 @@ static const struct option long_opts[] = {
 	{ "connect-wait", required_argument, NULL, O_CONNECT_WAIT },
 	{ "exaggerate", required_argument, NULL, O_EXAG },
 	{ "haze", required_argument, NULL, O_HAZE },
+	{ "color-layer", required_argument, NULL, O_CLAYER },
 	{ "window", no_argument, NULL, O_WINDOW },
 	{ "exit-after", required_argument, NULL, O_EXIT_AFTER },
 	{ "screenshot", required_argument, NULL, O_SCREENSHOT },
@@ -274,6 +278,7 @@ static bool take_option(int c, const char *s, struct args *a)
 		if ((rc = args_double("--exaggerate", s, 0.1, 100, &v, err)) == 0)
 			a->d.exaggeration = (float)v;
 		break;
+	case O_CLAYER: a->d.color_layer = s; return true;
 	case O_HAZE:
 		if ((rc = args_double("--haze", s, 0, 100, &v, err)) == 0)
 			a->d.haze = v > 0 ? (float)v : -1;

@@ -424,7 +424,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->hc = xcalloc((size_t)v->nlevels, sizeof *v->hc);
 	v->drawn = xcalloc((size_t)v->nlevels, sizeof *v->drawn);
 	v->detail = xcalloc((size_t)v->nlevels, sizeof *v->detail);
-	int rc = view_clipmap_create(gl, src, v->nlevels, &v->cm, err);
+	int rc = view_clipmap_create_layer(gl, src, v->nlevels, d->color_layer, &v->cm, err);
 	if (rc == 0)
 		/* every feature (lit): fail early */
 		rc = get_program(v, (NVARIANT - 1) & ~VAR_UNLIT, err) ? 0 : -EINVAL;

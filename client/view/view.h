@@ -48,6 +48,8 @@ struct view_desc {
 	bool no_cull;	      /* draw every ring sector (also: CLIPMAP_NO_CULL=1 in the env) */
 	bool unlit;	      /* the colour layer as it is: no sun, air or water (measuring what
 			       * the textures put on screen) */
+	const char *color_layer; /* the colour layer drawn (borrowed); NULL: the one named
+				  * "color", else the first colour layer */
 };
 
 struct view_frame_stats {

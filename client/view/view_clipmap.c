@@ -79,6 +79,12 @@ static bool same_tile(const struct tile_key *a, const struct tile_key *b)
 int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
 			struct view_clipmap **out, char err[256])
 {
+	return view_clipmap_create_layer(gl, src, nlevels, NULL, out, err);
+}
+
+int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int nlevels,
+			      const char *color_layer, struct view_clipmap **out, char err[256])
+{
 	const struct view_planet *p = &src->planet;
 	*out = NULL;
 	if (nlevels < 1 || nlevels > VIEW_MAX_LEVELS || p->tile_size < 16 || p->tile_size > 4096) {
@@ -87,10 +93,15 @@ int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevel
 	}
 	int layer[VIEW_NROLES];
 	for (int r = 0; r < VIEW_NROLES; r++) {
+		const char *name = r == VIEW_COLOR && color_layer ? color_layer : roles[r].name;
 		layer[r] = -1;
 		for (int i = 0; i < p->nlayers && layer[r] < 0; i++)
-			if (p->layer[i].format == roles[r].type && !strcmp(p->layer[i].name, roles[r].name))
+			if (p->layer[i].format == roles[r].type && !strcmp(p->layer[i].name, name))
 				layer[r] = i;
+		if (r == VIEW_COLOR && color_layer && layer[r] < 0) {
+			err_set(err, "planet %s has no colour layer \"%s\"", p->name, color_layer);
+			return -EINVAL;
+		}
 		for (int i = 0; i < p->nlayers && layer[r] < 0; i++)
 			if (p->layer[i].format == roles[r].type)
 				layer[r] = i;

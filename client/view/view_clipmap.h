@@ -39,6 +39,10 @@ struct view_clipmap;
  * format; a height layer is required). Returns 0 or -errno with err filled. */
 int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
 			struct view_clipmap **out, char err[256]);
+/* The same with the colour layer named (NULL: as view_clipmap_create); a planet without a
+ * colour layer of that name is refused. */
+int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int nlevels,
+			      const char *color_layer, struct view_clipmap **out, char err[256]);
 void view_clipmap_destroy(struct view_clipmap *cm);
 
 /* Sets level's target quad (NULL: the level is not wanted). Tiles farther than the ring

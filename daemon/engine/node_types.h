@@ -38,6 +38,9 @@ extern const struct node_type node_type_geoid;
 /* `craters`: seeded, size-distributed impact craters on the sphere, a height source or added
  * to an optional input height; band-limited per level (node_craters.c lists the parameters). */
 extern const struct node_type node_type_craters;
+/* `vector`: a GDAL/OGR vector source (GeoJSON, GeoPackage, Shapefile, …) rasterized per tile
+ * with exact area coverage: RGBA (styled by an attribute) or a 0..1 mask (node_vector.c). */
+extern const struct node_type node_type_vector;
 
 /* The type named `name` in the NULL-terminated list `types`, or NULL (borrowed). */
 const struct node_type *node_types_find_in(const struct node_type *const *types, const char *name);
