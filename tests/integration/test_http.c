@@ -58,12 +58,20 @@ static int http_port_from_log(const struct daemon_env *d)
 	return port;
 }
 
-static int start(void **state, const char *const *extra, const char *token)
+/* A planet whose tiles take long to make (1024² texels of 24 octaves: 50–100 ms each on one
+ * worker): the hang-up test's. */
+static const char slow_planet_text[] =
+	"[planet]\nname = slow\nbody = sphere\nradius = 1000000\ntile_size = 1024\nmax_level = 10\n"
+	"[node base]\ntype = noise\nseed = 9\noctaves = 24\nwavelength = 300000\namplitude = 500\n"
+	"[layer height]\nnode = base\nformat = f32\n";
+
+static int start(void **state, const char *const *extra, const char *token, bool slow)
 {
 	struct env *e = calloc(1, sizeof *e);
 	*state = e;
 	if (!e || daemon_env_init(&e->d, "test_http") ||
-	    daemon_env_planet_text(&e->d, "test.ini", planet_text, e->planet))
+	    daemon_env_planet_text(&e->d, "test.ini", planet_text, e->planet) ||
+	    (slow && daemon_env_planet_text(&e->d, "slow.ini", slow_planet_text, NULL)))
 		return -1;
 	char out[256];
 	char *const which[] = { "curl", "--version", NULL };
@@ -86,12 +94,18 @@ static int start(void **state, const char *const *extra, const char *token)
 	return e->port > 0 ? 0 : -1;
 }
 
-static int setup(void **state) { return start(state, NULL, NULL); }
+static int setup(void **state) { return start(state, NULL, NULL, false); }
 
 static int setup_token(void **state)
 {
 	static const char *const x[] = { "listen.require_token = tcp", NULL };
-	return start(state, x, "s3cret");
+	return start(state, x, "s3cret", false);
+}
+
+static int setup_slow(void **state)
+{
+	static const char *const x[] = { "engine.workers = 1", "http.max_per_address = 64", NULL };
+	return start(state, x, NULL, true);
 }
 
 static int teardown(void **state)
@@ -624,6 +638,84 @@ static void metrics_count(void **state)
 	free(b);
 }
 
+/* A raw client that asks for one tile and returns its socket (the answer left unread). */
+static int ask(struct env *e, const char *path)
+{
+	int fd = socket(AF_INET, SOCK_STREAM, 0);
+	struct sockaddr_in a = { .sin_family = AF_INET, .sin_port = htons((uint16_t)e->port) };
+	a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+	assert_int_equal(connect(fd, (struct sockaddr *)&a, sizeof a), 0);
+	char req[300];
+	int n = snprintf(req, sizeof req, "GET %s HTTP/1.1\r\nHost: x\r\n\r\n", path);
+	assert_int_equal(write(fd, req, (size_t)n), n);
+	return fd;
+}
+
+/* /metrics, gathered anew (once a second): waits for the next gathering. */
+static char *fresh_metrics(struct env *e)
+{
+	char m[200];
+	snprintf(m, sizeof m, "%s/metrics", e->d.dir);
+	daemon_env_log_wait(&e->d, "never", 1, 1200);
+	assert_int_equal(get(e, "/metrics", m, NULL), 200);
+	return slurp(m);
+}
+
+/* Clients that hang up while their tiles are made cancel them: 40 connections each ask for an
+ * uncached tile of the slow planet (one worker, 50–100 ms a tile) and close 0.3 s later. The
+ * daemon counts the requests cancelled (all but the few made by then), its scheduler drops
+ * their queued work, far fewer tiles than asked are made, and other clients are served. */
+static void hangup_cancels(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char *m0 = fresh_metrics(e);
+	double gen0 = metric(m0, "clipmapd_node_generated_total{planet=\"slow\",node=\"base\"}");
+	double sc0 = metric(m0, "clipmapd_sched_cancelled_total");
+	assert_true(metric(m0, "clipmapd_http_cancelled_total") == 0);
+	assert_non_null(strstr(m0, "clipmapd_sched_queued_web "));
+	free(m0);
+	enum { N = 40 };
+	int fd[N];
+	for (int i = 0; i < N; i++) {
+		char p[100]; /* level 7 (256 × 128 tiles), a row of them */
+		snprintf(p, sizeof p, "/wmts/slow/height/7/%d/%d.tif", 40 + i / 20, 100 + i % 20);
+		fd[i] = ask(e, p);
+	}
+	daemon_env_log_wait(&e->d, "never", 1, 300); /* all of them suspended and queued */
+	for (int i = 0; i < N; i++)
+		close(fd[i]);
+	/* the daemon still serves: a tile of the other planet, and health */
+	uint64_t t0 = clock_now_ns();
+	assert_int_equal(get(e, "/wmts/test/color/2/1/1.png", NULL, NULL), 200);
+	print_message("a tile right after 40 hang-ups: %.0f ms\n",
+		      (double)(clock_now_ns() - t0) * 1e-6);
+	assert_int_equal(get(e, "/healthz", NULL, NULL), 200);
+	/* wait until nothing is queued or running any more */
+	char *m = NULL;
+	for (int k = 0; k < 60; k++) {
+		free(m);
+		m = fresh_metrics(e);
+		if (metric(m, "clipmapd_sched_queued_web") == 0 &&
+		    metric(m, "clipmapd_sched_workers_busy") == 0)
+			break;
+	}
+	double cancelled = metric(m, "clipmapd_http_cancelled_total");
+	double gen = metric(m, "clipmapd_node_generated_total{planet=\"slow\",node=\"base\"}") -
+		     (gen0 > 0 ? gen0 : 0);
+	double sc = metric(m, "clipmapd_sched_cancelled_total") - sc0;
+	print_message("40 requests hung up: %.0f counted cancelled, %.0f queued jobs dropped, %.0f "
+		      "tiles generated\n", cancelled, sc, gen);
+	assert_true(cancelled >= N / 2 && cancelled <= N);
+	assert_true(sc >= cancelled - 1); /* all but one running when they left */
+	assert_true(gen < N / 2);
+	assert_true(gen + cancelled >= N); /* each request either made or cancelled */
+	free(m);
+	/* and the slow planet still serves a client that waits */
+	assert_int_equal(get(e, "/wmts/slow/height/7/41/100.tif", NULL, NULL), 200);
+	assert_int_equal(kill(e->d.daemon, 0), 0);
+}
+
 static void token_required(void **state)
 {
 	struct env *e = *state;
@@ -651,6 +743,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(bad_requests, setup, teardown),
 		cmocka_unit_test_setup_teardown(metrics_count, setup, teardown),
 		cmocka_unit_test_setup_teardown(token_required, setup_token, teardown),
+		cmocka_unit_test_setup_teardown(hangup_cancels, setup_slow, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
