@@ -36,13 +36,14 @@ char *cesium_layer_json(const struct planet *p, bool normals, size_t *len)
 	struct strbuf b = { 0 };
 	strbuf_printf(&b, "{\n  \"tilejson\": \"2.1.0\",\n  \"name\": ");
 	strbuf_json(&b, p->name);
-	strbuf_printf(&b, ",\n  \"version\": \"1.0.0\",\n  \"format\": \"quantized-mesh-1.0\",\n"
+	strbuf_printf(&b, ",\n");
+	if (normals)
+		strbuf_printf(&b, "  \"extensions\": [\"octvertexnormals\"],\n");
+	strbuf_printf(&b, "  \"version\": \"1.0.0\",\n  \"format\": \"quantized-mesh-1.0\",\n"
 			  "  \"scheme\": \"tms\",\n  \"tiles\": [\"{z}/{x}/{y}.terrain\"],\n"
 			  "  \"projection\": \"EPSG:4326\",\n  \"bounds\": [-180, -90, 180, 90],\n"
 			  "  \"minzoom\": 0,\n  \"maxzoom\": %d,\n  \"available\": [\n",
 		      p->max_level);
-	if (normals)
-		strbuf_printf(&b, "  \"extensions\": [\"octvertexnormals\"],\n");
 	for (int z = 0; z <= p->max_level; z++)
 		strbuf_printf(&b, "    [{\"startX\": 0, \"startY\": 0, \"endX\": %.0f, \"endY\": %.0f}]%s\n",
 			      ldexp(1, z + 1) - 1, ldexp(1, z) - 1, z < p->max_level ? "," : "");
