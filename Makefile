@@ -253,7 +253,9 @@ fuzz: deps $(FUZZ_SRC:tests/fuzz/%.c=build-fuzz/%)
 # $(CONFDIR) (kept if present: the admin's files), the planets' file paths pointed at
 # $(STATEDIR), where the shipped planets' data (data/, from make data) go; the systemd units
 # made from systemd/*.in with these paths in $(UNITDIR), the group clipmap (sysusers.d), man
-# pages (when scdoc is here), docs, bash completion. DESTDIR stages everything; a real install
+# pages (when scdoc is here), docs, bash completion, and CesiumJS for the HTTP endpoint's
+# browser page (from $(BUILD)/npm, put there by make deps) in $(DATADIR)/cesium, where the
+# installed clipmapd looks for it (BINDIR/../share/clipmap/cesium). DESTDIR stages everything; a real install
 # (no DESTDIR; RUN_SYSUSERS=no skips it) then creates the group with systemd-sysusers. `make uninstall` removes what
 # install put there except the config, the planets and the data.
 PREFIX      ?= /usr/local
@@ -263,6 +265,8 @@ CONFDIR     ?= $(SYSCONFDIR)/clipmap
 STATEDIR    ?= /var/lib/clipmap
 MANDIR      ?= $(PREFIX)/share/man
 DOCDIR      ?= $(PREFIX)/share/doc/clipmap
+DATADIR     ?= $(PREFIX)/share/clipmap
+CESIUM_BUILD := $(BUILD)/npm/node_modules/cesium/Build/Cesium
 UNITDIR     ?= $(if $(filter /usr,$(PREFIX)),/usr/lib/systemd/system,$(SYSCONFDIR)/systemd/system)
 SYSUSERSDIR ?= $(PREFIX)/lib/sysusers.d
 BASHCOMPDIR ?= $(PREFIX)/share/bash-completion/completions
@@ -308,6 +312,12 @@ install: $(PROGS) $(BUILD)/systemd/clipmapd.service $(BUILD)/systemd/clipmapd.so
 	install -m 644 README.md LICENSE docs/ARCHITECTURE.md docs/PLANETS.md docs/PROTOCOL.md \
 		docs/FLEET.md conf/redis.conf.example $(DESTDIR)$(DOCDIR)/
 	install -m 644 scripts/clipmapctl.bash-completion $(DESTDIR)$(BASHCOMPDIR)/clipmapctl
+	@if [ -f $(CESIUM_BUILD)/Cesium.js ]; then \
+		rm -rf $(DESTDIR)$(DATADIR)/cesium && install -d $(DESTDIR)$(DATADIR)/cesium && \
+		cp -RL $(CESIUM_BUILD)/. $(DESTDIR)$(DATADIR)/cesium/ && \
+		chmod -R u+rwX,go+rX,go-w $(DESTDIR)$(DATADIR)/cesium || exit 1; \
+	else echo "make install: no CesiumJS in $(BUILD)/npm (make deps installs it):" \
+		"the HTTP endpoint's browser page will be off"; fi
 	$(if $(SCDOC),for m in $(MAN_PAGES); do s=$${m##*.}; install -d $(DESTDIR)$(MANDIR)/man$$s && \
 		install -m 644 $$m $(DESTDIR)$(MANDIR)/man$$s/ || exit 1; done, \
 		@echo "make install: scdoc not found: no man pages (make deps installs it)")
@@ -320,7 +330,8 @@ uninstall:
 		$(DESTDIR)$(UNITDIR)/clipmapd.service $(DESTDIR)$(UNITDIR)/clipmapd.socket \
 		$(DESTDIR)$(SYSUSERSDIR)/clipmap.conf $(DESTDIR)$(BASHCOMPDIR)/clipmapctl \
 		$(foreach m,$(MAN_SRC:docs/man/%.scd=%),$(DESTDIR)$(MANDIR)/man$(subst .,,$(suffix $(m)))/$(m))
-	rm -rf $(DESTDIR)$(DOCDIR)
+	rm -rf $(DESTDIR)$(DOCDIR) $(DESTDIR)$(DATADIR)/cesium
+	rmdir $(DESTDIR)$(DATADIR) 2>/dev/null || true
 	@echo "kept: $(DESTDIR)$(CONFDIR) (config, planets), $(DESTDIR)$(STATEDIR) (data), the group clipmap"
 
 clean:

@@ -264,7 +264,7 @@ static void gather_metrics(struct daemon *d)
 		free(keys);
 		return;
 	}
-	size_t n = server_stats(d->srv, it, keys, CAP - 10);
+	size_t n = server_stats(d->srv, it, keys, CAP - 11);
 	struct http_stats hs;
 	http_get_stats(d->http, &hs);
 	const struct { const char *k; uint64_t v; } h[] = {
@@ -273,7 +273,7 @@ static void gather_metrics(struct daemon *d)
 		{ "http.server_errors.sent", hs.server_errors }, { "http.auth_failures", hs.auth_failures },
 		{ "http.bytes.sent", hs.bytes },
 		{ "http.cache.hits", hs.cache_hits }, { "http.cache.misses", hs.cache_misses },
-		{ "http.cache.bytes", hs.cache_bytes },
+		{ "http.cache.bytes", hs.cache_bytes }, { "http.cancelled", hs.cancelled },
 	};
 	for (size_t i = 0; i < sizeof h / sizeof h[0]; i++, n++)
 		it[n] = (struct proto_stat){ .key = h[i].k, .kind = PROTO_STAT_U64, .u = h[i].v };
@@ -453,7 +453,8 @@ static void log_ready(const struct daemon *d, struct sched *sched)
 }
 
 /* Where CesiumJS is for the browser page: [http] cesium, else the build tree's copy beside
- * the program (build/npm/..., from make deps). NULL (no page) when neither has Cesium.js. */
+ * the program (build/npm/..., from make deps), else the installed copy (make install puts
+ * it in BINDIR/../share/clipmap/cesium). NULL (no page) when none has Cesium.js. */
 static bool has_cesium(const char *dir)
 {
 	char js[600];
@@ -486,7 +487,8 @@ static char *find_cesium(const struct conf *c, char *buf, size_t n)
 		if (has_cesium(buf))
 			return buf;
 	}
-	return NULL;
+	snprintf(buf, n, "%.400s/../share/clipmap/cesium", exe);
+	return has_cesium(buf) ? buf : NULL;
 }
 
 /* The HTTP endpoint of [http], with the token where the listener is not loopback (or

@@ -4,7 +4,16 @@
  * its own wants the tile; the ready callback (manager thread) keeps the tile and resumes the
  * connection, whose handler runs again and answers. Suspended requests are linked in h->live
  * so shutdown can stop their scheduler requests and resume them (libmicrohttpd refuses to
- * stop with suspended connections). */
+ * stop with suspended connections), and so the hang-up watcher can find them.
+ *
+ * Hang-ups: libmicrohttpd does not watch a suspended connection's socket, so a client that
+ * closes while its tile is made would go unnoticed until the tile is sent. A thread of ours
+ * (watch_hangups) polls the sockets of the suspended connections for POLLRDHUP/POLLHUP (every
+ * 100 ms, picking up new ones as it goes); on a hang-up it withdraws the request's want, so
+ * the scheduler drops the queued work nobody else wants (work merged with another requester
+ * goes on for that one), and resumes the connection, whose handler then closes it. Whoever
+ * unlinks a request from h->live (the ready callback, the watcher, or shutdown) is the one
+ * that resumes it, exactly once. */
 #include "http.h"
 
 #include <errno.h>
@@ -12,6 +21,7 @@
 #include <math.h>
 #include <microhttpd.h>
 #include <netdb.h>
+#include <poll.h>
 #include <pthread.h>
 #include <stdarg.h>
 #include <stdatomic.h>
@@ -52,26 +62,34 @@ struct http {
 	char *metrics;
 	size_t metrics_len;
 	struct hreq *live; /* suspended requests */
+	uint64_t serial;   /* of the last request suspended */
 	bool stopping;
-	atomic_uint_fast64_t st_requests, st_tiles, st_304, st_4xx, st_5xx, st_auth, st_bytes;
+	pthread_cond_t live_cv; /* a request joined h->live, or stopping */
+	pthread_t watcher;
+	atomic_uint_fast64_t st_requests, st_tiles, st_304, st_4xx, st_5xx, st_auth, st_bytes,
+		st_cancelled;
 };
 
 /* A tile request that had to wait for the scheduler. */
 struct hreq {
 	struct http *h;
 	struct MHD_Connection *c;
-	struct planet_set *ps; /* the reference that keeps node alive */
-	struct node *node;
+	struct planet_set *ps; /* the reference that keeps the nodes alive */
 	const struct planet *terrain; /* Cesium terrain of this planet; NULL: an image */
-	struct tile_key key;
+	int nkeys;		      /* 1, or 2: a terrain tile with its normals */
+	struct node *node[2];
+	struct tile_key key[2];
 	enum geoimg_format fmt;
 	char etag[64];
 	struct sched_req *req;
-	struct hreq *prev, *next; /* in h->live while suspended */
-	pthread_mutex_t mu;	  /* guards tile, err, done */
-	struct tile *tile;
+	int fd;			  /* the connection's socket, watched while suspended */
+	uint64_t serial;	  /* unique among the requests of this http (h->mu) */
+	struct hreq *prev, *next; /* in h->live while linked (h->mu) */
+	bool linked;		  /* (h->mu) */
+	pthread_mutex_t mu;	  /* guards tile, err, done, hungup */
+	struct tile *tile[2];	  /* as key[] */
 	int err;
-	bool done;
+	bool done, hungup;
 };
 
 /* ---- responses -------------------------------------------------------------------------- */
@@ -235,8 +253,8 @@ static enum MHD_Result send_body(struct http *h, struct MHD_Connection *c,
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_ETAG, etag);
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_CACHE_CONTROL, cc);
 	MHD_add_response_header(resp, MHD_HTTP_HEADER_ACCESS_CONTROL_ALLOW_ORIGIN, "*");
-	if (terrain)
-		MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, MHD_HTTP_HEADER_ACCEPT_ENCODING);
+	if (terrain) /* gzip or not, vertex normals or not */
+		MHD_add_response_header(resp, MHD_HTTP_HEADER_VARY, "Accept-Encoding, Accept");
 	if (gz)
 		MHD_add_response_header(resp, MHD_HTTP_HEADER_CONTENT_ENCODING, "gzip");
 	enum MHD_Result res = MHD_queue_response(c, MHD_HTTP_OK, resp);
@@ -247,15 +265,15 @@ static enum MHD_Result send_body(struct http *h, struct MHD_Connection *c,
 }
 
 /* Answers with tile t: an image in fmt, or (terrain set) a quantized-mesh tile of that
- * planet; the encoding is kept under its ETag for the next request. */
+ * planet, with vertex normals from tile `normals` when not NULL; the encoding is kept under its ETag for the next request. */
 static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const struct tile *t,
-				 enum geoimg_format fmt, const struct planet *terrain,
-				 const char *etag)
+				 const struct tile *normals, enum geoimg_format fmt,
+				 const struct planet *terrain, const char *etag)
 {
 	unsigned char *out = NULL;
 	size_t n = 0;
 	if (terrain) {
-		cesium_quantized_mesh(terrain, t, &out, &n);
+		cesium_quantized_mesh(terrain, t, normals, &out, &n);
 		/* meshes compress (images do not): a gzip variant for clients that take it */
 		if (takes_gzip(c)) {
 			size_t zn;
@@ -292,43 +310,120 @@ static enum MHD_Result send_tile(struct http *h, struct MHD_Connection *c, const
 
 /* ---- waiting for the scheduler ---------------------------------------------------------- */
 
+/* Takes q out of h->live (h->mu held, q linked). */
+static void unlink_live(struct http *h, struct hreq *q)
+{
+	if (q->prev)
+		q->prev->next = q->next;
+	else
+		h->live = q->next;
+	if (q->next)
+		q->next->prev = q->prev;
+	q->prev = q->next = NULL;
+	q->linked = false;
+}
+
 static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
 {
-	(void)w;
 	struct hreq *q = ud;
 	pthread_mutex_lock(&q->mu);
-	bool first = !q->done;
-	if (first) {
-		q->tile = t ? tile_ref(t) : NULL;
-		q->err = t ? 0 : (err ? err : -EIO);
-		q->done = true;
+	bool first = false;
+	if (!q->done) {
+		int i = q->nkeys > 1 && w->key.node == q->key[1].node; /* same place, other node */
+		if (!t) {
+			q->err = err ? err : -EIO;
+			q->done = first = true;
+		} else if (!q->tile[i]) {
+			q->tile[i] = tile_ref(t);
+			q->done = first = !q->tile[0] ? false : q->nkeys < 2 || q->tile[1];
+		}
 	}
 	pthread_mutex_unlock(&q->mu);
 	if (!first)
 		return;
 	struct http *h = q->h;
 	pthread_mutex_lock(&h->mu);
-	/* Once stopping, http_destroy owns the list and resumes every request on it. */
-	bool resume = !h->stopping;
-	if (resume) {
-		if (q->prev)
-			q->prev->next = q->next;
-		else
-			h->live = q->next;
-		if (q->next)
-			q->next->prev = q->prev;
-		q->prev = q->next = NULL;
-	}
+	/* Once stopping, http_destroy owns the list and resumes every request on it; a request
+	 * the watcher unlinked (its client hung up) is resumed by the watcher. */
+	bool resume = !h->stopping && q->linked;
+	if (resume)
+		unlink_live(h, q);
 	pthread_mutex_unlock(&h->mu);
 	if (resume)
 		MHD_resume_connection(q->c);
+}
+
+/* Withdraws the want of a request whose client hung up and resumes its connection (its
+ * handler closes it). q was unlinked by the caller, so nobody else resumes it. */
+static void hung_up(struct http *h, struct hreq *q)
+{
+	pthread_mutex_lock(&q->mu);
+	q->hungup = true;
+	bool done = q->done;
+	pthread_mutex_unlock(&q->mu);
+	if (!done) {
+		sched_req_want(q->req, NULL, 0); /* the scheduler cancels what no one else wants */
+		atomic_fetch_add(&h->st_cancelled, 1);
+	}
+	MHD_resume_connection(q->c);
+}
+
+/* The hang-up watcher's thread (see the top of the file). */
+static void *watch_hangups(void *arg)
+{
+	struct http *h = arg;
+	struct pollfd *pf = NULL;
+	struct watched { struct hreq *q; uint64_t serial; } *who = NULL;
+	size_t cap = 0;
+	pthread_mutex_lock(&h->mu);
+	while (!h->stopping) {
+		if (!h->live) {
+			pthread_cond_wait(&h->live_cv, &h->mu);
+			continue;
+		}
+		size_t n = 0;
+		for (struct hreq *q = h->live; q; q = q->next)
+			n++;
+		if (n > cap) {
+			cap = n * 2;
+			pf = xrealloc(pf, cap * sizeof *pf);
+			who = xrealloc(who, cap * sizeof *who);
+		}
+		n = 0;
+		for (struct hreq *q = h->live; q; q = q->next, n++) {
+			pf[n] = (struct pollfd){ .fd = q->fd, .events = POLLRDHUP };
+			who[n] = (struct watched){ q, q->serial };
+		}
+		pthread_mutex_unlock(&h->mu);
+		int k = poll(pf, (nfds_t)n, 100);
+		pthread_mutex_lock(&h->mu);
+		for (size_t i = 0; k > 0 && i < n && !h->stopping; i++) {
+			if (!(pf[i].revents & (POLLRDHUP | POLLHUP | POLLERR)))
+				continue;
+			/* Still suspended (else its socket may be another connection's by now)? */
+			struct hreq *q = h->live;
+			while (q && (q != who[i].q || q->serial != who[i].serial))
+				q = q->next;
+			if (!q)
+				continue;
+			unlink_live(h, q);
+			pthread_mutex_unlock(&h->mu);
+			hung_up(h, q);
+			pthread_mutex_lock(&h->mu);
+		}
+	}
+	pthread_mutex_unlock(&h->mu);
+	free(pf);
+	free(who);
+	return NULL;
 }
 
 static void hreq_free(struct hreq *q)
 {
 	if (q->req)
 		sched_req_destroy(q->req); /* no callback after this */
-	tile_unref(q->tile);
+	tile_unref(q->tile[0]);
+	tile_unref(q->tile[1]);
 	planet_set_unref(q->ps);
 	pthread_mutex_destroy(&q->mu);
 	free(q);
@@ -457,9 +552,22 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 	}
 	struct tile_key key = { .node = l->node->hash, .x = rt->x, .y = rt->y,
 				.lx = (uint8_t)(rt->z + 1), .ly = (uint8_t)rt->z };
+	/* Terrain with vertex normals when the client asks for them (Cesium's Accept header:
+	 * "application/vnd.quantized-mesh;extensions=octvertexnormals,...") and the planet has
+	 * the normals of these heights. */
+	const struct planet_layer *nl = NULL;
+	if (terrain) {
+		const char *acc = MHD_lookup_connection_value(c, MHD_HEADER_KIND,
+							      MHD_HTTP_HEADER_ACCEPT);
+		if (acc && strstr(acc, "octvertexnormals"))
+			nl = cesium_normal_layer(p, l);
+	}
+	struct tile_key nkey = key;
+	if (nl)
+		nkey.node = nl->node->hash;
 	char etag[64];
-	snprintf(etag, sizeof etag, "\"%016llx-%u-%u-%u-%s\"", (unsigned long long)key.node, rt->z,
-		 rt->x, rt->y, terrain ? "qm" : geoimg_mime(rt->fmt) + 6);
+	snprintf(etag, sizeof etag, "\"%016llx-%u-%u-%u-%s\"", (unsigned long long)nkey.node, rt->z,
+		 rt->x, rt->y, nl ? "qmn" : terrain ? "qm" : geoimg_mime(rt->fmt) + 6);
 	const char *inm = MHD_lookup_connection_value(c, MHD_HEADER_KIND,
 						      MHD_HTTP_HEADER_IF_NONE_MATCH);
 	if (inm && (strstr(inm, etag) || !strcmp(inm, "*"))) {
@@ -484,17 +592,24 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 		planet_set_unref(ps);
 		return send_body(h, c, body, rt->fmt, terrain, gz, etag);
 	}
-	struct tile *t = cache_lookup(h->cache, &key);
-	if (t) {
-		enum MHD_Result res = send_tile(h, c, t, rt->fmt, terrain ? p : NULL, etag);
+	struct tile *t = cache_lookup(h->cache, &key), *nt = nl ? cache_lookup(h->cache, &nkey) : NULL;
+	if (t && (!nl || nt)) {
+		enum MHD_Result res = send_tile(h, c, t, nt, rt->fmt, terrain ? p : NULL, etag);
 		tile_unref(t);
+		tile_unref(nt);
 		planet_set_unref(ps);
 		return res;
 	}
+	tile_unref(t);
+	tile_unref(nt);
 	struct hreq *q = xcalloc(1, sizeof *q);
-	*q = (struct hreq){ .h = h, .c = c, .ps = ps, .node = l->node, .key = key,
+	*q = (struct hreq){ .h = h, .c = c, .ps = ps, .nkeys = nl ? 2 : 1,
+			    .node = { l->node, nl ? nl->node : NULL }, .key = { key, nkey },
 			    .fmt = rt->fmt, .terrain = terrain ? p : NULL };
 	memcpy(q->etag, etag, sizeof etag);
+	const union MHD_ConnectionInfo *ci = MHD_get_connection_info(c,
+								     MHD_CONNECTION_INFO_CONNECTION_FD);
+	q->fd = ci ? ci->connect_fd : -1; /* -1: poll ignores it */
 	pthread_mutex_init(&q->mu, NULL);
 	q->req = sched_req_create(h->sched, on_ready, q);
 	if (!q->req) {
@@ -511,15 +626,19 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 	if (h->live)
 		h->live->prev = q;
 	h->live = q;
+	q->linked = true;
+	q->serial = ++h->serial;
+	pthread_cond_signal(&h->live_cv);
 	/* Suspended before the want (a cached tile is reported at once, from the manager
 	 * thread) and under the lock, so shutdown never resumes a request not yet suspended. */
 	MHD_suspend_connection(c);
 	pthread_mutex_unlock(&h->mu);
 	*con_cls = q;
-	struct want w = { .node = q->node, .key = key, .cls = SCHED_VISIBLE };
-	int rc = sched_req_want(q->req, &w, 1);
+	struct want w[2] = { { .node = q->node[0], .key = key, .cls = SCHED_WEB },
+			     { .node = q->node[1], .key = nkey, .cls = SCHED_WEB } };
+	int rc = sched_req_want(q->req, w, (size_t)q->nkeys);
 	if (rc < 0)
-		on_ready(q, &w, NULL, rc);
+		on_ready(q, &w[0], NULL, rc);
 	return MHD_YES;
 }
 
@@ -527,17 +646,24 @@ static enum MHD_Result tile_request(struct http *h, struct MHD_Connection *c,
 static enum MHD_Result tile_ready(struct http *h, struct MHD_Connection *c, struct hreq *q)
 {
 	pthread_mutex_lock(&q->mu);
-	bool done = q->done;
-	struct tile *t = q->tile ? tile_ref(q->tile) : NULL;
+	bool done = q->done, hungup = q->hungup;
 	int err = q->err;
+	struct tile *t = done && !err ? tile_ref(q->tile[0]) : NULL,
+		    *nt = done && !err && q->tile[1] ? tile_ref(q->tile[1]) : NULL;
 	pthread_mutex_unlock(&q->mu);
+	if (hungup) {
+		tile_unref(t);
+		tile_unref(nt);
+		return MHD_NO; /* the client is gone: close */
+	}
 	if (!done)
 		return text(h, c, MHD_HTTP_SERVICE_UNAVAILABLE, "shutting down");
 	if (!t)
 		return text(h, c, MHD_HTTP_INTERNAL_SERVER_ERROR, "the tile could not be made: %s",
 			    strerror(-err));
-	enum MHD_Result res = send_tile(h, c, t, q->fmt, q->terrain, q->etag);
+	enum MHD_Result res = send_tile(h, c, t, nt, q->fmt, q->terrain, q->etag);
 	tile_unref(t);
+	tile_unref(nt);
 	return res;
 }
 
@@ -667,7 +793,7 @@ static enum MHD_Result on_request(void *cls, struct MHD_Connection *c, const cha
 			return text(h, c, MHD_HTTP_NOT_FOUND, "no planet %s with heights", rt.planet);
 		}
 		size_t n;
-		char *j = cesium_layer_json(p, &n);
+		char *j = cesium_layer_json(p, cesium_normal_layer(p, height_layer(p)) != NULL, &n);
 		planet_set_unref(ps);
 		return send_buf(h, c, MHD_HTTP_OK, "application/json", j, n, true);
 	}
@@ -703,6 +829,7 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 		h->token_len = d->token_len;
 	}
 	pthread_mutex_init(&h->mu, NULL);
+	pthread_cond_init(&h->live_cv, NULL);
 	unsigned flags = MHD_USE_AUTO_INTERNAL_THREAD | MHD_ALLOW_SUSPEND_RESUME;
 	if (ai->ai_family == AF_INET6)
 		flags |= MHD_USE_IPv6;
@@ -729,6 +856,7 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 		int e = errno ? errno : EADDRINUSE;
 		err_set(err, "http: cannot listen on %s: %s", d->listen, strerror(e));
 		planet_set_unref(h->ps);
+		pthread_cond_destroy(&h->live_cv);
 		pthread_mutex_destroy(&h->mu);
 		http_cache_destroy(h->bodies);
 		free(h->cesium_dir);
@@ -739,6 +867,11 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 	}
 	const union MHD_DaemonInfo *di = MHD_get_daemon_info(h->d, MHD_DAEMON_INFO_BIND_PORT);
 	h->port = di ? di->port : 0;
+	int e = pthread_create(&h->watcher, NULL, watch_hangups, h);
+	if (e) {
+		log_msg(LOG_ERROR, "http: cannot start the hang-up watcher: %s", strerror(e));
+		abort(); /* as the scheduler does: the daemon does not run without its threads */
+	}
 	*out = h;
 	return 0;
 }
@@ -751,6 +884,10 @@ void http_destroy(struct http *h)
 	 * every suspended connection: its handler answers 503. */
 	pthread_mutex_lock(&h->mu);
 	h->stopping = true;
+	pthread_cond_signal(&h->live_cv);
+	pthread_mutex_unlock(&h->mu);
+	pthread_join(h->watcher, NULL);
+	pthread_mutex_lock(&h->mu);
 	struct hreq *live = h->live;
 	h->live = NULL;
 	pthread_mutex_unlock(&h->mu);
@@ -770,6 +907,7 @@ void http_destroy(struct http *h)
 	free(h->cesium_dir);
 	free(h->tls_cert);
 	free(h->tls_key);
+	pthread_cond_destroy(&h->live_cv);
 	pthread_mutex_destroy(&h->mu);
 	free(h);
 }
@@ -810,6 +948,7 @@ void http_get_stats(struct http *h, struct http_stats *o)
 				  .server_errors = atomic_load(&h->st_5xx),
 				  .auth_failures = atomic_load(&h->st_auth),
 				  .bytes = atomic_load(&h->st_bytes),
+				  .cancelled = atomic_load(&h->st_cancelled),
 				  .cache_hits = cs.hits, .cache_misses = cs.misses,
 				  .cache_bytes = cs.bytes };
 }

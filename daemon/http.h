@@ -2,7 +2,9 @@
  * health checks (docs/HTTP.md). Web requests are one more requester of the scheduler: a tile
  * not in the memory cache is wanted through a sched_req of its own, so it shares the caches,
  * the store and the merging with every viewer; the connection is suspended meanwhile (no
- * thread waits) and resumed by the ready callback.
+ * thread waits) and resumed by the ready callback. Its requests are of their own class,
+ * SCHED_WEB (after what viewers show, before prefetch), and a client that hangs up while it
+ * waits withdraws its want, so work nobody else wants is cancelled.
  *
  * Threads: libmicrohttpd's own (a pool of `threads`), never the loop thread; encoding (PNG,
  * GeoTIFF, …) happens there. http_set_planets and http_set_metrics are called by the loop
@@ -36,6 +38,7 @@ struct http_desc {
 struct http_stats {
 	uint64_t requests, tiles, not_modified, client_errors, server_errors, auth_failures,
 		bytes, cache_hits, cache_misses, cache_bytes;
+	uint64_t cancelled; /* waiting requests whose client hung up (their want withdrawn) */
 };
 
 struct http;
@@ -43,7 +46,7 @@ struct http;
 /* Starts listening. Returns 0 or -errno with err filled (address in use, bad address,
  * -ENOTSUP: TLS asked of a libmicrohttpd built without it). */
 int http_create(const struct http_desc *d, struct http **out, char err[256]);
-/* Stops listening, answers suspended requests 503, joins the threads, frees. NULL: no-op. */
+/* Stops listening (and the hang-up watcher), answers suspended requests 503, joins the threads, frees. NULL: no-op. */
 void http_destroy(struct http *h);
 /* The port listened on (the ephemeral one when 0 was asked). */
 uint16_t http_port(const struct http *h);

@@ -4,7 +4,9 @@
  * coded, u and v in [0, 32767] west→east and south→north, height in [0, 32767] from min to
  * max), triangle indices (count, then 16-bit "high-water mark" coded indices: vertices are
  * numbered in the order triangles first use them), then the vertices on the west, south, east
- * and north edges (count + plain 16-bit indices each). */
+ * and north edges (count + plain 16-bit indices each); then the extensions asked for, each
+ * an id byte, a uint32 length and its data: octvertexnormals (id 1) is 2 bytes per vertex,
+ * in vertex order. */
 #include "http_cesium.h"
 
 #include <math.h>
@@ -17,12 +19,27 @@
 #include "common/strbuf.h"
 #include "common/xalloc.h"
 
-char *cesium_layer_json(const struct planet *p, size_t *len)
+const struct planet_layer *cesium_normal_layer(const struct planet *p,
+					       const struct planet_layer *heights)
+{
+	for (size_t i = 0; heights && i < p->nlayers; i++) {
+		const struct node *n = p->layers[i].node;
+		if (p->layers[i].type == PIX_NORMAL && n->type && !strcmp(n->type->name, "normal") &&
+		    n->in[0] == heights->node)
+			return &p->layers[i];
+	}
+	return NULL;
+}
+
+char *cesium_layer_json(const struct planet *p, bool normals, size_t *len)
 {
 	struct strbuf b = { 0 };
 	strbuf_printf(&b, "{\n  \"tilejson\": \"2.1.0\",\n  \"name\": ");
 	strbuf_json(&b, p->name);
-	strbuf_printf(&b, ",\n  \"version\": \"1.0.0\",\n  \"format\": \"quantized-mesh-1.0\",\n"
+	strbuf_printf(&b, ",\n");
+	if (normals)
+		strbuf_printf(&b, "  \"extensions\": [\"octvertexnormals\"],\n");
+	strbuf_printf(&b, "  \"version\": \"1.0.0\",\n  \"format\": \"quantized-mesh-1.0\",\n"
 			  "  \"scheme\": \"tms\",\n  \"tiles\": [\"{z}/{x}/{y}.terrain\"],\n"
 			  "  \"projection\": \"EPSG:4326\",\n  \"bounds\": [-180, -90, 180, 90],\n"
 			  "  \"minzoom\": 0,\n  \"maxzoom\": %d,\n  \"available\": [\n",
@@ -85,6 +102,51 @@ static double corner_height(const float *h, uint32_t T, double x, double y)
 	return a * (1 - fy) + b * fy;
 }
 
+/* Unit normal at texel-corner (x, y) of normal tile nt (RG8: east, north; up implied),
+ * bilinear between texel centres as corner_height, in the local east-north-up frame. */
+static void corner_normal(const uint8_t *rg, uint32_t T, double x, double y, double enu[3])
+{
+	x -= 0.5;
+	y -= 0.5;
+	x = x < 0 ? 0 : x > T - 1 ? T - 1 : x;
+	y = y < 0 ? 0 : y > T - 1 ? T - 1 : y;
+	uint32_t x0 = (uint32_t)x, y0 = (uint32_t)y;
+	uint32_t xs[2] = { x0, x0 + 1 < T ? x0 + 1 : x0 }, ys[2] = { y0, y0 + 1 < T ? y0 + 1 : y0 };
+	double fx = x - x0, fy = y - y0, w[4] = { (1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy,
+						 fx * fy };
+	enu[0] = enu[1] = enu[2] = 0;
+	for (int k = 0; k < 4; k++) {
+		const uint8_t *c = rg + 2 * ((size_t)ys[k / 2] * T + xs[k % 2]);
+		double e = c[0] / 127.5 - 1, n = c[1] / 127.5 - 1, u2 = 1 - e * e - n * n;
+		enu[0] += w[k] * e;
+		enu[1] += w[k] * n;
+		enu[2] += w[k] * (u2 > 0 ? sqrt(u2) : 0);
+	}
+	double m = sqrt(enu[0] * enu[0] + enu[1] * enu[1] + enu[2] * enu[2]);
+	if (!(m > 0)) {
+		enu[0] = enu[1] = 0;
+		enu[2] = m = 1;
+	}
+	for (int j = 0; j < 3; j++)
+		enu[j] /= m;
+}
+
+/* Cesium's AttributeCompression.octEncode (range 255) of unit vector v: 2 bytes. */
+static void oct_encode(const double v[3], uint8_t out[2])
+{
+	double l1 = fabs(v[0]) + fabs(v[1]) + fabs(v[2]);
+	double x = v[0] / l1, y = v[1] / l1;
+	if (v[2] < 0) {
+		double ox = x;
+		x = (1 - fabs(y)) * (ox >= 0 ? 1 : -1);
+		y = (1 - fabs(ox)) * (y >= 0 ? 1 : -1);
+	}
+	x = x < -1 ? -1 : x > 1 ? 1 : x;
+	y = y < -1 ? -1 : y > 1 ? 1 : y;
+	out[0] = (uint8_t)lround((x * 0.5 + 0.5) * 255);
+	out[1] = (uint8_t)lround((y * 0.5 + 0.5) * 255);
+}
+
 /* Cesium's horizon-culling magnitude of point p (scaled space) along unit direction d. */
 static double occlusion_magnitude(const double p[3], const double d[3])
 {
@@ -99,8 +161,8 @@ static double occlusion_magnitude(const double p[3], const double d[3])
 	return 1 / (cosA * cosB - sinA * sinB);
 }
 
-void cesium_quantized_mesh(const struct planet *p, const struct tile *t, unsigned char **out,
-			   size_t *n)
+void cesium_quantized_mesh(const struct planet *p, const struct tile *t, const struct tile *nt,
+			   unsigned char **out, size_t *n)
 {
 	const uint32_t T = t->size, S = T < 64 ? T : 64, V = (S + 1) * (S + 1);
 	const double step = (double)T / S;
@@ -206,6 +268,25 @@ void cesium_quantized_mesh(const struct planet *p, const struct tile *t, unsigne
 		for (uint32_t s = 0; s <= S; s++) {
 			uint32_t i = e == 0 ? 0 : e == 2 ? S : s, k = e == 1 ? 0 : e == 3 ? S : s;
 			put_u16(&o, (uint16_t)num[k * (S + 1) + i]);
+		}
+	}
+	/* octvertexnormals: east-north-up at the vertex's geodetic place → Earth-centred */
+	if (nt && nt->type == PIX_NORMAL && nt->size == T) {
+		put(&o, &(uint8_t){ 1 }, 1);
+		put_u32(&o, 2 * V);
+		for (uint32_t j = 0; j < V; j++) {
+			uint32_t v = order[j], i = v % (S + 1), k = v / (S + 1);
+			double enu[3];
+			corner_normal(nt->data, T, i * step, (S - k) * step, enu);
+			double lat = (r.north - (r.north - r.south) * (double)(S - k) / S) * M_PI / 180;
+			double lon = (r.west + (r.east - r.west) * (double)i / S) * M_PI / 180;
+			double sl = sin(lat), cl = cos(lat), so = sin(lon), co = cos(lon);
+			double w[3] = { -so * enu[0] - sl * co * enu[1] + cl * co * enu[2],
+					co * enu[0] - sl * so * enu[1] + cl * so * enu[2],
+					cl * enu[1] + sl * enu[2] };
+			uint8_t b2[2];
+			oct_encode(w, b2);
+			put(&o, b2, 2);
 		}
 	}
 	free(hv);

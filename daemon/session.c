@@ -581,6 +581,15 @@ static void on_open(struct session *s, const struct proto_open *o)
 		s->name, s->peer, p->name, id);
 }
 
+/* The protocol's class (validated by the decoder) as the scheduler's: their numbers differ
+ * since the scheduler ranks web requests (SCHED_WEB) between visible and prefetch. */
+static enum sched_class sched_class_of(uint8_t proto_cls)
+{
+	return proto_cls == PROTO_CLASS_VISIBLE	   ? SCHED_VISIBLE
+	       : proto_cls == PROTO_CLASS_PREFETCH ? SCHED_PREFETCH
+						   : SCHED_BULK;
+}
+
 static void on_want(struct session *s, const struct proto_want *w)
 {
 	if (w->planet_id == 0 || w->planet_id > (uint32_t)s->nopened ||
@@ -609,7 +618,7 @@ static void on_want(struct session *s, const struct proto_want *w)
 			.key = { .node = L->node->hash, .lx = we->lx, .ly = we->ly, .x = we->x,
 				 .y = we->y },
 			.node = L->node, .pid = w->planet_id, .seq = w->seq, .order = i,
-			.layer = we->layer, .cls = we->cls
+			.layer = we->layer, .cls = (uint8_t)sched_class_of(we->cls)
 		};
 	}
 	struct wantset_drops d = { 0 };

@@ -3,7 +3,7 @@
  * Requesters (sessions, `clipmapctl render`, prefetch jobs) each own a sched_req and give it
  * ordered want lists; each list replaces the previous one. The manager resolves dependencies
  * depth-first through the graph, merges duplicates with queued and running work, orders
- * ready work by class (visible, prefetch, bulk), then level (coarse first), then the order in
+ * ready work by class (visible, web, prefetch, bulk), then level (coarse first), then the order in
  * which it was wanted, and cancels queued work no requester wants any more. Workers (lower OS
  * priority) generate with no lock held, publish into the cache, and hand completion back to
  * the manager, which tells every requester that still wants the tile.
@@ -28,6 +28,9 @@
 enum sched_class {
 	SCHED_NONE = 0,
 	SCHED_VISIBLE,	/* what a viewer shows now */
+	SCHED_WEB,	/* HTTP requests (daemon/http.c): after what a viewer shows (a GDAL export
+			 * must not starve it), before speculative prefetch (a person or a
+			 * program waits on each one) */
 	SCHED_PREFETCH, /* the ring around and the path ahead */
 	SCHED_BULK,	/* operator prefetch jobs */
 	SCHED_NCLASS

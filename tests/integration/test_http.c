@@ -21,6 +21,7 @@
 #include <arpa/inet.h>
 #include <math.h>
 #include <netinet/in.h>
+#include <poll.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -38,8 +39,10 @@ static const char planet_text[] =
 	"[node base]\ntype = noise\nseed = 5\noctaves = 4\nwavelength = 300000\namplitude = 500\n"
 	"[node tint]\ntype = ramp\ninput = base\n"
 	"stops = -500 0 0 255, 0 0 128 0, 500 255 255 255\n"
+	"[node shade]\ntype = normal\ninput = base\nexaggeration = 30\n"
 	"[layer height]\nnode = base\nformat = f32\n"
-	"[layer color]\nnode = tint\nformat = rgba8\n";
+	"[layer color]\nnode = tint\nformat = rgba8\n"
+	"[layer normal]\nnode = shade\nformat = rg8\n";
 
 struct env {
 	struct daemon_env d;
@@ -58,12 +61,20 @@ static int http_port_from_log(const struct daemon_env *d)
 	return port;
 }
 
-static int start(void **state, const char *const *extra, const char *token)
+/* A planet whose tiles take long to make (1024² texels of 24 octaves: 50–100 ms each on one
+ * worker): the hang-up test's. */
+static const char slow_planet_text[] =
+	"[planet]\nname = slow\nbody = sphere\nradius = 1000000\ntile_size = 1024\nmax_level = 10\n"
+	"[node base]\ntype = noise\nseed = 9\noctaves = 24\nwavelength = 300000\namplitude = 500\n"
+	"[layer height]\nnode = base\nformat = f32\n";
+
+static int start(void **state, const char *const *extra, const char *token, bool slow)
 {
 	struct env *e = calloc(1, sizeof *e);
 	*state = e;
 	if (!e || daemon_env_init(&e->d, "test_http") ||
-	    daemon_env_planet_text(&e->d, "test.ini", planet_text, e->planet))
+	    daemon_env_planet_text(&e->d, "test.ini", planet_text, e->planet) ||
+	    (slow && daemon_env_planet_text(&e->d, "slow.ini", slow_planet_text, NULL)))
 		return -1;
 	char out[256];
 	char *const which[] = { "curl", "--version", NULL };
@@ -86,12 +97,18 @@ static int start(void **state, const char *const *extra, const char *token)
 	return e->port > 0 ? 0 : -1;
 }
 
-static int setup(void **state) { return start(state, NULL, NULL); }
+static int setup(void **state) { return start(state, NULL, NULL, false); }
 
 static int setup_token(void **state)
 {
 	static const char *const x[] = { "listen.require_token = tcp", NULL };
-	return start(state, x, "s3cret");
+	return start(state, x, "s3cret", false);
+}
+
+static int setup_slow(void **state)
+{
+	static const char *const x[] = { "engine.workers = 1", "http.max_per_address = 64", NULL };
+	return start(state, x, NULL, true);
 }
 
 static int teardown(void **state)
@@ -329,27 +346,33 @@ static void exports_georeferenced(void **state)
  * corners (the mesh's vertices) the height it interpolates equals the mean of the four texels
  * around the corner in the daemon's float32 height tile, to the mesh's quantization; a level-0
  * tile decodes too, and children are declared available. */
-static void cesium_terrain(void **state)
+/* CesiumJS in Node: skips the test without the npm package (make deps puts it in build/npm)
+ * or a node ≥ 20; script receives tests/http/cesium_heights.mjs. */
+static void need_cesium_in_node(struct env *e, char script[700])
 {
-	struct env *e = *state;
-	NEED_DAEMON(e);
-	char npm[700], script[700];
-	snprintf(npm, sizeof npm, "%s/build/npm", e->d.root); /* make deps puts it there */
-	snprintf(script, sizeof script, "%s/tests/http/cesium_heights.mjs", e->d.root);
-	char probe[800];
+	char npm[700], probe[800], ver[64] = "";
+	snprintf(npm, sizeof npm, "%s/build/npm", e->d.root);
+	snprintf(script, 700, "%s/tests/http/cesium_heights.mjs", e->d.root);
 	snprintf(probe, sizeof probe, "%s/node_modules/cesium/package.json", npm);
 	if (access(probe, R_OK) != 0) {
 		print_message("no CesiumJS in %s (make deps installs it): skipped\n", npm);
 		skip();
 	}
 	/* CesiumJS asks for Node 22; 20 runs what this test uses, Debian 12's 18 is not tried */
-	char ver[64];
 	char *const nv[] = { "node", "--version", NULL };
 	if (daemon_env_run(nv, ver, sizeof ver) != 0 || atoi(ver + (ver[0] == 'v')) < 20) {
 		print_message("node %s is older than 20: CesiumJS in Node skipped\n", ver);
 		skip();
 	}
 	setenv("CLIPMAP_NPM", npm, 1);
+}
+
+static void cesium_terrain(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char script[700];
+	need_cesium_in_node(e, script);
 	char base[128], tif[200];
 	snprintf(base, sizeof base, "%s/cesium/test", e->url);
 	/* level 3 (16 × 8 tiles of 22.5°, 64² texels): row 2, column 11 */
@@ -408,6 +431,137 @@ static void cesium_terrain(void **state)
 	assert_int_equal(get(e, "/cesium/nope/layer.json", NULL, NULL), 404);
 }
 
+/* The unit normal (east, north, up) of an RGB normal texel ((c + 1) · 127.5; up from east and
+ * north, as the daemon's RG8 has it). */
+static void texel_normal(const uint8_t *px, double out[3])
+{
+	double e = px[0] / 127.5 - 1, n = px[1] / 127.5 - 1, u2 = 1 - e * e - n * n;
+	out[0] = e;
+	out[1] = n;
+	out[2] = u2 > 0 ? sqrt(u2) : 0;
+}
+
+static double angle_deg(const double a[3], const double b[3])
+{
+	double d = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+	double la = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]),
+	       lb = sqrt(b[0] * b[0] + b[1] * b[1] + b[2] * b[2]);
+	d /= la * lb;
+	return acos(d > 1 ? 1 : d < -1 ? -1 : d) * 180 / M_PI;
+}
+
+/* Runs cesium_heights.mjs with vertex normals for tile (3, x, y) at the points; reads its
+ * "normal LON LAT E N U" lines into out. */
+static void cesium_normals_at(struct env *e, const char *script, int x, int y,
+			      char pts[][64], int n, double out[][3])
+{
+	char base[128], xs[16], ys[16], o[16384];
+	snprintf(base, sizeof base, "%s/cesium/test", e->url);
+	snprintf(xs, sizeof xs, "%d", x);
+	snprintf(ys, sizeof ys, "%d", y);
+	char *argv[16] = { "node", (char *)script, base, "1000000", "0", "3", xs, ys };
+	int k = 8;
+	for (int i = 0; i < n; i++)
+		argv[k++] = pts[i];
+	argv[k] = NULL;
+	setenv("CLIPMAP_NORMALS", "1", 1);
+	int rc = daemon_env_run(argv, o, sizeof o);
+	unsetenv("CLIPMAP_NORMALS");
+	if (rc)
+		fail_msg("cesium_heights.mjs (normals): exit %d:\n%s", rc, o);
+	const char *p = o;
+	for (int i = 0; i < n; i++) {
+		p = strstr(p, "normal ");
+		double lon, lat;
+		if (!p || sscanf(p, "normal %lf %lf %lf %lf %lf", &lon, &lat, &out[i][0], &out[i][1],
+				 &out[i][2]) != 5)
+			fail_msg("no normal %d in:\n%s", i, o);
+		p++;
+	}
+}
+
+/* Vertex normals (the octvertexnormals extension), decoded by CesiumJS itself: layer.json
+ * lists the extension; a tile asked with Cesium's Accept header carries 2 bytes per vertex
+ * more than one asked without; at texel corners the normal Cesium decodes is the daemon's
+ * normal tile there (the mean of the four texels around the corner) within the 8-bit
+ * oct-encoding's precision; and two neighbouring tiles give nearly the same normal at a
+ * vertex of their shared edge. */
+static void cesium_normals(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char script[700];
+	need_cesium_in_node(e, script);
+	char f[200], g[200];
+	snprintf(f, sizeof f, "%s/layer.json", e->d.dir);
+	assert_int_equal(get(e, "/cesium/test/layer.json", f, NULL), 200);
+	char *lj = slurp(f);
+	if (!strstr(lj, "\"extensions\": [\"octvertexnormals\"]"))
+		fail_msg("layer.json lists no octvertexnormals:\n%s", lj);
+	free(lj);
+	/* with and without: 65² vertices · 2 bytes + the extension's 5-byte header */
+	snprintf(g, sizeof g, "%s/n.terrain", e->d.dir);
+	assert_int_equal(get(e, "/cesium/test/3/11/5.terrain", f, NULL), 200);
+	assert_int_equal(get(e, "/cesium/test/3/11/5.terrain", g,
+			     "Accept: application/vnd.quantized-mesh;extensions=octvertexnormals,"
+			     "application/octet-stream;q=0.9,*/*;q=0.01"), 200);
+	struct stat sf, sg;
+	assert_int_equal(stat(f, &sf), 0);
+	assert_int_equal(stat(g, &sg), 0);
+	assert_int_equal((long)(sg.st_size - sf.st_size), 65 * 65 * 2 + 5);
+	/* the daemon's normal tile: level 3, row 2, column 11 (Cesium's y from the north: 2) */
+	char tif[200];
+	snprintf(tif, sizeof tif, "%s/n3.tif", e->d.dir);
+	assert_int_equal(get(e, "/wmts/test/normal/3/2/11.tif", tif, NULL), 200);
+	struct img_info ii;
+	uint8_t *px = read_img(tif, IMG_U8, &ii);
+	assert_int_equal(ii.channels, 3);
+	static const int corner[][2] = { { 10, 20 }, { 33, 47 }, { 63, 1 }, { 1, 63 }, { 40, 12 } };
+	enum { NC = 5 };
+	char pts[NC + 1][64];
+	double want[NC][3], got[NC + 1][3], tilt = 0;
+	for (int k = 0; k < NC; k++) {
+		int ci = corner[k][0], cj = corner[k][1];
+		double lon = 67.5 + round(ci * 32767.0 / 64) / 32767 * 22.5,
+		       lat = 22.5 + round((64 - cj) * 32767.0 / 64) / 32767 * 22.5;
+		snprintf(pts[k], sizeof pts[k], "%.12f,%.12f", lon, lat);
+		want[k][0] = want[k][1] = want[k][2] = 0;
+		for (int d = 0; d < 4; d++) {
+			double t[3];
+			texel_normal(px + 3 * ((size_t)(cj - 1 + d / 2) * 64 + ci - 1 + d % 2), t);
+			for (int j = 0; j < 3; j++)
+				want[k][j] += t[j] / 4;
+		}
+	}
+	for (int i = 0; i < 64 * 64; i++) {
+		double t[3], up[3] = { 0, 0, 1 };
+		texel_normal(px + 3 * (size_t)i, t);
+		double a = angle_deg(t, up);
+		tilt = a > tilt ? a : tilt;
+	}
+	free(px);
+	/* a vertex of the east edge (column 64 = the next tile's column 0), row 20 */
+	snprintf(pts[NC], sizeof pts[NC], "90,%.12f", 22.5 + round(44 * 32767.0 / 64) / 32767 * 22.5);
+	cesium_normals_at(e, script, 11, 2, pts, NC + 1, got);
+	for (int k = 0; k < NC; k++) {
+		double a = angle_deg(got[k], want[k]);
+		print_message("normal at %s: Cesium (%.3f %.3f %.3f), daemon (%.3f %.3f %.3f): %.2f°\n",
+			      pts[k], got[k][0], got[k][1], got[k][2], want[k][0], want[k][1], want[k][2], a);
+		/* 8-bit oct encoding: within about 1°; texels quantized to 1/127.5 */
+		if (a > 2)
+			fail_msg("Cesium's normal at %s is %.2f° off the daemon's", pts[k], a);
+	}
+	print_message("the tile's normals tilt up to %.1f° from straight up\n", tilt);
+	assert_true(tilt > 5); /* real relief (exaggeration 30), not a flat planet */
+	double other[1][3];
+	cesium_normals_at(e, script, 12, 2, &pts[NC], 1, other);
+	double seam = angle_deg(got[NC], other[0]);
+	print_message("at the shared edge (%s): tile 11 (%.3f %.3f %.3f), tile 12 (%.3f %.3f %.3f): "
+		      "%.2f° apart\n", pts[NC], got[NC][0], got[NC][1], got[NC][2], other[0][0],
+		      other[0][1], other[0][2], seam);
+	assert_true(seam < 4);
+}
+
 /* Headless Chromium (a real browser, driven over the DevTools protocol) opens the page: CesiumJS
  * from build/npm shows the planet with the daemon's imagery on the daemon's terrain, no
  * console error or exception, and the screenshot is the planet's colours (the test planet's
@@ -440,9 +594,18 @@ static void browser_page(void **state)
 	struct img_info ii;
 	uint8_t *px = read_img(png, IMG_U8, &ii);
 	long n = (long)ii.width * ii.height, dark = 0, blue = 0, green = 0, white = 0;
+	double lit[2] = { 0, 0 }; /* brightness of the globe's upper-left and lower-right quarters */
+	long nlit[2] = { 0, 0 };
 	for (long i = 0; i < n; i++) {
 		const uint8_t *p = px + (size_t)i * ii.channels;
 		int r = p[0], g = p[1], b = p[2];
+		long x = i % ii.width, y = i / ii.width;
+		int q = x < ii.width / 2 && y < ii.height / 2 ? 0
+			: x >= ii.width / 2 && y >= ii.height / 2 ? 1 : -1;
+		if (q >= 0 && r + g + b >= 40 && y > 60) { /* on the globe, below the toolbar */
+			lit[q] += r + g + b;
+			nlit[q]++;
+		}
 		dark += r + g + b < 40;
 		blue += b > 100 && b > r + 40 && b > g + 20;
 		green += g > 60 && g > r + 20 && g > b + 20;
@@ -454,6 +617,12 @@ static void browser_page(void **state)
 		      100.0 * green / n, 100.0 * white / n);
 	assert_true(dark < n * 0.75);	     /* a globe, not a black page */
 	assert_true(blue + green > n / 20); /* in the planet's own colours */
+	/* lit by the terrain's vertex normals, the light over the viewer's left shoulder: the
+	 * upper-left of the globe is brighter than its lower-right (flat, they are alike) */
+	double ul = nlit[0] ? lit[0] / nlit[0] : 0, lr = nlit[1] ? lit[1] / nlit[1] : 1;
+	print_message("lighting: upper-left quarter %.0f, lower-right %.0f (ratio %.2f)\n", ul, lr,
+		      ul / lr);
+	assert_true(ul > 1.15 * lr);
 }
 
 static void revalidation_and_keepalive(void **state)
@@ -624,6 +793,95 @@ static void metrics_count(void **state)
 	free(b);
 }
 
+/* A raw client that asks for one tile and returns its socket (the answer left unread). */
+static int ask(struct env *e, const char *path)
+{
+	int fd = socket(AF_INET, SOCK_STREAM, 0);
+	struct sockaddr_in a = { .sin_family = AF_INET, .sin_port = htons((uint16_t)e->port) };
+	a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+	assert_int_equal(connect(fd, (struct sockaddr *)&a, sizeof a), 0);
+	char req[300];
+	int n = snprintf(req, sizeof req, "GET %s HTTP/1.1\r\nHost: x\r\n\r\n", path);
+	assert_int_equal(write(fd, req, (size_t)n), n);
+	return fd;
+}
+
+/* /metrics, gathered anew (once a second): waits for the next gathering. */
+static char *fresh_metrics(struct env *e)
+{
+	char m[200];
+	snprintf(m, sizeof m, "%s/metrics", e->d.dir);
+	daemon_env_log_wait(&e->d, "never", 1, 1200);
+	assert_int_equal(get(e, "/metrics", m, NULL), 200);
+	return slurp(m);
+}
+
+/* Clients that hang up while their tiles are made cancel them: 40 connections each ask for an
+ * uncached tile of the slow planet (one worker, 50–100 ms a tile) and close 0.3 s later. The
+ * daemon counts the requests cancelled (all but the few made by then), its scheduler drops
+ * their queued work, far fewer tiles than asked are made, and other clients are served. One
+ * more client asked for the last of those tiles and stays: its tile is made for it anyway. */
+static void hangup_cancels(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	char *m0 = fresh_metrics(e);
+	double gen0 = metric(m0, "clipmapd_node_generated_total{planet=\"slow\",node=\"base\"}");
+	double sc0 = metric(m0, "clipmapd_sched_cancelled_total");
+	assert_true(metric(m0, "clipmapd_http_cancelled_total") == 0);
+	assert_non_null(strstr(m0, "clipmapd_sched_queued_web "));
+	free(m0);
+	enum { N = 40 };
+	int fd[N];
+	for (int i = 0; i < N; i++) {
+		char p[100]; /* level 7 (256 × 128 tiles), a row of them */
+		snprintf(p, sizeof p, "/wmts/slow/height/7/%d/%d.tif", 40 + i / 20, 100 + i % 20);
+		fd[i] = ask(e, p);
+	}
+	int stays = ask(e, "/wmts/slow/height/7/41/119.tif"); /* fd[N - 1]'s tile */
+	daemon_env_log_wait(&e->d, "never", 1, 300); /* all of them suspended and queued */
+	for (int i = 0; i < N; i++)
+		close(fd[i]);
+	/* the daemon still serves: a tile of the other planet, and health */
+	uint64_t t0 = clock_now_ns();
+	assert_int_equal(get(e, "/wmts/test/color/2/1/1.png", NULL, NULL), 200);
+	print_message("a tile right after 40 hang-ups: %.0f ms\n",
+		      (double)(clock_now_ns() - t0) * 1e-6);
+	assert_int_equal(get(e, "/healthz", NULL, NULL), 200);
+	/* wait until nothing is queued or running any more */
+	char *m = NULL;
+	for (int k = 0; k < 60; k++) {
+		free(m);
+		m = fresh_metrics(e);
+		if (metric(m, "clipmapd_sched_queued_web") == 0 &&
+		    metric(m, "clipmapd_sched_workers_busy") == 0)
+			break;
+	}
+	double cancelled = metric(m, "clipmapd_http_cancelled_total");
+	double gen = metric(m, "clipmapd_node_generated_total{planet=\"slow\",node=\"base\"}") -
+		     (gen0 > 0 ? gen0 : 0);
+	double sc = metric(m, "clipmapd_sched_cancelled_total") - sc0;
+	print_message("40 requests hung up: %.0f counted cancelled, %.0f queued jobs dropped, %.0f "
+		      "tiles generated\n", cancelled, sc, gen);
+	assert_true(cancelled >= N / 2 && cancelled <= N);
+	/* all but the one running when they left and the one the staying client wants */
+	assert_true(sc >= cancelled - 2);
+	assert_true(gen < N / 2);
+	assert_true(gen + cancelled >= N); /* each request either made or cancelled */
+	free(m);
+	/* the client that stayed gets its tile, though another asker of it left */
+	char ans[64] = "";
+	struct pollfd pf = { .fd = stays, .events = POLLIN };
+	assert_int_equal(poll(&pf, 1, 60000), 1);
+	assert_true(read(stays, ans, sizeof ans - 1) > 12);
+	if (strncmp(ans, "HTTP/1.1 200", 12))
+		fail_msg("the client that stayed got \"%.12s\"", ans);
+	close(stays);
+	/* and the slow planet still serves a client that waits */
+	assert_int_equal(get(e, "/wmts/slow/height/7/41/100.tif", NULL, NULL), 200);
+	assert_int_equal(kill(e->d.daemon, 0), 0);
+}
+
 static void token_required(void **state)
 {
 	struct env *e = *state;
@@ -646,11 +904,13 @@ int main(void)
 		cmocka_unit_test_setup_teardown(heights_and_georeference, setup, teardown),
 		cmocka_unit_test_setup_teardown(exports_georeferenced, setup, teardown),
 		cmocka_unit_test_setup_teardown(cesium_terrain, setup, teardown),
+		cmocka_unit_test_setup_teardown(cesium_normals, setup, teardown),
 		cmocka_unit_test_setup_teardown(browser_page, setup, teardown),
 		cmocka_unit_test_setup_teardown(revalidation_and_keepalive, setup, teardown),
 		cmocka_unit_test_setup_teardown(bad_requests, setup, teardown),
 		cmocka_unit_test_setup_teardown(metrics_count, setup, teardown),
 		cmocka_unit_test_setup_teardown(token_required, setup_token, teardown),
+		cmocka_unit_test_setup_teardown(hangup_cancels, setup_slow, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

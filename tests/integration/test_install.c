@@ -5,7 +5,10 @@
  * program; then into a throwaway prefix (every directory in a temporary root, no DESTDIR),
  * where the installed clipmapd --check-config accepts the installed config and planets — none
  * of which names a path in this checkout — and systemd-analyze accepts the installed units;
- * make uninstall removes the programs and units and keeps the config. Runs make on this
+ * make uninstall removes the programs and units and keeps the config. CesiumJS (when make
+ * deps put it in the build tree) is installed too, and the installed clipmapd, run from the
+ * DESTDIR with no [http] cesium, serves the browser page and CesiumJS's files from it. Runs
+ * make on this
  * checkout's build directory (the programs are already built). Skipped when the programs
  * were not built or make is not here.
  */
@@ -16,7 +19,9 @@
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
+#include <signal.h>
 #include <string.h>
+#include <sys/types.h>
 #include <unistd.h>
 #include <cmocka.h>
 
@@ -94,6 +99,60 @@ static bool has(const char *file, const char *text)
 	return sh(out, sizeof out, "grep -qF -- '%s' '%s'", text, file) == 0;
 }
 
+/* The installed clipmapd (ROOT/usr/bin) with an HTTP listener and no [http] cesium: it finds
+ * the installed CesiumJS, serves the page at / and Cesium.js byte for byte. */
+static void installed_serves_cesium(const struct env *e, const char *root)
+{
+	char out[16384], f[700];
+	snprintf(f, sizeof f, "%s/usr/share/clipmap/cesium/Cesium.js", root);
+	if (access(f, R_OK) != 0)
+		print_message("missing: %s\n", f);
+	assert_int_equal(access(f, R_OK), 0);
+	/* the shipped procedural planet (the others need data), our own socket and port */
+	int rc = sh(out, sizeof out,
+		    "mkdir -p '%s/run/planets' && cp '%s/etc/clipmap/planets/procedural.ini' "
+		    "'%s/run/planets/' && printf '[listen]\nunix = %s/run/sock\ntcp =\n[engine]\n"
+		    "planets = %s/run/planets\nworkers = 1\n[log]\nlevel = info\n[http]\n"
+		    "listen = 127.0.0.1:0\n' > '%s/run/c.conf'",
+		    e->tmp, root, e->tmp, e->tmp, e->tmp, e->tmp);
+	assert_int_equal(rc, 0);
+	rc = sh(out, sizeof out, "'%s/usr/bin/clipmapd' -c '%s/run/c.conf' </dev/null >/dev/null "
+		"2>'%s/run/log' & echo $!", root, e->tmp, e->tmp);
+	assert_int_equal(rc, 0);
+	pid_t pid = (pid_t)atoi(out);
+	assert_true(pid > 0);
+	int port = 0;
+	for (int i = 0; i < 200 && !port; i++) { /* up to 20 s */
+		usleep(100000);
+		if (sh(out, sizeof out, "grep -o 'listening on http://127.0.0.1:[0-9]*' "
+		       "'%s/run/log' | grep -o '[0-9]*$'", e->tmp) == 0)
+			port = atoi(out);
+	}
+	if (!port) {
+		sh(out, sizeof out, "cat '%s/run/log'", e->tmp);
+		kill(pid, SIGKILL);
+		fail_msg("the installed clipmapd did not listen for HTTP:\n%s", out);
+	}
+	rc = sh(out, sizeof out, "curl -s -m 30 -o '%s/run/page' -w '%%{http_code}' "
+		"http://127.0.0.1:%d/", e->tmp, port);
+	int page = rc == 0 ? atoi(out) : -1;
+	rc = sh(out, sizeof out, "curl -s -m 30 -o '%s/run/Cesium.js' -w '%%{http_code}' "
+		"http://127.0.0.1:%d/cesium-js/Cesium.js && cmp '%s/run/Cesium.js' '%s'",
+		e->tmp, port, e->tmp, f);
+	int js = atoi(out), same = rc;
+	kill(pid, SIGTERM);
+	char pf[700];
+	snprintf(pf, sizeof pf, "%s/run/page", e->tmp);
+	assert_int_equal(page, 200);
+	if (!has(pf, "<script src=\"/cesium-js/Cesium.js\">"))
+		fail_msg("/ is not the Cesium page (the installed CesiumJS not found?)");
+	assert_int_equal(js, 200);
+	if (same != 0)
+		fail_msg("/cesium-js/Cesium.js differs from the installed file: %s", out);
+	print_message("the installed clipmapd serves the page and Cesium.js from %s/usr/share/"
+		      "clipmap/cesium\n", root);
+}
+
 static void test_destdir_layout(void **state)
 {
 	struct env *e = *state;
@@ -142,6 +201,16 @@ static void test_destdir_layout(void **state)
 	rc = sh(out, sizeof out, "find '%s/root' -name 'test_*' -o -name 'bench_*' | grep -q .",
 		e->tmp);
 	assert_int_not_equal(rc, 0);
+	/* CesiumJS, where make deps put it in the build tree */
+	snprintf(f, sizeof f, "%s/npm/node_modules/cesium/Build/Cesium/Cesium.js", e->bindir);
+	char root[128];
+	snprintf(root, sizeof root, "%s/root", e->tmp);
+	if (access(f, R_OK) != 0)
+		print_message("no CesiumJS in the build tree (make deps): its install not checked\n");
+	else if (sh(out, sizeof out, "command -v curl") != 0)
+		print_message("no curl: the installed browser page not checked\n");
+	else
+		installed_serves_cesium(e, root);
 
 	rc = make(e, out, sizeof out, "uninstall", args);
 	if (rc != 0)
@@ -150,6 +219,8 @@ static void test_destdir_layout(void **state)
 	snprintf(f, sizeof f, "%s/root/usr/bin/clipmapd", e->tmp);
 	assert_int_not_equal(access(f, F_OK), 0);
 	snprintf(f, sizeof f, "%s/root/usr/lib/systemd/system/clipmapd.service", e->tmp);
+	assert_int_not_equal(access(f, F_OK), 0);
+	snprintf(f, sizeof f, "%s/root/usr/share/clipmap/cesium", e->tmp);
 	assert_int_not_equal(access(f, F_OK), 0);
 	snprintf(f, sizeof f, "%s/root/etc/clipmap/clipmapd.conf", e->tmp); /* kept */
 	assert_int_equal(access(f, R_OK), 0);
