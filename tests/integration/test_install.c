@@ -111,10 +111,12 @@ static void installed_serves_cesium(const struct env *e, const char *root)
 	/* the shipped procedural planet (the others need data), our own socket and port */
 	int rc = sh(out, sizeof out,
 		    "mkdir -p '%s/run/planets' && cp '%s/etc/clipmap/planets/procedural.ini' "
-		    "'%s/run/planets/' && printf '[listen]\nunix = %s/run/sock\ntcp =\n[engine]\n"
+		    "'%s/etc/clipmap/planets/site.geojson' '%s/run/planets/' && printf '[listen]\nunix = %s/run/sock\ntcp =\n[engine]\n"
 		    "planets = %s/run/planets\nworkers = 1\n[log]\nlevel = info\n[http]\n"
 		    "listen = 127.0.0.1:0\n' > '%s/run/c.conf'",
-		    e->tmp, root, e->tmp, e->tmp, e->tmp, e->tmp);
+		    e->tmp, root, root, e->tmp, e->tmp, e->tmp, e->tmp);
+	if (rc)
+		print_message("%s\n", out);
 	assert_int_equal(rc, 0);
 	rc = sh(out, sizeof out, "'%s/usr/bin/clipmapd' -c '%s/run/c.conf' </dev/null >/dev/null "
 		"2>'%s/run/log' & echo $!", root, e->tmp, e->tmp);
