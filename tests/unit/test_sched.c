@@ -967,6 +967,95 @@ static void stress(void **state)
 	world_free(w);
 }
 
+/* Many workers hand jobs back at once (the manager's lock-free inbox): requesters fetch
+ * overlapping levels of two nodes with shared inputs, from several threads, with 16 workers. */
+struct handoff_arg {
+	struct world *w;
+	int idx, bad;
+};
+
+static void *handoff_thread(void *p)
+{
+	struct handoff_arg *a = p;
+	struct world *w = a->w;
+	struct node *nodes[] = { &w->s, &w->p };
+	struct want *list = calloc(2 * 32 * 16, sizeof *list);
+	struct tile **out = calloc(2 * 32 * 16, sizeof *out);
+	if (!list || !out) {
+		a->bad++;
+		free(list);
+		free(out);
+		return NULL;
+	}
+	for (int round = 0; round < 12; round++) {
+		int ly = 1 + (round + a->idx) % 4;
+		size_t n = 0;
+		for (int k = 0; k < 2; k++)
+			for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+				for (uint32_t x = 0; x < grid_tiles_x(ly + 1); x++)
+					list[n++] = mkwant(nodes[k], ly, x, y,
+							   (enum sched_class)(1 + (round + k) % 3));
+		if (sched_fetch(w->sched, list, n, out) != 0)
+			a->bad++;
+		for (size_t i = 0; i < n; i++) {
+			if (!tile_ok(list[i].node, out[i], &list[i].key))
+				a->bad++;
+			tile_unref(out[i]);
+		}
+	}
+	free(list);
+	free(out);
+	return NULL;
+}
+
+static void many_workers_handoff(void **state)
+{
+	(void)state;
+	struct world *w = world_new(16, 0);
+	struct handoff_arg a[6];
+	pthread_t th[6];
+	for (int i = 0; i < 6; i++) {
+		a[i] = (struct handoff_arg){ .w = w, .idx = i };
+		assert_int_equal(xthread_create(&th[i], handoff_thread, &a[i]), 0);
+	}
+	for (int i = 0; i < 6; i++) {
+		xthread_join(th[i]);
+		assert_int_equal(a[i].bad, 0);
+	}
+	/* The cache has no budget: every key of a, b, s and p at levels 1-4 generated once. */
+	size_t keys = 0;
+	struct node *nodes[] = { &w->a, &w->b, &w->s, &w->p };
+	for (int k = 0; k < 4; k++)
+		for (int ly = 1; ly <= 4; ly++)
+			for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+				for (uint32_t x = 0; x < grid_tiles_x(ly + 1); x++) {
+					assert_int_equal(count_of(w, nodes[k], ly, x, y), 1);
+					keys++;
+				}
+	struct sched_stats st;
+	sched_get_stats(w->sched, &st);
+	assert_int_equal(st.generated, keys);
+	assert_int_equal(st.failed, 0);
+	assert_int_equal(st.running, 0);
+	assert_int_equal(st.waiting, 0);
+	for (int c = 0; c < SCHED_NCLASS; c++)
+		assert_int_equal(st.queued[c], 0);
+	assert_int_equal(st.workers, 16);
+
+	/* A tile reported means its worker no longer counts as running, every time. */
+	for (uint32_t i = 0; i < 256; i++) {
+		struct want one = mkwant(&w->b, 5, i % 64, i / 64, SCHED_VISIBLE);
+		struct tile *t = NULL;
+		assert_int_equal(sched_fetch(w->sched, &one, 1, &t), 0);
+		assert_true(tile_ok(&w->b, t, &one.key));
+		tile_unref(t);
+		sched_get_stats(w->sched, &st);
+		assert_int_equal(st.running, 0);
+		assert_int_equal(st.generated, keys + i + 1);
+	}
+	world_free(w);
+}
+
 int main(void)
 {
 	alarm(240); /* a deadlock fails the run instead of hanging it */
@@ -982,6 +1071,7 @@ int main(void)
 		cmocka_unit_test(destroy_from_callback),
 		cmocka_unit_test(workers_lower_priority),
 		cmocka_unit_test(stress),
+		cmocka_unit_test(many_workers_handoff),
 	};
 	return cmocka_run_group_tests_name("sched", tests, NULL, NULL);
 }
