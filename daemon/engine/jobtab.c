@@ -72,7 +72,7 @@ void jobmap_insert(struct jobmap *m, struct job *j)
 	j->hash = grid_key_hash(&j->key);
 	j->hnext = m->b[j->hash & (m->nb - 1)];
 	m->b[j->hash & (m->nb - 1)] = j;
-	if (++m->n > m->nb)
+	if (++m->n > m->nb / 2) /* short chains: each link is a cache miss on a big map */
 		grow(m);
 }
 

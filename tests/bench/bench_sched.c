@@ -116,7 +116,7 @@ struct counter {
 	pthread_mutex_t mu;
 	pthread_cond_t cv;
 	size_t n, target;
-	uint64_t t_ready; /* ns, when the last callback ran */
+	uint64_t t_ready; /* ns, when the callback reaching target ran */
 };
 
 static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
@@ -124,9 +124,10 @@ static void on_ready(void *ud, const struct want *w, struct tile *t, int err)
 	(void)w, (void)t, (void)err;
 	struct counter *c = ud;
 	xmutex_lock(&c->mu);
-	c->t_ready = clock_now_ns();
-	if (++c->n >= c->target)
+	if (++c->n >= c->target) {
+		c->t_ready = clock_now_ns(); /* the last one: what the figures need */
 		xcond_signal(&c->cv);
+	}
 	xmutex_unlock(&c->mu);
 }
 
