@@ -7,7 +7,8 @@
  * CPU times come from the kernel's per-thread clocks, so they hold on a loaded machine where
  * tiles/s does not. The manager is the first thread sched_create starts (sched.c), found as
  * the lowest new thread id. To compare with another scheduler, link this program against its
- * sched.o and jobtab.o (docs/ARCHITECTURE.md, "Scheduler", has the figures of both). */
+ * sched.o and jobtab.o (docs/ARCHITECTURE.md, "Threads and what each owns", has figures of
+ * the scheduler before and after issue 20 measured that way). */
 #include <dirent.h>
 #include <errno.h>
 #include <pthread.h>
@@ -151,6 +152,44 @@ static void node_setup(struct node *n, struct planet *p, uint64_t hash)
 	atomic_init(&n->gen_ns, 0);
 }
 
+/* What both loads start with: a cache, a traced scheduler, and the bulk want list of every
+ * tile of node n at level ly (malloc'd, *total entries). Exits on failure. */
+struct rig {
+	struct cache *c;
+	struct sched *s;
+	pid_t mtid;
+	struct want *w;
+	size_t total;
+};
+
+static void rig_start(struct rig *g, int workers, struct node *n, int ly)
+{
+	g->c = cache_create((size_t)512 << 20);
+	struct sched_desc d = { .cache = g->c, .workers = workers };
+	g->s = create_traced(&d, &g->mtid);
+	size_t nx = (size_t)1 << (ly + 1), ny = (size_t)1 << ly;
+	g->total = nx * ny;
+	g->w = malloc(g->total * sizeof *g->w);
+	if (!g->w || !g->s || !g->c) {
+		fprintf(stderr, "bench_sched: out of memory\n");
+		exit(1);
+	}
+	size_t i = 0;
+	for (uint32_t y = 0; y < ny; y++)
+		for (uint32_t x = 0; x < nx; x++) {
+			struct tile_key k = { .node = n->hash, .x = x, .y = y,
+					      .lx = (uint8_t)(ly + 1), .ly = (uint8_t)ly };
+			g->w[i++] = (struct want){ .node = n, .key = k, .cls = SCHED_BULK };
+		}
+}
+
+static void rig_stop(struct rig *g)
+{
+	sched_destroy(g->s);
+	cache_destroy(g->c);
+	free(g->w);
+}
+
 struct run {
 	size_t tiles;
 	double sec;
@@ -166,30 +205,18 @@ static struct run throughput(uint32_t T, int workers, int ly, const struct node_
 	struct node n;
 	node_setup(&n, &p, 0x1234 + (uint64_t)T * 31 + (uint64_t)workers + (uint64_t)ly * 7);
 	n.type = type;
-	struct cache *c = cache_create((size_t)512 << 20);
-	struct sched_desc d = { .cache = c, .workers = workers };
-	pid_t mtid;
-	struct sched *s = create_traced(&d, &mtid);
-	size_t nx = (size_t)1 << (ly + 1), ny = (size_t)1 << ly, total = nx * ny;
-	struct want *w = malloc(total * sizeof *w);
-	if (!w || !s || !c) {
-		fprintf(stderr, "bench_sched: out of memory\n");
-		exit(1);
-	}
-	size_t i = 0;
-	for (uint32_t y = 0; y < ny; y++)
-		for (uint32_t x = 0; x < nx; x++) {
-			struct tile_key k = { .node = n.hash, .x = x, .y = y,
-					      .lx = (uint8_t)(ly + 1), .ly = (uint8_t)ly };
-			w[i++] = (struct want){ .node = &n, .key = k, .cls = SCHED_BULK };
-		}
+	struct rig g;
+	rig_start(&g, workers, &n, ly);
+	struct sched *s = g.s;
+	pid_t mtid = g.mtid;
+	size_t total = g.total;
 	struct counter cnt = { .target = total };
 	xmutex_init(&cnt.mu);
 	xcond_init(&cnt.cv);
 	struct sched_req *r = sched_req_create(s, on_ready, &cnt);
 	usleep(20000); /* let the threads start and settle */
 	uint64_t m0 = tid_cpu_ns(mtid), p0 = process_cpu_ns(), t0 = clock_now_ns();
-	if (sched_req_want(r, w, total) != 0) {
+	if (sched_req_want(r, g.w, total) != 0) {
 		fprintf(stderr, "bench_sched: want refused\n");
 		exit(1);
 	}
@@ -205,11 +232,9 @@ static struct run throughput(uint32_t T, int workers, int ly, const struct node_
 	if (!mtid)
 		o.mgr_us = -1;
 	sched_req_destroy(r);
-	sched_destroy(s);
-	cache_destroy(c);
+	rig_stop(&g);
 	xmutex_destroy(&cnt.mu);
 	xcond_destroy(&cnt.cv);
-	free(w);
 	return o;
 }
 
@@ -331,27 +356,15 @@ static void daemon_like(int workers, int bulk_ly)
 	node_setup(&layer_node, &p, 0x1a7e + (uint64_t)workers);
 	layer_node.type = &t_layer;
 	layer_node.in[0] = &base_node;
-	struct cache *c = cache_create((size_t)512 << 20);
-	struct sched_desc d = { .cache = c, .workers = workers };
-	pid_t mtid;
-	struct sched *s = create_traced(&d, &mtid);
+	struct rig g;
+	rig_start(&g, workers, &layer_node, bulk_ly);
+	struct sched *s = g.s;
+	pid_t mtid = g.mtid;
+	size_t total = g.total;
 	struct session_load L = { .s = s, .ly = bulk_ly + 2 };
 	atomic_init(&L.stop, false);
 	for (int i = 0; i < SESSIONS; i++)
 		L.req[i] = sched_req_create(s, on_ready_any, NULL);
-	size_t nx = (size_t)1 << (bulk_ly + 1), ny = (size_t)1 << bulk_ly, total = nx * ny;
-	struct want *w = malloc(total * sizeof *w);
-	if (!w || !s || !c) {
-		fprintf(stderr, "bench_sched: out of memory\n");
-		exit(1);
-	}
-	size_t i = 0;
-	for (uint32_t y = 0; y < ny; y++)
-		for (uint32_t x = 0; x < nx; x++) {
-			struct tile_key k = { .node = layer_node.hash, .x = x, .y = y,
-					      .lx = (uint8_t)(bulk_ly + 1), .ly = (uint8_t)bulk_ly };
-			w[i++] = (struct want){ .node = &layer_node, .key = k, .cls = SCHED_BULK };
-		}
 	struct counter cnt = { .target = total };
 	xmutex_init(&cnt.mu);
 	xcond_init(&cnt.cv);
@@ -360,7 +373,7 @@ static void daemon_like(int workers, int bulk_ly)
 	usleep(20000);
 	pthread_t mover;
 	uint64_t m0 = tid_cpu_ns(mtid), p0 = process_cpu_ns(), t0 = clock_now_ns();
-	if (xthread_create(&mover, move_sessions, &L) != 0 || sched_req_want(bulk, w, total) != 0) {
+	if (xthread_create(&mover, move_sessions, &L) != 0 || sched_req_want(bulk, g.w, total) != 0) {
 		fprintf(stderr, "bench_sched: cannot start\n");
 		exit(1);
 	}
@@ -380,11 +393,9 @@ static void daemon_like(int workers, int bulk_ly)
 	for (int k = 0; k < SESSIONS; k++)
 		sched_req_destroy(L.req[k]);
 	sched_req_destroy(bulk);
-	sched_destroy(s);
-	cache_destroy(c);
+	rig_stop(&g);
 	xmutex_destroy(&cnt.mu);
 	xcond_destroy(&cnt.cv);
-	free(w);
 }
 
 static int cmp_u64(const void *a, const void *b)
