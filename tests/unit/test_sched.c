@@ -463,6 +463,63 @@ static void priority_order(void **state)
 	rec_fini(&r);
 }
 
+/* A queued job another request now wants as visible moves ahead of the queue though no job
+ * left it, and the per-class counts follow it. */
+static void promotion_reorders_queue(void **state)
+{
+	(void)state;
+	struct world *w = world_new(1, 0);
+	struct rec rb, ra, rv;
+	rec_init(&rb);
+	rec_init(&ra);
+	rec_init(&rv);
+	gate_close(w);
+	struct sched_req *blocker = sched_req_create(w->sched, on_ready, &rb);
+	struct want bw = mkwant(&w->b, 0, 0, 0, SCHED_BULK);
+	assert_int_equal(sched_req_want(blocker, &bw, 1), 0);
+	gate_wait(w, 1);
+	struct want bulk[7];
+	for (uint32_t x = 0; x < 6; x++)
+		bulk[x] = mkwant(&w->a, 3, x, 1, SCHED_BULK);
+	bulk[6] = sync_marker(w, 0);
+	struct sched_req *qa = sched_req_create(w->sched, on_ready, &ra);
+	assert_int_equal(sched_req_want(qa, bulk, 7), 0);
+	assert_int_equal(rec_wait(&ra, &bulk[6].key), 0);
+	struct sched_stats st;
+	sched_get_stats(w->sched, &st);
+	assert_int_equal(st.queued[SCHED_BULK], 6);
+	assert_int_equal(st.queued[SCHED_VISIBLE], 0);
+	struct want vis[] = { bulk[4], sync_marker(w, 1) };
+	vis[0].cls = SCHED_VISIBLE;
+	struct sched_req *qv = sched_req_create(w->sched, on_ready, &rv);
+	assert_int_equal(sched_req_want(qv, vis, 2), 0);
+	assert_int_equal(rec_wait(&rv, &vis[1].key), 0);
+	sched_get_stats(w->sched, &st);
+	assert_int_equal(st.queued[SCHED_BULK], 5);
+	assert_int_equal(st.queued[SCHED_VISIBLE], 1);
+	assert_int_equal(st.cancelled, 0);
+	assert_int_equal(st.merged, 1);
+	gate_open(w);
+	for (int x = 0; x < 6; x++)
+		assert_int_equal(rec_wait(&ra, &bulk[x].key), 0);
+	assert_int_equal(rec_wait(&rv, &vis[0].key), 0);
+	const int order[] = { 4, 0, 1, 2, 3, 5 };
+	xmutex_lock(&w->st->mu);
+	assert_int_equal(w->st->nlog, 7);
+	assert_true(grid_key_equal(&w->st->log[0], &bw.key));
+	for (int i = 0; i < 6; i++)
+		assert_true(grid_key_equal(&w->st->log[1 + i], &bulk[order[i]].key));
+	xmutex_unlock(&w->st->mu);
+	assert_int_equal(ra.bad + rv.bad, 0);
+	sched_req_destroy(qa);
+	sched_req_destroy(qv);
+	sched_req_destroy(blocker);
+	world_free(w);
+	rec_fini(&rb);
+	rec_fini(&ra);
+	rec_fini(&rv);
+}
+
 struct fetch_arg {
 	struct world *w;
 	struct want want;
@@ -1063,6 +1120,7 @@ int main(void)
 		cmocka_unit_test(fetch_bytes_and_deps),
 		cmocka_unit_test(shared_dep_generated_once),
 		cmocka_unit_test(priority_order),
+		cmocka_unit_test(promotion_reorders_queue),
 		cmocka_unit_test(duplicates_merged),
 		cmocka_unit_test(cancellation),
 		cmocka_unit_test(failure_delivered),
