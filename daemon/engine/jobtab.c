@@ -10,6 +10,7 @@
 
 #include <errno.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "common/xalloc.h"
 #include "planet.h"
@@ -71,7 +72,7 @@ void jobmap_insert(struct jobmap *m, struct job *j)
 	j->hash = grid_key_hash(&j->key);
 	j->hnext = m->b[j->hash & (m->nb - 1)];
 	m->b[j->hash & (m->nb - 1)] = j;
-	if (++m->n > m->nb)
+	if (++m->n > m->nb / 2) /* short chains: each link is a cache miss on a big map */
 		grow(m);
 }
 
@@ -97,15 +98,66 @@ struct job **jobmap_list(const struct jobmap *m, size_t *n)
 	return out;
 }
 
-static void free_job(struct job *j)
+#define SPARE_MAX 4096 /* freed jobs kept for reuse */
+
+static void free_job(struct jobgraph *g, struct job *j)
 {
 	for (int k = 0; k < j->nin; k++)
 		tile_unref(j->in[k]);
 	tile_unref(j->result);
+	planet_unref(j->node->planet);
+	if (g && g->nspare < SPARE_MAX) {
+		j->next = g->spare;
+		g->spare = j;
+		g->nspare++;
+		return;
+	}
 	free(j->dependents);
 	free(j->wanters);
-	planet_unref(j->node->planet);
 	free(j);
+}
+
+/* A zeroed job, from the spares when there are (keeping their lists' buffers). */
+static struct job *alloc_job(struct jobgraph *g)
+{
+	struct job *j = g->spare;
+	if (!j)
+		return xcalloc(1, sizeof *j);
+	g->spare = j->next;
+	g->nspare--;
+	struct job **dependents = j->dependents;
+	struct job_wanter *wanters = j->wanters;
+	size_t capdependents = j->capdependents, capwanters = j->capwanters;
+	memset(j, 0, sizeof *j);
+	j->dependents = dependents;
+	j->capdependents = capdependents;
+	j->wanters = wanters;
+	j->capwanters = capwanters;
+	return j;
+}
+
+static void waiting_add(struct jobgraph *g, struct job *j)
+{
+	j->mstate = JOB_WAITING;
+	atomic_fetch_add(&g->waiting, 1);
+	j->wprev = NULL;
+	j->wnext = g->waiting_list;
+	if (j->wnext)
+		j->wnext->wprev = j;
+	g->waiting_list = j;
+}
+
+/* Takes j (JOB_WAITING) off the waiting list; the caller sets its new state. */
+static void waiting_del(struct jobgraph *g, struct job *j)
+{
+	atomic_fetch_sub(&g->waiting, 1);
+	if (j->wprev)
+		j->wprev->wnext = j->wnext;
+	else
+		g->waiting_list = j->wnext;
+	if (j->wnext)
+		j->wnext->wprev = j->wprev;
+	j->wprev = j->wnext = NULL;
 }
 
 static void remove_dependent(struct job *dj, struct job *j)
@@ -165,14 +217,13 @@ static void resolve(struct jobgraph *g, struct job *j)
 		j->next = g->push;
 		g->push = j;
 	} else {
-		j->mstate = JOB_WAITING;
-		atomic_fetch_add(&g->waiting, 1);
+		waiting_add(g, j);
 	}
 }
 
 struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct tile_key *key)
 {
-	struct job *j = xcalloc(1, sizeof *j);
+	struct job *j = alloc_job(g);
 	j->key = *key;
 	j->node = node;
 	planet_ref(node->planet); /* the planet outlives every job on its nodes */
@@ -252,11 +303,11 @@ static void drop_job(struct jobgraph *g, struct job *j)
 		if (j->dep[k])
 			remove_dependent(j->dep[k], j);
 	if (j->mstate == JOB_WAITING)
-		atomic_fetch_sub(&g->waiting, 1);
+		waiting_del(g, j);
 	if (j->leased && g->remote) /* cancelled or failed before it was generated */
 		g->remote->ops->release(g->remote, &j->key);
 	jobmap_remove(&g->map, j);
-	free_job(j);
+	free_job(g, j);
 }
 
 /* j failed with err: its wanters hear of it, and so does everything that depends on it. */
@@ -286,8 +337,8 @@ void jobgraph_complete(struct jobgraph *g, struct job *j)
 			d->missing--;
 		}
 		if (d->missing == 0) {
+			waiting_del(g, d);
 			d->mstate = JOB_SUBMITTED;
-			atomic_fetch_sub(&g->waiting, 1);
 			d->next = g->push;
 			g->push = d;
 		}
@@ -305,6 +356,9 @@ void jobgraph_init(struct jobgraph *g, struct cache *c,
 	g->cache = c;
 	g->epoch = g->seq = 0;
 	g->push = g->fails = NULL;
+	g->waiting_list = NULL;
+	g->spare = NULL;
+	g->nspare = 0;
 	g->report = report;
 	g->ud = ud;
 	atomic_init(&g->merged, 0);
@@ -318,25 +372,30 @@ void jobgraph_fini(struct jobgraph *g)
 	size_t n;
 	struct job **all = jobmap_list(&g->map, &n);
 	for (size_t i = 0; i < n; i++)
-		free_job(all[i]);
+		free_job(NULL, all[i]);
 	free(all);
 	jobmap_fini(&g->map);
+	while (g->spare) {
+		struct job *j = g->spare;
+		g->spare = j->next;
+		free(j->dependents);
+		free(j->wanters);
+		free(j);
+	}
+	g->nspare = 0;
 }
 
 void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel)
 {
-	size_t n;
-	struct job **all = jobmap_list(&g->map, &n);
-	for (size_t i = 0; i < n; i++) {
-		struct job *j = all[i];
-		if (j->mstate == JOB_WAITING && j->mark != g->epoch) {
-			atomic_fetch_sub(&g->waiting, 1);
+	for (struct job *j = g->waiting_list, *next; j; j = next) {
+		next = j->wnext;
+		if (j->mark != g->epoch) {
+			waiting_del(g, j);
 			j->mstate = JOB_CANCELLED;
 			j->next = cancel;
 			cancel = j;
 		}
 	}
-	free(all);
 	/* Unlink from surviving inputs first: cancelled jobs may depend on each other. */
 	for (struct job *j = cancel; j; j = j->next) {
 		for (int k = 0; k < j->nin; k++)
@@ -350,7 +409,7 @@ void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel)
 		if (j->leased && g->remote) /* nobody wants it now: others need not wait */
 			g->remote->ops->release(g->remote, &j->key);
 		jobmap_remove(&g->map, j);
-		free_job(j);
+		free_job(g, j);
 	}
 }
 

@@ -76,6 +76,7 @@ struct job {
 	size_t nwanters, capwanters;
 	uint64_t wanters_epoch;
 	struct job *next; /* manager's scratch lists */
+	struct job *wprev, *wnext; /* the graph's list of JOB_WAITING jobs */
 
 	/* Queue (under the queue mutex). */
 	struct job_prio qprio;
@@ -114,6 +115,9 @@ struct jobgraph {
 	uint64_t seq;
 	struct job *push;  /* jobs that became ready, linked by next, for the caller to queue */
 	struct job *fails; /* jobs whose deps() failed, linked by next, for jobgraph_complete */
+	struct job *waiting_list; /* every JOB_WAITING job (wprev/wnext): what cancellation walks */
+	struct job *spare; /* freed jobs kept for reuse (linked by next), their lists' buffers */
+	size_t nspare;
 	/* Tells one waiting want entry about its job: t borrowed, NULL with err < 0 on failure. */
 	void (*report)(void *ud, const struct job_wanter *w, struct tile *t, int err);
 	void *ud;

@@ -1,13 +1,25 @@
 /* sched — see sched.h. Design note:
  *
  * Locks (never nested; none is held across generation, callbacks or a cache call):
- *   in_mu  the manager's inbox: pending want lists, destroy requests, finished jobs, stop.
- *          Requesters and workers only post under it and never wait on generation.
- *   q_mu   the ready heap, per-class queued counts, running count, worker stop flag.
+ *   in_mu  the manager's inbox: pending want lists, destroy requests, stop, and the manager's
+ *          sleep. Requesters post under it and never wait on generation.
+ *   q_mu   the ready heap, per-class queued counts, idle-worker count, worker stop flag.
  *   cache  taken by the manager (lookups) and workers (inserts) with neither lock above held.
+ * Lock-free: finished jobs go back to the manager on `done`, a multi-producer stack that the
+ * manager takes whole with one exchange (release push, acquire take: the job's result, err
+ * and remote state travel with it). Only the push that finds the stack empty takes in_mu to
+ * wake the manager, which checks the stack under in_mu before sleeping, so no wake is lost;
+ * while the manager is busy, workers hand back any number of jobs with one atomic operation
+ * each and no lock. `running` is an atomic counter, lowered before the job is pushed (so a
+ * requester told of a tile never still sees its worker counted as running).
  * The manager owns everything else (job map, active requests, want lists and their entry
  * states, dependency links) and touches it without locks. A job moves to a worker through
- * q_mu (the worker reads only node, key and inputs) and back through in_mu (result, err).
+ * q_mu (the worker reads only node, key and inputs) and back through `done` (result, err).
+ *
+ * Serial work per tile (the scheduler's ceiling is the manager thread): one creation (job
+ * from a free list, map insert), one heap push in a batch under q_mu, one completion (taken in
+ * a batch; report, dependents, map removal, job back to the free list) and one callback.
+ * Workers signal q_cv only for the idle workers a batch needs, not a broadcast to all.
  *
  * Manager iteration: snapshot the inbox; install new want lists and apply destroys; when any
  * changed, recompute (an epoch-stamped marking pass over every active list: report cached
@@ -85,14 +97,16 @@ struct sched {
 	pthread_cond_t in_cv;  /* the manager waits for work */
 	pthread_cond_t ack_cv; /* destroyers wait for the manager */
 	struct sched_req *changes;
-	struct job *done;
 	bool in_stop;
+	_Atomic(struct job *) done; /* finished jobs (and woken parked ones), linked by next_done */
 
 	pthread_mutex_t q_mu;
 	pthread_cond_t q_cv; /* workers wait for ready jobs */
 	struct jobheap heap;
-	uint64_t queued[SCHED_NCLASS], running;
+	uint64_t queued[SCHED_NCLASS];
+	int idle; /* workers waiting on q_cv */
 	bool q_stop;
+	atomic_uint_fast64_t running;
 
 	/* Manager only. */
 	struct jobgraph g;
@@ -216,6 +230,11 @@ static bool apply_changes(struct sched *s, struct sched_req *ch)
 	return changed;
 }
 
+static bool prio_equal(const struct job_prio *a, const struct job_prio *b)
+{
+	return a->cls == b->cls && a->ly == b->ly && a->lx == b->lx && a->order == b->order;
+}
+
 /* The marking pass over every active want list, then cancellation of what it missed. */
 static void recompute(struct sched *s)
 {
@@ -255,6 +274,7 @@ static void recompute(struct sched *s)
 	struct job *cancel = NULL;
 	xmutex_lock(&s->q_mu);
 	size_t kept = 0;
+	bool reorder = false;
 	for (size_t i = 0; i < s->heap.n; i++) {
 		struct job *j = s->heap.a[i];
 		if (j->mark != s->g.epoch) {
@@ -262,16 +282,21 @@ static void recompute(struct sched *s)
 			j->mstate = JOB_CANCELLED;
 			j->next = cancel;
 			cancel = j;
+			s->queued[j->qprio.cls]--;
+			reorder = true;
 		} else {
-			j->qprio = j->prio;
+			if (!prio_equal(&j->qprio, &j->prio)) {
+				s->queued[j->qprio.cls]--;
+				s->queued[j->prio.cls]++;
+				j->qprio = j->prio;
+				reorder = true;
+			}
 			s->heap.a[kept++] = j;
 		}
 	}
 	s->heap.n = kept;
-	jobheap_heapify(&s->heap);
-	memset(s->queued, 0, sizeof s->queued);
-	for (size_t i = 0; i < s->heap.n; i++)
-		s->queued[s->heap.a[i]->qprio.cls]++;
+	if (reorder) /* else the heap is as it was, in order */
+		jobheap_heapify(&s->heap);
 	xmutex_unlock(&s->q_mu);
 
 	jobgraph_cancel_unmarked(&s->g, cancel);
@@ -291,10 +316,13 @@ static void submit(struct sched *s)
 		s->queued[j->qprio.cls]++;
 		pushed++;
 	}
-	if (pushed > 1)
+	/* Wake as many idle workers as there are new jobs: a busy worker takes the next job
+	 * without waiting, and waking more would only have them contend for q_mu. */
+	if (pushed >= s->idle)
 		xcond_broadcast(&s->q_cv);
 	else
-		xcond_signal(&s->q_cv);
+		for (int i = 0; i < pushed; i++)
+			xcond_signal(&s->q_cv);
 	xmutex_unlock(&s->q_mu);
 }
 
@@ -322,12 +350,43 @@ static void free_req(struct sched_req *r)
 	free(r);
 }
 
+/* Pushes j on the done stack (any thread); wakes the manager when the stack was empty. */
+static void post_done(struct sched *s, struct job *j)
+{
+	struct job *old = atomic_load_explicit(&s->done, memory_order_relaxed);
+	do
+		j->next_done = old;
+	while (!atomic_compare_exchange_weak_explicit(&s->done, &old, j, memory_order_release,
+						      memory_order_relaxed));
+	if (!old) {
+		/* Under in_mu: the manager tests the stack under it before it sleeps. */
+		xmutex_lock(&s->in_mu);
+		xcond_signal(&s->in_cv);
+		xmutex_unlock(&s->in_mu);
+	}
+}
+
+/* The manager takes every finished job, oldest first. */
+static struct job *take_done(struct sched *s)
+{
+	struct job *j = atomic_exchange_explicit(&s->done, NULL, memory_order_acquire), *fifo = NULL;
+	while (j) {
+		struct job *next = j->next_done;
+		j->next_done = fifo;
+		fifo = j;
+		j = next;
+	}
+	return fifo;
+}
+
 static void *manager_main(void *arg)
 {
 	struct sched *s = arg;
+	pthread_setname_np(pthread_self(), "sched-manager"); /* for top -H, perf, gdb */
 	xmutex_lock(&s->in_mu);
 	for (;;) {
-		while (!s->in_stop && !s->changes && !s->done)
+		while (!s->in_stop && !s->changes &&
+		       !atomic_load_explicit(&s->done, memory_order_relaxed))
 			xcond_wait(&s->in_cv, &s->in_mu);
 		if (s->in_stop)
 			break;
@@ -345,9 +404,8 @@ static void *manager_main(void *arg)
 			r->pending = NULL;
 			r->has_pending = false;
 		}
-		struct job *done = s->done;
-		s->done = NULL;
 		xmutex_unlock(&s->in_mu);
+		struct job *done = take_done(s);
 
 		if (apply_changes(s, ch))
 			recompute(s);
@@ -473,11 +531,7 @@ static void remote_wake(void *ud, void *token)
 	struct sched *s = ud;
 	struct job *j = token;
 	j->rstate = JOB_R_WOKEN;
-	xmutex_lock(&s->in_mu);
-	j->next_done = s->done;
-	s->done = j;
-	xcond_signal(&s->in_cv);
-	xmutex_unlock(&s->in_mu);
+	post_done(s, j);
 }
 
 /* cls: the class the job was queued with; bulk work (operator prefetch) is kept on disk
@@ -537,17 +591,21 @@ static void *worker_main(void *arg)
 	/* This worker's reads from the store and the remote tier. */
 	struct tilecodec *tc = s->store || s->remote ? tilecodec_create() : NULL;
 	free(wa);
+	pthread_setname_np(pthread_self(), "sched-worker");
 	lower_priority(s);
 	xmutex_lock(&s->q_mu);
 	for (;;) {
-		while (!s->q_stop && s->heap.n == 0)
+		while (!s->q_stop && s->heap.n == 0) {
+			s->idle++;
 			xcond_wait(&s->q_cv, &s->q_mu);
+			s->idle--;
+		}
 		if (s->q_stop)
 			break;
 		struct job *j = jobheap_pop(&s->heap);
 		enum sched_class cls = (enum sched_class)j->qprio.cls;
 		s->queued[cls]--;
-		s->running++;
+		atomic_fetch_add_explicit(&s->running, 1, memory_order_relaxed);
 		xmutex_unlock(&s->q_mu);
 
 		if (j->from_store)
@@ -555,14 +613,9 @@ static void *worker_main(void *arg)
 		else
 			generate(s, &g, j, cls);
 
-		xmutex_lock(&s->in_mu);
-		j->next_done = s->done;
-		s->done = j;
-		xcond_signal(&s->in_cv);
-		xmutex_unlock(&s->in_mu);
-
+		atomic_fetch_sub_explicit(&s->running, 1, memory_order_relaxed);
+		post_done(s, j);
 		xmutex_lock(&s->q_mu);
-		s->running--;
 	}
 	xmutex_unlock(&s->q_mu);
 	gen_ctx_fini(&g);
@@ -588,6 +641,11 @@ struct sched *sched_create(const struct sched_desc *d)
 		s->nworkers = n > 0 ? (int)n : 1;
 	}
 	s->nice = d->worker_nice == 0 ? 5 : d->worker_nice;
+	atomic_init(&s->done, NULL);
+	atomic_init(&s->running, 0);
+	atomic_init(&s->generated, 0);
+	atomic_init(&s->loaded, 0);
+	atomic_init(&s->nice_err, 0);
 	xmutex_init(&s->in_mu);
 	xmutex_init(&s->q_mu);
 	xcond_init(&s->in_cv);
@@ -814,8 +872,8 @@ void sched_get_stats(struct sched *s, struct sched_stats *out)
 	xmutex_lock(&s->q_mu);
 	for (int c = 0; c < SCHED_NCLASS; c++)
 		out->queued[c] = s->queued[c];
-	out->running = s->running;
 	xmutex_unlock(&s->q_mu);
+	out->running = atomic_load(&s->running);
 	out->waiting = atomic_load(&s->g.waiting);
 	out->generated = atomic_load(&s->generated);
 	out->loaded = atomic_load(&s->loaded);

@@ -463,6 +463,63 @@ static void priority_order(void **state)
 	rec_fini(&r);
 }
 
+/* A queued job another request now wants as visible moves ahead of the queue though no job
+ * left it, and the per-class counts follow it. */
+static void promotion_reorders_queue(void **state)
+{
+	(void)state;
+	struct world *w = world_new(1, 0);
+	struct rec rb, ra, rv;
+	rec_init(&rb);
+	rec_init(&ra);
+	rec_init(&rv);
+	gate_close(w);
+	struct sched_req *blocker = sched_req_create(w->sched, on_ready, &rb);
+	struct want bw = mkwant(&w->b, 0, 0, 0, SCHED_BULK);
+	assert_int_equal(sched_req_want(blocker, &bw, 1), 0);
+	gate_wait(w, 1);
+	struct want bulk[7];
+	for (uint32_t x = 0; x < 6; x++)
+		bulk[x] = mkwant(&w->a, 3, x, 1, SCHED_BULK);
+	bulk[6] = sync_marker(w, 0);
+	struct sched_req *qa = sched_req_create(w->sched, on_ready, &ra);
+	assert_int_equal(sched_req_want(qa, bulk, 7), 0);
+	assert_int_equal(rec_wait(&ra, &bulk[6].key), 0);
+	struct sched_stats st;
+	sched_get_stats(w->sched, &st);
+	assert_int_equal(st.queued[SCHED_BULK], 6);
+	assert_int_equal(st.queued[SCHED_VISIBLE], 0);
+	struct want vis[] = { bulk[4], sync_marker(w, 1) };
+	vis[0].cls = SCHED_VISIBLE;
+	struct sched_req *qv = sched_req_create(w->sched, on_ready, &rv);
+	assert_int_equal(sched_req_want(qv, vis, 2), 0);
+	assert_int_equal(rec_wait(&rv, &vis[1].key), 0);
+	sched_get_stats(w->sched, &st);
+	assert_int_equal(st.queued[SCHED_BULK], 5);
+	assert_int_equal(st.queued[SCHED_VISIBLE], 1);
+	assert_int_equal(st.cancelled, 0);
+	assert_int_equal(st.merged, 1);
+	gate_open(w);
+	for (int x = 0; x < 6; x++)
+		assert_int_equal(rec_wait(&ra, &bulk[x].key), 0);
+	assert_int_equal(rec_wait(&rv, &vis[0].key), 0);
+	const int order[] = { 4, 0, 1, 2, 3, 5 };
+	xmutex_lock(&w->st->mu);
+	assert_int_equal(w->st->nlog, 7);
+	assert_true(grid_key_equal(&w->st->log[0], &bw.key));
+	for (int i = 0; i < 6; i++)
+		assert_true(grid_key_equal(&w->st->log[1 + i], &bulk[order[i]].key));
+	xmutex_unlock(&w->st->mu);
+	assert_int_equal(ra.bad + rv.bad, 0);
+	sched_req_destroy(qa);
+	sched_req_destroy(qv);
+	sched_req_destroy(blocker);
+	world_free(w);
+	rec_fini(&rb);
+	rec_fini(&ra);
+	rec_fini(&rv);
+}
+
 struct fetch_arg {
 	struct world *w;
 	struct want want;
@@ -967,6 +1024,95 @@ static void stress(void **state)
 	world_free(w);
 }
 
+/* Many workers hand jobs back at once (the manager's lock-free inbox): requesters fetch
+ * overlapping levels of two nodes with shared inputs, from several threads, with 16 workers. */
+struct handoff_arg {
+	struct world *w;
+	int idx, bad;
+};
+
+static void *handoff_thread(void *p)
+{
+	struct handoff_arg *a = p;
+	struct world *w = a->w;
+	struct node *nodes[] = { &w->s, &w->p };
+	struct want *list = calloc(2 * 32 * 16, sizeof *list);
+	struct tile **out = calloc(2 * 32 * 16, sizeof *out);
+	if (!list || !out) {
+		a->bad++;
+		free(list);
+		free(out);
+		return NULL;
+	}
+	for (int round = 0; round < 12; round++) {
+		int ly = 1 + (round + a->idx) % 4;
+		size_t n = 0;
+		for (int k = 0; k < 2; k++)
+			for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+				for (uint32_t x = 0; x < grid_tiles_x(ly + 1); x++)
+					list[n++] = mkwant(nodes[k], ly, x, y,
+							   (enum sched_class)(1 + (round + k) % 3));
+		if (sched_fetch(w->sched, list, n, out) != 0)
+			a->bad++;
+		for (size_t i = 0; i < n; i++) {
+			if (!tile_ok(list[i].node, out[i], &list[i].key))
+				a->bad++;
+			tile_unref(out[i]);
+		}
+	}
+	free(list);
+	free(out);
+	return NULL;
+}
+
+static void many_workers_handoff(void **state)
+{
+	(void)state;
+	struct world *w = world_new(16, 0);
+	struct handoff_arg a[6];
+	pthread_t th[6];
+	for (int i = 0; i < 6; i++) {
+		a[i] = (struct handoff_arg){ .w = w, .idx = i };
+		assert_int_equal(xthread_create(&th[i], handoff_thread, &a[i]), 0);
+	}
+	for (int i = 0; i < 6; i++) {
+		xthread_join(th[i]);
+		assert_int_equal(a[i].bad, 0);
+	}
+	/* The cache has no budget: every key of a, b, s and p at levels 1-4 generated once. */
+	size_t keys = 0;
+	struct node *nodes[] = { &w->a, &w->b, &w->s, &w->p };
+	for (int k = 0; k < 4; k++)
+		for (int ly = 1; ly <= 4; ly++)
+			for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+				for (uint32_t x = 0; x < grid_tiles_x(ly + 1); x++) {
+					assert_int_equal(count_of(w, nodes[k], ly, x, y), 1);
+					keys++;
+				}
+	struct sched_stats st;
+	sched_get_stats(w->sched, &st);
+	assert_int_equal(st.generated, keys);
+	assert_int_equal(st.failed, 0);
+	assert_int_equal(st.running, 0);
+	assert_int_equal(st.waiting, 0);
+	for (int c = 0; c < SCHED_NCLASS; c++)
+		assert_int_equal(st.queued[c], 0);
+	assert_int_equal(st.workers, 16);
+
+	/* A tile reported means its worker no longer counts as running, every time. */
+	for (uint32_t i = 0; i < 256; i++) {
+		struct want one = mkwant(&w->b, 5, i % 64, i / 64, SCHED_VISIBLE);
+		struct tile *t = NULL;
+		assert_int_equal(sched_fetch(w->sched, &one, 1, &t), 0);
+		assert_true(tile_ok(&w->b, t, &one.key));
+		tile_unref(t);
+		sched_get_stats(w->sched, &st);
+		assert_int_equal(st.running, 0);
+		assert_int_equal(st.generated, keys + i + 1);
+	}
+	world_free(w);
+}
+
 int main(void)
 {
 	alarm(240); /* a deadlock fails the run instead of hanging it */
@@ -974,6 +1120,7 @@ int main(void)
 		cmocka_unit_test(fetch_bytes_and_deps),
 		cmocka_unit_test(shared_dep_generated_once),
 		cmocka_unit_test(priority_order),
+		cmocka_unit_test(promotion_reorders_queue),
 		cmocka_unit_test(duplicates_merged),
 		cmocka_unit_test(cancellation),
 		cmocka_unit_test(failure_delivered),
@@ -982,6 +1129,7 @@ int main(void)
 		cmocka_unit_test(destroy_from_callback),
 		cmocka_unit_test(workers_lower_priority),
 		cmocka_unit_test(stress),
+		cmocka_unit_test(many_workers_handoff),
 	};
 	return cmocka_run_group_tests_name("sched", tests, NULL, NULL);
 }
