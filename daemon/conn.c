@@ -285,9 +285,7 @@ static int flush_tls(struct conn *c, uint64_t *sent)
 			break;
 		if (n < 0)
 			return (int)n;
-		advance(c, (size_t)n, sent);
-		if (k && (size_t)n < v[0].iov_len)
-			break;
+		advance(c, (size_t)n, sent); /* a part (BATCH): the rest on the next turn */
 	}
 	if (tls_stream_unsent(c->tls)) {
 		ssize_t n = tls_stream_send(c->tls, NULL, 0); /* pushes its records, if it can */
