@@ -355,6 +355,43 @@ int main(void)
 	printf("server/ratios in this run: 1 session / bare stream %.2f (goal >= 0.8), "
 	       "50 sessions / 1 session %.2f (goal >= 1.6)\n", one / bare, fifty / one);
 
+	/* What the daemon did meanwhile: frames against encodings, and its loop's iterations. */
+	struct proto_msg sr = { .type = PROTO_STATS_REQ, .stats_req = { .req = 1 } };
+	cl_send(c, &sr);
+	for (;;) {
+		struct proto_msg m = { 0 };
+		size_t need;
+		ssize_t r = proto_decode(c->in.data + c->off, c->in.len - c->off, &m, &need, NULL);
+		if (r < 0)
+			die("bad frame");
+		if (r == 0) {
+			if (cl_read(c) <= 0)
+				die("recv");
+			continue;
+		}
+		cl_consume(c, (size_t)r);
+		if (m.type != PROTO_STATS) {
+			proto_msg_fini(&m);
+			continue;
+		}
+		static const char *const show[] = { "tiles.sent", "tiles.encoded", "encode.shared",
+						   "encode.evicted", "loop.p99_ms", "loop.max_ms",
+						   "loop.over_50ms" };
+		printf("server/daemon STATS at the end:");
+		for (size_t k = 0; k < sizeof show / sizeof show[0]; k++)
+			for (uint16_t i = 0; i < m.stats.count; i++)
+				if (strcmp(m.stats.items[i].key, show[k]) == 0) {
+					if (m.stats.items[i].kind == PROTO_STAT_F64)
+						printf(" %s %.1f", show[k], m.stats.items[i].f);
+					else
+						printf(" %s %llu", show[k],
+						       (unsigned long long)m.stats.items[i].u);
+				}
+		printf("\n");
+		proto_msg_fini(&m);
+		break;
+	}
+
 	int st = 0;
 	int rc = daemon_env_stop(&d, SIGTERM, &st);
 	daemon_env_fini(&d);
