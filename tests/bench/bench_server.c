@@ -92,30 +92,39 @@ static void cl_send(struct cl *c, const struct proto_msg *m)
 	pbuf_fini(&b);
 }
 
-/* Reads until one whole message is decoded; returns its type (TILEs are decoded and checked). */
-static uint16_t cl_next(struct cl *c)
+/* Reads until one whole message is decoded into *m (the caller finis it; a TILE's payload
+ * points into the input, valid until the next read). */
+static void cl_msg(struct cl *c, struct proto_msg *m)
 {
 	for (;;) {
-		struct proto_msg m = { 0 };
+		*m = (struct proto_msg){ 0 };
 		size_t need;
-		ssize_t r = proto_decode(c->in.data + c->off, c->in.len - c->off, &m, &need, NULL);
+		ssize_t r = proto_decode(c->in.data + c->off, c->in.len - c->off, m, &need, NULL);
 		if (r < 0)
 			die("bad frame");
 		if (r > 0) {
-			uint16_t t = m.type;
-			if (t == PROTO_TILE &&
-			    tilecodec_decode(c->tc, &m.tile.enc, m.tile.payload, m.tile.payload_len, c->px,
-					     256 * 256 * 4, NULL))
-				die("tile decode");
-			if (t == PROTO_ERROR)
-				die(m.error.message);
-			proto_msg_fini(&m);
+			if (m->type == PROTO_ERROR)
+				die(m->error.message);
 			cl_consume(c, (size_t)r);
-			return t;
+			return;
 		}
 		if (cl_read(c) <= 0)
 			die("recv");
 	}
+}
+
+/* The next message's type (TILEs are decoded and checked). */
+static uint16_t cl_next(struct cl *c)
+{
+	struct proto_msg m;
+	cl_msg(c, &m);
+	if (m.type == PROTO_TILE &&
+	    tilecodec_decode(c->tc, &m.tile.enc, m.tile.payload, m.tile.payload_len, c->px,
+			     256 * 256 * 4, NULL))
+		die("tile decode");
+	uint16_t t = m.type;
+	proto_msg_fini(&m);
+	return t;
 }
 
 static void cl_until(struct cl *c, uint16_t type)
@@ -359,17 +368,8 @@ int main(void)
 	struct proto_msg sr = { .type = PROTO_STATS_REQ, .stats_req = { .req = 1 } };
 	cl_send(c, &sr);
 	for (;;) {
-		struct proto_msg m = { 0 };
-		size_t need;
-		ssize_t r = proto_decode(c->in.data + c->off, c->in.len - c->off, &m, &need, NULL);
-		if (r < 0)
-			die("bad frame");
-		if (r == 0) {
-			if (cl_read(c) <= 0)
-				die("recv");
-			continue;
-		}
-		cl_consume(c, (size_t)r);
+		struct proto_msg m;
+		cl_msg(c, &m);
 		if (m.type != PROTO_STATS) {
 			proto_msg_fini(&m);
 			continue;
