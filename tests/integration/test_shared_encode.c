@@ -3,7 +3,8 @@
  * planet id), the daemon encodes each tile once per encoding however many sessions want it
  * and whenever they come (STATS tiles.encoded against tiles.sent and encode.shared), the
  * frames decode to the same texels in both encodings, and a session that never reads, or
- * one closed with frames queued, changes none of it; the daemon then stops cleanly.
+ * one closed with frames queued, changes none of it; the daemon then stops cleanly. And a
+ * new WANT still takes unsent shared frames back out of a session's output.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -358,11 +359,83 @@ static void test_shared_frames(void **state)
 	assert_int_equal(WEXITSTATUS(status), 0);
 }
 
+/* A session that does not read fills its socket and its queue with shared frames; a new WANT
+ * takes the unsent ones back (tiles.recalled) and the stream stays whole: every frame that
+ * arrives parses and decodes, the new want-set's tiles all arrive, and the tiles received
+ * are exactly the frames queued less those taken back. */
+static void test_recall_shared(void **state)
+{
+	(void)state;
+	enum { W = 32, H = 16, N = W * H * 2, N2 = 8 };
+	struct proto_want_entry *e = calloc(N, sizeof *e), e2[N2];
+	int n = 0;
+	for (uint32_t y = 0; y < H; y++)
+		for (uint32_t x = 0; x < W; x++)
+			for (uint8_t l = 0; l < 2; l++)
+				e[n++] = (struct proto_want_entry){ .layer = l, .cls = PROTO_CLASS_VISIBLE,
+								    .lx = 10, .ly = 9, .x = 200 + x,
+								    .y = 100 + y };
+	for (int k = 0; k < N2; k++)
+		e2[k] = (struct proto_want_entry){ .layer = (uint8_t)(k & 1), .cls = PROTO_CLASS_VISIBLE,
+						   .lx = 10, .ly = 9, .x = 400 + (uint32_t)k / 2,
+						   .y = 100 };
+	struct cl *st = cl_connect(false);
+	cl_open(st, false);
+	uint64_t sent0 = cl_stat(st, "tiles.sent"), rec0 = cl_stat(st, "tiles.recalled");
+	struct cl *r = cl_connect(false);
+	cl_open(r, false); /* raw: 16 KiB a tile, the socket takes a few hundred */
+	cl_want(r, 1, e, N);
+	/* until its output stops growing: socket and queue full */
+	uint64_t last = 0, end = clock_now_ms() + 30000;
+	for (int still = 0; still < 10 && clock_now_ms() < end;) {
+		usleep(100 * 1000);
+		uint64_t now = cl_stat(st, "tiles.sent");
+		still = now == last ? still + 1 : 0;
+		last = now;
+	}
+	uint64_t queued = last - sent0;
+	if (!(queued > 0 && queued < N)) /* some waited in the want-set */
+		fail_msg("%llu of %d tiles queued", (unsigned long long)queued, N);
+	cl_want(r, 2, e2, N2);
+	uint64_t recalled = 0; /* the WANT goes on another connection than the STATS */
+	for (end = clock_now_ms() + 20000; !recalled && clock_now_ms() < end; usleep(50 * 1000))
+		recalled = cl_stat(st, "tiles.recalled") - rec0;
+	assert_true(recalled > 0);
+
+	/* Everything queued for seq 1 and not taken back, then the N2 new tiles. */
+	struct tilecodec *tc = tilecodec_create();
+	uint8_t *px = malloc(64 * 64 * 4);
+	uint64_t got1 = 0, got2 = 0;
+	while (got2 < N2) {
+		cl_expect(r, PROTO_TILE);
+		const struct proto_tile *t = &r->m.tile;
+		char err[256];
+		if (tilecodec_decode(tc, &t->enc, t->payload, t->payload_len, px, 64 * 64 * 4, err))
+			fail_msg("tile %u/%u: %s", t->key.x, t->key.y, err);
+		if (t->seq == 1)
+			got1++;
+		else
+			got2++;
+	}
+	uint64_t total = cl_stat(st, "tiles.sent") - sent0;
+	recalled = cl_stat(st, "tiles.recalled") - rec0;
+	printf("not reading: %llu frames queued, %llu taken back by the new WANT, %llu stale ones "
+	       "received, then the %d new\n", (unsigned long long)queued,
+	       (unsigned long long)recalled, (unsigned long long)got1, N2);
+	assert_int_equal(got1 + got2, total - recalled);
+	tilecodec_destroy(tc);
+	free(px);
+	free(e);
+	cl_free(r);
+	cl_free(st);
+}
+
 int main(void)
 {
 	signal(SIGPIPE, SIG_IGN);
 	const struct CMUnitTest tests[] = {
-		cmocka_unit_test(test_shared_frames),
+		cmocka_unit_test(test_recall_shared),
+		cmocka_unit_test(test_shared_frames), /* last: it stops the daemon */
 	};
 	return cmocka_run_group_tests(tests, start_daemon, stop_daemon);
 }
