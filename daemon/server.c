@@ -1055,9 +1055,10 @@ int server_run(struct server *srv)
 		uint64_t t0 = clock_now_ns();
 		for (int i = 0; i < n; i++)
 			dispatch(srv, &evs[i]);
-		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (encoding and copying
-		 * scale with bytes): sessions not reached stay listed, at the front, for the next
-		 * iteration, which then does not wait. */
+		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (queuing a shared
+		 * encoding costs nothing per byte, but the kernel copies what sendmsg hands it):
+		 * sessions not reached stay listed, at the front, for the next iteration, which
+		 * then does not wait. */
 		struct session_link *p = srv->pump;
 		srv->pump = NULL;
 		size_t budget = LOOP_OUT_BUDGET;
