@@ -1,25 +1,34 @@
-/* conn — see conn.h. Output is compacted only once more than 1 MiB at its head has gone out
- * and that is over half the buffer, so a steady stream does not memmove on every send. Input
- * is consumed frame by frame (pbuf_consume), so a partial frame simply waits for more bytes.
+/* conn — see conn.h. Output: the pieces are an array used from `head`; pieces that went
+ * out are freed as they go and the array is slid back only once its head is over half of it
+ * (a few dozen bytes per piece, never payload bytes). A message piece stops taking appends
+ * at MSG_SEG bytes. Plain sockets get up to IOV_MAX_OUT pieces per sendmsg; over TLS each
+ * piece is handed to the stream in turn. Input is consumed frame by frame (pbuf_consume), so
+ * a partial frame simply waits for more bytes.
  */
 #include "conn.h"
 
 #include <errno.h>
+#include <stdlib.h>
 #include <string.h>
 #include <sys/epoll.h>
 #include <sys/socket.h>
+#include <sys/uio.h>
 #include <unistd.h>
 
 #include "common/errbuf.h"
+#include "common/xalloc.h"
+#include "encq.h"
 #include "tls.h"
 
 #define RECV_CHUNK 65536
+#define MSG_SEG (64u << 10)
+#define IOV_MAX_OUT 64
+#define TILE_HEAD (PROTO_HDR + 44u)
 
 void conn_init(struct conn *c, int fd)
 {
 	*c = (struct conn){ .fd = fd, .reading = true };
 	pbuf_init(&c->in);
-	pbuf_init(&c->out);
 }
 
 int conn_start_tls(struct conn *c, struct tls_server *tls)
@@ -48,10 +57,22 @@ int conn_close(struct conn *c)
 	return rc;
 }
 
+static void seg_fini(struct conn *c, struct conn_seg *g)
+{
+	c->owned -= g->b.cap;
+	pbuf_fini(&g->b);
+	etile_unref(g->e);
+}
+
 void conn_fini(struct conn *c)
 {
 	pbuf_fini(&c->in);
-	pbuf_fini(&c->out);
+	for (size_t i = c->head; i < c->n; i++)
+		seg_fini(c, &c->seg[i]);
+	free(c->seg);
+	c->seg = NULL;
+	c->head = c->n = c->cap = 0;
+	c->pending = 0;
 }
 
 uint32_t conn_events(const struct conn *c)
@@ -61,7 +82,7 @@ uint32_t conn_events(const struct conn *c)
 
 uint64_t conn_pending(const struct conn *c)
 {
-	return c->out.len - c->out_off;
+	return c->pending;
 }
 
 /* conn_recv over TLS: every record GnuTLS holds is taken, so none waits unseen by epoll. */
@@ -151,29 +172,126 @@ void conn_consume(struct conn *c, size_t n)
 	pbuf_consume(&c->in, n);
 }
 
+/* Whether piece g can go out; a TILE whose encoding became ready gets its header now (and
+ * its count corrected), one whose encoding failed is emptied (skipped). */
+static bool settle(struct conn *c, struct conn_seg *g)
+{
+	if (!g->e || g->b.len)
+		return true;
+	if (!g->e->ready)
+		return false;
+	uint64_t now = 0;
+	if (!g->e->err) {
+		g->pt.enc = g->e->enc;
+		g->pt.payload = g->e->payload;
+		g->pt.payload_len = g->e->len;
+		pbuf_reserve(&g->b, TILE_HEAD);
+		c->owned += g->b.cap;
+		if (proto_encode_tile_head(&g->b, &g->pt, NULL) == (ssize_t)TILE_HEAD)
+			now = TILE_HEAD + g->e->len;
+		else
+			g->b.len = 0;
+	}
+	if (!now) {
+		/* nothing to send: an empty header and no payload */
+		etile_unref(g->e);
+		g->e = NULL;
+	}
+	c->pending = c->pending - g->counted + now;
+	g->counted = now;
+	return true;
+}
+
+static size_t seg_len(const struct conn_seg *g)
+{
+	return g->b.len + (g->e ? g->e->len : 0);
+}
+
+/* Whether the head piece is ready to go (settling the pieces at the head). */
+static bool head_ready(struct conn *c)
+{
+	return c->head < c->n && settle(c, &c->seg[c->head]);
+}
+
+/* Frees the pieces wholly sent at the head and the array once empty. */
+static void drop_sent(struct conn *c)
+{
+	while (c->head < c->n && settle(c, &c->seg[c->head]) &&
+	       c->seg[c->head].off == seg_len(&c->seg[c->head])) {
+		seg_fini(c, &c->seg[c->head]);
+		c->head++;
+	}
+	if (c->head == c->n) {
+		c->head = c->n = 0;
+		if (c->cap > 256) {
+			free(c->seg);
+			c->seg = NULL;
+			c->cap = 0;
+		}
+	}
+}
+
+/* The unsent part of piece g as up to two iovecs. */
+static int seg_iov(const struct conn_seg *g, struct iovec *v)
+{
+	int k = 0;
+	size_t off = g->off;
+	if (off < g->b.len) {
+		v[k++] = (struct iovec){ g->b.data + off, g->b.len - off };
+		off = 0;
+	} else {
+		off -= g->b.len;
+	}
+	if (g->e && off < g->e->len)
+		v[k++] = (struct iovec){ (void *)(g->e->payload + off), g->e->len - off };
+	return k;
+}
+
+/* Marks n bytes sent from the head on. */
+static void advance(struct conn *c, size_t n, uint64_t *sent)
+{
+	*sent += n;
+	c->pending -= n;
+	for (size_t i = c->head; n && i < c->n; i++) {
+		struct conn_seg *g = &c->seg[i];
+		size_t left = seg_len(g) - g->off;
+		size_t take = n < left ? n : left;
+		g->off += take;
+		g->counted -= take;
+		n -= take;
+	}
+	drop_sent(c);
+}
+
 /* Writes over TLS as far as the socket takes (TLS's own unsent records first). Returns 1 when
- * that was done (the caller updates the buffer), 0 while the handshake waits with nothing to
- * send (want_out set while the handshake has bytes to write), or -errno. */
+ * that was done, 0 while the handshake waits with nothing to send (want_out set while the
+ * handshake has bytes to write), or -errno. */
 static int flush_tls(struct conn *c, uint64_t *sent)
 {
 	if (!tls_stream_ready(c->tls)) {
 		int rc = tls_stream_handshake(c->tls);
-		if (rc == -EAGAIN && c->out_off == c->out.len) {
+		if (rc == -EAGAIN && !c->pending) {
 			c->want_out = tls_stream_unsent(c->tls) > 0;
 			return 0;
 		}
 		if (rc)
 			return rc == -EAGAIN ? -ENOTCONN : rc;
 	}
-	do {
-		ssize_t n = tls_stream_send(c->tls, c->out.data + c->out_off, c->out.len - c->out_off);
+	while (head_ready(c) && !tls_stream_unsent(c->tls)) {
+		struct iovec v[2];
+		int k = seg_iov(&c->seg[c->head], v);
+		ssize_t n = k ? tls_stream_send(c->tls, v[0].iov_base, v[0].iov_len) : 0;
 		if (n == -EAGAIN)
 			break;
 		if (n < 0)
 			return (int)n;
-		c->out_off += (size_t)n;
-		*sent += (uint64_t)n;
-	} while (c->out_off < c->out.len && !tls_stream_unsent(c->tls));
+		advance(c, (size_t)n, sent); /* a part (BATCH): the rest on the next turn */
+	}
+	if (tls_stream_unsent(c->tls)) {
+		ssize_t n = tls_stream_send(c->tls, NULL, 0); /* pushes its records, if it can */
+		if (n < 0 && n != -EAGAIN)
+			return (int)n;
+	}
 	return 1;
 }
 
@@ -184,9 +302,20 @@ int conn_flush(struct conn *c, uint64_t *sent)
 		if (rc <= 0)
 			return rc;
 	}
-	while (!c->tls && c->out_off < c->out.len) {
-		ssize_t n = send(c->fd, c->out.data + c->out_off, c->out.len - c->out_off,
-				 MSG_NOSIGNAL | MSG_DONTWAIT);
+	while (!c->tls && head_ready(c)) {
+		struct iovec v[IOV_MAX_OUT];
+		int k = 0;
+		for (size_t i = c->head; i < c->n && k + 2 <= IOV_MAX_OUT; i++) {
+			if (!settle(c, &c->seg[i]))
+				break;
+			k += seg_iov(&c->seg[i], v + k);
+		}
+		if (!k) {
+			drop_sent(c); /* empty pieces (failed encodings) */
+			continue;
+		}
+		struct msghdr mh = { .msg_iov = v, .msg_iovlen = (size_t)k };
+		ssize_t n = sendmsg(c->fd, &mh, MSG_NOSIGNAL | MSG_DONTWAIT);
 		if (n < 0) {
 			if (errno == EINTR)
 				continue;
@@ -194,17 +323,9 @@ int conn_flush(struct conn *c, uint64_t *sent)
 				break;
 			return -errno;
 		}
-		c->out_off += (size_t)n;
-		*sent += (uint64_t)n;
+		advance(c, (size_t)n, sent);
 	}
-	if (c->out_off == c->out.len) {
-		c->out.len = c->out_off = 0;
-	} else if (c->out_off > (1u << 20) && c->out_off > c->out.len / 2) {
-		memmove(c->out.data, c->out.data + c->out_off, c->out.len - c->out_off);
-		c->out.len -= c->out_off;
-		c->out_off = 0;
-	}
-	c->want_out = c->out_off < c->out.len || (c->tls && tls_stream_unsent(c->tls));
+	c->want_out = head_ready(c) || (c->tls && tls_stream_unsent(c->tls));
 	return 0;
 }
 
@@ -217,11 +338,71 @@ void conn_throttle(struct conn *c, uint64_t max_pending)
 		c->reading = false;
 }
 
-void conn_compact(struct conn *c)
+static struct conn_seg *seg_new(struct conn *c)
 {
-	if (!c->out_off)
-		return;
-	memmove(c->out.data, c->out.data + c->out_off, c->out.len - c->out_off);
-	c->out.len -= c->out_off;
-	c->out_off = 0;
+	if (c->n == c->cap && c->head > c->n / 2) {
+		memmove(c->seg, c->seg + c->head, (c->n - c->head) * sizeof *c->seg);
+		c->n -= c->head;
+		c->head = 0;
+	}
+	if (c->n == c->cap) {
+		c->cap = c->cap ? 2 * c->cap : 16;
+		c->seg = xrealloc(c->seg, c->cap * sizeof *c->seg);
+	}
+	struct conn_seg *g = &c->seg[c->n++];
+	*g = (struct conn_seg){ 0 };
+	pbuf_init(&g->b);
+	return g;
+}
+
+struct pbuf *conn_msg_begin(struct conn *c)
+{
+	struct conn_seg *g = c->n > c->head ? &c->seg[c->n - 1] : NULL;
+	if (!g || g->e || g->b.len >= MSG_SEG)
+		g = seg_new(c);
+	c->owned -= g->b.cap;
+	return &g->b;
+}
+
+void conn_msg_end(struct conn *c)
+{
+	struct conn_seg *g = &c->seg[c->n - 1];
+	c->owned += g->b.cap;
+	uint64_t unsent = g->b.len - g->off;
+	c->pending = c->pending - g->counted + unsent;
+	g->counted = unsent;
+}
+
+void conn_put_tile(struct conn *c, struct etile *e, const struct proto_tile *pt)
+{
+	struct conn_seg *g = seg_new(c);
+	g->e = etile_ref(e);
+	g->pt = *pt;
+	g->pt.payload = NULL;
+	g->pt.payload_len = 0;
+	g->counted = etile_frame_bytes(e);
+	c->pending += g->counted;
+	settle(c, g);
+}
+
+size_t conn_recall(struct conn *c, bool (*drop)(void *ud, const struct tile_key *k), void *ud,
+		   uint64_t *bytes)
+{
+	size_t keep = c->head, gone = 0;
+	*bytes = 0;
+	for (size_t i = c->head; i < c->n; i++) {
+		struct conn_seg *g = &c->seg[i];
+		if (g->e && !g->off && drop(ud, &g->pt.key)) {
+			*bytes += g->counted;
+			c->pending -= g->counted;
+			seg_fini(c, g);
+			gone++;
+			continue;
+		}
+		c->seg[keep++] = *g;
+	}
+	c->n = keep;
+	drop_sent(c);
+	c->want_out = head_ready(c) || (c->tls && tls_stream_unsent(c->tls));
+	return gone;
 }

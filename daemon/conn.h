@@ -1,13 +1,14 @@
 /* conn — a framed, non-blocking stream connection: input accumulates in a buffer and is cut
- * into protocol frames (proto_decode, with the session's frame-size cap); output is one
- * growable buffer with a read offset that the owner appends frames to and conn_flush writes
- * out as far as the socket takes. Reading pauses while too much output is pending (a peer
- * that does not read cannot make us queue without bound).
+ * into protocol frames (proto_decode, with the session's frame-size cap); output is a queue
+ * of pieces (conn_seg: owned message bytes, or TILE frames whose payload is a shared
+ * encoding) that conn_flush writes out with sendmsg as far as the socket takes, without
+ * copying the payloads. Reading pauses while too much output is pending (a peer that does
+ * not read cannot make us queue without bound).
  *
  * With TLS (conn_start_tls, on a TCP listener with [tls]) the same calls carry the stream
  * through a tls_stream (tls.h): reading and flushing advance its handshake first, and the
- * frames are records' plaintext; the caller sees no difference but the events it is asked
- * to wait for.
+ * frames are records' plaintext (each piece is handed to GnuTLS in turn, which copies it
+ * into records); the caller sees no difference but the events it is asked to wait for.
  *
  * Threads: one owner thread (the event loop). Ownership: a conn owns its fd, buffers and TLS
  * stream.
@@ -20,13 +21,29 @@
 
 #include "common/proto.h"
 
+struct etile;
+
+/* One piece of the output: bytes the conn owns (messages, appended to while it is the last),
+ * or a TILE frame: a header of its own and the shared payload of an encoding (encq.h), which
+ * may still be under way (nothing after it goes out before it is ready). */
+struct conn_seg {
+	struct etile *e;    /* a TILE frame (owned reference); NULL: bytes */
+	struct pbuf b;	    /* bytes: the data; TILE: its header, made once e is ready */
+	size_t off;	    /* bytes of this piece the socket already took */
+	uint64_t counted;   /* bytes counted in the conn's pending for it */
+	struct proto_tile pt; /* TILE: this session's fields (seq, planet id, layer, key) */
+};
+
 struct conn {
 	int fd;
 	struct pbuf in;	 /* received bytes not yet consumed */
-	struct pbuf out; /* frames to send: the owner appends, bytes [out_off, len) are unsent */
-	size_t out_off;
+	/* frames to send, in order: seg[head, n) */
+	struct conn_seg *seg;
+	size_t head, n, cap;
+	uint64_t pending; /* unsent bytes (a TILE not yet encoded: its upper bound) */
+	uint64_t owned;	  /* bytes of buffers the output owns (headers and messages) */
 	bool reading;  /* wants input (EPOLLIN) */
-	bool want_out; /* has unsent output, or its TLS handshake waits to write (EPOLLOUT) */
+	bool want_out; /* has output ready to send, or its TLS handshake waits to write */
 	struct tls_stream *tls; /* NULL: plain */
 };
 struct tls_server;
@@ -75,7 +92,15 @@ int conn_flush(struct conn *c, uint64_t *sent);
 /* Output backpressure: stops reading above 2 × max_pending unsent bytes, resumes below
  * max_pending. */
 void conn_throttle(struct conn *c, uint64_t max_pending);
-/* Moves the unsent output to the start of the buffer (before growing it). */
-void conn_compact(struct conn *c);
+/* The buffer a message is appended to (proto_encode), then conn_msg_end. */
+struct pbuf *conn_msg_begin(struct conn *c);
+void conn_msg_end(struct conn *c);
+/* Queues a TILE frame: e's payload (a reference is taken) with a header made from pt's seq,
+ * planet_id, layer and key once e is ready. An encoding that failed is skipped. */
+void conn_put_tile(struct conn *c, struct etile *e, const struct proto_tile *pt);
+/* Takes the TILE frames of which no byte went out yet and for which drop(ud, key) is true
+ * out of the output. Returns how many, and their bytes in *bytes. */
+size_t conn_recall(struct conn *c, bool (*drop)(void *ud, const struct tile_key *k), void *ud,
+		   uint64_t *bytes);
 
 #endif

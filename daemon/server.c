@@ -40,6 +40,7 @@
 #include "common/tilecodec.h"
 #include "common/xalloc.h"
 #include "common/xthread.h"
+#include "encq.h"
 #include "loopstat.h"
 #include "prefetch.h"
 #include "readyq.h"
@@ -57,7 +58,7 @@
 #define EVICT_WARN_NS 10000000000ull /* at most one eviction warning per 10 s */
 #define MAX_LINK_STATS 32	       /* sessions whose link STATS shows */
 
-enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH };
+enum ev_kind { EV_NONE = 0, EV_LISTENER, EV_SESSION, EV_READY, EV_TIMER, EV_WATCH, EV_ENCODED };
 
 /* What epoll hands back: the kind of source and its object. */
 struct evsrc {
@@ -99,7 +100,7 @@ struct server {
 	struct prefetch_limits prefetch; /* caps from the conf, counts from the sessions */
 
 	int epfd, timerfd;
-	struct evsrc ev_ready, ev_timer;
+	struct evsrc ev_ready, ev_timer, ev_encoded;
 	struct readyq ready;
 	struct listener ls[LISTEN_MAX];
 	struct tls_server *tls; /* [tls]: the TCP listeners' credentials; NULL: plain */
@@ -125,7 +126,7 @@ struct server {
 	struct session_link *pump;	/* sessions with more output to produce */
 	struct session_link *graveyard; /* closed this iteration, freed at its end */
 
-	struct tilecodec *codec; /* the loop thread's encoder */
+	struct encq *encq; /* the shared encodings and their threads */
 	struct proto_limits limits;
 	uint64_t start_ns;
 	struct session_counters counters;
@@ -506,6 +507,15 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 		stat_u(&b, "tls.failed", srv->tls_tally.failed);
 		stat_u(&b, "tls.reloads", srv->tls_reloads);
 	}
+	struct encq_stats es;
+	encq_stats(srv->encq, &es);
+	stat_u(&b, "tiles.encoded", es.encoded);
+	stat_u(&b, "encode.shared", es.shared);
+	stat_u(&b, "encode.failed", es.failed);
+	stat_u(&b, "encode.queued", es.queued);
+	stat_u(&b, "encode.entries", es.entries);
+	stat_u(&b, "encode.bytes", es.bytes);
+	stat_u(&b, "encode.evicted", es.evicted);
 	stat_u(&b, "tiles.recalled", c->tiles_recalled);
 	stat_u(&b, "bytes.recalled", c->bytes_recalled);
 	stat_u(&b, "planets", srv->planets->n);
@@ -623,7 +633,7 @@ static void init_env(struct server *srv)
 		.limits = &srv->limits, .max_jobs = srv->conf->max_jobs, .sched = srv->sched,
 		.queue_ms = srv->conf->send_queue_ms, .bbr = srv->conf->bbr,
 		.raw_above_bps = raw_above(srv->conf),
-		.cache = srv->cache, .ready = &srv->ready, .codec = srv->codec,
+		.cache = srv->cache, .ready = &srv->ready, .encq = srv->encq,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,
 		.handshake_ns = (uint64_t)srv->conf->handshake_timeout * 1000000000u,
@@ -636,7 +646,16 @@ static void init_env(struct server *srv)
 	set_prefetch_caps(srv);
 }
 
-/* The ready eventfd and the housekeeping timer in the epoll set. */
+/* The shared encodings' budget: a quarter of the tile cache's, within [16, 256] MiB (a
+ * `none` encoding keeps its tile alive, so this much may outlive the cache's own budget). */
+static uint64_t encq_budget(const struct conf *c)
+{
+	uint64_t b = (uint64_t)c->cache_bytes / 4;
+	b = b < (16u << 20) ? 16u << 20 : b;
+	return b > (256u << 20) ? 256u << 20 : b;
+}
+
+/* The ready eventfd, the encoders' eventfd and the housekeeping timer in the epoll set. */
 static int open_loop_fds(struct server *srv, char err[256])
 {
 	int rc;
@@ -652,8 +671,15 @@ static int open_loop_fds(struct server *srv, char err[256])
 	srv->ev_ready = (struct evsrc){ EV_READY, NULL };
 	srv->ev_timer = (struct evsrc){ EV_TIMER, NULL };
 	rc = 0;
+	srv->ev_encoded = (struct evsrc){ EV_ENCODED, NULL };
+	if ((rc = encq_create(ENCQ_THREADS, encq_budget(srv->conf), session_on_encoded,
+			      &srv->encq))) {
+		err_set(err, "tile encoders: %s", strerror(-rc));
+		return rc;
+	}
 	if (timerfd_settime(srv->timerfd, 0, &its, NULL) ||
 	    (rc = ep_add(srv, srv->ready.evfd, &srv->ev_ready)) ||
+	    (rc = ep_add(srv, encq_fd(srv->encq), &srv->ev_encoded)) ||
 	    (rc = ep_add(srv, srv->timerfd, &srv->ev_timer))) {
 		rc = rc ? rc : -errno;
 		err_set(err, "timer: %s", strerror(-rc));
@@ -673,7 +699,6 @@ int server_create(const struct conf *c, struct sched *s, struct cache *cache,
 	srv->planets = planets;
 	srv->epfd = srv->timerfd = srv->ready.evfd = -1;
 	srv->start_ns = clock_now_ns();
-	srv->codec = tilecodec_create();
 	srv->limits = (struct proto_limits){ .max_want = c->max_want, .max_rate = c->max_rate,
 					     .max_pending = c->max_pending,
 					     .max_frame = c->max_frame };
@@ -773,7 +798,7 @@ void server_destroy(struct server *srv)
 		close(srv->epfd);
 	if (srv->timerfd >= 0)
 		close(srv->timerfd);
-	tilecodec_destroy(srv->codec);
+	encq_destroy(srv->encq); /* after the sessions: none refers to an encoding any more */
 	planet_set_unref(srv->planets);
 	free(srv);
 }
@@ -1006,6 +1031,7 @@ static void dispatch(struct server *srv, const struct epoll_event *e)
 		break;
 	case EV_READY: on_ready(srv); break;
 	case EV_TIMER: on_timer(srv); break;
+	case EV_ENCODED: encq_drain(srv->encq); break;
 	case EV_WATCH: {
 		struct watch *w = ev->obj;
 		w->fn(w->ud);
@@ -1030,9 +1056,10 @@ int server_run(struct server *srv)
 		uint64_t t0 = clock_now_ns();
 		for (int i = 0; i < n; i++)
 			dispatch(srv, &evs[i]);
-		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (encoding and copying
-		 * scale with bytes): sessions not reached stay listed, at the front, for the next
-		 * iteration, which then does not wait. */
+		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (queuing a shared
+		 * encoding costs nothing per byte, but the kernel copies what sendmsg hands it):
+		 * sessions not reached stay listed, at the front, for the next iteration, which
+		 * then does not wait. */
 		struct session_link *p = srv->pump;
 		srv->pump = NULL;
 		size_t budget = LOOP_OUT_BUDGET;

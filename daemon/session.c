@@ -1,13 +1,16 @@
 /* session — see session.h. Design note: a session owns one scheduler request for its want-set
  * (all planets it opened, concatenated); ready reports come back through env->ready as
  * (session, job, key, tile), the want-set says whether the key is still wanted and orders what
- * waits for output room. TILE frames are encoded straight into the connection's output buffer
- * (header space reserved, payload encoded after it, header written last) so a tile is copied
- * once. A closed session stays allocated until the server frees it at the end of the loop
+ * waits for output room. A TILE frame's payload is an encoding shared by every session that
+ * wants the tile in that codec, made once off the loop (encq.h); the output queues a
+ * reference to it with this session's header (conn.h), and writes it with sendmsg from the
+ * shared bytes: nothing on the loop scales with tile bytes. A closed session stays allocated until the server frees it at the end of the loop
  * iteration, so pointers in the current epoll batch or ready batch never dangle.
  *
  * Memory: ready tiles waiting for output room are held up to the session's allowance
- * (max_pending bytes of raw tiles, the same figure that caps its queued output); beyond it
+ * (max_pending bytes of raw tiles, the same figure that caps its queued output, in which a
+ * shared encoding counts its whole frame, as if copied, and one still being encoded its raw
+ * size); beyond it
  * they are parked (released) and looked up in the cache again when room appears, or wanted
  * again when the cache let them go. A session thus holds at most about 2 × max_pending, and
  * its output buffer is given back whenever it drains. Once it parks with its output full, its
@@ -36,6 +39,7 @@
 #include "common/xalloc.h"
 #include "conn.h"
 #include "control.h"
+#include "encq.h"
 #include "linkest.h"
 #include "wantset.h"
 
@@ -43,7 +47,6 @@
 #define PUMP_BUDGET (4u << 20) /* output bytes produced per pump call (fairness) */
 #define READ_BUDGET (1u << 20) /* input bytes read per event */
 #define CLOSE_GRACE_NS 2000000000ull
-#define OUT_KEEP (1u << 20) /* a drained output buffer above this is freed */
 
 struct sopen {
 	struct planet *p;	/* NULL: dropped by a reload (the id may be given again) */
@@ -88,20 +91,9 @@ struct session {
 	struct control ctl;
 	uint64_t tiles_sent, tiles_dropped;
 
-	/* The link and the send window (linkest.h). `flushed` counts the bytes the kernel took,
-	 * so a byte at out index i is stream position flushed + i - out_off; `fr` lists the TILE
-	 * frames still in the output by stream position, oldest first, so that a new want-set
-	 * can take back the ones no longer wanted before the kernel has them. */
+	/* The link and the send window (linkest.h). TILE frames still wholly in the output can
+	 * be taken back by a new want-set (conn_recall) before the kernel has them. */
 	struct linkest le;
-	uint64_t flushed;
-	struct sframe *fr;
-	size_t nfr, capfr;
-};
-
-/* A TILE frame in the output: stream positions [begin, end). */
-struct sframe {
-	uint64_t begin, end;
-	struct tile_key key;
 };
 
 /* ---- output ----------------------------------------------------------------------------- */
@@ -136,15 +128,7 @@ static int flush(struct session *s)
 	uint32_t was = conn_events(&s->c);
 	uint64_t w = 0;
 	int rc = conn_flush(&s->c, &w);
-	s->flushed += w;
 	s->env->counters->bytes_sent += w;
-	size_t gone = 0; /* frames wholly handed to the kernel */
-	while (gone < s->nfr && s->fr[gone].end <= s->flushed)
-		gone++;
-	if (gone) {
-		memmove(s->fr, s->fr + gone, (s->nfr - gone) * sizeof *s->fr);
-		s->nfr -= gone;
-	}
 	linkest_sample(&s->le, clock_now_ns(), false);
 	if (rc) {
 		char why[240];
@@ -153,7 +137,7 @@ static int flush(struct session *s)
 		return rc;
 	}
 	if (s->closing) {
-		if (!s->c.want_out) {
+		if (!s->c.want_out && !conn_pending(&s->c)) {
 			session_close(s, NULL);
 			return -EPIPE;
 		}
@@ -161,11 +145,6 @@ static int flush(struct session *s)
 		conn_throttle(&s->c, s->env->limits->max_pending);
 	}
 	resume_if_drained(s); /* the client reads again */
-	if (!s->c.want_out && s->c.out.cap > OUT_KEEP) {
-		/* drained: a burst's buffer is not kept for the session's lifetime */
-		pbuf_fini(&s->c.out);
-		pbuf_init(&s->c.out);
-	}
 	if (was != conn_events(&s->c))
 		update_interest(s);
 	return 0;
@@ -174,7 +153,8 @@ static int flush(struct session *s)
 static void send_msg(struct session *s, const struct proto_msg *m)
 {
 	char err[256];
-	ssize_t n = proto_encode(&s->c.out, m, err);
+	ssize_t n = proto_encode(conn_msg_begin(&s->c), m, err);
+	conn_msg_end(&s->c);
 	if (n < 0)
 		log_msg(LOG_ERROR, "session %llu: cannot encode %s: %s", (unsigned long long)s->id,
 			proto_type_name(m->type), err);
@@ -259,59 +239,18 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 		cnt->tiles_failed++;
 		return;
 	}
-	const struct tile *t = e->t;
 	enum tcodec codec = (enum tcodec)s->codec;
 	uint64_t fast = s->env->raw_above_bps;
 	if (fast && s->le.tcp && s->le.rate * 8 > fast)
 		codec = TCODEC_NONE; /* the link outruns the encoder (raw is always allowed) */
-	enum tfilter filt = codec == TCODEC_NONE ? TFILTER_NONE : tilecodec_default_filter(t->type);
-	size_t bound = tilecodec_bound(codec, t->nbytes);
-	size_t head = PROTO_HDR + 44;
-	struct pbuf *out = &s->c.out;
-	size_t need = out->len + head + bound;
-	if (need > out->cap && s->c.out_off) {
-		conn_compact(&s->c); /* room from what went out before growing */
-		need = out->len + head + bound;
-	}
-	if (need > out->cap) {
-		/* Grow to what is needed, doubling only up to the session's cap (max_pending plus
-		 * this tile): a buffer twice max_pending would be resident for nothing. */
-		size_t cap = out->cap * 2, lim = (size_t)s->env->limits->max_pending + head + bound;
-		cap = cap > lim ? lim : cap;
-		cap = cap < need ? need : cap;
-		out->data = xrealloc(out->data, cap);
-		out->cap = cap;
-	}
-	uint8_t *at = out->data + out->len;
+	/* shared with every session that wants this encoding; made off the loop (encq.h) */
+	struct etile *et = encq_get(s->env->encq, e->t, codec, s->src);
 	struct proto_tile pt = { .seq = e->seq, .planet_id = e->pid, .layer = e->layer,
 				 .key = e->key };
-	ssize_t n = tilecodec_encode(s->env->codec, t->type, t->size, codec, filt, 1, t->data,
-				     &pt.enc, at + head, bound);
-	char err[256];
-	if (n >= 0) {
-		pt.payload = at + head;
-		pt.payload_len = (uint32_t)n;
-		struct pbuf hb;
-		pbuf_init_fixed(&hb, at, head);
-		ssize_t h = proto_encode_tile_head(&hb, &pt, err);
-		if (h == (ssize_t)head) {
-			uint64_t begin = s->flushed + conn_pending(&s->c);
-			out->len += head + (size_t)n;
-			if (s->nfr == s->capfr) {
-				s->capfr = s->capfr ? 2 * s->capfr : 16;
-				s->fr = xrealloc(s->fr, s->capfr * sizeof *s->fr);
-			}
-			s->fr[s->nfr++] = (struct sframe){ begin, begin + head + (size_t)n, e->key };
-			s->tiles_sent++;
-			cnt->tiles_sent++;
-			return;
-		}
-		n = h < 0 ? h : -EINVAL;
-	} else {
-		snprintf(err, sizeof err, "%s", strerror((int)-n));
-	}
-	log_msg(LOG_ERROR, "session %llu: cannot encode tile %u/%u/%u/%u: %s",
-		(unsigned long long)s->id, e->key.lx, e->key.ly, e->key.x, e->key.y, err);
+	conn_put_tile(&s->c, et, &pt);
+	etile_unref(et);
+	s->tiles_sent++;
+	cnt->tiles_sent++;
 }
 
 /* The send window: output bytes this session may hold before the kernel takes them. */
@@ -325,38 +264,27 @@ static bool has_room(const struct session *s)
 	return wantset_nready(&s->ws) && conn_pending(&s->c) < window(s);
 }
 
+static bool unwanted(void *ud, const struct tile_key *k)
+{
+	const struct session *s = ud;
+	return wantset_find(&s->ws, k) < 0;
+}
+
 /* Takes the TILE frames the kernel has not begun of keys the want-set no longer holds out of
  * the output (a new want-set: what the viewer left is not worth the link's time). */
 static void recall_unwanted(struct session *s)
 {
 	if (!s->env->queue_ms)
 		return; /* send_queue_ms 0: the queue as it was (bench_link's peer) */
-	struct pbuf *out = &s->c.out;
-	uint64_t shift = 0;
-	size_t keep = 0;
-	for (size_t i = 0; i < s->nfr; i++) {
-		struct sframe f = s->fr[i];
-		f.begin -= shift;
-		f.end -= shift;
-		if (f.begin >= s->flushed && wantset_find(&s->ws, &f.key) < 0) {
-			size_t at = s->c.out_off + (size_t)(f.begin - s->flushed);
-			size_t len = (size_t)(f.end - f.begin);
-			memmove(out->data + at, out->data + at + len, out->len - at - len);
-			out->len -= len;
-			shift += len;
-			s->env->counters->tiles_recalled++;
-			s->env->counters->bytes_recalled += len;
-			s->env->counters->tiles_dropped++; /* it left unsent after all */
-			s->tiles_dropped++;
-			continue;
-		}
-		s->fr[keep++] = f;
-	}
-	s->nfr = keep;
-	if (shift) {
-		s->c.want_out = s->c.out_off < out->len;
-		update_interest(s);
-	}
+	uint64_t bytes = 0;
+	size_t n = conn_recall(&s->c, unwanted, s, &bytes);
+	if (!n)
+		return;
+	s->env->counters->tiles_recalled += n;
+	s->env->counters->bytes_recalled += bytes;
+	s->env->counters->tiles_dropped += n; /* it left unsent after all */
+	s->tiles_dropped += n;
+	update_interest(s);
 }
 
 bool session_pump(struct session *s, size_t *budget)
@@ -364,10 +292,10 @@ bool session_pump(struct session *s, size_t *budget)
 	if (s->dead || s->closing)
 		return false;
 	struct session_counters *cnt = s->env->counters;
-	size_t start = s->c.out.len;
+	uint64_t start = conn_pending(&s->c);
 	size_t lim = *budget < PUMP_BUDGET ? *budget : PUMP_BUDGET;
 	bool rewant = false;
-	while (has_room(s) && s->c.out.len - start < lim) {
+	while (has_room(s) && conn_pending(&s->c) - start < lim) {
 		struct wantset_entry *e = wantset_pop(&s->ws);
 		if (!e)
 			break;
@@ -389,11 +317,19 @@ bool session_pump(struct session *s, size_t *budget)
 	if (rewant)
 		submit_wants(s, 0, 0); /* when paused: resume_if_drained does it */
 	resume_if_drained(s);
-	size_t made = s->c.out.len - start;
-	*budget = made < *budget ? *budget - made : 0;
-	if (s->c.out.len != start && flush(s))
+	uint64_t made = conn_pending(&s->c) > start ? conn_pending(&s->c) - start : 0;
+	*budget = made < *budget ? *budget - (size_t)made : 0;
+	if (made && flush(s))
 		return false;
 	return has_room(s);
+}
+
+void session_on_encoded(struct session *s)
+{
+	if (s->dead)
+		return;
+	if (!flush(s) && has_room(s))
+		pump_add(s);
 }
 
 void session_on_ready(struct session *s, struct ready_item *it)
@@ -999,7 +935,6 @@ void session_free(struct session *s)
 	wantset_fini(&s->ws);
 	ready_src_unref(s->src);
 	free(s->scratch);
-	free(s->fr);
 	control_fini(&s->ctl);
 	for (int i = 0; i < s->nopened; i++)
 		planet_set_unref(s->opened[i].set);
@@ -1027,7 +962,7 @@ void session_get_load(const struct session *s, struct session_load *out)
 	const struct linkest *le = &s->le;
 	uint64_t q = conn_pending(&s->c) + le->notsent;
 	*out = (struct session_load){ .pending_bytes = conn_pending(&s->c),
-				      .out_bytes = s->c.out.cap,
+				      .out_bytes = s->c.owned,
 				      .held_bytes = wantset_held(&s->ws),
 				      .paused = s->paused,
 				      .ready_tiles = wantset_nready(&s->ws),

@@ -53,7 +53,7 @@ struct session_env {
 	struct sched *sched;
 	struct cache *cache;
 	struct readyq *ready;	 /* the scheduler's callbacks push here */
-	struct tilecodec *codec; /* the loop thread's encoder */
+	struct encq *encq;	 /* the shared encodings (encq.h) */
 	const uint8_t *token;	 /* the token listeners may require */
 	size_t token_len;
 	bool have_token;
@@ -85,7 +85,7 @@ struct session_env {
 struct session_load {
 	uint64_t pending_bytes, ready_tiles, jobs;
 	uint64_t held_bytes; /* ready tiles' bytes held for output room */
-	uint64_t out_bytes;  /* the output buffer's size */
+	uint64_t out_bytes;  /* the output's own buffers (headers, messages; not shared payloads) */
 	bool paused;	     /* wants withdrawn while the output is full */
 	/* the link (linkest.h): TCP only; 0 when not measured (Unix sockets, no sample yet) */
 	bool tcp;
@@ -107,6 +107,8 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 void session_on_event(struct session *s, uint32_t events);
 /* A ready item for this session or one of its jobs (takes the item's tile reference). */
 void session_on_ready(struct session *s, struct ready_item *it);
+/* An encoding this session's output waits for is ready: writes what can go and pumps more. */
+void session_on_encoded(struct session *s);
 /* Produces more output if there is room, at most *budget bytes (taken off it; the last tile
  * may overshoot). Returns true while the session still has ready tiles and output room (the
  * server calls it again). */

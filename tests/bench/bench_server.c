@@ -1,11 +1,17 @@
 /* bench_server — clipmapd over loopback TCP: round trip of a cached quad (4 tiles of 256²
  * RGBA8: WANT sent → 4th TILE decoded), p50/p99; cached-tile throughput to 1 and to 50
- * sessions. Starts build/clipmapd on a temporary config (tests/support/daemon_env).
+ * sessions, and its peer measured in the same run: a bare loopback TCP stream of TILE frames
+ * of the same size, sent by a thread from one prepared buffer and received and decoded by the
+ * same client code (the most the client and the loopback take). Prints the ratios (1 session
+ * / bare stream, 50 sessions / 1 session), which stay meaningful on a loaded machine where
+ * the absolute figures do not. Starts build/clipmapd on a temporary config
+ * (tests/support/daemon_env).
  */
 #include <errno.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
 #include <poll.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -31,10 +37,35 @@ static void die(const char *what)
 
 struct cl {
 	int fd;
-	struct pbuf in;
+	struct pbuf in; /* bytes [off, len) not yet decoded */
+	size_t off;
 	struct tilecodec *tc;
 	uint8_t *px;
 };
+
+/* Consumes n decoded bytes: an offset, so a 1 MiB read of several frames is not moved once
+ * per frame (the client's cost would cap what is measured). */
+static void cl_consume(struct cl *c, size_t n)
+{
+	c->off += n;
+	if (c->off == c->in.len)
+		c->off = c->in.len = 0;
+}
+
+/* Receives once (up to 1 MiB) after the undecoded bytes, moved to the front first. */
+static ssize_t cl_read(struct cl *c)
+{
+	if (c->off) {
+		memmove(c->in.data, c->in.data + c->off, c->in.len - c->off);
+		c->in.len -= c->off;
+		c->off = 0;
+	}
+	pbuf_reserve(&c->in, 1 << 20);
+	ssize_t n = recv(c->fd, c->in.data + c->in.len, 1 << 20, 0);
+	if (n > 0)
+		c->in.len += (size_t)n;
+	return n;
+}
 
 static struct cl *cl_tcp(int port)
 {
@@ -61,33 +92,39 @@ static void cl_send(struct cl *c, const struct proto_msg *m)
 	pbuf_fini(&b);
 }
 
-/* Reads until one whole message is decoded; returns its type (TILEs are decoded and checked). */
-static uint16_t cl_next(struct cl *c)
+/* Reads until one whole message is decoded into *m (the caller finis it; a TILE's payload
+ * points into the input, valid until the next read). */
+static void cl_msg(struct cl *c, struct proto_msg *m)
 {
 	for (;;) {
-		struct proto_msg m = { 0 };
+		*m = (struct proto_msg){ 0 };
 		size_t need;
-		ssize_t r = proto_decode(c->in.data, c->in.len, &m, &need, NULL);
+		ssize_t r = proto_decode(c->in.data + c->off, c->in.len - c->off, m, &need, NULL);
 		if (r < 0)
 			die("bad frame");
 		if (r > 0) {
-			uint16_t t = m.type;
-			if (t == PROTO_TILE &&
-			    tilecodec_decode(c->tc, &m.tile.enc, m.tile.payload, m.tile.payload_len, c->px,
-					     256 * 256 * 4, NULL))
-				die("tile decode");
-			if (t == PROTO_ERROR)
-				die(m.error.message);
-			proto_msg_fini(&m);
-			pbuf_consume(&c->in, (size_t)r);
-			return t;
+			if (m->type == PROTO_ERROR)
+				die(m->error.message);
+			cl_consume(c, (size_t)r);
+			return;
 		}
-		pbuf_reserve(&c->in, 1 << 20);
-		ssize_t n = recv(c->fd, c->in.data + c->in.len, 1 << 20, 0);
-		if (n <= 0)
+		if (cl_read(c) <= 0)
 			die("recv");
-		c->in.len += (size_t)n;
 	}
+}
+
+/* The next message's type (TILEs are decoded and checked). */
+static uint16_t cl_next(struct cl *c)
+{
+	struct proto_msg m;
+	cl_msg(c, &m);
+	if (m.type == PROTO_TILE &&
+	    tilecodec_decode(c->tc, &m.tile.enc, m.tile.payload, m.tile.payload_len, c->px,
+			     256 * 256 * 4, NULL))
+		die("tile decode");
+	uint16_t t = m.type;
+	proto_msg_fini(&m);
+	return t;
 }
 
 static void cl_until(struct cl *c, uint16_t type)
@@ -114,6 +151,81 @@ static void want(struct cl *c, uint32_t seq, const struct proto_want_entry *e, u
 	struct proto_msg m = { .type = PROTO_WANT,
 			       .want = { .planet_id = 1, .seq = seq, .count = n, .entries = e } };
 	cl_send(c, &m);
+}
+
+/* ---- the peer: a bare loopback stream of TILE frames --------------------------------------- */
+
+struct bare {
+	int lfd;
+	size_t frames; /* to send */
+	struct pbuf buf; /* BARE_BATCH frames */
+};
+#define BARE_BATCH 8
+
+static void *bare_send(void *arg)
+{
+	struct bare *b = arg;
+	int fd = accept(b->lfd, NULL, NULL);
+	if (fd < 0)
+		die("bare: accept");
+	size_t batches = b->frames / BARE_BATCH;
+	for (size_t i = 0; i < batches; i++) {
+		size_t off = 0;
+		while (off < b->buf.len) {
+			ssize_t n = send(fd, b->buf.data + off, b->buf.len - off, MSG_NOSIGNAL);
+			if (n <= 0)
+				die("bare: send");
+			off += (size_t)n;
+		}
+	}
+	close(fd);
+	return NULL;
+}
+
+/* Tiles/s of `frames` raw 256² RGBA8 TILE frames over a bare loopback TCP stream. */
+static double bare_stream(size_t frames)
+{
+	static uint8_t px[256 * 256 * 4];
+	for (size_t i = 0; i < sizeof px; i++)
+		px[i] = (uint8_t)(i * 2654435761u >> 13);
+	struct bare b = { .frames = frames / BARE_BATCH * BARE_BATCH };
+	pbuf_init(&b.buf);
+	for (int i = 0; i < BARE_BATCH; i++) {
+		struct proto_msg m = {
+			.type = PROTO_TILE,
+			.tile = { .seq = 1, .planet_id = 1, .layer = 0,
+				  .key = { .node = 1, .lx = 8, .ly = 7, .x = (uint32_t)i, .y = 1 },
+				  .enc = { .format = PIX_COLOR, .codec = TCODEC_NONE,
+					   .filter = TFILTER_NONE, .size = 256,
+					   .raw_len = sizeof px,
+					   .checksum = tilecodec_checksum(px, sizeof px) },
+				  .payload = px, .payload_len = sizeof px } };
+		if (proto_encode(&b.buf, &m, NULL) < 0)
+			die("bare: encode");
+	}
+	b.lfd = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	struct sockaddr_in sa = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+	socklen_t sl = sizeof sa;
+	if (b.lfd < 0 || bind(b.lfd, (struct sockaddr *)&sa, sizeof sa) || listen(b.lfd, 1) ||
+	    getsockname(b.lfd, (struct sockaddr *)&sa, &sl))
+		die("bare: listen");
+	pthread_t th;
+	if (pthread_create(&th, NULL, bare_send, &b))
+		die("bare: thread");
+	struct cl *c = cl_tcp(ntohs(sa.sin_port));
+	uint64_t t0 = clock_now_ns();
+	for (size_t k = 0; k < b.frames; k++)
+		cl_until(c, PROTO_TILE);
+	double dt = (clock_now_ns() - t0) * 1e-9;
+	pthread_join(th, NULL);
+	close(b.lfd);
+	close(c->fd);
+	pbuf_fini(&c->in);
+	tilecodec_destroy(c->tc);
+	free(c->px);
+	free(c);
+	pbuf_fini(&b.buf);
+	return (double)b.frames / dt;
 }
 
 static int cmp_u64(const void *a, const void *b)
@@ -189,8 +301,12 @@ int main(void)
 			cl_until(c, PROTO_TILE);
 	}
 	double dt = (clock_now_ns() - t0) * 1e-9;
-	printf("server/cached tiles 256² rgba8 to 1 session: %.0f tiles/s (%.2f GB/s)\n",
-	       rounds * 512 / dt, rounds * 512 * 262144.0 / dt * 1e-9);
+	double one = rounds * 512 / dt;
+	printf("server/cached tiles 256² rgba8 to 1 session: %.0f tiles/s (%.2f GB/s)\n", one,
+	       one * 262144.0 * 1e-9);
+	double bare = bare_stream((size_t)rounds * 512);
+	printf("server/bare loopback tcp stream of the same frames (peer): %.0f tiles/s (%.2f "
+	       "GB/s)\n", bare, bare * 262144.0 * 1e-9);
 
 	/* 50 sessions, each 64 cached tiles per round out of the same 512. */
 	enum { NS = 50 };
@@ -218,15 +334,14 @@ int main(void)
 				if (!(pf[i].revents & POLLIN))
 					continue;
 				/* one recv worth, then decode whatever is complete */
-				pbuf_reserve(&s[i]->in, 1 << 20);
-				ssize_t n = recv(s[i]->fd, s[i]->in.data + s[i]->in.len, 1 << 20, 0);
-				if (n <= 0)
+				if (cl_read(s[i]) <= 0)
 					die("recv");
-				s[i]->in.len += (size_t)n;
 				for (;;) {
 					struct proto_msg m = { 0 };
 					size_t need;
-					ssize_t rr = proto_decode(s[i]->in.data, s[i]->in.len, &m, &need, NULL);
+					ssize_t rr = proto_decode(s[i]->in.data + s[i]->off,
+								  s[i]->in.len - s[i]->off, &m, &need,
+								  NULL);
 					if (rr < 0)
 						die("bad frame");
 					if (rr == 0)
@@ -237,14 +352,45 @@ int main(void)
 							busy--;
 					}
 					proto_msg_fini(&m);
-					pbuf_consume(&s[i]->in, (size_t)rr);
+					cl_consume(s[i], (size_t)rr);
 				}
 			}
 		}
 	}
 	dt = (clock_now_ns() - t0) * 1e-9;
-	printf("server/cached tiles 256² rgba8 to 50 sessions: %.0f tiles/s (%.2f GB/s)\n",
-	       tiles / dt, tiles * 262144.0 / dt * 1e-9);
+	double fifty = tiles / dt;
+	printf("server/cached tiles 256² rgba8 to 50 sessions: %.0f tiles/s (%.2f GB/s)\n", fifty,
+	       fifty * 262144.0 * 1e-9);
+	printf("server/ratios in this run: 1 session / bare stream %.2f (goal >= 0.8), "
+	       "50 sessions / 1 session %.2f (goal >= 1.6)\n", one / bare, fifty / one);
+
+	/* What the daemon did meanwhile: frames against encodings, and its loop's iterations. */
+	struct proto_msg sr = { .type = PROTO_STATS_REQ, .stats_req = { .req = 1 } };
+	cl_send(c, &sr);
+	for (;;) {
+		struct proto_msg m;
+		cl_msg(c, &m);
+		if (m.type != PROTO_STATS) {
+			proto_msg_fini(&m);
+			continue;
+		}
+		static const char *const show[] = { "tiles.sent", "tiles.encoded", "encode.shared",
+						   "encode.evicted", "loop.p99_ms", "loop.max_ms",
+						   "loop.over_50ms" };
+		printf("server/daemon STATS at the end:");
+		for (size_t k = 0; k < sizeof show / sizeof show[0]; k++)
+			for (uint16_t i = 0; i < m.stats.count; i++)
+				if (strcmp(m.stats.items[i].key, show[k]) == 0) {
+					if (m.stats.items[i].kind == PROTO_STAT_F64)
+						printf(" %s %.1f", show[k], m.stats.items[i].f);
+					else
+						printf(" %s %llu", show[k],
+						       (unsigned long long)m.stats.items[i].u);
+				}
+		printf("\n");
+		proto_msg_fini(&m);
+		break;
+	}
 
 	int st = 0;
 	int rc = daemon_env_stop(&d, SIGTERM, &st);

@@ -1,0 +1,256 @@
+/* test_conn_out — a connection's output queue (daemon/conn.c) with shared encodings
+ * (daemon/encq.c) on a real socket with a small send buffer: messages and TILE frames go out
+ * in the order queued, byte for byte what proto_encode makes of them, nothing after a TILE
+ * whose encoding is still under way, partial writes resumed anywhere (in a header, in a
+ * payload); the pending count ends at zero; a recall takes out the TILE frames not yet begun
+ * and never the one the socket has begun; the same encoding is shared (one encoding for two
+ * requests) and an encoding outlives the cache that made it while a queue refers to it.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <unistd.h>
+
+#include "common/proto.h"
+#include "common/tilecodec.h"
+#include "conn.h"
+#include "encq.h"
+
+static void no_wake(struct session *s)
+{
+	(void)s;
+}
+
+/* A Unix stream pair: fds[0] non-blocking with a small send buffer (the daemon's end). */
+static void pair(int fds[2])
+{
+	assert_int_equal(socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, fds), 0);
+	int small = 4096;
+	assert_int_equal(setsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &small, sizeof small), 0);
+	assert_int_equal(fcntl(fds[0], F_SETFL, O_NONBLOCK), 0);
+}
+
+static struct tile *make_tile(uint32_t x, uint8_t seed)
+{
+	struct tile_key k = { .node = 77, .lx = 6, .ly = 5, .x = x, .y = 3 };
+	struct tile *t = tile_create(&k, PIX_COLOR, 64);
+	for (size_t i = 0; i < t->nbytes; i++)
+		t->data[i] = (uint8_t)((i / 4 % 64) * seed + (i % 4)); /* compressible */
+	return t;
+}
+
+/* Waits for the encoders and drains until e is ready. */
+static void wait_ready(struct encq *q, struct etile *e)
+{
+	for (int i = 0; i < 1000 && !e->ready; i++) {
+		struct pollfd pf = { .fd = encq_fd(q), .events = POLLIN };
+		(void)poll(&pf, 1, 20);
+		encq_drain(q);
+	}
+	assert_true(e->ready);
+	assert_int_equal(e->err, 0);
+}
+
+static void put_msg(struct conn *c, uint32_t req)
+{
+	struct proto_msg m = { .type = PROTO_ERROR,
+			       .error = { .code = PROTO_E_LIMIT, .ref_id = req, .message = "m" } };
+	assert_true(proto_encode(conn_msg_begin(c), &m, NULL) > 0);
+	conn_msg_end(c);
+}
+
+static void expect_msg(struct pbuf *b, uint32_t req)
+{
+	struct proto_msg m = { .type = PROTO_ERROR,
+			       .error = { .code = PROTO_E_LIMIT, .ref_id = req, .message = "m" } };
+	assert_true(proto_encode(b, &m, NULL) > 0);
+}
+
+static struct proto_tile tile_fields(uint32_t seq, const struct tile *t)
+{
+	return (struct proto_tile){ .seq = seq, .planet_id = 2, .layer = 1, .key = t->key };
+}
+
+static void expect_tile(struct pbuf *b, uint32_t seq, const struct tile *t, const struct etile *e)
+{
+	struct proto_msg m = { .type = PROTO_TILE, .tile = tile_fields(seq, t) };
+	m.tile.enc = e->enc;
+	m.tile.payload = e->payload;
+	m.tile.payload_len = e->len;
+	assert_true(proto_encode(b, &m, NULL) > 0);
+}
+
+/* Flushes c until nothing is pending, reading the peer meanwhile into got. */
+static uint64_t pump_out(struct conn *c, int peer, struct pbuf *got)
+{
+	uint64_t sent = 0;
+	for (int i = 0; i < 100000 && conn_pending(c); i++) {
+		assert_int_equal(conn_flush(c, &sent), 0);
+		pbuf_reserve(got, 1000); /* small reads: partial frames on both sides */
+		ssize_t n = recv(peer, got->data + got->len, 1000, MSG_DONTWAIT);
+		if (n > 0)
+			got->len += (size_t)n;
+	}
+	for (;;) {
+		pbuf_reserve(got, 65536);
+		ssize_t n = recv(peer, got->data + got->len, 65536, MSG_DONTWAIT);
+		if (n <= 0)
+			break;
+		got->len += (size_t)n;
+	}
+	return sent;
+}
+
+static void test_order_bytes_and_waiting(void **state)
+{
+	(void)state;
+	int fds[2];
+	pair(fds);
+	struct encq *q;
+	assert_int_equal(encq_create(2, 1u << 20, no_wake, &q), 0);
+	struct tile *t1 = make_tile(1, 3), *t2 = make_tile(2, 5);
+	struct conn c;
+	conn_init(&c, fds[0]);
+
+	put_msg(&c, 1);
+	struct etile *e1 = encq_get(q, t1, TCODEC_NONE, NULL);
+	struct etile *e2 = encq_get(q, t2, TCODEC_ZSTD, NULL);
+	struct etile *e2b = encq_get(q, t2, TCODEC_ZSTD, NULL); /* the same encoding */
+	assert_ptr_equal(e2, e2b);
+	struct proto_tile f1 = tile_fields(5, t1), f2 = tile_fields(6, t2);
+	conn_put_tile(&c, e1, &f1);
+	conn_put_tile(&c, e2, &f2);
+	conn_put_tile(&c, e2b, &f2);
+	put_msg(&c, 2);
+	etile_unref(e2b);
+	/* before any encoding is ready: the first message only */
+	uint64_t sent = 0;
+	if (!e1->ready) {
+		assert_int_equal(conn_flush(&c, &sent), 0);
+		assert_true(sent <= 64);
+	}
+	wait_ready(q, e1);
+	wait_ready(q, e2);
+	struct encq_stats st;
+	encq_stats(q, &st);
+	assert_int_equal(st.encoded, 2);
+	assert_int_equal(st.shared, 1);
+	assert_int_equal(e2->enc.codec, TCODEC_ZSTD);
+	assert_true(e2->len < t2->nbytes);
+	assert_ptr_equal(e1->payload, t1->data); /* `none`: the tile's own texels */
+
+	struct pbuf got, want;
+	pbuf_init(&got);
+	pbuf_init(&want);
+	sent += pump_out(&c, fds[1], &got);
+	expect_msg(&want, 1);
+	expect_tile(&want, 5, t1, e1);
+	expect_tile(&want, 6, t2, e2);
+	expect_tile(&want, 6, t2, e2);
+	expect_msg(&want, 2);
+	assert_int_equal(got.len, want.len);
+	assert_memory_equal(got.data, want.data, want.len);
+	assert_int_equal(sent, want.len);
+	assert_int_equal(conn_pending(&c), 0);
+	assert_false(c.want_out);
+
+	/* the cache goes first; the queue's references keep nothing dangling */
+	conn_put_tile(&c, e2, &f2);
+	size_t f2len = PROTO_HDR + 44 + e2->len;
+	etile_unref(e1);
+	etile_unref(e2);
+	encq_destroy(q);
+	pbuf_fini(&got);
+	pbuf_init(&got);
+	pump_out(&c, fds[1], &got);
+	assert_int_equal(got.len, f2len);
+	struct proto_msg m = { 0 };
+	size_t need;
+	assert_int_equal(proto_decode(got.data, got.len, &m, &need, NULL), (ssize_t)got.len);
+	assert_int_equal(m.type, PROTO_TILE);
+	proto_msg_fini(&m);
+
+	conn_close(&c);
+	conn_fini(&c);
+	close(fds[1]);
+	tile_unref(t1);
+	tile_unref(t2);
+	pbuf_fini(&got);
+	pbuf_fini(&want);
+}
+
+static bool drop_all(void *ud, const struct tile_key *k)
+{
+	(void)k;
+	(*(int *)ud)++;
+	return true;
+}
+
+static void test_recall(void **state)
+{
+	(void)state;
+	int fds[2];
+	pair(fds);
+	struct encq *q;
+	assert_int_equal(encq_create(1, 1u << 20, no_wake, &q), 0);
+	struct tile *t[3];
+	struct etile *e[3];
+	struct conn c;
+	conn_init(&c, fds[0]);
+	for (int i = 0; i < 3; i++) {
+		t[i] = make_tile((uint32_t)i + 10, (uint8_t)(i + 2));
+		e[i] = encq_get(q, t[i], TCODEC_NONE, NULL);
+		wait_ready(q, e[i]);
+		struct proto_tile f = tile_fields(9, t[i]);
+		conn_put_tile(&c, e[i], &f);
+	}
+	uint64_t frame = PROTO_HDR + 44 + t[0]->nbytes;
+	assert_int_equal(conn_pending(&c), 3 * frame);
+	/* the peer does not read: the socket takes part of the first frame only */
+	uint64_t sent = 0;
+	assert_int_equal(conn_flush(&c, &sent), 0);
+	assert_true(sent > 0 && sent < frame);
+	int asked = 0;
+	uint64_t bytes = 0;
+	assert_int_equal(conn_recall(&c, drop_all, &asked, &bytes), 2);
+	assert_int_equal(bytes, 2 * frame);
+	assert_int_equal(conn_pending(&c), frame - sent);
+	struct pbuf got;
+	pbuf_init(&got);
+	sent += pump_out(&c, fds[1], &got);
+	assert_int_equal(got.len, frame); /* the begun frame, whole */
+	assert_int_equal(sent, frame);
+	struct proto_msg m = { 0 };
+	size_t need;
+	assert_int_equal(proto_decode(got.data, got.len, &m, &need, NULL), (ssize_t)frame);
+	assert_int_equal(m.tile.key.x, 10);
+	assert_memory_equal(m.tile.payload, t[0]->data, t[0]->nbytes);
+	proto_msg_fini(&m);
+	conn_close(&c);
+	conn_fini(&c);
+	close(fds[1]);
+	for (int i = 0; i < 3; i++) {
+		etile_unref(e[i]);
+		tile_unref(t[i]);
+	}
+	encq_destroy(q);
+	pbuf_fini(&got);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(test_order_bytes_and_waiting),
+		cmocka_unit_test(test_recall),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
