@@ -82,10 +82,15 @@ static void encode(struct tilecodec *tc, struct etile *e)
 		e->len = (uint32_t)t->nbytes;
 		return;
 	}
-	size_t bound = tilecodec_bound(codec, t->nbytes);
+	bool lossy = tilecodec_is_lossy(codec);
+	/* a lossy codec may fall back to zstd (tilecodec_encode_lossy) */
+	size_t bound = tilecodec_bound(lossy ? TCODEC_ZSTD : codec, t->nbytes);
 	e->buf = xmalloc(bound ? bound : 1);
-	ssize_t n = tilecodec_encode(tc, t->type, t->size, codec, tilecodec_default_filter(t->type),
-				     1, t->data, &e->enc, e->buf, bound);
+	ssize_t n = lossy ? tilecodec_encode_lossy(tc, t->type, t->size, codec, &e->lossy, t->data,
+						   &e->enc, e->buf, bound)
+			  : tilecodec_encode(tc, t->type, t->size, codec,
+					     tilecodec_default_filter(t->type), 1, t->data, &e->enc,
+					     e->buf, bound);
 	if (n < 0) {
 		e->err = (int)n;
 		free(e->buf);
@@ -252,7 +257,8 @@ static void add_waiter(struct etile *e, struct ready_src *src)
 	e->waiters[e->nwait++] = ready_src_ref(src);
 }
 
-struct etile *encq_get(struct encq *q, struct tile *t, enum tcodec codec, struct ready_src *src)
+struct etile *encq_get(struct encq *q, struct tile *t, enum tcodec codec,
+		       const struct tilecodec_lossy_opts *lossy, struct ready_src *src)
 {
 	size_t h = slot(q, &t->key, (uint8_t)codec);
 	for (struct etile *e = q->tab[h]; e; e = e->hnext) {
@@ -269,6 +275,8 @@ struct etile *encq_get(struct encq *q, struct tile *t, enum tcodec codec, struct
 	atomic_init(&e->refs, 3); /* the cache's, the job's, the caller's */
 	e->key = t->key;
 	e->codec = (uint8_t)codec;
+	if (lossy)
+		e->lossy = *lossy;
 	e->t = tile_ref(t);
 	e->cached = true;
 	add_waiter(e, src);

@@ -43,6 +43,8 @@ struct etile {
 	atomic_int refs;
 	struct tile_key key;
 	uint8_t codec;		 /* the encoding asked for (the cache key with key) */
+	struct tilecodec_lossy_opts lossy; /* a lossy codec's knobs (fixed per key and codec:
+					    * the step follows the level, the quality the conf) */
 	bool ready;		 /* (loop) payload, len, enc and err may be read */
 	int err;		 /* < 0: the encoding failed (ready); nothing is sent */
 	struct tilecodec_hdr enc; /* what the payload is (codec `none` when it did not pay) */
@@ -87,8 +89,12 @@ void encq_destroy(struct encq *q);
 /* The eventfd the loop watches (readable when encodings are done: call encq_drain). */
 int encq_fd(const struct encq *q);
 /* The encoding codec of tile t (borrowed): a new reference, ready or under way. When not
- * ready, src (borrowed; a reference is taken) is woken once it is. */
-struct etile *encq_get(struct encq *q, struct tile *t, enum tcodec codec, struct ready_src *src);
+ * ready, src (borrowed; a reference is taken) is woken once it is. lossy: a lossy codec's
+ * knobs (NULL: its defaults), taken when the encoding is made; an encoding of the same key
+ * and codec already cached is shared whatever its knobs were (a SIGHUP that changes
+ * webp_quality applies to tiles encoded after it). */
+struct etile *encq_get(struct encq *q, struct tile *t, enum tcodec codec,
+		       const struct tilecodec_lossy_opts *lossy, struct ready_src *src);
 /* Takes the finished encodings back, marks them ready, wakes their waiters and applies the
  * budget. */
 void encq_drain(struct encq *q);

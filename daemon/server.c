@@ -612,6 +612,12 @@ static void set_prefetch_caps(struct server *srv)
 	srv->prefetch.max_tiles_total = c->pf_max_tiles_total;
 }
 
+/* [session] lossy_below_mbit in bits/s (0: never lossy; compress = never: never either). */
+static uint64_t lossy_below(const struct conf *c)
+{
+	return c->compress == CONF_COMPRESS_NEVER ? 0 : (uint64_t)c->lossy_below_mbit * 1000000u;
+}
+
 void server_conf_changed(struct server *srv)
 {
 	const struct conf *c = srv->conf;
@@ -622,6 +628,8 @@ void server_conf_changed(struct server *srv)
 	srv->env.queue_ms = c->send_queue_ms;
 	srv->env.bbr = c->bbr;
 	srv->env.raw_above_bps = raw_above(c);
+	srv->env.lossy_below_bps = lossy_below(c);
+	srv->env.webp_quality = c->webp_quality;
 	srv->env.handshake_ns = (uint64_t)c->handshake_timeout * 1000000000u;
 	srv->env.frame_ns = (uint64_t)c->frame_timeout * 1000000000u;
 	set_prefetch_caps(srv);
@@ -633,6 +641,7 @@ static void init_env(struct server *srv)
 		.limits = &srv->limits, .max_jobs = srv->conf->max_jobs, .sched = srv->sched,
 		.queue_ms = srv->conf->send_queue_ms, .bbr = srv->conf->bbr,
 		.raw_above_bps = raw_above(srv->conf),
+		.lossy_below_bps = lossy_below(srv->conf), .webp_quality = srv->conf->webp_quality,
 		.cache = srv->cache, .ready = &srv->ready, .encq = srv->encq,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
 		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,

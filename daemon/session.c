@@ -39,6 +39,7 @@
 #include "common/xalloc.h"
 #include "conn.h"
 #include "control.h"
+#include "encpick.h"
 #include "encq.h"
 #include "linkest.h"
 #include "wantset.h"
@@ -69,7 +70,8 @@ struct session {
 	uint64_t close_deadline;
 	struct proto_rate rate;
 	uint32_t rate_viol;
-	uint8_t codec;
+	uint8_t codec;	 /* the lossless codec */
+	uint32_t codecs; /* HELLO_OK's: codec, and the lossy ones agreed */
 
 	struct sopen opened[MAX_OPEN];
 	int nopened;
@@ -239,12 +241,17 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 		cnt->tiles_failed++;
 		return;
 	}
-	enum tcodec codec = (enum tcodec)s->codec;
-	uint64_t fast = s->env->raw_above_bps;
-	if (fast && s->le.tcp && s->le.rate * 8 > fast)
-		codec = TCODEC_NONE; /* the link outruns the encoder (raw is always allowed) */
+	/* raw on fast links, lossy on slow ones where agreed, else the session's codec */
+	const struct planet *p = e->pid >= 1 && e->pid <= MAX_OPEN ? s->opened[e->pid - 1].p : NULL;
+	struct encpick_policy pol = { .lossless = (enum tcodec)s->codec, .offered = s->codecs,
+				      .raw_above_bps = s->env->raw_above_bps,
+				      .lossy_below_bps = s->env->lossy_below_bps,
+				      .webp_quality = s->env->webp_quality };
+	struct encpick pick;
+	encpick(&pol, e->t->type, e->key.ly, e->t->size, p ? p->a : 6378137.0,
+		s->le.tcp ? s->le.rate * 8 : 0, &pick);
 	/* shared with every session that wants this encoding; made off the loop (encq.h) */
-	struct etile *et = encq_get(s->env->encq, e->t, codec, s->src);
+	struct etile *et = encq_get(s->env->encq, e->t, pick.codec, &pick.lossy, s->src);
 	struct proto_tile pt = { .seq = e->seq, .planet_id = e->pid, .layer = e->layer,
 				 .key = e->key };
 	conn_put_tile(&s->c, et, &pt);
@@ -453,20 +460,25 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 			codec = TCODEC_LZ4;
 	}
 	s->codec = codec;
+	/* the lossy codecs too where the client offered them (encpick.h decides per tile) */
+	struct encpick_policy pol = { .lossless = (enum tcodec)codec, .offered = h->codecs,
+				      .lossy_below_bps = s->le.tcp ? env->lossy_below_bps : 0 };
+	s->codecs = encpick_agreed(&pol);
 	s->st = PROTO_ST_READY;
 	char nm[40];
 	snprintf(s->name + strlen(s->name), sizeof s->name - strlen(s->name), " %s",
 		 log_escape(nm, sizeof nm, h->name));
 	struct proto_msg m = { .type = PROTO_HELLO_OK,
 			       .hello_ok = { .version = PROTO_VERSION,
-					     .codecs = codec ? 1u << codec : 0,
+					     .codecs = s->codecs,
 					     .session = s->id, .name = "clipmapd/0.1",
 					     .limits = *env->limits } };
 	send_msg(s, &m);
 	/* the one info line of a session */
-	log_msg(LOG_INFO, "session %llu (%s) from %s on %s: hello, codec %s",
+	log_msg(LOG_INFO, "session %llu (%s) from %s on %s: hello, codec %s%s",
 		(unsigned long long)s->id, s->name, s->peer, s->l->name,
-		tilecodec_codec_name((enum tcodec)codec));
+		tilecodec_codec_name((enum tcodec)codec),
+		s->codecs & TCODEC_LOSSY_MASK ? " (lossy on slow links)" : "");
 }
 
 static void on_list(struct session *s, uint32_t req)

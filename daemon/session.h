@@ -47,6 +47,10 @@ struct session_env {
 	/* compress = auto: a TCP session's tiles go raw while its link is measured faster than
 	 * this (bits/s; 0: never) — there the encoder, not the link, would be the bottleneck */
 	uint64_t raw_above_bps;
+	/* lossy codecs to TCP sessions that offered them, on links measured slower than this
+	 * (bits/s; 0: never; encpick.h), at this WebP quality */
+	uint64_t lossy_below_bps;
+	int webp_quality;
 	struct prefetch_limits *prefetch; /* the server's caps on prefetch jobs (prefetch.h) */
 	uint64_t handshake_ns; /* accept to HELLO_OK, at most ([listen] handshake_timeout) */
 	uint64_t frame_ns;     /* a frame's first byte to its last, at most (frame_timeout) */

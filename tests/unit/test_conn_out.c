@@ -122,9 +122,9 @@ static void test_order_bytes_and_waiting(void **state)
 	conn_init(&c, fds[0]);
 
 	put_msg(&c, 1);
-	struct etile *e1 = encq_get(q, t1, TCODEC_NONE, NULL);
-	struct etile *e2 = encq_get(q, t2, TCODEC_ZSTD, NULL);
-	struct etile *e2b = encq_get(q, t2, TCODEC_ZSTD, NULL); /* the same encoding */
+	struct etile *e1 = encq_get(q, t1, TCODEC_NONE, NULL, NULL);
+	struct etile *e2 = encq_get(q, t2, TCODEC_ZSTD, NULL, NULL);
+	struct etile *e2b = encq_get(q, t2, TCODEC_ZSTD, NULL, NULL); /* the same encoding */
 	assert_ptr_equal(e2, e2b);
 	struct proto_tile f1 = tile_fields(5, t1), f2 = tile_fields(6, t2);
 	conn_put_tile(&c, e1, &f1);
@@ -208,7 +208,7 @@ static void test_recall(void **state)
 	conn_init(&c, fds[0]);
 	for (int i = 0; i < 3; i++) {
 		t[i] = make_tile((uint32_t)i + 10, (uint8_t)(i + 2));
-		e[i] = encq_get(q, t[i], TCODEC_NONE, NULL);
+		e[i] = encq_get(q, t[i], TCODEC_NONE, NULL, NULL);
 		wait_ready(q, e[i]);
 		struct proto_tile f = tile_fields(9, t[i]);
 		conn_put_tile(&c, e[i], &f);
