@@ -684,8 +684,8 @@ static int load_coverage(const char *what, const char *path, struct coverage *cv
 #else
 	char err[256];
 	int rc = coverage_read(path, cv, err);
-	if (rc)
-		return fail(what, rc, err);
+	if (rc) /* a file that cannot be used is bad input, as an unknown planet (exit 2) */
+		return fail(what, rc == -E2BIG ? -EINVAL : rc, err);
 	if (cv->skipped)
 		fprintf(stderr, "clipmapctl %s: %s: %u features that are not polygons skipped\n",
 			what, path, cv->skipped);
