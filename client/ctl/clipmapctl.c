@@ -74,6 +74,8 @@ static const struct cmd_usage {
 	  "  clipmapctl render PLANET LAYER --level L --at LAT,LON [--tiles N] -o FILE\n"
 	  "                                                     N×N tiles around a place (N = 3)\n"
 	  "      options: --workers N  --cache-mb N  --shade (colour × hillshade)  --quiet\n"
+	  "               --store PATH [--store-mb N]  read and fill an LMDB tile store (the\n"
+	  "               one a running clipmapd uses too)\n"
 	  "      heights: .tif/.tiff/.exr (float metres) or .png (16-bit, scale printed);\n"
 	  "      colour and normals: .png\n" },
 	{ "graph", "  clipmapctl graph PLANET                            the node graph as "
@@ -302,6 +304,8 @@ struct render_args {
 	bool world, at, quiet;
 	double lat, lon; /* --at */
 	uint32_t ntiles; /* --tiles */
+	const char *store;  /* --store PATH: an LMDB tile store, shared with clipmapd if it runs */
+	uint32_t store_mb;  /* --store-mb: its budget (0: 1024, as clipmapd's disk_mb) */
 	struct render_opts ro;
 };
 
@@ -323,6 +327,12 @@ static bool render_option(int c, const char *s, struct render_args *ra)
 	uint32_t v;
 	switch (c) {
 	case 'o': ra->outpath = s; return true;
+	case 'S': ra->store = s; return true;
+	case 'B':
+		if (parse_u32(s, "--store-mb", 1u << 26, &v))
+			return false;
+		ra->store_mb = v;
+		return true;
 	case 'l':
 		if (parse_u32(s, "--level", GRID_MAX_LEVEL - 1, &v))
 			return false;
@@ -411,8 +421,35 @@ static int render_to_file(const struct render_args *ra, const char *planet, cons
 		ro.ud = &t0;
 	}
 	struct render_image im;
-	char err[256], note[256];
+	char err[256] = "", note[256];
+	if (ra->store) {
+		rc = store_lmdb_open(&(struct store_lmdb_desc){
+					     .path = ra->store,
+					     .budget = (uint64_t)(ra->store_mb ? ra->store_mb : 1024)
+						       << 20 },
+				     &ro.store, err);
+		if (rc) {
+			fprintf(stderr, "clipmapctl render: --store %s\n", err);
+			planet_unref(p);
+			return 1;
+		}
+		if (err[0])
+			fprintf(stderr, "clipmapctl render: --store: %s\n", err);
+	}
 	rc = render_layer(p, layer, rg, &ro, &im, err);
+	if (ro.store) {
+		/* what is queued is written before the store closes */
+		struct store_stats st;
+		store_flush(ro.store);
+		store_stat(ro.store, &st);
+		if (!ra->quiet)
+			fprintf(stderr, "store %s: %llu hits, %llu misses, %llu tiles written, "
+					"%llu corrupt; %llu tiles in it\n",
+				ra->store, (unsigned long long)st.hits,
+				(unsigned long long)st.misses, (unsigned long long)st.puts,
+				(unsigned long long)st.corrupt, (unsigned long long)st.tiles);
+		store_destroy(ro.store);
+	}
 	if (rc) {
 		fprintf(stderr, "clipmapctl render: %s\n", err);
 		planet_unref(p);
@@ -440,7 +477,8 @@ static int cmd_render(int argc, char **argv)
 		{ "shade", no_argument, NULL, 's' },	    { "quiet", no_argument, NULL, 'q' },
 		{ "output", required_argument, NULL, 'o' }, { "help", no_argument, NULL, 'h' },
 		{ "at", required_argument, NULL, 'a' },	    { "tiles", required_argument, NULL, 't' },
-		{ "version", no_argument, NULL, 'V' },	    { 0, 0, 0, 0 },
+		{ "version", no_argument, NULL, 'V' },	    { "store", required_argument, NULL, 'S' },
+		{ "store-mb", required_argument, NULL, 'B' }, { 0, 0, 0, 0 },
 	};
 	struct render_args ra = { .level = -1, .ntiles = 3 };
 	int c, status;
