@@ -121,6 +121,33 @@ static void mark_broken(struct lstore *s)
 	xmutex_unlock(&s->mu);
 }
 
+static void rdlock(struct lstore *s);
+static void rwunlock(struct lstore *s);
+
+/* mdb_txn_begin, first adopting a map another process sharing the file has grown
+ * (MDB_MAP_RESIZED: it opened the file with a larger budget). Called with envlock held shared
+ * and no transaction of the caller's open; takes the lock exclusive for the resize (no
+ * transaction of this process is open then) and shared again. The exclusive lock is tried for
+ * 2 s at most (a thread holding the lock shared twice, or a long listing, would keep it): then
+ * this one attempt fails (MDB_MAP_RESIZED) and a later one resizes. */
+static int begin(struct lstore *s, unsigned flags, MDB_txn **txn)
+{
+	int rc = s->env ? mdb_txn_begin(s->env, NULL, flags, txn) : EIO;
+	if (rc != MDB_MAP_RESIZED)
+		return rc;
+	rwunlock(s);
+	bool got = false;
+	for (int i = 0; i < 2000 && !(got = pthread_rwlock_trywrlock(&s->envlock) == 0); i++)
+		usleep(1000);
+	if (got) {
+		if (s->env)
+			mdb_env_set_mapsize(s->env, 0);
+		rwunlock(s);
+	}
+	rdlock(s);
+	return s->env ? mdb_txn_begin(s->env, NULL, flags, txn) : EIO;
+}
+
 static void rdlock(struct lstore *s)
 {
 	if (pthread_rwlock_rdlock(&s->envlock))
@@ -372,7 +399,7 @@ static int evict_to(struct lstore *s, MDB_txn *txn, uint64_t target, uint64_t *n
 static int apply(struct lstore *s, struct wop *ops, size_t n, uint64_t extra_evict)
 {
 	MDB_txn *txn;
-	int rc = mdb_txn_begin(s->env, NULL, 0, &txn);
+	int rc = begin(s, 0, &txn);
 	if (rc)
 		return rc;
 	uint64_t nb = atomic_load(&s->bytes), nt = atomic_load(&s->ntiles);
@@ -552,7 +579,7 @@ static int l_get(struct store *base, const struct tile_key *k, enum pix_type typ
 	store_key_encode(k, kb);
 	MDB_txn *txn;
 	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	int rc = begin(s, MDB_RDONLY, &txn);
 	if (rc) {
 		rwunlock(s);
 		if (fatal(rc))
@@ -599,7 +626,7 @@ static bool l_contains(struct store *base, const struct tile_key *k)
 	store_key_encode(k, kb);
 	MDB_txn *txn;
 	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	int rc = begin(s, MDB_RDONLY, &txn);
 	if (rc) {
 		rwunlock(s);
 		if (fatal(rc))
@@ -645,7 +672,7 @@ static int l_del(struct store *base, const struct tile_key *k)
 static int read_cursor(struct lstore *s, MDB_dbi db, MDB_txn **txn, MDB_cursor **c)
 {
 	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, txn) : EIO;
+	int rc = begin(s, MDB_RDONLY, txn);
 	if (rc) {
 		rwunlock(s);
 		if (fatal(rc))
@@ -734,7 +761,7 @@ static void l_stat(struct store *base, struct store_stats *o)
 	/* the file's totals: other processes' tiles count too */
 	rdlock(s);
 	MDB_txn *txn;
-	if (s->env && mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) == 0) {
+	if (begin(s, MDB_RDONLY, &txn) == 0) {
 		uint64_t nb, nt, stamp;
 		if (totals_get(s, txn, &nb, &nt, &stamp) == 0) {
 			atomic_store(&s->bytes, nb);
