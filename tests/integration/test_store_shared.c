@@ -107,10 +107,9 @@ static uint64_t stat_of(struct net_conn *c, const char *key)
 
 static void wait_written(struct net_conn *c)
 {
-	uint64_t end = clock_now_ms() + 20000;
-	while (stat_of(c, "store.disk.queued") > 0 && clock_now_ms() < end)
-		usleep(20000);
-	assert_int_equal(stat_of(c, "store.disk.queued"), 0);
+	char err[256];
+	if (net_stat_wait_zero(c, "store.disk.queued", 20000, err))
+		fail_msg("%s", err);
 }
 
 /* Sends the WANT (both layers of the block) and receives every tile. Returns how many. */

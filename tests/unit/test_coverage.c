@@ -27,73 +27,15 @@
 #include "common/xalloc.h"
 #include "engine/planet.h"
 #include "prefetch.h"
+#include "support/prefetch_keys.h"
 
-struct keyset {
-	struct tile_key *k;
-	size_t n;
-};
-
-static int cmp_key(const void *a, const void *b)
-{
-	const struct tile_key *x = a, *y = b;
-	if (x->lx != y->lx)
-		return x->lx < y->lx ? -1 : 1;
-	if (x->ly != y->ly)
-		return x->ly < y->ly ? -1 : 1;
-	if (x->y != y->y)
-		return x->y < y->y ? -1 : 1;
-	if (x->x != y->x)
-		return x->x < y->x ? -1 : 1;
-	return 0;
-}
-
-static void sort_unique(struct keyset *ks)
-{
-	qsort(ks->k, ks->n, sizeof *ks->k, cmp_key);
-	size_t n = ks->n ? 1 : 0;
-	for (size_t i = 1; i < ks->n; i++)
-		if (cmp_key(&ks->k[i], &ks->k[n - 1]))
-			ks->k[n++] = ks->k[i];
-	ks->n = n;
-}
-
-/* Every key of the job (one layer), sorted; a duplicate fails. */
+/* Every key of the job (one layer), sorted; fails on a duplicate or a bad estimate. */
 static void job_keys(const struct planet *p, const struct proto_prefetch *m, struct keyset *ks)
 {
-	struct prefetch_iter *it;
+	uint64_t est;
 	char err[256];
-	if (prefetch_iter_create(p, m, PREFETCH_MAX_TILES, &it, err) != 0)
-		fail_msg("prefetch_iter_create: %s", err);
-	uint64_t est = prefetch_iter_total(it);
-	size_t cap = 1 << 16;
-	ks->k = xmalloc(cap * sizeof *ks->k);
-	ks->n = 0;
-	struct want w[512];
-	size_t got;
-	while ((got = prefetch_iter_next(it, w, 512)) > 0) {
-		if (ks->n + got > cap) {
-			cap *= 2;
-			ks->k = xrealloc(ks->k, cap * sizeof *ks->k);
-		}
-		for (size_t i = 0; i < got; i++) {
-			ks->k[ks->n] = w[i].key;
-			ks->k[ks->n++].node = 0;
-		}
-	}
-	assert_int_equal(prefetch_iter_error(it, err), 0);
-	assert_int_equal(ks->n, prefetch_iter_total(it));
-	prefetch_iter_destroy(it);
-	double ratio = (double)est / (double)(ks->n ? ks->n : 1);
-	if (!(ratio >= 0.5 && ratio <= 4.0))
-		fail_msg("estimate %llu for %zu tiles", (unsigned long long)est, ks->n);
-	size_t n0 = ks->n;
-	sort_unique(ks);
-	assert_int_equal(ks->n, n0);
-}
-
-static bool has(const struct keyset *ks, const struct tile_key *k)
-{
-	return bsearch(k, ks->k, ks->n, sizeof *ks->k, cmp_key) != NULL;
+	if (prefetch_job_keys(p, m, ks, &est, err))
+		fail_msg("prefetch job: %s", err);
 }
 
 /* a and b hold the same tiles; else prints the first few differences and fails. */
@@ -101,11 +43,11 @@ static void same_set(const char *what, const struct keyset *a, const struct keys
 {
 	size_t only_a = 0, only_b = 0;
 	for (size_t i = 0; i < a->n; i++)
-		if (!has(b, &a->k[i]) && only_a++ < 3)
+		if (!keyset_has(b, &a->k[i]) && only_a++ < 3)
 			printf("  %s: (%u,%u) at (%u,%u) only in the polygon's job\n", what,
 			       a->k[i].x, a->k[i].y, a->k[i].lx, a->k[i].ly);
 	for (size_t i = 0; i < b->n; i++)
-		if (!has(a, &b->k[i]) && only_b++ < 3)
+		if (!keyset_has(a, &b->k[i]) && only_b++ < 3)
 			printf("  %s: (%u,%u) at (%u,%u) only in the reference\n", what, b->k[i].x,
 			       b->k[i].y, b->k[i].lx, b->k[i].ly);
 	printf("%s: %zu tiles, %zu in the reference; %zu / %zu differ\n", what, a->n, b->n,
@@ -179,12 +121,12 @@ static void rect_is_bbox(void **state)
 		} else {
 			size_t extra = 0, missing = 0;
 			for (size_t i = 0; i < kp.n; i++)
-				extra += !has(&kb, &kp.k[i]);
+				extra += !keyset_has(&kb, &kp.k[i]);
 			struct lonpoly lp = { 1, rings, r };
 			struct keyset ref;
 			brute(p, &lp, 3, 8, &ref);
 			for (size_t i = 0; i < ref.n; i++)
-				missing += !has(&kp, &ref.k[i]);
+				missing += !keyset_has(&kp, &ref.k[i]);
 			size_t upto8 = 0;
 			for (size_t i = 0; i < kp.n; i++)
 				upto8 += kp.k[i].ly <= 8;
@@ -231,7 +173,7 @@ static void multipolygon_is_union(void **state)
 		ka.k = xrealloc(ka.k, (ka.n + kb.n) * sizeof *ka.k);
 		memcpy(ka.k + ka.n, kb.k, kb.n * sizeof *kb.k);
 		ka.n += kb.n;
-		sort_unique(&ka);
+		keyset_sort_unique(&ka);
 		same_set(c ? "antimeridian split" : "two parts", &kp, &ka);
 		free(kp.k);
 		free(ka.k);
@@ -296,7 +238,7 @@ static void brute(const struct planet *p, const struct lonpoly *poly, int lmin, 
 			}
 			base += poly->rings[r];
 		}
-		sort_unique(ref);
+		keyset_sort_unique(ref);
 	}
 }
 
@@ -315,7 +257,7 @@ static void triangle_and_hole(void **state)
 	brute(p, &lp, 4, 10, &ref);
 	size_t missing = 0;
 	for (size_t i = 0; i < ref.n; i++)
-		if (!has(&kp, &ref.k[i]) && missing++ < 3)
+		if (!keyset_has(&kp, &ref.k[i]) && missing++ < 3)
 			printf("  triangle: viewer tile (%u,%u) at (%u,%u) missing\n", ref.k[i].x,
 			       ref.k[i].y, ref.k[i].lx, ref.k[i].ly);
 	printf("triangle: %zu tiles, %zu asked for by viewers inside, %zu missing\n", kp.n, ref.n,
@@ -339,13 +281,13 @@ static void triangle_and_hole(void **state)
 	struct grid_quad q;
 	grid_window(lx, 10, p->tile_size, p->tile_size, 8.0, 46.0, &q);
 	struct tile_key mid = { 0, q.tx0, q.ty0, (uint8_t)lx, 10 };
-	assert_true(has(&ks, &mid));
-	assert_false(has(&kh, &mid));
+	assert_true(keyset_has(&ks, &mid));
+	assert_false(keyset_has(&kh, &mid));
 	struct lonpoly lh = { 2, r2, sq };
 	brute(p, &lh, 10, 10, &ref);
 	missing = 0;
 	for (size_t i = 0; i < ref.n; i++)
-		missing += !has(&kh, &ref.k[i]);
+		missing += !keyset_has(&kh, &ref.k[i]);
 	printf("hole: %zu tiles (%zu without it), %zu asked for by viewers, %zu missing\n", kh.n,
 	       ks.n, ref.n, missing);
 	assert_int_equal(missing, 0);
