@@ -455,6 +455,16 @@ static int prefetch_route(struct net_conn *c, const char *planet, double a, doub
 
 enum mode { COLD, PREFETCHED, RESTARTED };
 
+/* The viewer's tile source on planet `name`, wrapped (copy_source_wrap). */
+static int open_source(const struct net_opts *no, const char *name, struct view_source **out,
+		       char err[256])
+{
+	int rc = view_source_net_create(no, name, out, err);
+	if (rc == 0)
+		*out = copy_source_wrap(*out);
+	return rc;
+}
+
 /* After a prefetch into the store: waits until its write queue is empty, then restarts the
  * daemon on the same store (a cold memory cache) and connects again. */
 static int restart_daemon(struct daemon_env *d, struct net_conn **sc, const struct net_opts *no,
@@ -498,10 +508,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	rc = net_connect(&no, &sc, err);
 	if (rc)
 		goto out;
-	rc = view_source_net_create(&no, name, &c.src, err);
+	rc = open_source(&no, name, &c.src, err);
 	if (rc)
 		goto out;
-	c.src = copy_source_wrap(c.src);
 	const struct view_planet *p = &c.src->planet;
 	levels_at(c.src, agl, &tr->lmin, &tr->lmax);
 	double warm_s = 0.25, len = v * (x->trial_s + 0.5);
@@ -518,10 +527,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		rc = restart_daemon(&d, &sc, &no, err);
 		if (rc)
 			goto out;
-		rc = view_source_net_create(&no, name, &c.src, err);
+		rc = open_source(&no, name, &c.src, err);
 		if (rc)
 			goto out;
-		c.src = copy_source_wrap(c.src);
 		p = &c.src->planet;
 	}
 	struct dstats sh;
