@@ -62,9 +62,9 @@ static const struct cmd_usage {
 	{ "prefetch",
 	  "  clipmapctl prefetch PLANET --bbox W,S,E,N --levels A-B [--layers a,b]\n"
 	  "  clipmapctl prefetch PLANET --path LAT,LON:LAT,LON --width KM --levels A-B\n"
-	  "  clipmapctl prefetch PLANET --coverage FILE --levels A-B   (polygons: GeoJSON,\n"
-	  "                          GeoPackage, Shapefile…, any CRS)\n"
 	  "                          [--layers a,b]             fill the cache (Ctrl-C cancels)\n"
+	  "  clipmapctl prefetch PLANET --coverage FILE --levels A-B [--layers a,b]\n"
+	  "      --coverage: the polygons of a GeoJSON, GeoPackage, Shapefile… (any CRS)\n"
 	  "      --dry-run [--json]: the estimate per level and the tier's budget, nothing run\n"
 	  "      --bbox: W < E; across the antimeridian write E + 360 (170,-10,190,10)\n" },
 	{ "render",
