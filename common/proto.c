@@ -45,7 +45,7 @@ static const struct type_info types[] = {
 	{ PROTO_STATS, "STATS", 8u << 20, FROM_SERVER },
 	{ PROTO_CACHE_LS, "CACHE_LS", 512, FROM_CLIENT },
 	{ PROTO_CACHE_ENTRIES, "CACHE_ENTRIES", 512u << 10, FROM_SERVER },
-	{ PROTO_CACHE_OP, "CACHE_OP", 512, FROM_CLIENT },
+	{ PROTO_CACHE_OP, "CACHE_OP", 128u << 10, FROM_CLIENT },
 	{ PROTO_CACHE_STAT, "CACHE_STAT", 4u << 20, FROM_SERVER },
 	{ PROTO_CACHE_DONE, "CACHE_DONE", 64, FROM_SERVER },
 	{ PROTO_PREFETCH, "PREFETCH", 128u << 10, FROM_CLIENT },
@@ -669,6 +669,36 @@ static void decode_cache_entries(struct rd *r, struct proto_cache_entries *c)
 	}
 }
 
+/* A polygon's rings and points (PREFETCH shape 3, CACHE_OP's polygon filter): counts checked
+ * against the caps and the bytes left before anything is allocated. */
+static void decode_polygon(struct rd *r, uint32_t *nrings, const uint32_t **rings_out,
+			   uint32_t *npoints, const struct proto_lonlat **points)
+{
+	*nrings = rd_u32(r, "ring count");
+	if (!r->err && *nrings == 0)
+		rd_fail(r, PROTO_ERR_FIELD, "polygon without rings");
+	uint32_t *rings = rd_array(r, *nrings, PROTO_MAX_RINGS, 4, sizeof *rings, "rings");
+	*rings_out = rings;
+	uint64_t total = 0;
+	for (uint32_t i = 0; i < *nrings && !r->err; i++) {
+		rings[i] = rd_u32(r, "ring length");
+		if (!r->err && rings[i] < 3)
+			rd_fail(r, PROTO_ERR_FIELD, "ring %u of %u points (3 at least)", i, rings[i]);
+		total += rings[i];
+	}
+	if (!r->err && total > PROTO_MAX_POLY)
+		rd_fail(r, PROTO_ERR_LIMIT, "%llu polygon points exceed the cap of %u",
+			(unsigned long long)total, PROTO_MAX_POLY);
+	*npoints = r->err ? 0 : (uint32_t)total;
+	struct proto_lonlat *pt = rd_array(r, *npoints, PROTO_MAX_POLY, 16, sizeof(*pt),
+					   "polygon points");
+	*points = pt;
+	for (uint32_t i = 0; i < *npoints && !r->err; i++) {
+		pt[i].lon = rd_range(r, -540, 540, "point lon");
+		pt[i].lat = rd_range(r, -90, 90, "point lat");
+	}
+}
+
 static void decode_cache_op(struct rd *r, struct proto_cache_op *c)
 {
 	c->req = rd_u32(r, "req");
@@ -681,15 +711,19 @@ static void decode_cache_op(struct rd *r, struct proto_cache_op *c)
 	c->bbox.north = rd_f64(r, "north");
 	c->lmin = rd_u8(r, "lmin");
 	c->lmax = rd_u8(r, "lmax");
+	if (!r->err && (c->filter & PROTO_COF_POLYGON) && c->op == PROTO_COP_PURGE)
+		decode_polygon(r, &c->nrings, &c->rings, &c->npoints, &c->points);
 	if (r->err)
 		return;
 	const struct geo_rect *b = &c->bbox;
 	if (c->op < PROTO_COP_STAT || c->op > PROTO_COP_VERIFY)
 		rd_fail(r, PROTO_ERR_FIELD, "cache op %u", c->op);
-	else if (c->filter & ~(PROTO_COF_BBOX | PROTO_COF_LEVELS))
+	else if (c->filter & ~(PROTO_COF_BBOX | PROTO_COF_LEVELS | PROTO_COF_POLYGON))
 		rd_fail(r, PROTO_ERR_FIELD, "unknown filter bits 0x%x", c->filter);
 	else if (c->filter && c->op != PROTO_COP_PURGE)
 		rd_fail(r, PROTO_ERR_FIELD, "filters go with purge");
+	else if ((c->filter & PROTO_COF_BBOX) && (c->filter & PROTO_COF_POLYGON))
+		rd_fail(r, PROTO_ERR_FIELD, "a bbox or a polygon, not both");
 	else if (c->op == PROTO_COP_PURGE && !c->planet[0])
 		rd_fail(r, PROTO_ERR_FIELD, "purge without a planet");
 	else if (c->op == PROTO_COP_GC && c->planet[0])
@@ -771,6 +805,8 @@ static void decode_prefetch(struct rd *r, struct proto_prefetch *p)
 			pt[i].lon = rd_range(r, -540, 540, "point lon");
 			pt[i].lat = rd_range(r, -90, 90, "point lat");
 		}
+	} else if (p->shape == PROTO_SHAPE_POLYGON) {
+		decode_polygon(r, &p->nrings, &p->rings, &p->npoints, &p->points);
 	} else {
 		rd_fail(r, PROTO_ERR_FIELD, "shape %u", p->shape);
 	}

@@ -38,6 +38,8 @@
 #define PROTO_MAX_CACHE_ENTRIES 16384 /* per CACHE_ENTRIES message */
 #define PROTO_MAX_PATH 4096	       /* prefetch path points */
 #define PROTO_MAX_WIDTH 2e7	       /* prefetch corridor width, metres */
+#define PROTO_MAX_RINGS 512	       /* prefetch / purge polygon rings */
+#define PROTO_MAX_POLY 7680	       /* prefetch / purge polygon points, every ring */
 
 enum proto_type {
 	PROTO_NONE = 0,
@@ -291,6 +293,7 @@ enum proto_cache_opk { PROTO_COP_STAT = 1, PROTO_COP_PURGE = 2, PROTO_COP_GC = 3
 		       PROTO_COP_VERIFY = 4 };
 #define PROTO_COF_BBOX 1u   /* cache_op.filter bits (purge) */
 #define PROTO_COF_LEVELS 2u
+#define PROTO_COF_POLYGON 4u /* tiles touching a polygon (rings as PREFETCH's shape 3) */
 #define PROTO_MAX_STAT_ROWS 4096 /* per CACHE_STAT message */
 
 struct proto_cache_op {
@@ -300,6 +303,9 @@ struct proto_cache_op {
 	uint8_t filter;	    /* purge: PROTO_COF_* bits */
 	struct geo_rect bbox; /* with PROTO_COF_BBOX: tiles touching it (west > east crosses) */
 	uint8_t lmin, lmax;   /* with PROTO_COF_LEVELS: ly range */
+	uint32_t nrings, npoints; /* with PROTO_COF_POLYGON: as struct proto_prefetch's */
+	const uint32_t *rings;
+	const struct proto_lonlat *points;
 };
 
 struct proto_cache_stat_row {
@@ -321,7 +327,8 @@ struct proto_cache_done {
 	uint64_t checked, removed, bytes, corrupt;
 };
 
-enum proto_shape { PROTO_SHAPE_NONE = 0, PROTO_SHAPE_BBOX = 1, PROTO_SHAPE_PATH = 2 };
+enum proto_shape { PROTO_SHAPE_NONE = 0, PROTO_SHAPE_BBOX = 1, PROTO_SHAPE_PATH = 2,
+		   PROTO_SHAPE_POLYGON = 3 };
 
 struct proto_lonlat { double lon, lat; };
 
@@ -333,8 +340,11 @@ struct proto_prefetch {
 	uint8_t lmin, lmax; /* ly range (lx = ly + 1), lmin ≤ lmax ≤ GRID_MAX_LEVEL */
 	struct geo_rect bbox; /* SHAPE_BBOX; west may exceed east (crosses the antimeridian) */
 	double width_m;	    /* SHAPE_PATH: corridor width */
-	uint32_t npoints;   /* SHAPE_PATH: 1 ≤ npoints ≤ PROTO_MAX_PATH; geodesics between */
+	uint32_t npoints;   /* SHAPE_PATH: 1 ≤ npoints ≤ PROTO_MAX_PATH; geodesics between;
+			     * SHAPE_POLYGON: the rings' points, ≤ PROTO_MAX_POLY */
 	const struct proto_lonlat *points;
+	uint32_t nrings;    /* SHAPE_POLYGON: 1 ≤ nrings ≤ PROTO_MAX_RINGS (common/lonpoly.h) */
+	const uint32_t *rings; /* points per ring, each ≥ 3, summing to npoints */
 };
 
 enum proto_job_state { PROTO_JOB_NONE = 0, PROTO_JOB_RUNNING = 1, PROTO_JOB_DONE = 2,

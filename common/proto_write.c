@@ -359,6 +359,25 @@ static void enc_cache_entries(struct wr *w, const struct proto_msg *m)
 		enc_cache_entry(w, &c->entries[i]);
 }
 
+static void enc_polygon(struct wr *w, uint32_t nrings, const uint32_t *rings,
+			const struct proto_lonlat *points)
+{
+	w32(w, nrings);
+	if (!wcount(w, nrings, PROTO_MAX_RINGS, "polygon rings"))
+		return;
+	size_t n = 0;
+	for (uint32_t i = 0; i < nrings; i++) {
+		w32(w, rings[i]);
+		n += rings[i];
+	}
+	if (!wcount(w, n, PROTO_MAX_POLY, "polygon points"))
+		return;
+	for (size_t i = 0; i < n; i++) {
+		wf64(w, points[i].lon);
+		wf64(w, points[i].lat);
+	}
+}
+
 static void enc_prefetch(struct wr *w, const struct proto_msg *m)
 {
 	const struct proto_prefetch *p = &m->prefetch;
@@ -382,6 +401,8 @@ static void enc_prefetch(struct wr *w, const struct proto_msg *m)
 			wf64(w, p->points[i].lon);
 			wf64(w, p->points[i].lat);
 		}
+	} else if (p->shape == PROTO_SHAPE_POLYGON) {
+		enc_polygon(w, p->nrings, p->rings, p->points);
 	}
 }
 
@@ -408,6 +429,8 @@ static void enc_cache_op(struct wr *w, const struct proto_msg *m)
 	wf64(w, c->bbox.north);
 	w8(w, c->lmin);
 	w8(w, c->lmax);
+	if ((c->filter & PROTO_COF_POLYGON) && c->op == PROTO_COP_PURGE)
+		enc_polygon(w, c->nrings, c->rings, c->points);
 }
 
 static void enc_cache_stat(struct wr *w, const struct proto_msg *m)

@@ -18,6 +18,7 @@
 #include <string.h>
 
 #include "common/errbuf.h"
+#include "common/lonpoly.h"
 #include "common/xalloc.h"
 #include "common/xthread.h"
 #include "engine/node.h"
@@ -57,6 +58,9 @@ struct cacheop {
 	/* CACHE_LS */
 	bool ls;
 	struct proto_cache_ls lq; /* planet unused: target names it */
+	/* purge's polygon (q's rings and points, owned copies) */
+	uint32_t *rings;
+	struct proto_lonlat *pts;
 	struct proto_cache_entry *ents;
 	size_t nents, lscap, limit;
 	uint64_t total, now_ns;
@@ -117,6 +121,18 @@ static bool wanted(const struct cacheop *op, const struct tile_key *k)
 		bool lon = b->west < b->east ? r.west < b->east && r.east > b->west
 					     : r.east > b->west || r.west < b->east;
 		if (!lon)
+			return false;
+	}
+	if (q->filter & PROTO_COF_POLYGON) {
+		struct geo_rect r;
+		grid_tile_rect(k, &r);
+		struct lonpoly poly = { q->nrings, q->rings, q->points };
+		bool hit = false;
+		/* the polygon's longitudes may run past ±180: the tile's copies there too */
+		for (int s = -1; s <= 1 && !hit; s++)
+			hit = lonpoly_touches_rect(&poly, r.west + 360.0 * s, r.south,
+						   r.east + 360.0 * s, r.north);
+		if (!hit)
 			return false;
 	}
 	return true;
@@ -448,6 +464,17 @@ int cacheop_start(const struct proto_cache_op *q, const struct planet_set *ps,
 		return -ENOENT;
 	op->q = *q;
 	op->q.planet = NULL;
+	if (q->filter & PROTO_COF_POLYGON) {
+		op->rings = xmalloc(q->nrings * sizeof *op->rings);
+		memcpy(op->rings, q->rings, q->nrings * sizeof *op->rings);
+		op->pts = xmalloc((q->npoints ? q->npoints : 1) * sizeof *op->pts);
+		memcpy(op->pts, q->points, q->npoints * sizeof *op->pts);
+		op->q.rings = op->rings;
+		op->q.points = op->pts;
+	} else {
+		op->q.rings = NULL;
+		op->q.points = NULL;
+	}
 	return op_run(op, cache, store, done, ud, out, err);
 }
 
@@ -489,6 +516,8 @@ void cacheop_destroy(struct cacheop *op)
 	for (size_t i = 0; i < op->nnames; i++)
 		free(op->names[i]);
 	free(op->names);
+	free(op->rings);
+	free(op->pts);
 	free(op->nodes);
 	free(op->cnt);
 	free(op->del);

@@ -30,10 +30,12 @@
 #include "common/clipmap.h"
 #include "common/errbuf.h"
 #include "common/geo.h"
+#include "common/lonpoly.h"
 #include "common/xalloc.h"
 #include "common/xthread.h"
 
 #define ESTIMATE_ROWS 4096  /* bbox rows sampled per level */
+#define ESTIMATE_POLY_ROWS 256 /* polygon rows sampled per level */
 #define ESTIMATE_PIECES 16  /* pieces per geodesic */
 #define ESTIMATE_MAX 1e15   /* the estimate saturates there */
 #define FEED_CAP 8192	    /* keys queued between a builder and its job */
@@ -52,6 +54,10 @@ struct prefetch_iter {
 	double width;
 	struct proto_lonlat *pts;
 	uint32_t npts;
+	uint32_t *rings; /* polygon: points per ring (pts holds them) */
+	uint32_t nrings;
+	double (*iv)[2]; /* polygon: a row's longitude intervals (scratch) */
+	size_t ivcap;
 	int layers[PROTO_MAX_LAYERS];
 	int nlayers;
 	/* position */
@@ -277,19 +283,223 @@ static uint64_t bbox_rows(struct prefetch_iter *it, int ly, uint32_t stride, boo
 	return n_tiles;
 }
 
+static uint64_t poly_rows(struct prefetch_iter *it, int ly, uint32_t stride, bool segs,
+			  uint64_t *nrows);
+
 static int bbox_level(struct prefetch_iter *it, int ly)
 {
 	free(it->segs);
 	it->segs = NULL;
 	it->nsegs = 0;
 	uint64_t rows;
-	uint64_t n = bbox_rows(it, ly, 1, true, &rows);
+	uint64_t n = it->shape == PROTO_SHAPE_POLYGON ? poly_rows(it, ly, 1, true, &rows)
+						       : bbox_rows(it, ly, 1, true, &rows);
 	if (n == UINT64_MAX) {
 		it->ntiles = 0;
 		return -E2BIG;
 	}
 	it->ntiles = n;
 	return 0;
+}
+
+#define LX_BREAKS 128 /* latitudes where the lx viewers use changes, per level */
+
+/* The lx range (clipmap_level_lx_range) of viewers at lat, as one number to compare. */
+static int lx_code(int ly, double lat)
+{
+	int a, b;
+	clipmap_level_lx_range(ly, lat, lat, &a, &b);
+	return a * 64 + b;
+}
+
+/* The latitudes where the lx range of a viewer there changes, at level ly, ascending: found
+ * every 0.05° and refined by bisection. Returns how many (at most LX_BREAKS). */
+static size_t lx_breaks(int ly, double *out)
+{
+	size_t n = 0;
+	double prev = -90.0;
+	int pc = lx_code(ly, prev);
+	for (int i = 1; i <= 3600 && n < LX_BREAKS; i++) {
+		double lat = -90.0 + 0.05 * i;
+		int c = lx_code(ly, lat);
+		if (c != pc) {
+			double a = prev, b = lat;
+			for (int k = 0; k < 40; k++) {
+				double m = (a + b) / 2;
+				if (lx_code(ly, m) == pc)
+					a = m;
+				else
+					b = m;
+			}
+			out[n++] = (a + b) / 2;
+		}
+		prev = lat;
+		pc = c;
+	}
+	return n;
+}
+
+/* The latitudes [*lo, *hi] of the viewers whose window and ring (window_rows) reach row y at
+ * level ly: a focus's rows move south as it does, so both ends are found by bisection. */
+static void reach_lats(const struct prefetch_iter *it, int ly, uint32_t y, double *lo, double *hi)
+{
+	double a = -90.0, b = 90.0;
+	for (int k = 0; k < 50; k++) { /* the northernmost focus whose last row is ≥ y */
+		double m = (a + b) / 2;
+		uint32_t y0, y1;
+		window_rows(it, ly, m, &y0, &y1);
+		if (y1 >= y)
+			a = m;
+		else
+			b = m;
+	}
+	*hi = b;
+	a = -90.0, b = 90.0;
+	for (int k = 0; k < 50; k++) { /* the southernmost focus whose first row is ≤ y */
+		double m = (a + b) / 2;
+		uint32_t y0, y1;
+		window_rows(it, ly, m, &y0, &y1);
+		if (y0 <= y)
+			b = m;
+		else
+			a = m;
+	}
+	*lo = a;
+}
+
+static int cmp_run(const void *a, const void *b)
+{
+	const uint32_t *x = a, *y = b;
+	return x[0] < y[0] ? -1 : x[0] > y[0];
+}
+
+/* The rows of a polygon level, as bbox_rows: the viewers whose window or ring may reach row y
+ * are those inside the polygon within (CLIPMAP_REACH_TILES + 1) rows of it; each stretch of
+ * longitudes they span adds the columns window_cols gives it, merged per row and lx. */
+static uint64_t poly_rows(struct prefetch_iter *it, int ly, uint32_t stride, bool segs,
+			  uint64_t *nrows)
+{
+	struct lonpoly poly = { it->nrings, it->rings, it->pts };
+	double pw, ps, pe, pn;
+	lonpoly_bounds(&poly, &pw, &ps, &pe, &pn);
+	size_t cap = 0;
+	uint64_t n_tiles = 0;
+	uint32_t ya, yb, y0, y1;
+	window_rows(it, ly, pn, &y0, &ya);
+	window_rows(it, ly, ps, &yb, &y1);
+	(void)ya;
+	(void)yb;
+	*nrows = (uint64_t)y1 - y0 + 1;
+	if (!it->iv) {
+		it->ivcap = 2 * (size_t)it->npts + 2;
+		it->iv = xmalloc(it->ivcap * sizeof *it->iv);
+	}
+	size_t runcap = 2 * it->ivcap;
+	uint32_t(*runs)[2] = xmalloc(runcap * sizeof *runs);
+	double brk[LX_BREAKS];
+	size_t nbrk = lx_breaks(ly, brk);
+	double reach = (CLIPMAP_REACH_TILES + 1) * 180.0 / (double)grid_tiles_y(ly);
+	for (uint64_t yy = y0; yy <= y1; yy += stride) {
+		uint32_t y = (uint32_t)yy;
+		double rs, rn;
+		row_lats(ly, y, &rs, &rn);
+		double vs = fmax(rs - reach, ps), vn = fmin(rn + reach, pn);
+		if (vs > vn) /* a row only the window's rounding reaches: the nearest edge */
+			vs = vn = rs > pn ? pn : ps;
+		/* only the viewers whose window and ring reach row y (as a bbox's rows) */
+		double ra, rb;
+		reach_lats(it, ly, y, &ra, &rb);
+		vs = fmax(vs, ra);
+		vn = fmin(vn, rb);
+		if (vs > vn)
+			continue;
+		double lo, hi;
+		if (lonpoly_strip(&poly, vs, vn, it->iv, it->ivcap, &lo, &hi) <= 0)
+			continue;
+		int lxa, lxb;
+		clipmap_level_lx_range(ly, lo, hi, &lxa, &lxb);
+		/* the strip cut where the lx viewers use changes: each lx gets only the
+		 * longitudes of the polygon's part at the latitudes that use it */
+		double cut[LX_BREAKS + 2];
+		size_t ncut = 0;
+		cut[ncut++] = lo;
+		for (size_t i = 0; i < nbrk; i++)
+			if (brk[i] > lo && brk[i] < hi)
+				cut[ncut++] = brk[i];
+		cut[ncut++] = hi;
+		for (int lx = lxa; lx <= lxb; lx++) {
+			uint32_t W = grid_tiles_x(lx);
+			size_t nr = 0;
+			bool all = false;
+			for (size_t c = 0; c + 1 < ncut && !all; c++) {
+				double slo, shi;
+				long niv = lonpoly_strip(&poly, cut[c], cut[c + 1], it->iv, it->ivcap,
+							 &slo, &shi);
+				if (niv <= 0)
+					continue;
+				int sa, sb;
+				clipmap_level_lx_range(ly, slo, shi, &sa, &sb);
+				if (lx < sa || lx > sb)
+					continue;
+				for (long i = 0; i < niv; i++) {
+					uint32_t x0, n;
+					window_cols(it, lx, it->iv[i][0], it->iv[i][1] - it->iv[i][0],
+						    &x0, &n);
+					if (n >= W) {
+						all = true;
+						break;
+					}
+					if (nr + 2 > runcap) {
+						runcap *= 2;
+						runs = xrealloc(runs, runcap * sizeof *runs);
+					}
+					uint64_t end = (uint64_t)x0 + n;
+					runs[nr][0] = x0;
+					runs[nr++][1] = (uint32_t)(end < W ? end : W);
+					if (end > W) {
+						runs[nr][0] = 0;
+						runs[nr++][1] = (uint32_t)(end - W);
+					}
+				}
+			}
+			if (all) {
+				runs[0][0] = 0;
+				runs[0][1] = W;
+				nr = 1;
+			}
+			qsort(runs, nr, sizeof *runs, cmp_run);
+			size_t m = 0;
+			for (size_t i = 1; i < nr; i++) {
+				if (runs[i][0] <= runs[m][1]) {
+					if (runs[i][1] > runs[m][1])
+						runs[m][1] = runs[i][1];
+				} else {
+					m++;
+					runs[m][0] = runs[i][0];
+					runs[m][1] = runs[i][1];
+				}
+			}
+			for (size_t i = 0; nr && i <= m; i++) {
+				uint32_t n = runs[i][1] - runs[i][0];
+				n_tiles += n;
+				if (!segs)
+					continue;
+				if (n_tiles * it->nlayers > it->max_tiles) {
+					free(runs);
+					return UINT64_MAX;
+				}
+				if (it->nsegs == cap) {
+					cap = cap ? cap * 2 : 64;
+					it->segs = xrealloc(it->segs, cap * sizeof *it->segs);
+				}
+				it->segs[it->nsegs++] = (struct segment){ runs[i][0], n, y, (uint8_t)lx };
+			}
+		}
+		if (segs && it->cancel && atomic_load_explicit(it->cancel, memory_order_relaxed))
+			break;
+	}
+	free(runs);
+	return n_tiles;
 }
 
 static int enter_level(struct prefetch_iter *it, int ly, struct geo_body *body)
@@ -299,7 +509,7 @@ static int enter_level(struct prefetch_iter *it, int ly, struct geo_body *body)
 	it->li = 0;
 	it->seg = 0;
 	it->col = 0;
-	if (it->shape == PROTO_SHAPE_BBOX)
+	if (it->shape == PROTO_SHAPE_BBOX || it->shape == PROTO_SHAPE_POLYGON)
 		return bbox_level(it, ly);
 	int rc = build_path_level(it, ly, body);
 	it->ntiles = rc ? 0 : it->nlist;
@@ -317,13 +527,31 @@ int prefetch_check(const struct planet *p, const struct proto_prefetch *m, char 
 		err_set(err, "level range %u..%u", m->lmin, m->lmax);
 		return -EINVAL;
 	}
-	if (m->shape != PROTO_SHAPE_BBOX && m->shape != PROTO_SHAPE_PATH) {
+	if (m->shape != PROTO_SHAPE_BBOX && m->shape != PROTO_SHAPE_PATH &&
+	    m->shape != PROTO_SHAPE_POLYGON) {
 		err_set(err, "unknown shape %u", m->shape);
 		return -EINVAL;
 	}
 	if (m->shape == PROTO_SHAPE_PATH && (m->npoints == 0 || !(m->width_m >= 0))) {
 		err_set(err, "a path needs points and a width ≥ 0");
 		return -EINVAL;
+	}
+	if (m->shape == PROTO_SHAPE_POLYGON) {
+		uint64_t n = 0;
+		for (uint32_t i = 0; i < m->nrings && m->rings; i++) {
+			if (m->rings[i] < 3) {
+				err_set(err, "polygon ring %u has %u points (3 at least)", i,
+					m->rings[i]);
+				return -EINVAL;
+			}
+			n += m->rings[i];
+		}
+		if (m->nrings == 0 || m->nrings > PROTO_MAX_RINGS || n != m->npoints ||
+		    n > PROTO_MAX_POLY || !m->points) {
+			err_set(err, "a polygon needs 1-%u rings of %u points in all at most",
+				PROTO_MAX_RINGS, PROTO_MAX_POLY);
+			return -EINVAL;
+		}
 	}
 	if (p->nlayers == 0 || (p->nlayers < 64 && m->layers >> p->nlayers)) {
 		err_set(err, "layer mask 0x%llx names layers planet %s does not have (it has %zu)",
@@ -346,17 +574,30 @@ static void iter_init(struct prefetch_iter *it, const struct planet *p,
 	for (size_t i = 0; i < p->nlayers && i < PROTO_MAX_LAYERS; i++)
 		if (m->layers == 0 || (m->layers >> i) & 1)
 			it->layers[it->nlayers++] = (int)i;
-	it->npts = m->shape == PROTO_SHAPE_PATH ? m->npoints : 0;
+	it->npts = m->shape == PROTO_SHAPE_PATH || m->shape == PROTO_SHAPE_POLYGON ? m->npoints : 0;
+	if (m->shape == PROTO_SHAPE_POLYGON) {
+		/* the estimate's iterator borrows them; prefetch_iter_create copies */
+		it->pts = (struct proto_lonlat *)m->points;
+		it->rings = (uint32_t *)m->rings;
+		it->nrings = m->nrings;
+	}
 }
 
 static double bbox_level_estimate(struct prefetch_iter *it, int ly)
 {
 	uint64_t rows;
+	bool poly = it->shape == PROTO_SHAPE_POLYGON;
 	/* one pass to learn the row count, without visiting more than two rows */
-	(void)bbox_rows(it, ly, UINT32_MAX, false, &rows);
-	uint64_t stride64 = (rows + ESTIMATE_ROWS - 1) / ESTIMATE_ROWS;
+	if (poly)
+		(void)poly_rows(it, ly, UINT32_MAX, false, &rows);
+	else
+		(void)bbox_rows(it, ly, UINT32_MAX, false, &rows);
+	/* a polygon row costs a pass over its edges: fewer of them sampled */
+	uint32_t sample = poly ? ESTIMATE_POLY_ROWS : ESTIMATE_ROWS;
+	uint64_t stride64 = (rows + sample - 1) / sample;
 	uint32_t stride = stride64 ? (uint32_t)stride64 : 1;
-	uint64_t n = bbox_rows(it, ly, stride, false, &rows);
+	uint64_t n = poly ? poly_rows(it, ly, stride, false, &rows)
+			  : bbox_rows(it, ly, stride, false, &rows);
 	uint64_t visited = (rows + stride - 1) / stride;
 	return (double)n * (double)rows / (double)(visited ? visited : 1);
 }
@@ -487,7 +728,7 @@ int prefetch_estimate(const struct planet *p, const struct proto_prefetch *m,
 		mm->ly = -1;
 	for (int ly = m->lmin; ly <= m->lmax; ly++) {
 		double t;
-		if (m->shape == PROTO_SHAPE_BBOX) {
+		if (m->shape == PROTO_SHAPE_BBOX || m->shape == PROTO_SHAPE_POLYGON) {
 			t = bbox_level_estimate(&it, ly);
 		} else {
 			double w = fmin(m->width_m, M_PI * a); /* wider wraps round the planet */
@@ -511,6 +752,7 @@ int prefetch_estimate(const struct planet *p, const struct proto_prefetch *m,
 	}
 	free(pc);
 	free(mm);
+	free(it.iv);
 	e->tiles = (uint64_t)total;
 	return 0;
 }
@@ -530,6 +772,10 @@ int prefetch_iter_create(const struct planet *p, const struct proto_prefetch *m,
 	if (it->npts) {
 		it->pts = xmalloc(m->npoints * sizeof *it->pts);
 		memcpy(it->pts, m->points, m->npoints * sizeof *it->pts);
+	}
+	if (it->nrings) {
+		it->rings = xmalloc(m->nrings * sizeof *it->rings);
+		memcpy(it->rings, m->rings, m->nrings * sizeof *it->rings);
 	}
 	*out = it;
 	return 0;
@@ -573,7 +819,7 @@ size_t prefetch_iter_next(struct prefetch_iter *it, struct want *out, size_t n)
 			continue;
 		}
 		struct tile_key key;
-		if (it->shape == PROTO_SHAPE_BBOX) {
+		if (it->shape != PROTO_SHAPE_PATH) {
 			const struct segment *sg = &it->segs[it->seg];
 			key.lx = sg->lx;
 			key.ly = (uint8_t)it->ly;
@@ -588,7 +834,7 @@ size_t prefetch_iter_next(struct prefetch_iter *it, struct want *out, size_t n)
 		if (++it->li == it->nlayers) {
 			it->li = 0;
 			it->pos++;
-			if (it->shape == PROTO_SHAPE_BBOX && ++it->col == it->segs[it->seg].n) {
+			if (it->shape != PROTO_SHAPE_PATH && ++it->col == it->segs[it->seg].n) {
 				it->col = 0;
 				it->seg++;
 			}
@@ -621,6 +867,8 @@ void prefetch_iter_destroy(struct prefetch_iter *it)
 	free(it->list);
 	free(it->segs);
 	free(it->pts);
+	free(it->rings);
+	free(it->iv);
 	free(it);
 }
 

@@ -24,6 +24,7 @@
 #ifndef CTL_THIN
 #include "engine/planet.h"
 #endif
+#include "coverage.h"
 #include "ctl_args.h"
 #include "ctl_cache.h"
 #include "ctl_conn.h"
@@ -53,7 +54,8 @@ static const struct cmd_usage {
 		   "                          [--limit N] [--json]       what is cached\n"
 		   "  clipmapctl cache stat [PLANET] [--json]          tiles and bytes per planet,\n"
 		   "                                                     layer, level and tier\n"
-		   "  clipmapctl cache purge PLANET [--bbox W,S,E,N] [--levels A-B] [--json]\n"
+		   "  clipmapctl cache purge PLANET [--bbox W,S,E,N | --coverage FILE] [--levels A-B]\n"
+		   "                          [--json]\n"
 		   "                                                     drop its tiles from disk\n"
 		   "  clipmapctl cache gc [--json]                     drop disk entries no planet uses\n"
 		   "  clipmapctl cache verify [PLANET] [--json]        check every stored checksum\n" },
@@ -61,6 +63,8 @@ static const struct cmd_usage {
 	  "  clipmapctl prefetch PLANET --bbox W,S,E,N --levels A-B [--layers a,b]\n"
 	  "  clipmapctl prefetch PLANET --path LAT,LON:LAT,LON --width KM --levels A-B\n"
 	  "                          [--layers a,b]             fill the cache (Ctrl-C cancels)\n"
+	  "  clipmapctl prefetch PLANET --coverage FILE --levels A-B [--layers a,b]\n"
+	  "      --coverage: the polygons of a GeoJSON, GeoPackage, Shapefile… (any CRS)\n"
 	  "      --dry-run [--json]: the estimate per level and the tier's budget, nothing run\n"
 	  "      --bbox: W < E; across the antimeridian write E + 360 (170,-10,190,10)\n" },
 	{ "render",
@@ -70,6 +74,8 @@ static const struct cmd_usage {
 	  "  clipmapctl render PLANET LAYER --level L --at LAT,LON [--tiles N] -o FILE\n"
 	  "                                                     N×N tiles around a place (N = 3)\n"
 	  "      options: --workers N  --cache-mb N  --shade (colour × hillshade)  --quiet\n"
+	  "               --store PATH [--store-mb N]  read and fill an LMDB tile store (the\n"
+	  "               one a running clipmapd uses too)\n"
 	  "      heights: .tif/.tiff/.exr (float metres) or .png (16-bit, scale printed);\n"
 	  "      colour and normals: .png\n" },
 	{ "graph", "  clipmapctl graph PLANET                            the node graph as "
@@ -298,6 +304,8 @@ struct render_args {
 	bool world, at, quiet;
 	double lat, lon; /* --at */
 	uint32_t ntiles; /* --tiles */
+	const char *store;  /* --store PATH: an LMDB tile store, shared with clipmapd if it runs */
+	uint32_t store_mb;  /* --store-mb: its budget (0: 1024, as clipmapd's disk_mb) */
 	struct render_opts ro;
 };
 
@@ -319,6 +327,12 @@ static bool render_option(int c, const char *s, struct render_args *ra)
 	uint32_t v;
 	switch (c) {
 	case 'o': ra->outpath = s; return true;
+	case 'S': ra->store = s; return true;
+	case 'B':
+		if (parse_u32(s, "--store-mb", 1u << 26, &v))
+			return false;
+		ra->store_mb = v;
+		return true;
 	case 'l':
 		if (parse_u32(s, "--level", GRID_MAX_LEVEL - 1, &v))
 			return false;
@@ -407,8 +421,35 @@ static int render_to_file(const struct render_args *ra, const char *planet, cons
 		ro.ud = &t0;
 	}
 	struct render_image im;
-	char err[256], note[256];
+	char err[256] = "", note[256];
+	if (ra->store) {
+		rc = store_lmdb_open(&(struct store_lmdb_desc){
+					     .path = ra->store,
+					     .budget = (uint64_t)(ra->store_mb ? ra->store_mb : 1024)
+						       << 20 },
+				     &ro.store, err);
+		if (rc) {
+			fprintf(stderr, "clipmapctl render: --store %s\n", err);
+			planet_unref(p);
+			return 1;
+		}
+		if (err[0])
+			fprintf(stderr, "clipmapctl render: --store: %s\n", err);
+	}
 	rc = render_layer(p, layer, rg, &ro, &im, err);
+	if (ro.store) {
+		/* what is queued is written before the store closes */
+		struct store_stats st;
+		store_flush(ro.store);
+		store_stat(ro.store, &st);
+		if (!ra->quiet)
+			fprintf(stderr, "store %s: %llu hits, %llu misses, %llu tiles written, "
+					"%llu corrupt; %llu tiles in it\n",
+				ra->store, (unsigned long long)st.hits,
+				(unsigned long long)st.misses, (unsigned long long)st.puts,
+				(unsigned long long)st.corrupt, (unsigned long long)st.tiles);
+		store_destroy(ro.store);
+	}
 	if (rc) {
 		fprintf(stderr, "clipmapctl render: %s\n", err);
 		planet_unref(p);
@@ -436,7 +477,8 @@ static int cmd_render(int argc, char **argv)
 		{ "shade", no_argument, NULL, 's' },	    { "quiet", no_argument, NULL, 'q' },
 		{ "output", required_argument, NULL, 'o' }, { "help", no_argument, NULL, 'h' },
 		{ "at", required_argument, NULL, 'a' },	    { "tiles", required_argument, NULL, 't' },
-		{ "version", no_argument, NULL, 'V' },	    { 0, 0, 0, 0 },
+		{ "version", no_argument, NULL, 'V' },	    { "store", required_argument, NULL, 'S' },
+		{ "store-mb", required_argument, NULL, 'B' }, { 0, 0, 0, 0 },
 	};
 	struct render_args ra = { .level = -1, .ntiles = 3 };
 	int c, status;
@@ -668,16 +710,39 @@ static int cache_option(int c, const char *s, struct ctl_cache_opts *o)
 	}
 }
 
+/* Reads a --coverage file into cv and points o at it. Returns -1 to go on, else the exit
+ * status (after saying what is wrong). */
+static int load_coverage(const char *what, const char *path, struct coverage *cv)
+{
+#ifdef CTL_THIN
+	(void)path;
+	*cv = (struct coverage){ 0 };
+	fprintf(stderr, "clipmapctl %s: --coverage needs clipmapctl-offline\n", what);
+	return 1;
+#else
+	char err[256];
+	int rc = coverage_read(path, cv, err);
+	if (rc) /* a file that cannot be used is bad input, as an unknown planet (exit 2) */
+		return fail(what, rc == -E2BIG ? -EINVAL : rc, err);
+	if (cv->skipped)
+		fprintf(stderr, "clipmapctl %s: %s: %u features that are not polygons skipped\n",
+			what, path, cv->skipped);
+	return -1;
+#endif
+}
+
 /* `cache stat|purge|gc|verify`. */
 static int cmd_cache_op(int argc, char **argv, struct ctl_target *t)
 {
 	static const struct option opts[] = {
 		GLOBAL_OPTS,
 		{ "bbox", required_argument, NULL, 'b' }, { "levels", required_argument, NULL, 'l' },
-		{ "json", no_argument, NULL, 'j' },	  { 0, 0, 0, 0 },
+		{ "json", no_argument, NULL, 'j' },	  { "coverage", required_argument, NULL, 'c' },
+		{ 0, 0, 0, 0 },
 	};
 	static const char *const names[] = { "stat", "purge", "gc", "verify" };
 	struct ctl_cache_op_opts o = { 0 };
+	const char *coverage = NULL;
 	for (int i = 0; i < 4; i++)
 		if (strcmp(argv[1], names[i]) == 0)
 			o.op = (uint8_t)(PROTO_COP_STAT + i);
@@ -707,6 +772,10 @@ static int cmd_cache_op(int argc, char **argv, struct ctl_target *t)
 				return fail(what, -EINVAL, err);
 			o.filter |= PROTO_COF_LEVELS;
 			break;
+		case 'c':
+			coverage = optarg;
+			o.filter |= PROTO_COF_POLYGON;
+			break;
 		case 'j': o.json = true; break;
 		default: cmd_usage(stderr); return 2;
 		}
@@ -714,7 +783,9 @@ static int cmd_cache_op(int argc, char **argv, struct ctl_target *t)
 	int npos = argc - optind;
 	const char *why = NULL;
 	if (o.filter && o.op != PROTO_COP_PURGE)
-		why = "--bbox and --levels go with purge";
+		why = "--bbox, --coverage and --levels go with purge";
+	else if ((o.filter & PROTO_COF_BBOX) && (o.filter & PROTO_COF_POLYGON))
+		why = "give --bbox or --coverage, not both";
 	else if (o.op == PROTO_COP_PURGE && npos != 1)
 		why = "want PLANET";
 	else if (o.op == PROTO_COP_GC && npos != 0)
@@ -726,12 +797,28 @@ static int cmd_cache_op(int argc, char **argv, struct ctl_target *t)
 		return 2;
 	}
 	o.planet = npos ? argv[optind] : NULL;
+	struct coverage cv = { 0 };
+	if (coverage) {
+		if ((status = load_coverage(what, coverage, &cv)) >= 0)
+			return status;
+		o.nrings = cv.nrings;
+		o.npoints = cv.npoints;
+		o.rings = cv.rings;
+		o.points = cv.pts;
+	}
 	struct net_conn *conn;
-	if (connect_or_complain(t, &conn))
-		return 1;
-	int rc = ctl_cache_op(conn, &o, t->timeout_ms, stdout, err);
-	net_close(conn);
-	return rc ? fail(what, rc, err) : 0;
+	int rc = 0;
+	if (connect_or_complain(t, &conn)) {
+		status = 1;
+	} else {
+		rc = ctl_cache_op(conn, &o, t->timeout_ms, stdout, err);
+		net_close(conn);
+		status = rc ? fail(what, rc, err) : 0;
+	}
+#ifndef CTL_THIN
+	coverage_free(&cv);
+#endif
+	return status;
 }
 
 static int cmd_cache(int argc, char **argv, struct ctl_target *t)
@@ -781,6 +868,7 @@ static int cmd_cache(int argc, char **argv, struct ctl_target *t)
 struct prefetch_args {
 	struct ctl_prefetch_opts o;
 	struct proto_lonlat *pts; /* --path, owned (free()) */
+	const char *coverage;	  /* --coverage FILE */
 	bool levels, width, dry_run;
 };
 
@@ -791,10 +879,18 @@ static int prefetch_option(int c, const char *s, struct prefetch_args *pa)
 	struct ctl_prefetch_opts *o = &pa->o;
 	char err[256];
 	switch (c) {
+	case 'c':
+		if (o->shape) {
+			err_set(err, "give one --bbox, --path or --coverage");
+			return fail("prefetch", -EINVAL, err);
+		}
+		pa->coverage = s;
+		o->shape = PROTO_SHAPE_POLYGON;
+		return 0;
 	case 'b':
 	case 'p':
 		if (o->shape) {
-			err_set(err, "give one --bbox or one --path");
+			err_set(err, "give one --bbox, --path or --coverage");
 			return fail("prefetch", -EINVAL, err);
 		}
 		if (c == 'b' ? ctl_parse_bbox(s, &o->bbox, err)
@@ -824,14 +920,14 @@ static int check_prefetch_args(const struct prefetch_args *pa, int npos)
 {
 	const char *why = NULL;
 	if (npos != 1)
-		why = "want PLANET and --bbox or --path";
+		why = "want PLANET and --bbox, --path or --coverage";
 	else if (!pa->o.shape)
-		why = "give --bbox W,S,E,N or --path LAT,LON:LAT,LON";
+		why = "give --bbox W,S,E,N, --path LAT,LON:LAT,LON or --coverage FILE";
 	else if (!pa->levels)
 		why = "--levels A-B is required";
 	else if (pa->o.shape == PROTO_SHAPE_PATH && !pa->width)
 		why = "--path needs --width KM";
-	else if (pa->o.shape == PROTO_SHAPE_BBOX && pa->width)
+	else if (pa->o.shape != PROTO_SHAPE_PATH && pa->width)
 		why = "--width goes with --path";
 	else if (pa->o.json && !pa->dry_run)
 		why = "--json goes with --dry-run";
@@ -851,7 +947,8 @@ static int parse_prefetch_args(int argc, char **argv, struct ctl_target *t,
 		{ "bbox", required_argument, NULL, 'b' },   { "path", required_argument, NULL, 'p' },
 		{ "width", required_argument, NULL, 'w' },  { "levels", required_argument, NULL, 'l' },
 		{ "layers", required_argument, NULL, 'y' }, { "dry-run", no_argument, NULL, 'n' },
-		{ "json", no_argument, NULL, 'j' },	    { 0, 0, 0, 0 },
+		{ "json", no_argument, NULL, 'j' },	    { "coverage", required_argument, NULL, 'c' },
+		{ 0, 0, 0, 0 },
 	};
 	*pa = (struct prefetch_args){ 0 };
 	int c, status;
@@ -914,7 +1011,14 @@ static int prefetch(const struct ctl_target *t, const struct ctl_prefetch_opts *
 static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 {
 	struct prefetch_args pa;
+	struct coverage cv = { 0 };
 	int status = parse_prefetch_args(argc, argv, t, &pa);
+	if (status < 0 && pa.coverage && (status = load_coverage("prefetch", pa.coverage, &cv)) < 0) {
+		pa.o.rings = cv.rings;
+		pa.o.nrings = cv.nrings;
+		pa.o.points = cv.pts;
+		pa.o.npoints = cv.npoints;
+	}
 	if (status < 0 && pa.dry_run) {
 		struct net_conn *conn;
 		if (connect_or_complain(t, &conn)) {
@@ -929,7 +1033,22 @@ static int cmd_prefetch(int argc, char **argv, struct ctl_target *t)
 		status = prefetch(t, &pa.o);
 	}
 	free(pa.pts);
+#ifndef CTL_THIN
+	coverage_free(&cv);
+#endif
 	return status;
+}
+
+/* Whether the command line names a --coverage file (read with GDAL: clipmapctl-offline). */
+static bool wants_coverage(int argc, char **argv)
+{
+	for (int i = 1; i < argc; i++) {
+		if (strcmp(argv[i], "--") == 0)
+			return false;
+		if (strcmp(argv[i], "--coverage") == 0 || strncmp(argv[i], "--coverage=", 11) == 0)
+			return true;
+	}
+	return false;
 }
 
 /* The command named argv[0], with t from the global options. */
@@ -937,6 +1056,13 @@ static int run_command(int argc, char **argv, struct ctl_target *t)
 {
 	const char *cmd = argv[0];
 	current_cmd = cmd;
+#ifdef CTL_THIN
+	/* a coverage file is read with GDAL, which only clipmapctl-offline loads */
+	if ((!strcmp(cmd, "prefetch") || !strcmp(cmd, "cache")) && wants_coverage(argc, argv))
+		return run_offline(argc, argv, t);
+#else
+	(void)wants_coverage;
+#endif
 	if (strcmp(cmd, "status") == 0)
 		return cmd_status(argc, argv, t);
 	if (strcmp(cmd, "cache") == 0)

@@ -246,7 +246,9 @@ int ctl_cache_op(struct net_conn *c, const struct ctl_cache_op_opts *o, int time
 			       .cache_op = { .req = req, .op = o->op,
 					     .planet = o->planet ? o->planet : "",
 					     .filter = o->filter, .bbox = o->bbox, .lmin = o->lmin,
-					     .lmax = o->lmax } };
+					     .lmax = o->lmax, .nrings = o->nrings,
+					     .npoints = o->npoints, .rings = o->rings,
+					     .points = o->points } };
 	int rc = net_send(c, &q, err);
 	if (rc)
 		return rc;

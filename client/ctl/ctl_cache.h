@@ -37,6 +37,10 @@ struct ctl_cache_op_opts {
 	uint8_t filter;	    /* PROTO_COF_* (purge) */
 	struct geo_rect bbox;
 	uint8_t lmin, lmax;
+	/* with PROTO_COF_POLYGON: the polygon (borrowed; client/ctl/coverage.h) */
+	uint32_t nrings, npoints;
+	const uint32_t *rings;
+	const struct proto_lonlat *points;
 	bool json;
 };
 

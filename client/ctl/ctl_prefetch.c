@@ -186,7 +186,8 @@ int ctl_prefetch_dry(struct net_conn *c, const struct ctl_prefetch_opts *o, int 
 						 .layers = mask, .shape = o->shape, .lmin = o->lmin,
 						 .lmax = o->lmax, .bbox = o->bbox,
 						 .width_m = o->width_m, .npoints = o->npoints,
-						 .points = o->points } };
+						 .points = o->points, .nrings = o->nrings,
+						 .rings = o->rings } };
 	if ((rc = net_send(c, &q, err)))
 		return rc;
 	struct proto_msg r = { 0 };
@@ -254,7 +255,8 @@ int ctl_prefetch_run(struct net_conn *c, const struct ctl_prefetch_opts *o,
 				.prefetch = { .id = r.id, .planet = o->planet, .layers = mask,
 					      .shape = o->shape, .lmin = o->lmin, .lmax = o->lmax,
 					      .bbox = o->bbox, .width_m = o->width_m,
-					      .npoints = o->npoints, .points = o->points } };
+					      .npoints = o->npoints, .points = o->points,
+					      .nrings = o->nrings, .rings = o->rings } };
 	rc = net_send(c, &pf, err);
 	if (rc)
 		return rc;

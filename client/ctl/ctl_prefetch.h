@@ -1,5 +1,5 @@
 /* ctl_prefetch — `clipmapctl prefetch`: starts a PREFETCH job (a bbox or a path corridor over
- * a level range), shows its progress (a redrawn bar on a terminal, a plain line per second
+ * a polygon coverage, over a level range), shows its progress (a redrawn bar on a terminal, a plain line per second
  * otherwise) and a summary, and cancels it when stop_fd becomes readable (the caller turns
  * SIGINT into that, e.g. with a signalfd).
  * No state of its own; the connection has one owner thread.
@@ -14,10 +14,12 @@
 struct ctl_prefetch_opts {
 	const char *planet;
 	const char *layers;	/* "a,b" layer names; NULL: every layer */
-	uint8_t shape;		/* PROTO_SHAPE_BBOX or PROTO_SHAPE_PATH */
+	uint8_t shape;		/* PROTO_SHAPE_BBOX, _PATH or _POLYGON */
 	struct geo_rect bbox;
-	const struct proto_lonlat *points; /* path, borrowed */
+	const struct proto_lonlat *points; /* path or polygon, borrowed */
 	uint32_t npoints;
+	const uint32_t *rings; /* polygon: points per ring, borrowed */
+	uint32_t nrings;
 	double width_m;
 	uint8_t lmin, lmax;
 	bool json; /* --dry-run: the estimate as JSON */

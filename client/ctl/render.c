@@ -174,7 +174,8 @@ int render_layer(const struct planet *p, const char *layer, const struct render_
 	out->pixels = xmalloc(px * (out->is_float ? 4 : (size_t)out->channels));
 
 	struct cache *c = cache_create((o->cache_mb ? o->cache_mb : 1024) << 20);
-	struct sched *s = sched_create(&(struct sched_desc){ .cache = c, .workers = o->workers });
+	struct sched *s = sched_create(
+		&(struct sched_desc){ .cache = c, .workers = o->workers, .store = o->store });
 	size_t total = (size_t)cols * rows, done = 0;
 	int rc = 0;
 	struct want w[2 * BATCH];

@@ -10,11 +10,14 @@
 
 #include "common/grid.h"
 #include "engine/planet.h"
+#include "engine/store.h"
 
 struct render_opts {
 	int workers;	  /* 0: one per CPU */
 	size_t cache_mb;  /* 0: 1024 */
 	int shade;	  /* colour pictures: multiply by a hillshade from the "normal" layer */
+	struct store *store; /* borrowed, optional: a disk tier under the cache (store.h), read
+			      * and filled — possibly the one a running clipmapd uses */
 	void (*progress)(void *ud, size_t done, size_t total);
 	void *ud;
 };

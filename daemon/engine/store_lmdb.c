@@ -1,8 +1,9 @@
-/* store_lmdb — the disk tier: one LMDB file (MDB_NOSUBDIR) with three databases:
+/* store_lmdb — the disk tier: one LMDB file (MDB_NOSUBDIR) with four databases:
  *   tiles  key (18 bytes, store.h) → value (store.c's format: header, checksum, zstd payload)
  *   meta   key → stamp u64, accounted bytes u32, value length u32 (little-endian), keep u8
  *   lru    keep u8 ‖ stamp u64 big-endian ‖ key → empty: incidental entries oldest first,
  *          then prefetched ones oldest first — the order eviction takes them in
+ *   info   "totals" → accounted bytes u64, tiles u64, next stamp u64 (little-endian)
  * A stamp is a store-wide counter (continued across restarts from the largest in lru), set on
  * write and refreshed on every hit (keeping the entry's class), so eviction takes lru's first
  * entries: prefetched tiles go only once no incidental one is left.
@@ -23,10 +24,20 @@
  * being committed (newest first; a delete hides an older put), so a tile put a moment ago is
  * found — bulk work written only to the store is not generated twice while it waits.
  *
+ * Several processes, one file (clipmapd and `clipmapctl render --store`, docs/man/clipmapd.8):
+ * LMDB serialises write transactions across processes, and every one reads the totals from
+ * info when it begins and writes them back before it commits, so each writer accounts and
+ * evicts against what the file holds, whoever wrote it; stamps continue from info's, so the
+ * LRU order is one order for every process. Each process evicts down to its own budget (the
+ * smallest budget wins: give them the same). stat re-reads info, so it counts the other
+ * processes' tiles too. The map is at least as large as the file's (another process may have
+ * opened it with a larger budget).
+ *
  * Locks: mu protects the queue, the batch's count (inflight: the batch's keys and tiles may
  * be read under mu while it is non-zero), the stop flag, the flush sequence numbers and the
- * write error; nothing is encoded or written under it. Counters are atomics. The writer alone
- * writes the accounted bytes, tile count and stamp (atomics, read by stat).
+ * write error; nothing is encoded or written under it. Counters are atomics. The accounted
+ * bytes, tile count and stamp are atomics too: the writer sets them after each commit and stat
+ * from the file's totals.
  */
 #include <errno.h>
 #include <lmdb.h>
@@ -63,7 +74,7 @@ struct wop {
 struct lstore {
 	struct store base;
 	MDB_env *env;
-	MDB_dbi tiles, meta, lru;
+	MDB_dbi tiles, meta, lru, info;
 	char *path;
 	uint64_t budget, mapsize;
 	size_t psize;
@@ -108,6 +119,33 @@ static void mark_broken(struct lstore *s)
 	xmutex_lock(&s->mu);
 	xcond_signal(&s->cv);
 	xmutex_unlock(&s->mu);
+}
+
+static void rdlock(struct lstore *s);
+static void rwunlock(struct lstore *s);
+
+/* mdb_txn_begin, first adopting a map another process sharing the file has grown
+ * (MDB_MAP_RESIZED: it opened the file with a larger budget). Called with envlock held shared
+ * and no transaction of the caller's open; takes the lock exclusive for the resize (no
+ * transaction of this process is open then) and shared again. The exclusive lock is tried for
+ * 2 s at most (a thread holding the lock shared twice, or a long listing, would keep it): then
+ * this one attempt fails (MDB_MAP_RESIZED) and a later one resizes. */
+static int begin(struct lstore *s, unsigned flags, MDB_txn **txn)
+{
+	int rc = s->env ? mdb_txn_begin(s->env, NULL, flags, txn) : EIO;
+	if (rc != MDB_MAP_RESIZED)
+		return rc;
+	rwunlock(s);
+	bool got = false;
+	for (int i = 0; i < 2000 && !(got = pthread_rwlock_trywrlock(&s->envlock) == 0); i++)
+		usleep(1000);
+	if (got) {
+		if (s->env)
+			mdb_env_set_mapsize(s->env, 0);
+		rwunlock(s);
+	}
+	rdlock(s);
+	return s->env ? mdb_txn_begin(s->env, NULL, flags, txn) : EIO;
 }
 
 static void rdlock(struct lstore *s)
@@ -191,6 +229,35 @@ static void lru_key(uint8_t lk[LRU_LEN], uint8_t keep, uint64_t stamp,
 	lk[0] = keep;
 	be64(lk + 1, stamp);
 	memcpy(lk + 9, kb, STORE_KEY_LEN);
+}
+
+#define TOTALS_LEN 24
+static const char totals_key[] = "totals";
+
+/* The file's totals (info) as txn sees them. Returns 0, or MDB_NOTFOUND (not written yet). */
+static int totals_get(struct lstore *s, MDB_txn *txn, uint64_t *nb, uint64_t *nt,
+		      uint64_t *stamp)
+{
+	MDB_val k = { sizeof totals_key - 1, (void *)totals_key }, v;
+	int rc = mdb_get(txn, s->info, &k, &v);
+	if (rc)
+		return rc;
+	if (v.mv_size != TOTALS_LEN)
+		return MDB_NOTFOUND; /* foreign: recomputed by the next open */
+	*nb = rle64(v.mv_data);
+	*nt = rle64((const uint8_t *)v.mv_data + 8);
+	*stamp = rle64((const uint8_t *)v.mv_data + 16);
+	return 0;
+}
+
+static int totals_put(struct lstore *s, MDB_txn *txn, uint64_t nb, uint64_t nt, uint64_t stamp)
+{
+	uint8_t b[TOTALS_LEN];
+	le64(b, nb);
+	le64(b + 8, nt);
+	le64(b + 16, stamp);
+	MDB_val k = { sizeof totals_key - 1, (void *)totals_key }, v = { TOTALS_LEN, b };
+	return mdb_put(txn, s->info, &k, &v, 0);
 }
 
 /* ---- the queue ---- */
@@ -332,11 +399,22 @@ static int evict_to(struct lstore *s, MDB_txn *txn, uint64_t target, uint64_t *n
 static int apply(struct lstore *s, struct wop *ops, size_t n, uint64_t extra_evict)
 {
 	MDB_txn *txn;
-	int rc = mdb_txn_begin(s->env, NULL, 0, &txn);
+	int rc = begin(s, 0, &txn);
 	if (rc)
 		return rc;
 	uint64_t nb = atomic_load(&s->bytes), nt = atomic_load(&s->ntiles);
 	uint64_t stamp = atomic_load(&s->stamp), evicted = 0, written = 0;
+	/* what the file holds now: other processes may have written since our last batch */
+	uint64_t fb, ft, fs;
+	if ((rc = totals_get(s, txn, &fb, &ft, &fs)) == 0) {
+		nb = fb;
+		nt = ft;
+		stamp = fs > stamp ? fs : stamp;
+	} else if (rc != MDB_NOTFOUND) {
+		mdb_txn_abort(txn);
+		return rc;
+	}
+	rc = 0;
 	if (extra_evict)
 		rc = evict_to(s, txn, nb > extra_evict ? nb - extra_evict : 0, &nb, &nt, &evicted);
 	for (size_t i = 0; i < n && rc == 0; i++) {
@@ -367,6 +445,8 @@ static int apply(struct lstore *s, struct wop *ops, size_t n, uint64_t extra_evi
 	}
 	if (rc == 0 && s->budget && nb > s->budget)
 		rc = evict_to(s, txn, s->budget / 10 * 9, &nb, &nt, &evicted);
+	if (rc == 0)
+		rc = totals_put(s, txn, nb, nt, stamp);
 	if (rc == 0)
 		rc = mdb_txn_commit(txn);
 	else
@@ -499,7 +579,7 @@ static int l_get(struct store *base, const struct tile_key *k, enum pix_type typ
 	store_key_encode(k, kb);
 	MDB_txn *txn;
 	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	int rc = begin(s, MDB_RDONLY, &txn);
 	if (rc) {
 		rwunlock(s);
 		if (fatal(rc))
@@ -546,7 +626,7 @@ static bool l_contains(struct store *base, const struct tile_key *k)
 	store_key_encode(k, kb);
 	MDB_txn *txn;
 	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, &txn) : EIO;
+	int rc = begin(s, MDB_RDONLY, &txn);
 	if (rc) {
 		rwunlock(s);
 		if (fatal(rc))
@@ -592,7 +672,7 @@ static int l_del(struct store *base, const struct tile_key *k)
 static int read_cursor(struct lstore *s, MDB_dbi db, MDB_txn **txn, MDB_cursor **c)
 {
 	rdlock(s);
-	int rc = s->env ? mdb_txn_begin(s->env, NULL, MDB_RDONLY, txn) : EIO;
+	int rc = begin(s, MDB_RDONLY, txn);
 	if (rc) {
 		rwunlock(s);
 		if (fatal(rc))
@@ -678,6 +758,18 @@ static void l_stat(struct store *base, struct store_stats *o)
 {
 	struct lstore *s = (struct lstore *)base;
 	struct stat st;
+	/* the file's totals: other processes' tiles count too */
+	rdlock(s);
+	MDB_txn *txn;
+	if (begin(s, MDB_RDONLY, &txn) == 0) {
+		uint64_t nb, nt, stamp;
+		if (totals_get(s, txn, &nb, &nt, &stamp) == 0) {
+			atomic_store(&s->bytes, nb);
+			atomic_store(&s->ntiles, nt);
+		}
+		mdb_txn_abort(txn);
+	}
+	rwunlock(s);
 	*o = (struct store_stats){
 		.tiles = atomic_load(&s->ntiles), .bytes = atomic_load(&s->bytes),
 		.budget = s->budget, .hits = atomic_load(&s->hits),
@@ -771,7 +863,8 @@ static int open_env(struct lstore *s, char err[256])
 		goto fail;
 	if ((rc = mdb_dbi_open(txn, "tiles", MDB_CREATE, &s->tiles)) ||
 	    (rc = mdb_dbi_open(txn, "meta", MDB_CREATE, &s->meta)) ||
-	    (rc = mdb_dbi_open(txn, "lru", MDB_CREATE, &s->lru))) {
+	    (rc = mdb_dbi_open(txn, "lru", MDB_CREATE, &s->lru)) ||
+	    (rc = mdb_dbi_open(txn, "info", MDB_CREATE, &s->info))) {
 		mdb_txn_abort(txn);
 		goto fail;
 	}
@@ -797,8 +890,21 @@ static int open_env(struct lstore *s, char err[256])
 		mdb_txn_abort(txn);
 		goto fail;
 	}
+	/* the totals every process sharing the file keeps up to date from now on */
+	uint64_t fb, ft, fs;
+	if (totals_get(s, txn, &fb, &ft, &fs) == 0 && fs > stamp)
+		stamp = fs;
+	if ((rc = totals_put(s, txn, nb, nt, stamp))) {
+		mdb_txn_abort(txn);
+		goto fail;
+	}
 	if ((rc = mdb_txn_commit(txn)))
 		goto fail;
+	/* another process may have opened the file with a larger map: never a smaller one */
+	if ((rc = mdb_env_info(s->env, &info)))
+		goto fail;
+	if (info.me_mapsize > s->mapsize)
+		s->mapsize = info.me_mapsize;
 	atomic_store(&s->bytes, nb);
 	atomic_store(&s->ntiles, nt);
 	atomic_store(&s->stamp, stamp);

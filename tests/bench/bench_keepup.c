@@ -17,6 +17,16 @@
  * 50 m) for quick runs; KEEPUP_V=R one trial per row at R × the seed's velocity (for A/B
  * comparisons); KEEPUP_DEBUG=1 prints every frame; KEEPUP_AHEAD=0 no look-ahead along the
  * motion (view_clipmap_motion); KEEPUP_DRAIN=0 no reading between frames.
+ * KEEPUP_ROUTE=equator|46n|70n|pole: where the route runs (default equator: from (0°, 20°E)
+ * heading 80°, where lx = ly + 1 at every level; 46n: from (46°N, 7°E) heading 90°, the Alps,
+ * where viewers use lx = ly; 70n: from (70°N, 20°E) heading 90°; pole: from (88°N, 0°)
+ * heading 0°, over the north pole).
+ * The "restarted" configurations ("procedural restarted", "earth restarted"; run with
+ * KEEPUP_FULL=1 or chosen by KEEPUP_ONLY=restarted) prefetch the route into a disk store
+ * ([store] path in the daemon's temporary directory), stop the daemon (SIGTERM, its write
+ * queue drained first), start a fresh one on the same store (a cold memory cache), and fly:
+ * each trial line and the table give the tiles generated during the flight (goal 0) and
+ * while hovering at the start, besides the keep-up ratio (ours/seed).
  * Single-threaded (the daemon is a separate process); owns everything it creates.
  */
 #include <math.h>
@@ -61,10 +71,31 @@ static const struct {
 	{ 800, 640, "6-16" },	 { 200, 160, "7-17" },	 { 50, 40, "8-20" },
 };
 
-/* The route: a great circle from (0°, 20°E) heading 80°, where lx = ly + 1 for every level. */
-#define START_LAT 0.0
-#define START_LON 20.0
-#define HEADING 80.0
+/* The route: a great circle from (start_lat, start_lon) heading `heading` (KEEPUP_ROUTE; the
+ * default from (0°, 20°E) heading 80°, where lx = ly + 1 for every level). */
+static double start_lat = 0.0, start_lon = 20.0, heading = 80.0;
+static const char *route_name = "equator";
+
+/* KEEPUP_ROUTE into the route. Returns false on an unknown name. */
+static bool set_route(const char *name)
+{
+	static const struct {
+		const char *name;
+		double lat, lon, heading;
+	} routes[] = { { "equator", 0.0, 20.0, 80.0 },
+		       { "46n", 46.0, 7.0, 90.0 },
+		       { "70n", 70.0, 20.0, 90.0 },
+		       { "pole", 88.0, 0.0, 0.0 } };
+	for (size_t i = 0; i < sizeof routes / sizeof routes[0]; i++)
+		if (strcmp(name, routes[i].name) == 0) {
+			start_lat = routes[i].lat;
+			start_lon = routes[i].lon;
+			heading = routes[i].heading;
+			route_name = routes[i].name;
+			return true;
+		}
+	return false;
+}
 
 static void sleep_until(double t)
 {
@@ -79,9 +110,9 @@ static void sleep_until(double t)
  * for a straight flight). */
 static void route_point(double a, double s, double *lat, double *lon)
 {
-	double p1 = START_LAT * DEG, th = HEADING * DEG, d = s / a;
+	double p1 = start_lat * DEG, th = heading * DEG, d = s / a;
 	double p2 = asin(sin(p1) * cos(d) + cos(p1) * sin(d) * cos(th));
-	double l2 = START_LON * DEG + atan2(sin(th) * sin(d) * cos(p1), cos(d) - sin(p1) * sin(p2));
+	double l2 = start_lon * DEG + atan2(sin(th) * sin(d) * cos(p1), cos(d) - sin(p1) * sin(p2));
 	*lat = p2 / DEG;
 	*lon = remainder(l2 / DEG, 360.0);
 }
@@ -93,17 +124,19 @@ static void route_point(double a, double s, double *lat, double *lon)
  * its memory as a running daemon's does); prefetched ones with a cache that holds the whole
  * route, as an operator who prefetches a route would size it. Call daemon_env_fini after,
  * also on failure. */
-static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, char *name,
-			size_t nname, char err[256])
+static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, bool store,
+			char *name, size_t nname, char err[256])
 {
-	char cache[64];
+	char cache[64], path[200];
 	snprintf(cache, sizeof cache, "engine.cache_mb = %d", cache_mb);
-	const char *const set[] = { "engine.workers = 0", cache, "session.max_rate = 0", NULL };
 	int rc = daemon_env_init(d, "bench_keepup");
 	if (rc) {
 		err_set(err, "temporary directory: %s", strerror(-rc));
 		return rc;
 	}
+	snprintf(path, sizeof path, "store.path = %s/tiles.lmdb", d->dir);
+	const char *const set[] = { "engine.workers = 0", cache, "session.max_rate = 0",
+				    store ? path : NULL, "store.disk_mb = 16384", NULL };
 	rc = daemon_env_planet_copy(d, planet, name, nname);
 	if (rc) {
 		err_set(err, "cannot prepare %s from %s", d->planets, planet);
@@ -115,7 +148,7 @@ static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, 
 /* ---- daemon statistics ----------------------------------------------------------------- */
 
 struct dstats {
-	uint64_t generated, hits, misses, workers;
+	uint64_t generated, hits, misses, workers, disk_hits, queued;
 	int nnodes;
 	struct {
 		char name[64];
@@ -145,6 +178,10 @@ static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
 			out->misses = s->u;
 		else if (strcmp(s->key, "sched.workers") == 0)
 			out->workers = s->u;
+		else if (strcmp(s->key, "store.disk.hits") == 0)
+			out->disk_hits = s->u;
+		else if (strcmp(s->key, "store.disk.queued") == 0)
+			out->queued = s->u;
 		else if (strncmp(s->key, "node.", 5) == 0) {
 			/* node.PLANET.NODE.generated / .mean_ms, in that order */
 			const char *dot = strrchr(s->key, '.');
@@ -262,7 +299,7 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	double t0 = clock_now_s();
 	double ground = 0;
 	view_clipmap_ground(c->cm, lon, lat, &ground);
-	struct view_camera cam = { .lat = lat, .lon = lon, .alt = ground + agl, .heading = HEADING,
+	struct view_camera cam = { .lat = lat, .lon = lon, .alt = ground + agl, .heading = heading,
 				   .pitch = -10, .fov_y = 60, .width = WIDTH, .height = HEIGHT };
 	int lmin, lmax;
 	view_level_range(&c->body, &cam, agl, N_PHI, c->max_level, &lmin, &lmax);
@@ -354,6 +391,8 @@ struct trial {
 	double gen_per_s, hit_ratio, util, frame_p95_ms, late_frac;
 	double hover_s, prefetch_s;
 	uint64_t prefetch_tiles;
+	uint64_t gen_hover, gen_flight; /* tiles generated while hovering at the start, flying */
+	uint64_t disk_hits;		/* disk-tier hits, hover and flight */
 	char top_node[64];
 	double top_share;
 	double fine_lag; /* of the frames short of full detail: those missing only the 2 finest */
@@ -383,7 +422,7 @@ static void levels_at(const struct view_source *src, double agl, int *lmin, int 
 {
 	struct view_body b;
 	view_body_init(&b, src->planet.a, src->planet.f);
-	struct view_camera cam = { .lat = START_LAT, .lon = START_LON, .alt = agl, .fov_y = 60,
+	struct view_camera cam = { .lat = start_lat, .lon = start_lon, .alt = agl, .fov_y = 60,
 				   .width = WIDTH, .height = HEIGHT };
 	int ml = src->planet.max_level < GRID_MAX_LEVEL ? src->planet.max_level : GRID_MAX_LEVEL;
 	view_level_range(&b, &cam, agl, N_PHI, ml, lmin, lmax);
@@ -401,7 +440,8 @@ static int prefetch_route(struct net_conn *c, const char *planet, double a, doub
 		double tile_m = M_PI * a / (double)(1u << l); /* a tile's height at level l */
 		struct ctl_prefetch_opts o = { .planet = planet, .shape = PROTO_SHAPE_PATH,
 					       .points = pts, .npoints = NP,
-					       .width_m = 4 * tile_m, .lmin = (uint8_t)l,
+					       .width_m = fmin(4 * tile_m, PROTO_MAX_WIDTH),
+					       .lmin = (uint8_t)l,
 					       .lmax = (uint8_t)l };
 		struct ctl_prefetch_ui ui = { .stop_fd = -1, .stall_ms = 120000 };
 		struct proto_prefetch_progress fin = { 0 };
@@ -413,13 +453,52 @@ static int prefetch_route(struct net_conn *c, const char *planet, double a, doub
 	return 0;
 }
 
+enum mode { COLD, PREFETCHED, RESTARTED };
+
+/* The viewer's tile source on planet `name`, wrapped (copy_source_wrap). */
+static int open_source(const struct net_opts *no, const char *name, struct view_source **out,
+		       char err[256])
+{
+	int rc = view_source_net_create(no, name, out, err);
+	if (rc == 0)
+		*out = copy_source_wrap(*out);
+	return rc;
+}
+
+/* After a prefetch into the store: waits until its write queue is empty, then restarts the
+ * daemon on the same store (a cold memory cache) and connects again. */
+static int restart_daemon(struct daemon_env *d, struct net_conn **sc, const struct net_opts *no,
+			  char err[256])
+{
+	double t0 = clock_now_s();
+	for (;;) {
+		struct dstats st;
+		int rc = get_stats(*sc, &st, err);
+		if (rc)
+			return rc;
+		if (st.queued == 0)
+			break;
+		if (clock_now_s() - t0 > 120) {
+			err_set(err, "the store's write queue did not drain in 120 s");
+			return -ETIMEDOUT;
+		}
+		usleep(50000);
+	}
+	net_close(*sc);
+	*sc = NULL;
+	int rc = daemon_env_restart(d, err);
+	return rc ? rc : net_connect(no, sc, err);
+}
+
 static int run_trial(const struct ctx *x, const char *planet_ini, double agl, double v,
-		     bool prefetch, struct trial *tr)
+		     enum mode mode, struct trial *tr)
 {
 	memset(tr, 0, sizeof *tr);
+	bool prefetch = mode != COLD;
 	char err[256] = "", name[64];
 	struct daemon_env d;
-	int rc = daemon_start(&d, planet_ini, prefetch ? 8192 : 1024, name, sizeof name, err);
+	int rc = daemon_start(&d, planet_ini, prefetch ? 8192 : 1024, mode == RESTARTED, name,
+			      sizeof name, err);
 	struct net_conn *sc = NULL;
 	struct client c = { 0 };
 	struct frame *fr = NULL;
@@ -429,10 +508,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	rc = net_connect(&no, &sc, err);
 	if (rc)
 		goto out;
-	rc = view_source_net_create(&no, name, &c.src, err);
+	rc = open_source(&no, name, &c.src, err);
 	if (rc)
 		goto out;
-	c.src = copy_source_wrap(c.src);
 	const struct view_planet *p = &c.src->planet;
 	levels_at(c.src, agl, &tr->lmin, &tr->lmax);
 	double warm_s = 0.25, len = v * (x->trial_s + 0.5);
@@ -443,6 +521,21 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		if (rc)
 			goto out;
 	}
+	if (mode == RESTARTED) {
+		view_source_destroy(c.src);
+		c.src = NULL;
+		rc = restart_daemon(&d, &sc, &no, err);
+		if (rc)
+			goto out;
+		rc = open_source(&no, name, &c.src, err);
+		if (rc)
+			goto out;
+		p = &c.src->planet;
+	}
+	struct dstats sh;
+	rc = get_stats(sc, &sh, err);
+	if (rc)
+		goto out;
 	view_body_init(&c.body, p->a, p->f);
 	c.max_level = p->max_level < GRID_MAX_LEVEL ? p->max_level : GRID_MAX_LEVEL;
 	c.nlevels = c.max_level + 1;
@@ -456,7 +549,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	double t0 = clock_now_s(), done_at = -1;
 	struct frame f;
 	for (int k = 0;; k++) {
-		rc = client_frame(&c, START_LAT, START_LON, agl, &f);
+		rc = client_frame(&c, start_lat, start_lon, agl, &f);
 		if (rc)
 			goto out;
 		double t = clock_now_s();
@@ -530,6 +623,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	/* Daemon-side figures over the whole flight (warm-up included). */
 	double flight_s = fly + warm_s;
 	tr->gen_per_s = (double)(s1.generated - s0.generated) / flight_s;
+	tr->gen_flight = s1.generated - s0.generated;
+	tr->gen_hover = s0.generated - sh.generated;
+	tr->disk_hits = s1.disk_hits - sh.disk_hits;
 	uint64_t h = s1.hits - s0.hits, m = s1.misses - s0.misses;
 	tr->hit_ratio = h + m ? (double)h / (double)(h + m) : 1;
 	double busy = 0, top = 0;
@@ -603,9 +699,10 @@ static void limiting_stage(struct row *r)
 			 t->util * 100, t->hit_ratio * 100, load);
 }
 
-static void search(const struct ctx *x, const char *planet, bool prefetch, int i, bool fine,
+static void search(const struct ctx *x, const char *planet, enum mode mode, int i, bool fine,
 		   struct row *r)
 {
+	bool prefetch = mode != COLD;
 	memset(r, 0, sizeof *r);
 	r->alt = seed[i].alt;
 	r->seed_v = seed[i].vel;
@@ -620,7 +717,7 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 	double stop_ratio = fine ? 1.09 : 1.19;
 	while (r->trials < MAX_TRIALS) {
 		struct trial tr;
-		int rc = run_trial(x, planet, seed[i].alt, v, prefetch, &tr);
+		int rc = run_trial(x, planet, seed[i].alt, v, mode, &tr);
 		r->trials++;
 		if (rc || !tr.ok)
 			break;
@@ -629,11 +726,13 @@ static void search(const struct ctx *x, const char *planet, bool prefetch, int i
 		bool pass = tr.full >= 0.95;
 		fprintf(stderr, "  keepup %s%s %7.0f m  v %9.0f m/s: %5.1f%% full, %5.0f tiles/s, "
 				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, hover %.1f s, fine-lag %.0f%%, "
-				"load %.1f%s\n",
+				"load %.1f; generated %llu flying, %llu hovering, %llu disk hits%s\n",
 			strrchr(planet, '/') ? strrchr(planet, '/') + 1 : planet,
-			prefetch ? " prefetched" : "", seed[i].alt, v, tr.full * 100, tr.gen_per_s,
-			tr.hit_ratio * 100, tr.util * 100, tr.frame_p95_ms, tr.hover_s,
-			tr.fine_lag * 100, tr.load1, prefetch ? "" : "");
+			mode == RESTARTED ? " restarted" : prefetch ? " prefetched" : "", seed[i].alt,
+			v, tr.full * 100, tr.gen_per_s, tr.hit_ratio * 100, tr.util * 100,
+			tr.frame_p95_ms, tr.hover_s, tr.fine_lag * 100, tr.load1,
+			(unsigned long long)tr.gen_flight, (unsigned long long)tr.gen_hover,
+			(unsigned long long)tr.disk_hits, prefetch ? "" : "");
 		if (pass) {
 			lo = v;
 			r->pass = tr;
@@ -687,6 +786,7 @@ static void fmt_alt(double a, char *out, size_t n)
 struct config {
 	const char *label, *planet;
 	bool prefetch;
+	enum mode mode;
 	struct row rows[NALT];
 	bool run;
 	double seconds;
@@ -694,10 +794,10 @@ struct config {
 
 static void print_table(const struct config *cf, double trial_s)
 {
-	printf("keepup/%s: 60 Hz, full detail >= 95%% of %.1f s flights, 1280x720 levels, "
-	       "%.0f s in all\n", cf->label, trial_s, cf->seconds);
-	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s  %s\n", "altitude", "seed", "ours",
-	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "limiting stage");
+	printf("keepup/%s: route %s, 60 Hz, full detail >= 95%% of %.1f s flights, 1280x720 "
+	       "levels, %.0f s in all\n", cf->label, route_name, trial_s, cf->seconds);
+	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s %8s  %s\n", "altitude", "seed", "ours",
+	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "gen", "limiting stage");
 	for (int i = 0; i < NALT; i++) {
 		const struct row *r = &cf->rows[i];
 		char a[32], sv[32], ov[48], lv[16];
@@ -711,12 +811,14 @@ static void print_table(const struct config *cf, double trial_s)
 		}
 		snprintf(lv, sizeof lv, "%d-%d", r->lmin, r->lmax);
 		const struct trial *t = r->v > 0 ? &r->pass : &r->fail;
-		printf("  %-8s %-6s %-6s %11s %11s %6.1fx %9.0f %5.0f%%  %s\n", a, seed[i].levels, lv,
-		       sv, ov, r->v / r->seed_v, t->gen_per_s, t->hit_ratio * 100, r->limit);
+		printf("  %-8s %-6s %-6s %11s %11s %6.1fx %9.0f %5.0f%% %8llu  %s\n", a,
+		       seed[i].levels, lv, sv, ov, r->v / r->seed_v, t->gen_per_s,
+		       t->hit_ratio * 100, (unsigned long long)t->gen_flight, r->limit);
 	}
 	double worst = INFINITY;
 	for (int i = 0; i < NALT; i++)
-		worst = fmin(worst, cf->rows[i].v / cf->rows[i].seed_v);
+		if (strcmp(cf->rows[i].limit, "not run") != 0) /* KEEPUP_ALTS left it out */
+			worst = fmin(worst, cf->rows[i].v / cf->rows[i].seed_v);
 	printf("keepup/%s: lowest ours/seed %.1fx (target >= 10x)\n", cf->label, worst);
 }
 
@@ -930,6 +1032,12 @@ int main(int argc, char **argv)
 	x.drain = !getenv("KEEPUP_DRAIN") || atoi(getenv("KEEPUP_DRAIN")) > 0;
 	x.ahead = !getenv("KEEPUP_AHEAD") || atoi(getenv("KEEPUP_AHEAD")) > 0;
 	const char *only = getenv("KEEPUP_ONLY"); /* a label substring, for quick runs */
+	const char *route = getenv("KEEPUP_ROUTE");
+	if (route && !set_route(route)) {
+		fprintf(stderr, "bench_keepup: KEEPUP_ROUTE=%s: want equator, 46n, 70n or pole\n",
+			route);
+		return 2;
+	}
 	const char *alts = getenv("KEEPUP_ALTS"); /* row digits 0 (800 km) .. 8 (50 m) */
 	char err[256];
 	struct gl_context *glc;
@@ -944,17 +1052,23 @@ int main(int argc, char **argv)
 		  .prefetch = true },
 		{ .label = "earth cold", .planet = "conf/planets/earth.ini" },
 		{ .label = "earth prefetched", .planet = "conf/planets/earth.ini", .prefetch = true },
+		{ .label = "procedural restarted", .planet = "conf/planets/procedural.ini",
+		  .prefetch = true, .mode = RESTARTED },
+		{ .label = "earth restarted", .planet = "conf/planets/earth.ini", .prefetch = true,
+		  .mode = RESTARTED },
 	};
 	enum { NCF = sizeof cf / sizeof cf[0] };
 	bool have_earth = access("data/earth/etopo5.tif", R_OK) == 0;
 	for (int k = 0; k < NCF; k++) {
-		cf[k].run = full || !cf[k].prefetch;
-		if (k >= 2 && !have_earth)
+		if (cf[k].prefetch && cf[k].mode == COLD)
+			cf[k].mode = PREFETCHED;
+		cf[k].run = full || !cf[k].prefetch || (only && strstr(cf[k].label, only));
+		if (strncmp(cf[k].label, "earth", 5) == 0 && !have_earth)
 			cf[k].run = false;
 		if (only && !strstr(cf[k].label, only))
 			cf[k].run = false;
 	}
-	printf("keepup: %s, GL %s (%s); %s matrix (KEEPUP_FULL=1 for all four), flights %.1f s\n",
+	printf("keepup: %s, GL %s (%s); %s matrix (KEEPUP_FULL=1 for all), flights %.1f s\n",
 	       full ? "full" : "default", gl_context_backend(glc), gl_context_renderer(glc),
 	       full ? "full" : "reduced", x.trial_s);
 	if (!have_earth)
@@ -970,7 +1084,7 @@ int main(int argc, char **argv)
 							      .limit = "not run" };
 				continue;
 			}
-			search(&x, cf[k].planet, cf[k].prefetch, i, full, &cf[k].rows[i]);
+			search(&x, cf[k].planet, cf[k].mode, i, full, &cf[k].rows[i]);
 		}
 		cf[k].seconds = clock_now_s() - t0;
 		print_table(&cf[k], x.trial_s);

@@ -842,6 +842,74 @@ static void damaged_file_replaced_at_run_time(void **state)
 	net_close(op);
 }
 
+/* Writes text to the file name in the test's directory; its path in out. */
+static void write_in_dir(struct env *e, const char *name, const char *text, char *out, size_t n)
+{
+	snprintf(out, n, "%s/%s", e->d.dir, name);
+	FILE *f = fopen(out, "w");
+	assert_non_null(f);
+	fputs(text, f);
+	fclose(f);
+}
+
+/* Issue 13: prefetch --coverage and cache purge --coverage through the thin clipmapctl (which
+ * hands them to clipmapctl-offline, GDAL): a rectangle's dry run and job are its bbox's, the
+ * job runs to the end, purging the coverage removes its stored tiles (a bbox purge of the same
+ * place then finds none), and bad files are errors naming them (exit 2, as bad input). */
+static void coverage_prefetch_and_purge(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	if (!daemon_env_built(&e->d, "clipmapctl") || !daemon_env_built(&e->d, "clipmapctl-offline"))
+		skip();
+	static char out[1 << 16], out2[1 << 16];
+	char rect[256], line[256], missing[256];
+	write_in_dir(e, "rect.geojson",
+		     "{\"type\":\"Polygon\",\"coordinates\":[[[-30,10.5],[-29,10.5],[-29,11.5],"
+		     "[-30,11.5],[-30,10.5]]]}", rect, sizeof rect);
+	write_in_dir(e, "line.geojson",
+		     "{\"type\":\"LineString\",\"coordinates\":[[0,0],[1,1]]}", line,
+		     sizeof line);
+	snprintf(missing, sizeof missing, "%s/none.gpkg", e->d.dir);
+	assert_int_equal(ctl(e, out, sizeof out, "prefetch", "test", "--coverage", rect,
+			     "--levels", "3-8", "--dry-run", "--json", NULL), 0);
+	assert_int_equal(ctl(e, out2, sizeof out2, "prefetch", "test", "--bbox", "-30,10.5,-29,11.5",
+			     "--levels", "3-8", "--dry-run", "--json", NULL), 0);
+	printf("coverage dry run: %s", out);
+	uint64_t tiles = json_u(out, "\"tiles\": ");
+	assert_true(tiles > 0);
+	assert_int_equal(tiles, json_u(out2, "\"tiles\": "));
+	assert_int_equal(ctl(e, out, sizeof out, "prefetch", "test", "--coverage", rect,
+			     "--levels", "3-8", NULL), 0);
+	printf("coverage job: %s", out);
+	char want[96];
+	snprintf(want, sizeof want, "%llu of %llu tiles", (unsigned long long)tiles,
+		 (unsigned long long)tiles);
+	assert_non_null(strstr(out, want));
+	struct net_conn *s = conn(e, false);
+	wait_written(s);
+	net_close(s);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", "test", "--coverage", rect,
+			     "--levels", "8-8", "--json", NULL), 0);
+	printf("purge --coverage: %s", out);
+	assert_true(json_u(out, "\"removed\": ") > 0);
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", "test", "--bbox",
+			     "-29.9,10.6,-29.1,11.4", "--levels", "8-8", "--json", NULL), 0);
+	assert_int_equal(json_u(out, "\"removed\": "), 0);
+	/* bad files and usage */
+	assert_int_equal(ctl(e, out, sizeof out, "prefetch", "test", "--coverage", missing,
+			     "--levels", "1-2", NULL), 2);
+	printf("missing: %s", out);
+	assert_non_null(strstr(out, missing));
+	assert_int_equal(ctl(e, out, sizeof out, "cache", "purge", "test", "--coverage", line,
+			     NULL), 2);
+	printf("line: %s", out);
+	assert_non_null(strstr(out, line));
+	assert_non_null(strstr(out, "no polygon"));
+	assert_int_equal(ctl(e, out, sizeof out, "prefetch", "test", "--coverage", rect, "--bbox",
+			     "1,1,2,2", "--levels", "1-2", NULL), 2);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -852,6 +920,7 @@ int main(void)
 		cmocka_unit_test(caps_enforced), /* late: its cancelled jobs' tiles may still run */
 		cmocka_unit_test(restart_then_viewer_generates_nothing),
 		cmocka_unit_test(cache_maintenance),
+		cmocka_unit_test(coverage_prefetch_and_purge),
 		cmocka_unit_test(damaged_file_replaced_at_run_time),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

@@ -208,10 +208,9 @@ static uint32_t fetch(struct env *e, struct net_conn *c, uint32_t pid, uint32_t 
 /* Waits (bounded) until the writer has committed everything queued (write-behind). */
 static void wait_written(struct net_conn *c)
 {
-	uint64_t end = clock_now_ms() + 10000;
-	while (stat_of(c, "store.disk.queued") > 0 && clock_now_ms() < end)
-		usleep(20000);
-	assert_int_equal(stat_of(c, "store.disk.queued"), 0);
+	char err[256];
+	if (net_stat_wait_zero(c, "store.disk.queued", 10000, err))
+		fail_msg("%s", err);
 }
 
 static void restart(struct env *e, int sig)

@@ -4,8 +4,11 @@
 #include <errno.h>
 #include <stdio.h>
 #include <string.h>
+#include <unistd.h>
 
 #include "client/net.h"
+#include "common/clock.h"
+#include "common/errbuf.h"
 #include "common/proto.h"
 
 int net_stat_u64(struct net_conn *c, const char *key, uint64_t *out, char err[256])
@@ -39,4 +42,20 @@ uint32_t net_want_block(struct proto_want_entry *w, uint32_t n, uint32_t cap, in
 					.layer = l, .cls = PROTO_CLASS_VISIBLE, .lx = (uint8_t)(ly + 1),
 					.ly = (uint8_t)ly, .x = x % (2u << ly), .y = y };
 	return n;
+}
+
+int net_stat_wait_zero(struct net_conn *c, const char *key, int timeout_ms, char err[256])
+{
+	uint64_t end = clock_now_ms() + (uint64_t)timeout_ms, v;
+	for (;;) {
+		int rc = net_stat_u64(c, key, &v, err);
+		if (rc || v == 0)
+			return rc;
+		if (clock_now_ms() >= end) {
+			err_set(err, "%s still %llu after %d ms", key, (unsigned long long)v,
+				timeout_ms);
+			return -ETIMEDOUT;
+		}
+		usleep(20000);
+	}
 }

@@ -11,6 +11,11 @@ struct net_conn;
  * err says which), or -errno from the connection (err filled). */
 int net_stat_u64(struct net_conn *c, const char *key, uint64_t *out, char err[256]);
 
+/* Polls key (every 20 ms, at most timeout_ms) until it reads 0, e.g. store.disk.queued: the
+ * store's writer has committed everything queued. Returns 0, -ETIMEDOUT (err says the last
+ * value) or what net_stat_u64 returns. */
+int net_stat_wait_zero(struct net_conn *c, const char *key, int timeout_ms, char err[256]);
+
 struct proto_want_entry;
 
 /* Appends to w[n ..] (at most cap entries in all) both layers of every tile of level

@@ -24,66 +24,25 @@
 #include "common/xalloc.h"
 #include "engine/planet.h"
 #include "prefetch.h"
-
-struct keyset {
-	struct tile_key *k;
-	size_t n;
-};
-
-static int cmp_key(const void *a, const void *b)
-{
-	const struct tile_key *x = a, *y = b;
-	if (x->lx != y->lx)
-		return x->lx < y->lx ? -1 : 1;
-	if (x->ly != y->ly)
-		return x->ly < y->ly ? -1 : 1;
-	if (x->y != y->y)
-		return x->y < y->y ? -1 : 1;
-	if (x->x != y->x)
-		return x->x < y->x ? -1 : 1;
-	return 0;
-}
+#include "support/prefetch_keys.h"
 
 /* Every key the job yields (one layer), sorted; fails on a duplicate. The job's total, exact
  * once done, matches; the estimate made before is within a small factor of it. */
 static void job_keys(const struct planet *p, const struct proto_prefetch *m, struct keyset *ks)
 {
-	struct prefetch_iter *it;
+	uint64_t est;
 	char err[256];
-	if (prefetch_iter_create(p, m, PREFETCH_MAX_TILES, &it, err) != 0)
-		fail_msg("prefetch_iter_create: %s", err);
-	uint64_t est = prefetch_iter_total(it);
-	size_t cap = 1 << 16;
-	ks->k = xmalloc(cap * sizeof *ks->k);
-	ks->n = 0;
-	struct want w[512];
-	size_t got;
-	while ((got = prefetch_iter_next(it, w, 512)) > 0) {
-		if (ks->n + got > cap) {
-			cap *= 2;
-			ks->k = xrealloc(ks->k, cap * sizeof *ks->k);
-		}
-		for (size_t i = 0; i < got; i++)
-			ks->k[ks->n++] = w[i].key;
-	}
-	assert_int_equal(prefetch_iter_error(it, err), 0);
-	assert_int_equal(ks->n, prefetch_iter_total(it));
-	prefetch_iter_destroy(it);
-	double ratio = (double)est / (double)ks->n;
-	printf("  estimate %llu for %zu tiles (x%.2f)\n", (unsigned long long)est, ks->n, ratio);
-	assert_true(ratio >= 0.5 && ratio <= 4.0);
-	qsort(ks->k, ks->n, sizeof *ks->k, cmp_key);
-	for (size_t i = 1; i < ks->n; i++)
-		if (cmp_key(&ks->k[i - 1], &ks->k[i]) == 0)
-			fail_msg("tile (%u,%u) of level (%u,%u) twice", ks->k[i].x, ks->k[i].y,
-				 ks->k[i].lx, ks->k[i].ly);
+	if (prefetch_job_keys(p, m, ks, &est, err))
+		fail_msg("prefetch job: %s", err);
+	printf("  estimate %llu for %zu tiles (x%.2f)\n", (unsigned long long)est, ks->n,
+	       (double)est / (double)(ks->n ? ks->n : 1));
 }
 
 static bool has(const struct keyset *ks, const struct tile_key *k)
 {
 	struct tile_key probe = *k;
 	probe.node = 0;
-	return bsearch(&probe, ks->k, ks->n, sizeof *ks->k, cmp_key) != NULL;
+	return keyset_has(ks, &probe);
 }
 
 /* What a viewer focused at (lat, lon) asks for at level ly holding lx: its window and ring.
@@ -163,10 +122,10 @@ static void bbox_covers_viewers(void **state)
 					}
 				}
 		}
-		qsort(want.k, want.n, sizeof *want.k, cmp_key);
+		qsort(want.k, want.n, sizeof *want.k, tile_key_cmp);
 		size_t distinct = want.n ? 1 : 0;
 		for (size_t i = 1; i < want.n; i++)
-			distinct += cmp_key(&want.k[i - 1], &want.k[i]) != 0;
+			distinct += tile_key_cmp(&want.k[i - 1], &want.k[i]) != 0;
 		printf("bbox at %.1f,%.1f: %zu tiles in the job, %zu asked for by viewers, %zu "
 		       "missing\n",
 		       lat, lon, ks.n, distinct, missing);

@@ -8,6 +8,7 @@
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <cmocka.h>
@@ -39,6 +40,7 @@ struct fixture {
 	struct proto_stat stats[4];
 	struct proto_cache_entry entries[PROTO_MAX_CACHE_ENTRIES];
 	struct proto_lonlat points[PROTO_MAX_PATH];
+	uint32_t rings[3];
 	uint8_t payload[64 * 64 * 4];
 	struct proto_msg msgs[40];
 	int nmsgs;
@@ -191,6 +193,20 @@ static struct fixture *fixture_create(void)
 		.prefetch_dry = { .id = 9, .planet = "earth", .layers = 0, .shape = PROTO_SHAPE_PATH,
 				  .lmin = 3, .lmax = 9, .width_m = PROTO_MAX_WIDTH, .npoints = 2,
 				  .points = f->points } };
+	/* a polygon: three rings (a hole, another part) over the path's points */
+	f->rings[0] = 5;
+	f->rings[1] = 3;
+	f->rings[2] = 4;
+	*m++ = (struct proto_msg){
+		.type = PROTO_PREFETCH,
+		.prefetch = { .id = 11, .planet = "earth", .layers = 1, .shape = PROTO_SHAPE_POLYGON,
+			      .lmin = 0, .lmax = 12, .nrings = 3, .rings = f->rings, .npoints = 12,
+			      .points = f->points } };
+	*m++ = (struct proto_msg){ .type = PROTO_CACHE_OP,
+				   .cache_op = { .req = 4, .op = PROTO_COP_PURGE, .planet = "earth",
+						 .filter = PROTO_COF_POLYGON | PROTO_COF_LEVELS,
+						 .lmin = 2, .lmax = 9, .nrings = 2, .npoints = 8,
+						 .rings = f->rings, .points = f->points } };
 	static const struct proto_estimate_level lv[GRID_MAX_LEVEL + 1] = {
 		{ 0, 36, 1 << 20 }, { 30, UINT64_MAX, 0 } };
 	*m++ = (struct proto_msg){
@@ -305,6 +321,47 @@ static void prefetch_width_bounded(void **state)
 }
 
 /* Decoded fields are what was sent (a few spot checks beyond the byte equality above). */
+/* A polygon's counts are checked before anything is allocated: a ring of 2^31 points, rings
+ * summing past PROTO_MAX_POLY, a ring of 2 points and more rings than the cap are refused. */
+static void polygon_counts_bounded(void **state)
+{
+	(void)state;
+	struct proto_lonlat pts[8] = { { 0, 0 }, { 1, 0 }, { 1, 1 }, { 0, 1 },
+				       { 5, 5 }, { 6, 5 }, { 6, 6 }, { 5, 6 } };
+	uint32_t rings[2] = { 4, 4 };
+	struct proto_msg m = { .type = PROTO_PREFETCH,
+			       .prefetch = { .id = 1, .planet = "earth", .shape = PROTO_SHAPE_POLYGON,
+					     .lmax = 3, .nrings = 2, .rings = rings, .npoints = 8,
+					     .points = pts } };
+	char err[256];
+	struct pbuf a;
+	pbuf_init(&a);
+	assert_true(proto_encode(&a, &m, err) > 0);
+	size_t at = a.len - 8 * 16 - 2 * 4 - 4; /* the ring count */
+	static const struct {
+		uint32_t nrings, r0, r1;
+		const char *says;
+	} bad[] = { { 2, 0x80000000u, 4, "exceed the cap" },
+		    { 2, PROTO_MAX_POLY, 4, "exceed the cap" },
+		    { 2, 2, 6, "3 at least" },
+		    { PROTO_MAX_RINGS + 1, 4, 4, "exceed the cap" },
+		    { 0, 4, 4, "without rings" } };
+	for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+		uint8_t *b = a.data + at;
+		uint32_t v[3] = { bad[i].nrings, bad[i].r0, bad[i].r1 };
+		for (int k = 0; k < 3; k++)
+			for (int j = 0; j < 4; j++)
+				b[4 * k + j] = (uint8_t)(v[k] >> (8 * j));
+		struct proto_msg d;
+		size_t need;
+		assert_true(proto_decode(a.data, a.len, &d, &need, err) < 0);
+		printf("polygon %u rings (%u, %u): %s\n", bad[i].nrings, bad[i].r0, bad[i].r1, err);
+		assert_non_null(strstr(err, bad[i].says));
+		proto_msg_fini(&d);
+	}
+	pbuf_fini(&a);
+}
+
 static void decoded_fields(void **state)
 {
 	struct fixture *f = *state;
@@ -799,6 +856,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(prefetch_width_bounded),
+		cmocka_unit_test(polygon_counts_bounded),
 		cmocka_unit_test_setup_teardown(round_trip_every_type, setup, teardown),
 		cmocka_unit_test_setup_teardown(decoded_fields, setup, teardown),
 		cmocka_unit_test(byte_layout),
