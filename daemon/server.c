@@ -516,6 +516,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "encode.entries", es.entries);
 	stat_u(&b, "encode.bytes", es.bytes);
 	stat_u(&b, "encode.evicted", es.evicted);
+	stat_u(&b, "lookahead.wants", c->ahead_wants);
 	stat_u(&b, "tiles.recalled", c->tiles_recalled);
 	stat_u(&b, "bytes.recalled", c->bytes_recalled);
 	stat_u(&b, "planets", srv->planets->n);

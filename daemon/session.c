@@ -40,6 +40,7 @@
 #include "conn.h"
 #include "control.h"
 #include "encpick.h"
+#include "lookahead.h"
 #include "encq.h"
 #include "linkest.h"
 #include "wantset.h"
@@ -84,6 +85,8 @@ struct session {
 	struct wantset_entry *scratch; /* a WANT's entries, reused */
 	size_t capscratch;
 	struct sched_req *req;
+	struct sched_req *ahead; /* the look-ahead along the path (lookahead.h): bulk, unsent */
+	uint64_t focus_ns;	 /* when the last WANT's focus came */
 	struct ready_src *src; /* this session's handle on the ready queue (reference) */
 	bool paused; /* its wants are withdrawn while its output is full (see the top) */
 	bool has_focus;
@@ -204,6 +207,8 @@ static void begin_close(struct session *s)
 	s->close_deadline = clock_now_ns() + CLOSE_GRACE_NS;
 	if (s->req)
 		(void)sched_req_want(s->req, NULL, 0);
+	if (s->ahead)
+		(void)sched_req_want(s->ahead, NULL, 0);
 	update_interest(s);
 	flush(s);
 }
@@ -222,6 +227,15 @@ static void retire(struct session *s, struct planet_set *ps)
 	}
 	s->retired = xrealloc(s->retired, (s->nretired + 1) * sizeof *s->retired);
 	s->retired[s->nretired++] = ps;
+}
+
+/* The look-ahead's tiles are made for the cache and the store only: nothing to tell. */
+static void ahead_ready_cb(void *ud, const struct want *w, struct tile *t, int err)
+{
+	(void)ud;
+	(void)w;
+	(void)t;
+	(void)err;
 }
 
 /* ---- tiles ---------------------------------------------------------------------------- */
@@ -450,6 +464,7 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 		return;
 	}
 	s->req = sched_req_create(env->sched, sess_ready_cb, ready_src_ref(s->src));
+	s->ahead = sched_req_create(env->sched, ahead_ready_cb, NULL);
 	/* Presented the token (required or not): prefetch limits of an authenticated client. */
 	s->ctl.authed = s->need_token || control_token_ok(env, h);
 	uint8_t codec = TCODEC_NONE;
@@ -538,6 +553,36 @@ static enum sched_class sched_class_of(uint8_t proto_cls)
 						   : SCHED_BULK;
 }
 
+/* Asks the scheduler, at bulk class, for the tiles this WANT's visible ones become along the
+ * focus's motion (lookahead.h); replaces the last look-ahead, so a turn or a stop cancels
+ * what was queued for the old path. The velocity is the client's, else the focus's last
+ * move. */
+static void look_ahead(struct session *s, const struct proto_want *w, const struct planet *p)
+{
+	uint64_t now = clock_now_ns();
+	struct lookahead_motion m = { .lon = w->lon, .lat = w->lat, .ve = w->vel[0],
+				      .vn = w->vel[1], .radius = p->a };
+	if (m.ve == 0 && m.vn == 0 && s->has_focus &&
+	    lookahead_velocity(s->lon, s->lat, w->lon, w->lat, (double)(now - s->focus_ns) * 1e-9,
+			       p->a, &m.ve, &m.vn))
+		m.ve = m.vn = 0;
+	s->focus_ns = now;
+	struct proto_want_entry *ahead = xmalloc(LOOKAHEAD_MAX * sizeof *ahead);
+	size_t n = lookahead_wants(&m, w->entries, w->count, ahead, LOOKAHEAD_MAX);
+	struct want *list = n ? xmalloc(n * sizeof *list) : NULL;
+	for (size_t i = 0; i < n; i++) {
+		struct node *nd = p->layers[ahead[i].layer].node;
+		list[i] = (struct want){ .node = nd, .cls = SCHED_BULK,
+					 .key = { .node = nd->hash, .lx = ahead[i].lx,
+						  .ly = ahead[i].ly, .x = ahead[i].x,
+						  .y = ahead[i].y } };
+	}
+	if (sched_req_want(s->ahead, list, n) == 0)
+		s->env->counters->ahead_wants += n;
+	free(list);
+	free(ahead);
+}
+
 static void on_want(struct session *s, const struct proto_want *w)
 {
 	if (w->planet_id == 0 || w->planet_id > (uint32_t)s->nopened ||
@@ -574,6 +619,7 @@ static void on_want(struct session *s, const struct proto_want *w)
 	count_drops(s, &d);
 	recall_unwanted(s);
 	submit_wants(s, PROTO_WANT, w->seq);
+	look_ahead(s, w, p);
 	s->has_focus = true;
 	s->lon = w->lon;
 	s->lat = w->lat;
@@ -928,6 +974,8 @@ void session_close(struct session *s, const char *why)
 	s->src->dead = true; /* reports still on their way are dropped (server's on_ready) */
 	sched_req_release(s->req, sess_req_fin); /* NULL (never authenticated): nothing */
 	s->req = NULL;
+	sched_req_release(s->ahead, NULL);
+	s->ahead = NULL;
 	readyq_purge(env->ready, s);
 	env->detach(env->ud, s->link);
 	int rc = conn_close(&s->c);

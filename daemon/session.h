@@ -36,6 +36,7 @@ struct session_counters {
 	 * no longer wanted them), and their bytes */
 	uint64_t tiles_recalled, bytes_recalled;
 	uint64_t pauses; /* times a session's wants were withdrawn while its output was full */
+	uint64_t ahead_wants; /* look-ahead tiles asked of the scheduler (lookahead.h) */
 };
 
 /* What the server lends every session; every pointer is borrowed and outlives the sessions. */

@@ -387,6 +387,62 @@ static void test_want_replace(void **state)
 	cl_free(c);
 }
 
+/* Polls STATS until the scheduler has nothing queued, waiting or running. */
+static void cl_wait_idle(struct cl *c)
+{
+	for (int i = 0; i < 1500; i++) {
+		if (cl_stat(c, "sched.queued.visible") + cl_stat(c, "sched.queued.prefetch") +
+			    cl_stat(c, "sched.queued.bulk") + cl_stat(c, "sched.waiting") +
+			    cl_stat(c, "sched.workers.busy") ==
+		    0)
+			return;
+		usleep(20000);
+	}
+	fail_msg("the scheduler did not go idle in 30 s");
+}
+
+/* The server's look-ahead: a viewer moving east at 10 km/s (a level-8 tile of this 1000 km
+ * planet is 12 km wide) asks for a 4×4 block; the tiles it will want 1-4 s later are made
+ * before it asks for them — the block two tiles east then arrives with nothing generated —
+ * while the block behind it was not made (the control: it generates). */
+static void test_look_ahead(void **state)
+{
+	(void)state;
+	struct cl *c = cl_unix();
+	uint32_t pid = cl_open(c, NULL);
+	static struct proto_want_entry e[64];
+	uint32_t n = block(e, 3, 8, 300, 120, 4, 4);
+	struct proto_msg m = { .type = PROTO_WANT,
+			       .want = { .planet_id = pid, .seq = 1, .lon = 31, .lat = 5,
+					 .vel = { 10000, 0, 0 }, .count = n, .entries = e } };
+	cl_send(c, &m);
+	for (uint32_t i = 0; i < n; i++)
+		cl_expect(c, PROTO_TILE, 20000);
+	cl_wait_idle(c);
+	assert_true(cl_stat(c, "lookahead.wants") >= 2 * 4 * 3); /* 3 columns ahead, 2 layers */
+	uint64_t gen0 = cl_stat(c, "sched.generated");
+	n = block(e, 3, 8, 302, 120, 4, 4); /* 2 s later: two tiles east */
+	cl_want(c, pid, 2, 31, 5, e, n);    /* the same focus, no velocity: no new look-ahead */
+	int tiles = 0;
+	while (tiles < 2 * 4 * 2) /* the two new columns (the others were sent already) */
+		if (cl_recv(c, 20000) > 0 && c->m.type == PROTO_TILE)
+			tiles++;
+	cl_wait_idle(c);
+	uint64_t gen1 = cl_stat(c, "sched.generated");
+	printf("look-ahead: %llu tiles asked ahead; the block 2 tiles east generated %llu\n",
+	       (unsigned long long)cl_stat(c, "lookahead.wants"),
+	       (unsigned long long)(gen1 - gen0));
+	assert_int_equal(gen1, gen0);
+	n = block(e, 3, 8, 297, 120, 4, 4); /* behind the start: never looked ahead to */
+	cl_want(c, pid, 3, 31, 5, e, n);
+	tiles = 0;
+	while (tiles < 2 * 4 * 4)
+		if (cl_recv(c, 20000) > 0 && c->m.type == PROTO_TILE)
+			tiles++;
+	assert_true(cl_stat(c, "sched.generated") > gen1);
+	cl_free(c);
+}
+
 /* 50 sessions fly around at once; every one receives every new tile of every step. */
 static void test_fifty_sessions(void **state)
 {
@@ -911,6 +967,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_tiles_match_inprocess),
 		cmocka_unit_test(test_want_replace),
+		cmocka_unit_test(test_look_ahead),
 		cmocka_unit_test(test_fifty_sessions),
 		cmocka_unit_test(test_stalled_session),
 		cmocka_unit_test(test_malformed),
