@@ -52,7 +52,9 @@ else
 	KEEP=${FLEET_KEEP:-0}
 fi
 mkdir -p "$OUT/planets"
-cp "$PLANET_FILE" "$OUT/planets/"
+# the planet file with relative data paths made absolute (the procedural planet's site.geojson)
+PLANET_DIR=$(cd "$(dirname "$PLANET_FILE")" && pwd)
+sed "s|^path = \([^/]\)|path = $PLANET_DIR/\1|" "$PLANET_FILE" > "$OUT/planets/$(basename "$PLANET_FILE")"
 
 PIDS=""	 # every process started here, stopped by cleanup (by PID, never by name)
 cleanup() {

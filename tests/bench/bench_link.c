@@ -6,7 +6,9 @@
  * jump — for the daemon as configured (send_queue_ms = 100: the send window sized from the
  * link, BBR asked for) and, in the same run, for its peer with send_queue_ms = 0 and
  * bbr = false (the 8 MiB queue, nothing recalled, the kernel's own buffering and congestion
- * control: the daemon before issue 15). Figures, not pass/fail;
+ * control: the daemon before issue 15), and the configured daemon again with a client that
+ * offers the lossy codecs (as clipmapview does: WebP colour, 16-bit heights below
+ * lossy_below_mbit, 50 by default). Figures, not pass/fail;
  * on a loaded machine read the ratios. Skips (exit 0, saying why) without root or namespaces.
  * LINK_RATES="4 20" picks rates (Mbit/s).
  */
@@ -17,6 +19,7 @@
 #include <string.h>
 
 #include "client/net.h"
+#include "common/tilecodec.h"
 #include "support/daemon_env.h"
 #include "support/shaped_link.h"
 
@@ -30,7 +33,7 @@ static void stop_daemon(void)
 		daemon_env_fini(running);
 }
 
-static int run_rate(struct shaped_link *sl, struct daemon_env *e, unsigned mbit,
+static int run_rate(struct shaped_link *sl, struct daemon_env *e, unsigned mbit, uint32_t codecs,
 		    struct link_jump_result *r)
 {
 	char err[256];
@@ -39,7 +42,7 @@ static int run_rate(struct shaped_link *sl, struct daemon_env *e, unsigned mbit,
 		return -1;
 	}
 	uint32_t pid;
-	struct net_conn *c = shaped_link_session(sl, e, &pid, err);
+	struct net_conn *c = shaped_link_session(sl, e, codecs, &pid, err);
 	if (!c) {
 		fprintf(stderr, "bench_link: %s\n", err);
 		return -1;
@@ -94,12 +97,14 @@ int main(void)
 	       "2x2 tiles, 2 layers (40 tiles); 128^2 tiles (~50 KB with zstd)\n", DELAY_MS);
 	printf("%-10s %-16s %10s %10s %10s %12s %12s\n", "rate", "daemon", "first", "coarse",
 	       "all", "stale", "goodput");
-	struct link_jump_result res[2][8];
-	const char *names[2] = { "window 100 ms", "8 MiB queue" };
-	const char *queues[2] = { "session.send_queue_ms = 100", "session.send_queue_ms = 0" };
-	const char *ccs[2] = { "session.bbr = true", "session.bbr = false" };
+	struct link_jump_result res[3][8];
+	const char *names[3] = { "window 100 ms", "8 MiB queue", "window + lossy" };
+	const char *queues[3] = { "session.send_queue_ms = 100", "session.send_queue_ms = 0",
+				  "session.send_queue_ms = 100" };
+	const char *ccs[3] = { "session.bbr = true", "session.bbr = false", "session.bbr = true" };
+	const uint32_t codecs[3] = { 0, 0, TCODEC_ALL_MASK };
 	int failed = 0;
-	for (int k = 0; k < 2; k++) {
+	for (int k = 0; k < 3; k++) {
 		struct daemon_env e;
 		char tcp[64], err[256];
 		snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", sl.addr);
@@ -118,7 +123,7 @@ int main(void)
 		}
 		for (int i = 0; i < nr; i++) {
 			struct link_jump_result *r = &res[k][i];
-			if (run_rate(&sl, &e, rates[i], r)) {
+			if (run_rate(&sl, &e, rates[i], codecs[k], r)) {
 				failed = 1;
 				continue;
 			}
@@ -154,6 +159,14 @@ int main(void)
 		       "%.0f KB\n", rates[i], b->first_ms / (a->first_ms > 0 ? a->first_ms : 1),
 		       b->full_ms / (a->full_ms > 0 ? a->full_ms : 1),
 		       (double)a->stale_bytes / 1000, (double)b->stale_bytes / 1000);
+	}
+	printf("lossy over lossless (window; > 1: lossy is faster)\n");
+	for (int i = 0; i < nr; i++) {
+		const struct link_jump_result *a = &res[0][i], *l = &res[2][i];
+		if (a->full_ms > 0 && l->full_ms > 0)
+			printf("  %u Mbit/s: coarsest level %.1fx, all of B %.1fx\n", rates[i],
+			       a->coarse_ms / (l->coarse_ms > 0 ? l->coarse_ms : 1),
+			       a->full_ms / l->full_ms);
 	}
 	shaped_link_fini(&sl);
 	return failed;

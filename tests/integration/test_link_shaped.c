@@ -112,7 +112,7 @@ static void jump_at(unsigned mbit)
 	if (shaped_link_shape(&L, mbit * 1000, DELAY_MS, err))
 		fail_msg("%s", err);
 	uint32_t pid;
-	struct net_conn *c = shaped_link_session(&L, &E, &pid, err);
+	struct net_conn *c = shaped_link_session(&L, &E, 0, &pid, err);
 	if (!c)
 		fail_msg("%s", err);
 	const struct link_jump_plan plan = { .warm_ms = 2500, .a_lmin = 2, .a_lmax = 9,

@@ -384,7 +384,7 @@ int shaped_link_daemon_start(const struct shaped_link *sl, struct daemon_env *e,
 }
 
 struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
-				     uint32_t *pid, char why[256])
+				     uint32_t codecs, uint32_t *pid, char why[256])
 {
 	int fd = shaped_link_connect(sl, e->port);
 	if (fd < 0) {
@@ -395,7 +395,8 @@ struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon
 	char tokf[160], peer[64];
 	snprintf(tokf, sizeof tokf, "%s/token", e->dir);
 	snprintf(peer, sizeof peer, "%s:%d", sl->addr, e->port);
-	struct net_opts o = { .token_file = tokf, .name = "shaped_link", .timeout_ms = 10000 };
+	struct net_opts o = { .token_file = tokf, .name = "shaped_link", .timeout_ms = 10000,
+			      .codecs = codecs };
 	struct net_conn *c = NULL;
 	if (net_connect_fd(fd, peer, &o, &c, why))
 		return NULL;

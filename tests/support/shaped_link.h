@@ -64,7 +64,7 @@ struct daemon_env;
 /* A session to the daemon of e (listening on sl->addr, token file DIR/token) from the client's
  * namespace, planet "test" open (its id in *pid). Returns it, or NULL with why filled. */
 struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
-				     uint32_t *pid, char why[256]);
+				     uint32_t codecs, uint32_t *pid, char why[256]);
 
 /* Starts clipmapd in e (daemon_env_init with tag, the planet above as "test", the token)
  * listening on sl->addr, with 2 workers, a 256 MB cache, max_rate 1000, log level info and

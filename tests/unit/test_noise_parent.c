@@ -18,6 +18,7 @@
 #include <cmocka.h>
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -62,11 +63,21 @@ static int write_planets(void)
 			fclose(fd);
 		return -1;
 	}
-	char line[4096];
+	char line[4096], dir[PATH_MAX];
+	if (!realpath("conf/planets", dir))
+		snprintf(dir, sizeof dir, "conf/planets");
 	int n = 0;
 	while (fgets(line, sizeof line, in)) {
 		if (strncmp(line, "from_parent", 11) == 0)
 			continue;
+		if (strncmp(line, "path = ", 7) == 0 && line[7] != '/') {
+			/* a data file beside the planet (the site's GeoJSON): by its full path */
+			char abs[PATH_MAX + 4200];
+			snprintf(abs, sizeof abs, "path = %s/%s", dir, line + 7);
+			fputs(abs, fp);
+			fputs(abs, fd);
+			continue;
+		}
 		fputs(line, fp);
 		fputs(line, fd);
 		if (strncmp(line, "kind = fbm", 10) == 0) {
