@@ -9,8 +9,12 @@
  * control: the daemon before issue 15), and the configured daemon again with a client that
  * offers the lossy codecs (as clipmapview does: WebP colour, 16-bit heights below
  * lossy_below_mbit, 50 by default). Figures, not pass/fail;
- * on a loaded machine read the ratios. Skips (exit 0, saying why) without root or namespaces.
- * LINK_RATES="4 20" picks rates (Mbit/s).
+ * on a loaded machine read the ratios. Then per rate and configuration the real viewer
+ * (clipmapview offscreen, 320x180, 4 frames a second) flies 20 s over the link: lon 0 to 40
+ * at lat 10, 150 km up over the test planet (1000 km radius: 35 km/s, levels 0-5), and the
+ * share of its frames that were complete is printed (skipped without a GL context).
+ * Skips (exit 0, saying why) without root or namespaces.
+ * LINK_RATES="4 20" picks rates (Mbit/s); LINK_FLIGHT=0 leaves the flights out.
  */
 #include <errno.h>
 #include <signal.h>
@@ -57,6 +61,45 @@ static int run_rate(struct shaped_link *sl, struct daemon_env *e, unsigned mbit,
 	return rc;
 }
 
+#define FLIGHT_S 20
+#define FLIGHT_FPS 4
+
+/* The viewer's 20 s flight over the link: the share of its frames that were complete, or
+ * < 0 when it could not run (why printed once). */
+static double flight(struct shaped_link *sl, struct daemon_env *e, bool lossless)
+{
+	static bool told;
+	char fl[600], stats[600], out[16384];
+	snprintf(fl, sizeof fl, "%s/flight.csv", e->dir);
+	snprintf(stats, sizeof stats, "%s/flight.jsonl", e->dir);
+	FILE *f = fopen(fl, "w");
+	if (!f)
+		return -1;
+	fprintf(f, "lat,lon,alt,heading,pitch\n");
+	for (int i = 0; i < FLIGHT_S * FLIGHT_FPS; i++)
+		fprintf(f, "10,%.4f,150000,90,-40\n", 40.0 * i / (FLIGHT_S * FLIGHT_FPS - 1));
+	if (fclose(f))
+		return -1;
+	int rc = shaped_link_view(sl, e, fl, FLIGHT_FPS, lossless, stats, out, sizeof out);
+	if (rc) {
+		if (!told)
+			fprintf(stderr, "bench_link: flights skipped: clipmapview %d: %s\n", rc, out);
+		told = true;
+		return -1;
+	}
+	f = fopen(stats, "r");
+	if (!f)
+		return -1;
+	char line[2048];
+	int frames = 0, complete = 0;
+	while (fgets(line, sizeof line, f)) {
+		frames++;
+		complete += strstr(line, "\"complete\":true") != NULL;
+	}
+	fclose(f);
+	return frames ? (double)complete / frames : -1;
+}
+
 static void fmt_ms(char *out, size_t n, double ms)
 {
 	if (ms < 0)
@@ -95,8 +138,8 @@ int main(void)
 	}
 	printf("link jump: %d ms delay; A: levels 2-9, 6x6 tiles each, 2 layers; B: levels 3-7, "
 	       "2x2 tiles, 2 layers (40 tiles); 128^2 tiles (~50 KB with zstd)\n", DELAY_MS);
-	printf("%-10s %-16s %10s %10s %10s %12s %12s\n", "rate", "daemon", "first", "coarse",
-	       "all", "stale", "goodput");
+	printf("%-10s %-16s %10s %10s %10s %12s %12s %12s\n", "rate", "daemon", "first", "coarse",
+	       "all", "stale", "goodput", "20 s flight");
 	struct link_jump_result res[3][8];
 	const char *names[3] = { "window 100 ms", "8 MiB queue", "window + lossy" };
 	const char *queues[3] = { "session.send_queue_ms = 100", "session.send_queue_ms = 0",
@@ -134,8 +177,13 @@ int main(void)
 			fmt_ms(all, sizeof all, r->full_ms);
 			snprintf(st, sizeof st, "%.0f KB", (double)r->stale_bytes / 1000);
 			snprintf(gp, sizeof gp, "%.2f Mbit/s", r->warm_bps * 1e-6);
-			printf("%-10s %-16s %10s %10s %10s %12s %12s\n", rate, names[k], f, co, all, st,
-			       gp);
+			const char *fe = getenv("LINK_FLIGHT");
+			double fc = fe && atoi(fe) == 0 ? -1 : flight(&sl, &e, codecs[k] == 0);
+			char fs[24] = "-";
+			if (fc >= 0)
+				snprintf(fs, sizeof fs, "%.0f%% complete", 100 * fc);
+			printf("%-10s %-16s %10s %10s %10s %12s %12s %12s\n", rate, names[k], f, co, all,
+			       st, gp, fs);
 			fflush(stdout);
 		}
 		daemon_env_fini(&e);

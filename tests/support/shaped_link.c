@@ -536,3 +536,25 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 	}
 	return 0;
 }
+
+int shaped_link_view(const struct shaped_link *sl, const struct daemon_env *e, const char *flight,
+		     int fps, bool lossless, const char *stats, char *out, size_t n)
+{
+	if (!daemon_env_built(e, "clipmapview")) {
+		snprintf(out, n, "build/clipmapview was not built");
+		return -ENOTSUP;
+	}
+	char exe[600], tokf[600], target[64], fps_s[16];
+	snprintf(exe, sizeof exe, "%s/clipmapview", e->bindir);
+	snprintf(tokf, sizeof tokf, "%s/token", e->dir);
+	snprintf(target, sizeof target, "%s:%d", sl->addr, e->port);
+	snprintf(fps_s, sizeof fps_s, "%d", fps);
+	char *argv[] = { "ip", "netns", "exec", (char *)sl->ns, exe, "--connect", target,
+			 "--token-file", tokf, "--planet", "test", "--flight", (char *)flight,
+			 "--steps", "1", "--fps", fps_s, "--size", "320x180", "--stats",
+			 (char *)stats, "--no-prefetch", lossless ? "--lossless" : NULL, NULL };
+	int rc = daemon_env_run(argv, out, n);
+	if (rc == 1 && strstr(out, "no OpenGL context"))
+		return -ENOTSUP;
+	return rc;
+}

@@ -98,4 +98,12 @@ struct link_jump_result {
 int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan *p,
 		  struct link_jump_result *r, char why[256]);
 
+/* Runs build/clipmapview (offscreen, 320x180, fps frames a second, --no-prefetch) in the
+ * client's namespace against the daemon of e, flying the camera keys of CSV flight (one key
+ * per frame), --lossless when asked, one --stats line per frame into stats. Returns its exit
+ * status (0 ok), -ENOTSUP with out saying why when there is no GL context or no clipmapview,
+ * or -errno; out (n bytes) gets its output. */
+int shaped_link_view(const struct shaped_link *sl, const struct daemon_env *e, const char *flight,
+		     int fps, bool lossless, const char *stats, char *out, size_t n);
+
 #endif
