@@ -112,7 +112,8 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 }
 
 /* [tls] cert and key read again (a renewed certificate, or new paths): new TCP connections
- * get them, open ones keep theirs. Files that do not load change nothing. */
+ * and HTTPS handshakes get them, open connections keep theirs. Files that do not load change
+ * nothing. */
 static void reload_tls(struct daemon *d, struct conf *c, struct conf *nc)
 {
 	char err[256], warn[256];
@@ -123,6 +124,16 @@ static void reload_tls(struct daemon *d, struct conf *c, struct conf *nc)
 	}
 	if (warn[0])
 		log_msg(LOG_WARN, "reload: %s", warn);
+	char *cert = NULL, *key = NULL;
+	if (d->http && (tls_pem_read("cert", nc->tls_cert, &cert, err) ||
+			tls_pem_read("key", nc->tls_key, &key, err) ||
+			http_reload_tls(d->http, cert, key, err)))
+		log_msg(LOG_ERROR, "reload: %s; the HTTPS endpoint keeps the running certificate",
+			err);
+	if (key)
+		memset(key, 0, strlen(key)); /* the key's bytes do not stay in freed memory */
+	free(cert);
+	free(key);
 	char *t = c->tls_cert; /* swapped: nc frees the old ones */
 	c->tls_cert = nc->tls_cert;
 	nc->tls_cert = t;

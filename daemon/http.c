@@ -44,6 +44,7 @@
 #include "http_cesium.h"
 #include "http_page.h"
 #include "http_route.h"
+#include "http_tls.h"
 #include "http_wmts.h"
 
 struct http {
@@ -55,7 +56,7 @@ struct http {
 	int max_age;
 	uint16_t port;
 	char *cesium_dir; /* NULL: no browser page */
-	char *tls_cert, *tls_key; /* PEM, kept while MHD may read them; NULL: plain HTTP */
+	bool tls; /* HTTPS: the certificate is http_tls's (replaceable by http_reload_tls) */
 	struct http_cache *bodies; /* encoded tiles by ETag */
 	pthread_mutex_t mu; /* guards the fields below */
 	struct planet_set *ps;
@@ -833,14 +834,25 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 	unsigned flags = MHD_USE_AUTO_INTERNAL_THREAD | MHD_ALLOW_SUSPEND_RESUME;
 	if (ai->ai_family == AF_INET6)
 		flags |= MHD_USE_IPv6;
-	struct MHD_OptionItem tls[3] = { { MHD_OPTION_END, 0, NULL } };
+	struct MHD_OptionItem tls[2] = { { MHD_OPTION_END, 0, NULL } };
 	if (d->tls_cert) {
-		h->tls_cert = xstrdup(d->tls_cert);
-		h->tls_key = xstrdup(d->tls_key);
+		int rc = http_tls_set(d->tls_cert, d->tls_key, err);
+		if (rc) {
+			freeaddrinfo(ai);
+			planet_set_unref(h->ps);
+			pthread_cond_destroy(&h->live_cv);
+			pthread_mutex_destroy(&h->mu);
+			http_cache_destroy(h->bodies);
+			free(h->cesium_dir);
+			free(h);
+			return rc;
+		}
+		h->tls = true;
 		flags |= MHD_USE_TLS;
-		tls[0] = (struct MHD_OptionItem){ MHD_OPTION_HTTPS_MEM_KEY, 0, h->tls_key };
-		tls[1] = (struct MHD_OptionItem){ MHD_OPTION_HTTPS_MEM_CERT, 0, h->tls_cert };
-		tls[2] = (struct MHD_OptionItem){ MHD_OPTION_END, 0, NULL };
+		/* the certificate through a callback, so that a reload can replace it */
+		tls[0] = (struct MHD_OptionItem){ MHD_OPTION_HTTPS_CERT_CALLBACK, 0,
+						  http_tls_callback() };
+		tls[1] = (struct MHD_OptionItem){ MHD_OPTION_END, 0, NULL };
 	}
 	h->d = MHD_start_daemon(
 		flags, 0, NULL, NULL, on_request, h, MHD_OPTION_SOCK_ADDR, ai->ai_addr,
@@ -860,8 +872,8 @@ int http_create(const struct http_desc *d, struct http **out, char err[256])
 		pthread_mutex_destroy(&h->mu);
 		http_cache_destroy(h->bodies);
 		free(h->cesium_dir);
-		free(h->tls_cert);
-		free(h->tls_key);
+		if (h->tls)
+			http_tls_clear();
 		free(h);
 		return -e;
 	}
@@ -905,14 +917,23 @@ void http_destroy(struct http *h)
 	free(h->metrics);
 	http_cache_destroy(h->bodies);
 	free(h->cesium_dir);
-	free(h->tls_cert);
-	free(h->tls_key);
+	if (h->tls)
+		http_tls_clear(); /* after MHD stopped: no handshake is left */
 	pthread_cond_destroy(&h->live_cv);
 	pthread_mutex_destroy(&h->mu);
 	free(h);
 }
 
 uint16_t http_port(const struct http *h) { return h->port; }
+
+int http_reload_tls(struct http *h, const char *cert_pem, const char *key_pem, char err[256])
+{
+	if (!h->tls) {
+		err_set(err, "https: the endpoint was started without TLS");
+		return -EINVAL;
+	}
+	return http_tls_set(cert_pem, key_pem, err);
+}
 
 void http_set_planets(struct http *h, struct planet_set *ps)
 {

@@ -48,6 +48,10 @@ struct http;
 int http_create(const struct http_desc *d, struct http **out, char err[256]);
 /* Stops listening (and the hang-up watcher), answers suspended requests 503, joins the threads, frees. NULL: no-op. */
 void http_destroy(struct http *h);
+/* Replaces the HTTPS certificate and key (PEM text, copied) for handshakes from now on.
+ * Returns 0, or -EINVAL with err (the endpoint is plain HTTP, or the PEM does not parse):
+ * the running certificate stays then. Any thread. */
+int http_reload_tls(struct http *h, const char *cert_pem, const char *key_pem, char err[256]);
 /* The port listened on (the ephemeral one when 0 was asked). */
 uint16_t http_port(const struct http *h);
 /* The planets served from now on (a new reference is taken; requests in flight keep theirs). */

@@ -13,8 +13,8 @@
  * the HTTP endpoint is HTTPS on the same certificate (curl, when installed).
  * Bad [tls] files stop clipmapd at start with the file and the problem named (an expired
  * certificate is a warning). SIGHUP loads a renewed certificate for new connections while an
- * open one keeps working; a bad renewal is refused and the running certificate kept; the
- * handshakes are counted in STATS.
+ * open one keeps working, and the HTTPS endpoint shows it too; a bad renewal is refused and
+ * the running certificate kept; the handshakes are counted in STATS.
  * Skipped, saying so, without certtool (package gnutls-bin) or the programs.
  */
 #include <arpa/inet.h>
@@ -767,6 +767,19 @@ static void sighup_reloads_the_certificate(void **state)
 	free(t[0]);
 	free(t[1]);
 	net_close(old);
+	/* the HTTPS endpoint too (when curl is here): the new CA, not the old one */
+	char *cv[] = { "curl", "--version", NULL };
+	if (http_port > 0 && daemon_env_run(cv, out, sizeof out) == 0) {
+		char url[128];
+		snprintf(url, sizeof url, "https://127.0.0.1:%d/healthz", http_port);
+		char *ok[] = { "curl", "-sS", "-m", "20", "--cacert", ca2, url, NULL };
+		int r2 = daemon_env_run(ok, out, sizeof out);
+		if (r2)
+			fprintf(stderr, "curl with the new CA: %s", out);
+		assert_int_equal(r2, 0);
+		char *old_ca[] = { "curl", "-sS", "-m", "20", "--cacert", ca, url, NULL };
+		assert_int_equal(daemon_env_run(old_ca, out, sizeof out), 60);
+	}
 
 	/* A renewal gone wrong: the certificate of ca but server2's key. */
 	assert_int_equal(replace_file("server-ca.pem", "server.pem"), 0);
