@@ -244,8 +244,10 @@ static void store_watch(struct daemon *d)
 		log_msg(LOG_WARN, "store %s: writes fail (disk full or I/O error?): serving from "
 			"memory and generation, tiles left unstored", d->conf.store_path);
 		d->store_failing = true;
-	} else if (st.write_errors == old->write_errors && st.puts > old->puts &&
-		   d->store_failing) {
+	} else if (d->store_failing && st.puts > old->puts && st.last_write > 0) {
+		/* a batch committed since the last tick and the last one did: a tick that saw a
+		 * failing batch and then good ones (queued before and after the disk had room) is
+		 * the recovery, not more failure */
 		log_msg(LOG_INFO, "store %s: writes succeed again", d->conf.store_path);
 		d->store_failing = false;
 	}

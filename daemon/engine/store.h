@@ -48,6 +48,7 @@ struct store_stats {
 	uint64_t queued;      /* writes queued or being committed */
 	uint64_t recovered;   /* times the file failed at run time (MDB_PANIC, MDB_CORRUPTED…)
 			       * and was moved aside and recreated empty */
+	int last_write;	      /* the last batch: 1 committed, -1 failed, 0 none yet */
 };
 
 /* Why a tile was stored, which decides the eviction order: incidental tiles (what viewers

@@ -103,6 +103,7 @@ struct lstore {
 
 	atomic_uint_fast64_t bytes, ntiles, stamp;
 	atomic_uint_fast64_t hits, misses, puts, evictions, corrupt, drops, werrs, queued;
+	atomic_int last_write; /* store_stats.last_write */
 	atomic_uint_fast64_t recovered;
 };
 
@@ -521,6 +522,7 @@ static void *writer_main(void *arg)
 		rwunlock(s);
 		if (rc)
 			atomic_fetch_add(&s->werrs, 1);
+		atomic_store(&s->last_write, rc ? -1 : 1);
 		/* MDB_BAD_TXN: LMDB met a damaged page inside the transaction (it flags the
 		 * transaction and fails what follows) */
 		if (fatal(rc) || rc == MDB_BAD_TXN)
@@ -776,6 +778,7 @@ static void l_stat(struct store *base, struct store_stats *o)
 		.misses = atomic_load(&s->misses), .puts = atomic_load(&s->puts),
 		.evictions = atomic_load(&s->evictions), .corrupt = atomic_load(&s->corrupt),
 		.write_drops = atomic_load(&s->drops), .write_errors = atomic_load(&s->werrs),
+		.last_write = atomic_load(&s->last_write),
 		.queued = atomic_load(&s->queued), .recovered = atomic_load(&s->recovered),
 		.file_bytes = stat(s->path, &st) == 0 ? (uint64_t)st.st_size : 0 };
 }

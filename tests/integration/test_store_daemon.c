@@ -36,6 +36,7 @@
 #include "engine/sched.h"
 #include "engine/store.h"
 #include "support/daemon_env.h"
+#include "support/slow.h"
 #include "support/net_stat.h"
 
 static const char planet_text[] =
@@ -394,7 +395,7 @@ static void write_failure_recovers(void **state)
 	print_message("file limited to %lld bytes: %llu write batches failed\n", (long long)st.st_size,
 		      (unsigned long long)werr);
 	assert_true(werr > 0);
-	assert_true(daemon_env_log_wait(&e->d, "writes fail", 1, 3000));
+	assert_true(daemon_env_log_wait(&e->d, "writes fail", 1, (int)test_slow(5000)));
 
 	lim.rlim_cur = RLIM_INFINITY;
 	assert_int_equal(prlimit(e->d.daemon, RLIMIT_FSIZE, &lim, NULL), 0);
@@ -402,7 +403,7 @@ static void write_failure_recovers(void **state)
 	assert_int_equal(fetch(e, c, pid, 3, w, n, 0, false), n);
 	wait_written(c);
 	assert_true(stat_of(c, "store.disk.puts") >= puts0 + n);
-	assert_true(daemon_env_log_wait(&e->d, "writes succeed again", 1, 3000));
+	assert_true(daemon_env_log_wait(&e->d, "writes succeed again", 1, (int)test_slow(5000)));
 	assert_int_equal(daemon_env_log_count(&e->d, "writes fail"), 1);
 	net_close(c);
 
