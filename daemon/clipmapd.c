@@ -111,6 +111,27 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 				k[i].key, c->path);
 }
 
+/* [tls] cert and key of c as PEM text, for the HTTPS endpoint. Returns 0 with both owned
+ * (free_pems), or -errno with err naming the file (nothing owned then). */
+static int read_pems(const struct conf *c, char **cert, char **key, char err[256])
+{
+	*cert = *key = NULL;
+	int rc = tls_pem_read("cert", c->tls_cert, cert, err);
+	if (!rc && (rc = tls_pem_read("key", c->tls_key, key, err))) {
+		free(*cert);
+		*cert = NULL;
+	}
+	return rc;
+}
+
+static void free_pems(char *cert, char *key)
+{
+	if (key)
+		memset(key, 0, strlen(key)); /* the key's bytes do not stay in freed memory */
+	free(key);
+	free(cert);
+}
+
 /* [tls] cert and key read again (a renewed certificate, or new paths): new TCP connections
  * and HTTPS handshakes get them, open connections keep theirs. Files that do not load change
  * nothing. */
@@ -125,15 +146,10 @@ static void reload_tls(struct daemon *d, struct conf *c, struct conf *nc)
 	if (warn[0])
 		log_msg(LOG_WARN, "reload: %s", warn);
 	char *cert = NULL, *key = NULL;
-	if (d->http && (tls_pem_read("cert", nc->tls_cert, &cert, err) ||
-			tls_pem_read("key", nc->tls_key, &key, err) ||
-			http_reload_tls(d->http, cert, key, err)))
+	if (d->http && (read_pems(nc, &cert, &key, err) || http_reload_tls(d->http, cert, key, err)))
 		log_msg(LOG_ERROR, "reload: %s; the HTTPS endpoint keeps the running certificate",
 			err);
-	if (key)
-		memset(key, 0, strlen(key)); /* the key's bytes do not stay in freed memory */
-	free(cert);
-	free(key);
+	free_pems(cert, key);
 	char *t = c->tls_cert; /* swapped: nc frees the old ones */
 	c->tls_cert = nc->tls_cert;
 	nc->tls_cert = t;
@@ -517,10 +533,8 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 	char err[256], cesium[512], *cert = NULL, *key = NULL;
 	const char *cdir = find_cesium(c, cesium, sizeof cesium);
 	int rc = 0;
-	if (c->tls_cert && ((rc = tls_pem_read("cert", c->tls_cert, &cert, err)) ||
-			    (rc = tls_pem_read("key", c->tls_key, &key, err)))) {
+	if (c->tls_cert && (rc = read_pems(c, &cert, &key, err))) {
 		log_msg(LOG_ERROR, "http: %s", err);
-		free(cert);
 		return rc;
 	}
 	rc = http_create(&(struct http_desc){ .listen = c->http_listen, .sched = sched,
@@ -535,10 +549,7 @@ static int start_http(struct daemon *d, struct sched *sched, struct cache *cache
 						  .cesium_dir = cdir, .tls_cert = cert,
 						  .tls_key = key },
 			     &d->http, err);
-	if (key)
-		memset(key, 0, strlen(key));
-	free(key);
-	free(cert);
+	free_pems(cert, key);
 	if (rc) {
 		log_msg(LOG_ERROR, "%s", err);
 		return rc;
