@@ -87,6 +87,7 @@ struct session {
 	struct sched_req *req;
 	struct sched_req *ahead; /* the look-ahead along the path (lookahead.h): bulk, unsent */
 	uint64_t focus_ns;	 /* when the last WANT's focus came */
+	size_t nahead;		 /* tiles the look-ahead holds wanted now */
 	struct ready_src *src; /* this session's handle on the ready queue (reference) */
 	bool paused; /* its wants are withdrawn while its output is full (see the top) */
 	bool has_focus;
@@ -567,6 +568,8 @@ static void look_ahead(struct session *s, const struct proto_want *w, const stru
 			       p->a, &m.ve, &m.vn))
 		m.ve = m.vn = 0;
 	s->focus_ns = now;
+	if (m.ve == 0 && m.vn == 0 && !s->nahead)
+		return; /* still, and nothing ahead to cancel */
 	struct proto_want_entry *ahead = xmalloc(LOOKAHEAD_MAX * sizeof *ahead);
 	size_t n = lookahead_wants(&m, w->entries, w->count, ahead, LOOKAHEAD_MAX);
 	struct want *list = n ? xmalloc(n * sizeof *list) : NULL;
@@ -577,8 +580,11 @@ static void look_ahead(struct session *s, const struct proto_want *w, const stru
 						  .ly = ahead[i].ly, .x = ahead[i].x,
 						  .y = ahead[i].y } };
 	}
-	if (sched_req_want(s->ahead, list, n) == 0)
+	/* a session holding still asks nothing of the scheduler (no manager work per WANT) */
+	if ((n || s->nahead) && sched_req_want(s->ahead, list, n) == 0) {
 		s->env->counters->ahead_wants += n;
+		s->nahead = n;
+	}
 	free(list);
 	free(ahead);
 }
