@@ -48,6 +48,9 @@ in vec3 v_in;
 in float v_depth;
 in vec3 v_eye;
 #endif
+#if !GEO_FRAG
+in vec3 v_sunl; // the sun in the point's east-north-up frame (the vertex shader's)
+#endif
 
 uniform vec3 u_lat;
 uniform float u_T;
@@ -141,13 +144,26 @@ void main()
 	up = sn.z;
 #endif
 
-	// The fragment's local east, north, up in the camera's ENU frame.
+	// Lighting in the point's own east-north-up frame: its up is (0, 0, 1), the normal
+	// (en, up). The sun and the eye in that frame come from the vertex shader, or near a pole
+	// (GEO_FRAG), where that frame turns fast, are built here.
+#if GEO_FRAG
 	vec3 U = normalize(v_delta + vec3(0.0, 0.0, 1.0));
 	vec3 E = cross(vec3(0.0, u_lat.y, u_lat.x), U);
 	E *= inversesqrt(max(dot(E, E), 1e-12));
 	vec3 Nn = cross(U, E);
-	vec3 nrm = normalize(en.x * E + en.y * Nn + up * U);
-	float day = smoothstep(-0.1, 0.1, dot(U, u_sun));
+	vec3 sunl = vec3(dot(u_sun, E), dot(u_sun, Nn), dot(u_sun, U));
+#if SEA
+	vec3 eyel = vec3(dot(v_eye, E), dot(v_eye, Nn), dot(v_eye, U));
+#endif
+#else
+	vec3 sunl = v_sunl;
+#if SEA
+	vec3 eyel = v_eye;
+#endif
+#endif
+	vec3 nrm = vec3(en, up);
+	float day = smoothstep(-0.1, 0.1, sunl.z);
 #if SEA
 	// Water: flat, the floor's colour fading into deep-water blue with depth (the first few
 	// metres show the floor, a hundred hide it), and the sun's glint on top.
@@ -156,18 +172,18 @@ void main()
 	float clear = exp2(max(v_depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)
 	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7), clear),
 		     wet);
-	nrm = mix(nrm, U, below); // below is 0 or 1: still a unit vector (flat water, flat ice)
+	nrm = mix(nrm, vec3(0.0, 0.0, 1.0), below); // below is 0 or 1: flat water, flat ice
 #endif
-	float diff = max(dot(nrm, u_sun), 0.0);
-	float sky = 0.5 + 0.5 * dot(nrm, U); // the open sky a slope sees
+	float diff = max(dot(nrm, sunl), 0.0);
+	float sky = 0.5 + 0.5 * nrm.z; // the open sky a slope sees
 	vec3 lit = albedo * (vec3(1.0, 0.97, 0.92) * 1.05 * diff * day +
 			     vec3(0.30, 0.38, 0.50) * 0.22 * sky * (0.1 + 0.9 * day) + 0.015);
 #if SEA
 	// The glint: Phong around the sun's mirror image, cos^375 as e^(-375 (1 - cos)) (one
 	// exp2; pow() costs llvmpipe a log2 too), brighter towards grazing (Schlick's Fresnel).
-	vec3 eye = v_eye * inversesqrt(dot(v_eye, v_eye));
-	float c = max(dot(eye, U), 0.0);
-	float spec = exp2((dot(2.0 * c * U - eye, u_sun) - 1.0) * (375.0 * 1.4427));
+	vec3 eye = eyel * inversesqrt(dot(eyel, eyel));
+	float c = max(eye.z, 0.0);
+	float spec = exp2((dot(vec3(0.0, 0.0, 2.0 * c) - eye, sunl) - 1.0) * (375.0 * 1.4427));
 	float m = 1.0 - c, m2 = m * m;
 	float fres = 0.02 + 0.98 * m2 * m2 * m;
 	lit += wet * day * (vec3(1.0, 0.95, 0.85) * 6.0 * spec * (0.2 + fres) +

@@ -17,6 +17,9 @@
 #ifndef SEA
 #define SEA 1
 #endif
+#ifndef GEO_FRAG
+#define GEO_FRAG 1
+#endif
 
 layout(location = 0) in vec3 a_ring; // sin φ̃, cos φ̃ (φ̃ = 0: north), θ̃ (angle from the nadir)
 
@@ -51,7 +54,10 @@ out vec3 v_in;    // light scattered into the ray by that air
 #endif
 #if SEA
 out float v_depth; // water above the ground, metres (< 0: dry land)
-out vec3 v_eye;    // from the point to the camera, ENU
+out vec3 v_eye;    // from the point to the camera: ENU, or the point's ENU without GEO_FRAG
+#endif
+#if !GEO_FRAG
+out vec3 v_sunl;   // towards the sun in the point's east-north-up frame
 #endif
 
 // (Δlon, Δlat) of the direction up + d from the camera's nadir, without cancellation.
@@ -108,8 +114,18 @@ void main()
 
 	v_delta = d;
 	v_g = g;
+#if GEO_FRAG
 #if SEA
 	v_eye = -pos;
+#endif
+#else
+	// the point's east, north (up is n): away from the poles, never degenerate
+	vec3 E = normalize(cross(zhat, n));
+	vec3 Nn = cross(n, E);
+	v_sunl = vec3(dot(u_sun, E), dot(u_sun, Nn), dot(u_sun, n));
+#if SEA
+	v_eye = vec3(-dot(pos, E), -dot(pos, Nn), -dot(pos, n));
+#endif
 #endif
 #if HAZE
 	// Air between the camera and the point: an exponential atmosphere integrated along the
