@@ -15,6 +15,9 @@ extern const struct node_type node_type_noise;
 /* `color_filter`: input (color) → color. levels, brightness, contrast, gamma (one LUT),
  * then hue rotation and saturation (a 3×3 matrix) when not identity; alpha passes. */
 extern const struct node_type node_type_color_filter;
+/* `color_mask`: input (color) → height 0..1: 1 within `near` of one of `colors` (RGB
+ * distance), 0 beyond `far`, smoothstep between — land cover from a colour layer. */
+extern const struct node_type node_type_color_mask;
 /* `height_filter`: input (height) → height: clamp(in · scale + offset, min, max). */
 extern const struct node_type node_type_height_filter;
 /* `ramp`: input (height) → color: hypsometric tint from `stops`, shifted by `sea_level`,

@@ -1,4 +1,4 @@
-/* Tests of the per-texel node types: color_filter, height_filter, ramp, blend. Nodes are built
+/* Tests of the per-texel node types: color_filter, height_filter, color_mask, ramp, blend. Nodes are built
  * from INI snippets exactly as the planet loader would (node_init), their inputs are bare
  * nodes with a type and a hash, and generate() runs on hand-filled tiles. */
 #include <stdarg.h>
@@ -334,6 +334,58 @@ static void height_filter(void **state)
 }
 
 /* Runs a ramp over heights hs[0..n) and returns the colours (4 per height). */
+/* color_mask: 1 within `near` of the nearest reference colour, 0 from `far` on, smoothstep
+ * between (and monotone in the distance); alpha ignored; bad keys named. */
+static void color_mask(void **state)
+{
+	(void)state;
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_color_mask, &input_color, NULL, NULL,
+			      "colors = 200 150 100, 20 40 10\nnear = 10\nfar = 50"), 0);
+	assert_int_equal(tn.n.out, PIX_HEIGHT);
+	struct tile *a = tile_create(&key0, PIX_COLOR, T);
+	uint8_t *px = a->data;
+	/* texel i: the first colour moved i units along red (alpha varies, ignored) */
+	for (int i = 0; i < N; i++) {
+		int r = 200 - (i < 200 ? i : 200);
+		px[4 * i] = (uint8_t)r;
+		px[4 * i + 1] = 150;
+		px[4 * i + 2] = 100;
+		px[4 * i + 3] = (uint8_t)(i * 7);
+	}
+	/* the last texel: exactly the second colour */
+	px[4 * (N - 1)] = 20, px[4 * (N - 1) + 1] = 40, px[4 * (N - 1) + 2] = 10;
+	struct tile *o = run1(&tn, a, NULL, NULL);
+	const float *m = tile_f32(o);
+	for (int d = 0; d <= 10; d++)
+		assert_true(m[d] == 1.0f);
+	for (int d = 50; d < 200; d++)
+		assert_true(m[d] == 0.0f);
+	assert_true(fabsf(m[30] - 0.5f) < 1e-6f); /* the middle of the smoothstep */
+	for (int d = 11; d < 50; d++)
+		assert_true(m[d] < m[d - 1] && m[d] > 0 && m[d] < 1);
+	assert_true(m[N - 1] == 1.0f);
+	tile_unref(o);
+	tile_unref(a);
+	unmake(&tn);
+	static const struct {
+		const char *params, *key;
+	} bad[] = {
+		{ "near = 10", "colors" },
+		{ "colors = 1 2", "colors" },
+		{ "colors = 1 2 300", "colors" },
+		{ "colors = 1 2 3\nnear = 40\nfar = 20", "far" },
+	};
+	for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+		assert_int_equal(make(&tn, &node_type_color_mask, &input_color, NULL, NULL,
+				      bad[i].params),
+				 -EINVAL);
+		if (!strstr(tn.err, bad[i].key))
+			fail_msg("%s: \"%s\" does not name %s", bad[i].params, tn.err, bad[i].key);
+		unmake(&tn);
+	}
+}
+
 static void ramp_run(const char *params, const float *hs, int n, uint8_t *out)
 {
 	struct tnode tn;
@@ -688,7 +740,7 @@ int main(void)
 		cmocka_unit_test(blend_heights),     cmocka_unit_test(blend_colors),
 		cmocka_unit_test(blend_errors),	     cmocka_unit_test(hashes_differ),
 		cmocka_unit_test(color_reference),   cmocka_unit_test(ramp_reference),
-		cmocka_unit_test(blend_masked_and_normals),
+		cmocka_unit_test(blend_masked_and_normals), cmocka_unit_test(color_mask),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
 }
