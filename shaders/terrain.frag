@@ -45,8 +45,9 @@ in vec3 v_tr;
 in vec3 v_in;
 #endif
 #if SEA
-in float v_depth;
 in vec3 v_eye;
+uniform sampler2DArray u_height;
+uniform vec2 u_sea;     // sea level (m, exaggerated), 1 / exaggeration
 #endif
 #if !GEO_FRAG
 in vec3 v_sunl; // the sun in the point's east-north-up frame (the vertex shader's)
@@ -166,10 +167,18 @@ void main()
 	float day = smoothstep(-0.1, 0.1, sunl.z);
 #if SEA
 	// Water: flat, the floor's colour fading into deep-water blue with depth (the first few
-	// metres show the floor, a hundred hide it), and the sun's glint on top.
-	float below = step(0.0, v_depth); // at the sea's surface: water, or ice on it
+	// metres show the floor, a hundred hide it), and the sun's glint on top. The depth is
+	// the sea level less the heights of the levels the colour comes from, per fragment: the
+	// coast follows those texels, not the rings' vertices (which the vertex shader lifts to
+	// the water's surface).
+	float hd = tex_at(u_height, g, u_df, u_dvf, u_dsf).r;
+#if BLEND
+	hd = mix(hd, tex_at(u_height, g, u_dc, u_dvc, u_dsc).r, v_blend);
+#endif
+	float depth = u_sea.x * u_sea.y - hd;
+	float below = step(0.0, depth); // at the sea's surface: water, or ice on it
 	float wet = below * (1.0 - ice);
-	float clear = exp2(max(v_depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)
+	float clear = exp2(max(depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)
 	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7), clear),
 		     wet);
 	nrm = mix(nrm, vec3(0.0, 0.0, 1.0), below); // below is 0 or 1: flat water, flat ice

@@ -6,7 +6,7 @@
 // Compiled in variants (view.c prepends the #defines; the defaults below are the full one):
 // BLEND samples the coarser level too (the outer part of a ring, or a level fading in), HAZE
 // computes the air's transmittance and in-scatter here, per vertex, SEA lifts the ground below
-// sea level to the water's surface (the depth goes to the fragment shader).
+// sea level to the water's surface (the fragment shader finds the depth from the heights).
 
 #ifndef BLEND
 #define BLEND 1
@@ -53,7 +53,6 @@ out vec3 v_tr;    // transmittance of the air between the camera and the point
 out vec3 v_in;    // light scattered into the ray by that air
 #endif
 #if SEA
-out float v_depth; // water above the ground, metres (< 0: dry land)
 out vec3 v_eye;    // from the point to the camera: ENU, or the point's ENU without GEO_FRAG
 #endif
 #if !GEO_FRAG
@@ -97,8 +96,7 @@ void main()
 	float h = hf * u_exag;
 #endif
 #if SEA
-	v_depth = (u_sea.x - h) * u_sea.y;
-	h = max(h, u_sea.x);
+	h = max(h, u_sea.x); // the fragment shader tells water from land per fragment
 #endif
 
 	// P - C = (Nc+hc)·d + (N-Nc + h-hc)·n - e²·(N·(s-sc) + (N-Nc)·sc)·ẑ

@@ -626,6 +626,20 @@ static int drawn_range(struct view *v, int l, double *lo, double *hi)
 	return drawn_range_near(v, l, -1, lo, hi);
 }
 
+/* Whether the ground levels i and c draw, and the levels their colour comes from, lies
+ * above the sea everywhere their slices hold it: the one-level program without water does. */
+static bool dry(struct view *v, int i, int c)
+{
+	const int ls[4] = { i, c, v->detail[i], v->detail[c] };
+	double sea = v->src->planet.look.sea_level;
+	for (int k = 0; k < 4; k++) {
+		double lo, hi;
+		if (view_clipmap_height_range(v->cm, ls[k], &lo, &hi) != 0 || !(lo > sea))
+			return false;
+	}
+	return true;
+}
+
 /* Binds the program of variant bits for drawing level i (fine) blended towards level c
  * (coarse): the frame's common uniforms on its first use this frame, the levels' always. */
 static int bind_program(struct view *v, int bits, int i, int c, float fade)
@@ -684,6 +698,8 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 	 * the way to the nearer pole. */
 	double dpole = M_PI / 2 - fabs(v->last.lat * DEG);
 	int bits = v->frame_bits | (fmin(clipmap_ring_radius(i), cap) > 0.8 * dpole ? VAR_GEO_FRAG : 0);
+	if ((bits & VAR_SEA) && dry(v, i, c))
+		bits &= ~VAR_SEA;
 	/* Cull against the heights the two levels' slices hold (the planet's bounds until
 	 * both have them), and against the horizon of the lowest ground between the camera and
 	 * the level (the slices of this level and every finer one drawn hold all of it): a sphere
