@@ -689,6 +689,178 @@ static void bad_files(void **state)
 	node_ini_fini(&v);
 }
 
+/* A rectangle in (lon, lat) as GeoJSON. */
+static void write_rect(const char *name, double w, double so, double e, double n)
+{
+	char text[512];
+	snprintf(text, sizeof text,
+		 "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\","
+		 "\"properties\":{},\"geometry\":{\"type\":\"Polygon\",\"coordinates\":"
+		 "[[[%.6f,%.6f],[%.6f,%.6f],[%.6f,%.6f],[%.6f,%.6f],[%.6f,%.6f]]]}}]}",
+		 w, so, e, so, e, n, w, n, w, so);
+	write_file(name, text);
+}
+
+/* What the feathered mask must be at a texel fully outside rectangle [w, e] × [so, n] whose
+ * centre is (lonc, latc): 1 − smoothstep of the distance on the ground (on this sphere, in
+ * the plane tangent at the centre: the nearest point of an axis-aligned rectangle). */
+static double feather_ref(double w, double so, double e, double n, double lonc, double latc,
+			  double feather)
+{
+	lonc += 360 * round(((w + e) / 2 - lonc) / 360); /* the copy nearest the rectangle */
+	double dx = fmax(fmax(w - lonc, 0), lonc - e), dy = fmax(fmax(so - latc, 0), latc - n);
+	double m = R * M_PI / 180;
+	double d = hypot(dx * m * cos(latc * M_PI / 180), dy * m);
+	double t = fmin(d / feather, 1);
+	return 1 - t * t * (3 - 2 * t);
+}
+
+/* Tile (lx, ly, x, y) of the feathered rectangle against feather_ref: texels inside exactly
+ * 1, texels outside as the reference within float rounding. Returns the tile (owned) and
+ * counts the texels in the feather's band (0 < mask < 1, fully outside) in *band. */
+static struct tile *feather_tile(struct node_ini *v, const double rect[4], double feather,
+				 int lx, int ly, uint32_t x, uint32_t y, int *band, int *inside)
+{
+	struct tile *t = gen(v, lx, ly, x, y);
+	const float *m = tile_f32(t);
+	struct tile_key k = { .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
+	struct geo_rect r;
+	grid_tile_rect(&k, &r);
+	double dlon = (r.east - r.west) / T, dlat = (r.north - r.south) / T, worst = 0;
+	for (int j = 0; j < T; j++)
+		for (int i = 0; i < T; i++) {
+			double w = r.west + i * dlon, e = w + dlon, n = r.north - j * dlat, so = n - dlat;
+			double sh = 360 * round(((rect[0] + rect[2]) / 2 - (w + e) / 2) / 360);
+			bool in = w + sh >= rect[0] && e + sh <= rect[2] && so >= rect[1] && n <= rect[3];
+			bool out = e + sh <= rect[0] || w + sh >= rect[2] || n <= rect[1] || so >= rect[3];
+			float got = m[j * T + i];
+			if (in) {
+				assert_true(got == 1.0f);
+				++*inside;
+			} else if (out) {
+				double want = feather_ref(rect[0], rect[1], rect[2], rect[3], w + dlon / 2,
+							  n - dlat / 2, feather);
+				worst = fmax(worst, fabs(got - want));
+				if (want == 0)
+					assert_true(got == 0.0f); /* beyond the feather: exactly none */
+				*band += got > 0 && got < 1;
+			} else {
+				assert_true(got > 0 && got <= 1);
+			}
+		}
+	assert_true(worst < 2e-4);
+	return t;
+}
+
+/* The soft edge (feather = 600m): inside the polygon the mask is exactly 1 and the blend's
+ * heights exactly the target; across the feather the mask follows 1 − smoothstep of the
+ * distance on the ground and the heights lie between target and terrain, nearer the target
+ * the nearer the polygon (monotone along a row); beyond it the mask is exactly 0 and the
+ * heights unchanged bit for bit. A polygon lying in one tile feathers into its neighbour
+ * (the index box grows by the feather), so both tiles agree along their shared edge — also
+ * across the antimeridian. */
+static void feather(void **state)
+{
+	(void)state;
+	const double F = 600;
+	int ly = 12, lx = 13;
+	double tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
+	/* a rectangle near the east edge of its tile, within the feather of the next one */
+	uint32_t x = (uint32_t)floor((10.03 + 180) / tw), y = (uint32_t)floor((90 - 45.03) / th);
+	double east = -180 + (x + 1) * tw - 0.002, north = 90 - y * th - th / 3;
+	double rect[4] = { east - tw / 3, north - th / 4, east, north };
+	write_rect("soft.geojson", rect[0], rect[1], rect[2], rect[3]);
+	struct node_ini v;
+	vnode_ok(&v, "[node x]\ntype = vector\npath = soft.geojson\noutput = mask\nfeather = 600m\n");
+	int band = 0, inside = 0, band_b = 0, in_b = 0;
+	struct tile *ma = feather_tile(&v, rect, F, lx, ly, x, y, &band, &inside);
+	struct tile *mb = feather_tile(&v, rect, F, lx, ly, x + 1, y, &band_b, &in_b);
+	printf("# feather: %d texels inside, %d in the band, %d of them in the next tile\n", inside,
+	       band + band_b, band_b);
+	assert_true(inside > 100 && band > 100 && band_b > 20 && in_b == 0);
+	/* the shared edge: the neighbour's first column continues this tile's last one */
+	const float *a = tile_f32(ma), *b = tile_f32(mb);
+	for (int j = 0; j < T; j++)
+		assert_true(fabsf(a[j * T + T - 1] - b[j * T]) < 0.2f);
+
+	/* The blend over a rough terrain, target 312.5 m. */
+	struct node terrain = { .name = "terrain", .out = PIX_HEIGHT, .hash = 21 };
+	struct node level = { .name = "level", .out = PIX_HEIGHT, .hash = 22 };
+	struct node *ins[3] = { &terrain, &level, &v.n };
+	struct node_ini bn;
+	char err[256];
+	if (node_ini_init(&bn, &node_type_blend, &pl, "[node f]\ntype = blend\nmode = mask\n", ins,
+			  3, err))
+		fail_msg("%s", err);
+	struct tile_key k = { .node = 21, .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
+	struct tile *ta = tile_create(&k, PIX_HEIGHT, T), *tb = tile_create(&k, PIX_HEIGHT, T);
+	struct tile *o = tile_create(&k, PIX_HEIGHT, T);
+	for (int i = 0; i < T * T; i++) {
+		tile_f32(ta)[i] = 300.0f + 37.123f * sinf(i * 0.37f) + (float)(i % T) * 0.731f;
+		tile_f32(tb)[i] = 312.5f;
+	}
+	struct tile *in[3] = { ta, tb, ma };
+	assert_int_equal(node_type_blend.generate(&bn.n, &bn.g, &k, in, 3, o), 0);
+	int at_target = 0, unchanged = 0, between = 0;
+	for (int i = 0; i < T * T; i++) {
+		float c = a[i], h = tile_f32(o)[i], t0 = tile_f32(ta)[i];
+		if (c >= 1.0f) {
+			assert_float_equal(h, 312.5f, 312.5f * 2e-7f);
+			at_target++;
+		} else if (c <= 0.0f) {
+			assert_true(h == t0);
+			unchanged++;
+		} else {
+			assert_true(h >= fminf(t0, 312.5f) - 1e-3f && h <= fmaxf(t0, 312.5f) + 1e-3f);
+			/* the blend's weight is the mask: |h − terrain| = mask · |target − terrain| */
+			assert_float_equal(fabsf(h - t0), c * fabsf(312.5f - t0), 1e-3);
+			between++;
+		}
+	}
+	printf("# feather blend: %d at the target, %d between, %d unchanged\n", at_target, between,
+	       unchanged);
+	assert_true(at_target > 100 && between > 100 && unchanged > 100);
+	/* monotone: west from the rectangle's west edge along its middle row, the mask falls */
+	struct geo_rect gr;
+	grid_tile_rect(&k, &gr);
+	int jm = (int)((gr.north - (rect[1] + rect[3]) / 2) / ((gr.north - gr.south) / T));
+	int iw = (int)((rect[0] - gr.west) / ((gr.east - gr.west) / T));
+	int falls = 0;
+	for (int i = iw; i > 0; i--) {
+		assert_true(a[jm * T + i - 1] <= a[jm * T + i]);
+		falls += a[jm * T + i - 1] < a[jm * T + i];
+	}
+	assert_true(falls > 5);
+	tile_unref(ta), tile_unref(tb), tile_unref(o), tile_unref(ma), tile_unref(mb);
+	node_ini_fini(&bn);
+	node_ini_fini(&v);
+
+	/* Across the antimeridian: the rectangle ends 0.002° west of it; the first tile east of
+	 * it (x = 0) takes the feather, and meets the last tile. */
+	double am[4] = { 179.99, 10.0, 179.998, 10.01 };
+	write_rect("soft_am.geojson", am[0], am[1], am[2], am[3]);
+	vnode_ok(&v, "[node x]\ntype = vector\npath = soft_am.geojson\noutput = mask\n"
+		     "feather = 0.6km\n");
+	uint32_t nx = grid_tiles_x(lx), ya = (uint32_t)floor((90 - 10.005) / th);
+	band = inside = band_b = in_b = 0;
+	ma = feather_tile(&v, am, F, lx, ly, nx - 1, ya, &band, &inside);
+	mb = feather_tile(&v, am, F, lx, ly, 0, ya, &band_b, &in_b);
+	printf("# feather at the antimeridian: %d inside, %d in the band west, %d east\n", inside,
+	       band, band_b);
+	assert_true(inside > 10 && band > 50 && band_b > 20);
+	a = tile_f32(ma), b = tile_f32(mb);
+	for (int j = 0; j < T; j++)
+		assert_true(fabsf(a[j * T + T - 1] - b[j * T]) < 0.2f);
+	tile_unref(ma), tile_unref(mb);
+	node_ini_fini(&v);
+
+	/* a feather is a distance on the ground, and softens a mask only */
+	refused("[node x]\ntype = vector\npath = soft.geojson\noutput = mask\nfeather = 3px\n",
+		"feather: expected a distance on the ground");
+	refused("[node x]\ntype = vector\npath = soft.geojson\nfeather = 300m\n",
+		"feather: softens a mask's edge");
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -704,6 +876,7 @@ int main(void)
 		cmocka_unit_test(outline),
 		cmocka_unit_test(earth_border),
 		cmocka_unit_test(bad_files),
+		cmocka_unit_test(feather),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }
