@@ -6,7 +6,8 @@
  * of the layer drawn from the start (--color-layer), every frame after it (once complete) the
  * other layer's: so the colour clipmap refilled from the new layer, and switching back made
  * the daemon send the first layer's tiles again. Paced in real time, the frames right after
- * the switch are incomplete and the last one matches. A name the planet has no colour layer
+ * the switch are incomplete and the last one matches; so does a window's (xvfb-run) last
+ * frame. A name the planet has no colour layer
  * of is exit 2 with a message listing its colour layers. Skipped when the daemon or the
  * viewer was not built, or no GL context exists.
  */
@@ -243,6 +244,43 @@ static void switch_real_time(void **state)
 	}
 }
 
+/* The window (on a virtual X display, xvfb-run): the same switch scripted at frame 20 of a
+ * real-time window (what L does); the stats name the layer per frame and the screenshot of
+ * the last frame shows the new layer whole. Skipped without xvfb-run. */
+static void switch_window(void **state)
+{
+	struct env *e = *state;
+	if (e->d.daemon <= 0)
+		skip();
+	if (system("command -v xvfb-run >/dev/null 2>&1") != 0) {
+		print_message("skipped: xvfb-run not installed (apt-get install xvfb xauth)\n");
+		skip();
+	}
+	char plain[200], warm[200], shot[200], stats[200], out[8192], exe[600], limit[32];
+	references(e, false, plain, warm);
+	snprintf(exe, sizeof exe, "%s/clipmapview", e->d.bindir);
+	snprintf(shot, sizeof shot, "%s/window.png", e->d.dir);
+	snprintf(stats, sizeof stats, "%s/window.json", e->d.dir);
+	snprintf(limit, sizeof limit, "%.0f", test_slow(120));
+	/* 240 frames at 60 Hz: the new layer's tiles are in well before the end */
+	char *argv[] = { "timeout", limit, "xvfb-run", "-a", "-s", "-screen 0 1024x768x24", exe,
+			 "--window", "--planet", e->planet, "--camera", CAMERA, "--size", "160x120",
+			 "--exit-after", "240", "--switch-layer-at", "20:warm", "--stats", stats,
+			 "--screenshot", shot, NULL };
+	int rc = daemon_env_run(argv, out, sizeof out);
+	if (rc != 0)
+		fprintf(stderr, "clipmapview --window: exit %d:\n%s\n", rc, out);
+	assert_int_equal(rc, 0);
+	char names[300][16];
+	assert_int_equal(stats_layers(stats, names, 300), 240);
+	for (int f = 0; f < 240; f++)
+		assert_string_equal(names[f], f < 20 ? "color" : "warm");
+	double d = mad(shot, warm);
+	fprintf(stderr, "window: last frame |diff| to warm %.3f, to color %.3f\n", d,
+		mad(shot, plain));
+	assert_true(d < 1.0);
+}
+
 /* A name the planet has no colour layer of (also a height layer's name): exit 2, naming it
  * and the planet's colour layers, before any picture is written. */
 static void bad_name(void **state)
@@ -282,6 +320,7 @@ int main(void)
 		cmocka_unit_test(switch_local),
 		cmocka_unit_test(switch_net),
 		cmocka_unit_test(switch_real_time),
+		cmocka_unit_test(switch_window),
 		cmocka_unit_test(bad_name),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
