@@ -472,6 +472,34 @@ static void parent_is_mean(void **state)
 	node_ini_fini(&v);
 }
 
+/* Mask tile m of vector node v as the weight of a blend with mode mask: a = a rough terrain
+ * (returned owned in *terrain), b = 312.5 m everywhere. Returns the heights (owned). */
+static struct tile *flatten_with(struct node_ini *v, struct tile *m, struct tile **terrain)
+{
+	struct node tn = { .name = "terrain", .out = PIX_HEIGHT, .hash = 21 };
+	struct node level = { .name = "level", .out = PIX_HEIGHT, .hash = 22 };
+	struct node *ins[3] = { &tn, &level, &v->n };
+	struct node_ini bn;
+	char err[256];
+	if (node_ini_init(&bn, &node_type_blend, &pl, "[node f]\ntype = blend\nmode = mask\n", ins,
+			  3, err))
+		fail_msg("%s", err);
+	struct tile_key k = m->key;
+	k.node = 21;
+	struct tile *a = tile_create(&k, PIX_HEIGHT, T), *b = tile_create(&k, PIX_HEIGHT, T);
+	struct tile *o = tile_create(&k, PIX_HEIGHT, T);
+	for (int i = 0; i < T * T; i++) {
+		tile_f32(a)[i] = 300.0f + 37.123f * sinf(i * 0.37f) + (float)(i % T) * 0.731f;
+		tile_f32(b)[i] = 312.5f;
+	}
+	struct tile *in[3] = { a, b, m };
+	assert_int_equal(node_type_blend.generate(&bn.n, &bn.g, &k, in, 3, o), 0);
+	tile_unref(b);
+	node_ini_fini(&bn);
+	*terrain = a;
+	return o;
+}
+
 /* The mask as a blend's mask over heights, b a constant target: inside the polygon every
  * height is the target, outside every height is unchanged (bit for bit). */
 static void flatten(void **state)
@@ -483,28 +511,12 @@ static void flatten(void **state)
 		   "[[[10.01,45.01],[10.05,45.012],[10.06,45.04],[10.02,45.05],[10.01,45.01]]]}}]}");
 	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = site.geojson\noutput = mask\n");
-	/* The blend: a = terrain, b = the site's height, mask = the vector node. */
-	struct node terrain = { .name = "terrain", .out = PIX_HEIGHT, .hash = 21 };
-	struct node level = { .name = "level", .out = PIX_HEIGHT, .hash = 22 };
-	struct node *ins[3] = { &terrain, &level, &v.n };
-	struct node_ini bn;
-	char err[256];
-	if (node_ini_init(&bn, &node_type_blend, &pl, "[node f]\ntype = blend\nmode = mask\n", ins,
-			  3, err))
-		fail_msg("%s", err);
 	int ly = 12, lx = 13;
 	double tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
 	uint32_t x = (uint32_t)floor((10.03 + 180) / tw), y = (uint32_t)floor((90 - 45.03) / th);
 	struct tile *m = gen(&v, lx, ly, x, y);
-	struct tile_key k = { .node = 21, .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
-	struct tile *a = tile_create(&k, PIX_HEIGHT, T), *b = tile_create(&k, PIX_HEIGHT, T);
-	struct tile *o = tile_create(&k, PIX_HEIGHT, T);
-	for (int i = 0; i < T * T; i++) {
-		tile_f32(a)[i] = 300.0f + 37.123f * sinf(i * 0.37f) + (float)(i % T) * 0.731f;
-		tile_f32(b)[i] = 312.5f;
-	}
-	struct tile *in[3] = { a, b, m };
-	assert_int_equal(node_type_blend.generate(&bn.n, &bn.g, &k, in, 3, o), 0);
+	/* The blend: a = terrain, b = the site's height, mask = the vector node. */
+	struct tile *a, *o = flatten_with(&v, m, &a);
 	int inside = 0, outside = 0, edge = 0;
 	for (int i = 0; i < T * T; i++) {
 		float c = tile_f32(m)[i], h = tile_f32(o)[i];
@@ -521,8 +533,7 @@ static void flatten(void **state)
 	printf("# flatten: %d texels at the target, %d unchanged, %d on the edge\n", inside,
 	       outside, edge);
 	assert_true(inside > 200 && outside > 200 && edge < inside);
-	tile_unref(a), tile_unref(b), tile_unref(o), tile_unref(m);
-	node_ini_fini(&bn);
+	tile_unref(a), tile_unref(o), tile_unref(m);
 	node_ini_fini(&v);
 }
 
@@ -784,23 +795,7 @@ static void feather(void **state)
 		assert_true(fabsf(a[j * T + T - 1] - b[j * T]) < 0.2f);
 
 	/* The blend over a rough terrain, target 312.5 m. */
-	struct node terrain = { .name = "terrain", .out = PIX_HEIGHT, .hash = 21 };
-	struct node level = { .name = "level", .out = PIX_HEIGHT, .hash = 22 };
-	struct node *ins[3] = { &terrain, &level, &v.n };
-	struct node_ini bn;
-	char err[256];
-	if (node_ini_init(&bn, &node_type_blend, &pl, "[node f]\ntype = blend\nmode = mask\n", ins,
-			  3, err))
-		fail_msg("%s", err);
-	struct tile_key k = { .node = 21, .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
-	struct tile *ta = tile_create(&k, PIX_HEIGHT, T), *tb = tile_create(&k, PIX_HEIGHT, T);
-	struct tile *o = tile_create(&k, PIX_HEIGHT, T);
-	for (int i = 0; i < T * T; i++) {
-		tile_f32(ta)[i] = 300.0f + 37.123f * sinf(i * 0.37f) + (float)(i % T) * 0.731f;
-		tile_f32(tb)[i] = 312.5f;
-	}
-	struct tile *in[3] = { ta, tb, ma };
-	assert_int_equal(node_type_blend.generate(&bn.n, &bn.g, &k, in, 3, o), 0);
+	struct tile *ta, *o = flatten_with(&v, ma, &ta);
 	int at_target = 0, unchanged = 0, between = 0;
 	for (int i = 0; i < T * T; i++) {
 		float c = a[i], h = tile_f32(o)[i], t0 = tile_f32(ta)[i];
@@ -822,7 +817,7 @@ static void feather(void **state)
 	assert_true(at_target > 100 && between > 100 && unchanged > 100);
 	/* monotone: west from the rectangle's west edge along its middle row, the mask falls */
 	struct geo_rect gr;
-	grid_tile_rect(&k, &gr);
+	grid_tile_rect(&ma->key, &gr);
 	int jm = (int)((gr.north - (rect[1] + rect[3]) / 2) / ((gr.north - gr.south) / T));
 	int iw = (int)((rect[0] - gr.west) / ((gr.east - gr.west) / T));
 	int falls = 0;
@@ -831,8 +826,7 @@ static void feather(void **state)
 		falls += a[jm * T + i - 1] < a[jm * T + i];
 	}
 	assert_true(falls > 5);
-	tile_unref(ta), tile_unref(tb), tile_unref(o), tile_unref(ma), tile_unref(mb);
-	node_ini_fini(&bn);
+	tile_unref(ta), tile_unref(o), tile_unref(ma), tile_unref(mb);
 	node_ini_fini(&v);
 
 	/* Across the antimeridian: the rectangle ends 0.002° west of it; the first tile east of
