@@ -3,8 +3,10 @@
  * several levels, also across the antimeridian and around a pole; a 100 m line measured
  * across in fine tiles (east-west at 45° and 70°: the cos φ conversion, north-south); tiles
  * that meet at the antimeridian and at a pole agree on their border texels; a mask through
- * `blend` mode mask flattens exactly the polygon; styles by attribute; and files refused at
- * load with a message naming them. */
+ * `blend` mode mask flattens exactly the polygon, and with a feather blends into the terrain
+ * over that distance on the ground (exact inside, untouched beyond, as the reference distance
+ * across tile borders, the antimeridian and near a pole); styles by attribute; and files
+ * refused at load with a message naming them. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -846,6 +848,27 @@ static void feather(void **state)
 	for (int j = 0; j < T; j++)
 		assert_true(fabsf(a[j * T + T - 1] - b[j * T]) < 0.2f);
 	tile_unref(ma), tile_unref(mb);
+	node_ini_fini(&v);
+
+	/* Near the north pole a texel is 75 times narrower east-west than north-south: the
+	 * feather reaches across several tiles of the row, each as the reference. */
+	double pole[4] = { 10.0, 89.2, 10.3, 89.25 };
+	write_rect("soft_pole.geojson", pole[0], pole[1], pole[2], pole[3]);
+	vnode_ok(&v, "[node x]\ntype = vector\npath = soft_pole.geojson\noutput = mask\n"
+		     "feather = 600m\n");
+	ly = 10, lx = 11;
+	tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
+	uint32_t xp = (uint32_t)floor((10.3 + 180) / tw), yp = (uint32_t)floor((90 - 89.22) / th);
+	int far_band = 0;
+	for (uint32_t k2 = 0; k2 < 4; k2++) {
+		band = inside = 0;
+		struct tile *t2 = feather_tile(&v, pole, F, lx, ly, xp + k2, yp, &band, &inside);
+		if (k2 >= 2)
+			far_band += band;
+		tile_unref(t2);
+	}
+	printf("# feather near the pole: %d texels in the band two and three tiles east\n", far_band);
+	assert_true(far_band > 20);
 	node_ini_fini(&v);
 
 	/* a feather is a distance on the ground, and softens a mask only */
