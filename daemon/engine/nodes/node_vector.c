@@ -452,6 +452,8 @@ static void feather_segment(struct feather *fe, const double p[2], const double 
 			double gl = reach / mx;
 			fi0 = fmax(0, floor((lon0 - gl - fe->west) / fe->dlon));
 			fi1 = fmin(T - 1, floor((lon1 + gl - fe->west) / fe->dlon));
+			if (fi0 > fi1)
+				continue; /* (before an out-of-range cast to int) */
 		}
 		double ay = (p[1] - latc) * my, ey = (q[1] - p[1]) * my;
 		float *row = fe->dist + (size_t)j * T;
