@@ -66,15 +66,25 @@ static void usage(FILE *f)
 		"  --rings N,M         N steps around, M rings per level (default 256,16)\n"
 		"  --color-layer NAME  the colour layer drawn (default: \"color\"; earth: annotated\n"
 		"                      for coast, borders and rivers)\n"
+		"  --switch-layer-at FRAME:NAME  switch to colour layer NAME before frame FRAME\n"
+		"                      (0-based; repeatable): scripted L presses\n"
 		"  --backend egl|osmesa, --workers N, --no-prefetch\n"
 		"  --window            fly interactively in a window (--camera optional):\n"
 		"                      left drag orbit, right drag look, wheel zoom, WASD/arrows move,\n"
-		"                      E/PageUp climb, Q/PageDown descend, Shift faster, R reset, Esc quit\n"
+		"                      E/PageUp climb, Q/PageDown descend, Shift faster, R reset,\n"
+		"                      L next colour layer, Esc quit\n"
 		"  --exit-after N      (window) close after N frames\n"
 		"  --screenshot FILE   (window) write the last frame as PNG on exit\n"
 		"  -V, --version       the version\n"
 		"exit status: 0 ok, 1 failure, 2 bad usage, 3 incomplete after --timeout\n");
 }
+
+/* --switch-layer-at FRAME:NAME: the colour layer NAME from frame FRAME on. */
+#define MAX_SWITCHES 16
+struct layer_switch {
+	long frame;
+	const char *name; /* borrowed from argv */
+};
 
 /* What the command line asks for (parse_args). */
 struct args {
@@ -90,6 +100,8 @@ struct args {
 	double timeout, fov, fps, budget;
 	struct view_desc d; /* --sun, --rings, --exaggerate, --haze, --no-prefetch */
 	enum gl_backend backend;
+	struct layer_switch sw[MAX_SWITCHES]; /* --switch-layer-at, in command-line order */
+	int nsw;
 };
 
 /* Prints an argument error (err from common/args) and returns false. */
@@ -215,12 +227,36 @@ static bool parse_backend(const char *s, enum gl_backend *b)
 	return true;
 }
 
+/* "FRAME:NAME" into a->sw (the name is checked against the planet once it is open). */
+static bool parse_switch(const char *s, struct args *a)
+{
+	char err[256], num[32];
+	const char *colon = strchr(s, ':');
+	if (!colon || colon == s || !colon[1] || (size_t)(colon - s) >= sizeof num) {
+		snprintf(err, sizeof err, "--switch-layer-at: \"%s\": expected FRAME:NAME (a frame "
+			 "number, a colour layer's name)", s);
+		return complain(err);
+	}
+	if (a->nsw == MAX_SWITCHES) {
+		snprintf(err, sizeof err, "--switch-layer-at: at most %d", MAX_SWITCHES);
+		return complain(err);
+	}
+	snprintf(num, sizeof num, "%.*s", (int)(colon - s), s);
+	struct layer_switch *w = &a->sw[a->nsw];
+	if (args_long("--switch-layer-at", num, 0, 1L << 40, &w->frame, err))
+		return complain(err);
+	w->name = colon + 1;
+	a->nsw++;
+	return true;
+}
+
 enum {
 	O_PLANET = 256, O_CAMERA, O_FLIGHT, O_STEPS, O_SIZE, O_WAIT, O_TIMEOUT, O_STATS, O_FOV,
 	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
 	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS, O_LOSSLESS,
 	O_CLAYER,
-	O_CONNECT_WAIT
+	O_CONNECT_WAIT,
+	O_SWITCH_LAYER
 };
 
 static const struct option long_opts[] = {
@@ -251,6 +287,7 @@ static const struct option long_opts[] = {
 	{ "exaggerate", required_argument, NULL, O_EXAG },
 	{ "haze", required_argument, NULL, O_HAZE },
 	{ "color-layer", required_argument, NULL, O_CLAYER },
+	{ "switch-layer-at", required_argument, NULL, O_SWITCH_LAYER },
 	{ "window", no_argument, NULL, O_WINDOW },
 	{ "exit-after", required_argument, NULL, O_EXIT_AFTER },
 	{ "screenshot", required_argument, NULL, O_SCREENSHOT },
@@ -279,6 +316,7 @@ static bool take_option(int c, const char *s, struct args *a)
 			a->d.exaggeration = (float)v;
 		break;
 	case O_CLAYER: a->d.color_layer = s; return true;
+	case O_SWITCH_LAYER: return parse_switch(s, a);
 	case O_HAZE:
 		if ((rc = args_double("--haze", s, 0, 100, &v, err)) == 0)
 			a->d.haze = v > 0 ? (float)v : -1;
@@ -578,10 +616,16 @@ static void stats_line(FILE *f, int frame, const struct view_frame_stats *s,
 	fprintf(f,
 		"\"frame\":%d,\"ms\":%.3f,\"lmin\":%d,\"lmax\":%d,\"lfirst\":%d,\"llast\":%d,"
 		"\"levels_drawn\":%d,\"dmax\":%d,\"ldetail\":%d,\"triangles\":%llu,\"bytes_uploaded\":%llu,\"tiles_received\":%d,"
-		"\"wants_sent\":%zu,\"complete\":%s,\"alt\":%.3f,\"agl\":%.3f}\n",
+		"\"wants_sent\":%zu,\"complete\":%s,\"alt\":%.3f,\"agl\":%.3f,\"color_layer\":\"",
 		frame, s->cpu_ms, s->lmin, s->lmax, s->lfirst, s->llast, s->levels_drawn, s->dmax,
 		s->ldetail, (unsigned long long)s->triangles, (unsigned long long)s->bytes_uploaded,
 		s->tiles_received, s->wants_sent, s->complete ? "true" : "false", s->alt, s->agl);
+	/* a layer's name as a JSON string (names are UTF-8: only quotes, backslashes and
+	 * control characters need escapes) */
+	for (const unsigned char *c = (const unsigned char *)(s->color_layer ? s->color_layer : "");
+	     *c; c++)
+		fprintf(f, *c == '"' || *c == '\\' ? "\\%c" : *c < 0x20 ? "\\u%04x" : "%c", *c);
+	fprintf(f, "\"}\n");
 }
 
 /* The picture v shows as PNG at path (pix: scratch of width × height × 4 bytes). Returns 0
@@ -598,6 +642,54 @@ static int write_picture(struct view *v, const char *path, int width, int height
 	return 0;
 }
 
+/* ---- colour layers -------------------------------------------------------------------- */
+
+/* Whether every --switch-layer-at names a colour layer of the planet (else says which does
+ * not, and the planet's colour layers). Returns 0 or 2. */
+static int check_switches(const struct args *a, const struct view *v)
+{
+	char err[256];
+	for (int i = 0; i < a->nsw; i++)
+		if (view_find_color_layer(v, a->sw[i].name, err) < 0) {
+			fprintf(stderr, "clipmapview: --switch-layer-at %ld:%s: %s\n", a->sw[i].frame,
+				a->sw[i].name, err);
+			return 2;
+		}
+	return 0;
+}
+
+/* The --switch-layer-at entries due at frame f (checked by check_switches). */
+static void scripted_switches(const struct args *a, struct view *v, long f)
+{
+	char err[256];
+	for (int i = 0; i < a->nsw; i++)
+		if (a->sw[i].frame == f)
+			view_set_color_layer(v, a->sw[i].name, err);
+}
+
+/* L: the planet's next colour layer after the one drawn (the planet's order, wrapping). */
+static void next_color_layer(struct view *v, const struct view_planet *p)
+{
+	const char *cur = view_color_layer(v);
+	int at = -1, ncolor = 0;
+	for (int i = 0; cur && i < p->nlayers; i++)
+		if (p->layer[i].format == PIX_COLOR) {
+			ncolor++;
+			if (!strcmp(p->layer[i].name, cur))
+				at = i;
+		}
+	if (at < 0 || ncolor < 2)
+		return;
+	for (int k = 1; k <= p->nlayers; k++) {
+		int i = (at + k) % p->nlayers;
+		if (p->layer[i].format == PIX_COLOR) {
+			char err[256];
+			view_set_color_layer(v, p->layer[i].name, err);
+			return;
+		}
+	}
+}
+
 /* ---- window mode ---------------------------------------------------------------------- */
 
 struct window_opts {
@@ -607,6 +699,8 @@ struct window_opts {
 	const char *screenshot;
 	FILE *stats;
 	struct link_report *link;
+	const struct args *args; /* --switch-layer-at */
+	const struct view_planet *planet;
 };
 
 static void fly_input(const struct gl_window_input *in, struct view_fly_input *f)
@@ -649,7 +743,9 @@ static void hud_frame(struct hud *h, struct gl_window *w, const char *title,
 	if (now - h->since < 0.5)
 		return;
 	double dt = now - h->since;
-	char text[448], link[128] = "";
+	char text[512], link[128] = "", layer[48] = "";
+	if (st->color_layer && st->color_layer[0])
+		snprintf(layer, sizeof layer, " | colour %.32s", st->color_layer);
 	if (lr->net && !lr->now.up)
 		snprintf(link, sizeof link, " | reconnecting (attempt %u)",
 			 lr->now.attempt ? lr->now.attempt : 1);
@@ -659,10 +755,10 @@ static void hud_frame(struct hud *h, struct gl_window *w, const char *title,
 			 lr->now.reconnects ? ", reconnected" : "");
 	snprintf(text, sizeof text,
 		 "%s | %.1f fps | levels %d-%d (%d drawn, texels %d) of %d-%d%s | %.0f tiles/s"
-		 " | %.2f MB/s | %.4f, %.4f, %.0f m%s",
+		 " | %.2f MB/s | %.4f, %.4f, %.0f m%s%s",
 		 title, h->frames / dt, st->lfirst, st->llast, st->levels_drawn, st->ldetail,
 		 st->lmin, st->lmax, st->complete ? " ready" : "", h->tiles / dt, h->bytes / dt / 1e6, cam->lat,
-		 cam->lon, st->agl, link);
+		 cam->lon, st->agl, layer, link);
 	gl_window_set_title(w, text);
 	*h = (struct hud){ .since = now };
 }
@@ -700,6 +796,9 @@ static int window_loop(struct gl_window *w, struct view *v, const struct view_ca
 		fly.cam.height = last.height > 0 ? last.height : fh;
 		view_fly_step(&fly, &fi, t - t_prev);
 		t_prev = t;
+		for (int k = 0; k < in.next_layer; k++)
+			next_color_layer(v, o->planet);
+		scripted_switches(o->args, v, frames);
 		struct view_frame_stats st;
 		int rc = view_frame(v, &fly.cam, t - t_start, &st);
 		if (rc < 0) {
@@ -767,8 +866,10 @@ static int run_window(const struct args *a, struct view_source *src, const struc
 		home.heading = keys->v[3];
 		home.pitch = keys->v[4];
 	}
+	if ((status = check_switches(a, v)))
+		goto out;
 	struct window_opts wo = { title, a->width, a->height, a->exit_after, a->screenshot,
-				  stats, lr };
+				  stats, lr, a, &src->planet };
 	status = window_loop(win, v, &home, radius, &wo);
 out:
 	view_destroy(v);
@@ -792,6 +893,7 @@ static int render_frames(const struct args *a, struct view *v, const struct key 
 		struct view_camera cam = flight_camera(keys, nkeys, a->steps, a->fov, f);
 		struct view_frame_stats st;
 		int rc;
+		scripted_switches(a, v, (long)f);
 		if (a->wait_complete)
 			rc = view_frame_complete(v, &cam, a->timeout, &st, NULL);
 		else
@@ -860,7 +962,8 @@ static int run_offline(const struct args *a, struct view_source *src, const stru
 		fprintf(stderr, "clipmapview: %s\n", err);
 		goto out;
 	}
-	status = render_frames(a, v, keys, nkeys, stats, lr);
+	if ((status = check_switches(a, v)) == 0)
+		status = render_frames(a, v, keys, nkeys, stats, lr);
 out:
 	view_destroy(v);
 	gl_context_destroy(ctx);

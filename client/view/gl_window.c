@@ -20,6 +20,7 @@ struct gl_window {
 	bool have_cursor;
 	double wheel;  /* accumulated by the scroll callback */
 	bool reset;    /* R pressed (key callback) */
+	int layer;     /* L presses since the last poll (key callback) */
 };
 
 static const int key_codes[GLW_NKEYS] = {
@@ -63,6 +64,8 @@ static void on_key(GLFWwindow *win, int key, int scancode, int action, int mods)
 		glfwSetWindowShouldClose(win, GLFW_TRUE);
 	else if (key == GLFW_KEY_R)
 		w->reset = true;
+	else if (key == GLFW_KEY_L)
+		w->layer++;
 }
 
 int gl_window_create(int width, int height, const char *title, struct gl_window **out,
@@ -140,6 +143,8 @@ void gl_window_poll(struct gl_window *w, struct gl_window_input *in)
 	in->key[GLW_SHIFT] |= glfwGetKey(w->win, GLFW_KEY_RIGHT_SHIFT) == GLFW_PRESS;
 	in->reset = w->reset;
 	w->reset = false;
+	in->next_layer = w->layer;
+	w->layer = 0;
 	in->quit = glfwWindowShouldClose(w->win);
 }
 

@@ -26,6 +26,7 @@ struct gl_window_input {
 	double wheel;	      /* scroll notches since the last poll, > 0 away from the user */
 	bool key[GLW_NKEYS];  /* held */
 	bool reset;	      /* R pressed since the last poll */
+	int next_layer;	      /* L presses since the last poll (next colour layer) */
 	bool quit;	      /* Esc pressed or the window closed */
 };
 

@@ -164,6 +164,10 @@ struct view {
 	/* state */
 	struct view_want *wants;
 	bool sent_once;
+	int color_next; /* the colour layer view_set_color_layer asked for, switched to at the
+			 * next frame (-1: none): one switch per want-set sent, so the daemon
+			 * sees every tile dropped by a switch leave the set before it is wanted
+			 * again */
 	bool *was_usable;
 	double *ready_since;
 	struct view_camera last;
@@ -416,6 +420,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	const char *nc = getenv("CLIPMAP_NO_CULL");
 	v->cull = !v->d.no_cull && !(nc && strcmp(nc, "1") == 0);
 	v->wants = xmalloc(MAX_WANTS * sizeof *v->wants);
+	v->color_next = -1;
 	v->was_usable = xcalloc((size_t)v->nlevels, sizeof *v->was_usable);
 	v->ready_since = xcalloc((size_t)v->nlevels, sizeof *v->ready_since);
 	v->floor = xcalloc((size_t)v->nlevels, sizeof *v->floor);
@@ -499,7 +504,8 @@ static bool usable(struct view *v, int l, double r, struct uploads *u)
 {
 	const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
 	const struct grid_quad *h = view_clipmap_held(v->cm, l);
-	if (t && !(h && grid_quad_equal(h, t)) && may_upload(v, u)) {
+	if (t && (!(h && grid_quad_equal(h, t)) || view_clipmap_color_stale(v->cm, l)) &&
+	    may_upload(v, u)) {
 		double t0 = clock_now_ms();
 		if (view_clipmap_update(v->cm, l) == 1)
 			u->done++;
@@ -895,6 +901,10 @@ static void frame_camera(struct view *v, const struct view_camera *cam, struct f
 static int frame_receive(struct view *v, const struct view_camera *cam, struct frame *f)
 {
 	bool changed = !v->sent_once;
+	if (v->color_next >= 0) {
+		changed |= view_clipmap_set_color(v->cm, v->color_next) == 1;
+		v->color_next = -1;
+	}
 	set_targets(v, f->lmin, f->dmax, &changed);
 	/* The look-ahead along the camera's motion (real time only: a frame without time —
 	 * offline rendering — has no motion). */
@@ -1187,8 +1197,10 @@ static int frame_end(struct view *v, struct frame *f)
 	for (int l = f->lmin; l <= f->dmax && complete; l++) {
 		const struct grid_quad *h = view_clipmap_held(v->cm, l);
 		const struct grid_quad *t = view_clipmap_target_of(v->cm, l);
-		complete = h && t && grid_quad_equal(h, t);
+		complete = h && t && grid_quad_equal(h, t) && !view_clipmap_color_stale(v->cm, l);
 	}
+	int cl = view_clipmap_color_layer(v->cm);
+	f->s.color_layer = cl >= 0 ? v->src->planet.layer[cl].name : "";
 	f->s.complete = complete;
 	gl->BindVertexArray(0);
 	gl->Finish();
@@ -1329,3 +1341,35 @@ int view_read_rgba(struct view *v, unsigned char *out)
 struct view_clipmap *view_get_clipmap(struct view *v) { return v->cm; }
 const struct view_body *view_get_body(const struct view *v) { return &v->body; }
 void view_background_rgba(const struct view *v, unsigned char out[4]) { memcpy(out, v->bg, 4); }
+
+int view_find_color_layer(const struct view *v, const char *name, char err[256])
+{
+	const struct view_planet *p = &v->src->planet;
+	int i = view_clipmap_color_find(v->cm, name);
+	if (i >= 0 && view_clipmap_color_layer(v->cm) >= 0)
+		return i;
+	char list[200] = "";
+	size_t n = 0;
+	for (int k = 0; k < p->nlayers && n < sizeof list; k++)
+		if (p->layer[k].format == PIX_COLOR)
+			n += (size_t)snprintf(list + n, sizeof list - n, "%s%s", n ? ", " : "",
+					      p->layer[k].name);
+	err_set(err, "planet %s has no colour layer \"%s\" (its colour layers: %s)", p->name, name,
+		n ? list : "none");
+	return -EINVAL;
+}
+
+int view_set_color_layer(struct view *v, const char *name, char err[256])
+{
+	int i = view_find_color_layer(v, name, err);
+	if (i < 0)
+		return i;
+	v->color_next = i;
+	return 0;
+}
+
+const char *view_color_layer(const struct view *v)
+{
+	int i = v->color_next >= 0 ? v->color_next : view_clipmap_color_layer(v->cm);
+	return i >= 0 ? v->src->planet.layer[i].name : NULL;
+}

@@ -66,7 +66,9 @@ struct view_frame_stats {
 	int levels_uploaded;	 /* levels whose new quad was copied in this frame */
 	int tiles_received;	 /* this frame */
 	size_t wants_sent;	 /* entries in the want-set sent this frame (0: none sent) */
-	bool complete;		 /* every wanted level drawn at its target quad */
+	bool complete;		 /* every wanted level drawn at its target quad (its colour
+				  * from the colour layer drawn now) */
+	const char *color_layer; /* the colour layer drawn ("" none; borrowed from the source) */
 	double alt, agl, ground; /* camera above the ellipsoid, above the ground; ground height
 				  * (the water's surface where a sea covers the ground) */
 };
@@ -86,6 +88,17 @@ int view_frame(struct view *v, const struct view_camera *c, double now_s,
 /* Between frames: takes the tiles that arrive for the next `seconds` (they are uploaded by
  * the next frame, within its budget). Returns how many arrived, or -errno. */
 int view_idle(struct view *v, double seconds);
+/* Switches the colour layer drawn to the planet's colour layer `name` from the next frame
+ * on: its tiles are wanted coarse levels first, and each level keeps its old colour until
+ * its new one is complete (view_clipmap_set_color); heights and normals stay. Returns 0, or
+ * -EINVAL with err naming the planet's colour layers. */
+int view_set_color_layer(struct view *v, const char *name, char err[256]);
+/* The index of the planet's colour layer `name` (what view_set_color_layer takes), or
+ * -EINVAL with err naming the planet's colour layers. */
+int view_find_color_layer(const struct view *v, const char *name, char err[256]);
+/* The colour layer drawn, or the one asked for if the switch is still to come (NULL: the
+ * planet has none); borrowed from the source. */
+const char *view_color_layer(const struct view *v);
 /* Turns frustum culling of ring sectors on or off (a debug switch: the pixels are the same). */
 void view_set_culling(struct view *v, bool on);
 /* Offline rendering: renders frames, sleeping on the source between them, until one is

@@ -39,6 +39,7 @@ struct level {
 	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
 	float hlo, hhi; /* the heights' range over the whole slice */
 	uint64_t hver;	/* counts hmirror's changes (from 1) */
+	uint32_t cgen;	/* the colour generation its colour slice holds (view_clipmap.cgen) */
 	struct near_range {
 		double lon, lat, r; /* the disk */
 		uint64_t hver;	    /* hmirror's version then (0: unset) */
@@ -53,6 +54,8 @@ struct view_clipmap {
 	uint32_t T, S; /* tile size, window (texture) size */
 	int nlevels;
 	int layer[VIEW_NROLES]; /* source layer index per role, -1 absent */
+	uint32_t cgen;		/* counts colour layer switches: a held level whose cgen differs
+				 * draws the previous layer's colour until it is refilled */
 	unsigned tex[VIEW_NROLES];
 	unsigned char *zeros; /* a T×T tile of zeros for tiles that failed */
 	bool has_motion;       /* the camera's ground motion, smoothed: */
@@ -452,16 +455,24 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 	struct level *L = &cm->lv[level];
 	if (!L->has_target)
 		return 0;
-	if (L->has_held && grid_quad_equal(&L->held, &L->target))
+	bool stale = view_clipmap_color_stale(cm, level);
+	if (L->has_held && grid_quad_equal(&L->held, &L->target) && !stale)
 		return 1;
-	struct grid_region rg[GRID_MAX_REGIONS];
+	/* Heights and normals: the regions the held window lacks. Colour after a layer switch:
+	 * the whole target from the new layer at once, so a slice never holds two layers. */
+	struct grid_region rg[GRID_MAX_REGIONS], crg[GRID_MAX_REGIONS];
 	int nr = grid_update_regions(L->has_held ? &L->held : NULL, &L->target, rg);
+	int ncr = stale ? grid_update_regions(NULL, &L->target, crg) : nr;
+	if (!stale)
+		memcpy(crg, rg, (size_t)nr * sizeof *rg);
 	/* Every tile a region copies from must be here, for every role. */
-	for (int i = 0; i < nr; i++) {
-		struct tile_key k = { 0, rg[i].tx, rg[i].ty, L->target.lx, L->target.ly };
-		for (int r = 0; r < VIEW_NROLES; r++)
-			if (cm->layer[r] >= 0 && !find(L, r, &k))
+	for (int r = 0; r < VIEW_NROLES; r++) {
+		const struct grid_region *g = r == VIEW_COLOR ? crg : rg;
+		for (int i = 0; cm->layer[r] >= 0 && i < (r == VIEW_COLOR ? ncr : nr); i++) {
+			struct tile_key k = { 0, g[i].tx, g[i].ty, L->target.lx, L->target.ly };
+			if (!find(L, r, &k))
 				return 0;
+		}
 	}
 	const struct gl *gl = cm->gl;
 	uint32_t T = cm->T, period = level_period(cm, &L->target);
@@ -471,26 +482,30 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 		if (cm->layer[r] < 0)
 			continue;
 		size_t bpp = pix_bytes(roles[r].type);
+		const struct grid_region *rgr = r == VIEW_COLOR ? crg : rg;
+		int nrr = r == VIEW_COLOR ? ncr : nr;
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
-		for (int i = 0; i < nr; i++) {
-			struct tile_key k = { 0, rg[i].tx, rg[i].ty, L->target.lx, L->target.ly };
+		for (int i = 0; i < nrr; i++) {
+			const struct grid_region *g = &rgr[i];
+			struct tile_key k = { 0, g->tx, g->ty, L->target.lx, L->target.ly };
 			const struct slot *s = find(L, r, &k);
 			const unsigned char *base = s->t.texels ? s->t.texels : cm->zeros;
-			for (uint32_t x = rg[i].x; x < cm->S; x += period) {
-				gl->TexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)x, (GLint)rg[i].y, level,
-						  (GLsizei)rg[i].w, (GLsizei)rg[i].h, 1, roles[r].fmt,
+			for (uint32_t x = g->x; x < cm->S; x += period) {
+				gl->TexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)x, (GLint)g->y, level,
+						  (GLsizei)g->w, (GLsizei)g->h, 1, roles[r].fmt,
 						  roles[r].gltype,
-						  base + ((size_t)rg[i].sy * T + rg[i].sx) * bpp);
-				cm->st.bytes_uploaded += (uint64_t)rg[i].w * rg[i].h * bpp;
+						  base + ((size_t)g->sy * T + g->sx) * bpp);
+				cm->st.bytes_uploaded += (uint64_t)g->w * g->h * bpp;
 				cm->st.regions_uploaded++;
 			}
 			if (r == VIEW_HEIGHT)
-				mirror_region(cm, L, &rg[i], base, period);
+				mirror_region(cm, L, g, base, period);
 		}
 	}
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, 0);
 	L->held = L->target;
 	L->has_held = true;
+	L->cgen = cm->cgen;
 	return 1;
 }
 
@@ -650,4 +665,39 @@ int view_clipmap_height_range_near(struct view_clipmap *cm, int level, double lo
 uint64_t view_clipmap_height_version(const struct view_clipmap *cm, int level)
 {
 	return cm->lv[level].hver;
+}
+
+bool view_clipmap_color_stale(const struct view_clipmap *cm, int level)
+{
+	const struct level *L = &cm->lv[level];
+	return L->has_held && cm->layer[VIEW_COLOR] >= 0 && L->cgen != cm->cgen;
+}
+
+int view_clipmap_color_find(const struct view_clipmap *cm, const char *name)
+{
+	const struct view_planet *p = &cm->src->planet;
+	for (int i = 0; i < p->nlayers; i++)
+		if (p->layer[i].format == PIX_COLOR && !strcmp(p->layer[i].name, name))
+			return i;
+	return -1;
+}
+
+int view_clipmap_color_layer(const struct view_clipmap *cm) { return cm->layer[VIEW_COLOR]; }
+
+int view_clipmap_set_color(struct view_clipmap *cm, int layer)
+{
+	const struct view_planet *p = &cm->src->planet;
+	if (cm->layer[VIEW_COLOR] < 0 || layer < 0 || layer >= p->nlayers ||
+	    p->layer[layer].format != PIX_COLOR)
+		return -EINVAL;
+	if (layer == cm->layer[VIEW_COLOR])
+		return 0;
+	/* The old layer's tiles go (those still in flight are dropped as they arrive: no role
+	 * takes their layer); each held level keeps its slice until the new one is complete. */
+	for (int l = 0; l < cm->nlevels; l++)
+		for (int i = 0; i < SLOTS; i++)
+			drop(cm, &cm->lv[l].slots[VIEW_COLOR][i]);
+	cm->layer[VIEW_COLOR] = layer;
+	cm->cgen++;
+	return 1;
 }

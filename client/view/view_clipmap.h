@@ -90,6 +90,21 @@ int view_clipmap_height_range_near(struct view_clipmap *cm, int level, double lo
 int view_clipmap_height_range_box(struct view_clipmap *cm, int level, double x0, double x1,
 				  double y0, double y1, double *lo, double *hi);
 
+/* Colour layer switches. The colour role draws one layer of the planet at a time;
+ * view_clipmap_set_color switches it to layer (an index into the source's planet, a colour
+ * layer): the old layer's tiles are released, the want-set asks for the new layer's (coarse
+ * levels first), and each held level keeps drawing its old colour until every colour tile of
+ * its target has arrived, then its whole colour slice is replaced at once — a slice never
+ * mixes two layers. Heights and normals stay. Returns 1 (switched), 0 (already drawn) or
+ * -EINVAL (not a colour layer, or the planet has none). */
+int view_clipmap_set_color(struct view_clipmap *cm, int layer);
+/* The colour layer drawn (index into the planet), -1 without one. */
+int view_clipmap_color_layer(const struct view_clipmap *cm);
+/* The index of the planet's colour layer called name, or -1. */
+int view_clipmap_color_find(const struct view_clipmap *cm, const char *name);
+/* Whether level's colour slice still holds a layer drawn before the last switch. */
+bool view_clipmap_color_stale(const struct view_clipmap *cm, int level);
+
 unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r); /* 0: absent */
 /* Reads every slice of a role's texture (S × S × nlevels texels, slice-major) into out.
  * Returns 0 or -ENOENT. */

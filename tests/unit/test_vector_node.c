@@ -3,8 +3,10 @@
  * several levels, also across the antimeridian and around a pole; a 100 m line measured
  * across in fine tiles (east-west at 45° and 70°: the cos φ conversion, north-south); tiles
  * that meet at the antimeridian and at a pole agree on their border texels; a mask through
- * `blend` mode mask flattens exactly the polygon; styles by attribute; and files refused at
- * load with a message naming them. */
+ * `blend` mode mask flattens exactly the polygon, and with a feather blends into the terrain
+ * over that distance on the ground (exact inside, untouched beyond, as the reference distance
+ * across tile borders, the antimeridian and near a pole); styles by attribute; and files
+ * refused at load with a message naming them. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -472,6 +474,34 @@ static void parent_is_mean(void **state)
 	node_ini_fini(&v);
 }
 
+/* Mask tile m of vector node v as the weight of a blend with mode mask: a = a rough terrain
+ * (returned owned in *terrain), b = 312.5 m everywhere. Returns the heights (owned). */
+static struct tile *flatten_with(struct node_ini *v, struct tile *m, struct tile **terrain)
+{
+	struct node tn = { .name = "terrain", .out = PIX_HEIGHT, .hash = 21 };
+	struct node level = { .name = "level", .out = PIX_HEIGHT, .hash = 22 };
+	struct node *ins[3] = { &tn, &level, &v->n };
+	struct node_ini bn;
+	char err[256];
+	if (node_ini_init(&bn, &node_type_blend, &pl, "[node f]\ntype = blend\nmode = mask\n", ins,
+			  3, err))
+		fail_msg("%s", err);
+	struct tile_key k = m->key;
+	k.node = 21;
+	struct tile *a = tile_create(&k, PIX_HEIGHT, T), *b = tile_create(&k, PIX_HEIGHT, T);
+	struct tile *o = tile_create(&k, PIX_HEIGHT, T);
+	for (int i = 0; i < T * T; i++) {
+		tile_f32(a)[i] = 300.0f + 37.123f * sinf(i * 0.37f) + (float)(i % T) * 0.731f;
+		tile_f32(b)[i] = 312.5f;
+	}
+	struct tile *in[3] = { a, b, m };
+	assert_int_equal(node_type_blend.generate(&bn.n, &bn.g, &k, in, 3, o), 0);
+	tile_unref(b);
+	node_ini_fini(&bn);
+	*terrain = a;
+	return o;
+}
+
 /* The mask as a blend's mask over heights, b a constant target: inside the polygon every
  * height is the target, outside every height is unchanged (bit for bit). */
 static void flatten(void **state)
@@ -483,28 +513,12 @@ static void flatten(void **state)
 		   "[[[10.01,45.01],[10.05,45.012],[10.06,45.04],[10.02,45.05],[10.01,45.01]]]}}]}");
 	struct node_ini v;
 	vnode_ok(&v, "[node x]\ntype = vector\npath = site.geojson\noutput = mask\n");
-	/* The blend: a = terrain, b = the site's height, mask = the vector node. */
-	struct node terrain = { .name = "terrain", .out = PIX_HEIGHT, .hash = 21 };
-	struct node level = { .name = "level", .out = PIX_HEIGHT, .hash = 22 };
-	struct node *ins[3] = { &terrain, &level, &v.n };
-	struct node_ini bn;
-	char err[256];
-	if (node_ini_init(&bn, &node_type_blend, &pl, "[node f]\ntype = blend\nmode = mask\n", ins,
-			  3, err))
-		fail_msg("%s", err);
 	int ly = 12, lx = 13;
 	double tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
 	uint32_t x = (uint32_t)floor((10.03 + 180) / tw), y = (uint32_t)floor((90 - 45.03) / th);
 	struct tile *m = gen(&v, lx, ly, x, y);
-	struct tile_key k = { .node = 21, .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
-	struct tile *a = tile_create(&k, PIX_HEIGHT, T), *b = tile_create(&k, PIX_HEIGHT, T);
-	struct tile *o = tile_create(&k, PIX_HEIGHT, T);
-	for (int i = 0; i < T * T; i++) {
-		tile_f32(a)[i] = 300.0f + 37.123f * sinf(i * 0.37f) + (float)(i % T) * 0.731f;
-		tile_f32(b)[i] = 312.5f;
-	}
-	struct tile *in[3] = { a, b, m };
-	assert_int_equal(node_type_blend.generate(&bn.n, &bn.g, &k, in, 3, o), 0);
+	/* The blend: a = terrain, b = the site's height, mask = the vector node. */
+	struct tile *a, *o = flatten_with(&v, m, &a);
 	int inside = 0, outside = 0, edge = 0;
 	for (int i = 0; i < T * T; i++) {
 		float c = tile_f32(m)[i], h = tile_f32(o)[i];
@@ -521,8 +535,7 @@ static void flatten(void **state)
 	printf("# flatten: %d texels at the target, %d unchanged, %d on the edge\n", inside,
 	       outside, edge);
 	assert_true(inside > 200 && outside > 200 && edge < inside);
-	tile_unref(a), tile_unref(b), tile_unref(o), tile_unref(m);
-	node_ini_fini(&bn);
+	tile_unref(a), tile_unref(o), tile_unref(m);
 	node_ini_fini(&v);
 }
 
@@ -689,6 +702,182 @@ static void bad_files(void **state)
 	node_ini_fini(&v);
 }
 
+/* A rectangle in (lon, lat) as GeoJSON. */
+static void write_rect(const char *name, double w, double so, double e, double n)
+{
+	char text[512];
+	snprintf(text, sizeof text,
+		 "{\"type\":\"FeatureCollection\",\"features\":[{\"type\":\"Feature\","
+		 "\"properties\":{},\"geometry\":{\"type\":\"Polygon\",\"coordinates\":"
+		 "[[[%.6f,%.6f],[%.6f,%.6f],[%.6f,%.6f],[%.6f,%.6f],[%.6f,%.6f]]]}}]}",
+		 w, so, e, so, e, n, w, n, w, so);
+	write_file(name, text);
+}
+
+/* What the feathered mask must be at a texel fully outside rectangle [w, e] × [so, n] whose
+ * centre is (lonc, latc): 1 − smoothstep of the distance on the ground (on this sphere, in
+ * the plane tangent at the centre: the nearest point of an axis-aligned rectangle). */
+static double feather_ref(double w, double so, double e, double n, double lonc, double latc,
+			  double feather)
+{
+	lonc += 360 * round(((w + e) / 2 - lonc) / 360); /* the copy nearest the rectangle */
+	double dx = fmax(fmax(w - lonc, 0), lonc - e), dy = fmax(fmax(so - latc, 0), latc - n);
+	double m = R * M_PI / 180;
+	double d = hypot(dx * m * cos(latc * M_PI / 180), dy * m);
+	double t = fmin(d / feather, 1);
+	return 1 - t * t * (3 - 2 * t);
+}
+
+/* Tile (lx, ly, x, y) of the feathered rectangle against feather_ref: texels inside exactly
+ * 1, texels outside as the reference within float rounding. Returns the tile (owned) and
+ * counts the texels in the feather's band (0 < mask < 1, fully outside) in *band. */
+static struct tile *feather_tile(struct node_ini *v, const double rect[4], double feather,
+				 int lx, int ly, uint32_t x, uint32_t y, int *band, int *inside)
+{
+	struct tile *t = gen(v, lx, ly, x, y);
+	const float *m = tile_f32(t);
+	struct tile_key k = { .x = x, .y = y, .lx = (uint8_t)lx, .ly = (uint8_t)ly };
+	struct geo_rect r;
+	grid_tile_rect(&k, &r);
+	double dlon = (r.east - r.west) / T, dlat = (r.north - r.south) / T, worst = 0;
+	for (int j = 0; j < T; j++)
+		for (int i = 0; i < T; i++) {
+			double w = r.west + i * dlon, e = w + dlon, n = r.north - j * dlat, so = n - dlat;
+			double sh = 360 * round(((rect[0] + rect[2]) / 2 - (w + e) / 2) / 360);
+			bool in = w + sh >= rect[0] && e + sh <= rect[2] && so >= rect[1] && n <= rect[3];
+			bool out = e + sh <= rect[0] || w + sh >= rect[2] || n <= rect[1] || so >= rect[3];
+			float got = m[j * T + i];
+			if (in) {
+				assert_true(got == 1.0f);
+				++*inside;
+			} else if (out) {
+				double want = feather_ref(rect[0], rect[1], rect[2], rect[3], w + dlon / 2,
+							  n - dlat / 2, feather);
+				worst = fmax(worst, fabs(got - want));
+				if (want == 0)
+					assert_true(got == 0.0f); /* beyond the feather: exactly none */
+				*band += got > 0 && got < 1;
+			} else {
+				assert_true(got > 0 && got <= 1);
+			}
+		}
+	assert_true(worst < 2e-4);
+	return t;
+}
+
+/* The soft edge (feather = 600m): inside the polygon the mask is exactly 1 and the blend's
+ * heights exactly the target; across the feather the mask follows 1 − smoothstep of the
+ * distance on the ground and the heights lie between target and terrain, nearer the target
+ * the nearer the polygon (monotone along a row); beyond it the mask is exactly 0 and the
+ * heights unchanged bit for bit. A polygon lying in one tile feathers into its neighbour
+ * (the index box grows by the feather), so both tiles agree along their shared edge — also
+ * across the antimeridian. */
+static void feather(void **state)
+{
+	(void)state;
+	const double F = 600;
+	int ly = 12, lx = 13;
+	double tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
+	/* a rectangle near the east edge of its tile, within the feather of the next one */
+	uint32_t x = (uint32_t)floor((10.03 + 180) / tw), y = (uint32_t)floor((90 - 45.03) / th);
+	double east = -180 + (x + 1) * tw - 0.002, north = 90 - y * th - th / 3;
+	double rect[4] = { east - tw / 3, north - th / 4, east, north };
+	write_rect("soft.geojson", rect[0], rect[1], rect[2], rect[3]);
+	struct node_ini v;
+	vnode_ok(&v, "[node x]\ntype = vector\npath = soft.geojson\noutput = mask\nfeather = 600m\n");
+	int band = 0, inside = 0, band_b = 0, in_b = 0;
+	struct tile *ma = feather_tile(&v, rect, F, lx, ly, x, y, &band, &inside);
+	struct tile *mb = feather_tile(&v, rect, F, lx, ly, x + 1, y, &band_b, &in_b);
+	printf("# feather: %d texels inside, %d in the band, %d of them in the next tile\n", inside,
+	       band + band_b, band_b);
+	assert_true(inside > 100 && band > 100 && band_b > 20 && in_b == 0);
+	/* the shared edge: the neighbour's first column continues this tile's last one */
+	const float *a = tile_f32(ma), *b = tile_f32(mb);
+	for (int j = 0; j < T; j++)
+		assert_true(fabsf(a[j * T + T - 1] - b[j * T]) < 0.2f);
+
+	/* The blend over a rough terrain, target 312.5 m. */
+	struct tile *ta, *o = flatten_with(&v, ma, &ta);
+	int at_target = 0, unchanged = 0, between = 0;
+	for (int i = 0; i < T * T; i++) {
+		float c = a[i], h = tile_f32(o)[i], t0 = tile_f32(ta)[i];
+		if (c >= 1.0f) {
+			assert_float_equal(h, 312.5f, 312.5f * 2e-7f);
+			at_target++;
+		} else if (c <= 0.0f) {
+			assert_true(h == t0);
+			unchanged++;
+		} else {
+			assert_true(h >= fminf(t0, 312.5f) - 1e-3f && h <= fmaxf(t0, 312.5f) + 1e-3f);
+			/* the blend's weight is the mask: |h − terrain| = mask · |target − terrain| */
+			assert_float_equal(fabsf(h - t0), c * fabsf(312.5f - t0), 1e-3);
+			between++;
+		}
+	}
+	printf("# feather blend: %d at the target, %d between, %d unchanged\n", at_target, between,
+	       unchanged);
+	assert_true(at_target > 100 && between > 100 && unchanged > 100);
+	/* monotone: west from the rectangle's west edge along its middle row, the mask falls */
+	struct geo_rect gr;
+	grid_tile_rect(&ma->key, &gr);
+	int jm = (int)((gr.north - (rect[1] + rect[3]) / 2) / ((gr.north - gr.south) / T));
+	int iw = (int)((rect[0] - gr.west) / ((gr.east - gr.west) / T));
+	int falls = 0;
+	for (int i = iw; i > 0; i--) {
+		assert_true(a[jm * T + i - 1] <= a[jm * T + i]);
+		falls += a[jm * T + i - 1] < a[jm * T + i];
+	}
+	assert_true(falls > 5);
+	tile_unref(ta), tile_unref(o), tile_unref(ma), tile_unref(mb);
+	node_ini_fini(&v);
+
+	/* Across the antimeridian: the rectangle ends 0.002° west of it; the first tile east of
+	 * it (x = 0) takes the feather, and meets the last tile. */
+	double am[4] = { 179.99, 10.0, 179.998, 10.01 };
+	write_rect("soft_am.geojson", am[0], am[1], am[2], am[3]);
+	vnode_ok(&v, "[node x]\ntype = vector\npath = soft_am.geojson\noutput = mask\n"
+		     "feather = 0.6km\n");
+	uint32_t nx = grid_tiles_x(lx), ya = (uint32_t)floor((90 - 10.005) / th);
+	band = inside = band_b = in_b = 0;
+	ma = feather_tile(&v, am, F, lx, ly, nx - 1, ya, &band, &inside);
+	mb = feather_tile(&v, am, F, lx, ly, 0, ya, &band_b, &in_b);
+	printf("# feather at the antimeridian: %d inside, %d in the band west, %d east\n", inside,
+	       band, band_b);
+	assert_true(inside > 10 && band > 50 && band_b > 20);
+	a = tile_f32(ma), b = tile_f32(mb);
+	for (int j = 0; j < T; j++)
+		assert_true(fabsf(a[j * T + T - 1] - b[j * T]) < 0.2f);
+	tile_unref(ma), tile_unref(mb);
+	node_ini_fini(&v);
+
+	/* Near the north pole a texel is 75 times narrower east-west than north-south: the
+	 * feather reaches across several tiles of the row, each as the reference. */
+	double pole[4] = { 10.0, 89.2, 10.3, 89.25 };
+	write_rect("soft_pole.geojson", pole[0], pole[1], pole[2], pole[3]);
+	vnode_ok(&v, "[node x]\ntype = vector\npath = soft_pole.geojson\noutput = mask\n"
+		     "feather = 600m\n");
+	ly = 10, lx = 11;
+	tw = 360.0 / grid_tiles_x(lx), th = 180.0 / grid_tiles_y(ly);
+	uint32_t xp = (uint32_t)floor((10.3 + 180) / tw), yp = (uint32_t)floor((90 - 89.22) / th);
+	int far_band = 0;
+	for (uint32_t k2 = 0; k2 < 4; k2++) {
+		band = inside = 0;
+		struct tile *t2 = feather_tile(&v, pole, F, lx, ly, xp + k2, yp, &band, &inside);
+		if (k2 >= 2)
+			far_band += band;
+		tile_unref(t2);
+	}
+	printf("# feather near the pole: %d texels in the band two and three tiles east\n", far_band);
+	assert_true(far_band > 20);
+	node_ini_fini(&v);
+
+	/* a feather is a distance on the ground, and softens a mask only */
+	refused("[node x]\ntype = vector\npath = soft.geojson\noutput = mask\nfeather = 3px\n",
+		"feather: expected a distance on the ground");
+	refused("[node x]\ntype = vector\npath = soft.geojson\nfeather = 300m\n",
+		"feather: softens a mask's edge");
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -704,6 +893,7 @@ int main(void)
 		cmocka_unit_test(outline),
 		cmocka_unit_test(earth_border),
 		cmocka_unit_test(bad_files),
+		cmocka_unit_test(feather),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -19,6 +19,12 @@
  *                separated: a feature whose field equals VALUE takes that colour and width,
  *                any other the default. Drawn in order: default style first, then `styles`
  *                from first to last (later ones on top).
+ *   feather      (output = mask) a soft edge: a distance on the ground (300m, 0.5km) over
+ *                which the mask falls from 1 at the shapes' edge to 0, as 1 − smoothstep of
+ *                the distance; default none (0: a hard edge, the exact coverage alone).
+ *                Inside the shapes the mask stays exactly 1, beyond the feather exactly 0, so
+ *                a blend with mode mask flattens exactly the polygon and leaves the terrain
+ *                farther than the feather bit for bit as it was.
  * Geometry: edges join their vertices with straight lines in (lon, lat), as the source's
  * segments are drawn by GIS tools in plate carrée (a border that follows a parallel stays on
  * it; a great circle would cut across it), and the tile grid is plate carrée itself. Lines are
@@ -28,6 +34,14 @@
  * longitude towards the poles). Features crossing the antimeridian (unwrapped longitudes) and
  * polygons around a pole are drawn whole on every tile they touch; coverage is exact area in
  * map space, so neighbouring tiles (and a level and its parent, averaged) agree.
+ * Feather: a texel's distance to the shapes is measured from its centre in metres, in the
+ * plane tangent there (east by N(φ)·cos φ, north by M(φ) of the centre's latitude), to every
+ * edge (a polygon's ring, a line's centreline less its half-width, a point less its radius)
+ * near it: the value depends only on where the texel is, so tiles agree at their borders; a
+ * shape's index box grows by the feather, so a tile sees the shapes within it (also across the
+ * antimeridian). A texel partly covered (coverage c) takes c + (1 − c)·w, w the feather's
+ * weight at its centre: continuous from the inside (1) to the feather's end (0). Cost: per
+ * edge near the tile, the texels within the feather of it.
  * Threads: immutable after create; generate() on any worker (scratch from gen_ctx).
  */
 #include "engine/node_types.h"
@@ -66,6 +80,7 @@ struct vector {
 	struct vstyle styles[MAX_STYLES + 1];
 	double a, e2;		   /* the planet's ellipsoid */
 	double max_px;		   /* widest px half-width: the query grows by it */
+	double feather;		   /* metres; 0: none */
 };
 
 static void vector_destroy(struct node *n)
@@ -156,7 +171,7 @@ static int vector_create(struct node *n, struct node_parse *p)
 		return np_error(p, NULL, "node \"%s\": the planet has no body (ellipsoid)", n->name);
 	v->a = pl->a;
 	v->e2 = pl->f * (2 - pl->f);
-	const char *path, *layer, *field, *styles, *width;
+	const char *path, *layer, *field, *styles, *width, *feather;
 	static const uint8_t white[4] = { 255, 255, 255, 255 };
 	uint8_t col[4];
 	double fo;
@@ -171,8 +186,17 @@ static int vector_create(struct node *n, struct node_parse *p)
 	    (rc = np_enum(p, "output", out_names, OUT_COLOR, &v->output)) ||
 	    (rc = np_enum(p, "polygons", poly_names, POLY_FILL, &v->polygons)) ||
 	    (rc = np_color(p, "color", white, col)) ||
-	    (rc = np_double(p, "fill_opacity", 1, 0, 1, &fo)))
+	    (rc = np_double(p, "fill_opacity", 1, 0, 1, &fo)) ||
+	    (rc = np_string(p, "feather", NULL, &feather)))
 		return rc;
+	if (feather) {
+		bool fpx = false;
+		if (parse_width(feather, &v->feather, &fpx) || fpx)
+			return np_error(p, "feather", "expected a distance on the ground like 300m or "
+					"0.5km, got \"%s\"", feather);
+		if (v->output != OUT_MASK)
+			return np_error(p, "feather", "softens a mask's edge: needs output = mask");
+	}
 	v->fill_opacity = (float)fo;
 	for (int c = 0; c < 4; c++)
 		v->styles[0].rgba[c] = col[c] / 255.0f;
@@ -213,7 +237,8 @@ static int vector_create(struct node *n, struct node_parse *p)
 	for (size_t i = 0; i < s->nfeats; i++) {
 		struct vec_feature *f = &s->feats[i];
 		const struct vstyle *st = &v->styles[f->style];
-		double g = st->px ? 0 : st->width / 2 / (v->a * (1 - v->e2) * (M_PI / 180)) * 1.001;
+		double g = ((st->px ? 0 : st->width / 2) + v->feather) /
+			   (v->a * (1 - v->e2) * (M_PI / 180)) * 1.001;
 		double phi = fmax(fabs(f->bbox[1]), fabs(f->bbox[3])) + g;
 		double c = phi >= 89.999 ? 0 : cos(phi * (M_PI / 180));
 		double gx = g == 0 ? 0 : c > 0 ? g / c * 1.001 : 360;
@@ -395,6 +420,137 @@ static bool wants(const struct vector *v, const struct vec_feature *ft, int what
 	return what == 0 ? v->polygons != POLY_OUTLINE : v->polygons != POLY_FILL;
 }
 
+/* The feather of a mask tile: each texel's distance in metres to the nearest shape, up to
+ * the feather. */
+struct feather {
+	const struct vector *v;
+	double west, north, dlon, dlat; /* as struct frame */
+	int T;
+	float *dist;	  /* T × T metres, from v->feather down */
+	const double *mx; /* per row: metres per degree east and north at its centres */
+	const double *my;
+	double my_min;	  /* the least metres per degree north (the equator's) */
+};
+
+/* The texels within reach of segment p → q (degrees, shifted to the copy; a point when p == q)
+ * take their distance to it, less hw metres, where nearer than what they hold. Distances are
+ * taken in the plane tangent at each texel's centre. */
+static void feather_segment(struct feather *fe, const double p[2], const double q[2], double hw)
+{
+	const int T = fe->T;
+	double reach = fe->v->feather + hw, glat = reach / fe->my_min;
+	double lat0 = fmin(p[1], q[1]) - glat, lat1 = fmax(p[1], q[1]) + glat;
+	double fj0 = floor((fe->north - lat1) / fe->dlat), fj1 = floor((fe->north - lat0) / fe->dlat);
+	if (fj1 < 0 || fj0 > T - 1)
+		return;
+	int j0 = fj0 < 0 ? 0 : (int)fj0, j1 = fj1 > T - 1 ? T - 1 : (int)fj1;
+	double lon0 = fmin(p[0], q[0]), lon1 = fmax(p[0], q[0]);
+	for (int j = j0; j <= j1; j++) {
+		double mx = fe->mx[j], my = fe->my[j], latc = fe->north - (j + 0.5) * fe->dlat;
+		double fi0 = 0, fi1 = T - 1;
+		if (mx * 360 > reach) { /* else every column of the row is within reach */
+			double gl = reach / mx;
+			fi0 = fmax(0, floor((lon0 - gl - fe->west) / fe->dlon));
+			fi1 = fmin(T - 1, floor((lon1 + gl - fe->west) / fe->dlon));
+			if (fi0 > fi1)
+				continue; /* (before an out-of-range cast to int) */
+		}
+		double ay = (p[1] - latc) * my, ey = (q[1] - p[1]) * my;
+		float *row = fe->dist + (size_t)j * T;
+		for (int i = (int)fi0; i <= (int)fi1; i++) {
+			double lonc = fe->west + (i + 0.5) * fe->dlon;
+			double ax = (p[0] - lonc) * mx, ex = (q[0] - p[0]) * mx;
+			double l2 = ex * ex + ey * ey;
+			double t = l2 > 0 ? fmin(fmax(-(ax * ex + ay * ey) / l2, 0), 1) : 0;
+			double dx = ax + t * ex, dy = ay + t * ey;
+			double d = sqrt(dx * dx + dy * dy) - hw;
+			if (d < row[i])
+				row[i] = d > 0 ? (float)d : 0.0f;
+		}
+	}
+}
+
+/* Whether a chunk's box (degrees, shifted by off) is farther than reach metres from the tile. */
+static bool feather_far(const struct feather *fe, const double *bb, double off, double reach)
+{
+	double south = fe->north - fe->T * fe->dlat, east = fe->west + fe->T * fe->dlon;
+	double glat = reach / fe->my_min;
+	if (bb[1] - glat > fe->north || bb[3] + glat < south)
+		return true;
+	double phi = fmin(fmax(fabs(bb[1]), fabs(bb[3])) + glat, 90);
+	double c = cos(phi * (M_PI / 180));
+	if (phi >= 89.999 || !(c > 0))
+		return false;
+	double glon = reach / (fe->my_min * c) * 1.001; /* N ≥ M: east-west grows less */
+	return bb[0] + off - glon > east || bb[2] + off + glon < fe->west;
+}
+
+/* Feature ft's edges, centrelines and points into the feather (every copy near the tile). */
+static void feather_feature(struct feather *fe, const struct vec_source *s,
+			    const struct vec_feature *ft)
+{
+	const struct vector *v = fe->v;
+	const struct vstyle *st = &v->styles[ft->style];
+	double latc = fe->north - fe->T * fe->dlat / 2, my, mx;
+	metres_per_degree(v, latc, &my, &mx);
+	double hw = st->px ? st->width / 2 * fe->dlat * my : st->width / 2;
+	if (ft->kind == VEC_POLYGON && v->polygons == POLY_FILL)
+		hw = 0;
+	double east = fe->west + fe->T * fe->dlon, pad = v->max_px * fe->dlon;
+	int k0 = (int)ceil((fe->west - pad - ft->gbox[2]) / 360);
+	int k1 = (int)floor((east + pad - ft->gbox[0]) / 360);
+	for (int k = k0; k <= k1; k++) {
+		double off = 360.0 * k;
+		for (uint32_t pi = 0; pi < ft->nparts; pi++) {
+			const struct vec_part *pa = &s->parts[ft->part0 + pi];
+			const double *g = s->xy + 2 * pa->first;
+			if (ft->kind == VEC_POINT) {
+				for (uint32_t i = 0; i < pa->n; i++) {
+					double q[2] = { g[2 * i] + off, g[2 * i + 1] };
+					feather_segment(fe, q, q, hw);
+				}
+				continue;
+			}
+			if (pa->n < 2)
+				continue;
+			uint32_t nc = (pa->n - 2) / VEC_CHUNK + 1;
+			for (uint32_t c = 0; c < nc; c++) {
+				if (feather_far(fe, s->chunks[pa->chunk0 + c], off, v->feather + hw))
+					continue;
+				uint32_t i0 = c * VEC_CHUNK, i1 = (c + 1) * VEC_CHUNK;
+				i1 = i1 < pa->n - 1 ? i1 : pa->n - 1;
+				for (uint32_t i = i0; i < i1; i++) {
+					double a[2] = { g[2 * i] + off, g[2 * i + 1] };
+					double b[2] = { g[2 * i + 2] + off, g[2 * i + 3] };
+					feather_segment(fe, a, b, hw);
+				}
+			}
+		}
+	}
+}
+
+/* The feather over the coverage o: c + (1 − c)·(1 − smoothstep(d / feather)). */
+static void feather_mask(struct feather *fe, const struct vec_source *s, const uint32_t *ids,
+			 size_t nids, float *o)
+{
+	const struct vector *v = fe->v;
+	const int T = fe->T;
+	for (size_t i = 0; i < (size_t)T * T; i++)
+		fe->dist[i] = (float)v->feather;
+	for (size_t i = 0; i < nids; i++) {
+		const struct vec_feature *ft = &s->feats[ids[i]];
+		if (v->styles[ft->style].rgba[3] > 0)
+			feather_feature(fe, s, ft);
+	}
+	for (size_t i = 0; i < (size_t)T * T; i++) {
+		float c = o[i], d = fe->dist[i];
+		if (c >= 1 || d >= (float)v->feather)
+			continue;
+		float t = d / (float)v->feather, w = 1 - t * t * (3 - 2 * t);
+		o[i] = c + (1 - c) * w;
+	}
+}
+
 struct scratch {
 	float *acc, *cov, *rgba;
 	uint32_t *ids;
@@ -432,12 +588,15 @@ static int vector_generate(const struct node *n, struct gen_ctx *g, const struct
 			    .dlon = (r.east - r.west) / T, .dlat = (r.north - r.south) / T };
 	double pad = v->max_px * fmax(fr.dlon, fr.dlat);
 	size_t nacc = vr_acc_floats(T, T), nf = s->nfeats ? s->nfeats : 1;
-	size_t bytes = (nacc + tt + (mask ? 0 : 4 * tt)) * sizeof(float) + nf * 5 + 64;
+	size_t nrow = mask && v->feather > 0 ? 2 * (size_t)T : 0, ndist = nrow ? tt : 0;
+	size_t bytes = nrow * sizeof(double) +
+		       (nacc + tt + ndist + (mask ? 0 : 4 * tt)) * sizeof(float) + nf * 5 + 64;
 	char *base = gen_scratch(g, bytes);
-	struct scratch sc = { .acc = (float *)base };
+	double *rows = (double *)base; /* the feather's metres per degree, per row */
+	struct scratch sc = { .acc = (float *)(rows + nrow) };
 	sc.cov = sc.acc + nacc;
 	sc.rgba = mask ? NULL : sc.cov + tt;
-	sc.ids = (uint32_t *)(sc.cov + tt + (mask ? 0 : 4 * tt));
+	sc.ids = (uint32_t *)(sc.cov + tt + ndist + (mask ? 0 : 4 * tt));
 	sc.seen = (uint8_t *)(sc.ids + nf);
 	memset(sc.seen, 0, nf);
 	size_t nids = vec_source_query(s, r.west - pad, fmax(r.south - pad, -90), r.east + pad,
@@ -488,6 +647,16 @@ static int vector_generate(const struct node *n, struct gen_ctx *g, const struct
 	if (mask) {
 		int ya, yb;
 		vr_resolve(&acc, o, &ya, &yb);
+		if (nrow) {
+			struct feather fe = { .v = v, .west = r.west, .north = r.north, .dlon = fr.dlon,
+					      .dlat = fr.dlat, .T = T, .dist = sc.cov + tt,
+					      .mx = rows, .my = rows + T };
+			double mxe;
+			metres_per_degree(v, 0, &fe.my_min, &mxe);
+			for (int j = 0; j < T; j++)
+				metres_per_degree(v, r.north - (j + 0.5) * fr.dlat, rows + T + j, rows + j);
+			feather_mask(&fe, s, sc.ids, nids, o);
+		}
 		return 0;
 	}
 	uint8_t *d = out->data;
