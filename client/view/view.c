@@ -98,6 +98,7 @@ static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG"
 #define HSUB_PH 4
 #define HSUB_TH 4
 #define HORIZON_LEVELS 8
+#define MESH_HALF_ABOVE 0.25 /* × the planet's radius: the rings at half density above */
 #define BLEND_END 0.95 /* the coarse level fully shown from here (× the ring's outer θ̃) */
 /* A camera step longer than this many heights above the ground between two frames is a jump,
  * not flight (view_fly moves about one height a frame at most). */
@@ -121,6 +122,17 @@ struct air {
 	float sky[3];	/* the sky's colour at the ground (the clear colour's encoding) */
 };
 
+/* The rings' index buffer at one density: every `step`-th circle and step around. At the
+ * full density a ring cell is about a pixel at the nadir of the finest level (view_levels);
+ * high above a planet, where no relief reaches a pixel, half the density draws the same
+ * picture with a quarter of the triangles (view_frame picks it per frame, MESH_HALF_ABOVE). */
+struct mesh {
+	int step;	   /* 1: every circle and step; 2: every other one */
+	int j0;		   /* the outer part's rows: j0 rounded up to a multiple of step */
+	size_t *sec_first; /* ring i part p sector s: from sec_first[(2i+p)·nsec+s] to the next */
+	size_t *fan_first; /* per circle-boundary k·m (k = 1..NR), (n / step)·3 indices each */
+};
+
 struct view {
 	const struct gl *gl;
 	struct view_source *src;
@@ -134,8 +146,10 @@ struct view {
 	unsigned vao, vbo, ibo;
 	int nsec;		 /* sectors per ring part */
 	int j0;			 /* rows 0..j0-1 of a ring (from its outer edge) form its outer part */
-	size_t *sec_first;	 /* ring i part p sector s: from sec_first[(2i+p)·nsec+s] to the next */
-	size_t *fan_first;	 /* per circle-boundary k·m (k = 1..NR), n·3 indices each */
+	struct mesh mesh[2];	 /* the rings' triangles: every vertex, and every other one */
+	int nmesh;		 /* 2 where the rings can be halved (even counts), else 1 */
+	const struct mesh *cur_mesh; /* this frame's */
+	int mesh_mode;		 /* view_set_mesh: 0 by height, 1 full, 2 half */
 	bool cull;
 	/* programs, by variant; the one in use */
 	struct program prog[NVARIANT];
@@ -248,6 +262,44 @@ static double circle_theta(int c, int m)
 /* The first φ̃ step of sector s. */
 static int sector_k(const struct view *v, int s) { return s * v->d.n_phi / v->nsec; }
 
+/* Appends the rings' triangles at density 1/step to idx[*q...]: for each ring's two parts
+ * and each sector, its cells from the inner circle out... as the full mesh, on the circles
+ * and steps that are multiples of step (the vertex buffer is shared). */
+static void build_mesh(struct view *v, struct mesh *me, int step, uint32_t *idx, size_t *q)
+{
+	int n = v->d.n_phi, m = v->d.m_rings, NR = v->nlevels;
+	uint32_t centre = (uint32_t)((NR * m + 1) * n);
+	me->step = step;
+	me->j0 = (v->j0 + step - 1) / step * step;
+	me->sec_first = xcalloc((size_t)NR * 2 * v->nsec + 1, sizeof *me->sec_first);
+	me->fan_first = xcalloc((size_t)NR + 1, sizeof *me->fan_first);
+	for (int ip = 0; ip < NR * 2; ip++)
+		for (int sec = 0; sec < v->nsec; sec++) {
+			int i = ip / 2, c0 = i * m + (ip % 2 ? me->j0 : 0);
+			int c1 = ip % 2 ? (i + 1) * m : i * m + me->j0;
+			me->sec_first[ip * v->nsec + sec] = *q;
+			for (int c = c1 - step; c >= c0; c -= step)
+				for (int k = sector_k(v, sec); k < sector_k(v, sec + 1); k += step) {
+					uint32_t a = (uint32_t)(c * n + k);
+					uint32_t b = (uint32_t)(c * n + (k + step) % n);
+					uint32_t a2 = a + (uint32_t)(step * n), b2 = b + (uint32_t)(step * n);
+					uint32_t t[6] = { b2, a2, a, b2, a, b };
+					memcpy(idx + *q, t, sizeof t);
+					*q += 6;
+				}
+		}
+	me->sec_first[NR * 2 * v->nsec] = *q;
+	for (int k1 = 1; k1 <= NR; k1++) {
+		me->fan_first[k1] = *q;
+		int c = k1 * m;
+		for (int k = 0; k < n; k += step) {
+			idx[(*q)++] = (uint32_t)(c * n + k);
+			idx[(*q)++] = (uint32_t)(c * n + (k + step) % n);
+			idx[(*q)++] = centre;
+		}
+	}
+}
+
 static void build_geometry(struct view *v)
 {
 	const struct gl *gl = v->gl;
@@ -269,43 +321,18 @@ static void build_geometry(struct view *v)
 	centre[0] = 0;
 	centre[1] = 1;
 	centre[2] = 0;
-	size_t nidx = (size_t)NR * m * n * 6 + (size_t)NR * n * 3;
+	size_t full = (size_t)NR * m * n * 6 + (size_t)NR * n * 3;
+	size_t nidx = full + full / 2; /* and the half mesh: a quarter of the cells, half the fans */
 	uint32_t *idx = xmalloc(nidx * sizeof *idx);
 	v->nsec = n < 32 ? n : 32;
 	v->j0 = m - (m * 9) / 16; /* the inner ~56 % of the rows show the fine level alone */
 	if (v->j0 < 1)
 		v->j0 = 1;
-	v->sec_first = xcalloc((size_t)NR * 2 * v->nsec + 1, sizeof *v->sec_first);
-	v->fan_first = xcalloc((size_t)NR + 1, sizeof *v->fan_first);
 	size_t q = 0;
-	for (int ip = 0; ip < NR * 2; ip++)
-		for (int sec = 0; sec < v->nsec; sec++) {
-			int i = ip / 2, c0 = i * m + (ip % 2 ? v->j0 : 0);
-			int c1 = ip % 2 ? (i + 1) * m : i * m + v->j0;
-			v->sec_first[ip * v->nsec + sec] = q;
-			for (int c = c1 - 1; c >= c0; c--)
-				for (int k = sector_k(v, sec); k < sector_k(v, sec + 1); k++) {
-					uint32_t a = (uint32_t)(c * n + k);
-					uint32_t b = (uint32_t)(c * n + (k + 1) % n);
-					uint32_t a2 = a + (uint32_t)n, b2 = b + (uint32_t)n;
-					idx[q++] = b2;
-					idx[q++] = a2;
-					idx[q++] = a;
-					idx[q++] = b2;
-					idx[q++] = a;
-					idx[q++] = b;
-				}
-		}
-	v->sec_first[NR * 2 * v->nsec] = q;
-	for (int k1 = 1; k1 <= NR; k1++) {
-		v->fan_first[k1] = q;
-		int c = k1 * m;
-		for (int k = 0; k < n; k++) {
-			idx[q++] = (uint32_t)(c * n + k);
-			idx[q++] = (uint32_t)(c * n + (k + 1) % n);
-			idx[q++] = (uint32_t)(nvert - 1);
-		}
-	}
+	v->nmesh = m % 2 == 0 && (n / v->nsec) % 2 == 0 && n % v->nsec == 0 ? 2 : 1;
+	for (int h = 0; h < v->nmesh; h++)
+		build_mesh(v, &v->mesh[h], h + 1, idx, &q);
+	v->cur_mesh = &v->mesh[0];
 	gl->GenVertexArrays(1, &v->vao);
 	gl->BindVertexArray(v->vao);
 	gl->GenBuffers(1, &v->vbo);
@@ -470,8 +497,10 @@ void view_destroy(struct view *v)
 	if (v->ibo)
 		gl->DeleteBuffers(1, &v->ibo);
 	free_fbo(v);
-	free(v->sec_first);
-	free(v->fan_first);
+	for (int h = 0; h < v->nmesh; h++) {
+		free(v->mesh[h].sec_first);
+		free(v->mesh[h].fan_first);
+	}
 	free(v->wants);
 	free(v->was_usable);
 	free(v->ready_since);
@@ -526,6 +555,8 @@ static void level_uniforms(struct view *v, int l, int up, int uv, int us)
 }
 
 void view_set_culling(struct view *v, bool on) { v->cull = on; }
+
+void view_set_mesh(struct view *v, int mode) { v->mesh_mode = mode; }
 
 /* Index ranges drawn as few calls: a range adjoining the pending one extends it. */
 struct ranges {
@@ -696,6 +727,7 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 			  double cap, uint64_t *culled)
 {
 	const struct gl *gl = v->gl;
+	const struct mesh *me = v->cur_mesh;
 	int m = v->d.m_rings;
 	bool ring = !disk;
 	bool fading = disk && fade < 1;
@@ -745,18 +777,19 @@ static int64_t draw_level(struct view *v, int i, int c, int last, bool disk, dou
 				bool blended = fading || (j == i && part == 0 && c != i);
 				if (blended != (pass == 1))
 					continue;
-				double split = circle_theta(j * m + v->j0, m);
+				double split = circle_theta(j * m + me->j0, m);
 				double th0 = part ? clipmap_ring_radius(j + 1) : split;
 				double th1 = part ? split : clipmap_ring_radius(j);
-				const size_t *sf = v->sec_first + (size_t)(2 * j + part) * v->nsec;
+				const size_t *sf = me->sec_first + (size_t)(2 * j + part) * v->nsec;
 				for (int sc = 0; sc < v->nsec; sc++)
 					draw_sector(v, &b, &r, th0, th1, sc, sf[sc], sf[sc + 1] - sf[sc],
 						    cap, &idx, &cidx);
 			}
 		if (!ring)
 			for (int sc = 0; sc < v->nsec && (pass == 1) == fading; sc++) {
-				size_t f = v->fan_first[last + 1] + (size_t)sector_k(v, sc) * 3;
-				size_t n = (size_t)(sector_k(v, sc + 1) - sector_k(v, sc)) * 3;
+				size_t f = me->fan_first[last + 1] +
+					   (size_t)(sector_k(v, sc) / me->step) * 3;
+				size_t n = (size_t)((sector_k(v, sc + 1) - sector_k(v, sc)) / me->step) * 3;
 				draw_sector(v, &b, &r, 0, clipmap_ring_radius(last + 1), sc, f, n, cap,
 					    &idx, &cidx);
 			}
@@ -1153,6 +1186,8 @@ static void horizon_need(struct view *v)
 static int frame_draw(struct view *v, struct frame *f)
 {
 	v->frame_cap = f->cap;
+	bool half = v->mesh_mode == 2 || (v->mesh_mode == 0 && f->agl > MESH_HALF_ABOVE * v->body.a);
+	v->cur_mesh = &v->mesh[half && v->nmesh > 1 ? 1 : 0];
 	for (int s = 0; s < v->nsec * HSUB_PH; s++)
 		v->horizon[s] = -INFINITY;
 	horizon_need(v);

@@ -101,6 +101,10 @@ int view_find_color_layer(const struct view *v, const char *name, char err[256])
 const char *view_color_layer(const struct view *v);
 /* Turns frustum culling of ring sectors on or off (a debug switch: the pixels are the same). */
 void view_set_culling(struct view *v, bool on);
+/* The rings' density: 0 (the default) every vertex below MESH_HALF_ABOVE × the planet's
+ * radius above the ground and every other one above it, where no relief reaches a pixel;
+ * 1 always every vertex; 2 always every other one (for comparing the two). */
+void view_set_mesh(struct view *v, int mode);
 /* Offline rendering: renders frames, sleeping on the source between them, until one is
  * complete (every wanted level drawn at its target quad, the camera's ground height settled)
  * or timeout_s passes. *frames (may be NULL) counts the frames. Returns 0 or -ETIMEDOUT (the

@@ -491,6 +491,75 @@ static void elevation_bounds_hold(void **state)
 	}
 }
 
+/* High above a planet the rings are drawn at half density (view_set_mesh: every other
+ * circle and step), where no relief reaches a pixel: a quarter of the triangles or fewer and
+ * the same picture but for the limb's outline and single pixels; low down every vertex is
+ * drawn. Coasts do not move: the sea is found per fragment, not per vertex. */
+static void half_mesh_high_up(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = ctx_or_skip();
+	if (!ctx)
+		skip();
+	struct view_source *src;
+	char err[256];
+	int rc = view_source_local_create("conf/planets/procedural.ini",
+					  &(struct view_source_local_opts){ 2, 256 }, &src, err);
+	if (rc < 0)
+		fail_msg("%s", err);
+	int W = 320, H = 180;
+	struct view_desc d = { .width = W, .height = H, .no_prefetch = true };
+	struct view *v = NULL;
+	assert_int_equal(view_create(gl_context_api(ctx), src, &d, &v, err), 0);
+	static const struct {
+		const char *name;
+		struct view_camera c;
+		bool half; /* what the default (mode 0) draws */
+	} cases[] = {
+		{ "orbit", { 30, 10, 12e6, 0, -90, 60, 0, 0 }, true },
+		{ "2000 km, oblique", { -40, 150, 2e6, 30, -50, 60, 0, 0 }, true },
+		{ "500 km", { 10, 60, 5e5, 0, -60, 60, 0, 0 }, false },
+	};
+	size_t n = (size_t)W * H * 4;
+	unsigned char *full = xmalloc(n), *half = xmalloc(n);
+	for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++) {
+		const struct view_camera *c = &cases[i].c;
+		struct view_frame_stats s0, s1, s2;
+		view_set_mesh(v, 1);
+		assert_int_equal(view_frame_complete(v, c, test_slow(300), &s1, NULL), 0);
+		view_read_rgba(v, full);
+		view_set_mesh(v, 2);
+		assert_int_equal(view_frame(v, c, 0, &s2), 0);
+		view_read_rgba(v, half);
+		view_set_mesh(v, 0);
+		assert_int_equal(view_frame(v, c, 0, &s0), 0);
+		size_t off = 0;
+		for (size_t k = 0; k < (size_t)W * H; k++) {
+			int m = 0;
+			for (int ch = 0; ch < 3; ch++)
+				m = fmax(m, abs(full[4 * k + ch] - half[4 * k + ch]));
+			off += m > 13;
+		}
+		fprintf(stderr, "mesh, %s: %llu triangles at full density, %llu at half (%.2f); "
+				"%.3f %% of pixels differ by more than 13/255; default: %s\n",
+			cases[i].name, (unsigned long long)s1.triangles,
+			(unsigned long long)s2.triangles, (double)s2.triangles / s1.triangles,
+			100.0 * off / (W * H), s0.triangles == s2.triangles ? "half" : "full");
+		assert_true(s2.triangles * 3 < s1.triangles);
+		assert_int_equal(s0.triangles, cases[i].half ? s2.triangles : s1.triangles);
+		if (cases[i].half && off * 100 > (size_t)W * H) { /* 1 % */
+			img_write("/tmp/view_mesh_full.png", W, H, 4, IMG_U8, full, err);
+			img_write("/tmp/view_mesh_half.png", W, H, 4, IMG_U8, half, err);
+			fail_msg("%s: %zu pixels differ at half density", cases[i].name, off);
+		}
+	}
+	free(full);
+	free(half);
+	view_destroy(v);
+	view_source_destroy(src);
+	gl_context_destroy(ctx);
+}
+
 static void culling_keeps_pixels(void **state)
 {
 	(void)state;
@@ -567,7 +636,7 @@ int main(void)
 		cmocka_unit_test(marker_projects_to_predicted_pixel),
 		cmocka_unit_test(coverage_views),
 		cmocka_unit_test(elevation_bounds_hold),
-		cmocka_unit_test(culling_keeps_pixels),
+		cmocka_unit_test(culling_keeps_pixels), cmocka_unit_test(half_mesh_high_up),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
