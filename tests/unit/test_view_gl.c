@@ -107,6 +107,17 @@ static struct gl_context *ctx_or_skip(void)
 	return ctx;
 }
 
+/* The procedural planet in-process (2 workers, a 256 MiB cache), or the test fails. */
+static struct view_source *procedural_source(void)
+{
+	struct view_source *src;
+	char err[256];
+	if (view_source_local_create("conf/planets/procedural.ini",
+				     &(struct view_source_local_opts){ 2, 256 }, &src, err) < 0)
+		fail_msg("%s", err);
+	return src;
+}
+
 static struct view *make_view(struct gl_context *ctx, struct view_source *src, int w, int h)
 {
 	struct view_desc d = { .width = w, .height = h, .n_phi = 96, .m_rings = 12,
@@ -420,12 +431,8 @@ static void coverage_views(void **state)
 	struct gl_context *ctx = ctx_or_skip();
 	if (!ctx)
 		skip();
-	struct view_source *src;
+	struct view_source *src = procedural_source();
 	char err[256];
-	int rc = view_source_local_create("conf/planets/procedural.ini",
-					  &(struct view_source_local_opts){ 2, 256 }, &src, err);
-	if (rc < 0)
-		fail_msg("%s", err);
 	struct view *v = make_view(ctx, src, 96, 96);
 	struct geo_body *gb;
 	assert_int_equal(geo_body_create(WGS_A, WGS_F, &gb, err), 0);
@@ -501,12 +508,8 @@ static void half_mesh_high_up(void **state)
 	struct gl_context *ctx = ctx_or_skip();
 	if (!ctx)
 		skip();
-	struct view_source *src;
+	struct view_source *src = procedural_source();
 	char err[256];
-	int rc = view_source_local_create("conf/planets/procedural.ini",
-					  &(struct view_source_local_opts){ 2, 256 }, &src, err);
-	if (rc < 0)
-		fail_msg("%s", err);
 	int W = 320, H = 180;
 	struct view_desc d = { .width = W, .height = H, .no_prefetch = true };
 	struct view *v = NULL;
@@ -566,12 +569,8 @@ static void culling_keeps_pixels(void **state)
 	struct gl_context *ctx = ctx_or_skip();
 	if (!ctx)
 		skip();
-	struct view_source *src;
+	struct view_source *src = procedural_source();
 	char err[256];
-	int rc = view_source_local_create("conf/planets/procedural.ini",
-					  &(struct view_source_local_opts){ 2, 256 }, &src, err);
-	if (rc < 0)
-		fail_msg("%s", err);
 	int W = 160, H = 90;
 	struct view_desc d = { .width = W, .height = H, .n_phi = 128, .m_rings = 8,
 			       .no_prefetch = true, .background_set = true,
