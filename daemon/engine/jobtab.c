@@ -114,6 +114,45 @@ struct job **jobmap_list(const struct jobmap *m, size_t *n)
 }
 
 #define SPARE_MAX 4096 /* freed jobs kept for reuse */
+#define JOB_BLOCK 64
+
+struct jobblock {
+	struct jobblock *prev, *next;	      /* the graph's partial list */
+	struct jobblock *all_prev, *all_next; /* the graph's list of blocks */
+	struct job *free;		      /* its free jobs, linked by next */
+	unsigned nfree;
+	struct job jobs[JOB_BLOCK];
+};
+
+static void free_block(struct jobblock *b)
+{
+	for (int i = 0; i < JOB_BLOCK; i++) {
+		free(b->jobs[i].dependents);
+		free(b->jobs[i].wanters);
+	}
+	free(b);
+}
+
+/* A new block, all free, at the head of both lists. */
+static void add_block(struct jobgraph *g)
+{
+	struct jobblock *b = xcalloc(1, sizeof *b);
+	for (int i = JOB_BLOCK; i-- > 0;) {
+		b->jobs[i].block = b;
+		b->jobs[i].next = b->free;
+		b->free = &b->jobs[i];
+	}
+	b->nfree = JOB_BLOCK;
+	g->nspare += JOB_BLOCK;
+	b->next = g->partial;
+	if (b->next)
+		b->next->prev = b;
+	g->partial = b;
+	b->all_next = g->blocks;
+	if (b->all_next)
+		b->all_next->all_prev = b;
+	g->blocks = b;
+}
 
 static void free_job(struct jobgraph *g, struct job *j)
 {
@@ -125,15 +164,35 @@ static void free_job(struct jobgraph *g, struct job *j)
 	}
 	tile_unref(j->result);
 	planet_unref(j->node->planet);
-	if (g && g->nspare < SPARE_MAX) {
-		j->next = g->spare;
-		g->spare = j;
-		g->nspare++;
-		return;
+	if (!g)
+		return; /* jobgraph_fini frees the blocks */
+	struct jobblock *b = j->block;
+	j->next = b->free;
+	b->free = j;
+	g->nspare++;
+	if (b->nfree++ == 0) { /* it has a free job again */
+		b->prev = NULL;
+		b->next = g->partial;
+		if (b->next)
+			b->next->prev = b;
+		g->partial = b;
 	}
-	free(j->dependents);
-	free(j->wanters);
-	free(j);
+	if (b->nfree == JOB_BLOCK && g->nspare > SPARE_MAX) {
+		if (b->prev)
+			b->prev->next = b->next;
+		else
+			g->partial = b->next;
+		if (b->next)
+			b->next->prev = b->prev;
+		if (b->all_prev)
+			b->all_prev->all_next = b->all_next;
+		else
+			g->blocks = b->all_next;
+		if (b->all_next)
+			b->all_next->all_prev = b->all_prev;
+		g->nspare -= JOB_BLOCK;
+		free_block(b);
+	}
 }
 
 void jobgraph_ready(struct jobgraph *g, struct job *j)
@@ -145,22 +204,25 @@ void jobgraph_ready(struct jobgraph *g, struct job *j)
 	g->push[g->npush++] = j;
 }
 
-/* A zeroed job, from the spares when there are (keeping their lists' buffers). */
+/* A zeroed job from a block (keeping its lists' buffers). */
 static struct job *alloc_job(struct jobgraph *g)
 {
-	struct job *j = g->spare;
-	if (!j) {
-		j = xcalloc(1, sizeof *j);
-		j->in = j->in_s;
-		j->dep = j->dep_s;
-		return j;
-	}
-	g->spare = j->next;
+	if (!g->partial)
+		add_block(g);
+	struct jobblock *b = g->partial;
+	struct job *j = b->free;
+	b->free = j->next;
 	g->nspare--;
+	if (--b->nfree == 0) {
+		g->partial = b->next;
+		if (g->partial)
+			g->partial->prev = NULL;
+	}
 	struct job **dependents = j->dependents;
 	struct job_wanter *wanters = j->wanters;
 	size_t capdependents = j->capdependents, capwanters = j->capwanters;
 	memset(j, 0, sizeof *j);
+	j->block = b;
 	j->dependents = dependents;
 	j->capdependents = capdependents;
 	j->wanters = wanters;
@@ -322,11 +384,17 @@ void jobgraph_add_wanter(struct jobgraph *g, struct job *j, struct sched_req *r,
 		j->wanters_epoch = g->epoch;
 		j->nwanters = 0;
 	}
-	if (j->nwanters == j->capwanters) {
+	struct job_wanter w = { r, (uint32_t)idx };
+	if (j->nwanters == 0) {
+		j->wanter0 = w; /* most jobs have one: no allocation */
+		j->nwanters = 1;
+		return;
+	}
+	if (j->nwanters - 1 == j->capwanters) {
 		j->capwanters = j->capwanters ? j->capwanters * 2 : 2;
 		j->wanters = xrealloc(j->wanters, j->capwanters * sizeof *j->wanters);
 	}
-	j->wanters[j->nwanters++] = (struct job_wanter){ r, (uint32_t)idx };
+	j->wanters[j->nwanters++ - 1] = w;
 }
 
 /* Reports j's outcome to every want entry waiting for it, each with a reference of its own:
@@ -337,11 +405,12 @@ static void report_job(struct jobgraph *g, struct job *j, int err)
 	if (j->wanters_epoch != g->epoch || j->nwanters == 0)
 		return;
 	struct tile *t = j->result;
-	for (size_t i = 0; i + 1 < j->nwanters; i++)
-		g->report(g->ud, &j->wanters[i], t ? tile_ref(t) : NULL, err);
-	j->result = NULL;
-	g->report(g->ud, &j->wanters[j->nwanters - 1], t, err);
+	size_t n = j->nwanters;
 	j->nwanters = 0;
+	for (size_t i = 0; i + 1 < n; i++)
+		g->report(g->ud, i ? &j->wanters[i - 1] : &j->wanter0, t ? tile_ref(t) : NULL, err);
+	j->result = NULL;
+	g->report(g->ud, n > 1 ? &j->wanters[n - 2] : &j->wanter0, t, err);
 }
 
 /* Unlinks j from the jobs it waits for, drops it from the map and frees it. */
@@ -407,7 +476,7 @@ void jobgraph_init(struct jobgraph *g, struct cache *c,
 	g->npush = g->cappush = 0;
 	g->fails = NULL;
 	g->waiting_list = NULL;
-	g->spare = NULL;
+	g->blocks = g->partial = NULL;
 	g->nspare = 0;
 	g->report = report;
 	g->ud = ud;
@@ -428,13 +497,12 @@ void jobgraph_fini(struct jobgraph *g)
 	free(g->push);
 	g->push = NULL;
 	g->npush = g->cappush = 0;
-	while (g->spare) {
-		struct job *j = g->spare;
-		g->spare = j->next;
-		free(j->dependents);
-		free(j->wanters);
-		free(j);
+	while (g->blocks) {
+		struct jobblock *b = g->blocks;
+		g->blocks = b->all_next;
+		free_block(b);
 	}
+	g->partial = NULL;
 	g->nspare = 0;
 }
 

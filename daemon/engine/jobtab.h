@@ -23,6 +23,7 @@
 #include "tile.h"
 
 struct sched_req;
+struct jobblock;
 
 /* Smaller is more urgent: class, then level (ly, then lx; coarse first), then want order. */
 struct job_prio {
@@ -78,10 +79,12 @@ struct job {
 	struct job *dep_s[JOB_INLINE_DEPS];
 	struct job **dependents;	 /* jobs with this one in their dep[] */
 	size_t ndependents, capdependents;
-	struct job_wanter *wanters; /* want entries waiting for it, valid for wanters_epoch */
+	struct job_wanter wanter0;  /* want entries waiting for it, valid for wanters_epoch: */
+	struct job_wanter *wanters; /* the first, then the others (wanters[i - 1]) */
 	size_t nwanters, capwanters;
 	uint64_t wanters_epoch;
-	struct job *next; /* manager's scratch lists */
+	struct job *next; /* manager's scratch lists; a free job's block list */
+	struct jobblock *block; /* the block it lives in */
 	struct job *wprev, *wnext; /* the graph's list of JOB_WAITING jobs */
 
 	/* Queue (under the queue mutex). */
@@ -130,8 +133,13 @@ struct jobgraph {
 	size_t npush, cappush;
 	struct job *fails; /* jobs whose deps() failed, linked by next, for jobgraph_complete */
 	struct job *waiting_list; /* every JOB_WAITING job (wprev/wnext): what cancellation walks */
-	struct job *spare; /* freed jobs kept for reuse (linked by next), their lists' buffers */
-	size_t nspare;
+	/* Jobs come from blocks of JOB_BLOCK (one allocation for many: a long want list creates
+	 * its jobs at a few hundred ns each otherwise); a freed job goes back to its block, kept
+	 * for reuse with its lists' buffers, and a block all free is released once more than
+	 * SPARE_MAX jobs are free. */
+	struct jobblock *blocks;  /* every block (all_prev/all_next) */
+	struct jobblock *partial; /* blocks with a free job (prev/next) */
+	size_t nspare;		  /* free jobs in all blocks */
 	/* Tells one waiting want entry about its job: t an owned reference the hook keeps or
 	 * unrefs, NULL with err < 0 on failure. */
 	void (*report)(void *ud, const struct job_wanter *w, struct tile *t, int err);
