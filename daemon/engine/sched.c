@@ -17,8 +17,11 @@
  * q_mu (the worker reads only node, key and inputs) and back through `done` (result, err).
  *
  * Serial work per tile (the scheduler's ceiling is the manager thread): one creation (job
- * from a free list, map insert), one heap push in a batch under q_mu, one completion (taken in
- * a batch; report, dependents, map removal, job back to the free list) and one callback.
+ * from a block, map insert), one heap push in a batch under q_mu, one completion (taken in a
+ * batch; dependents, report with the job's own tile reference, map removal, job back to its
+ * block) and one callback. Most of it is cache misses on a big map and on lines workers
+ * wrote, so the loops over want entries, finished jobs and reports prefetch AHEAD entries
+ * early (jobtab.h says what each structure does to avoid reading other jobs).
  * Workers signal q_cv only for the idle workers a batch needs, not a broadcast to all.
  *
  * Manager iteration: snapshot the inbox; install new want lists and apply destroys; when any
