@@ -539,11 +539,7 @@ void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel, bool after
 
 static bool before(const struct jobheap_ent *a, const struct jobheap_ent *b)
 {
-	if (job_prio_less(&a->prio, &b->prio))
-		return true;
-	if (job_prio_less(&b->prio, &a->prio))
-		return false;
-	return a->seq < b->seq;
+	return a->key < b->key || (a->key == b->key && a->seq < b->seq);
 }
 
 static void sift_up(struct jobheap *h, size_t i)
@@ -589,7 +585,7 @@ void jobheap_push(struct jobheap *h, struct job *j)
 		h->cap = h->cap ? h->cap * 2 : 64;
 		h->a = xrealloc(h->a, h->cap * sizeof *h->a);
 	}
-	h->a[h->n++] = (struct jobheap_ent){ j->qprio, j->seq, j };
+	h->a[h->n++] = (struct jobheap_ent){ job_prio_key(&j->qprio), j->seq, j };
 	sift_up(h, h->n - 1);
 }
 
@@ -599,8 +595,17 @@ struct job *jobheap_pop(struct jobheap *h)
 		return NULL;
 	struct job *top = h->a[0].j;
 	if (--h->n > 0) {
-		h->a[0] = h->a[h->n];
-		sift_down(h, 0);
+		/* Bottom-up: the hole at the root goes down to a leaf by the smaller child (one
+		 * comparison a level), then the last entry, mostly among the largest, rises from
+		 * there: about half the comparisons of sifting it down from the root. */
+		size_t i = 0, n = h->n;
+		for (size_t c; (c = 2 * i + 1) < n; i = c) {
+			if (c + 1 < n && before(&h->a[c + 1], &h->a[c]))
+				c++;
+			h->a[i] = h->a[c];
+		}
+		h->a[i] = h->a[n];
+		sift_up(h, i);
 	}
 	return top;
 }

@@ -178,12 +178,19 @@ void jobgraph_new_epoch(struct jobgraph *g);
 void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel, bool after_pass);
 
 /* A heap entry carries its ordering key, so that sifting reads no job (each one a cache miss,
- * under the queue mutex, when the heap is large). */
+ * under the queue mutex, when the heap is large): the job's qprio packed so that it compares
+ * as one integer (job_prio_key), then its seq. */
 struct jobheap_ent {
-	struct job_prio prio; /* the job's qprio */
+	uint64_t key;
 	uint64_t seq;
 	struct job *j;
 };
+
+/* p as an integer that orders as job_prio_less: class, ly, lx, then order. */
+static inline uint64_t job_prio_key(const struct job_prio *p)
+{
+	return (uint64_t)p->cls << 48 | (uint64_t)p->ly << 40 | (uint64_t)p->lx << 32 | p->order;
+}
 
 struct jobheap {
 	struct jobheap_ent *a;

@@ -317,7 +317,7 @@ static void recompute(struct sched *s)
 				s->queued[j->qprio.cls]--;
 				s->queued[j->prio.cls]++;
 				j->qprio = j->prio;
-				e.prio = j->prio;
+				e.key = job_prio_key(&j->prio);
 				reorder = true;
 			}
 			s->heap.a[kept++] = e;
