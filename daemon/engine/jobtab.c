@@ -116,13 +116,35 @@ struct job **jobmap_list(const struct jobmap *m, size_t *n)
 #define SPARE_MAX 4096 /* freed jobs kept for reuse */
 #define JOB_BLOCK 64
 
+enum { BL_PARTIAL, BL_ALL }; /* a block's two lists */
+
 struct jobblock {
-	struct jobblock *prev, *next;	      /* the graph's partial list */
-	struct jobblock *all_prev, *all_next; /* the graph's list of blocks */
-	struct job *free;		      /* its free jobs, linked by next */
+	struct {
+		struct jobblock *prev, *next;
+	} l[2];
+	struct job *free; /* its free jobs, linked by next */
 	unsigned nfree;
 	struct job jobs[JOB_BLOCK];
 };
+
+static void block_push(struct jobblock **head, struct jobblock *b, int l)
+{
+	b->l[l].prev = NULL;
+	b->l[l].next = *head;
+	if (*head)
+		(*head)->l[l].prev = b;
+	*head = b;
+}
+
+static void block_del(struct jobblock **head, struct jobblock *b, int l)
+{
+	if (b->l[l].prev)
+		b->l[l].prev->l[l].next = b->l[l].next;
+	else
+		*head = b->l[l].next;
+	if (b->l[l].next)
+		b->l[l].next->l[l].prev = b->l[l].prev;
+}
 
 static void free_block(struct jobblock *b)
 {
@@ -144,14 +166,8 @@ static void add_block(struct jobgraph *g)
 	}
 	b->nfree = JOB_BLOCK;
 	g->nspare += JOB_BLOCK;
-	b->next = g->partial;
-	if (b->next)
-		b->next->prev = b;
-	g->partial = b;
-	b->all_next = g->blocks;
-	if (b->all_next)
-		b->all_next->all_prev = b;
-	g->blocks = b;
+	block_push(&g->partial, b, BL_PARTIAL);
+	block_push(&g->blocks, b, BL_ALL);
 }
 
 static void free_job(struct jobgraph *g, struct job *j)
@@ -170,26 +186,11 @@ static void free_job(struct jobgraph *g, struct job *j)
 	j->next = b->free;
 	b->free = j;
 	g->nspare++;
-	if (b->nfree++ == 0) { /* it has a free job again */
-		b->prev = NULL;
-		b->next = g->partial;
-		if (b->next)
-			b->next->prev = b;
-		g->partial = b;
-	}
+	if (b->nfree++ == 0) /* it has a free job again */
+		block_push(&g->partial, b, BL_PARTIAL);
 	if (b->nfree == JOB_BLOCK && g->nspare > SPARE_MAX) {
-		if (b->prev)
-			b->prev->next = b->next;
-		else
-			g->partial = b->next;
-		if (b->next)
-			b->next->prev = b->prev;
-		if (b->all_prev)
-			b->all_prev->all_next = b->all_next;
-		else
-			g->blocks = b->all_next;
-		if (b->all_next)
-			b->all_next->all_prev = b->all_prev;
+		block_del(&g->partial, b, BL_PARTIAL);
+		block_del(&g->blocks, b, BL_ALL);
 		g->nspare -= JOB_BLOCK;
 		free_block(b);
 	}
@@ -213,11 +214,8 @@ static struct job *alloc_job(struct jobgraph *g)
 	struct job *j = b->free;
 	b->free = j->next;
 	g->nspare--;
-	if (--b->nfree == 0) {
-		g->partial = b->next;
-		if (g->partial)
-			g->partial->prev = NULL;
-	}
+	if (--b->nfree == 0)
+		block_del(&g->partial, b, BL_PARTIAL);
 	struct job **dependents = j->dependents;
 	struct job_wanter *wanters = j->wanters;
 	size_t capdependents = j->capdependents, capwanters = j->capwanters;
@@ -499,7 +497,7 @@ void jobgraph_fini(struct jobgraph *g)
 	g->npush = g->cappush = 0;
 	while (g->blocks) {
 		struct jobblock *b = g->blocks;
-		g->blocks = b->all_next;
+		g->blocks = b->l[BL_ALL].next;
 		free_block(b);
 	}
 	g->partial = NULL;

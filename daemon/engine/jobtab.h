@@ -137,8 +137,8 @@ struct jobgraph {
 	 * its jobs at a few hundred ns each otherwise); a freed job goes back to its block, kept
 	 * for reuse with its lists' buffers, and a block all free is released once more than
 	 * SPARE_MAX jobs are free. */
-	struct jobblock *blocks;  /* every block (all_prev/all_next) */
-	struct jobblock *partial; /* blocks with a free job (prev/next) */
+	struct jobblock *partial; /* blocks with a free job (link BL_PARTIAL) */
+	struct jobblock *blocks;  /* every block (link BL_ALL) */
 	size_t nspare;		  /* free jobs in all blocks */
 	/* Tells one waiting want entry about its job: t an owned reference the hook keeps or
 	 * unrefs, NULL with err < 0 on failure. */

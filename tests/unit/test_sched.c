@@ -1066,6 +1066,19 @@ static void stress(void **state)
 	world_free(w);
 }
 
+/* sched_fetch of list[0..n) into out, each tile checked and dropped: how many were wrong
+ * (all of them when the fetch failed). */
+static int fetch_check(struct world *w, const struct want *list, size_t n, struct tile **out)
+{
+	int bad = sched_fetch(w->sched, list, n, out) != 0;
+	for (size_t i = 0; i < n; i++) {
+		if (!tile_ok(list[i].node, out[i], &list[i].key))
+			bad++;
+		tile_unref(out[i]);
+	}
+	return bad;
+}
+
 /* Many fetches of the same wide tiles at once: jobs with more inputs than they hold in
  * themselves, several want entries waiting on each job, and more jobs than the scheduler
  * keeps for reuse (its blocks of jobs released and made again). */
@@ -1093,13 +1106,7 @@ static void *wide_thread(void *p)
 			list[k++] = mkwant(a->wide, a->ly, x, y, SCHED_WEB);
 			list[k++] = mkwant(&a->w->b, a->ly, x, y, SCHED_BULK);
 		}
-	if (sched_fetch(a->w->sched, list, k, out) != 0)
-		a->bad++;
-	for (size_t i = 0; i < k; i++) {
-		if (!tile_ok(list[i].node, out[i], &list[i].key))
-			a->bad++;
-		tile_unref(out[i]);
-	}
+	a->bad += fetch_check(a->w, list, k, out);
 	free(list);
 	free(out);
 	return NULL;
@@ -1166,13 +1173,7 @@ static void *handoff_thread(void *p)
 				for (uint32_t x = 0; x < grid_tiles_x(ly + 1); x++)
 					list[n++] = mkwant(nodes[k], ly, x, y,
 							   (enum sched_class)(1 + (round + k) % 3));
-		if (sched_fetch(w->sched, list, n, out) != 0)
-			a->bad++;
-		for (size_t i = 0; i < n; i++) {
-			if (!tile_ok(list[i].node, out[i], &list[i].key))
-				a->bad++;
-			tile_unref(out[i]);
-		}
+		a->bad += fetch_check(w, list, n, out);
 	}
 	free(list);
 	free(out);
