@@ -1,5 +1,5 @@
 /* jobtab — see jobtab.h. A chained hash map over tile keys, the job graph, and a binary
- * min-heap that keeps every job's heap_idx current.
+ * min-heap of entries that carry their own ordering key.
  *
  * Graph invariants: j->dep[k] is the job producing input k while it is missing (j is then in
  * that job's dependents list once, however many slots it fills); a job the current marking
@@ -42,7 +42,11 @@ void jobmap_fini(struct jobmap *m)
 
 struct job *jobmap_find(const struct jobmap *m, const struct tile_key *k)
 {
-	uint64_t h = grid_key_hash(k);
+	return jobmap_find_hashed(m, k, grid_key_hash(k));
+}
+
+struct job *jobmap_find_hashed(const struct jobmap *m, const struct tile_key *k, uint64_t h)
+{
 	for (struct job *j = m->b[h & (m->nb - 1)]; j; j = j->hnext)
 		if (j->hash == h && grid_key_equal(&j->key, k))
 			return j;
@@ -53,25 +57,36 @@ static void grow(struct jobmap *m)
 {
 	size_t nb = m->nb * 2;
 	struct job **b = xcalloc(nb, sizeof *b);
+	/* Each old chain splits into two new ones, its order kept (oldest first). */
+	struct job **tail[2];
 	for (size_t i = 0; i < m->nb; i++) {
-		struct job *j = m->b[i];
-		while (j) {
-			struct job *next = j->hnext;
-			j->hnext = b[j->hash & (nb - 1)];
-			b[j->hash & (nb - 1)] = j;
-			j = next;
+		tail[0] = &b[i];
+		tail[1] = &b[i + m->nb];
+		for (struct job *j = m->b[i], *next; j; j = next) {
+			next = j->hnext;
+			int hi = (j->hash & m->nb) != 0;
+			*tail[hi] = j;
+			tail[hi] = &j->hnext;
 		}
+		*tail[0] = NULL;
+		*tail[1] = NULL;
 	}
 	free(m->b);
 	m->b = b;
 	m->nb = nb;
 }
 
+/* At the chain's tail: jobs mostly finish in the order they were created, so the one removed
+ * is then at the head and removal reads no other job. The chain was just walked by the
+ * jobmap_find that preceded the insert, so reaching its tail costs no cache miss. */
 void jobmap_insert(struct jobmap *m, struct job *j)
 {
 	j->hash = grid_key_hash(&j->key);
-	j->hnext = m->b[j->hash & (m->nb - 1)];
-	m->b[j->hash & (m->nb - 1)] = j;
+	j->hnext = NULL;
+	struct job **p = &m->b[j->hash & (m->nb - 1)];
+	while (*p)
+		p = &(*p)->hnext;
+	*p = j;
 	if (++m->n > m->nb / 2) /* short chains: each link is a cache miss on a big map */
 		grow(m);
 }
@@ -99,40 +114,119 @@ struct job **jobmap_list(const struct jobmap *m, size_t *n)
 }
 
 #define SPARE_MAX 4096 /* freed jobs kept for reuse */
+#define JOB_BLOCK 64
+
+enum { BL_PARTIAL, BL_ALL }; /* a block's two lists */
+
+struct jobblock {
+	struct {
+		struct jobblock *prev, *next;
+	} l[2];
+	struct job *free; /* its free jobs, linked by next */
+	unsigned nfree;
+	struct job jobs[JOB_BLOCK];
+};
+
+static void block_push(struct jobblock **head, struct jobblock *b, int l)
+{
+	b->l[l].prev = NULL;
+	b->l[l].next = *head;
+	if (*head)
+		(*head)->l[l].prev = b;
+	*head = b;
+}
+
+static void block_del(struct jobblock **head, struct jobblock *b, int l)
+{
+	if (b->l[l].prev)
+		b->l[l].prev->l[l].next = b->l[l].next;
+	else
+		*head = b->l[l].next;
+	if (b->l[l].next)
+		b->l[l].next->l[l].prev = b->l[l].prev;
+}
+
+static void free_block(struct jobblock *b)
+{
+	for (int i = 0; i < JOB_BLOCK; i++) {
+		free(b->jobs[i].dependents);
+		free(b->jobs[i].wanters);
+	}
+	free(b);
+}
+
+/* A new block, all free, at the head of both lists. */
+static void add_block(struct jobgraph *g)
+{
+	struct jobblock *b = xcalloc(1, sizeof *b);
+	for (int i = JOB_BLOCK; i-- > 0;) {
+		b->jobs[i].block = b;
+		b->jobs[i].next = b->free;
+		b->free = &b->jobs[i];
+	}
+	b->nfree = JOB_BLOCK;
+	g->nspare += JOB_BLOCK;
+	block_push(&g->partial, b, BL_PARTIAL);
+	block_push(&g->blocks, b, BL_ALL);
+}
 
 static void free_job(struct jobgraph *g, struct job *j)
 {
 	for (int k = 0; k < j->nin; k++)
 		tile_unref(j->in[k]);
+	if (j->in != j->in_s) {
+		free(j->in);
+		free(j->dep);
+	}
 	tile_unref(j->result);
 	planet_unref(j->node->planet);
-	if (g && g->nspare < SPARE_MAX) {
-		j->next = g->spare;
-		g->spare = j;
-		g->nspare++;
-		return;
+	if (!g)
+		return; /* jobgraph_fini frees the blocks */
+	struct jobblock *b = j->block;
+	j->next = b->free;
+	b->free = j;
+	g->nspare++;
+	if (b->nfree++ == 0) /* it has a free job again */
+		block_push(&g->partial, b, BL_PARTIAL);
+	if (b->nfree == JOB_BLOCK && g->nspare > SPARE_MAX) {
+		block_del(&g->partial, b, BL_PARTIAL);
+		block_del(&g->blocks, b, BL_ALL);
+		g->nspare -= JOB_BLOCK;
+		free_block(b);
 	}
-	free(j->dependents);
-	free(j->wanters);
-	free(j);
 }
 
-/* A zeroed job, from the spares when there are (keeping their lists' buffers). */
+void jobgraph_ready(struct jobgraph *g, struct job *j)
+{
+	if (g->npush == g->cappush) {
+		g->cappush = g->cappush ? g->cappush * 2 : 256;
+		g->push = xrealloc(g->push, g->cappush * sizeof *g->push);
+	}
+	g->push[g->npush++] = j;
+}
+
+/* A zeroed job from a block (keeping its lists' buffers). */
 static struct job *alloc_job(struct jobgraph *g)
 {
-	struct job *j = g->spare;
-	if (!j)
-		return xcalloc(1, sizeof *j);
-	g->spare = j->next;
+	if (!g->partial)
+		add_block(g);
+	struct jobblock *b = g->partial;
+	struct job *j = b->free;
+	b->free = j->next;
 	g->nspare--;
+	if (--b->nfree == 0)
+		block_del(&g->partial, b, BL_PARTIAL);
 	struct job **dependents = j->dependents;
 	struct job_wanter *wanters = j->wanters;
 	size_t capdependents = j->capdependents, capwanters = j->capwanters;
 	memset(j, 0, sizeof *j);
+	j->block = b;
 	j->dependents = dependents;
 	j->capdependents = capdependents;
 	j->wanters = wanters;
 	j->capwanters = capwanters;
+	j->in = j->in_s;
+	j->dep = j->dep_s;
 	return j;
 }
 
@@ -199,6 +293,10 @@ static void resolve(struct jobgraph *g, struct job *j)
 		g->fails = j;
 		return;
 	}
+	if (nd > JOB_INLINE_DEPS && j->in == j->in_s) {
+		j->in = xcalloc(NODE_MAX_DEPS, sizeof *j->in);
+		j->dep = xcalloc(NODE_MAX_DEPS, sizeof *j->dep);
+	}
 	j->nin = nd;
 	for (int k = 0; k < nd; k++) {
 		struct job *dj = jobmap_find(&g->map, &deps[k].key);
@@ -214,8 +312,7 @@ static void resolve(struct jobgraph *g, struct job *j)
 	}
 	if (j->missing == 0) {
 		j->mstate = JOB_SUBMITTED;
-		j->next = g->push;
-		g->push = j;
+		jobgraph_ready(g, j);
 	} else {
 		waiting_add(g, j);
 	}
@@ -228,7 +325,6 @@ struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct 
 	j->node = node;
 	planet_ref(node->planet); /* the planet outlives every job on its nodes */
 	j->seq = g->seq++;
-	j->heap_idx = -1;
 	jobmap_insert(&g->map, j);
 	bool keeps = store_keeps(node);
 	bool disk = g->store && keeps && store_contains(g->store, key);
@@ -238,8 +334,7 @@ struct job *jobgraph_create(struct jobgraph *g, struct node *node, const struct 
 		j->from_store = true;
 		j->from_disk = disk;
 		j->mstate = JOB_SUBMITTED;
-		j->next = g->push;
-		g->push = j;
+		jobgraph_ready(g, j);
 		return j;
 	}
 	resolve(g, j);
@@ -258,11 +353,19 @@ void jobgraph_regenerate(struct jobgraph *g, struct job *j)
 			jobgraph_visit(g, j->dep[k], &j->prio);
 }
 
+void jobgraph_new_epoch(struct jobgraph *g)
+{
+	g->epoch++;
+	g->marked_waiting = 0;
+}
+
 void jobgraph_visit(struct jobgraph *g, struct job *j, const struct job_prio *p)
 {
 	if (j->mark != g->epoch) {
 		j->mark = g->epoch;
 		j->prio = *p;
+		if (j->mstate == JOB_WAITING)
+			g->marked_waiting++;
 	} else if (job_prio_less(p, &j->prio)) {
 		j->prio = *p;
 	} else {
@@ -279,21 +382,33 @@ void jobgraph_add_wanter(struct jobgraph *g, struct job *j, struct sched_req *r,
 		j->wanters_epoch = g->epoch;
 		j->nwanters = 0;
 	}
-	if (j->nwanters == j->capwanters) {
+	struct job_wanter w = { r, (uint32_t)idx };
+	if (j->nwanters == 0) {
+		j->wanter0 = w; /* most jobs have one: no allocation */
+		j->nwanters = 1;
+		return;
+	}
+	if (j->nwanters - 1 == j->capwanters) {
 		j->capwanters = j->capwanters ? j->capwanters * 2 : 2;
 		j->wanters = xrealloc(j->wanters, j->capwanters * sizeof *j->wanters);
 	}
-	j->wanters[j->nwanters++] = (struct job_wanter){ r, (uint32_t)idx };
+	j->wanters[j->nwanters++ - 1] = w;
 }
 
-/* Reports j's outcome to every want entry waiting for it. */
-static void report_job(struct jobgraph *g, struct job *j, struct tile *t, int err)
+/* Reports j's outcome to every want entry waiting for it, each with a reference of its own:
+ * the last one gets j->result's (one reference count change less per tile, on a line the
+ * worker that made the tile last wrote). */
+static void report_job(struct jobgraph *g, struct job *j, int err)
 {
-	if (j->wanters_epoch != g->epoch)
+	if (j->wanters_epoch != g->epoch || j->nwanters == 0)
 		return;
-	for (size_t i = 0; i < j->nwanters; i++)
-		g->report(g->ud, &j->wanters[i], t, err);
+	struct tile *t = j->result;
+	size_t n = j->nwanters;
 	j->nwanters = 0;
+	for (size_t i = 0; i + 1 < n; i++)
+		g->report(g->ud, i ? &j->wanters[i - 1] : &j->wanter0, t ? tile_ref(t) : NULL, err);
+	j->result = NULL;
+	g->report(g->ud, n > 1 ? &j->wanters[n - 2] : &j->wanter0, t, err);
 }
 
 /* Unlinks j from the jobs it waits for, drops it from the map and frees it. */
@@ -313,7 +428,7 @@ static void drop_job(struct jobgraph *g, struct job *j)
 /* j failed with err: its wanters hear of it, and so does everything that depends on it. */
 static void fail_job(struct jobgraph *g, struct job *j, int err)
 {
-	report_job(g, j, NULL, err);
+	report_job(g, j, err);
 	while (j->ndependents > 0)
 		fail_job(g, j->dependents[0], err); /* unlinks itself from j */
 	drop_job(g, j);
@@ -326,7 +441,6 @@ void jobgraph_complete(struct jobgraph *g, struct job *j)
 		fail_job(g, j, j->err);
 		return;
 	}
-	report_job(g, j, t, 0);
 	for (size_t i = 0; i < j->ndependents; i++) {
 		struct job *d = j->dependents[i];
 		for (int k = 0; k < d->nin; k++) {
@@ -339,11 +453,11 @@ void jobgraph_complete(struct jobgraph *g, struct job *j)
 		if (d->missing == 0) {
 			waiting_del(g, d);
 			d->mstate = JOB_SUBMITTED;
-			d->next = g->push;
-			g->push = d;
+			jobgraph_ready(g, d);
 		}
 	}
 	j->ndependents = 0;
+	report_job(g, j, 0); /* last: it may give t's reference away */
 	drop_job(g, j);
 }
 
@@ -355,9 +469,12 @@ void jobgraph_init(struct jobgraph *g, struct cache *c,
 	jobmap_init(&g->map);
 	g->cache = c;
 	g->epoch = g->seq = 0;
-	g->push = g->fails = NULL;
+	g->marked_waiting = 0;
+	g->push = NULL;
+	g->npush = g->cappush = 0;
+	g->fails = NULL;
 	g->waiting_list = NULL;
-	g->spare = NULL;
+	g->blocks = g->partial = NULL;
 	g->nspare = 0;
 	g->report = report;
 	g->ud = ud;
@@ -375,19 +492,24 @@ void jobgraph_fini(struct jobgraph *g)
 		free_job(NULL, all[i]);
 	free(all);
 	jobmap_fini(&g->map);
-	while (g->spare) {
-		struct job *j = g->spare;
-		g->spare = j->next;
-		free(j->dependents);
-		free(j->wanters);
-		free(j);
+	free(g->push);
+	g->push = NULL;
+	g->npush = g->cappush = 0;
+	while (g->blocks) {
+		struct jobblock *b = g->blocks;
+		g->blocks = b->l[BL_ALL].next;
+		free_block(b);
 	}
+	g->partial = NULL;
 	g->nspare = 0;
 }
 
-void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel)
+void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel, bool after_pass)
 {
-	for (struct job *j = g->waiting_list, *next; j; j = next) {
+	/* Each waiting job counts once in marked_waiting (marked once per epoch) and none left
+	 * the waiting state during the pass: equal counts mean every waiting job is marked. */
+	bool all_marked = after_pass && g->marked_waiting == atomic_load(&g->waiting);
+	for (struct job *j = all_marked ? NULL : g->waiting_list, *next; j; j = next) {
 		next = j->wnext;
 		if (j->mark != g->epoch) {
 			waiting_del(g, j);
@@ -413,49 +535,39 @@ void jobgraph_cancel_unmarked(struct jobgraph *g, struct job *cancel)
 	}
 }
 
-static bool before(const struct job *a, const struct job *b)
+static bool before(const struct jobheap_ent *a, const struct jobheap_ent *b)
 {
-	if (job_prio_less(&a->qprio, &b->qprio))
-		return true;
-	if (job_prio_less(&b->qprio, &a->qprio))
-		return false;
-	return a->seq < b->seq;
-}
-
-static void put(struct jobheap *h, size_t i, struct job *j)
-{
-	h->a[i] = j;
-	j->heap_idx = (ptrdiff_t)i;
+	return a->key < b->key || (a->key == b->key && a->seq < b->seq);
 }
 
 static void sift_up(struct jobheap *h, size_t i)
 {
-	struct job *j = h->a[i];
+	struct jobheap_ent e = h->a[i];
 	while (i > 0) {
 		size_t p = (i - 1) / 2;
-		if (!before(j, h->a[p]))
+		if (!before(&e, &h->a[p]))
 			break;
-		put(h, i, h->a[p]);
+		h->a[i] = h->a[p];
 		i = p;
 	}
-	put(h, i, j);
+	h->a[i] = e;
 }
 
 static void sift_down(struct jobheap *h, size_t i)
 {
-	struct job *j = h->a[i];
+	struct jobheap_ent e = h->a[i];
 	for (;;) {
 		size_t c = 2 * i + 1;
 		if (c >= h->n)
 			break;
-		if (c + 1 < h->n && before(h->a[c + 1], h->a[c]))
+		if (c + 1 < h->n && before(&h->a[c + 1], &h->a[c]))
 			c++;
-		if (!before(h->a[c], j))
+		if (!before(&h->a[c], &e))
 			break;
-		put(h, i, h->a[c]);
+		h->a[i] = h->a[c];
 		i = c;
 	}
-	put(h, i, j);
+	h->a[i] = e;
 }
 
 void jobheap_fini(struct jobheap *h)
@@ -471,7 +583,7 @@ void jobheap_push(struct jobheap *h, struct job *j)
 		h->cap = h->cap ? h->cap * 2 : 64;
 		h->a = xrealloc(h->a, h->cap * sizeof *h->a);
 	}
-	put(h, h->n++, j);
+	h->a[h->n++] = (struct jobheap_ent){ job_prio_key(&j->qprio), j->seq, j };
 	sift_up(h, h->n - 1);
 }
 
@@ -479,19 +591,25 @@ struct job *jobheap_pop(struct jobheap *h)
 {
 	if (h->n == 0)
 		return NULL;
-	struct job *top = h->a[0];
-	top->heap_idx = -1;
+	struct job *top = h->a[0].j;
 	if (--h->n > 0) {
-		put(h, 0, h->a[h->n]);
-		sift_down(h, 0);
+		/* Bottom-up: the hole at the root goes down to a leaf by the smaller child (one
+		 * comparison a level), then the last entry, mostly among the largest, rises from
+		 * there: about half the comparisons of sifting it down from the root. */
+		size_t i = 0, n = h->n;
+		for (size_t c; (c = 2 * i + 1) < n; i = c) {
+			if (c + 1 < n && before(&h->a[c + 1], &h->a[c]))
+				c++;
+			h->a[i] = h->a[c];
+		}
+		h->a[i] = h->a[n];
+		sift_up(h, i);
 	}
 	return top;
 }
 
 void jobheap_heapify(struct jobheap *h)
 {
-	for (size_t i = 0; i < h->n; i++)
-		h->a[i]->heap_idx = (ptrdiff_t)i;
 	for (size_t i = h->n / 2; i-- > 0;)
 		sift_down(h, i);
 }

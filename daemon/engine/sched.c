@@ -17,8 +17,11 @@
  * q_mu (the worker reads only node, key and inputs) and back through `done` (result, err).
  *
  * Serial work per tile (the scheduler's ceiling is the manager thread): one creation (job
- * from a free list, map insert), one heap push in a batch under q_mu, one completion (taken in
- * a batch; report, dependents, map removal, job back to the free list) and one callback.
+ * from a block, map insert), one heap push in a batch under q_mu, one completion (taken in a
+ * batch; dependents, report with the job's own tile reference, map removal, job back to its
+ * block) and one callback. Most of it is cache misses on a big map and on lines workers
+ * wrote, so the loops over want entries, finished jobs and reports prefetch AHEAD entries
+ * early (jobtab.h says what each structure does to avoid reading other jobs).
  * Workers signal q_cv only for the idle workers a batch needs, not a broadcast to all.
  *
  * Manager iteration: snapshot the inbox; install new want lists and apply destroys; when any
@@ -74,6 +77,10 @@ struct sched_req {
 	size_t n;
 	uint8_t *st;	 /* enum entry_state per entry */
 	uint32_t *first; /* index of the first entry with the same key */
+	uint64_t *hash;	 /* grid_key_hash of each entry's key */
+	struct job **job; /* the job a PENDING entry waits for (alive while it is pending: it is
+			   * reported when the job completes or fails, and a job a pending entry
+			   * waits for is marked by every pass, so never cancelled) */
 	bool active, dead;
 	struct sched_req *prev, *next; /* active list */
 };
@@ -124,8 +131,9 @@ static void die(const char *what, int rc)
 	abort();
 }
 
-/* first[i] = index of the first entry with w[i]'s key. Returns how many distinct keys. */
-static size_t dedupe(const struct want *w, size_t n, uint32_t *first)
+/* first[i] = index of the first entry with w[i]'s key, hash[i] (when not NULL) its
+ * grid_key_hash. Returns how many distinct keys. */
+static size_t dedupe(const struct want *w, size_t n, uint32_t *first, uint64_t *hash)
 {
 	size_t cap = 16;
 	while (cap < 2 * n)
@@ -134,7 +142,10 @@ static size_t dedupe(const struct want *w, size_t n, uint32_t *first)
 	memset(tab, 0xff, cap * sizeof *tab);
 	size_t distinct = 0;
 	for (size_t i = 0; i < n; i++) {
-		size_t h = grid_key_hash(&w[i].key) & (cap - 1);
+		uint64_t kh = grid_key_hash(&w[i].key);
+		if (hash)
+			hash[i] = kh;
+		size_t h = kh & (cap - 1);
 		first[i] = (uint32_t)i;
 		while (tab[h] != UINT32_MAX) {
 			if (grid_key_equal(&w[tab[h]].key, &w[i].key)) {
@@ -164,13 +175,16 @@ static void add_report(struct sched *s, struct sched_req *r, size_t idx, struct 
 	s->batch[s->nbatch++] = (struct report){ r, &r->list[idx], t, err };
 }
 
-/* The graph's report hook: queues the callback unless the entry was already reported. */
+/* The graph's report hook (t owned): queues the callback unless the entry was already
+ * reported. */
 static void report_entry(void *ud, const struct job_wanter *w, struct tile *t, int err)
 {
 	struct sched *s = ud;
 	struct sched_req *r = w->r;
 	if (!r->dead && w->idx < r->n && r->st[w->idx] == ENTRY_PENDING)
-		add_report(s, r, w->idx, t ? tile_ref(t) : NULL, err);
+		add_report(s, r, w->idx, t, err);
+	else
+		tile_unref(t);
 }
 
 static void activate(struct sched *s, struct sched_req *r)
@@ -214,12 +228,17 @@ static bool apply_changes(struct sched *s, struct sched_req *ch)
 		free(r->list);
 		free(r->st);
 		free(r->first);
+		free(r->hash);
+		free(r->job);
 		r->list = r->pend_m;
 		r->n = r->npend_m;
 		r->pend_m = NULL;
-		r->st = xcalloc(r->n ? r->n : 1, 1);
-		r->first = xmalloc((r->n ? r->n : 1) * sizeof *r->first);
-		dedupe(r->list, r->n, r->first);
+		size_t n1 = r->n ? r->n : 1;
+		r->st = xcalloc(n1, 1);
+		r->first = xmalloc(n1 * sizeof *r->first);
+		r->hash = xmalloc(n1 * sizeof *r->hash);
+		r->job = xmalloc(n1 * sizeof *r->job);
+		dedupe(r->list, r->n, r->first, r->hash);
 		for (size_t i = 0; i < r->n; i++)
 			if (r->first[i] != i)
 				r->st[i] = ENTRY_DUP;
@@ -235,12 +254,19 @@ static bool prio_equal(const struct job_prio *a, const struct job_prio *b)
 	return a->cls == b->cls && a->ly == b->ly && a->lx == b->lx && a->order == b->order;
 }
 
+/* How far ahead the manager's loops ask for the lines they will touch (__builtin_prefetch). */
+#define AHEAD 8
+
 /* The marking pass over every active want list, then cancellation of what it missed. */
 static void recompute(struct sched *s)
 {
-	s->g.epoch++;
+	jobgraph_new_epoch(&s->g);
 	for (struct sched_req *r = s->reqs; r; r = r->next) {
 		for (size_t i = 0; i < r->n; i++) {
+			/* A new entry looks its key up in the job map: its bucket is fetched
+			 * AHEAD entries early (a miss each on a big map). */
+			if (i + AHEAD < r->n && r->st[i + AHEAD] == ENTRY_NEW)
+				jobmap_prefetch(&s->g.map, r->hash[i + AHEAD]);
 			const struct want *w = &r->list[i];
 			struct job_prio p = { (uint8_t)w->cls, w->key.ly, w->key.lx, (uint32_t)i };
 			if (r->st[i] == ENTRY_REPORTED)
@@ -248,13 +274,14 @@ static void recompute(struct sched *s)
 			if (r->st[i] == ENTRY_DUP) {
 				/* Reported with its first entry, but its class may be better. */
 				if (r->st[r->first[i]] == ENTRY_PENDING)
-					jobgraph_visit(&s->g, jobmap_find(&s->g.map, &w->key), &p);
+					jobgraph_visit(&s->g, r->job[r->first[i]], &p);
 				continue;
 			}
-			struct job *j = jobmap_find(&s->g.map, &w->key);
-			if (j) {
-				if (r->st[i] == ENTRY_NEW)
-					atomic_fetch_add(&s->g.merged, 1);
+			struct job *j;
+			if (r->st[i] == ENTRY_PENDING) {
+				j = r->job[i]; /* no lookup: a pending entry's job is alive */
+			} else if ((j = jobmap_find_hashed(&s->g.map, &w->key, r->hash[i]))) {
+				atomic_fetch_add(&s->g.merged, 1);
 			} else {
 				struct tile *t = cache_lookup(s->cache, &w->key);
 				if (t) {
@@ -264,6 +291,7 @@ static void recompute(struct sched *s)
 				j = jobgraph_create(&s->g, w->node, &w->key);
 			}
 			r->st[i] = ENTRY_PENDING;
+			r->job[i] = j;
 			jobgraph_visit(&s->g, j, &p);
 			jobgraph_add_wanter(&s->g, j, r, i);
 		}
@@ -276,9 +304,9 @@ static void recompute(struct sched *s)
 	size_t kept = 0;
 	bool reorder = false;
 	for (size_t i = 0; i < s->heap.n; i++) {
-		struct job *j = s->heap.a[i];
+		struct jobheap_ent e = s->heap.a[i];
+		struct job *j = e.j;
 		if (j->mark != s->g.epoch) {
-			j->heap_idx = -1;
 			j->mstate = JOB_CANCELLED;
 			j->next = cancel;
 			cancel = j;
@@ -289,9 +317,10 @@ static void recompute(struct sched *s)
 				s->queued[j->qprio.cls]--;
 				s->queued[j->prio.cls]++;
 				j->qprio = j->prio;
+				e.key = job_prio_key(&j->prio);
 				reorder = true;
 			}
-			s->heap.a[kept++] = j;
+			s->heap.a[kept++] = e;
 		}
 	}
 	s->heap.n = kept;
@@ -299,23 +328,30 @@ static void recompute(struct sched *s)
 		jobheap_heapify(&s->heap);
 	xmutex_unlock(&s->q_mu);
 
-	jobgraph_cancel_unmarked(&s->g, cancel);
+	jobgraph_cancel_unmarked(&s->g, cancel, true);
 }
 
 static void submit(struct sched *s)
 {
-	if (!s->g.push)
+	size_t n = s->g.npush;
+	if (n == 0)
 		return;
-	int pushed = 0;
+	struct job **push = s->g.push;
+	/* In the order they became ready: mostly increasing seq, so each heap push stops at
+	 * once. The job lines are read before taking q_mu, not under it. */
+	for (size_t i = 0; i < n; i++) {
+		if (i + AHEAD < n)
+			__builtin_prefetch(push[i + AHEAD], 1);
+		push[i]->qprio = push[i]->prio;
+	}
+	int pushed = (int)n;
 	xmutex_lock(&s->q_mu);
-	while (s->g.push) {
-		struct job *j = s->g.push;
-		s->g.push = j->next;
-		j->qprio = j->prio;
+	for (size_t i = 0; i < n; i++) {
+		struct job *j = push[i];
 		jobheap_push(&s->heap, j);
 		s->queued[j->qprio.cls]++;
-		pushed++;
 	}
+	s->g.npush = 0;
 	/* Wake as many idle workers as there are new jobs: a busy worker takes the next job
 	 * without waiting, and waking more would only have them contend for q_mu. */
 	if (pushed >= s->idle)
@@ -329,6 +365,9 @@ static void submit(struct sched *s)
 static void deliver(struct sched *s)
 {
 	for (size_t i = 0; i < s->nbatch; i++) {
+		if (i + AHEAD < s->nbatch && s->batch[i + AHEAD].t)
+			__builtin_prefetch(s->batch[i + AHEAD].t, 1); /* its count, last written
+									 * by a worker */
 		struct report *e = &s->batch[i];
 		if (!e->r->dead)
 			e->r->fn(e->r->ud, e->w, e->t, e->err);
@@ -347,6 +386,8 @@ static void free_req(struct sched_req *r)
 	free(r->list);
 	free(r->st);
 	free(r->first);
+	free(r->hash);
+	free(r->job);
 	free(r);
 }
 
@@ -418,21 +459,24 @@ static void *manager_main(void *arg)
 		while (done) {
 			struct job *j = done;
 			done = j->next_done;
+			if (done) /* its map removal, next */
+				jobmap_prefetch(&s->g.map, done->hash);
 			bool remote = !j->result &&
 				      (j->rstate == JOB_R_WAIT || j->rstate == JOB_R_WOKEN);
 			if (remote && j->mark != s->g.epoch) {
 				/* Another daemon makes it and nobody here wants it any more. */
 				j->mstate = JOB_CANCELLED;
 				j->next = NULL;
-				jobgraph_cancel_unmarked(&s->g, j);
+				jobgraph_cancel_unmarked(&s->g, j, false);
 			} else if (remote && j->rstate == JOB_R_WAIT) {
 				/* Another daemon generates it: park it until the remote tier
 				 * wakes it (no worker and no manager time spent waiting), then
 				 * load it. A job found taken over just before its generation
 				 * lets its inputs go (all held: it was ready). */
-				for (int k = 0; k < j->nin; k++)
+				for (int k = 0; k < j->nin; k++) {
 					tile_unref(j->in[k]);
-				memset(j->in, 0, sizeof j->in);
+					j->in[k] = NULL;
+				}
 				j->nin = 0;
 				j->from_store = true;
 				j->from_disk = false;
@@ -440,8 +484,7 @@ static void *manager_main(void *arg)
 				s->remote->ops->wait(s->remote, &j->key, j);
 			} else if (remote) {
 				j->from_disk = false; /* woken: ask the remote tier again */
-				j->next = s->g.push;
-				s->g.push = j;
+				jobgraph_ready(&s->g, j);
 			} else if (j->from_store && !j->result)
 				jobgraph_regenerate(&s->g, j); /* not loaded after all: generate */
 			else
@@ -835,7 +878,7 @@ int sched_fetch(struct sched *s, const struct want *w, size_t n, struct tile **o
 	struct fetch f = { .out = out };
 	uint32_t *first = xmalloc(n * sizeof *first);
 	f.err = xcalloc(n, sizeof *f.err);
-	f.left = dedupe(w, n, first);
+	f.left = dedupe(w, n, first, NULL);
 	for (size_t i = 0; i < n; i++)
 		out[i] = NULL;
 	xmutex_init(&f.mu);

@@ -23,6 +23,7 @@ grep -h -e '^machine:' -e '^memcpy 64 MiB' "$LOG/machine"
 [ -f "$LOG/bench_noise_parent" ] && grep -h -e '^whole keys' "$LOG/bench_noise_parent"
 [ -f "$LOG/bench_server" ] && grep -h -e 'round trip' -e 'cached tiles' "$LOG/bench_server"
 [ -f "$LOG/bench_http" ] && grep -h -e '^http/cached' "$LOG/bench_http"
+[ -f "$LOG/bench_sched" ] && grep -h -e '^sched/goal' "$LOG/bench_sched"
 [ -f "$LOG/bench_view" ] && grep -h -e '^view/frame' -e '^view/flight' "$LOG/bench_view"
 [ -f "$LOG/bench_keepup" ] && grep -h -v -e '^  keepup ' -e '^bench_keepup:' "$LOG/bench_keepup"
 exit 0

@@ -1,7 +1,8 @@
 /* Scheduler tests with test-only node types: `count` writes a value derived from its key and
  * counts generations per key; `sum` adds its two inputs (default deps); `pair` adds two
  * neighbouring tiles of one input (custom deps, so neighbours share a dependency); `fail`
- * returns -EIO; `badeps` fails in deps(). Every generate passes a gate the test can close, so
+ * returns -EIO; `badeps` fails in deps(); `wide` adds six neighbouring tiles of one input
+ * (more inputs than a job holds in itself). Every generate passes a gate the test can close, so
  * with one worker the order of generation is observable. A key already in the cache serves
  * as a "sync" marker: its callback arrives after the manager has queued everything else in
  * the same want list. Waits have deadlines, and an alarm backs them up: a hang fails. */
@@ -122,6 +123,36 @@ static int deps_pair(const struct node *n, const struct tile_key *k, struct node
 	return 2;
 }
 
+/* wide: input tiles k .. k + WIDE - 1 along x. */
+#define WIDE 6
+static int deps_wide(const struct node *n, const struct tile_key *k, struct node_dep *out)
+{
+	for (int i = 0; i < WIDE; i++) {
+		out[i].node = n->in[0];
+		out[i].key = *k;
+		out[i].key.node = n->in[0]->hash;
+		out[i].key.x = grid_wrap_x(k->lx, (int64_t)k->x + i);
+	}
+	return WIDE;
+}
+
+/* The sum of every input, weighted by its slot (1, 2, 3...): inputs out of order show. */
+static int gen_wsum(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
+		    struct tile *const *in, int nin, struct tile *out)
+{
+	(void)g;
+	pass_gate(n->impl, k);
+	if (nin != WIDE)
+		return -EINVAL;
+	for (uint32_t i = 0; i < out->size * out->size; i++) {
+		float v = 0;
+		for (int s = 0; s < nin; s++)
+			v += (float)(s + 1) * tile_f32(in[s])[i];
+		tile_f32(out)[i] = v;
+	}
+	return 0;
+}
+
 static int deps_bad(const struct node *n, const struct tile_key *k, struct node_dep *out)
 {
 	(void)n, (void)k, (void)out;
@@ -137,6 +168,8 @@ static const struct node_type t_pair = { .name = "pair", .slots = slots2, .nslot
 static const struct node_type t_fail = { .name = "fail", .generate = gen_fail };
 static const struct node_type t_badeps = { .name = "badeps", .deps = deps_bad,
 					   .generate = gen_count };
+static const struct node_type t_wide = { .name = "wide", .slots = slots2, .nslots = 1,
+					 .deps = deps_wide, .generate = gen_wsum };
 
 /* What a node's tile at k must hold. */
 static float expect(const struct node *n, const struct tile_key *k)
@@ -145,6 +178,15 @@ static float expect(const struct node *n, const struct tile_key *k)
 		return value(n->hash, k);
 	struct tile_key a = *k, b = *k;
 	a.node = n->in[0]->hash;
+	if (n->type == &t_wide) {
+		float v = 0; /* as gen_wsum adds them, rounding included */
+		for (int s = 0; s < WIDE; s++) {
+			b = a;
+			b.x = grid_wrap_x(k->lx, (int64_t)k->x + s);
+			v += (float)(s + 1) * expect(n->in[0], &b);
+		}
+		return v;
+	}
 	if (n->type == &t_pair) {
 		b = a;
 		b.x = grid_wrap_x(k->lx, (int64_t)k->x + 1);
@@ -1024,6 +1066,85 @@ static void stress(void **state)
 	world_free(w);
 }
 
+/* sched_fetch of list[0..n) into out, each tile checked and dropped: how many were wrong
+ * (all of them when the fetch failed). */
+static int fetch_check(struct world *w, const struct want *list, size_t n, struct tile **out)
+{
+	int bad = sched_fetch(w->sched, list, n, out) != 0;
+	for (size_t i = 0; i < n; i++) {
+		if (!tile_ok(list[i].node, out[i], &list[i].key))
+			bad++;
+		tile_unref(out[i]);
+	}
+	return bad;
+}
+
+/* Many fetches of the same wide tiles at once: jobs with more inputs than they hold in
+ * themselves, several want entries waiting on each job, and more jobs than the scheduler
+ * keeps for reuse (its blocks of jobs released and made again). */
+struct wide_arg {
+	struct world *w;
+	struct node *wide;
+	int ly, bad;
+};
+
+static void *wide_thread(void *p)
+{
+	struct wide_arg *a = p;
+	size_t n = (size_t)grid_tiles_x(a->ly + 1) * grid_tiles_y(a->ly);
+	struct want *list = calloc(2 * n, sizeof *list);
+	struct tile **out = calloc(2 * n, sizeof *out);
+	if (!list || !out) {
+		a->bad++;
+		free(list);
+		free(out);
+		return NULL;
+	}
+	size_t k = 0;
+	for (uint32_t y = 0; y < grid_tiles_y(a->ly); y++)
+		for (uint32_t x = 0; x < grid_tiles_x(a->ly + 1); x++) {
+			list[k++] = mkwant(a->wide, a->ly, x, y, SCHED_WEB);
+			list[k++] = mkwant(&a->w->b, a->ly, x, y, SCHED_BULK);
+		}
+	a->bad += fetch_check(a->w, list, k, out);
+	free(list);
+	free(out);
+	return NULL;
+}
+
+static void wide_many_wanters(void **state)
+{
+	(void)state;
+	struct world *w = world_new(4, 0);
+	struct node wide;
+	mknode(w, &wide, &t_wide, 8, &w->a, NULL);
+	/* Level 5: 2048 wide tiles, 2048 of A, 2048 of B wanted by three fetches at once (6144
+	 * jobs, beyond the 4096 kept for reuse); then level 4 from what was kept. */
+	for (int ly = 5; ly >= 4; ly--) {
+		struct wide_arg a[3];
+		pthread_t th[3];
+		for (int i = 0; i < 3; i++) {
+			a[i] = (struct wide_arg){ .w = w, .wide = &wide, .ly = ly };
+			assert_int_equal(xthread_create(&th[i], wide_thread, &a[i]), 0);
+		}
+		for (int i = 0; i < 3; i++) {
+			xthread_join(th[i]);
+			assert_int_equal(a[i].bad, 0);
+		}
+	}
+	/* The cache has no budget: each key generated once however many waited for it. */
+	size_t keys = 0;
+	for (int ly = 4; ly <= 5; ly++)
+		keys += 3 * (size_t)grid_tiles_x(ly + 1) * grid_tiles_y(ly);
+	struct sched_stats st;
+	sched_get_stats(w->sched, &st);
+	assert_int_equal(st.generated, keys);
+	assert_int_equal(st.failed, 0);
+	assert_int_equal(st.waiting, 0);
+	assert_int_equal(st.running, 0);
+	world_free(w);
+}
+
 /* Many workers hand jobs back at once (the manager's lock-free inbox): requesters fetch
  * overlapping levels of two nodes with shared inputs, from several threads, with 16 workers. */
 struct handoff_arg {
@@ -1052,13 +1173,7 @@ static void *handoff_thread(void *p)
 				for (uint32_t x = 0; x < grid_tiles_x(ly + 1); x++)
 					list[n++] = mkwant(nodes[k], ly, x, y,
 							   (enum sched_class)(1 + (round + k) % 3));
-		if (sched_fetch(w->sched, list, n, out) != 0)
-			a->bad++;
-		for (size_t i = 0; i < n; i++) {
-			if (!tile_ok(list[i].node, out[i], &list[i].key))
-				a->bad++;
-			tile_unref(out[i]);
-		}
+		a->bad += fetch_check(w, list, n, out);
 	}
 	free(list);
 	free(out);
@@ -1130,6 +1245,7 @@ int main(void)
 		cmocka_unit_test(workers_lower_priority),
 		cmocka_unit_test(stress),
 		cmocka_unit_test(many_workers_handoff),
+		cmocka_unit_test(wide_many_wanters),
 	};
 	return cmocka_run_group_tests_name("sched", tests, NULL, NULL);
 }
