@@ -1,10 +1,11 @@
 /* test_view_store — the persistent store as a viewer sees it (issue 13), with the real
  * programs: clipmapd with a disk store ([store] path), `clipmapctl prefetch`, and clipmapview
  * (offscreen, EGL or OSMesa on llvmpipe) over the daemon or with the engine in-process.
- *   - A route over the north pole prefetched (levels 0-10 along the meridians 20°E and
- *     160°W), the daemon restarted on the same store (a cold memory cache): a paced
- *     clipmapview flight along it (50 km up, 88°N → the pole → 88°N on the other side)
- *     generates 0 tiles in the daemon, every one loaded from disk. Near the pole the lx of a
+ *   - Routes prefetched (levels 0-10) over the north pole (along the meridians 20°E and
+ *     160°W), south at 70°S and east on the equator, the daemon restarted on the same store
+ *     (a cold memory cache): a paced clipmapview flight along each (50 km up; 88°N → the
+ *     pole → 88°N on the other side) generates 0 tiles in the daemon, every one loaded
+ *     from disk. Near the pole the lx of a
  *     level changes within a few rows, and the viewer's and the daemon's look-ahead asked for
  *     tiles on the lx the viewer was leaving, which no prefetch holds (492 generated at
  *     800 km in bench_keepup's pole route before).
@@ -157,48 +158,62 @@ static void skip_without_gl(int rc, const char *out)
 	}
 }
 
-/* The flight over the north pole, 50 km up: 88°N 20°E → 89.99°N → over to 160°W → 88°N,
- * 1.5 s a leg (about 150 km/s on the meridians). */
-static const char flight_csv[] = "88,20,50000,0,-30\n"
-				 "89.99,20,50000,0,-30\n"
-				 "89.99,-160,50000,180,-30\n"
-				 "88,-160,50000,180,-30\n";
+/* The flights, 50 km up, each 4.5 s (45 frames a leg at 30 frames/s, about 150 km/s), and
+ * the routes prefetched for them: the route with the daemon's look-ahead beyond its end — 4 s
+ * at 150 km/s is 5.4° of arc, and up to 1.7 times that where the viewer catches up after a
+ * late frame (a frame step 20 ms after the last: the velocity the daemon takes from two
+ * foci) — on the levels the viewer uses there (2-9, their detail up to 10) and those above. */
+static const struct route {
+	const char *name, *keys, *path;
+} routes[] = {
+	{ "over the north pole", /* 88°N 20°E → 89.99°N → over to 160°W → 88°N */
+	  "88,20,50000,0,-30\n89.99,20,50000,0,-30\n89.99,-160,50000,180,-30\n"
+	  "88,-160,50000,180,-30\n",
+	  "87.5,20:78,-160" },
+	{ "south at 70°S", "-67,30,50000,180,-30\n-69,30,50000,180,-30\n-71,30,50000,180,-30\n"
+	  "-73,30,50000,180,-30\n", "-66.5,30:-83,30" },
+	{ "east on the equator", "0,10,50000,90,-30\n0,12,50000,90,-30\n0,14,50000,90,-30\n"
+	  "0,16,50000,90,-30\n", "0,9.5:0,26" },
+};
 
-static void pole_flight_after_prefetch_and_restart_generates_nothing(void **state)
+static void flights_after_prefetch_and_restart_generate_nothing(void **state)
 {
 	struct env *e = *state;
 	NEED_PROGRAMS(e);
-	/* The route with the daemon's look-ahead beyond its end: 4 s at 150 km/s is 5.4° of
-	 * latitude, and up to 1.7 times that where the viewer catches up after a late frame (a
-	 * frame step 20 ms after the last: the velocity the daemon takes from two foci); the
-	 * levels the viewer uses there (2-9, their detail up to 10) and those above them. */
-	prefetch(e, "--path", "87.5,20:78,-160", "0", "0-10");
+	enum { NR = sizeof routes / sizeof routes[0] };
+	for (int i = 0; i < NR; i++)
+		prefetch(e, "--path", routes[i].path, "0", "0-10");
 	daemon_counts(e, true);
 	char err[256];
 	assert_int_equal(daemon_env_stop(&e->d, SIGTERM, NULL), 0);
 	if (daemon_env_restart(&e->d, err))
 		fail_msg("restart: %s", err);
-	char csv[200], stats[200], out[8192];
-	snprintf(csv, sizeof csv, "%s/pole.csv", e->d.dir);
-	snprintf(stats, sizeof stats, "%s/pole.json", e->d.dir);
-	FILE *f = fopen(csv, "w");
-	assert_non_null(f);
-	fputs(flight_csv, f);
-	assert_int_equal(fclose(f), 0);
-	int rc = run(e, "clipmapview", out, sizeof out, "--connect", e->d.sock, "--planet", "test",
-		     "--flight", csv, "--steps", "45", "--fps", "30", "--size", "320x180",
-		     "--stats", stats, NULL);
-	skip_without_gl(rc, out);
-	if (rc != 0)
-		fail_msg("clipmapview: exit %d: %s", rc, out);
-	/* what the daemon still has queued for the flight counts too */
-	struct counts n = daemon_counts(e, false);
-	printf("flight over the pole after a prefetch and a restart: %llu tiles generated, %llu "
-	       "loaded from disk\n",
-	       (unsigned long long)n.generated, (unsigned long long)n.loaded);
-	assert_true(n.loaded > 100);
-	assert_int_equal(n.generated, 0);
-	assert_int_equal(n.corrupt, 0);
+	struct counts n0 = daemon_counts(e, false);
+	for (int i = 0; i < NR; i++) {
+		char csv[200], stats[200], out[8192];
+		snprintf(csv, sizeof csv, "%s/flight%d.csv", e->d.dir, i);
+		snprintf(stats, sizeof stats, "%s/flight%d.json", e->d.dir, i);
+		FILE *f = fopen(csv, "w");
+		assert_non_null(f);
+		fputs(routes[i].keys, f);
+		assert_int_equal(fclose(f), 0);
+		int rc = run(e, "clipmapview", out, sizeof out, "--connect", e->d.sock, "--planet",
+			     "test", "--flight", csv, "--steps", "45", "--fps", "30", "--size",
+			     "320x180", "--stats", stats, NULL);
+		skip_without_gl(rc, out);
+		if (rc != 0)
+			fail_msg("clipmapview: exit %d: %s", rc, out);
+		/* what the daemon still has queued for the flight counts too */
+		struct counts n = daemon_counts(e, false);
+		printf("flight %s after a prefetch and a restart: %llu tiles generated, %llu "
+		       "loaded from disk\n",
+		       routes[i].name, (unsigned long long)(n.generated - n0.generated),
+		       (unsigned long long)(n.loaded - n0.loaded));
+		assert_true(n.loaded - n0.loaded > 100);
+		assert_int_equal(n.generated - n0.generated, 0);
+		assert_int_equal(n.corrupt, 0);
+		n0 = n;
+	}
 }
 
 /* The in-process viewer's "N tiles generated" from its exit line (-1: none). */
@@ -275,7 +290,7 @@ static void store_option_refused_clearly(void **state)
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
-		cmocka_unit_test_setup_teardown(pole_flight_after_prefetch_and_restart_generates_nothing,
+		cmocka_unit_test_setup_teardown(flights_after_prefetch_and_restart_generate_nothing,
 						setup, teardown),
 		cmocka_unit_test_setup_teardown(in_process_viewer_shares_the_daemon_store, setup,
 						teardown),
