@@ -7,6 +7,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/clipmap.h"
+#include "common/grid.h"
+
 #define DEG (M_PI / 180.0)
 
 static const double horizons[] = { 1.0, 2.0, 4.0 };
@@ -50,19 +53,52 @@ static bool kset_add(struct kset *s, const struct proto_want_entry *e)
 	}
 }
 
-static int by_level(const void *a, const void *b)
+/* The unit vector of (lon, lat) and its east and north directions. */
+static void frame(double lon, double lat, double p[3], double e[3], double nv[3])
 {
-	const struct proto_want_entry *x = a, *y = b;
-	return (x->ly > y->ly) - (x->ly < y->ly);
+	double cl = cos(lon * DEG), sl = sin(lon * DEG), cp = cos(lat * DEG), sp = sin(lat * DEG);
+	p[0] = cp * cl, p[1] = cp * sl, p[2] = sp;
+	e[0] = -sl, e[1] = cl, e[2] = 0;
+	nv[0] = -sp * cl, nv[1] = -sp * sl, nv[2] = cp;
 }
+
+/* Where the focus is after moving dist metres along the great circle of its velocity. */
+static void move(const struct lookahead_motion *m, double dist, double *lon, double *lat)
+{
+	double p[3], e[3], nv[3], v = hypot(m->ve, m->vn), d = dist / m->radius;
+	frame(m->lon, m->lat, p, e, nv);
+	double q[3];
+	for (int i = 0; i < 3; i++)
+		q[i] = p[i] * cos(d) + (m->ve * e[i] + m->vn * nv[i]) / v * sin(d);
+	*lat = asin(fmax(-1.0, fmin(1.0, q[2]))) / DEG;
+	*lon = atan2(q[1], q[0]) / DEG;
+}
+
+/* A level the WANT shows: its lx now and the layers shown (bit per layer). */
+struct shown {
+	int lx; /* -1: not shown */
+	uint64_t layers;
+};
 
 size_t lookahead_wants(const struct lookahead_motion *m, const struct proto_want_entry *w,
 		       size_t n, struct proto_want_entry *out, size_t cap)
 {
 	if (!(m->radius > 0) || !isfinite(m->ve) || !isfinite(m->vn) || !isfinite(m->lat) ||
-	    (m->ve == 0 && m->vn == 0))
+	    !isfinite(m->lon) || (m->ve == 0 && m->vn == 0) || m->tile_size == 0 ||
+	    m->tile_size > UINT32_MAX / GRID_WINDOW_MAX_TILES)
 		return 0;
-	double c = fmax(cos(m->lat * DEG), 0.01);
+	struct shown lv[GRID_MAX_LEVEL + 1];
+	for (int l = 0; l <= GRID_MAX_LEVEL; l++)
+		lv[l] = (struct shown){ -1, 0 };
+	for (size_t i = 0; i < n; i++) {
+		const struct proto_want_entry *e = &w[i];
+		if (e->cls != PROTO_CLASS_VISIBLE || e->ly > GRID_MAX_LEVEL || e->lx > e->ly + 1 ||
+		    e->layer >= 64)
+			continue;
+		if (lv[e->ly].lx < 0)
+			lv[e->ly].lx = e->lx;
+		lv[e->ly].layers |= 1ull << e->layer;
+	}
 	size_t k = 0;
 	struct kset seen;
 	kset_init(&seen, n + cap);
@@ -70,30 +106,37 @@ size_t lookahead_wants(const struct lookahead_motion *m, const struct proto_want
 		return 0; /* out of memory: no look-ahead, nothing else lost */
 	for (size_t i = 0; i < n; i++)
 		kset_add(&seen, &w[i]);
+	double v = hypot(m->ve, m->vn);
+	uint32_t T = m->tile_size;
 	for (size_t h = 0; h < sizeof horizons / sizeof horizons[0] && k < cap; h++) {
-		double dlon = m->ve * horizons[h] / (m->radius * c) / DEG,
-		       dlat = m->vn * horizons[h] / m->radius / DEG;
-		size_t first = k;
-		for (size_t i = 0; i < n && k < cap; i++) {
-			const struct proto_want_entry *e = &w[i];
-			if (e->cls != PROTO_CLASS_VISIBLE || e->lx > 31 || e->ly > 30)
+		double lon, lat;
+		move(m, v * horizons[h], &lon, &lat);
+		for (int ly = 0; ly <= GRID_MAX_LEVEL && k < cap; ly++) {
+			if (lv[ly].lx < 0)
 				continue;
-			double nx = ldexp(1.0, e->lx), ny = ldexp(1.0, e->ly);
-			double sx = dlon / 360.0 * nx, sy = -dlat / 180.0 * ny;
-			if (fabs(sx) < 0.5 && fabs(sy) < 0.5)
-				continue; /* the focus stays within this level's tiles */
-			double x = fmod(floor(e->x + sx + 0.5), nx);
-			x = x < 0 ? x + nx : x;
-			double y = floor(e->y + sy + 0.5);
-			if (y < 0 || y >= ny)
-				continue; /* past a pole: the tiles there are another column's */
-			struct proto_want_entry a = { .layer = e->layer, .cls = PROTO_CLASS_BULK,
-						      .lx = e->lx, .ly = e->ly, .x = (uint32_t)x,
-						      .y = (uint32_t)y };
-			if (kset_add(&seen, &a))
-				out[k++] = a;
+			/* The lx a viewer arriving there uses: the fresh one, or one coarser where
+			 * the hysteresis keeps it (it passed through that one on the way). */
+			int fresh = clipmap_level_lx(ly, lat, -1);
+			int cur = lv[ly].lx < fresh - 1 ? fresh - 1 : lv[ly].lx;
+			int lx = clipmap_level_lx(ly, lat, cur);
+			struct grid_quad q;
+			grid_window(lx, ly, T, CLIPMAP_WINDOW_TILES * T, lon, lat, &q);
+			struct tile_key keys[GRID_WINDOW_MAX_KEYS];
+			int nk = grid_quad_tiles(&q, 0, keys);
+			for (int layer = 0; layer < 64 && k < cap; layer++) {
+				if (!(lv[ly].layers >> layer & 1))
+					continue;
+				for (int i = 0; i < nk && k < cap; i++) {
+					struct proto_want_entry a = {
+						.layer = (uint8_t)layer, .cls = PROTO_CLASS_BULK,
+						.lx = keys[i].lx, .ly = keys[i].ly, .x = keys[i].x,
+						.y = keys[i].y
+					};
+					if (kset_add(&seen, &a))
+						out[k++] = a;
+				}
+			}
 		}
-		qsort(out + first, k - first, sizeof *out, by_level); /* coarse first */
 	}
 	free(seen.k);
 	return k;
@@ -105,9 +148,23 @@ int lookahead_velocity(double lon0, double lat0, double lon1, double lat1, doubl
 	if (!(t > 0.02 && t <= 5) || !isfinite(lon0) || !isfinite(lat0) || !isfinite(lon1) ||
 	    !isfinite(lat1) || !(r > 0))
 		return -EINVAL;
-	double dlon = fmod(lon1 - lon0 + 540.0, 360.0) - 180.0; /* across the antimeridian */
-	double c = cos(0.5 * (lat0 + lat1) * DEG);
-	*ve = dlon * DEG * r * c / t;
-	*vn = (lat1 - lat0) * DEG * r / t;
+	double p0[3], p1[3], e[3], nv[3], unused[3];
+	frame(lon0, lat0, p0, unused, unused);
+	frame(lon1, lat1, p1, e, nv);
+	double c = p0[0] * p1[0] + p0[1] * p1[1] + p0[2] * p1[2];
+	double away[3], len = 0; /* at p1, the direction away from p0 along their great circle */
+	for (int i = 0; i < 3; i++) {
+		away[i] = c * p1[i] - p0[i];
+		len += away[i] * away[i];
+	}
+	len = sqrt(len);
+	*ve = *vn = 0;
+	if (len == 0)
+		return 0; /* the same place (or antipodes: no direction) */
+	double speed = atan2(len, c) * r / t;
+	for (int i = 0; i < 3; i++) {
+		*ve += away[i] / len * e[i] * speed;
+		*vn += away[i] / len * nv[i] * speed;
+	}
 	return 0;
 }

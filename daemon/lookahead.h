@@ -6,14 +6,17 @@
  * there, and generating one costs 5–50 ms of a worker, a level's block of 16–25 tiles
  * 0.1–1 s on this machine's workers.
  *
- * How far ahead: where the focus will be after 1, 2 and 4 s of the current velocity (on the
- * planet's own radius), each visible want moved by the whole tiles the focus moves at its
- * level — only levels where that is at least half a tile, so a slow flight adds nothing and
- * a fast one adds its fine levels first (coarse levels cross tiles slowly). At the seed's
- * velocities (Table 1: about 0.8 × the altitude per second) 4 s is ~3 altitudes of ground:
- * beyond the finest rings, inside the coarse ones. Levels switch their longitude level lx at
- * 28° and 64° of latitude (common/clipmap.h); the moved tiles keep the lx of the want they
- * come from, which near those latitudes may be the one the viewer leaves.
+ * How far ahead: where the focus will be after 1, 2 and 4 s of the current velocity, along the
+ * great circle it moves on (on the planet's own radius; across a pole too). At each of those
+ * places, each level the WANT shows (its visible entries) gets the window a viewer focused
+ * there asks for (common/clipmap.h, as the viewer and prefetch: the longitude level lx that
+ * clipmap_level_lx gives at that latitude, the window grid_window centres on the focus), in
+ * every layer the level shows; what the WANT already holds (its window and ring) is left out,
+ * so a slow flight adds nothing and a fast one its fine levels first (coarse windows move
+ * slowly). At the seed's velocities (Table 1: about 0.8 × the altitude per second) 4 s is ~3
+ * altitudes of ground: beyond the finest rings, inside the coarse ones. The lx is the one the
+ * viewer will use there, not the one it has now: near a pole it changes within a few hundred
+ * kilometres, and a tile of the old lx there is one no viewer (and no prefetch) asks for.
  *
  * Pure functions, any thread.
  */
@@ -30,16 +33,20 @@ struct lookahead_motion {
 	double lon, lat; /* focus, degrees */
 	double ve, vn;	 /* ground velocity east and north, m/s */
 	double radius;	 /* the planet's equatorial radius, m */
+	uint32_t tile_size; /* the planet's tiles, texels a side (the window is
+			     * CLIPMAP_WINDOW_TILES of them) */
 };
 
-/* The look-ahead for the visible entries of w[0 .. n): entries (class bulk) for tiles not in
- * w, most urgent first (1 s before 2 s before 4 s; coarse levels first within each), into
- * out[0 .. cap). Returns the count. */
+/* The look-ahead for the levels and layers of the visible entries of w[0 .. n) (the lx of a
+ * level's first visible entry is the viewer's now, for clipmap_level_lx's hysteresis):
+ * entries (class bulk) for tiles not in w, most urgent first (1 s before 2 s before 4 s;
+ * coarse levels first within each), into out[0 .. cap). Returns the count. */
 size_t lookahead_wants(const struct lookahead_motion *m, const struct proto_want_entry *w,
 		       size_t n, struct proto_want_entry *out, size_t cap);
 
-/* A velocity from two foci t seconds apart (the client sent none): east and north m/s on a
- * sphere of radius r. Returns 0, or -EINVAL when t is outside (0.02, 5] s or a focus is not
+/* A velocity from two foci t seconds apart (the client sent none): east and north m/s at the
+ * second focus, along the great circle through both on a sphere of radius r (across a pole,
+ * the direction it goes on in). Returns 0, or -EINVAL when t is outside (0.02, 5] s or a focus is not
  * finite. */
 int lookahead_velocity(double lon0, double lat0, double lon1, double lat1, double t, double r,
 		       double *ve, double *vn);

@@ -562,7 +562,8 @@ static void look_ahead(struct session *s, const struct proto_want *w, const stru
 {
 	uint64_t now = clock_now_ns();
 	struct lookahead_motion m = { .lon = w->lon, .lat = w->lat, .ve = w->vel[0],
-				      .vn = w->vel[1], .radius = p->a };
+				      .vn = w->vel[1], .radius = p->a,
+				      .tile_size = p->tile_size };
 	if (m.ve == 0 && m.vn == 0 && s->has_focus &&
 	    lookahead_velocity(s->lon, s->lat, w->lon, w->lat, (double)(now - s->focus_ns) * 1e-9,
 			       p->a, &m.ve, &m.vn))

@@ -423,11 +423,7 @@ static int render_to_file(const struct render_args *ra, const char *planet, cons
 	struct render_image im;
 	char err[256] = "", note[256];
 	if (ra->store) {
-		rc = store_lmdb_open(&(struct store_lmdb_desc){
-					     .path = ra->store,
-					     .budget = (uint64_t)(ra->store_mb ? ra->store_mb : 1024)
-						       << 20 },
-				     &ro.store, err);
+		rc = store_open_file(ra->store, ra->store_mb, &ro.store, err);
 		if (rc) {
 			fprintf(stderr, "clipmapctl render: --store %s\n", err);
 			planet_unref(p);
@@ -439,15 +435,10 @@ static int render_to_file(const struct render_args *ra, const char *planet, cons
 	rc = render_layer(p, layer, rg, &ro, &im, err);
 	if (ro.store) {
 		/* what is queued is written before the store closes */
-		struct store_stats st;
-		store_flush(ro.store);
-		store_stat(ro.store, &st);
+		char line[256];
+		store_summary(ro.store, line, sizeof line);
 		if (!ra->quiet)
-			fprintf(stderr, "store %s: %llu hits, %llu misses, %llu tiles written, "
-					"%llu corrupt; %llu tiles in it\n",
-				ra->store, (unsigned long long)st.hits,
-				(unsigned long long)st.misses, (unsigned long long)st.puts,
-				(unsigned long long)st.corrupt, (unsigned long long)st.tiles);
+			fprintf(stderr, "store %s: %s\n", ra->store, line);
 		store_destroy(ro.store);
 	}
 	if (rc) {

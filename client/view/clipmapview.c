@@ -69,6 +69,9 @@ static void usage(FILE *f)
 		"  --switch-layer-at FRAME:NAME  switch to colour layer NAME before frame FRAME\n"
 		"                      (0-based; repeatable): scripted L presses\n"
 		"  --backend egl|osmesa, --workers N, --no-prefetch\n"
+		"  --store FILE        (in-process) read tiles from and write the generated ones to\n"
+		"                      an LMDB tile store, possibly the one a running clipmapd uses;\n"
+		"                      prints what it did on exit. --store-mb N: its budget (1024)\n"
 		"  --window            fly interactively in a window (--camera optional):\n"
 		"                      left drag orbit, right drag look, wheel zoom, WASD/arrows move,\n"
 		"                      E/PageUp climb, Q/PageDown descend, Shift faster, R reset,\n"
@@ -94,6 +97,8 @@ struct args {
 	const char *camera, *flight; /* one of them, or neither with --window */
 	const char *outp;	     /* -o: a path, or for a flight a frame-number pattern */
 	const char *statsp, *screenshot;
+	const char *store; /* --store FILE (in-process), --store-mb */
+	uint32_t store_mb;
 	int width, height, steps, workers;
 	bool wait_complete, window;
 	long exit_after;
@@ -255,8 +260,7 @@ enum {
 	O_SUN, O_RINGS, O_BACKEND, O_WORKERS, O_NOPF, O_HELP, O_CONNECT, O_TOKEN, O_EXAG, O_HAZE,
 	O_WINDOW, O_EXIT_AFTER, O_SCREENSHOT, O_FPS, O_BUDGET, O_VERSION, O_TLS_CA, O_TLS, O_LOSSLESS,
 	O_CLAYER,
-	O_CONNECT_WAIT,
-	O_SWITCH_LAYER
+	O_CONNECT_WAIT, O_SWITCH_LAYER, O_STORE, O_STORE_MB
 };
 
 static const struct option long_opts[] = {
@@ -291,6 +295,8 @@ static const struct option long_opts[] = {
 	{ "window", no_argument, NULL, O_WINDOW },
 	{ "exit-after", required_argument, NULL, O_EXIT_AFTER },
 	{ "screenshot", required_argument, NULL, O_SCREENSHOT },
+	{ "store", required_argument, NULL, O_STORE },
+	{ "store-mb", required_argument, NULL, O_STORE_MB },
 	{ NULL, 0, NULL, 0 },
 };
 
@@ -340,6 +346,11 @@ static bool take_option(int c, const char *s, struct args *a)
 	case O_BACKEND: return parse_backend(s, &a->backend);
 	case O_WORKERS: rc = args_int("--workers", s, 0, 1024, &a->workers, err); break;
 	case O_NOPF: a->d.no_prefetch = true; return true;
+	case O_STORE: a->store = s; return true;
+	case O_STORE_MB:
+		if ((rc = args_double("--store-mb", s, 1, 1 << 26, &v, err)) == 0)
+			a->store_mb = (uint32_t)v;
+		break;
 	default: usage(stderr); return false;
 	}
 	return rc ? complain(err) : true;
@@ -377,6 +388,11 @@ static int check_args(const struct args *a)
 		why = "--exit-after and --screenshot need --window";
 	else if (a->connect_wait > 0 && !a->connect_to)
 		why = "--connect-wait needs --connect";
+	else if ((a->store || a->store_mb) && a->connect_to)
+		why = "--store is the in-process engine's (with --connect the daemon's own [store] "
+		      "path serves)";
+	else if (a->store_mb && !a->store)
+		why = "--store-mb needs --store";
 	else if (!a->planet)
 		why = "--planet is required (a planet file, or with --connect a planet name)";
 	else if (!a->window && !a->camera == !a->flight)
@@ -1022,12 +1038,12 @@ static int open_source(const struct args *a, struct view_source **src)
 		fprintf(stderr, "clipmapview: planet %s not found (tried %s)\n", a->planet, path);
 		return 2;
 	}
-	if (view_source_local_create(path, &(struct view_source_local_opts){ a->workers, 0 }, src,
-				     err) < 0) {
+	struct view_source_local_opts lo = { .workers = a->workers, .store = a->store,
+					     .store_mb = a->store_mb };
+	int rc = view_source_local_create(path, &lo, src, err);
+	if (rc < 0 || err[0]) /* a failure, or a note on the store */
 		fprintf(stderr, "clipmapview: %s\n", err);
-		return 2;
-	}
-	return 0;
+	return rc < 0 ? 2 : 0;
 }
 
 int main(int argc, char **argv)
@@ -1058,6 +1074,11 @@ int main(int argc, char **argv)
 		fprintf(stderr, "clipmapview: the connection was lost %u time%s, restored %u "
 			"time%s\n", lr.now.lost, lr.now.lost == 1 ? "" : "s", lr.now.reconnects,
 			lr.now.reconnects == 1 ? "" : "s");
+	if (a.store) {
+		char line[512];
+		view_source_local_report(src, line, sizeof line);
+		fprintf(stderr, "clipmapview: %s\n", line);
+	}
 out:
 	if (stats && fclose(stats) != 0 && status == 0) {
 		fprintf(stderr, "clipmapview: %s: %s\n", a.statsp, strerror(errno));

@@ -259,6 +259,24 @@ bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double
 				int k = (int)fmin(AHEAD_MAX, floor(fabs(v) + 0.5));
 				a[i] = v < 0 ? -k : k;
 			}
+			/* Rows ahead only as far as this lx stays the one the level uses when
+			 * its window first touches them (clipmap_level_lx, as prefetch decides
+			 * it): near a pole it changes within a few rows, and a row of the lx
+			 * left behind is never shown. The window reaches 2 rows each side of
+			 * its focus. */
+			const struct grid_quad *q = &L->target;
+			double row = 180.0 / ldexp(1.0, q->ly);
+			for (int s = 2; s <= 1 + abs(a[1]); s++) {
+				int64_t y = a[1] > 0 ? (int64_t)q->ty0 + q->nty - 1 + s
+						     : (int64_t)q->ty0 - s;
+				double fy = a[1] > 0 ? (double)y - CLIPMAP_WINDOW_TILES / 2
+						     : (double)y + 1 + CLIPMAP_WINDOW_TILES / 2;
+				double la = fmax(-90.0, fmin(90.0, 90.0 - fy * row));
+				if (clipmap_level_lx(l, la, q->lx) != q->lx) {
+					a[1] = a[1] > 0 ? s - 2 : 2 - s;
+					break;
+				}
+			}
 		}
 		/* The ring is prefetched on the side the camera moves to: along an axis it moves on
 		 * (over 1/50 tile a second), the line behind is not asked for — new tiles there

@@ -51,7 +51,8 @@ bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_q
 /* The camera's ground position (degrees) at time t (seconds, any monotonic origin), once per
  * frame after the targets are set: its smoothed velocity sets each level's look-ahead, the
  * lines of tiles beyond the ring that the camera reaches within ~0.15 s (up to 2 lines per
- * axis; none on levels it crosses slowly). Returns whether a look-ahead changed — the want-set
+ * axis; none on levels it crosses slowly; no rows where the level will use another lx by the
+ * time its window reaches them, as near a pole: clipmap_level_lx). Returns whether a look-ahead changed — the want-set
  * must then be sent again. Tiles that fall out of the look-ahead are released. Optional: a
  * caller that never calls it gets no look-ahead. */
 bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t);

@@ -17,6 +17,7 @@
 #include "engine/cache.h"
 #include "engine/planet.h"
 #include "engine/sched.h"
+#include "engine/store.h"
 
 struct arrival {
 	uint8_t layer;
@@ -29,6 +30,7 @@ struct local {
 	struct view_source base;
 	struct planet *p;
 	struct cache *cache;
+	struct store *store; /* NULL without one */
 	struct sched *sched;
 	struct sched_req *req;
 	struct want *wbuf; /* scratch for want lists */
@@ -143,6 +145,9 @@ static void local_destroy(struct view_source *s)
 		sched_req_destroy(l->req);
 	if (l->sched)
 		sched_destroy(l->sched);
+	if (l->store)
+		store_flush(l->store); /* what is queued is committed before it closes */
+	store_destroy(l->store);
 	for (size_t i = 0; i < l->qn; i++)
 		tile_unref(l->q[l->qhead + i].t);
 	free(l->q);
@@ -165,7 +170,7 @@ static const struct view_source_ops local_ops = {
 int view_source_local_create(const char *planet_path, const struct view_source_local_opts *o,
 			     struct view_source **out, char err[256])
 {
-	static const struct view_source_local_opts defaults = { 0, 0 };
+	static const struct view_source_local_opts defaults = { .workers = 0 };
 	if (!o)
 		o = &defaults;
 	*out = NULL;
@@ -199,9 +204,28 @@ int view_source_local_create(const char *planet_path, const struct view_source_l
 		snprintf(vp->layer[i].name, sizeof vp->layer[i].name, "%s", p->layers[i].name);
 		vp->layer[i].format = p->layers[i].type;
 	}
+	err[0] = '\0';
+	if (o->store && (rc = store_open_file(o->store, o->store_mb, &l->store, err)) < 0) {
+		local_destroy(&l->base);
+		return rc;
+	}
 	l->cache = cache_create((o->cache_mb ? o->cache_mb : 512) << 20);
-	l->sched = sched_create(&(struct sched_desc){ .cache = l->cache, .workers = o->workers });
+	l->sched = sched_create(&(struct sched_desc){ .cache = l->cache, .workers = o->workers,
+						      .store = l->store });
 	l->req = sched_req_create(l->sched, on_ready, l);
 	*out = &l->base;
 	return 0;
+}
+
+void view_source_local_report(struct view_source *s, char *line, size_t n)
+{
+	struct local *l = (struct local *)s;
+	struct sched_stats st;
+	sched_get_stats(l->sched, &st);
+	char sum[256] = "";
+	if (l->store)
+		store_summary(l->store, sum, sizeof sum);
+	snprintf(line, n, "%llu tiles generated, %llu loaded from the store%s%s",
+		 (unsigned long long)st.generated, (unsigned long long)st.loaded,
+		 l->store ? "; store: " : "", sum);
 }

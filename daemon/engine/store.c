@@ -12,6 +12,7 @@
 #include "store.h"
 
 #include <errno.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #define XXH_STATIC_LINKING_ONLY /* XXH3_state_t on the stack */
@@ -29,6 +30,24 @@ void store_destroy(struct store *s)
 {
 	if (s)
 		s->ops->destroy(s);
+}
+
+int store_open_file(const char *path, uint32_t mb, struct store **out, char err[256])
+{
+	return store_lmdb_open(&(struct store_lmdb_desc){
+				       .path = path, .budget = (uint64_t)(mb ? mb : 1024) << 20 },
+			       out, err);
+}
+
+void store_summary(struct store *s, char *line, size_t n)
+{
+	struct store_stats st;
+	store_flush(s);
+	store_stat(s, &st);
+	snprintf(line, n, "%llu hits, %llu misses, %llu tiles written, %llu corrupt; %llu tiles in it",
+		 (unsigned long long)st.hits, (unsigned long long)st.misses,
+		 (unsigned long long)st.puts, (unsigned long long)st.corrupt,
+		 (unsigned long long)st.tiles);
 }
 
 bool store_keeps(const struct node *n)

@@ -161,6 +161,16 @@ struct store_lmdb_desc {
  * (counted in store_stats.recovered); reads meanwhile miss, and the caller generates. */
 int store_lmdb_open(const struct store_lmdb_desc *d, struct store **out, char err[256]);
 
+/* ---- a store file shared with other processes (clipmapctl render --store, clipmapview
+ * --store; the rules: clipmapd.conf(5), [store] path) ---- */
+
+/* Opens the store file at path with a budget of mb MiB (0: 1024, clipmapd's disk_mb default).
+ * Returns as store_lmdb_open (a note in err on success when the file was moved aside). */
+int store_open_file(const char *path, uint32_t mb, struct store **out, char err[256]);
+/* Commits what is queued, then writes what the store did into line: "N hits, M misses, K
+ * tiles written, C corrupt; T tiles in it". */
+void store_summary(struct store *s, char *line, size_t n);
+
 /* ---- the value format (shared by backends; pure) ---- */
 
 #define STORE_KEY_LEN 18  /* node u64, lx u8, ly u8, x u32, y u32 — big-endian, so key order

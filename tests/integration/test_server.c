@@ -14,6 +14,7 @@
 
 #include <errno.h>
 #include <limits.h>
+#include <math.h>
 #include <netinet/in.h>
 #include <poll.h>
 #include <signal.h>
@@ -26,7 +27,9 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "common/clipmap.h"
 #include "common/clock.h"
+#include "common/grid.h"
 #include "common/proto.h"
 #include "common/tilecodec.h"
 #include "engine/cache.h"
@@ -401,42 +404,83 @@ static void cl_wait_idle(struct cl *c)
 	fail_msg("the scheduler did not go idle in 30 s");
 }
 
+/* A viewer's visible window at level ly focused at (lon, lat) on this planet (64² tiles): the
+ * lx it uses there (common/clipmap.h), both layers, appended from e. Returns the count. */
+static uint32_t window_block(struct proto_want_entry *e, int ly, double lon, double lat)
+{
+	struct grid_quad q;
+	grid_window(clipmap_level_lx(ly, lat, -1), ly, 64, CLIPMAP_WINDOW_TILES * 64, lon, lat, &q);
+	struct tile_key k[GRID_WINDOW_MAX_KEYS];
+	int nk = grid_quad_tiles(&q, 0, k);
+	uint32_t n = 0;
+	for (int i = 0; i < nk; i++)
+		for (uint8_t l = 0; l < 2; l++)
+			e[n++] = (struct proto_want_entry){ .layer = l, .cls = PROTO_CLASS_VISIBLE,
+							    .lx = k[i].lx, .ly = k[i].ly, .x = k[i].x,
+							    .y = k[i].y };
+	return n;
+}
+
+/* Entries of b not in a (the same tile and layer). */
+static uint32_t count_new(const struct proto_want_entry *a, uint32_t na,
+			  const struct proto_want_entry *b, uint32_t nb)
+{
+	uint32_t n = 0;
+	for (uint32_t i = 0; i < nb; i++) {
+		bool seen = false;
+		for (uint32_t j = 0; j < na && !seen; j++)
+			seen = a[j].layer == b[i].layer && a[j].lx == b[i].lx && a[j].ly == b[i].ly &&
+			       a[j].x == b[i].x && a[j].y == b[i].y;
+		n += !seen;
+	}
+	return n;
+}
+
 /* The server's look-ahead: a viewer moving east at 10 km/s (a level-8 tile of this 1000 km
- * planet is 12 km wide) asks for a 4×4 block; the tiles it will want 1-4 s later are made
- * before it asks for them — the block two tiles east then arrives with nothing generated —
- * while the block behind it was not made (the control: it generates). */
+ * planet is 12 km wide) asks for its window; the window it will ask for 4 s later (40 km on,
+ * along the great circle) is made before it asks — its new columns arrive with nothing
+ * generated — while the window as far behind the start was not made (the control: it
+ * generates). */
 static void test_look_ahead(void **state)
 {
 	(void)state;
 	struct cl *c = cl_unix();
 	uint32_t pid = cl_open(c, NULL);
-	static struct proto_want_entry e[64];
-	uint32_t n = block(e, 3, 8, 300, 120, 4, 4);
+	static struct proto_want_entry e0[64], e[64];
+	/* 40 km east of (31°E, 5°N) on a great circle of the 1000 km sphere */
+	double d = 40.0 / 1000.0, p = 5 * M_PI / 180;
+	double lat4 = asin(sin(p) * cos(d)) * 180 / M_PI;
+	double dlon = atan2(sin(d) * cos(p), cos(d) - sin(p) * sin(lat4 * M_PI / 180)) * 180 / M_PI;
+	uint32_t n0 = window_block(e0, 8, 31, 5);
 	struct proto_msg m = { .type = PROTO_WANT,
 			       .want = { .planet_id = pid, .seq = 1, .lon = 31, .lat = 5,
-					 .vel = { 10000, 0, 0 }, .count = n, .entries = e } };
+					 .vel = { 10000, 0, 0 }, .count = n0, .entries = e0 } };
 	cl_send(c, &m);
-	for (uint32_t i = 0; i < n; i++)
+	for (uint32_t i = 0; i < n0; i++)
 		cl_expect(c, PROTO_TILE, 20000);
 	cl_wait_idle(c);
-	assert_true(cl_stat(c, "lookahead.wants") >= 2 * 4 * 3); /* 3 columns ahead, 2 layers */
+	uint32_t n = window_block(e, 8, 31 + dlon, lat4); /* 4 s later */
+	uint32_t fresh = count_new(e0, n0, e, n);
+	assert_true(fresh >= 2 * 5 * 2); /* at least two new columns of 5 rows, 2 layers */
+	assert_true(cl_stat(c, "lookahead.wants") >= fresh);
 	uint64_t gen0 = cl_stat(c, "sched.generated");
-	n = block(e, 3, 8, 302, 120, 4, 4); /* 2 s later: two tiles east */
-	cl_want(c, pid, 2, 31, 5, e, n);    /* the same focus, no velocity: no new look-ahead */
-	int tiles = 0;
-	while (tiles < 2 * 4 * 2) /* the two new columns (the others were sent already) */
+	cl_want(c, pid, 2, 31, 5, e, n); /* the same focus, no velocity: no new look-ahead */
+	uint32_t tiles = 0;
+	while (tiles < fresh) /* the new columns (the others were sent already) */
 		if (cl_recv(c, 20000) > 0 && c->m.type == PROTO_TILE)
 			tiles++;
 	cl_wait_idle(c);
 	uint64_t gen1 = cl_stat(c, "sched.generated");
-	printf("look-ahead: %llu tiles asked ahead; the block 2 tiles east generated %llu\n",
-	       (unsigned long long)cl_stat(c, "lookahead.wants"),
+	printf("look-ahead: %llu tiles asked ahead; the window 4 s on: %u new tiles, %llu "
+	       "generated\n",
+	       (unsigned long long)cl_stat(c, "lookahead.wants"), fresh,
 	       (unsigned long long)(gen1 - gen0));
 	assert_int_equal(gen1, gen0);
-	n = block(e, 3, 8, 297, 120, 4, 4); /* behind the start: never looked ahead to */
+	n = window_block(e, 8, 31 - dlon, 5); /* behind the start: never looked ahead to */
+	fresh = count_new(e0, n0, e, n);
 	cl_want(c, pid, 3, 31, 5, e, n);
 	tiles = 0;
-	while (tiles < 2 * 4 * 4)
+	while (tiles < fresh)
 		if (cl_recv(c, 20000) > 0 && c->m.type == PROTO_TILE)
 			tiles++;
 	assert_true(cl_stat(c, "sched.generated") > gen1);

@@ -1,7 +1,8 @@
 /* lookahead: the tiles the server generates ahead of a moving viewer — none while it holds
- * still, the visible tiles moved by the whole tiles the focus crosses in 1, 2 and 4 s on the
- * levels it crosses, across the antimeridian, never past a pole, never one already wanted,
- * and a velocity from two foci when the client sends none. */
+ * still, the windows a viewer focused where it will be in 1, 2 and 4 s asks for on the
+ * levels it shows (fine levels first: coarse windows move slowly), across the antimeridian,
+ * over a pole, on the lx a viewer uses there (clipmap_level_lx), never one already wanted,
+ * and a velocity from two foci when the client sends none (across a pole too). */
 #include <errno.h>
 #include <math.h>
 #include <setjmp.h>
@@ -11,26 +12,35 @@
 #include <stdint.h>
 #include <cmocka.h>
 
+#include "common/clipmap.h"
+#include "common/grid.h"
 #include "daemon/lookahead.h"
 
 #define R 6378137.0
+#define T 256
 
-/* The 4×4 visible block of (lx = ly + 1, ly) around (lon, lat), layer 0. */
+/* What a viewer focused at (lon, lat) asks for at level ly, layer 0: its window (visible) on
+ * the lx it uses there, then (ring) the tiles around it at class prefetch. */
 static size_t block(struct proto_want_entry *w, int ly, double lon, double lat)
 {
-	int lx = ly + 1;
-	double nx = ldexp(1, lx), ny = ldexp(1, ly);
-	long cx = (long)floor((lon + 180) / 360 * nx), cy = (long)floor((90 - lat) / 180 * ny);
+	struct grid_quad q;
+	grid_window(clipmap_level_lx(ly, lat, -1), ly, T, CLIPMAP_WINDOW_TILES * T, lon, lat, &q);
+	struct tile_key k[GRID_WINDOW_MAX_KEYS];
+	int nk = grid_quad_tiles(&q, 0, k);
 	size_t n = 0;
-	for (long j = -2; j < 2; j++)
-		for (long i = -2; i < 2; i++) {
-			long y = cy + j;
-			if (y < 0 || y >= ny)
-				continue;
-			w[n++] = (struct proto_want_entry){ .layer = 0, .cls = PROTO_CLASS_VISIBLE,
-							    .lx = (uint8_t)lx, .ly = (uint8_t)ly,
-							    .x = (uint32_t)(((cx + i) % (long)nx + (long)nx) % (long)nx),
-							    .y = (uint32_t)y };
+	for (int i = 0; i < nk; i++)
+		w[n++] = (struct proto_want_entry){ .layer = 0, .cls = PROTO_CLASS_VISIBLE,
+						    .lx = k[i].lx, .ly = k[i].ly, .x = k[i].x,
+						    .y = k[i].y };
+	int64_t ny = grid_tiles_y(ly);
+	for (int64_t y = (int64_t)q.ty0 - 1; y <= (int64_t)q.ty0 + q.nty; y++)
+		for (int64_t x = (int64_t)q.tx0 - 1; x <= (int64_t)q.tx0 + q.ntx; x++) {
+			struct tile_key r = { 0, grid_wrap_x(q.lx, x), (uint32_t)y, q.lx, q.ly };
+			if (y >= 0 && y < ny && grid_quad_distance(&q, &r) == 1)
+				w[n++] = (struct proto_want_entry){ .layer = 0,
+								    .cls = PROTO_CLASS_PREFETCH,
+								    .lx = r.lx, .ly = r.ly, .x = r.x,
+								    .y = r.y };
 		}
 	return n;
 }
@@ -48,7 +58,7 @@ static void still_adds_nothing(void **state)
 	(void)state;
 	struct proto_want_entry w[64], out[64];
 	size_t n = block(w, 10, 7.5, 46.5);
-	struct lookahead_motion m = { 7.5, 46.5, 0, 0, R };
+	struct lookahead_motion m = { 7.5, 46.5, 0, 0, R, T };
 	assert_int_equal(lookahead_wants(&m, w, n, out, 64), 0);
 	m.ve = 1.0; /* 4 m in 4 s: no level-10 tile (39 km) is crossed */
 	assert_int_equal(lookahead_wants(&m, w, n, out, 64), 0);
@@ -58,11 +68,11 @@ static void east_at_the_finest_level_first(void **state)
 {
 	(void)state;
 	struct proto_want_entry w[128], out[256];
-	size_t n = block(w, 4, 10, 0) + 0;
+	size_t n4 = block(w, 4, 10, 0), n = n4;
 	n += block(w + n, 12, 10, 0);
 	/* a level-12 tile is 360° / 2^13 = 4.9 km wide at the equator: 6 km/s crosses ~1.2 of
 	 * them in 1 s, 4.9 in 4 s; level 4's 1250 km tiles are not crossed */
-	struct lookahead_motion m = { 10, 0, 6000, 0, R };
+	struct lookahead_motion m = { 10, 0, 6000, 0, R, T };
 	size_t k = lookahead_wants(&m, w, n, out, 256);
 	assert_true(k > 0);
 	for (size_t i = 0; i < k; i++) {
@@ -72,30 +82,33 @@ static void east_at_the_finest_level_first(void **state)
 		for (size_t j = 0; j < i; j++) /* no duplicates */
 			assert_false(out[j].x == out[i].x && out[j].y == out[i].y);
 	}
-	/* the block moved east: columns beyond its east edge, the same rows */
-	uint32_t east = w[n - 1].x; /* the block's last column (row-major, east last) */
-	assert_true(contains(out, k, 12, east + 1, w[n - 1].y));
-	assert_true(contains(out, k, 12, east + 5, w[n - 1].y)); /* 4 s: ~5 tiles on */
-	assert_false(contains(out, k, 12, w[4].x - 1, w[4].y)); /* nothing behind it */
-	/* 1 s's tiles come before 4 s's */
-	size_t i1 = k, i4 = k;
+	/* the window moved east: columns beyond its ring's east edge, the same rows */
+	struct grid_quad q;
+	grid_window(13, 12, T, CLIPMAP_WINDOW_TILES * T, 10, 0, &q);
+	uint32_t east = q.tx0 + q.ntx - 1, row = q.ty0;
+	assert_false(contains(out, k, 12, east + 1, row)); /* the ring: wanted already */
+	assert_true(contains(out, k, 12, east + 2, row));
+	assert_true(contains(out, k, 12, east + 5, row)); /* 4 s: ~5 tiles on */
+	assert_false(contains(out, k, 12, q.tx0 - 2, row)); /* nothing behind it */
+	/* 2 s's tiles come before 4 s's */
+	size_t i2 = k, i4 = k;
 	for (size_t i = 0; i < k; i++) {
-		if (out[i].x == east + 1 && i1 == k)
-			i1 = i;
+		if (out[i].x == east + 2 && i2 == k)
+			i2 = i;
 		if (out[i].x == east + 5 && i4 == k)
 			i4 = i;
 	}
-	assert_true(i1 < i4);
+	assert_true(i2 < i4);
 	/* the cap holds */
 	assert_int_equal(lookahead_wants(&m, w, n, out, 3), 3);
 }
 
-static void across_the_antimeridian_not_past_a_pole(void **state)
+static void across_the_antimeridian(void **state)
 {
 	(void)state;
 	struct proto_want_entry w[64], out[256];
 	size_t n = block(w, 8, 179.5, 0);
-	struct lookahead_motion m = { 179.5, 0, 40000, 0, R }; /* east, over 180° */
+	struct lookahead_motion m = { 179.5, 0, 40000, 0, R, T }; /* east, over 180° */
 	size_t k = lookahead_wants(&m, w, n, out, 256);
 	assert_true(k > 0);
 	bool wrapped = false;
@@ -104,12 +117,50 @@ static void across_the_antimeridian_not_past_a_pole(void **state)
 		wrapped |= out[i].x < 8; /* columns just east of -180° */
 	}
 	assert_true(wrapped);
-	/* north over the pole at 89.9°: rows north of row 0 are not invented */
+}
+
+/* Whether every entry's lx is one a viewer focused somewhere in [lat_lo, lat_hi] uses at its
+ * level (what prefetch warms there). */
+static bool lx_viewers_use(const struct proto_want_entry *o, size_t k, double lat_lo,
+			   double lat_hi)
+{
+	for (size_t i = 0; i < k; i++) {
+		int a, b;
+		clipmap_level_lx_range(o[i].ly, lat_lo, lat_hi, &a, &b);
+		if (o[i].lx < a || o[i].lx > b)
+			return false;
+	}
+	return true;
+}
+
+/* Near a pole the lx of a level changes within a few hundred kilometres: a viewer leaving the
+ * pole at 200 km/s will use finer ones, and the look-ahead asks for those (a tile of the lx
+ * it has now, 800 km further, is one no viewer asks for: 492 such tiles were generated in a
+ * flight over a prefetched route over the pole). And over the pole itself: the other side. */
+static void on_the_lx_viewers_use_there_and_over_a_pole(void **state)
+{
+	(void)state;
+	struct proto_want_entry w[512], out[1024];
+	size_t n = 0;
+	for (int ly = 5; ly <= 9; ly++)
+		n += block(w + n, ly, 0, 89.5);
+	struct lookahead_motion m = { 0, 89.5, 0, -200000, R, T }; /* south: 800 km in 4 s */
+	size_t k = lookahead_wants(&m, w, n, out, 1024);
+	assert_true(k > 0);
+	assert_true(lx_viewers_use(out, k, 82, 89.5));
+	bool finer = false;
+	for (size_t i = 0; i < k; i++)
+		finer |= out[i].ly == 7 && out[i].lx > clipmap_level_lx(7, 89.5, -1);
+	assert_true(finer);
+	/* north over the pole at 89.9°, 40 km/s: 1 s on, the focus is at 89.74°N on the other
+	 * side (longitude 180°); nothing north of row 0 is invented */
 	n = block(w, 8, 0, 89.9);
-	m = (struct lookahead_motion){ 0, 89.9, 0, 40000, R };
-	k = lookahead_wants(&m, w, n, out, 256);
+	m = (struct lookahead_motion){ 0, 89.9, 0, 40000, R, T };
+	k = lookahead_wants(&m, w, n, out, 1024);
+	assert_true(k > 0);
 	for (size_t i = 0; i < k; i++)
 		assert_true(out[i].y < 256u);
+	assert_true(lx_viewers_use(out, k, 88.5, 90));
 }
 
 static void velocity_from_two_foci(void **state)
@@ -121,6 +172,10 @@ static void velocity_from_two_foci(void **state)
 	assert_true(fabs(vn) < 1e-9);
 	assert_int_equal(lookahead_velocity(0, 10, 0, 10.1, 0.5, R, &ve, &vn), 0);
 	assert_true(fabs(vn - 0.1 * M_PI / 180 * R / 0.5) < 1e-3);
+	/* over the north pole: from 89.9°N at 0° to 89.9°N at 180°, 0.2° of arc on, going south */
+	assert_int_equal(lookahead_velocity(0, 89.9, 180, 89.9, 1.0, R, &ve, &vn), 0);
+	assert_true(fabs(vn + 0.2 * M_PI / 180 * R) < 1e-3);
+	assert_true(fabs(ve) < 1e-3);
 	assert_int_equal(lookahead_velocity(0, 0, 1, 0, 0.0, R, &ve, &vn), -EINVAL);
 	assert_int_equal(lookahead_velocity(0, 0, 1, 0, 60, R, &ve, &vn), -EINVAL);
 	assert_int_equal(lookahead_velocity(NAN, 0, 1, 0, 1, R, &ve, &vn), -EINVAL);
@@ -131,7 +186,8 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(still_adds_nothing),
 		cmocka_unit_test(east_at_the_finest_level_first),
-		cmocka_unit_test(across_the_antimeridian_not_past_a_pole),
+		cmocka_unit_test(across_the_antimeridian),
+		cmocka_unit_test(on_the_lx_viewers_use_there_and_over_a_pole),
 		cmocka_unit_test(velocity_from_two_foci),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

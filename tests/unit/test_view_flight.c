@@ -514,7 +514,7 @@ static void coverage_orbit_to_ground(void **state)
 	struct view_source *src;
 	char err[256];
 	int rc = view_source_local_create("conf/planets/procedural.ini",
-					  &(struct view_source_local_opts){ 2, 256 }, &src, err);
+					  &(struct view_source_local_opts){ .workers = 2, .cache_mb = 256 }, &src, err);
 	if (rc < 0)
 		fail_msg("%s", err);
 	struct view *v = make_view(c, src, false);

@@ -113,7 +113,8 @@ static struct view_source *procedural_source(void)
 	struct view_source *src;
 	char err[256];
 	if (view_source_local_create("conf/planets/procedural.ini",
-				     &(struct view_source_local_opts){ 2, 256 }, &src, err) < 0)
+				     &(struct view_source_local_opts){ .workers = 2, .cache_mb = 256 }, &src,
+				     err) < 0)
 		fail_msg("%s", err);
 	return src;
 }
