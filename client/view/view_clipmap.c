@@ -478,11 +478,10 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 		return 1;
 	/* Heights and normals: the regions the held window lacks. Colour after a layer switch:
 	 * the whole target from the new layer at once, so a slice never holds two layers. */
-	struct grid_region rg[GRID_MAX_REGIONS], crg[GRID_MAX_REGIONS];
+	struct grid_region rg[GRID_MAX_REGIONS], whole[GRID_MAX_REGIONS];
 	int nr = grid_update_regions(L->has_held ? &L->held : NULL, &L->target, rg);
-	int ncr = stale ? grid_update_regions(NULL, &L->target, crg) : nr;
-	if (!stale)
-		memcpy(crg, rg, (size_t)nr * sizeof *rg);
+	const struct grid_region *crg = stale ? whole : rg; /* the colour's regions */
+	int ncr = stale ? grid_update_regions(NULL, &L->target, whole) : nr;
 	/* Every tile a region copies from must be here, for every role. */
 	for (int r = 0; r < VIEW_NROLES; r++) {
 		const struct grid_region *g = r == VIEW_COLOR ? crg : rg;
