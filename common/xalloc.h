@@ -11,5 +11,7 @@ void *xrealloc(void *p, size_t n);
 char *xstrdup(const char *s);
 /* Memory aligned to `align` (a power of two ≥ sizeof(void*)), size rounded up to it. */
 void *xaligned_alloc(size_t align, size_t n);
+/* Reports that n bytes could not be had and aborts (for allocators built on these). */
+_Noreturn void xalloc_fail(size_t n);
 
 #endif

@@ -25,6 +25,7 @@
 #include "engine/planets.h"
 #include "engine/sched.h"
 #include "engine/store.h"
+#include "engine/tilemem.h"
 #include "store_redis.h"
 #include "conf.h"
 #include "http.h"
@@ -448,13 +449,16 @@ static int take_signals(struct daemon *d)
 /* Tiles are 64 KiB to 1 MiB. By default glibc maps each one afresh (or trims its heaps back
  * to the system when the cache frees them), and the kernel zeroes every page on its first
  * touch: a quarter of the daemon's time in the keep-up bench went to those page faults and to
- * munmap. Keep tiles in the heap and keep freed memory for the next ones — the cache's budget
- * (cache_bytes) bounds how much that is. */
+ * munmap. Tile pixels now live in the engine's pool (engine/tilemem.h), which keeps freed
+ * buffers resident up to a quarter of the cache's budget beyond what the cache holds (its
+ * prune frees a tenth at a time); the heap keeps the rest (encoded tiles, want lists) in the
+ * same way, bounded by the cache's budget too. */
 static void keep_tiles_in_heap(size_t cache_bytes)
 {
 	size_t keep = cache_bytes < ((size_t)1 << 30) ? cache_bytes : (size_t)1 << 30;
 	if (!mallopt(M_MMAP_THRESHOLD, 32 << 20) || !mallopt(M_TRIM_THRESHOLD, (int)keep))
 		log_msg(LOG_WARN, "mallopt failed: tiles will be mapped afresh");
+	tilemem_keep(cache_bytes / 4 + ((size_t)64 << 20));
 }
 
 static void log_ready(const struct daemon *d, struct sched *sched)

@@ -12,7 +12,7 @@
 
 #define DEG (M_PI / 180.0)
 
-static const double horizons[] = { 1.0, 2.0, 4.0 };
+static const double horizons[] = { 1.0, 2.0, LOOKAHEAD_REACH_S };
 
 /* A set of tile addresses (open addressing, linear probing), sized once. */
 struct kset {
@@ -72,6 +72,17 @@ static void move(const struct lookahead_motion *m, double dist, double *lon, dou
 		q[i] = p[i] * cos(d) + (m->ve * e[i] + m->vn * nv[i]) / v * sin(d);
 	*lat = asin(fmax(-1.0, fmin(1.0, q[2]))) / DEG;
 	*lon = atan2(q[1], q[0]) / DEG;
+}
+
+void lookahead_point(const struct lookahead_motion *m, double t, double *lon, double *lat)
+{
+	double v = hypot(m->ve, m->vn);
+	if (!(v > 0) || !(m->radius > 0) || !isfinite(v)) {
+		*lon = m->lon;
+		*lat = m->lat;
+		return;
+	}
+	move(m, v * t, lon, lat);
 }
 
 /* A level the WANT shows: its lx now and the layers shown (bit per layer). */

@@ -44,6 +44,13 @@ struct lookahead_motion {
 size_t lookahead_wants(const struct lookahead_motion *m, const struct proto_want_entry *w,
 		       size_t n, struct proto_want_entry *out, size_t cap);
 
+/* How many seconds ahead the look-ahead reaches at most (its last horizon). */
+#define LOOKAHEAD_REACH_S 4.0
+
+/* Where m's focus is after t seconds at its velocity, along the great circle it moves on
+ * (the place the look-ahead's windows centre on): *lon, *lat in degrees. A still focus stays. */
+void lookahead_point(const struct lookahead_motion *m, double t, double *lon, double *lat);
+
 /* A velocity from two foci t seconds apart (the client sent none): east and north m/s at the
  * second focus, along the great circle through both on a sphere of radius r (across a pole,
  * the direction it goes on in). Returns 0, or -EINVAL when t is outside (0.02, 5] s or a focus is not

@@ -41,6 +41,7 @@
 #include "common/xalloc.h"
 #include "common/xthread.h"
 #include "encq.h"
+#include "lookahead.h"
 #include "loopstat.h"
 #include "prefetch.h"
 #include "readyq.h"
@@ -256,27 +257,30 @@ static void sess_detach(void *ud, struct session_link *l)
 	srv->graveyard = l;
 }
 
-/* Recomputes the cache's pruning foci from every session's focus and velocity. */
+/* Recomputes the cache's pruning foci from every session's focus and velocity: where it is,
+ * and where it will be 2 and 4 s on (the look-ahead's reach, lookahead.h), so that the tiles
+ * generated for the path ahead are the last to go and those left behind the first. */
 static void update_foci(void *ud)
 {
 	struct server *srv = ud;
 	struct cache_focus f[MAX_FOCI];
 	size_t n = 0;
-	for (struct session_link *l = srv->sessions; l && n + 2 <= MAX_FOCI; l = l->next) {
+	static const double ahead_s[] = { LOOKAHEAD_REACH_S / 2, LOOKAHEAD_REACH_S };
+	enum { NAHEAD = sizeof ahead_s / sizeof ahead_s[0] };
+	for (struct session_link *l = srv->sessions; l && n + 1 + NAHEAD <= MAX_FOCI;
+	     l = l->next) {
 		double lon, lat, v[3], r;
 		if (!session_focus(l->s, &lon, &lat, v, &r))
 			continue;
 		f[n++] = (struct cache_focus){ lon, lat };
-		/* Where the focus will be in 10 s: keep that ring too (velocity east, north, on
-		 * the focus planet's own radius). */
-		double t = 10.0;
-		if (!(r > 0))
+		struct lookahead_motion m = { .lon = lon, .lat = lat, .ve = v[0], .vn = v[1],
+					      .radius = r };
+		if (!(r > 0) || !isfinite(v[0]) || !isfinite(v[1]) || (v[0] == 0 && v[1] == 0))
 			continue;
-		double c = fmax(cos(lat * M_PI / 180.0), 0.01);
-		double dlat = v[1] * t / r * 180.0 / M_PI, dlon = v[0] * t / (r * c) * 180.0 / M_PI;
-		if (fabs(dlat) + fabs(dlon) > 1e-9 && isfinite(dlat) && isfinite(dlon))
-			f[n++] = (struct cache_focus){ fmod(lon + dlon + 540.0, 360.0) - 180.0,
-						       fmin(90.0, fmax(-90.0, lat + dlat)) };
+		for (int i = 0; i < NAHEAD; i++) {
+			lookahead_point(&m, ahead_s[i], &f[n].lon, &f[n].lat);
+			n++;
+		}
 	}
 	uint32_t T = srv->planets && srv->planets->n ? srv->planets->planets[0]->tile_size : 256;
 	cache_set_foci(srv->cache, f, n, T);

@@ -558,7 +558,8 @@ static enum sched_class sched_class_of(uint8_t proto_cls)
  * focus's motion (lookahead.h); replaces the last look-ahead, so a turn or a stop cancels
  * what was queued for the old path. The velocity is the client's, else the focus's last
  * move. */
-static void look_ahead(struct session *s, const struct proto_want *w, const struct planet *p)
+static void look_ahead(struct session *s, const struct proto_want *w, const struct planet *p,
+		       double vel[2])
 {
 	uint64_t now = clock_now_ns();
 	struct lookahead_motion m = { .lon = w->lon, .lat = w->lat, .ve = w->vel[0],
@@ -569,6 +570,8 @@ static void look_ahead(struct session *s, const struct proto_want *w, const stru
 			       p->a, &m.ve, &m.vn))
 		m.ve = m.vn = 0;
 	s->focus_ns = now;
+	vel[0] = m.ve;
+	vel[1] = m.vn;
 	if (m.ve == 0 && m.vn == 0 && !s->nahead)
 		return; /* still, and nothing ahead to cancel */
 	struct proto_want_entry *ahead = xmalloc(LOOKAHEAD_MAX * sizeof *ahead);
@@ -626,12 +629,17 @@ static void on_want(struct session *s, const struct proto_want *w)
 	count_drops(s, &d);
 	recall_unwanted(s);
 	submit_wants(s, PROTO_WANT, w->seq);
-	look_ahead(s, w, p);
+	double vel[2];
+	look_ahead(s, w, p, vel);
 	s->has_focus = true;
 	s->lon = w->lon;
 	s->lat = w->lat;
 	s->focus_a = p->a;
-	memcpy(s->vel, w->vel, sizeof s->vel);
+	/* the client's velocity, else the one the look-ahead estimated from the focus's moves:
+	 * the cache keeps the tiles along the path (server.c update_foci) */
+	s->vel[0] = vel[0];
+	s->vel[1] = vel[1];
+	s->vel[2] = w->vel[2];
 	s->env->focus_changed(s->env->ud);
 	if (wantset_nready(&s->ws))
 		pump_add(s);

@@ -1,14 +1,17 @@
 /* cache — see cache.h. A chained hash table (power-of-two buckets, each entry keeps its key
  * hash) under one mutex, with an LRU clock and the monotonic time stamped on lookup and insert.
  *
- * Pruning ranks every tile by its distance (grid_quad_distance) to the nearest focus's window
- * at the tile's own level, evicts the farthest first and, among equally far tiles, the least
- * recently stamped; with no foci every distance is 0, which is plain LRU. Quads are computed
+ * Pruning ranks every tile by what keeping it is worth (keep_worth): its cost to make again,
+ * discounted by its distance (grid_quad_distance) to the nearest focus's window at the tile's
+ * own level; it evicts the least worth first and, among equal worth, the least recently
+ * stamped. Tiles of one cost go farthest first; with no foci and equal costs it is plain
+ * LRU. Quads are computed
  * once per (focus, level) per prune. Evicted tiles are unreferenced after the mutex is
  * released, so freeing tile memory never happens under the lock.
  */
 #include "cache.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -40,7 +43,7 @@ struct cache {
 
 /* A tile considered for eviction. */
 struct victim {
-	uint32_t dist;
+	float keep; /* what keeping it is worth: its cost, discounted by its distance */
 	uint64_t stamp;
 	struct centry *e;
 };
@@ -144,11 +147,31 @@ bool cache_contains(struct cache *c, const struct tile_key *k)
 static int cmp_victim(const void *pa, const void *pb)
 {
 	const struct victim *a = pa, *b = pb;
-	if (a->dist != b->dist)
-		return a->dist > b->dist ? -1 : 1; /* farther first */
+	if (a->keep != b->keep)
+		return a->keep < b->keep ? -1 : 1; /* least worth keeping first */
 	if (a->stamp != b->stamp)
 		return a->stamp < b->stamp ? -1 : 1; /* then least recently used */
 	return 0;
+}
+
+/* What keeping a tile at focus distance d is worth: its cost to make again (tile.h cost_ms,
+ * at least COST_FLOOR_MS), divided by 4 per tile of distance. Among tiles of one cost the
+ * farthest goes first, as before costs counted; a tile ten times dearer is kept over a
+ * cheap one up to ~1.7 tiles nearer. A layer tile counts LAYER_WEIGHT times its cost (three
+ * tiles of distance): it is what viewers ask for again, and making it again needs its
+ * intermediate tiles too. In a cache smaller than the tiles around its foci (a fast flight
+ * over the procedural planet at 50 km: ~30 intermediate tiles per layer tile, ~4 GiB in the
+ * windows and rings against the shipped 1 GiB) the cheap intermediate tiles go before the
+ * layer tiles they were made for: a third of the terrain tiles were made twice or more
+ * before this (bench_keepup, KEEPUP_DEBUG). */
+#define COST_FLOOR_MS 0.05f
+#define LAYER_WEIGHT 64.0f
+static float keep_worth(const struct tile *t, uint32_t d)
+{
+	float c = t->cost_ms > COST_FLOOR_MS ? t->cost_ms : COST_FLOOR_MS;
+	if (t->layer)
+		c *= LAYER_WEIGHT;
+	return ldexpf(c, -2 * (int)(d < 60 ? d : 60));
 }
 
 /* Distance of tile t to the nearest focus's quad at t's level. quads/valid: lazily filled
@@ -195,7 +218,8 @@ static void prune_locked(struct cache *c, size_t target, struct tile ***out, siz
 	size_t n = 0;
 	for (size_t b = 0; b < c->nbuckets; b++)
 		for (struct centry *e = c->buckets[b]; e; e = e->next) {
-			v[n].dist = c->nfoci ? focus_distance(c, e->t, quads, valid) : 0;
+			v[n].keep = keep_worth(e->t, c->nfoci ? focus_distance(c, e->t, quads, valid)
+							      : 0);
 			v[n].stamp = e->stamp;
 			v[n].e = e;
 			n++;

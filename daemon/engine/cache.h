@@ -1,7 +1,11 @@
 /* cache — the tile cache (seed 003 §4.2): key → immutable, reference-counted tile, one mutex
  * for the whole cache, a byte budget, and pruning by distance to the viewers' focus points:
  * each level's quad and the ring around it are kept while farther tiles go first (seed 003
- * Fig. 3a); among equally far tiles the least recently used goes first.
+ * Fig. 3a); among equally far tiles the least recently used goes first. Distance is weighed
+ * against what a tile cost (tile.h cost_ms, layer): intermediate tiles that are cheap to
+ * make again go before the layer tiles viewers ask for (cache.c keep_worth), since a rich
+ * planet makes ~30 intermediate tiles per layer tile and a fast flight's windows and rings
+ * hold more of them than the budget.
  *
  * Each entry remembers when it was last used (monotonic time), which listings report as age.
  *
@@ -46,7 +50,7 @@ void cache_insert(struct cache *c, struct tile *t);
 void cache_insert_cold(struct cache *c, struct tile *t);
 /* Replaces the focus points pruning measures distance to (copied). */
 void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, uint32_t tile_size);
-/* Evicts until at most `target` bytes remain (farthest first, then least recent). */
+/* Evicts until at most `target` bytes remain (least worth keeping first, then least recent). */
 void cache_prune(struct cache *c, size_t target);
 void cache_stats(struct cache *c, struct cache_stats *out);
 /* Calls fn for each cached tile with the time of its last use (the last lookup or insert, as

@@ -36,6 +36,7 @@
 #include "sched.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdatomic.h>
 #include <stdbool.h>
 #include <stdio.h>
@@ -547,6 +548,7 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sche
 	if (j->from_disk)
 		rc = store_get(s->store, &j->key, n->out, n->planet->tile_size, tc, &t);
 	if (rc == 0) {
+		t->layer = true; /* the stores keep layer tiles only (set before it is shared) */
 		atomic_fetch_add(&s->loaded, 1);
 	} else if (s->remote) {
 		/* The fleet's tier: another daemon's tile, or this daemon's turn to make it. */
@@ -554,6 +556,8 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sche
 		j->rstate = JOB_R_NONE;
 		rc = s->remote->ops->get(s->remote, &j->key, n->out, n->planet->tile_size, tc,
 					 retry, &t);
+		if (rc == 0)
+			t->layer = true;
 		if (rc == 0 && s->store)
 			store_put(s->store, t, cls == SCHED_BULK ? STORE_KEEP_PREFETCHED
 								 : STORE_KEEP_INCIDENTAL);
@@ -577,6 +581,33 @@ static void remote_wake(void *ud, void *token)
 	post_done(s, j);
 }
 
+/* A generated tile's cost (tile.h cost_ms): dt ns of its own, plus each input node's cost
+ * once (the dearest of that node's input tiles); inputs of the job's own node (its parent,
+ * its neighbours) are left out. */
+static float chain_cost_ms(const struct job *j, uint64_t dt)
+{
+	double c = (double)dt * 1e-6;
+	for (int i = 0; i < j->nin; i++) {
+		const struct tile *a = j->in[i];
+		if (!a || a->key.node == j->key.node)
+			continue;
+		bool seen = false;
+		float most = a->cost_ms;
+		for (int k = 0; k < j->nin && !seen; k++) {
+			const struct tile *b = j->in[k];
+			if (!b || b->key.node != a->key.node)
+				continue;
+			if (k < i)
+				seen = true; /* counted with the first of its node */
+			else if (b->cost_ms > most)
+				most = b->cost_ms;
+		}
+		if (!seen)
+			c += most;
+	}
+	return (float)fmin(c, 1e6);
+}
+
 /* cls: the class the job was queued with; bulk work (operator prefetch) is kept on disk
  * ahead of what viewers happened to ask for, and does not flush the memory cache viewers use:
  * with a store its stored tiles are written through to the store only, the others
@@ -598,6 +629,8 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
+		t->cost_ms = chain_cost_ms(j, dt);
+		t->layer = store_keeps(n);
 		bool bulk = cls == SCHED_BULK, stored = false;
 		if (s->store && store_keeps(n))
 			/* Write-behind: never waits; a full queue drops it. */

@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "common/xalloc.h"
+#include "tilemem.h"
 
 struct tile *tile_create(const struct tile_key *key, enum pix_type type, uint32_t size)
 {
@@ -14,7 +15,7 @@ struct tile *tile_create(const struct tile_key *key, enum pix_type type, uint32_
 	t->size = size;
 	t->key = *key;
 	t->nbytes = (size_t)size * size * pix_bytes(type);
-	t->data = xaligned_alloc(64, t->nbytes);
+	t->data = tilemem_alloc(t->nbytes);
 	return t;
 }
 
@@ -29,7 +30,7 @@ void tile_unref(struct tile *t)
 	if (!t)
 		return;
 	if (atomic_fetch_sub_explicit(&t->refs, 1, memory_order_acq_rel) == 1) {
-		free(t->data);
+		tilemem_free(t->data, t->nbytes);
 		free(t);
 	}
 }

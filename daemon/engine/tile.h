@@ -9,6 +9,7 @@
 #ifndef CLIPMAP_TILE_H
 #define CLIPMAP_TILE_H
 #include <stdatomic.h>
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -22,6 +23,12 @@ struct tile {
 	struct tile_key key;
 	size_t nbytes; /* size · size · pix_bytes(type) */
 	unsigned char *data;
+	/* What making it again would cost, ms of a worker: its own generation and, once per
+	 * input node, that input's cost (its parent and neighbours in its own node left out,
+	 * so the figure stays the chain's, not the level's). 0 when unknown (a loaded tile).
+	 * Set once before the tile is shared; the cache evicts cheap tiles first (cache.h). */
+	float cost_ms;
+	bool layer; /* a planet layer's tile (what viewers ask for), not an intermediate one */
 };
 
 /* A new tile with uninitialised data; returns one owned reference (aborts on ENOMEM). */

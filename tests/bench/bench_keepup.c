@@ -18,7 +18,10 @@
  * each row's searched velocity: the row keeps it if their median is ≥ 95 % full detail, else
  * one search step lower (at most twice), else 0 (KEEPUP_CONFIRM=0: the search's answer, the
  * best of short flights, as before); KEEPUP_V=R one trial per row at R × the seed's velocity (for A/B
- * comparisons); KEEPUP_DEBUG=1 prints every frame; KEEPUP_AHEAD=0 no look-ahead along the
+ * comparisons); KEEPUP_DEBUG=1 prints every frame (its finest detail level and the first
+ * level whose window is not yet its target, "stale") and each node's tiles and worker time
+ * over the flight; KEEPUP_CACHE_MB=N the cold trials' memory cache (default 1024, the
+ * shipped size); KEEPUP_AHEAD=0 no look-ahead along the
  * motion (view_clipmap_motion); KEEPUP_DRAIN=0 no reading between frames.
  * KEEPUP_ROUTE=equator|46n|70n|pole: where the route runs (default equator: from (0°, 20°E)
  * heading 80°, where lx = ly + 1 at every level; 46n: from (46°N, 7°E) heading 90°, the Alps,
@@ -148,6 +151,14 @@ static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, 
 	return daemon_env_start(d, &(struct daemon_env_conf){ .set = set }, err);
 }
 
+/* The cold trials' cache: KEEPUP_CACHE_MB, else the shipped 1 GiB. */
+static int cold_cache_mb(void)
+{
+	const char *e = getenv("KEEPUP_CACHE_MB");
+	int mb = e ? atoi(e) : 0;
+	return mb > 0 ? mb : 1024;
+}
+
 /* ---- daemon statistics ----------------------------------------------------------------- */
 
 struct dstats {
@@ -156,6 +167,7 @@ struct dstats {
 	struct {
 		char name[64];
 		double total_ms;
+		uint64_t generated;
 	} node[MAX_NODES];
 };
 
@@ -198,7 +210,7 @@ static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
 				snprintf(out->node[k].name, sizeof out->node[k].name, "%.*s", len, s->key);
 			}
 			if (strcmp(dot, ".generated") == 0)
-				gen[k] = s->u;
+				gen[k] = out->node[k].generated = s->u;
 			else if (strcmp(dot, ".mean_ms") == 0)
 				out->node[k].total_ms = s->f * (double)gen[k];
 		}
@@ -287,6 +299,7 @@ struct client {
 struct frame {
 	bool complete;
 	int lmin, lmax, llast, received;
+	int dmax, stale; /* the finest detail level; the first level whose held quad is not its target (-1) */
 	double cpu_ms;
 };
 
@@ -347,12 +360,16 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	}
 	if (llast != lmax)
 		complete = false;
+	f->stale = -1;
 	for (int l = lmin; l <= dmax && complete; l++) {
 		view_clipmap_update(c->cm, l);
 		const struct grid_quad *h = view_clipmap_held(c->cm, l);
 		const struct grid_quad *t = view_clipmap_target_of(c->cm, l);
 		complete = h && t && grid_quad_equal(h, t);
+		if (!complete)
+			f->stale = l;
 	}
+	f->dmax = dmax;
 	f->complete = complete;
 	f->lmin = lmin;
 	f->lmax = lmax;
@@ -502,7 +519,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	bool prefetch = mode != COLD;
 	char err[256] = "", name[64];
 	struct daemon_env d;
-	int rc = daemon_start(&d, planet_ini, prefetch ? 8192 : 1024, mode == RESTARTED, name,
+	int rc = daemon_start(&d, planet_ini, prefetch ? 8192 : cold_cache_mb(), mode == RESTARTED, name,
 			      sizeof name, err);
 	struct net_conn *sc = NULL;
 	struct client c = { 0 };
@@ -595,9 +612,10 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 			goto out;
 		}
 		if (getenv("KEEPUP_DEBUG"))
-			fprintf(stderr, "    t %.3f full %d lmin %d llast %d lmax %d recv %d ms %.1f\n", t,
-				fr[n].complete, fr[n].lmin, fr[n].llast, fr[n].lmax, fr[n].received,
-				fr[n].cpu_ms);
+			fprintf(stderr,
+				"    t %.3f full %d lmin %d llast %d lmax %d dmax %d stale %d recv %d ms %.1f\n",
+				t, fr[n].complete, fr[n].lmin, fr[n].llast, fr[n].lmax, fr[n].dmax,
+				fr[n].stale, fr[n].received, fr[n].cpu_ms);
 		if (t >= warm_s) {
 			ms[counted++] = fr[n].cpu_ms;
 			full += fr[n].complete;
@@ -640,6 +658,14 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 			if (strcmp(s0.node[j].name, s1.node[i].name) == 0)
 				d0 = s0.node[j].total_ms;
 		double dt = s1.node[i].total_ms - d0;
+		if (getenv("KEEPUP_DEBUG")) {
+			uint64_t g0 = 0;
+			for (int j = 0; j < s0.nnodes; j++)
+				if (strcmp(s0.node[j].name, s1.node[i].name) == 0)
+					g0 = s0.node[j].generated;
+			fprintf(stderr, "    node %-40s %7llu tiles %8.1f ms in the flight\n",
+				s1.node[i].name, (unsigned long long)(s1.node[i].generated - g0), dt);
+		}
 		busy += dt;
 		if (dt > top) {
 			top = dt;

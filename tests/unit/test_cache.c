@@ -1,6 +1,6 @@
 /* Tile cache tests: hit/miss accounting, the byte budget, pruning by distance to the foci's
  * quads (the quad and its ring survive, far tiles go first), LRU order without foci,
- * reference counting across eviction, invalidation by node, last-use times, and concurrent
+ * costs (cheap intermediate tiles before layer tiles), reference counting across eviction, invalidation by node, last-use times, and concurrent
  * use. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -194,6 +194,79 @@ static void prune_keeps_quad_and_ring(void **state)
 	cache_destroy(c);
 }
 
+/* Costs (tile.h cost_ms, layer): in a budget smaller than the tiles around the focus, the
+ * cheap intermediate tiles of the window go before the layer tiles of its ring (what viewers
+ * ask for again), a dear intermediate tile stays beside them, and a layer tile far from the
+ * focus still goes before a cheap one near it. */
+static void cheap_intermediates_go_first(void **state)
+{
+	(void)state;
+	const double lon = 12.5, lat = 41.9;
+	const int lx = 7, ly = 6;
+	struct cache *c = cache_create(0);
+	struct cache_focus f = { lon, lat };
+	cache_set_foci(c, &f, 1, T);
+	struct grid_quad q;
+	window(lx, ly, lon, lat, &q);
+	size_t nlayer = 0, ncheap = 0;
+	struct tile_key dear = { 0 }, far = { 0 };
+	bool have_dear = false, have_far = false;
+	for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+		for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
+			struct tile_key k = key(3, lx, ly, x, y);
+			uint32_t d = grid_quad_distance(&q, &k);
+			struct tile *t = NULL;
+			if (d == 0) { /* the window: intermediate tiles of two nodes */
+				t = make_tile(&k);
+				t->cost_ms = 0.2f;
+				cache_insert(c, t);
+				tile_unref(t);
+				ncheap++;
+				struct tile_key k2 = key(4, lx, ly, x, y);
+				t = make_tile(&k2);
+				t->cost_ms = have_dear ? 0.3f : 40.0f;
+				if (!have_dear)
+					dear = k2, have_dear = true;
+				else
+					ncheap++;
+			} else if (d == 1) { /* the ring: layer tiles */
+				struct tile_key k2 = key(5, lx, ly, x, y);
+				t = make_tile(&k2);
+				t->cost_ms = 10.0f;
+				t->layer = true;
+				nlayer++;
+			} else if (d == 8 && !have_far) {
+				far = key(5, lx, ly, x, y);
+				t = make_tile(&far);
+				t->cost_ms = 10.0f;
+				t->layer = true;
+				have_far = true;
+			}
+			if (t) {
+				cache_insert(c, t);
+				tile_unref(t);
+			}
+		}
+	assert_true(have_dear && have_far && nlayer > 0 && ncheap > 0);
+	/* The layer tiles and the dear one stay; the cheap ones (inserted later than some of
+	 * the layer tiles: recency alone would keep them) and the far layer tile go. */
+	cache_prune(c, (nlayer + 1) * TILE_BYTES);
+	for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+		for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
+			struct tile_key k = key(5, lx, ly, x, y);
+			if (grid_quad_distance(&q, &k) == 1)
+				assert_true(cache_contains(c, &k));
+			assert_false(cache_contains(c, &(struct tile_key){ .node = 3, .x = x, .y = y,
+									  .lx = lx, .ly = ly }));
+		}
+	assert_true(cache_contains(c, &dear));
+	assert_false(cache_contains(c, &far));
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, nlayer + 1);
+	cache_destroy(c);
+}
+
 static void budget_prune_uses_foci(void **state)
 {
 	(void)state;
@@ -384,6 +457,7 @@ int main(void)
 		cmocka_unit_test(lru_without_foci),
 		cmocka_unit_test(prune_keeps_quad_and_ring),
 		cmocka_unit_test(budget_prune_uses_foci),
+		cmocka_unit_test(cheap_intermediates_go_first),
 		cmocka_unit_test(evicted_tile_stays_readable),
 		cmocka_unit_test(drop_node_and_foreach),
 		cmocka_unit_test(last_use_reported),

@@ -181,6 +181,30 @@ static void velocity_from_two_foci(void **state)
 	assert_int_equal(lookahead_velocity(NAN, 0, 1, 0, 1, R, &ve, &vn), -EINVAL);
 }
 
+/* Where the cache's foci ahead go (server.c update_foci): along the great circle, across the
+ * antimeridian and over a pole; a still focus stays. */
+static void point_ahead(void **state)
+{
+	(void)state;
+	double lon, lat;
+	struct lookahead_motion m = { .lon = 179.5, .lat = 0, .ve = 1000, .vn = 0, .radius = R };
+	lookahead_point(&m, 2 * M_PI / 180 * R / 1000, &lon, &lat); /* 2° of arc east */
+	assert_true(fabs(lon - (-178.5)) < 1e-6 && fabs(lat) < 1e-6);
+	m = (struct lookahead_motion){ .lon = 30, .lat = 89, .ve = 0, .vn = 500, .radius = R };
+	lookahead_point(&m, 2 * M_PI / 180 * R / 500, &lon, &lat); /* 2° north: over the pole */
+	assert_true(fabs(lat - 89) < 1e-6);
+	assert_true(fabs(fabs(lon) - 150) < 1e-6);
+	m.vn = 0;
+	lookahead_point(&m, 4, &lon, &lat);
+	assert_true(lon == 30 && lat == 89);
+	/* a velocity computed from two foci carries on from the second */
+	double ve, vn;
+	assert_int_equal(lookahead_velocity(10, 20, 10.1, 20.05, 0.5, R, &ve, &vn), 0);
+	m = (struct lookahead_motion){ .lon = 10.1, .lat = 20.05, .ve = ve, .vn = vn, .radius = R };
+	lookahead_point(&m, 0.5, &lon, &lat);
+	assert_true(fabs(lon - 10.2) < 2e-3 && fabs(lat - 20.1) < 2e-3);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -189,6 +213,7 @@ int main(void)
 		cmocka_unit_test(across_the_antimeridian),
 		cmocka_unit_test(on_the_lx_viewers_use_there_and_over_a_pole),
 		cmocka_unit_test(velocity_from_two_foci),
+		cmocka_unit_test(point_ahead),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -1,0 +1,146 @@
+/* Tile memory pool tests (engine/tilemem.h): a freed buffer is reused for the next tile of its
+ * size, sizes do not mix, the keep bound gives pages back and a released buffer comes back
+ * writable, small sizes bypass the pool, and threads never get one buffer twice. Under
+ * AddressSanitizer the pool is bypassed: the checks of reuse and of the counters are skipped
+ * there, the rest runs. */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <pthread.h>
+#include <sched.h>
+#include <stdbool.h>
+#include <string.h>
+
+#include "common/xthread.h"
+#include "engine/tilemem.h"
+
+#define TILE ((size_t)256 * 256 * 4)
+
+/* Whether this build pools (not under ASan): a pooled allocation maps a slab. */
+static bool pooled(void)
+{
+	struct tilemem_stats a, b;
+	tilemem_stats(&a);
+	void *p = tilemem_alloc(TILE);
+	tilemem_stats(&b);
+	tilemem_free(p, TILE);
+	return b.in_use == a.in_use + TILE;
+}
+
+static void reuse_by_size(void **state)
+{
+	(void)state;
+	void *a = tilemem_alloc(TILE);
+	memset(a, 0x5a, TILE);
+	assert_int_equal((uintptr_t)a % 64, 0);
+	tilemem_free(a, TILE);
+	void *other = tilemem_alloc(TILE / 4); /* another class: not a's buffer */
+	memset(other, 1, TILE / 4);
+	void *b = tilemem_alloc(TILE);
+	memset(b, 0x33, TILE);
+	if (pooled()) {
+		assert_ptr_not_equal(other, a);
+		assert_ptr_equal(b, a); /* the freed buffer, warm, is the next one handed out */
+	}
+	tilemem_free(other, TILE / 4);
+	tilemem_free(b, TILE);
+	/* A size that is not a page multiple is rounded up, and is writable to its end. */
+	void *odd = tilemem_alloc(TILE + 100);
+	memset(odd, 7, TILE + 100);
+	tilemem_free(odd, TILE + 100);
+	/* Small sizes are plain allocations. */
+	void *small = tilemem_alloc(1000);
+	memset(small, 9, 1000);
+	tilemem_free(small, 1000);
+	tilemem_free(NULL, TILE);
+}
+
+static void keep_bound_releases(void **state)
+{
+	(void)state;
+	if (!pooled()) {
+		skip();
+		return;
+	}
+	enum { N = 64 };
+	void *p[N];
+	for (int i = 0; i < N; i++) {
+		p[i] = tilemem_alloc(TILE);
+		memset(p[i], i, TILE);
+	}
+	tilemem_keep(4 * TILE);
+	struct tilemem_stats st;
+	tilemem_stats(&st);
+	assert_true(st.free_warm <= 4 * TILE);
+	for (int i = 0; i < N; i++)
+		tilemem_free(p[i], TILE);
+	tilemem_stats(&st);
+	assert_true(st.free_warm <= 4 * TILE);
+	assert_true(st.released >= (N - 4) * TILE);
+	/* Released buffers come back, populated again, and hold what is written. */
+	for (int i = 0; i < N; i++) {
+		p[i] = tilemem_alloc(TILE);
+		unsigned char *b = p[i];
+		memset(b, 0xc3, TILE);
+		assert_int_equal(b[0], 0xc3);
+		assert_int_equal(b[TILE - 1], 0xc3);
+	}
+	for (int i = 0; i < N; i++)
+		tilemem_free(p[i], TILE);
+	tilemem_keep(SIZE_MAX);
+	tilemem_stats(&st);
+	assert_int_equal(st.in_use, 0); /* every buffer of these tests was given back */
+}
+
+/* Threads allocating, filling with their own mark, checking and freeing: a buffer handed to
+ * two at once shows as a foreign mark. */
+struct worker {
+	unsigned char mark;
+	int bad;
+};
+
+static void *churn(void *arg)
+{
+	struct worker *w = arg;
+	static const size_t sizes[3] = { TILE, TILE / 4, TILE * 2 };
+	for (int i = 0; i < 400; i++) {
+		size_t n = sizes[i % 3];
+		unsigned char *p = tilemem_alloc(n);
+		memset(p, w->mark, n);
+		sched_yield();
+		for (size_t k = 0; k < n; k += 4093)
+			w->bad += p[k] != w->mark;
+		w->bad += p[n - 1] != w->mark;
+		tilemem_free(p, n);
+	}
+	return NULL;
+}
+
+static void threads_never_share(void **state)
+{
+	(void)state;
+	enum { NT = 4 };
+	pthread_t th[NT];
+	struct worker w[NT];
+	for (int i = 0; i < NT; i++) {
+		w[i] = (struct worker){ (unsigned char)(0x10 + i), 0 };
+		assert_int_equal(xthread_create(&th[i], churn, &w[i]), 0);
+	}
+	for (int i = 0; i < NT; i++) {
+		xthread_join(th[i]);
+		assert_int_equal(w[i].bad, 0);
+	}
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(reuse_by_size),
+		cmocka_unit_test(keep_bound_releases),
+		cmocka_unit_test(threads_never_share),
+	};
+	return cmocka_run_group_tests(tests, NULL, NULL);
+}
