@@ -569,7 +569,11 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	rc = view_clipmap_create(x->gl, c.src, c.nlevels, &c.cm, err);
 	if (rc)
 		goto out;
-	/* Hover at the start until the view is complete (then 0.5 s more for the rings). */
+	/* Hover at the start until the view is settled: complete, and every tile of its rings
+	 * received too (nothing left to ask for), then 0.5 s more. A flight that starts before
+	 * the rings are in measures the start-up (its first lines of tiles are still being
+	 * made), not the keep-up: 2 s flights at a tenth of the seed's velocity were 84–93 %
+	 * full detail, with every short frame in the first second. */
 	double t0 = clock_now_s(), done_at = -1;
 	struct frame f;
 	for (int k = 0;; k++) {
@@ -577,7 +581,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		if (rc)
 			goto out;
 		double t = clock_now_s();
-		if (f.complete && done_at < 0)
+		if (f.complete && done_at < 0 && view_clipmap_wants(c.cm, true, c.wants, MAX_WANTS) == 0)
 			done_at = t;
 		if (done_at >= 0 && t - done_at > 0.5)
 			break;
