@@ -12,12 +12,16 @@
 
 #include "common/xalloc.h"
 
+/* POOLED 0 under AddressSanitizer: plain allocations, so it sees every tile's lifetime. */
 #if defined(__SANITIZE_ADDRESS__)
-#define TILEMEM_BYPASS 1
+#define POOLED 0
 #elif defined(__has_feature)
 #if __has_feature(address_sanitizer)
-#define TILEMEM_BYPASS 1
+#define POOLED 0
 #endif
+#endif
+#ifndef POOLED
+#define POOLED 1
 #endif
 
 #define PAGE 4096u
@@ -87,9 +91,8 @@ static int grow(struct cls *c)
 
 void *tilemem_alloc(size_t n)
 {
-#ifndef TILEMEM_BYPASS
 	size_t sz = round_page(n);
-	if (n >= POOL_MIN) {
+	if (POOLED && n >= POOL_MIN) {
 		void *p = NULL;
 		bool populate = false;
 		pthread_mutex_lock(&mu);
@@ -121,7 +124,6 @@ void *tilemem_alloc(size_t n)
 		if (c)
 			xalloc_fail(n); /* the class exists but no slab could be mapped */
 	}
-#endif
 	return xaligned_alloc(64, n);
 }
 
@@ -129,9 +131,8 @@ void tilemem_free(void *p, size_t n)
 {
 	if (!p)
 		return;
-#ifndef TILEMEM_BYPASS
 	size_t sz = round_page(n);
-	if (n >= POOL_MIN) {
+	if (POOLED && n >= POOL_MIN) {
 		pthread_mutex_lock(&mu);
 		struct cls *c = class_of(sz, false);
 		if (c) {
@@ -150,9 +151,6 @@ void tilemem_free(void *p, size_t n)
 		}
 		pthread_mutex_unlock(&mu);
 	}
-#else
-	(void)n;
-#endif
 	free(p);
 }
 
