@@ -952,8 +952,6 @@ static int frame_receive(struct view *v, const struct view_camera *cam, struct f
 		return 0;
 	size_t n = view_clipmap_wants(v->cm, !v->d.no_prefetch, v->wants, MAX_WANTS);
 	struct view_focus foc = { cam->lon, cam->lat, v->last.alt, { 0, 0, 0 } };
-	if (f->now_s > 0)
-		view_clipmap_velocity(v->cm, v->src->planet.a, foc.vel);
 	rc = v->src->ops->want(v->src, v->wants, n, &foc);
 	if (rc < 0)
 		return rc;

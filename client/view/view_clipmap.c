@@ -232,18 +232,6 @@ static void drop_unwanted(struct view_clipmap *cm, struct level *L)
 				drop(cm, &L->slots[r][i]);
 }
 
-void view_clipmap_velocity(const struct view_clipmap *cm, double a, double vel[3])
-{
-	vel[0] = vel[1] = vel[2] = 0;
-	if (!cm->has_motion || !(a > 0))
-		return;
-	double k = M_PI / 180.0 * a;
-	vel[0] = cm->v_lon * k * cos(cm->m_lat * M_PI / 180.0);
-	vel[1] = cm->v_lat * k;
-	if (!isfinite(vel[0]) || !isfinite(vel[1]))
-		vel[0] = vel[1] = 0;
-}
-
 bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t)
 {
 	if (cm->has_motion && t > cm->m_t) {

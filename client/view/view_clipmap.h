@@ -56,11 +56,6 @@ bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_q
  * must then be sent again. Tiles that fall out of the look-ahead are released. Optional: a
  * caller that never calls it gets no look-ahead. */
 bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t);
-/* The camera's smoothed ground velocity from view_clipmap_motion, east and north m/s on a
- * sphere of radius a at its last latitude (vel[2], up, is 0): what the WANT's focus carries,
- * so the daemon's look-ahead and cache follow the path from the first WANT of a move. All 0
- * at rest or without motion. */
-void view_clipmap_velocity(const struct view_clipmap *cm, double a, double vel[3]);
 /* Forgets the camera's motion (it jumped: the step is no velocity); the next
  * view_clipmap_motion starts from rest. */
 void view_clipmap_motion_reset(struct view_clipmap *cm);

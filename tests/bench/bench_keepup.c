@@ -343,8 +343,6 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	if (changed) {
 		size_t n = view_clipmap_wants(c->cm, true, c->wants, MAX_WANTS);
 		struct view_focus foc = { lon, lat, cam.alt, { 0, 0, 0 } };
-		if (c->ahead) /* as the viewer (view.c): the camera's velocity with the focus */
-			view_clipmap_velocity(c->cm, c->src->planet.a, foc.vel);
 		rc = c->src->ops->want(c->src, c->wants, n, &foc);
 		if (rc < 0)
 			return rc;
