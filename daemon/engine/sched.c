@@ -630,17 +630,17 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
 		t->cost_ms = chain_cost_ms(j, dt);
-		t->layer = store_keeps(n);
+		t->layer = store_keeps(n); /* one walk of the planet's layers, read below */
 		bool bulk = cls == SCHED_BULK, stored = false;
-		if (s->store && store_keeps(n))
+		if (s->store && t->layer)
 			/* Write-behind: never waits; a full queue drops it. */
 			stored = store_put(s->store, t,
 					   bulk ? STORE_KEEP_PREFETCHED : STORE_KEEP_INCIDENTAL) == 0;
-		if (!bulk || (!s->store && store_keeps(n)))
+		if (!bulk || (!s->store && t->layer))
 			cache_insert(s->cache, t); /* without a disk tier, prefetch warms memory */
 		else if (!stored)
 			cache_insert_cold(s->cache, t);
-		if (s->remote && store_keeps(n))
+		if (s->remote && t->layer)
 			s->remote->ops->put(s->remote, t, j->leased); /* write-behind; releases
 								       * the lease */
 		j->leased = false;
