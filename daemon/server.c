@@ -259,29 +259,29 @@ static void sess_detach(void *ud, struct session_link *l)
 
 /* Recomputes the cache's pruning foci from every session's focus and velocity: where it is,
  * and where it will be 2 and 4 s on (the look-ahead's reach, lookahead.h), so that the tiles
- * generated for the path ahead are the last to go and those left behind the first. */
+ * generated for the path ahead are the last to go and those left behind the first. Every
+ * session's own focus comes first; the foci ahead fill what room is left. */
 static void update_foci(void *ud)
 {
 	struct server *srv = ud;
 	struct cache_focus f[MAX_FOCI];
-	size_t n = 0;
-	static const double ahead_s[] = { LOOKAHEAD_REACH_S / 2, LOOKAHEAD_REACH_S };
-	enum { NAHEAD = sizeof ahead_s / sizeof ahead_s[0] };
-	for (struct session_link *l = srv->sessions; l && n + 1 + NAHEAD <= MAX_FOCI;
-	     l = l->next) {
+	struct lookahead_motion moving[MAX_FOCI];
+	size_t n = 0, nm = 0;
+	for (struct session_link *l = srv->sessions; l && n < MAX_FOCI; l = l->next) {
 		double lon, lat, v[3], r;
 		if (!session_focus(l->s, &lon, &lat, v, &r))
 			continue;
 		f[n++] = (struct cache_focus){ lon, lat };
-		struct lookahead_motion m = { .lon = lon, .lat = lat, .ve = v[0], .vn = v[1],
-					      .radius = r };
-		if (!(r > 0) || !isfinite(v[0]) || !isfinite(v[1]) || (v[0] == 0 && v[1] == 0))
-			continue;
-		for (int i = 0; i < NAHEAD; i++) {
-			lookahead_point(&m, ahead_s[i], &f[n].lon, &f[n].lat);
+		if (r > 0 && isfinite(v[0]) && isfinite(v[1]) && (v[0] != 0 || v[1] != 0))
+			moving[nm++] = (struct lookahead_motion){ .lon = lon, .lat = lat, .ve = v[0],
+								  .vn = v[1], .radius = r };
+	}
+	static const double ahead_s[] = { LOOKAHEAD_REACH_S / 2, LOOKAHEAD_REACH_S };
+	for (size_t i = 0; i < nm; i++)
+		for (size_t h = 0; h < sizeof ahead_s / sizeof ahead_s[0] && n < MAX_FOCI; h++) {
+			lookahead_point(&moving[i], ahead_s[h], &f[n].lon, &f[n].lat);
 			n++;
 		}
-	}
 	uint32_t T = srv->planets && srv->planets->n ? srv->planets->planets[0]->tile_size : 256;
 	cache_set_foci(srv->cache, f, n, T);
 }
