@@ -353,7 +353,7 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 		c->workers = (int)n;
 	else if (strcmp(k, "worker_nice") == 0)
 		c->worker_nice = (int)n;
-	else if (strcmp(k, "cache_mb") == 0)
+	else if (strcmp(k, "cache_mb") == 0 && strcmp(r->sec, "engine") == 0)
 		c->cache_bytes = (size_t)n << 20;
 	else if (strcmp(k, "image_cache_mb") == 0)
 		c->image_cache_mb = (size_t)n;

@@ -54,6 +54,10 @@ static void test_shipped_file(void **state)
 	assert_true(c.bbr);
 	assert_int_equal(c.raw_above_mbit, 800);
 	assert_int_equal(c.image_cache_mb, 256);
+	/* [engine] cache_mb and [http] cache_mb are two caches: the file sets both (the second
+	 * once set the first, so every daemon run from this file had a 64 MiB tile cache) */
+	assert_int_equal(c.cache_bytes, (size_t)1024 << 20);
+	assert_int_equal(c.http_cache_mb, 64);
 	assert_null(c.store_path); /* no disk tier unless a path is set */
 	assert_int_equal(c.store_bytes, (uint64_t)1024 << 20);
 	conf_fini(&c);
@@ -67,7 +71,8 @@ static void test_values(void **state)
 			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\nimage_cache_mb = 48\n"
 			"[session]\nmax_pending_kb = 128\nmax_rate = 0\ncompress = never\n"
 			"send_queue_ms = 0\nbbr = no\nraw_above_mbit = 0\n"
-			"[log]\nlevel = debug\n[store]\npath = tiles.lmdb\ndisk_mb = 512\n";
+			"[log]\nlevel = debug\n[store]\npath = tiles.lmdb\ndisk_mb = 512\n"
+			"[http]\ncache_mb = 32\n";
 	struct conf c;
 	char err[256] = "";
 	int rc = conf_parse("/etc/x/d.conf", t, strlen(t), &c, err);
@@ -81,7 +86,8 @@ static void test_values(void **state)
 	assert_int_equal(c.require_token, CONF_TOKEN_TCP);
 	assert_int_equal(c.unix_mode, 0600);
 	assert_int_equal(c.workers, 3);
-	assert_int_equal(c.cache_bytes, (size_t)64 << 20);
+	assert_int_equal(c.cache_bytes, (size_t)64 << 20); /* not [http]'s */
+	assert_int_equal(c.http_cache_mb, 32);
 	assert_int_equal(c.image_cache_mb, 48);
 	assert_int_equal(c.max_pending, 128u << 10);
 	assert_int_equal(c.compress, CONF_COMPRESS_NEVER);
