@@ -17,6 +17,8 @@ HELLO, HELLO_OK, BYE, ERROR = 1, 2, 3, 4
 LIST_PLANETS, PLANETS, OPEN, OPENED = 16, 17, 18, 19
 WANT, TILE, TILE_FAIL = 32, 33, 34
 STATS_REQ, STATS = 48, 49
+PREFETCH, PREFETCH_PROGRESS = 64, 65
+CLASS_VISIBLE, CLASS_PREFETCH, CLASS_BULK = 1, 2, 3
 
 ERROR_CODES = {0: "none", 1: "protocol", 2: "version", 3: "auth", 4: "state", 5: "not-found",
                6: "limit", 7: "invalid", 8: "unavailable", 9: "busy", 10: "internal",
@@ -53,6 +55,25 @@ def open_planet(name, req=1):
     return frame(OPEN, struct.pack("<I", req) + _str(name))
 
 
+def list_planets(req=1):
+    return frame(LIST_PLANETS, struct.pack("<I", req))
+
+
+def prefetch_path(job, planet, lmin, lmax, width, points, layers=0):
+    """PREFETCH of a corridor `width` metres wide along (lon, lat) points."""
+    p = struct.pack("<I", job) + _str(planet) + struct.pack("<QBBBdI", layers, 2, lmin, lmax,
+                                                           width, len(points))
+    for lon, lat in points:
+        p += struct.pack("<2d", lon, lat)
+    return frame(PREFETCH, p)
+
+
+def prefetch_bbox(job, planet, lmin, lmax, west, south, east, north, layers=0):
+    p = struct.pack("<I", job) + _str(planet) + struct.pack("<QBBB4d", layers, 1, lmin, lmax,
+                                                           west, south, east, north)
+    return frame(PREFETCH, p)
+
+
 def want(planet_id, seq, entries, lon=0.0, lat=0.0, alt=1e6, vel=(0.0, 0.0, 0.0)):
     """entries: (layer, cls, lx, ly, x, y) tuples, most wanted first."""
     p = struct.pack("<II4d2d", planet_id, seq, lon, lat, alt, *vel)
@@ -84,6 +105,58 @@ class Reader:
         return mtype, payload
 
 
+class Skimmer:
+    """Cuts a socket's byte stream into frames without keeping tile texels: a TILE's payload
+    is read up to its 44-byte header and the rest received into a scratch buffer and
+    dropped, so a client of many sessions costs one kernel copy per byte. Other frames are
+    kept whole. pump() reads once and returns the frames it completed as (type, payload
+    head, length); None at end of stream."""
+
+    def __init__(self, scratch=None):
+        self.scratch = scratch if scratch is not None else bytearray(1 << 20)
+        self.part = bytearray()
+        self.mtype = None  # None: reading a header
+        self.length = self.head = self.skip = 0
+
+    def pump(self, s):
+        n = s.recv_into(self.scratch)
+        if n == 0:
+            return None
+        mv = memoryview(self.scratch)
+        out, i = [], 0
+        while i < n:
+            if self.skip:
+                k = min(self.skip, n - i)
+                self.skip -= k
+                i += k
+                if self.skip == 0:
+                    out.append((self.mtype, bytes(self.part), self.length))
+                    self.part.clear()
+                    self.mtype = None
+                continue
+            need = (HDR if self.mtype is None else self.head) - len(self.part)
+            k = min(need, n - i)
+            self.part += mv[i:i + k]
+            i += k
+            if k < need:
+                break
+            if self.mtype is None:
+                if self.part[:4] != MAGIC:
+                    raise ValueError("bad magic from the server")
+                _, _, self.mtype, self.length = struct.unpack_from("<BBHI", self.part, 4)
+                self.head = min(self.length, 44) if self.mtype == TILE else self.length
+                self.part.clear()
+                need = self.head
+            if self.mtype is not None and len(self.part) == self.head:
+                self.skip = self.length - self.head
+                if self.skip == 0:
+                    out.append((self.mtype, bytes(self.part), self.length))
+                    self.part.clear()
+                    self.mtype = None
+        mv.release()
+        return out
+
+
 def _rd_str(p, off):
     (n,) = struct.unpack_from("<H", p, off)
     return p[off + 2:off + 2 + n].decode("utf-8"), off + 2 + n
@@ -96,6 +169,50 @@ def decode_hello_ok(p):
     return {"version": version, "codecs": codecs, "session": session, "max_want": max_want,
             "max_rate": max_rate, "max_pending": max_pending, "max_frame": max_frame,
             "name": name}
+
+
+def decode_planet(p, off=0):
+    """One planet record (PLANETS, OPENED): (dict, offset after it)."""
+    name, off = _rd_str(p, off)
+    _, off = _rd_str(p, off)
+    a, f, tile_size, max_level, nlayers = struct.unpack_from("<ddIBH", p, off)
+    off += 23
+    layers = []
+    for _ in range(nlayers):
+        lname, off = _rd_str(p, off)
+        fmt, node = struct.unpack_from("<BQ", p, off)
+        off += 9
+        layers.append({"name": lname, "format": fmt, "node": node})
+    off += 8 + 8 + 3 + 1 + 8  # the look: air density, height, colour, sea, sea level
+    return {"name": name, "a": a, "f": f, "tile_size": tile_size, "max_level": max_level,
+            "layers": layers}, off
+
+
+def decode_planets(p):
+    _, count = struct.unpack_from("<IH", p, 0)
+    off, out = 6, []
+    for _ in range(count):
+        pl, off = decode_planet(p, off)
+        out.append(pl)
+    return out
+
+
+def decode_opened(p):
+    """(planet_id, planet record)."""
+    _, pid = struct.unpack_from("<II", p, 0)
+    return pid, decode_planet(p, 8)[0]
+
+
+def tile_key(p):
+    """(planet_id, (layer, lx, ly, x, y)) from a TILE payload's first 24 bytes."""
+    _, pid, layer, lx, ly = struct.unpack_from("<IIBBB", p, 0)
+    x, y = struct.unpack_from("<II", p, 16)
+    return pid, (layer, lx, ly, x, y)
+
+
+def tile_fail_key(p):
+    _, pid, layer, lx, ly, x, y = struct.unpack_from("<IIBBBII", p, 0)
+    return pid, (layer, lx, ly, x, y)
 
 
 def decode_error(p):
