@@ -2,6 +2,7 @@
 #include "xthread.h"
 
 #include <errno.h>
+#include <sched.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -84,4 +85,13 @@ int xthread_create(pthread_t *t, void *(*fn)(void *), void *arg)
 void xthread_join(pthread_t t)
 {
 	check(pthread_join(t, NULL), "pthread_join");
+}
+
+int xthread_batch(const char *name)
+{
+	if (name)
+		pthread_setname_np(pthread_self(), name); /* for top -H, perf, gdb */
+	struct sched_param p = { .sched_priority = 0 };
+	int rc = pthread_setschedparam(pthread_self(), SCHED_BATCH, &p);
+	return rc ? -rc : 0;
 }

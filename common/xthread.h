@@ -27,5 +27,10 @@ void xcond_broadcast(pthread_cond_t *cv);
 int xthread_create(pthread_t *t, void *(*fn)(void *), void *arg);
 /* Joins t (a failure is a programmer error: aborts). */
 void xthread_join(pthread_t t);
+/* Puts the calling thread under SCHED_BATCH, its niceness kept: a thread woken by another
+ * (a worker, the scheduler's manager, an encoder, a writer, woken by the event loop) then
+ * does not preempt it at the wake-up, so the loop finishes its iteration instead of waiting
+ * for a core. Any user may ask it. Returns 0 or -errno. */
+int xthread_batch(const char *name);
 
 #endif

@@ -266,7 +266,7 @@ static void advance(struct conn *c, size_t n, uint64_t *sent)
 /* Writes over TLS as far as the socket takes (TLS's own unsent records first). Returns 1 when
  * that was done, 0 while the handshake waits with nothing to send (want_out set while the
  * handshake has bytes to write), or -errno. */
-static int flush_tls(struct conn *c, uint64_t *sent)
+static int flush_tls(struct conn *c, uint64_t *sent, size_t max)
 {
 	if (!tls_stream_ready(c->tls)) {
 		int rc = tls_stream_handshake(c->tls);
@@ -277,7 +277,8 @@ static int flush_tls(struct conn *c, uint64_t *sent)
 		if (rc)
 			return rc == -EAGAIN ? -ENOTCONN : rc;
 	}
-	while (head_ready(c) && !tls_stream_unsent(c->tls)) {
+	uint64_t was = *sent;
+	while (head_ready(c) && !tls_stream_unsent(c->tls) && *sent - was < max) {
 		struct iovec v[2];
 		int k = seg_iov(&c->seg[c->head], v);
 		ssize_t n = k ? tls_stream_send(c->tls, v[0].iov_base, v[0].iov_len) : 0;
@@ -295,24 +296,37 @@ static int flush_tls(struct conn *c, uint64_t *sent)
 	return 1;
 }
 
-int conn_flush(struct conn *c, uint64_t *sent)
+int conn_flush(struct conn *c, uint64_t *sent, size_t max)
 {
 	if (c->tls) {
-		int rc = flush_tls(c, sent);
+		int rc = flush_tls(c, sent, max);
 		if (rc <= 0)
 			return rc;
 	}
-	while (!c->tls && head_ready(c)) {
+	size_t left = max;
+	while (!c->tls && head_ready(c) && left) {
 		struct iovec v[IOV_MAX_OUT];
 		int k = 0;
-		for (size_t i = c->head; i < c->n && k + 2 <= IOV_MAX_OUT; i++) {
+		size_t len = 0;
+		for (size_t i = c->head; i < c->n && k + 2 <= IOV_MAX_OUT && len < left; i++) {
 			if (!settle(c, &c->seg[i]))
 				break;
-			k += seg_iov(&c->seg[i], v + k);
+			int j = seg_iov(&c->seg[i], v + k);
+			for (int q = k; q < k + j; q++)
+				len += v[q].iov_len;
+			k += j;
 		}
 		if (!k) {
 			drop_sent(c); /* empty pieces (failed encodings) */
 			continue;
+		}
+		for (; len > left; k--) { /* no more than left: the last pieces cut or left out */
+			size_t over = len - left;
+			if (v[k - 1].iov_len > over) {
+				v[k - 1].iov_len -= over;
+				break;
+			}
+			len -= v[k - 1].iov_len;
 		}
 		struct msghdr mh = { .msg_iov = v, .msg_iovlen = (size_t)k };
 		ssize_t n = sendmsg(c->fd, &mh, MSG_NOSIGNAL | MSG_DONTWAIT);
@@ -324,6 +338,7 @@ int conn_flush(struct conn *c, uint64_t *sent)
 			return -errno;
 		}
 		advance(c, (size_t)n, sent);
+		left -= (size_t)n;
 	}
 	c->want_out = head_ready(c) || (c->tls && tls_stream_unsent(c->tls));
 	return 0;

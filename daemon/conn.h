@@ -84,11 +84,12 @@ ssize_t conn_recv(struct conn *c);
 ssize_t conn_decode(struct conn *c, enum proto_state st, uint32_t max_frame, struct proto_msg *m,
 		    uint16_t *code, uint16_t *type, char err[256]);
 void conn_consume(struct conn *c, size_t n);
-/* Writes what the socket takes and updates want_out; the bytes written are added to *sent.
- * Over TLS, advances the handshake first; output queued before the handshake completed
+/* Writes what the socket takes, at most max bytes (SIZE_MAX: no cap; over TLS whole records,
+ * so up to a record past it), and updates want_out (still set when max stopped it); the bytes
+ * written are added to *sent. Over TLS, advances the handshake first; output queued before the handshake completed
  * cannot go out and fails the connection (-ENOTCONN). Returns 0 or -errno (the connection
  * failed). */
-int conn_flush(struct conn *c, uint64_t *sent);
+int conn_flush(struct conn *c, uint64_t *sent, size_t max);
 /* Output backpressure: stops reading above 2 × max_pending unsent bytes, resumes below
  * max_pending. */
 void conn_throttle(struct conn *c, uint64_t max_pending);

@@ -106,6 +106,7 @@ static void encode(struct tilecodec *tc, struct etile *e)
 static void *encoder(void *arg)
 {
 	struct encq *q = arg;
+	xthread_batch("encoder");
 	struct tilecodec *tc = tilecodec_create();
 	xmutex_lock(&q->mu);
 	for (;;) {

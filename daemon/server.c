@@ -53,6 +53,12 @@
 #define MAX_WATCH 4
 #define MAX_FOCI 512
 #define LOOP_OUT_BUDGET (4u << 20) /* output bytes produced per loop iteration */
+/* Bytes written to sockets per loop iteration, all sessions together. The kernel copies each
+ * into a socket buffer on this thread: fast while its pages are warm, but a fresh page costs
+ * ~11 µs to fault on this VM kind (docs/ARCHITECTURE.md, "Memory"). Without the cap, an
+ * iteration in which many sessions' EPOLLOUT came up wrote a socket buffer's worth to each:
+ * with 200 moving sessions iterations reached 74-114 ms (tests/load/attack.py moving). */
+#define LOOP_WRITE_BUDGET (2u << 20)
 #define TRIM_EVERY_NS 1000000000ull /* at most one malloc_trim a second */
 #define ACCEPT_BATCH 16
 #define UNIX_RESERVE 8		       /* sessions over max_sessions kept for the Unix socket */
@@ -132,6 +138,7 @@ struct server {
 	uint64_t start_ns;
 	struct session_counters counters;
 	struct session_env env; /* lent to every session */
+	size_t write_budget;	/* this iteration's (env.write_budget points here) */
 
 	struct loopstat loop;	/* iteration times */
 	bool trim_due;		/* sessions were freed since the last trim */
@@ -649,7 +656,8 @@ static void init_env(struct server *srv)
 		.lossy_below_bps = lossy_below(srv->conf), .webp_quality = srv->conf->webp_quality,
 		.cache = srv->cache, .ready = &srv->ready, .encq = srv->encq,
 		.token = srv->token, .token_len = srv->token_len, .have_token = srv->have_token,
-		.planets = &srv->planets, .counters = &srv->counters, .ud = srv,
+		.planets = &srv->planets, .counters = &srv->counters,
+		.write_budget = &srv->write_budget, .ud = srv,
 		.handshake_ns = (uint64_t)srv->conf->handshake_timeout * 1000000000u,
 		.frame_ns = (uint64_t)srv->conf->frame_timeout * 1000000000u,
 		.attach = sess_attach, .authenticated = sess_authenticated,
@@ -970,6 +978,7 @@ static void on_accept(struct server *srv, struct listener *l)
 static void *trim_main(void *arg)
 {
 	struct server *srv = arg;
+	xthread_batch("trim");
 	uint64_t t0 = clock_now_ns();
 	malloc_trim(0);
 	uint64_t dt = clock_now_ns() - t0;
@@ -1068,6 +1077,7 @@ int server_run(struct server *srv)
 			return e;
 		}
 		uint64_t t0 = clock_now_ns();
+		srv->write_budget = LOOP_WRITE_BUDGET;
 		for (int i = 0; i < n; i++)
 			dispatch(srv, &evs[i]);
 		/* Output for at most LOOP_OUT_BUDGET bytes per iteration (queuing a shared

@@ -133,7 +133,10 @@ static int flush(struct session *s)
 {
 	uint32_t was = conn_events(&s->c);
 	uint64_t w = 0;
-	int rc = conn_flush(&s->c, &w);
+	size_t *budget = s->env->write_budget;
+	int rc = conn_flush(&s->c, &w, budget ? *budget : SIZE_MAX);
+	if (budget)
+		*budget = w < *budget ? *budget - (size_t)w : 0;
 	s->env->counters->bytes_sent += w;
 	linkest_sample(&s->le, clock_now_ns(), false);
 	if (rc) {

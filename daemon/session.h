@@ -64,6 +64,11 @@ struct session_env {
 	bool have_token;
 	struct planet_set *const *planets; /* the current set (replaced by reloads) */
 	struct session_counters *counters;
+	/* Bytes the sessions may still write in this loop iteration (the server resets it each
+	 * turn; NULL: no cap). A session that meets 0 keeps its output, and EPOLLOUT (level-
+	 * triggered) brings it back next turn: the kernel's copy into socket buffers is the
+	 * loop's one cost per byte, and this bounds an iteration's share of it. */
+	size_t *write_budget;
 
 	void *ud; /* the server: the first argument of every callback */
 	/* A new session on fd: the server registers fd for input, lists s and gives it an id.

@@ -426,6 +426,7 @@ static uint64_t write_batch(struct rds *r, redisContext **c, struct tilecodec *t
 static void *writer_main(void *arg)
 {
 	struct rds *r = arg;
+	xthread_batch("redis-writer");
 	struct tilecodec *tc = tilecodec_create();
 	redisContext *c = NULL;
 	unsigned cep = 0;

@@ -424,7 +424,7 @@ static struct job *take_done(struct sched *s)
 static void *manager_main(void *arg)
 {
 	struct sched *s = arg;
-	pthread_setname_np(pthread_self(), "sched-manager"); /* for top -H, perf, gdb */
+	xthread_batch("sched-manager"); /* named for top -H, perf, gdb */
 	xmutex_lock(&s->in_mu);
 	for (;;) {
 		while (!s->in_stop && !s->changes &&
@@ -667,7 +667,7 @@ static void *worker_main(void *arg)
 	/* This worker's reads from the store and the remote tier. */
 	struct tilecodec *tc = s->store || s->remote ? tilecodec_create() : NULL;
 	free(wa);
-	pthread_setname_np(pthread_self(), "sched-worker");
+	xthread_batch("sched-worker");
 	lower_priority(s);
 	xmutex_lock(&s->q_mu);
 	for (;;) {

@@ -486,6 +486,7 @@ static void replace_file(struct lstore *s)
 static void *writer_main(void *arg)
 {
 	struct lstore *s = arg;
+	xthread_batch("store-writer");
 	xmutex_lock(&s->mu);
 	for (;;) {
 		while (!s->stop && s->qn == 0 && !atomic_load(&s->broken))

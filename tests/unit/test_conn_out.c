@@ -89,12 +89,16 @@ static void expect_tile(struct pbuf *b, uint32_t seq, const struct tile *t, cons
 	assert_true(proto_encode(b, &m, NULL) > 0);
 }
 
-/* Flushes c until nothing is pending, reading the peer meanwhile into got. */
+/* Flushes c until nothing is pending, each call capped at a different byte count (the
+ * server's per-iteration write budget), reading the peer meanwhile into got. */
 static uint64_t pump_out(struct conn *c, int peer, struct pbuf *got)
 {
 	uint64_t sent = 0;
 	for (int i = 0; i < 100000 && conn_pending(c); i++) {
-		assert_int_equal(conn_flush(c, &sent), 0);
+		uint64_t was = sent;
+		size_t cap = i % 5 == 4 ? SIZE_MAX : 1 + (size_t)i * 7919 % 70000;
+		assert_int_equal(conn_flush(c, &sent, cap), 0);
+		assert_true(sent - was <= cap);
 		pbuf_reserve(got, 1000); /* small reads: partial frames on both sides */
 		ssize_t n = recv(peer, got->data + got->len, 1000, MSG_DONTWAIT);
 		if (n > 0)
@@ -135,7 +139,7 @@ static void test_order_bytes_and_waiting(void **state)
 	/* before any encoding is ready: the first message only */
 	uint64_t sent = 0;
 	if (!e1->ready) {
-		assert_int_equal(conn_flush(&c, &sent), 0);
+		assert_int_equal(conn_flush(&c, &sent, SIZE_MAX), 0);
 		assert_true(sent <= 64);
 	}
 	wait_ready(q, e1);
@@ -148,6 +152,11 @@ static void test_order_bytes_and_waiting(void **state)
 	assert_true(e2->len < t2->nbytes);
 	assert_ptr_equal(e1->payload, t1->data); /* `none`: the tile's own texels */
 
+	/* a spent budget writes nothing and keeps the output waiting (EPOLLOUT) */
+	uint64_t none = 0;
+	assert_int_equal(conn_flush(&c, &none, 0), 0);
+	assert_int_equal(none, 0);
+	assert_true(c.want_out);
 	struct pbuf got, want;
 	pbuf_init(&got);
 	pbuf_init(&want);
@@ -217,7 +226,7 @@ static void test_recall(void **state)
 	assert_int_equal(conn_pending(&c), 3 * frame);
 	/* the peer does not read: the socket takes part of the first frame only */
 	uint64_t sent = 0;
-	assert_int_equal(conn_flush(&c, &sent), 0);
+	assert_int_equal(conn_flush(&c, &sent, SIZE_MAX), 0);
 	assert_true(sent > 0 && sent < frame);
 	int asked = 0;
 	uint64_t bytes = 0;

@@ -13,6 +13,7 @@
 #include <cmocka.h>
 
 #include <errno.h>
+#include <sched.h>
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
@@ -43,6 +44,7 @@ struct tstate {
 	struct tile_key log[LOGMAX];
 	int nlog;
 	int nice_seen;
+	int policy_seen; /* the generating thread's scheduling policy */
 	atomic_int counts[NCOUNT];
 };
 
@@ -69,6 +71,7 @@ static void pass_gate(struct tstate *st, const struct tile_key *k)
 	if (st->nlog < LOGMAX)
 		st->log[st->nlog++] = *k;
 	st->nice_seen = getpriority(PRIO_PROCESS, (id_t)syscall(SYS_gettid));
+	st->policy_seen = sched_getscheduler(0);
 	if (st->gate_closed) {
 		st->at_gate++;
 		xcond_broadcast(&st->cv);
@@ -957,6 +960,9 @@ static void workers_lower_priority(void **state)
 	int want = mine + 5 > 19 ? 19 : mine + 5;
 	assert_int_equal(w->st->nice_seen, want);
 	assert_int_equal(sched_worker_nice_error(w->sched), 0);
+	/* and under SCHED_BATCH: woken by the event loop, a worker does not preempt it */
+	assert_int_equal(w->st->policy_seen, SCHED_BATCH);
+	assert_int_equal(sched_getscheduler(0), SCHED_OTHER); /* the caller's own is unchanged */
 	world_free(w);
 }
 
