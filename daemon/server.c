@@ -49,6 +49,9 @@
 #include "tls.h"
 
 #define TICK_NS 250000000ull
+/* The cache's foci are recomputed at most this often (a WANT marks them stale): each pass
+ * visits every session, so recomputing per WANT made 200 moving sessions cost 200² a second */
+#define FOCI_EVERY_NS 100000000ull
 #define STOP_GRACE_NS 1250000000ull /* + one tick + teardown: SIGTERM done within 2 s */
 #define MAX_WATCH 4
 #define MAX_FOCI 512
@@ -139,6 +142,8 @@ struct server {
 	struct session_counters counters;
 	struct session_env env; /* lent to every session */
 	size_t write_budget;	/* this iteration's (env.write_budget points here) */
+	bool foci_stale;	/* a focus moved since update_foci last ran */
+	uint64_t foci_ns;	/* when it last ran */
 
 	struct loopstat loop;	/* iteration times */
 	bool trim_due;		/* sessions were freed since the last trim */
@@ -291,6 +296,15 @@ static void update_foci(void *ud)
 		}
 	uint32_t T = srv->planets && srv->planets->n ? srv->planets->planets[0]->tile_size : 256;
 	cache_set_foci(srv->cache, f, n, T);
+	srv->foci_stale = false;
+	srv->foci_ns = clock_now_ns();
+}
+
+/* A session's focus moved: update_foci runs at the end of this loop iteration, or of the first
+ * one FOCI_EVERY_NS after the last run (the timer's tick comes at least every TICK_NS). */
+static void foci_moved(void *ud)
+{
+	((struct server *)ud)->foci_stale = true;
 }
 
 /* ---- STATS ------------------------------------------------------------------------------ */
@@ -662,7 +676,7 @@ static void init_env(struct server *srv)
 		.frame_ns = (uint64_t)srv->conf->frame_timeout * 1000000000u,
 		.attach = sess_attach, .authenticated = sess_authenticated,
 		.interest = sess_interest, .pump = sess_pump,
-		.detach = sess_detach, .focus_changed = update_foci, .stats = fill_stats,
+		.detach = sess_detach, .focus_changed = foci_moved, .stats = fill_stats,
 		.prefetch = &srv->prefetch
 	};
 	set_prefetch_caps(srv);
@@ -1103,6 +1117,8 @@ int server_run(struct server *srv)
 			p = next;
 		}
 		free_graveyard(srv);
+		if (srv->foci_stale && clock_now_ns() - srv->foci_ns >= FOCI_EVERY_NS)
+			update_foci(srv);
 		loopstat_add(&srv->loop, clock_now_ns() - t0);
 	}
 	free_graveyard(srv);
