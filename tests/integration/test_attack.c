@@ -428,8 +428,13 @@ static void test_admission(void **state)
 	assert_false(closed_silently(b[0], 300)); /* its HELLO was read first: no one pushed out */
 	/* max_sessions = 2 (u and t1): a TCP HELLO is refused with busy, a Unix one still gets
 	 * in (the Unix socket's reserve) */
+	assert_int_equal(kill(e->daemon, SIGSTOP), 0); /* (its HELLO there at the accept, as t1's:
+							  * else, accepted first, it is a fifth
+							  * silent one and pushes b[0] out) */
 	int t2 = dial_tcp(e->port, 21);
 	say_hello(t2);
+	usleep(100000);
+	assert_int_equal(kill(e->daemon, SIGCONT), 0);
 	expect(t2, PROTO_ERROR, PROTO_E_BUSY);
 	assert_true(closed_silently(t2, 5000));
 	int u2 = dial_unix(e->sock);
