@@ -513,7 +513,7 @@ def moving_run(args, planet_name, route, n, seconds):
         sess.append(st)
         sel.register(s, selectors.EVENT_READ, st)
     connect_s = time.monotonic() - t_conn
-    lat, extra, fails, errors, wants = [], 0, 0, [], 0
+    lat, extra, fails, errors, wants, withdrawn, asked = [], 0, 0, [], 0, 0, 0
     t0 = time.monotonic()
     end = t0 + seconds
     while True:
@@ -531,8 +531,10 @@ def moving_run(args, planet_name, route, n, seconds):
             new = {e[:1] + e[2:] for e in entries}
             for k in new - st["cur"]:
                 st["pending"][k] = now
+                asked += 1
             for k in st["cur"] - new:
-                st["pending"].pop(k, None)
+                if st["pending"].pop(k, None) is not None:
+                    withdrawn += 1  # left the set before it came: not in the latencies
             st["cur"], st["last"] = new, sig
             st["seq"] += 1
             st["t_want"] = now
@@ -577,6 +579,7 @@ def moving_run(args, planet_name, route, n, seconds):
             "tile_p50_ms": round(pct(lat, 50) * 1e3, 1) if lat else None,
             "tile_p99_ms": round(pct(lat, 99) * 1e3, 1) if lat else None,
             "tile_max_ms": round(max(lat) * 1e3, 1) if lat else None,
+            "asked": asked, "withdrawn": withdrawn,
             "waiting_at_end": len(waiting),
             "waiting_oldest_ms": round(max(waiting) * 1e3, 1) if waiting else 0,
             "extra_tiles": extra, "tile_fails": fails, "errors": errors[:3],
