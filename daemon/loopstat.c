@@ -19,6 +19,21 @@ void loopstat_add(struct loopstat *ls, uint64_t ns)
 		ls->max_ns = ns;
 }
 
+void loopstat_why(struct loopstat *ls, uint64_t ns, uint64_t cpu_ns, uint64_t voluntary)
+{
+	if (cpu_ns > ls->cpu_max_ns)
+		ls->cpu_max_ns = cpu_ns;
+	const uint64_t slow = (uint64_t)LOOPSTAT_SLOW_MS * 1000000u;
+	if (ns <= slow)
+		return;
+	if (cpu_ns > slow)
+		ls->slow_work++;
+	else if (voluntary)
+		ls->slow_blocked++;
+	else
+		ls->slow_preempted++;
+}
+
 double loopstat_quantile_ms(const struct loopstat *ls, double p)
 {
 	if (!ls->n)

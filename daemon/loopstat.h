@@ -17,10 +17,19 @@ struct loopstat {
 	uint64_t n;	 /* iterations */
 	uint64_t max_ns; /* the longest */
 	uint64_t b[LOOPSTAT_NB];
+	/* the iterations over LOOPSTAT_SLOW_MS, by why: the loop's own CPU passed it (work);
+	 * else it waited on something (a voluntary context switch inside the iteration: a lock,
+	 * a blocking call); else it was only preempted (runnable, the cores busy elsewhere) */
+	uint64_t slow_work, slow_blocked, slow_preempted;
+	uint64_t cpu_max_ns; /* the most CPU one iteration used */
 };
+#define LOOPSTAT_SLOW_MS 50
 
 /* Counts one iteration that took ns. */
 void loopstat_add(struct loopstat *ls, uint64_t ns);
+/* What the thread's own CPU clock and context switches say about the same iteration: cpu_ns
+ * used, voluntary switches during it (getrusage RUSAGE_THREAD). Call after loopstat_add. */
+void loopstat_why(struct loopstat *ls, uint64_t ns, uint64_t cpu_ns, uint64_t voluntary);
 /* The upper bound (ms) of the bucket that holds the p-th quantile (0 < p ≤ 1) of the counted
  * iterations, the maximum itself when that is the open bucket or smaller; 0 with none. */
 double loopstat_quantile_ms(const struct loopstat *ls, double p);

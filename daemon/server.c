@@ -29,6 +29,7 @@
 #include <string.h>
 #include <netinet/in.h>
 #include <sys/epoll.h>
+#include <sys/resource.h>
 #include <sys/ioctl.h>
 #include <sys/socket.h>
 #include <sys/timerfd.h>
@@ -449,6 +450,10 @@ static void stat_loop(struct statb *b, const struct loopstat *ls)
 	stat_f(b, "loop.max_ms", (double)ls->max_ns * 1e-6);
 	stat_f(b, "loop.p99_ms", loopstat_quantile_ms(ls, 0.99));
 	stat_u(b, "loop.over_50ms", loopstat_over(ls, 50));
+	stat_u(b, "loop.over_50ms.work", ls->slow_work);
+	stat_u(b, "loop.over_50ms.blocked", ls->slow_blocked);
+	stat_u(b, "loop.over_50ms.preempted", ls->slow_preempted);
+	stat_f(b, "loop.cpu_max_ms", (double)ls->cpu_max_ns * 1e-6);
 	for (int i = 0; i < LOOPSTAT_NB; i++) {
 		struct proto_stat *st =
 			i < LOOPSTAT_NB - 1
@@ -1114,6 +1119,11 @@ static void dispatch(struct server *srv, const struct epoll_event *e)
 	}
 }
 
+static int64_t tv_us(const struct timeval *tv)
+{
+	return (int64_t)tv->tv_sec * 1000000 + tv->tv_usec;
+}
+
 int server_run(struct server *srv)
 {
 	struct epoll_event evs[64], front[64];
@@ -1127,6 +1137,8 @@ int server_run(struct server *srv)
 			return e;
 		}
 		uint64_t t0 = clock_now_ns();
+		struct rusage r0, r1;
+		getrusage(RUSAGE_THREAD, &r0);
 		srv->write_budget = LOOP_WRITE_BUDGET;
 		int nf = epoll_wait(srv->epfd_front, front, 64, 0);
 		for (int i = 0; i < nf; i++)
@@ -1158,7 +1170,12 @@ int server_run(struct server *srv)
 		free_graveyard(srv);
 		if (srv->foci_stale && clock_now_ns() - srv->foci_ns >= FOCI_EVERY_NS)
 			update_foci(srv);
-		loopstat_add(&srv->loop, clock_now_ns() - t0);
+		uint64_t dt = clock_now_ns() - t0;
+		loopstat_add(&srv->loop, dt);
+		getrusage(RUSAGE_THREAD, &r1);
+		loopstat_why(&srv->loop, dt, (uint64_t)(tv_us(&r1.ru_utime) + tv_us(&r1.ru_stime) -
+						     tv_us(&r0.ru_utime) - tv_us(&r0.ru_stime)) * 1000u,
+			     (uint64_t)(r1.ru_nvcsw - r0.ru_nvcsw));
 	}
 	free_graveyard(srv);
 	return 0;

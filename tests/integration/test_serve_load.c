@@ -571,7 +571,9 @@ static void test_loop_histogram(void **state)
 		cl_expect(c, PROTO_TILE, 20000);
 	double iters = cl_stat(c, "loop.iterations");
 	static const char *const keys[] = { "loop.max_ms", "loop.p99_ms", "loop.over_50ms",
-					    "loop.le_1ms", "loop.le_50ms", "loop.gt_5000ms" };
+					    "loop.le_1ms", "loop.le_50ms", "loop.gt_5000ms",
+					    "loop.over_50ms.work", "loop.over_50ms.blocked",
+					    "loop.over_50ms.preempted", "loop.cpu_max_ms" };
 	for (size_t i = 0; i < sizeof keys / sizeof keys[0]; i++)
 		if (!has_stat(c, keys[i]))
 			fail_msg("no stat %s", keys[i]);
@@ -587,6 +589,11 @@ static void test_loop_histogram(void **state)
 	assert_true(iters >= 4); /* at least: connect, HELLO, OPEN, WANT */
 	assert_true(sum >= iters && sum <= iters + 40); /* STATS requests counted meanwhile */
 	assert_true(max > 0 && p99 <= max);
+	/* the over-50 ms iterations, by why, add up; no iteration used more CPU than time */
+	assert_true(cl_stat(c, "loop.over_50ms.work") + cl_stat(c, "loop.over_50ms.blocked") +
+			    cl_stat(c, "loop.over_50ms.preempted") ==
+		    cl_stat(c, "loop.over_50ms"));
+	assert_true(cl_stat(c, "loop.cpu_max_ms") <= cl_stat(c, "loop.max_ms") + 1.0);
 	cl_free(c);
 }
 

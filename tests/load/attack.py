@@ -19,9 +19,10 @@ Scenarios (each while the probes run):
           asking for the 4x4 windows of --levels in up to 3 layers (288 tiles with 2-7) and a
           new WANT whenever its windows move; one session first asks for every tile of the
           routes, so all are in the cache; measured: each tile's WANT -> TILE latency (goal
-          p99 <= --tile-p99-ms, 5 s), the daemon's event-loop iterations over 50 ms (goal 0,
-          from its STATS), tiles generated meanwhile; then all close at once (no BYE) and a
-          new client's HELLO is timed
+          p99 <= --tile-p99-ms, 5 s), the daemon's event-loop iterations over 50 ms from its
+          STATS, by why (goal: none of its own work or waits; those it spent preempted by
+          other processes are reported), tiles generated meanwhile; then all close at once
+          (no BYE) and a new client's HELLO is timed
 
 Probes: a client on the Unix socket (and on TCP from 127.0.0.2 when --tcp is given) connects,
 says HELLO, waits for HELLO_OK, says BYE, every 50 ms; the daemon's RSS is read from
@@ -655,7 +656,8 @@ def scenario_moving(args, n, seconds):
     proc.join(10)
     st1 = stats_now(args)
     figs.update(res)
-    for k in ("sched.generated", "loop.over_50ms", "loop.iterations"):
+    for k in ("sched.generated", "loop.over_50ms", "loop.over_50ms.work",
+              "loop.over_50ms.blocked", "loop.over_50ms.preempted", "loop.iterations"):
         figs[k] = st1.get(k, 0) - st0.get(k, 0)
     figs["loop.max_ms_since_start"] = round(st1.get("loop.max_ms", 0), 1)
     figs["sessions_after"] = st1.get("sessions")
@@ -767,7 +769,8 @@ def main():
     ap.add_argument("--tile-p99-ms", type=float, default=5000.0,
                     help="moving: goal for a cached tile's WANT -> TILE p99")
     ap.add_argument("--loop-over-50", type=int, default=0,
-                    help="moving: event-loop iterations over 50 ms allowed (goal 0)")
+                    help="moving: event-loop iterations over 50 ms of the loop's own work or "
+                    "waits allowed (goal 0)")
     args = ap.parse_args()
     lo, _, hi = args.levels.partition("-")
     if not lo.isdigit() or not (hi or lo).isdigit() or int(lo) > int(hi or lo) or int(hi or lo) > 20:
@@ -829,8 +832,13 @@ def main():
                                                                  args.tile_p99_ms))
             if f["errors"] or f["tile_fails"]:
                 goals.append("moving: %d TILE_FAIL, errors %s" % (f["tile_fails"], f["errors"]))
-            if f["loop.over_50ms"] > args.loop_over_50:
-                goals.append("moving: %d event-loop iterations over 50 ms" % f["loop.over_50ms"])
+            # The loop's own stalls: iterations over 50 ms in which it worked (its CPU) or
+            # waited (a voluntary switch: a lock, a blocking call). Those it spent runnable
+            # but off the CPU (preempted: this harness shares the machine) are reported.
+            own = f["loop.over_50ms.work"] + f["loop.over_50ms.blocked"]
+            if own > args.loop_over_50:
+                goals.append("moving: %d event-loop iterations over 50 ms of its own work or "
+                             "waits" % own)
             if f["hello_after_close_ms"] > args.p99_ms:
                 goals.append("moving: HELLO right after %d sessions closed took %.1f ms" %
                              (n, f["hello_after_close_ms"]))

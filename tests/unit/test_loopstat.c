@@ -38,6 +38,22 @@ static void test_buckets(void **state)
 	assert_int_equal(loopstat_bound_ms(LOOPSTAT_NB - 1), 0);
 }
 
+/* Iterations over 50 ms told apart by the loop's own CPU and context switches. */
+static void test_why(void **state)
+{
+	(void)state;
+	struct loopstat ls = { 0 };
+	loopstat_why(&ls, 10 * MS, 9 * MS, 3);	/* fast: not counted, its CPU is */
+	loopstat_why(&ls, 80 * MS, 70 * MS, 0); /* its own work */
+	loopstat_why(&ls, 80 * MS, 2 * MS, 1);	/* waited on something */
+	loopstat_why(&ls, 60 * MS, 1 * MS, 0);	/* runnable, off the CPU */
+	loopstat_why(&ls, 50 * MS, 1 * MS, 0);	/* exactly 50 ms is not over */
+	assert_int_equal(ls.slow_work, 1);
+	assert_int_equal(ls.slow_blocked, 1);
+	assert_int_equal(ls.slow_preempted, 1);
+	assert_int_equal(ls.cpu_max_ns, 70 * MS);
+}
+
 /* The quantile never claims more than the longest iteration seen. */
 static void test_quantile_capped_by_max(void **state)
 {
@@ -51,6 +67,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_buckets),
+		cmocka_unit_test(test_why),
 		cmocka_unit_test(test_quantile_capped_by_max),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
