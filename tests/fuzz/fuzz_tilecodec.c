@@ -127,26 +127,24 @@ static void decode_any(const uint8_t *h8, const uint8_t *p, size_t n)
 	free(out);
 }
 
-/* A lossy codec's round trip: decodes, heights within half a step (of the range / 65535 or
- * the asked step), a corrupted byte refused. */
-static void lossy_trip(const uint8_t *h8, const uint8_t *p, size_t n)
+/* A q16 round trip of heights: decodes, within half a step (of the range / 65535 or the asked
+ * step), a corrupted byte refused. */
+static void q16_trip(const uint8_t *h8, const uint8_t *p, size_t n)
 {
-	enum pix_type fmt = (enum pix_type)(1 + h8[1] % 3);
-	enum tcodec codec = fmt == PIX_HEIGHT ? TCODEC_Q16 : TCODEC_WEBP;
+	const enum pix_type fmt = PIX_HEIGHT;
 	uint32_t T = 1u << (h8[4] % 8);
 	size_t raw = (size_t)T * T * pix_bytes(fmt);
 	uint8_t *tex = malloc(raw), *back = malloc(raw);
 	for (size_t i = 0; i < raw; i++)
 		tex[i] = n ? p[i % n] : (uint8_t)i;
-	if (fmt == PIX_HEIGHT) /* finite heights of a few km, from the bytes */
-		for (size_t i = 0; i < raw / 4; i++)
-			((float *)(void *)tex)[i] = (float)((int)(tex[i * 4] | tex[i * 4 + 1] << 8) - 32768) *
-						    (float)(1 + h8[5] % 8) * 0.05f;
+	for (size_t i = 0; i < raw / 4; i++) /* finite heights of a few km, from the bytes */
+		((float *)(void *)tex)[i] = (float)((int)(tex[i * 4] | tex[i * 4 + 1] << 8) - 32768) *
+					    (float)(1 + h8[5] % 8) * 0.05f;
 	size_t cap = tilecodec_bound(TCODEC_ZSTD, raw);
 	uint8_t *pay = malloc(cap);
 	struct tilecodec_hdr h;
-	struct tilecodec_lossy_opts o = { .quality = h8[6] % 101, .step = (h8[7] % 4) * 0.25 };
-	ssize_t k = tilecodec_encode_lossy(tc, fmt, T, codec, &o, tex, &h, pay, cap);
+	struct tilecodec_lossy_opts o = { .step = (h8[7] % 4) * 0.25 };
+	ssize_t k = tilecodec_encode_lossy(tc, fmt, T, TCODEC_Q16, &o, tex, &h, pay, cap);
 	if (k <= 0 || (size_t)k > raw || h.raw_len != raw || h.size != T || h.format != fmt)
 		abort();
 	char err[256] = "";
@@ -188,11 +186,12 @@ static void round_trip(const uint8_t *h8, const uint8_t *p, size_t n)
 	 * most of it in WebPEncode, and could not reach 10^7). The encoder only ever sees the
 	 * daemon's own texels; the bytes a client receives, WebP payloads included, are what
 	 * decode_any fuzzes, and test_tilecodec covers the WebP round trip. */
-	if (tilecodec_is_lossy(codec) && fmt != PIX_HEIGHT)
-		codec = TCODEC_ZSTD;
 	if (tilecodec_is_lossy(codec)) {
-		lossy_trip(h8, p, n);
-		return;
+		if (fmt == PIX_HEIGHT) {
+			q16_trip(h8, p, n);
+			return;
+		}
+		codec = TCODEC_ZSTD;
 	}
 	enum tfilter filter = (enum tfilter)(h8[3] % TFILTER_COUNT);
 	uint32_t T = 1u << (h8[4] % 8);
