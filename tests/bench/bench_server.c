@@ -159,6 +159,8 @@ static uint64_t drain(struct cl **s, int n, int *left)
 {
 	uint64_t tiles = 0;
 	int busy = 0;
+	if (n <= 0)
+		return 0;
 	for (int i = 0; i < n; i++)
 		busy += left[i] > 0;
 	struct pollfd *pf = calloc((size_t)n, sizeof *pf);
