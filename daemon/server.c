@@ -548,6 +548,9 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "cache.misses", cs.misses);
 	stat_u(&b, "cache.inserts", cs.inserts);
 	stat_u(&b, "cache.evictions", cs.evictions);
+	stat_u(&b, "cache.prunes", cs.prunes);
+	stat_f(&b, "cache.prune_ms", (double)cs.prune_ns * 1e-6);
+	stat_f(&b, "cache.prune_hold_max_ms", (double)cs.prune_hold_max_ns * 1e-6);
 	stat_u(&b, "sched.loaded", ss.loaded);
 	stat_store(&b, sched_store(srv->sched));
 	stat_remote(&b, sched_remote(srv->sched));

@@ -5,9 +5,9 @@
  * discounted by its distance (grid_quad_distance) to the nearest focus's window at the tile's
  * own level; it evicts the least worth first and, among equal worth, the least recently
  * stamped. Tiles of one cost go farthest first; with no foci and equal costs it is plain
- * LRU. Quads are computed
- * once per (focus, level) per prune. Evicted tiles are unreferenced after the mutex is
- * released, so freeing tile memory never happens under the lock.
+ * LRU. The ranking runs without the mutex, on a copy of what it reads (prune); each level's
+ * distinct focus windows are computed once per ranking. Evicted tiles are unreferenced after
+ * the mutex is released, so freeing tile memory never happens under the lock.
  */
 #include "cache.h"
 
@@ -36,16 +36,25 @@ struct cache {
 	size_t nbuckets; /* power of two */
 	size_t budget, bytes, ntiles;
 	uint64_t clock, hits, misses, inserts, evictions;
+	uint64_t prunes, prune_ns, prune_hold_max_ns;
+	bool pruning; /* a thread is ranking tiles for eviction (prune) */
+	void (*rank_hook)(void *ud); /* tests (cache_set_rank_hook) */
+	void *rank_ud;
 	struct cache_focus *foci;
 	size_t nfoci;
 	uint32_t tile_size; /* for the foci's quads; 0: each tile's own size */
 };
 
-/* A tile considered for eviction. */
+/* A tile considered for eviction: what ranking it needs, copied under the mutex (the
+ * ranking runs without it). */
 struct victim {
-	float keep; /* what keeping it is worth: its cost, discounted by its distance */
-	uint64_t stamp;
-	struct centry *e;
+	struct tile_key key;
+	uint64_t hash;
+	uint64_t stamp; /* to tell whether it was used while the ranking ran */
+	float cost;	/* tile.h cost_ms */
+	float keep;	/* what keeping it is worth: its cost, discounted by its distance */
+	uint32_t size;	/* T */
+	bool layer;
 };
 
 struct cache *cache_create(size_t budget_bytes)
@@ -144,15 +153,6 @@ bool cache_contains(struct cache *c, const struct tile_key *k)
 	return found;
 }
 
-static int cmp_victim(const void *pa, const void *pb)
-{
-	const struct victim *a = pa, *b = pb;
-	if (a->keep != b->keep)
-		return a->keep < b->keep ? -1 : 1; /* least worth keeping first */
-	if (a->stamp != b->stamp)
-		return a->stamp < b->stamp ? -1 : 1; /* then least recently used */
-	return 0;
-}
 
 /* What keeping a tile at focus distance d is worth: its cost to make again (tile.h cost_ms,
  * at least COST_FLOOR_MS), divided by 4 per tile of distance. Among tiles of one cost the
@@ -166,78 +166,12 @@ static int cmp_victim(const void *pa, const void *pb)
  * before this (bench_keepup, KEEPUP_DEBUG). */
 #define COST_FLOOR_MS 0.05f
 #define LAYER_WEIGHT 64.0f
-static float keep_worth(const struct tile *t, uint32_t d)
+static float keep_worth(float cost_ms, bool layer, uint32_t d)
 {
-	float c = t->cost_ms > COST_FLOOR_MS ? t->cost_ms : COST_FLOOR_MS;
-	if (t->layer)
+	float c = cost_ms > COST_FLOOR_MS ? cost_ms : COST_FLOOR_MS;
+	if (layer)
 		c *= LAYER_WEIGHT;
 	return ldexpf(c, -2 * (int)(d < 60 ? d : 60));
-}
-
-/* Distance of tile t to the nearest focus's quad at t's level. quads/valid: lazily filled
- * table [focus][ly][lx]. Needs c->mu. */
-static uint32_t focus_distance(struct cache *c, const struct tile *t, struct grid_quad *quads,
-			       unsigned char *valid)
-{
-	uint32_t best = UINT32_MAX;
-	const struct tile_key *k = &t->key;
-	if (k->ly >= NLY || k->lx >= NLX)
-		return best;
-	uint32_t T = c->tile_size ? c->tile_size : t->size;
-	for (size_t f = 0; f < c->nfoci; f++) {
-		size_t i = (f * NLY + k->ly) * NLX + k->lx;
-		/* A quad cached for another tile size is recomputed (tiles of layers whose T
-		 * differs from the foci's are rare). */
-		if (!valid[i] || quads[i].T != T) {
-			grid_window(k->lx, k->ly, T, GRID_WINDOW_TILES * T, c->foci[f].lon,
-				    c->foci[f].lat, &quads[i]);
-			valid[i] = 1;
-		}
-		uint32_t d = grid_quad_distance(&quads[i], k);
-		if (d < best)
-			best = d;
-	}
-	return best;
-}
-
-/* Evicts until at most target bytes remain. Needs c->mu; returns the evicted tiles (owned
- * references, to unref once the lock is dropped) in *out, how many in *nout. */
-static void prune_locked(struct cache *c, size_t target, struct tile ***out, size_t *nout)
-{
-	*out = NULL;
-	*nout = 0;
-	if (c->bytes <= target)
-		return;
-	struct victim *v = xmalloc(c->ntiles * sizeof *v);
-	struct grid_quad *quads = NULL;
-	unsigned char *valid = NULL;
-	if (c->nfoci) {
-		quads = xmalloc(c->nfoci * NLY * NLX * sizeof *quads);
-		valid = xcalloc(c->nfoci * NLY * NLX, 1);
-	}
-	size_t n = 0;
-	for (size_t b = 0; b < c->nbuckets; b++)
-		for (struct centry *e = c->buckets[b]; e; e = e->next) {
-			v[n].keep = keep_worth(e->t, c->nfoci ? focus_distance(c, e->t, quads, valid)
-							      : 0);
-			v[n].stamp = e->stamp;
-			v[n].e = e;
-			n++;
-		}
-	qsort(v, n, sizeof *v, cmp_victim);
-	struct tile **tiles = xmalloc(n * sizeof *tiles);
-	size_t m = 0;
-	for (size_t i = 0; i < n && c->bytes > target; i++) {
-		unlink_entry(c, v[i].e);
-		tiles[m++] = v[i].e->t;
-		free(v[i].e);
-		c->evictions++;
-	}
-	free(v);
-	free(quads);
-	free(valid);
-	*out = tiles;
-	*nout = m;
 }
 
 static void unref_all(struct tile **tiles, size_t n)
@@ -247,11 +181,156 @@ static void unref_all(struct tile **tiles, size_t n)
 	free(tiles);
 }
 
+/* The foci's distinct windows per level (lx, ly), filled as the ranking meets each level:
+ * 200 viewers flying over one region share most of their coarse windows. */
+struct ranking {
+	const struct cache_focus *foci;
+	size_t nfoci;
+	uint32_t T; /* the foci's tile size; 0: each tile's own */
+	struct level_quads {
+		uint32_t T; /* 0: not filled */
+		size_t n;
+		struct grid_quad *q;
+	} lv[NLY][NLX];
+};
+
+static int cmp_quad(const void *pa, const void *pb)
+{
+	const struct grid_quad *a = pa, *b = pb;
+	if (a->ty0 != b->ty0)
+		return a->ty0 < b->ty0 ? -1 : 1;
+	if (a->tx0 != b->tx0)
+		return a->tx0 < b->tx0 ? -1 : 1;
+	if (a->nty != b->nty)
+		return a->nty < b->nty ? -1 : 1;
+	return (a->ntx > b->ntx) - (a->ntx < b->ntx);
+}
+
+/* Distance of a tile to the nearest focus's window at its level. */
+static uint32_t focus_distance(struct ranking *r, const struct victim *v)
+{
+	const struct tile_key *k = &v->key;
+	if (k->ly >= NLY || k->lx >= NLX)
+		return UINT32_MAX;
+	uint32_t T = r->T ? r->T : v->size;
+	struct level_quads *L = &r->lv[k->ly][k->lx];
+	if (L->T != T) {
+		/* first met (or, rarely, a layer of another tile size: the level's list is
+		 * rebuilt for it) */
+		if (!L->q)
+			L->q = xmalloc(r->nfoci * sizeof *L->q);
+		for (size_t f = 0; f < r->nfoci; f++)
+			grid_window(k->lx, k->ly, T, GRID_WINDOW_TILES * T, r->foci[f].lon,
+				    r->foci[f].lat, &L->q[f]);
+		qsort(L->q, r->nfoci, sizeof *L->q, cmp_quad);
+		size_t n = 0;
+		for (size_t f = 0; f < r->nfoci; f++)
+			if (n == 0 || cmp_quad(&L->q[n - 1], &L->q[f]) != 0)
+				L->q[n++] = L->q[f];
+		L->n = n;
+		L->T = T;
+	}
+	uint32_t best = UINT32_MAX;
+	for (size_t i = 0; i < L->n && best > 0; i++) {
+		uint32_t d = grid_quad_distance(&L->q[i], k);
+		if (d < best)
+			best = d;
+	}
+	return best;
+}
+
+static int cmp_victim(const void *pa, const void *pb)
+{
+	const struct victim *a = pa, *b = pb;
+	if (a->keep != b->keep)
+		return a->keep < b->keep ? -1 : 1; /* least worth keeping first */
+	if (a->stamp != b->stamp)
+		return a->stamp < b->stamp ? -1 : 1; /* then least recently used */
+	return 0;
+}
+
+/* Evicts until at most target bytes remain, least worth keeping first. The mutex is held
+ * only to copy what the ranking needs and then to evict: with a 1 GiB cache of 256² tiles
+ * and 200 viewers' foci, ranking under it held it for up to 104 ms, and the event loop,
+ * which looks tiles up, waited that long (attack.py moving, loop.over_50ms.blocked). A tile
+ * used while the ranking ran is kept (its stamp moved); one more round ranks what is left
+ * if that leaves the cache over target. One thread ranks at a time: another that finds a
+ * ranking under way leaves the pruning to it (its rounds continue until the target holds).
+ * Called without the mutex; frees the evicted tiles' references without it too. */
+static void prune(struct cache *c, size_t target)
+{
+	for (int round = 0; round < 8; round++) {
+		xmutex_lock(&c->mu);
+		if (c->bytes <= target || c->pruning) {
+			xmutex_unlock(&c->mu);
+			return;
+		}
+		uint64_t t0 = clock_now_ns();
+		c->pruning = true;
+		size_t n = 0, nf = c->nfoci;
+		struct victim *v = xmalloc((c->ntiles ? c->ntiles : 1) * sizeof *v);
+		struct cache_focus *foci = nf ? xmalloc(nf * sizeof *foci) : NULL;
+		if (nf)
+			memcpy(foci, c->foci, nf * sizeof *foci);
+		uint32_t T = c->tile_size;
+		void (*hook)(void *) = c->rank_hook;
+		void *hook_ud = c->rank_ud;
+		for (size_t b = 0; b < c->nbuckets; b++)
+			for (struct centry *e = c->buckets[b]; e; e = e->next)
+				v[n++] = (struct victim){ .key = e->t->key, .hash = e->hash,
+							  .stamp = e->stamp, .cost = e->t->cost_ms,
+							  .size = e->t->size, .layer = e->t->layer };
+		uint64_t hold = clock_now_ns() - t0;
+		xmutex_unlock(&c->mu);
+
+		struct ranking *r = xcalloc(1, sizeof *r);
+		r->foci = foci;
+		r->nfoci = nf;
+		r->T = T;
+		for (size_t i = 0; i < n; i++)
+			v[i].keep = keep_worth(v[i].cost, v[i].layer, nf ? focus_distance(r, &v[i]) : 0);
+		qsort(v, n, sizeof *v, cmp_victim);
+		for (int y = 0; y < NLY; y++)
+			for (int x = 0; x < NLX; x++)
+				free(r->lv[y][x].q);
+		free(r);
+		free(foci);
+		if (hook)
+			hook(hook_ud);
+
+		struct tile **tiles = xmalloc((n ? n : 1) * sizeof *tiles);
+		size_t m = 0;
+		xmutex_lock(&c->mu);
+		uint64_t t1 = clock_now_ns();
+		for (size_t i = 0; i < n && c->bytes > target; i++) {
+			struct centry *e = find(c, &v[i].key, v[i].hash);
+			if (!e || e->stamp != v[i].stamp)
+				continue; /* gone, or used meanwhile */
+			unlink_entry(c, e);
+			tiles[m++] = e->t;
+			free(e);
+			c->evictions++;
+		}
+		uint64_t t2 = clock_now_ns();
+		hold = hold > t2 - t1 ? hold : t2 - t1;
+		c->pruning = false;
+		c->prunes++;
+		c->prune_ns += t2 - t0;
+		if (hold > c->prune_hold_max_ns)
+			c->prune_hold_max_ns = hold;
+		bool again = c->bytes > target;
+		xmutex_unlock(&c->mu);
+		free(v);
+		unref_all(tiles, m);
+		if (!again)
+			return;
+	}
+}
+
 static void insert(struct cache *c, struct tile *t, bool cold)
 {
 	uint64_t h = grid_key_hash(&t->key);
-	struct tile **ev = NULL;
-	size_t nev = 0;
+	bool over = false;
 	uint64_t now = clock_now_ns();
 	xmutex_lock(&c->mu);
 	struct centry *e = find(c, &t->key, h);
@@ -273,12 +352,12 @@ static void insert(struct cache *c, struct tile *t, bool cold)
 		c->inserts++;
 		if (c->ntiles > c->nbuckets)
 			grow(c);
-		/* Prune to 90 % so the next few inserts do not each pay for a full ranking. */
-		if (c->budget && c->bytes > c->budget)
-			prune_locked(c, c->budget - c->budget / 10, &ev, &nev);
+		over = c->budget && c->bytes > c->budget && !c->pruning;
 	}
 	xmutex_unlock(&c->mu);
-	unref_all(ev, nev);
+	/* Prune to 90 % so the next few inserts do not each pay for a full ranking. */
+	if (over)
+		prune(c, c->budget - c->budget / 10);
 }
 
 void cache_insert(struct cache *c, struct tile *t)
@@ -307,14 +386,17 @@ void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, u
 	free(old);
 }
 
+void cache_set_rank_hook(struct cache *c, void (*fn)(void *ud), void *ud)
+{
+	xmutex_lock(&c->mu);
+	c->rank_hook = fn;
+	c->rank_ud = ud;
+	xmutex_unlock(&c->mu);
+}
+
 void cache_prune(struct cache *c, size_t target)
 {
-	struct tile **ev;
-	size_t nev;
-	xmutex_lock(&c->mu);
-	prune_locked(c, target, &ev, &nev);
-	xmutex_unlock(&c->mu);
-	unref_all(ev, nev);
+	prune(c, target);
 }
 
 void cache_stats(struct cache *c, struct cache_stats *out)
@@ -327,6 +409,9 @@ void cache_stats(struct cache *c, struct cache_stats *out)
 	out->bytes = c->bytes;
 	out->tiles = c->ntiles;
 	out->budget = c->budget;
+	out->prunes = c->prunes;
+	out->prune_ns = c->prune_ns;
+	out->prune_hold_max_ns = c->prune_hold_max_ns;
 	xmutex_unlock(&c->mu);
 }
 

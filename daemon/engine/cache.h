@@ -32,6 +32,9 @@ struct cache_focus {
 struct cache_stats {
 	uint64_t hits, misses, inserts, evictions;
 	size_t bytes, tiles, budget;
+	uint64_t prunes;	   /* rankings for eviction */
+	uint64_t prune_ns;	   /* their time, all together */
+	uint64_t prune_hold_max_ns; /* the longest the mutex was held by one of them */
 };
 
 /* A cache holding at most budget_bytes of tile data (0: unlimited). */
@@ -50,9 +53,15 @@ void cache_insert(struct cache *c, struct tile *t);
 void cache_insert_cold(struct cache *c, struct tile *t);
 /* Replaces the focus points pruning measures distance to (copied). */
 void cache_set_foci(struct cache *c, const struct cache_focus *foci, size_t n, uint32_t tile_size);
-/* Evicts until at most `target` bytes remain (least worth keeping first, then least recent). */
+/* Evicts until at most `target` bytes remain (least worth keeping first, then least recent).
+ * Returns at once when another thread is pruning (that thread goes on until its own target
+ * holds). The mutex is held only to copy what the ranking reads and to evict, never while
+ * ranking. */
 void cache_prune(struct cache *c, size_t target);
 void cache_stats(struct cache *c, struct cache_stats *out);
+/* Tests: fn(ud) is called by each ranking for eviction, on the pruning thread, after the copy
+ * and before the evictions, without the mutex (NULL: none). */
+void cache_set_rank_hook(struct cache *c, void (*fn)(void *ud), void *ud);
 /* Calls fn for each cached tile with the time of its last use (the last lookup or insert, as
  * a clock_now_ns time, common/clock.h), under the lock: fn must be quick and must not call the
  * cache. Stops early when fn returns non-zero. */

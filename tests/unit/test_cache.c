@@ -1,7 +1,8 @@
 /* Tile cache tests: hit/miss accounting, the byte budget, pruning by distance to the foci's
  * quads (the quad and its ring survive, far tiles go first), LRU order without foci,
- * costs (cheap intermediate tiles before layer tiles), reference counting across eviction, invalidation by node, last-use times, and concurrent
- * use. */
+ * costs (cheap intermediate tiles before layer tiles), reference counting across eviction,
+ * invalidation by node, last-use times, ranking without the mutex (a tile used meanwhile is
+ * kept), and concurrent use. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -109,6 +110,80 @@ static void lru_without_foci(void **state)
 	insert_new(c, &k[10]); /* 11 tiles > 10: prune to 9 */
 	for (int i = 0; i < 11; i++)
 		assert_int_equal(cache_contains(c, &k[i]), i != 5 && i != 6);
+	cache_destroy(c);
+}
+
+/* During a ranking for eviction, another thread looks a tile up: it must not wait for the
+ * ranking (the mutex is not held while ranking: the event loop looks tiles up), and the tile
+ * it used is kept although it ranked first to go. */
+struct rank_probe {
+	struct cache *c;
+	struct tile_key k;
+	int calls;
+	bool found, done;
+	pthread_mutex_t mu;
+	pthread_cond_t cv;
+};
+
+static void *probe_lookup(void *arg)
+{
+	struct rank_probe *p = arg;
+	struct tile *t = cache_lookup(p->c, &p->k);
+	pthread_mutex_lock(&p->mu);
+	p->found = t != NULL;
+	p->done = true;
+	pthread_cond_signal(&p->cv);
+	pthread_mutex_unlock(&p->mu);
+	tile_unref(t);
+	return NULL;
+}
+
+static void rank_hook(void *ud)
+{
+	struct rank_probe *p = ud;
+	p->calls++;
+	pthread_t th;
+	assert_int_equal(pthread_create(&th, NULL, probe_lookup, p), 0);
+	struct timespec dl;
+	clock_gettime(CLOCK_REALTIME, &dl);
+	dl.tv_sec += 10;
+	pthread_mutex_lock(&p->mu);
+	while (!p->done)
+		if (pthread_cond_timedwait(&p->cv, &p->mu, &dl) != 0)
+			break;
+	bool done = p->done;
+	pthread_mutex_unlock(&p->mu);
+	if (!done)
+		fail_msg("a lookup waited 10 s for the ranking: the ranking holds the cache's mutex");
+	pthread_join(th, NULL);
+}
+
+static void ranking_without_the_lock(void **state)
+{
+	(void)state;
+	struct cache *c = cache_create(10 * TILE_BYTES);
+	struct tile_key k[11];
+	for (uint32_t i = 0; i < 11; i++)
+		k[i] = key(1, 4, 3, i, 0);
+	for (int i = 0; i < 10; i++)
+		insert_new(c, &k[i]);
+	struct rank_probe p = { .c = c, .k = k[0] };
+	pthread_mutex_init(&p.mu, NULL);
+	pthread_cond_init(&p.cv, NULL);
+	cache_set_rank_hook(c, rank_hook, &p);
+	insert_new(c, &k[10]); /* 11 tiles > 10: prune to 9; 0, 1 and 2 rank first to go */
+	assert_int_equal(p.calls, 1);
+	assert_true(p.found);
+	for (int i = 0; i < 11; i++)
+		assert_int_equal(cache_contains(c, &k[i]), i != 1 && i != 2);
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.prunes, 1);
+	assert_int_equal(st.evictions, 2);
+	assert_true(st.prune_hold_max_ns <= st.prune_ns);
+	cache_set_rank_hook(c, NULL, NULL);
+	pthread_cond_destroy(&p.cv);
+	pthread_mutex_destroy(&p.mu);
 	cache_destroy(c);
 }
 
@@ -455,6 +530,7 @@ int main(void)
 		cmocka_unit_test(hit_miss),
 		cmocka_unit_test(budget_respected),
 		cmocka_unit_test(lru_without_foci),
+		cmocka_unit_test(ranking_without_the_lock),
 		cmocka_unit_test(prune_keeps_quad_and_ring),
 		cmocka_unit_test(budget_prune_uses_foci),
 		cmocka_unit_test(cheap_intermediates_go_first),
