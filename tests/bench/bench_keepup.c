@@ -60,7 +60,7 @@
 #define DEG (M_PI / 180.0)
 #define HZ 60.0
 #define MAX_WANTS 4096
-#define MAX_NODES 32
+#define MAX_NODES 64 /* the procedural planet has 36 */
 #define WIDTH 1280
 #define HEIGHT 720
 #define N_PHI 256
