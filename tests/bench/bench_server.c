@@ -218,10 +218,12 @@ static void *bare_send(void *arg)
 	if (fd < 0)
 		die("bare: accept");
 	size_t passes = b->frames / (size_t)b->distinct;
+	size_t chunk = b->buf.len / (size_t)b->distinct * BARE_BATCH; /* 2 MiB a call, at most */
 	for (size_t i = 0; i < passes; i++) {
 		size_t off = 0;
 		while (off < b->buf.len) {
-			ssize_t n = send(fd, b->buf.data + off, b->buf.len - off, MSG_NOSIGNAL);
+			size_t k = b->buf.len - off < chunk ? b->buf.len - off : chunk;
+			ssize_t n = send(fd, b->buf.data + off, k, MSG_NOSIGNAL);
 			if (n <= 0)
 				die("bare: send");
 			off += (size_t)n;
