@@ -533,6 +533,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "sched.queued.visible", ss.queued[SCHED_VISIBLE]);
 	stat_u(&b, "sched.queued.web", ss.queued[SCHED_WEB]);
 	stat_u(&b, "sched.queued.prefetch", ss.queued[SCHED_PREFETCH]);
+	stat_u(&b, "sched.queued.ahead", ss.queued[SCHED_AHEAD]);
 	stat_u(&b, "sched.queued.bulk", ss.queued[SCHED_BULK]);
 	stat_u(&b, "sched.waiting", ss.waiting);
 	stat_u(&b, "sched.workers", (uint64_t)ss.workers);

@@ -85,7 +85,7 @@ struct session {
 	struct wantset_entry *scratch; /* a WANT's entries, reused */
 	size_t capscratch;
 	struct sched_req *req;
-	struct sched_req *ahead; /* the look-ahead along the path (lookahead.h): bulk, unsent */
+	struct sched_req *ahead; /* the look-ahead along the path (lookahead.h): unsent */
 	uint64_t focus_ns;	 /* when the last WANT's focus came */
 	size_t nahead;		 /* tiles the look-ahead holds wanted now */
 	struct ready_src *src; /* this session's handle on the ready queue (reference) */
@@ -554,11 +554,11 @@ static enum sched_class sched_class_of(uint8_t proto_cls)
 {
 	return proto_cls == PROTO_CLASS_VISIBLE	   ? SCHED_VISIBLE
 	       : proto_cls == PROTO_CLASS_PREFETCH ? SCHED_PREFETCH
-						   : SCHED_BULK;
+						   : SCHED_AHEAD; /* a viewer's, not an operator's */
 }
 
-/* Asks the scheduler, at bulk class, for the tiles this WANT's visible ones become along the
- * focus's motion (lookahead.h); replaces the last look-ahead, so a turn or a stop cancels
+/* Asks the scheduler, at the ahead class (into the memory cache, even from the store), for
+ * the tiles this WANT's visible ones become along the focus's motion (lookahead.h); replaces the last look-ahead, so a turn or a stop cancels
  * what was queued for the old path. The velocity is the client's, else the focus's last
  * move. */
 static void look_ahead(struct session *s, const struct proto_want *w, const struct planet *p,
@@ -582,7 +582,7 @@ static void look_ahead(struct session *s, const struct proto_want *w, const stru
 	struct want *list = n ? xmalloc(n * sizeof *list) : NULL;
 	for (size_t i = 0; i < n; i++) {
 		struct node *nd = p->layers[ahead[i].layer].node;
-		list[i] = (struct want){ .node = nd, .cls = SCHED_BULK,
+		list[i] = (struct want){ .node = nd, .cls = SCHED_AHEAD,
 					 .key = { .node = nd->hash, .lx = ahead[i].lx,
 						  .ly = ahead[i].ly, .x = ahead[i].x,
 						  .y = ahead[i].y } };

@@ -539,7 +539,8 @@ static void lower_priority(struct sched *s)
 }
 
 /* A from_store job: the tile from the store, else the job goes back to the manager with no
- * result to be generated. Bulk work (prefetch) finding it there leaves the memory cache alone. */
+ * result to be generated. Bulk work (operator prefetch) finding it there leaves the memory
+ * cache alone; every other class, a viewer's look-ahead (SCHED_AHEAD) included, puts it there. */
 static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sched_class cls)
 {
 	const struct node *n = j->node;

@@ -32,7 +32,12 @@ enum sched_class {
 			 * must not starve it), before speculative prefetch (a person or a
 			 * program waits on each one) */
 	SCHED_PREFETCH, /* the ring around and the path ahead */
-	SCHED_BULK,	/* operator prefetch jobs */
+	SCHED_AHEAD,	/* a viewer's speculation: its look-ahead rows (the protocol's bulk class
+			 * from a session) and the server's look-ahead along its path
+			 * (lookahead.h); after the ring, before operator jobs, and like the
+			 * classes above its tiles go into the memory cache, also those loaded
+			 * from the store */
+	SCHED_BULK,	/* operator prefetch jobs: with a store, kept on disk only */
 	SCHED_NCLASS
 };
 

@@ -395,7 +395,8 @@ static void cl_wait_idle(struct cl *c)
 {
 	for (int i = 0; i < 1500; i++) {
 		if (cl_stat(c, "sched.queued.visible") + cl_stat(c, "sched.queued.prefetch") +
-			    cl_stat(c, "sched.queued.bulk") + cl_stat(c, "sched.waiting") +
+			    cl_stat(c, "sched.queued.ahead") + cl_stat(c, "sched.queued.bulk") +
+			    cl_stat(c, "sched.waiting") +
 			    cl_stat(c, "sched.workers.busy") ==
 		    0)
 			return;

@@ -132,7 +132,8 @@ static struct counts daemon_counts(struct env *e, bool written)
 	if (written && net_stat_wait_zero(c, "store.disk.queued", (int)test_slow(60) * 1000, err))
 		fail_msg("%s", err);
 	static const char *const busy[] = { "sched.workers.busy", "sched.queued.bulk",
-					    "sched.queued.visible", "sched.queued.prefetch" };
+					    "sched.queued.visible", "sched.queued.prefetch",
+					    "sched.queued.ahead" };
 	for (int i = 0; i < 100; i++) {
 		uint64_t n = 0, v;
 		for (size_t k = 0; k < sizeof busy / sizeof busy[0]; k++)

@@ -29,6 +29,7 @@
 #include "engine/node.h"
 #include "engine/planet.h"
 #include "engine/sched.h"
+#include "engine/store.h"
 #include "engine/tile.h"
 
 #define T 16
@@ -1234,6 +1235,56 @@ static void many_workers_handoff(void **state)
 	world_free(w);
 }
 
+/* A viewer's look-ahead (SCHED_AHEAD) loaded from the store goes into the memory cache, where
+ * the viewer's WANT finds it moments later; an operator's bulk job loading the same way
+ * leaves the cache alone (it must not flush what viewers use). Before SCHED_AHEAD both were
+ * bulk, and over a restarted daemon's store a viewer's look-ahead only read the disk. */
+static void ahead_loads_into_cache_bulk_does_not(void **state)
+{
+	(void)state;
+	char dir[] = "/tmp/clipmap-test-sched-XXXXXX", path[64], lock[80], err[256];
+	assert_non_null(mkdtemp(dir));
+	snprintf(path, sizeof path, "%s/store.mdb", dir);
+	snprintf(lock, sizeof lock, "%s-lock", path);
+	struct store *st = NULL;
+	assert_int_equal(store_open_file(path, 64, &st, err), 0);
+	struct world *w = world_new(1, 0);
+	struct planet_layer layer = { .name = "h", .node = &w->a, .type = PIX_HEIGHT };
+	w->planet.layers = &layer;
+	w->planet.nlayers = 1;
+	sched_destroy(w->sched);
+	w->sched = sched_create(&(struct sched_desc){ .cache = w->cache, .store = st, .workers = 1 });
+	assert_non_null(w->sched);
+	struct want make[2] = { mkwant(&w->a, 3, 1, 1, SCHED_VISIBLE),
+				mkwant(&w->a, 3, 2, 1, SCHED_VISIBLE) };
+	struct tile *out[2];
+	assert_int_equal(sched_fetch(w->sched, make, 2, out), 0);
+	tile_unref(out[0]);
+	tile_unref(out[1]);
+	assert_int_equal(store_flush(st), 0);
+	cache_prune(w->cache, 0);
+	struct want bulk = mkwant(&w->a, 3, 1, 1, SCHED_BULK), ahead = mkwant(&w->a, 3, 2, 1, SCHED_AHEAD);
+	assert_false(cache_contains(w->cache, &bulk.key));
+	assert_false(cache_contains(w->cache, &ahead.key));
+	assert_int_equal(sched_fetch(w->sched, &bulk, 1, out), 0);
+	assert_true(tile_ok(&w->a, out[0], &bulk.key));
+	tile_unref(out[0]);
+	assert_int_equal(sched_fetch(w->sched, &ahead, 1, out), 0);
+	assert_true(tile_ok(&w->a, out[0], &ahead.key));
+	tile_unref(out[0]);
+	struct sched_stats ss;
+	sched_get_stats(w->sched, &ss);
+	assert_int_equal(ss.generated, 2);
+	assert_int_equal(ss.loaded, 2);
+	assert_false(cache_contains(w->cache, &bulk.key));
+	assert_true(cache_contains(w->cache, &ahead.key));
+	world_free(w);
+	store_destroy(st);
+	unlink(path);
+	unlink(lock);
+	rmdir(dir);
+}
+
 int main(void)
 {
 	alarm(240); /* a deadlock fails the run instead of hanging it */
@@ -1252,6 +1303,7 @@ int main(void)
 		cmocka_unit_test(stress),
 		cmocka_unit_test(many_workers_handoff),
 		cmocka_unit_test(wide_many_wanters),
+		cmocka_unit_test(ahead_loads_into_cache_bulk_does_not),
 	};
 	return cmocka_run_group_tests_name("sched", tests, NULL, NULL);
 }
