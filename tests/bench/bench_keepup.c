@@ -300,6 +300,7 @@ struct frame {
 	bool complete;
 	int lmin, lmax, llast, received;
 	int dmax, stale; /* the finest detail level; the first level whose held quad is not its target (-1) */
+	int stale_lx[2];  /* that level's held and target lx */
 	double cpu_ms;
 };
 
@@ -366,8 +367,11 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 		const struct grid_quad *h = view_clipmap_held(c->cm, l);
 		const struct grid_quad *t = view_clipmap_target_of(c->cm, l);
 		complete = h && t && grid_quad_equal(h, t);
-		if (!complete)
+		if (!complete) {
 			f->stale = l;
+			f->stale_lx[0] = h ? h->lx : -1;
+			f->stale_lx[1] = t ? t->lx : -1;
+		}
 	}
 	f->dmax = dmax;
 	f->complete = complete;
@@ -617,9 +621,11 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		}
 		if (getenv("KEEPUP_DEBUG"))
 			fprintf(stderr,
-				"    t %.3f full %d lmin %d llast %d lmax %d dmax %d stale %d recv %d ms %.1f\n",
+				"    t %.3f full %d lmin %d llast %d lmax %d dmax %d stale %d (lx %d of %d) "
+				"recv %d ms %.1f lat %.2f\n",
 				t, fr[n].complete, fr[n].lmin, fr[n].llast, fr[n].lmax, fr[n].dmax,
-				fr[n].stale, fr[n].received, fr[n].cpu_ms);
+				fr[n].stale, fr[n].stale_lx[0], fr[n].stale_lx[1], fr[n].received,
+				fr[n].cpu_ms, lat);
 		if (t >= warm_s) {
 			ms[counted++] = fr[n].cpu_ms;
 			full += fr[n].complete;
