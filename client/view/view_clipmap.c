@@ -15,14 +15,12 @@
 #include "common/xalloc.h"
 #include "view_levels.h"
 
-/* Per role: the window's tiles and their ring ((n+3)², a line of the ring n+3 long), the
- * look-ahead (≤ 2 × AHEAD_MAX lines) and the window of the next lx ((n+1)²). */
+/* Per role: the window's tiles and their ring ((n+3)², a line of the ring n+3 long) and the
+ * look-ahead (≤ 2 × AHEAD_MAX lines). */
 #define AHEAD_MAX 2
 #define LINE (CLIPMAP_WINDOW_TILES + 3)
-#define NEXT_TILES ((CLIPMAP_WINDOW_TILES + 1) * (CLIPMAP_WINDOW_TILES + 1))
-#define SLOTS (LINE * LINE + LINE * 2 * AHEAD_MAX + NEXT_TILES)
+#define SLOTS (LINE * LINE + LINE * 2 * AHEAD_MAX)
 #define AHEAD_LEAD_S 0.15   /* look ahead as far as the camera moves in this time */
-#define NEXT_LEAD_S 0.4	    /* ask for the window of the next lx this long before it is due */
 #define AHEAD_CAP 160	    /* look-ahead tiles per want-set, all levels and roles together */
 
 struct slot {
@@ -36,8 +34,6 @@ struct level {
 	int ahead[2]; /* look-ahead lines beyond the ring: x (signed: + east), y (+ south) */
 	int side[2];  /* per axis (x, y): the side (−1 west/north, +1 east/south) whose ring
 		       * line is prefetched while the camera moves; 0: both */
-	bool has_next;	       /* the camera moves to where this level uses another lx: */
-	struct grid_quad next; /* its window there, asked for (look-ahead) before it is due */
 	struct slot slots[VIEW_NROLES][SLOTS];
 	float *hmirror; /* S × S heights, toroidal like the texture; NULL until first upload */
 	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
@@ -220,8 +216,6 @@ static bool wanted(const struct level *L, const struct tile_key *k)
 		return false;
 	if (grid_quad_distance(&L->target, k) <= 1)
 		return true;
-	if (L->has_next && grid_quad_distance(&L->next, k) == 0)
-		return true;
 	struct tile_key a[LINE * 2 * AHEAD_MAX];
 	int n = ahead_tiles(L, a);
 	for (int i = 0; i < n; i++)
@@ -308,47 +302,9 @@ bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double
 			L->side[1] = sd[1];
 			changed = true;
 		}
-		/* Where the camera will be NEXT_LEAD_S on, this level may use another lx (the
-		 * levels turn coarser in x towards a pole, finer away from it: clipmap_level_lx).
-		 * Its window there is a new set of tiles, none of them in the ring or the rows
-		 * ahead (those stop where the lx changes): asked for now, they are here when the
-		 * level switches. Without it each switch waited a round trip with the level
-		 * stale (a pole flight's short frames were all such switches). Not across a
-		 * pole (the next point is then behind the camera's frame). */
-		bool has_next = false;
-		struct grid_quad next = { 0 };
-		if (L->has_target && cm->v_lat != 0) { /* lx follows latitude alone */
-			double la = cm->m_lat + cm->v_lat * NEXT_LEAD_S;
-			double lo = cm->m_lon + cm->v_lon * NEXT_LEAD_S;
-			if (la > -90 && la < 90) {
-				int now = clipmap_level_lx(l, cm->m_lat, L->target.lx);
-				int lx = clipmap_level_lx(l, la, now);
-				if (lx != now && grid_level_valid(lx, l)) {
-					/* the window where the switch happens: the first point of
-					 * the path on the other lx (bisection) */
-					double f0 = 0, f1 = 1;
-					for (int i = 0; i < 24; i++) {
-						double f = (f0 + f1) / 2;
-						if (clipmap_level_lx(l, cm->m_lat + (la - cm->m_lat) * f,
-								     now) != now)
-							f1 = f;
-						else
-							f0 = f;
-					}
-					grid_window(lx, l, L->target.T, cm->S,
-						    remainder(cm->m_lon + (lo - cm->m_lon) * f1, 360.0),
-						    cm->m_lat + (la - cm->m_lat) * f1, &next);
-					has_next = true;
-				}
-			}
-		}
-		bool next_changed = has_next != L->has_next ||
-				    (has_next && !grid_quad_equal(&next, &L->next));
-		if (a[0] != L->ahead[0] || a[1] != L->ahead[1] || next_changed) {
+		if (a[0] != L->ahead[0] || a[1] != L->ahead[1]) {
 			L->ahead[0] = a[0];
 			L->ahead[1] = a[1];
-			L->has_next = has_next;
-			L->next = next;
 			changed = true;
 			drop_unwanted(cm, L);
 		}
@@ -370,7 +326,6 @@ bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_q
 		L->has_target = false;
 		L->ahead[0] = L->ahead[1] = 0;
 		L->side[0] = L->side[1] = 0;
-		L->has_next = false;
 		for (int r = 0; r < VIEW_NROLES; r++)
 			for (int i = 0; i < SLOTS; i++)
 				drop(cm, &L->slots[r][i]);
@@ -432,22 +387,17 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
 			if (!L->has_target)
 				continue;
 			struct tile_key k[SLOTS];
-			/* look-ahead: the next lx's window first (not counted against AHEAD_CAP:
-			 * at most (n+1)² a level, and only near where a level's lx changes),
-			 * then the rows ahead */
-			int nnext = pass == 2 && L->has_next ? grid_quad_tiles(&L->next, 0, k) : 0;
 			int nk = pass == 0   ? grid_quad_tiles(&L->target, 0, k)
 				 : pass == 1 ? ring_tiles(L, k)
-					     : nnext + ahead_tiles(L, k + nnext);
+					     : ahead_tiles(L, k);
 			for (int r = 0; r < VIEW_NROLES; r++) {
 				if (cm->layer[r] < 0)
 					continue;
 				for (int i = 0; i < nk; i++) {
-					bool capped = pass == 2 && i >= nnext;
 					if (find(L, r, &k[i]) || n >= cap ||
-					    (capped && ahead >= AHEAD_CAP))
+					    (pass == 2 && ahead >= AHEAD_CAP))
 						continue;
-					ahead += capped;
+					ahead += pass == 2;
 					out[n++] = (struct view_want){ (uint8_t)cm->layer[r], cls[pass],
 								       k[i] };
 				}

@@ -95,15 +95,23 @@ static void budget_respected(void **state)
 	cache_destroy(c);
 }
 
-static void lru_without_foci(void **state)
+/* A cache of room for 10 tiles holding the first 10 of the 11 keys it writes to k (one level,
+ * one row), inserted in order: k[0] is the least recently used. */
+static struct cache *ten_of_eleven(struct tile_key k[11])
 {
-	(void)state;
 	struct cache *c = cache_create(10 * TILE_BYTES);
-	struct tile_key k[11];
 	for (uint32_t i = 0; i < 11; i++)
 		k[i] = key(1, 4, 3, i, 0);
 	for (int i = 0; i < 10; i++)
 		insert_new(c, &k[i]);
+	return c;
+}
+
+static void lru_without_foci(void **state)
+{
+	(void)state;
+	struct tile_key k[11];
+	struct cache *c = ten_of_eleven(k);
 	/* Use 0..4 again: 5 and 6 become the least recently used. */
 	for (int i = 0; i < 5; i++)
 		tile_unref(cache_lookup(c, &k[i]));
@@ -161,12 +169,8 @@ static void rank_hook(void *ud)
 static void ranking_without_the_lock(void **state)
 {
 	(void)state;
-	struct cache *c = cache_create(10 * TILE_BYTES);
 	struct tile_key k[11];
-	for (uint32_t i = 0; i < 11; i++)
-		k[i] = key(1, 4, 3, i, 0);
-	for (int i = 0; i < 10; i++)
-		insert_new(c, &k[i]);
+	struct cache *c = ten_of_eleven(k);
 	struct rank_probe p = { .c = c, .k = k[0] };
 	pthread_mutex_init(&p.mu, NULL);
 	pthread_cond_init(&p.cv, NULL);

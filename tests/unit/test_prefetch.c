@@ -213,6 +213,32 @@ static void estimate_near_count(void **state)
 	planet_unref(p);
 }
 
+/* A corridor over the pole (the keep-up bench's pole route at 80 km: 156.5 km wide at level 9,
+ * every layer) runs within the daemon's default limit of 250 000 tiles. Its path was once
+ * sampled some 50 times a tile near the pole (a step of cos(lat), not of the viewers' tiles
+ * there, wider on their coarser lx), and the job stopped on its samples with 747 tiles to make. */
+static void pole_corridor_within_limit(void **state)
+{
+	(void)state;
+	struct planet *p = load();
+	struct proto_lonlat pts[2] = { { 0.0, 88.0 }, { 180.0, 87.11 } };
+	struct proto_prefetch m = { .id = 6, .layers = 0, .shape = PROTO_SHAPE_PATH, .lmin = 9,
+				    .lmax = 9, .width_m = 156.5e3, .npoints = 2, .points = pts };
+	struct prefetch_iter *it;
+	char err[256];
+	assert_int_equal(prefetch_iter_create(p, &m, 250000, &it, err), 0);
+	struct want w[512];
+	size_t n = 0, got;
+	while ((got = prefetch_iter_next(it, w, 512)) > 0)
+		n += got;
+	if (prefetch_iter_error(it, err))
+		fail_msg("%s", err);
+	printf("pole corridor at level 9: %zu tiles (every layer)\n", n);
+	assert_true(n > 0 && n < 10000);
+	prefetch_iter_destroy(it);
+	planet_unref(p);
+}
+
 /* Hostile sizes (issue 14) are seen by the estimate, which enumerates nothing: the 67-byte
  * corridor 9.55e6 m wide at level 22 and the whole planet at level 11 (25 M tiles); an
  * iterator whose level passes its limit stops with -E2BIG. */
@@ -269,6 +295,7 @@ int main(void)
 		cmocka_unit_test(corridor_keeps_width),
 		cmocka_unit_test(estimate_near_count),
 		cmocka_unit_test(hostile_sizes),
+		cmocka_unit_test(pole_corridor_within_limit),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
