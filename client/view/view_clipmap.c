@@ -15,12 +15,14 @@
 #include "common/xalloc.h"
 #include "view_levels.h"
 
-/* Per role: the window's tiles and their ring ((n+3)², a line of the ring n+3 long) and the
- * look-ahead (≤ 2 × AHEAD_MAX lines). */
+/* Per role: the window's tiles and their ring ((n+3)², a line of the ring n+3 long), the
+ * look-ahead (≤ 2 × AHEAD_MAX lines) and the window of the next lx ((n+1)²). */
 #define AHEAD_MAX 2
 #define LINE (CLIPMAP_WINDOW_TILES + 3)
-#define SLOTS (LINE * LINE + LINE * 2 * AHEAD_MAX)
+#define NEXT_TILES ((CLIPMAP_WINDOW_TILES + 1) * (CLIPMAP_WINDOW_TILES + 1))
+#define SLOTS (LINE * LINE + LINE * 2 * AHEAD_MAX + NEXT_TILES)
 #define AHEAD_LEAD_S 0.15   /* look ahead as far as the camera moves in this time */
+#define NEXT_LEAD_S 0.4	    /* ask for the window of the next lx this long before it is due */
 #define AHEAD_CAP 160	    /* look-ahead tiles per want-set, all levels and roles together */
 
 struct slot {
@@ -34,6 +36,8 @@ struct level {
 	int ahead[2]; /* look-ahead lines beyond the ring: x (signed: + east), y (+ south) */
 	int side[2];  /* per axis (x, y): the side (−1 west/north, +1 east/south) whose ring
 		       * line is prefetched while the camera moves; 0: both */
+	bool has_next;	       /* the camera moves to where this level uses another lx: */
+	struct grid_quad next; /* its window there, asked for (look-ahead) before it is due */
 	struct slot slots[VIEW_NROLES][SLOTS];
 	float *hmirror; /* S × S heights, toroidal like the texture; NULL until first upload */
 	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
@@ -216,6 +220,8 @@ static bool wanted(const struct level *L, const struct tile_key *k)
 		return false;
 	if (grid_quad_distance(&L->target, k) <= 1)
 		return true;
+	if (L->has_next && grid_quad_distance(&L->next, k) == 0)
+		return true;
 	struct tile_key a[LINE * 2 * AHEAD_MAX];
 	int n = ahead_tiles(L, a);
 	for (int i = 0; i < n; i++)
@@ -232,13 +238,37 @@ static void drop_unwanted(struct view_clipmap *cm, struct level *L)
 				drop(cm, &L->slots[r][i]);
 }
 
+/* Where the camera will be t seconds on: along the great circle of its smoothed ground
+ * motion (its east and north components; across a pole too). */
+static void path_point(const struct view_clipmap *cm, double t, double *lat, double *lon)
+{
+	const double rad = M_PI / 180.0;
+	double p1 = cm->m_lat * rad;
+	/* degrees of arc per second; within 10° of a pole the smoothed longitude rate is still
+	 * full of a turn about the pole or a crossing (a camera circling it sweeps 360°/s), so
+	 * only the motion north or south is followed there */
+	double ve = fabs(cm->m_lat) < 80 ? cm->v_lon * cos(p1) : 0, vn = cm->v_lat;
+	double d = hypot(ve, vn) * t * rad, th = atan2(ve, vn);
+	double p2 = asin(fmax(-1.0, fmin(1.0, sin(p1) * cos(d) + cos(p1) * sin(d) * cos(th))));
+	double l2 = cm->m_lon * rad + atan2(sin(th) * sin(d) * cos(p1), cos(d) - sin(p1) * sin(p2));
+	*lat = p2 / rad;
+	*lon = remainder(l2 / rad, 360.0);
+}
+
 bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t)
 {
 	if (cm->has_motion && t > cm->m_t) {
 		double dt = t - cm->m_t, a = fmin(1.0, dt / 0.1); /* ~0.1 s smoothing */
 		double dlon = remainder(lon - cm->m_lon, 360.0), dlat = lat - cm->m_lat;
-		cm->v_lon += a * (dlon / dt - cm->v_lon);
-		cm->v_lat += a * (dlat / dt - cm->v_lat);
+		if (fabs(dlon) > 90) {
+			/* across a pole: the longitude jumped, and north turned to south. A rate
+			 * from this step would be ~180° a frame, which the smoothing took most
+			 * of a second to forget (the look-ahead went sideways off the path). */
+			cm->v_lat = -cm->v_lat;
+		} else {
+			cm->v_lon += a * (dlon / dt - cm->v_lon);
+			cm->v_lat += a * (dlat / dt - cm->v_lat);
+		}
 	} else if (!cm->has_motion) {
 		cm->v_lon = cm->v_lat = 0;
 	}
@@ -302,9 +332,46 @@ bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double
 			L->side[1] = sd[1];
 			changed = true;
 		}
-		if (a[0] != L->ahead[0] || a[1] != L->ahead[1]) {
+		/* Where the camera will be NEXT_LEAD_S on, this level may use another lx (the
+		 * levels turn coarser in x towards a pole, finer away from it: clipmap_level_lx).
+		 * Its window there is a new set of tiles, none of them in the ring or the rows
+		 * ahead (those stop where the lx changes): asked for now, they are here when the
+		 * level switches. Without it each switch waited a round trip with the level
+		 * stale (a pole flight's short frames were all such switches). */
+		bool has_next = false;
+		struct grid_quad next = { 0 };
+		if (L->has_target && cm->v_lat != 0) { /* lx follows latitude alone */
+			int now = clipmap_level_lx(l, cm->m_lat, L->target.lx);
+			double lat_f, lon_f;
+			path_point(cm, NEXT_LEAD_S, &lat_f, &lon_f);
+			int lx = clipmap_level_lx(l, lat_f, now);
+			if (lx != now && grid_level_valid(lx, l)) {
+				/* the window where the switch happens: the first point of the path
+				 * on the other lx (bisection) */
+				double f0 = 0, f1 = 1;
+				for (int i = 0; i < 24; i++) {
+					double f = (f0 + f1) / 2;
+					path_point(cm, NEXT_LEAD_S * f, &lat_f, &lon_f);
+					if (clipmap_level_lx(l, lat_f, now) != now)
+						f1 = f;
+					else
+						f0 = f;
+				}
+				path_point(cm, NEXT_LEAD_S * f1, &lat_f, &lon_f);
+				/* the lx there: the first change, not the lx at the end of the lead
+				 * (near a pole a level changes lx several times within it) */
+				lx = clipmap_level_lx(l, lat_f, now);
+				grid_window(lx, l, L->target.T, cm->S, lon_f, lat_f, &next);
+				has_next = true;
+			}
+		}
+		bool next_changed = has_next != L->has_next ||
+				    (has_next && !grid_quad_equal(&next, &L->next));
+		if (a[0] != L->ahead[0] || a[1] != L->ahead[1] || next_changed) {
 			L->ahead[0] = a[0];
 			L->ahead[1] = a[1];
+			L->has_next = has_next;
+			L->next = next;
 			changed = true;
 			drop_unwanted(cm, L);
 		}
@@ -326,6 +393,7 @@ bool view_clipmap_target(struct view_clipmap *cm, int level, const struct grid_q
 		L->has_target = false;
 		L->ahead[0] = L->ahead[1] = 0;
 		L->side[0] = L->side[1] = 0;
+		L->has_next = false;
 		for (int r = 0; r < VIEW_NROLES; r++)
 			for (int i = 0; i < SLOTS; i++)
 				drop(cm, &L->slots[r][i]);
@@ -387,17 +455,22 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
 			if (!L->has_target)
 				continue;
 			struct tile_key k[SLOTS];
+			/* look-ahead: the next lx's window first (not counted against AHEAD_CAP:
+			 * at most (n+1)² a level, and only near where a level's lx changes),
+			 * then the rows ahead */
+			int nnext = pass == 2 && L->has_next ? grid_quad_tiles(&L->next, 0, k) : 0;
 			int nk = pass == 0   ? grid_quad_tiles(&L->target, 0, k)
 				 : pass == 1 ? ring_tiles(L, k)
-					     : ahead_tiles(L, k);
+					     : nnext + ahead_tiles(L, k + nnext);
 			for (int r = 0; r < VIEW_NROLES; r++) {
 				if (cm->layer[r] < 0)
 					continue;
 				for (int i = 0; i < nk; i++) {
+					bool capped = pass == 2 && i >= nnext;
 					if (find(L, r, &k[i]) || n >= cap ||
-					    (pass == 2 && ahead >= AHEAD_CAP))
+					    (capped && ahead >= AHEAD_CAP))
 						continue;
-					ahead += pass == 2;
+					ahead += capped;
 					out[n++] = (struct view_want){ (uint8_t)cm->layer[r], cls[pass],
 								       k[i] };
 				}

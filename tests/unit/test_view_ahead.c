@@ -1,7 +1,9 @@
 /* view_clipmap look-ahead (view_clipmap_motion): a camera moving east gets the lines of tiles
  * beyond the ring on the levels it crosses quickly, ranked after every quad and ring tile;
  * the tiles it got ahead make the next quad complete without asking again; reversing drops
- * them. While it moves, the ring is asked for only on the side it moves to. A synthetic source delivers every wanted tile at once (zeros). Needs a GL context
+ * them. While it moves, the ring is asked for only on the side it moves to. Flying north
+ * towards where a level's lx changes, the new lx's window is asked for before the switch. A
+ * synthetic source delivers every wanted tile at once (zeros). Needs a GL context
  * (llvmpipe); skipped without one.
  */
 #include <stdarg.h>
@@ -17,6 +19,7 @@
 #include "client/view/gl_context.h"
 #include "client/view/view_clipmap.h"
 #include "client/view/view_levels.h"
+#include "common/clipmap.h"
 #include "common/xalloc.h"
 #include "support/synth_source.h"
 
@@ -172,8 +175,82 @@ static void look_ahead(void **state)
 	gl_context_destroy(ctx);
 }
 
+/* Targets at (lon, lat) on every level as the viewer sets them: each level's lx from
+ * clipmap_level_lx, with the hysteresis of the lx it has. */
+static void aim_at(struct view_clipmap *cm, double lon, double lat)
+{
+	for (int l = 0; l < NLEVELS; l++) {
+		const struct grid_quad *cur = view_clipmap_target_of(cm, l);
+		struct grid_quad q;
+		grid_window(clipmap_level_lx(l, lat, cur ? cur->lx : -1), l, T,
+			    CLIPMAP_WINDOW_TILES * T, lon, lat, &q);
+		view_clipmap_target(cm, l, &q);
+	}
+}
+
+/* Flying north towards where level 8 turns coarser in x (its lx drops): the window of the
+ * new lx is asked for at look-ahead class before the level gets there, so the level is
+ * complete the moment it switches, without waiting for a tile. Before, nothing of the new
+ * lx was asked for until the switch (a pole flight's short frames were all such waits). */
+static void next_lx_window(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = NULL;
+	char err[256];
+	if (gl_context_create(GL_BACKEND_AUTO, &ctx, err) < 0) {
+		printf("view_ahead: skipped (no GL: %s)\n", err);
+		skip();
+	}
+	enum { L8 = 8 };
+	/* where level 8's lx first changes going north */
+	int lx0 = clipmap_level_lx(L8, 40.0, -1), thr_lx = lx0;
+	double thr = 40.0;
+	while (thr < 89 && (thr_lx = clipmap_level_lx(L8, thr, lx0)) == lx0)
+		thr += 0.01;
+	assert_true(thr < 89 && thr_lx < lx0);
+
+	struct view_source *s = src_create();
+	struct view_clipmap *cm = NULL;
+	assert_int_equal(view_clipmap_create(gl_context_api(ctx), s, NLEVELS, &cm, err), 0);
+	struct view_want *w = xmalloc(MAX_WANTS * sizeof *w);
+	double lon = 20.0, lat = thr - 0.65, t = 0; /* north at 1°/s: 0.65 s short of it */
+	bool asked_next = false, switched = false;
+	for (int k = 0; k < 12 && !switched; k++) {
+		aim_at(cm, lon, lat);
+		const struct grid_quad *q = view_clipmap_target_of(cm, L8);
+		assert_non_null(q);
+		if (q->lx != lx0) {
+			/* the switch: every tile of the new window is here already */
+			assert_int_equal(q->lx, thr_lx);
+			assert_true(asked_next);
+			assert_int_equal(view_clipmap_update(cm, L8), 1);
+			switched = true;
+			break;
+		}
+		view_clipmap_motion(cm, lon, lat, t);
+		size_t n = ask(cm, s, w);
+		for (size_t i = 0; i < n; i++)
+			if (w[i].key.ly == L8 && w[i].key.lx == thr_lx) {
+				assert_int_equal(w[i].cls, VIEW_CLASS_AHEAD);
+				asked_next = true;
+			}
+		while (view_clipmap_receive(cm) > 0)
+			;
+		for (int l = 0; l < NLEVELS; l++)
+			view_clipmap_update(cm, l);
+		t += 0.1;
+		lat += 0.1;
+	}
+	assert_true(switched);
+	free(w);
+	view_clipmap_destroy(cm);
+	view_source_destroy(s);
+	gl_context_destroy(ctx);
+}
+
 int main(void)
 {
-	const struct CMUnitTest tests[] = { cmocka_unit_test(look_ahead) };
+	const struct CMUnitTest tests[] = { cmocka_unit_test(look_ahead),
+					    cmocka_unit_test(next_lx_window) };
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
