@@ -243,16 +243,12 @@ static void drop_unwanted(struct view_clipmap *cm, struct level *L)
 static void path_point(const struct view_clipmap *cm, double t, double *lat, double *lon)
 {
 	const double rad = M_PI / 180.0;
-	double p1 = cm->m_lat * rad;
 	/* degrees of arc per second; within 10° of a pole the smoothed longitude rate is still
 	 * full of a turn about the pole or a crossing (a camera circling it sweeps 360°/s), so
 	 * only the motion north or south is followed there */
-	double ve = fabs(cm->m_lat) < 80 ? cm->v_lon * cos(p1) : 0, vn = cm->v_lat;
-	double d = hypot(ve, vn) * t * rad, th = atan2(ve, vn);
-	double p2 = asin(fmax(-1.0, fmin(1.0, sin(p1) * cos(d) + cos(p1) * sin(d) * cos(th))));
-	double l2 = cm->m_lon * rad + atan2(sin(th) * sin(d) * cos(p1), cos(d) - sin(p1) * sin(p2));
-	*lat = p2 / rad;
-	*lon = remainder(l2 / rad, 360.0);
+	double ve = fabs(cm->m_lat) < 80 ? cm->v_lon * cos(cm->m_lat * rad) : 0, vn = cm->v_lat;
+	view_sphere_direct(cm->m_lat, cm->m_lon, atan2(ve, vn), hypot(ve, vn) * t * rad, lat, lon);
+	*lon = remainder(*lon, 360.0);
 }
 
 bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double t)

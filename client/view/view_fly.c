@@ -55,10 +55,9 @@ void view_fly_move(struct view_fly *f, double forward_m, double right_m)
 	struct view_camera *c = &f->cam;
 	double d = dist / f->radius;
 	double b = c->heading * DEG + atan2(right_m, forward_m); /* bearing of the move */
-	double p1 = c->lat * DEG, l1 = c->lon * DEG;
-	double sp2 = sin(p1) * cos(d) + cos(p1) * sin(d) * cos(b);
-	double p2 = asin(clampd(sp2, -1, 1));
-	double l2 = l1 + atan2(sin(b) * sin(d) * cos(p1), cos(d) - sin(p1) * sp2);
+	double lat2, lon2;
+	view_sphere_direct(c->lat, c->lon, b, d, &lat2, &lon2);
+	double p1 = c->lat * DEG, l1 = c->lon * DEG, p2 = lat2 * DEG, l2 = lon2 * DEG;
 	/* the bearing on arrival: the reverse of the bearing from the end back to the start */
 	double back = atan2(sin(l1 - l2) * cos(p1),
 			    cos(p2) * sin(p1) - sin(p2) * cos(p1) * cos(l1 - l2));

@@ -261,6 +261,17 @@ bool view_sector_visible(const struct view_body *b, const struct view_camera *c,
 	return true;
 }
 
+void view_sphere_direct(double lat_deg, double lon_deg, double bearing, double arc,
+			double *lat2_deg, double *lon2_deg)
+{
+	const double rad = M_PI / 180.0;
+	double p1 = lat_deg * rad;
+	double sp2 = fmax(-1.0, fmin(1.0, sin(p1) * cos(arc) + cos(p1) * sin(arc) * cos(bearing)));
+	*lat2_deg = asin(sp2) / rad;
+	*lon2_deg = lon_deg +
+		    atan2(sin(bearing) * sin(arc) * cos(p1), cos(arc) - sin(p1) * sp2) / rad;
+}
+
 void view_geo_delta(double lat_deg, double th, double ph, double *dlon, double *dlat)
 {
 	double sl = sin(lat_deg * DEG), cl = cos(lat_deg * DEG);

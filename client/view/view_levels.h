@@ -83,6 +83,11 @@ bool view_sector_visible(const struct view_body *b, const struct view_camera *c,
 /* (Δlon, Δlat) from the camera's nadir of the view-space direction (θ̃, φ̃), as terrain.vert
  * maps it (radians; the camera's geodetic latitude taken as spherical). */
 void view_geo_delta(double lat_deg, double th, double ph, double *dlon, double *dlat);
+/* The point an arc of `arc` radians from (lat, lon) along bearing `bearing` (radians from
+ * north, east positive) reaches on a sphere: its latitude and its longitude (degrees; the
+ * longitude not wrapped). Across a pole too. */
+void view_sphere_direct(double lat_deg, double lon_deg, double bearing, double arc,
+			double *lat2_deg, double *lon2_deg);
 /* Bounds of the elevation angle (radians, above the camera's horizontal plane) at which
  * camera c (c->alt: above the ellipsoid) sees the ring points of the sector θ̃ ∈ [th0, th1],
  * φ̃ ∈ [ph0, ph1]: the least for heights ≥ h, the greatest for heights ≤ h, with a margin

@@ -5,7 +5,7 @@
  * discounted by its distance (grid_quad_distance) to the nearest focus's window at the tile's
  * own level; it evicts the least worth first and, among equal worth, the least recently
  * stamped. Tiles of one cost go farthest first; with no foci and equal costs it is plain
- * LRU. The ranking runs without the mutex, on a copy of what it reads (prune); each level's
+ * LRU. The ranking runs without the mutex, on a copy of what it reads (cache_prune); each level's
  * distinct focus windows are computed once per ranking. Evicted tiles are unreferenced after
  * the mutex is released, so freeing tile memory never happens under the lock.
  */
@@ -37,7 +37,7 @@ struct cache {
 	size_t budget, bytes, ntiles;
 	uint64_t clock, hits, misses, inserts, evictions;
 	uint64_t prunes, prune_ns, prune_hold_max_ns;
-	bool pruning; /* a thread is ranking tiles for eviction (prune) */
+	bool pruning; /* a thread is ranking tiles for eviction (cache_prune) */
 	void (*rank_hook)(void *ud); /* tests (cache_set_rank_hook) */
 	void *rank_ud;
 	struct cache_focus *foci;
@@ -153,7 +153,6 @@ bool cache_contains(struct cache *c, const struct tile_key *k)
 	return found;
 }
 
-
 /* What keeping a tile at focus distance d is worth: its cost to make again (tile.h cost_ms,
  * at least COST_FLOOR_MS), divided by 4 per tile of distance. Among tiles of one cost the
  * farthest goes first, as before costs counted; a tile ten times dearer is kept over a
@@ -249,6 +248,23 @@ static int cmp_victim(const void *pa, const void *pb)
 	return 0;
 }
 
+/* Sorts v least worth keeping first (no lock: v and foci are copies). */
+static void rank(struct victim *v, size_t n, const struct cache_focus *foci, size_t nf,
+		 uint32_t T)
+{
+	struct ranking *r = xcalloc(1, sizeof *r);
+	r->foci = foci;
+	r->nfoci = nf;
+	r->T = T;
+	for (size_t i = 0; i < n; i++)
+		v[i].keep = keep_worth(v[i].cost, v[i].layer, nf ? focus_distance(r, &v[i]) : 0);
+	qsort(v, n, sizeof *v, cmp_victim);
+	for (int y = 0; y < NLY; y++)
+		for (int x = 0; x < NLX; x++)
+			free(r->lv[y][x].q);
+	free(r);
+}
+
 /* Evicts until at most target bytes remain, least worth keeping first. The mutex is held
  * only to copy what the ranking needs and then to evict: with a 1 GiB cache of 256² tiles
  * and 200 viewers' foci, ranking under it held it for up to 104 ms, and the event loop,
@@ -257,7 +273,7 @@ static int cmp_victim(const void *pa, const void *pb)
  * if that leaves the cache over target. One thread ranks at a time: another that finds a
  * ranking under way leaves the pruning to it (its rounds continue until the target holds).
  * Called without the mutex; frees the evicted tiles' references without it too. */
-static void prune(struct cache *c, size_t target)
+void cache_prune(struct cache *c, size_t target)
 {
 	for (int round = 0; round < 8; round++) {
 		xmutex_lock(&c->mu);
@@ -283,17 +299,7 @@ static void prune(struct cache *c, size_t target)
 		uint64_t hold = clock_now_ns() - t0;
 		xmutex_unlock(&c->mu);
 
-		struct ranking *r = xcalloc(1, sizeof *r);
-		r->foci = foci;
-		r->nfoci = nf;
-		r->T = T;
-		for (size_t i = 0; i < n; i++)
-			v[i].keep = keep_worth(v[i].cost, v[i].layer, nf ? focus_distance(r, &v[i]) : 0);
-		qsort(v, n, sizeof *v, cmp_victim);
-		for (int y = 0; y < NLY; y++)
-			for (int x = 0; x < NLX; x++)
-				free(r->lv[y][x].q);
-		free(r);
+		rank(v, n, foci, nf, T);
 		free(foci);
 		if (hook)
 			hook(hook_ud);
@@ -357,7 +363,7 @@ static void insert(struct cache *c, struct tile *t, bool cold)
 	xmutex_unlock(&c->mu);
 	/* Prune to 90 % so the next few inserts do not each pay for a full ranking. */
 	if (over)
-		prune(c, c->budget - c->budget / 10);
+		cache_prune(c, c->budget - c->budget / 10);
 }
 
 void cache_insert(struct cache *c, struct tile *t)
@@ -392,11 +398,6 @@ void cache_set_rank_hook(struct cache *c, void (*fn)(void *ud), void *ud)
 	c->rank_hook = fn;
 	c->rank_ud = ud;
 	xmutex_unlock(&c->mu);
-}
-
-void cache_prune(struct cache *c, size_t target)
-{
-	prune(c, target);
 }
 
 void cache_stats(struct cache *c, struct cache_stats *out)

@@ -73,19 +73,44 @@ static void ring_lines(const struct view_clipmap *cm, const struct view_want *w,
 	}
 }
 
-static void look_ahead(void **state)
+/* A GL context (the test is skipped without one), the synthetic source, a clipmap over it
+ * and room for a want-set. */
+struct rig {
+	struct gl_context *ctx;
+	struct view_source *s;
+	struct view_clipmap *cm;
+	struct view_want *w;
+};
+
+static struct rig rig_open(void)
 {
-	(void)state;
-	struct gl_context *ctx = NULL;
+	struct rig g = { 0 };
 	char err[256];
-	if (gl_context_create(GL_BACKEND_AUTO, &ctx, err) < 0) {
+	if (gl_context_create(GL_BACKEND_AUTO, &g.ctx, err) < 0) {
 		printf("view_ahead: skipped (no GL: %s)\n", err);
 		skip();
 	}
-	struct view_source *s = src_create();
-	struct view_clipmap *cm = NULL;
-	assert_int_equal(view_clipmap_create(gl_context_api(ctx), s, NLEVELS, &cm, err), 0);
-	struct view_want *w = xmalloc(MAX_WANTS * sizeof *w);
+	g.s = src_create();
+	assert_int_equal(view_clipmap_create(gl_context_api(g.ctx), g.s, NLEVELS, &g.cm, err), 0);
+	g.w = xmalloc(MAX_WANTS * sizeof *g.w);
+	return g;
+}
+
+static void rig_close(struct rig *g)
+{
+	free(g->w);
+	view_clipmap_destroy(g->cm);
+	view_source_destroy(g->s);
+	gl_context_destroy(g->ctx);
+}
+
+static void look_ahead(void **state)
+{
+	(void)state;
+	struct rig g = rig_open();
+	struct view_clipmap *cm = g.cm;
+	struct view_source *s = g.s;
+	struct view_want *w = g.w;
 
 	/* At rest: no look-ahead. */
 	double lon = 20.0, t = 0;
@@ -169,10 +194,7 @@ static void look_ahead(void **state)
 	view_clipmap_get_stats(cm, &st1);
 	assert_true(st1.tiles_held < st0.tiles_held);
 
-	free(w);
-	view_clipmap_destroy(cm);
-	view_source_destroy(s);
-	gl_context_destroy(ctx);
+	rig_close(&g);
 }
 
 /* Targets at (lon, lat) on every level as the viewer sets them: each level's lx from
@@ -195,12 +217,6 @@ static void aim_at(struct view_clipmap *cm, double lon, double lat)
 static void next_lx_window(void **state)
 {
 	(void)state;
-	struct gl_context *ctx = NULL;
-	char err[256];
-	if (gl_context_create(GL_BACKEND_AUTO, &ctx, err) < 0) {
-		printf("view_ahead: skipped (no GL: %s)\n", err);
-		skip();
-	}
 	enum { L8 = 8 };
 	/* where level 8's lx first changes going north */
 	int lx0 = clipmap_level_lx(L8, 40.0, -1), thr_lx = lx0;
@@ -209,10 +225,10 @@ static void next_lx_window(void **state)
 		thr += 0.01;
 	assert_true(thr < 89 && thr_lx < lx0);
 
-	struct view_source *s = src_create();
-	struct view_clipmap *cm = NULL;
-	assert_int_equal(view_clipmap_create(gl_context_api(ctx), s, NLEVELS, &cm, err), 0);
-	struct view_want *w = xmalloc(MAX_WANTS * sizeof *w);
+	struct rig g = rig_open();
+	struct view_clipmap *cm = g.cm;
+	struct view_source *s = g.s;
+	struct view_want *w = g.w;
 	double lon = 20.0, lat = thr - 0.65, t = 0; /* north at 1°/s: 0.65 s short of it */
 	bool asked_next = false, switched = false;
 	for (int k = 0; k < 12 && !switched; k++) {
@@ -242,10 +258,7 @@ static void next_lx_window(void **state)
 		lat += 0.1;
 	}
 	assert_true(switched);
-	free(w);
-	view_clipmap_destroy(cm);
-	view_source_destroy(s);
-	gl_context_destroy(ctx);
+	rig_close(&g);
 }
 
 int main(void)
