@@ -37,7 +37,8 @@ static const struct type_info types[] = {
 	{ PROTO_LIST_PLANETS, "LIST_PLANETS", 4, FROM_CLIENT },
 	{ PROTO_PLANETS, "PLANETS", 8u << 20, FROM_SERVER },
 	{ PROTO_OPEN, "OPEN", 512, FROM_CLIENT },
-	{ PROTO_OPENED, "OPENED", 32u << 10, FROM_SERVER },
+	{ PROTO_OPENED, "OPENED", (32u << 10) + 2u * SEA_GRID_MAX_ROWS * SEA_GRID_MAX_COLS,
+	  FROM_SERVER }, /* the planet and its sea's lattice */
 	{ PROTO_WANT, "WANT", 64u << 10, FROM_CLIENT },
 	{ PROTO_TILE, "TILE", PROTO_MAX_FRAME, FROM_SERVER },
 	{ PROTO_TILE_FAIL, "TILE_FAIL", 8192, FROM_SERVER },
@@ -479,6 +480,19 @@ static void decode_planet(struct rd *r, struct proto_planet *p)
 			p->air_density);
 	if (!r->err && (p->sea > 1 || (!p->sea && p->sea_level != 0)))
 		rd_fail(r, PROTO_ERR_FIELD, "sea %u with sea_level %g", p->sea, p->sea_level);
+	struct sea_grid *g = &p->sea_grid;
+	g->rows = rd_u16(r, "sea grid rows");
+	g->cols = rd_u16(r, "sea grid columns");
+	if (!r->err && !sea_grid_valid_size(g->rows, g->cols))
+		rd_fail(r, PROTO_ERR_FIELD, "sea grid %u × %u (2..%d rows, 2..%d columns, or 0 × 0)",
+			g->rows, g->cols, SEA_GRID_MAX_ROWS, SEA_GRID_MAX_COLS);
+	if (!r->err && g->rows && !p->sea)
+		rd_fail(r, PROTO_ERR_FIELD, "a sea grid without a sea");
+	uint32_t n = r->err ? 0 : (uint32_t)g->rows * g->cols;
+	g->dm = rd_array(r, n, (size_t)SEA_GRID_MAX_ROWS * SEA_GRID_MAX_COLS, 2, sizeof *g->dm,
+			 "sea grid nodes");
+	for (uint32_t i = 0; i < n && !r->err; i++)
+		g->dm[i] = (int16_t)rd_u16(r, "sea grid node");
 }
 
 static void decode_planets(struct rd *r, struct proto_planets *p)
@@ -486,7 +500,7 @@ static void decode_planets(struct rd *r, struct proto_planets *p)
 	p->req = rd_u32(r, "req");
 	p->count = rd_u16(r, "planet count");
 	struct proto_planet *a =
-		rd_array(r, p->count, PROTO_MAX_PLANETS, 55, sizeof(*a), "planets");
+		rd_array(r, p->count, PROTO_MAX_PLANETS, 59, sizeof(*a), "planets");
 	p->planets = a;
 	for (uint16_t i = 0; i < p->count && !r->err; i++)
 		decode_planet(r, &a[i]);

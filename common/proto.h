@@ -18,12 +18,13 @@
 #include <sys/types.h>
 
 #include "grid.h"
+#include "seagrid.h"
 #include "tilecodec.h"
 
 /* ---- framing ---------------------------------------------------------------------------- */
 
 #define PROTO_MAGIC "CLMP" /* the first 4 bytes of every frame */
-#define PROTO_VERSION 2	   /* frame layout and message set; HELLO negotiates it */
+#define PROTO_VERSION 3	   /* frame layout and message set; HELLO negotiates it */
 #define PROTO_HDR 12	   /* frame header bytes */
 #define PROTO_MAX_FRAME (16u << 20) /* payload bytes, any type */
 
@@ -175,6 +176,9 @@ struct proto_planet {
 	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB */
 	uint8_t sea;	      /* 1: a sea at sea_level; 0: none (sea_level 0) */
 	double sea_level;     /* metres above the ellipsoid, |x| ≤ 1e5 */
+	/* Version 3: where the sea follows a geoid, its surface above sea_level (common/seagrid.h;
+	 * OPENED carries it, PLANETS never); 0 × 0: the sea is at sea_level everywhere. */
+	struct sea_grid sea_grid;
 };
 
 struct proto_req { uint32_t req; }; /* LIST_PLANETS, STATS_REQ */

@@ -165,6 +165,18 @@ static void enc_planet(struct wr *w, const struct proto_planet *p)
 		w8(w, p->air_color[i]);
 	w8(w, p->sea);
 	wf64(w, p->sea_level);
+	const struct sea_grid *g = &p->sea_grid;
+	if (!sea_grid_valid_size(g->rows, g->cols) || (g->rows && !g->dm)) {
+		if (!w->err) {
+			err_set(w->errbuf, "sea grid %u × %u is not a lattice", g->rows, g->cols);
+			w->err = PROTO_ERR_FIELD;
+		}
+		return;
+	}
+	w16(w, g->rows);
+	w16(w, g->cols);
+	for (size_t i = 0; i < (size_t)g->rows * g->cols; i++)
+		w16(w, (uint16_t)g->dm[i]);
 }
 
 static void enc_tile_head(struct wr *w, const struct proto_tile *t)

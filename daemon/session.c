@@ -421,7 +421,9 @@ static void count_drops(struct session *s, const struct wantset_drops *d)
 
 /* ---- handlers --------------------------------------------------------------------------- */
 
-static void fill_planet(const struct planet *p, struct proto_planet *out, struct proto_layer *ls)
+/* with_grid: the sea's surface grid too (OPENED; a PLANETS list leaves it out). */
+static void fill_planet(const struct planet *p, struct proto_planet *out, struct proto_layer *ls,
+			bool with_grid)
 {
 	for (size_t i = 0; i < p->nlayers; i++)
 		ls[i] = (struct proto_layer){ .name = p->layers[i].name,
@@ -436,6 +438,8 @@ static void fill_planet(const struct planet *p, struct proto_planet *out, struct
 				      .air_color = { p->look.air_color[0], p->look.air_color[1],
 						     p->look.air_color[2] },
 				      .sea = p->look.sea, .sea_level = p->look.sea_level };
+	if (with_grid)
+		out->sea_grid = p->look.sea_grid;
 }
 
 static void on_hello(struct session *s, const struct proto_hello *h)
@@ -507,7 +511,7 @@ static void on_list(struct session *s, uint32_t req)
 	struct proto_planet *pl = xcalloc(n ? n : 1, sizeof *pl);
 	struct proto_layer *ls = xcalloc(n * PROTO_MAX_LAYERS + 1, sizeof *ls);
 	for (size_t i = 0; i < n; i++)
-		fill_planet(ps->planets[i], &pl[i], ls + i * PROTO_MAX_LAYERS);
+		fill_planet(ps->planets[i], &pl[i], ls + i * PROTO_MAX_LAYERS, false);
 	struct proto_msg m = { .type = PROTO_PLANETS,
 			       .planets = { .req = req, .count = (uint16_t)n, .planets = pl } };
 	send_msg(s, &m);
@@ -542,7 +546,7 @@ static void on_open(struct session *s, const struct proto_open *o)
 	struct proto_layer ls[PROTO_MAX_LAYERS];
 	struct proto_msg m = { .type = PROTO_OPENED,
 			       .opened = { .req = o->req, .planet_id = (uint32_t)id } };
-	fill_planet(p, &m.opened.planet, ls);
+	fill_planet(p, &m.opened.planet, ls, true);
 	send_msg(s, &m);
 	log_msg(LOG_DEBUG, "session %llu (%s, %s): opened %s as %d", (unsigned long long)s->id,
 		s->name, s->peer, p->name, id);

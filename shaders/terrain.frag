@@ -46,6 +46,7 @@ in vec3 v_in;
 #endif
 #if SEA
 in vec3 v_eye;
+in float v_sea;         // the sea's surface (m, exaggerated): sea level, or on a geoid
 uniform sampler2DArray u_height;
 uniform vec2 u_sea;     // sea level (m, exaggerated), 1 / exaggeration
 #endif
@@ -175,7 +176,7 @@ void main()
 #if BLEND
 	hd = mix(hd, tex_at(u_height, g, u_dc, u_dvc, u_dsc).r, v_blend);
 #endif
-	float depth = u_sea.x * u_sea.y - hd;
+	float depth = v_sea * u_sea.y - hd;
 	float below = step(0.0, depth); // at the sea's surface: water, or ice on it
 	float wet = below * (1.0 - ice);
 	float clear = exp2(max(depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)

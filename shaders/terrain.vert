@@ -42,6 +42,11 @@ uniform vec3 u_sun;     // towards the sun, ENU at the camera
 uniform vec4 u_haze;    // scale height (m, exaggerated), extinction per m of sea-level air (rgb)
 uniform vec2 u_sea;     // sea level (m, exaggerated), 1 / exaggeration
 uniform sampler2DArray u_height;
+#if SEA
+uniform sampler2D u_seag; // the sea's surface above sea level (m): a lat/lon lattice, rows from
+			  // the south pole to the north, columns from −180° east (seagrid.h)
+uniform vec3 u_seagrid;   // its rows and columns; the camera's longitude (rad)
+#endif
 
 out vec3 v_delta; // unit normal minus the camera's up, ENU: the fragment's up, (lon, lat)
 out vec2 v_g;     // (Δlon, Δlat) from the camera's nadir
@@ -54,6 +59,7 @@ out vec3 v_in;    // light scattered into the ray by that air
 #endif
 #if SEA
 out vec3 v_eye;    // from the point to the camera: ENU, or the point's ENU without GEO_FRAG
+out float v_sea;   // the sea's surface here (m, exaggerated)
 #endif
 #if !GEO_FRAG
 out vec3 v_sunl;   // towards the sun in the point's east-north-up frame
@@ -79,6 +85,18 @@ float height_at(vec2 g, vec4 p, vec2 vc, float slice)
 	return textureLod(u_height, vec3(u / u_T, v / u_T, slice), 0.0).r;
 }
 
+#if SEA
+// The sea's surface at (Δlon, Δlat) from the camera's nadir: sea level plus the lattice there.
+float sea_at(vec2 g)
+{
+	const float PI = 3.14159265;
+	float lon = u_seagrid.z + g.x, lat = u_lat.z + g.y;
+	vec2 st = vec2((lon + PI) / (2.0 * PI) + 0.5 / u_seagrid.y,
+		       ((lat + 0.5 * PI) / PI * (u_seagrid.x - 1.0) + 0.5) / u_seagrid.x);
+	return u_sea.x + textureLod(u_seag, st, 0.0).r * u_exag;
+}
+#endif
+
 void main()
 {
 	float th = min(a_ring.z, u_cap);
@@ -96,7 +114,8 @@ void main()
 	float h = hf * u_exag;
 #endif
 #if SEA
-	h = max(h, u_sea.x); // the fragment shader tells water from land per fragment
+	v_sea = sea_at(g);
+	h = max(h, v_sea); // the fragment shader tells water from land per fragment
 #endif
 
 	// P - C = (Nc+hc)·d + (N-Nc + h-hc)·n - e²·(N·(s-sc) + (N-Nc)·sc)·ẑ

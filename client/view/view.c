@@ -65,13 +65,13 @@
 enum {
 	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_DF,
 	U_DVF, U_DSF, U_DC, U_DVC, U_DSC, U_FADE, U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE,
-	U_EXAG, U_SEA, U_COUNT
+	U_EXAG, U_SEA, U_SEAG, U_SEAGRID, U_COUNT
 };
 static const char *const uniform_names[U_COUNT] = {
 	"u_vp",	 "u_lat", "u_body", "u_a",   "u_cap",	 "u_blend",  "u_T",	"u_pf",
 	"u_vf",	 "u_sf",  "u_pc",   "u_vc",  "u_sc",	 "u_df",     "u_dvf",	"u_dsf",
 	"u_dc",	 "u_dvc", "u_dsc",  "u_fade", "u_height", "u_normal", "u_color", "u_sun",
-	"u_haze", "u_exag", "u_sea",
+	"u_haze", "u_exag", "u_sea",  "u_seag",  "u_seagrid",
 };
 
 /* Horizon culling's per-level results, kept while the camera and the heights stay. */
@@ -105,7 +105,7 @@ static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG"
 #define JUMP_HEIGHTS 10.0
 
 struct frame_uniforms {
-	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4], sea[2];
+	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4], sea[2], seagrid[3];
 };
 
 struct program {
@@ -138,6 +138,11 @@ struct view {
 	struct view_source *src;
 	struct view_desc d;
 	struct air air;
+	/* The sea's surface: sea_level, plus the planet's geoid lattice where it has one (a
+	 * GL_TEXTURE_2D of metres on unit SEA_UNIT; 1 × 1 texel of 0 without), and the lowest and
+	 * highest it gets, metres. */
+	unsigned sea_tex;
+	double sea_lo, sea_hi;
 	struct view_body body;
 	struct view_clipmap *cm;
 	int nlevels, max_level;
@@ -385,6 +390,42 @@ static const struct view_look earth_air = { .air_density = 1, .air_height = 8000
  * density 1, as the viewer always drew it); Mars' butterscotch a red-heavy dust haze. The
  * light the air scatters into a ray is sunlight × (1 − transmittance), so the haze takes the
  * colour of the extinction. */
+/* The texture unit of the sea's lattice (the layers' textures take 0 .. VIEW_NROLES − 1). */
+#define SEA_UNIT VIEW_NROLES
+
+/* The sea's surface lattice as a texture (metres above sea_level; a texel of 0 without one),
+ * and its range. Longitude wraps, latitude clamps at the poles. */
+static void sea_init(struct view *v, const struct view_look *look)
+{
+	const struct gl *gl = v->gl;
+	const struct sea_grid *g = &look->sea_grid;
+	double lo = 0, hi = 0;
+	sea_grid_range(g, &lo, &hi);
+	v->sea_lo = look->sea_level + lo;
+	v->sea_hi = look->sea_level + hi;
+	int rows = g->rows ? g->rows : 1, cols = g->rows ? g->cols : 1;
+	float *m = xmalloc((size_t)rows * cols * sizeof *m);
+	for (size_t i = 0; i < (size_t)rows * cols; i++)
+		m[i] = g->rows ? g->dm[i] / 10.0f : 0.0f;
+	gl->GenTextures(1, &v->sea_tex);
+	gl->ActiveTexture(GL_TEXTURE0 + SEA_UNIT);
+	gl->BindTexture(GL_TEXTURE_2D, v->sea_tex);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_REPEAT);
+	gl->TexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+	gl->TexImage2D(GL_TEXTURE_2D, 0, GL_R32F, cols, rows, 0, GL_RED, GL_FLOAT, m);
+	gl->ActiveTexture(GL_TEXTURE0);
+	free(m);
+}
+
+/* The sea's surface at (lon, lat) degrees, metres above the ellipsoid. */
+static double sea_height(const struct view *v, double lon, double lat)
+{
+	const struct view_look *look = &v->src->planet.look;
+	return look->sea_level + sea_grid_at(&look->sea_grid, lat, lon);
+}
+
 static void air_init(struct air *air, const struct view_look *look, float haze)
 {
 	*air = (struct air){ .on = false };
@@ -436,6 +477,7 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 		v->d.exaggeration = 1;
 	const struct view_planet *p = &src->planet;
 	air_init(&v->air, &p->look, v->d.haze);
+	sea_init(v, &p->look);
 	view_body_init(&v->body, p->a, p->f);
 	v->body.hmin *= v->d.exaggeration;
 	v->body.hmax *= v->d.exaggeration;
@@ -487,6 +529,8 @@ void view_destroy(struct view *v)
 		return;
 	const struct gl *gl = v->gl;
 	view_clipmap_destroy(v->cm);
+	if (v->sea_tex)
+		gl->DeleteTextures(1, &v->sea_tex);
 	for (int i = 0; i < NVARIANT; i++)
 		if (v->prog[i].id)
 			gl->DeleteProgram(v->prog[i].id);
@@ -649,10 +693,9 @@ static int drawn_range_near(struct view *v, int l, double r, double *lo, double 
 	int rc = r < 0 ? view_clipmap_height_range(v->cm, l, lo, hi)
 		       : view_clipmap_height_range_near(v->cm, l, v->last.lon, v->last.lat, r, lo,
 							hi);
-	const struct view_look *look = &v->src->planet.look;
-	if (rc == 0 && look->sea) {
-		*lo = fmax(*lo, look->sea_level);
-		*hi = fmax(*hi, look->sea_level);
+	if (rc == 0 && v->src->planet.look.sea) {
+		*lo = fmax(*lo, v->sea_lo);
+		*hi = fmax(*hi, v->sea_hi);
 	}
 	return rc;
 }
@@ -668,7 +711,7 @@ static int drawn_range(struct view *v, int l, double *lo, double *hi)
 static bool dry(struct view *v, int i, int c)
 {
 	const int ls[4] = { i, c, v->detail[i], v->detail[c] };
-	double sea = v->src->planet.look.sea_level;
+	double sea = v->sea_hi;
 	for (int k = 0; k < 4; k++) {
 		double lo, hi;
 		if (view_clipmap_height_range(v->cm, ls[k], &lo, &hi) != 0 || !(lo > sea))
@@ -703,6 +746,8 @@ static int bind_program(struct view *v, int bits, int i, int c, float fade)
 		gl->Uniform4fv(p->u[U_HAZE], 1, f->haze);
 		gl->Uniform1f(p->u[U_EXAG], v->d.exaggeration);
 		gl->Uniform2f(p->u[U_SEA], f->sea[0], f->sea[1]);
+		gl->Uniform1i(p->u[U_SEAG], SEA_UNIT);
+		gl->Uniform3f(p->u[U_SEAGRID], f->seagrid[0], f->seagrid[1], f->seagrid[2]);
 		p->frame = v->frame_no;
 	}
 	level_uniforms(v, i, p->u[U_PF], p->u[U_VF], p->u[U_SF]);
@@ -848,12 +893,17 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 	const struct view_look *look = &v->src->planet.look;
 	f->sea[0] = (float)(look->sea_level * v->d.exaggeration);
 	f->sea[1] = 1.0f / v->d.exaggeration;
+	f->seagrid[0] = look->sea_grid.rows ? look->sea_grid.rows : 1;
+	f->seagrid[1] = look->sea_grid.rows ? look->sea_grid.cols : 1;
+	f->seagrid[2] = (float)(c->lon * DEG);
 	v->frame_bits = (look->sea ? VAR_SEA : 0) | (v->air.on ? VAR_HAZE : 0) |
 			(v->d.unlit ? VAR_UNLIT : 0) |
 			(v->d.exaggeration != 1 ? VAR_EXAG : 0) |
 			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
 			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
 	const struct gl *gl = v->gl;
+	gl->ActiveTexture(GL_TEXTURE0 + SEA_UNIT);
+	gl->BindTexture(GL_TEXTURE_2D, v->sea_tex);
 	for (int r = 0; r < VIEW_NROLES; r++) {
 		gl->ActiveTexture(GL_TEXTURE0 + (GLenum)r);
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, view_clipmap_texture(v->cm, (enum view_role)r));
@@ -867,8 +917,10 @@ static double surface_height(const struct view *v, double lon, double lat)
 {
 	double ground = 0;
 	view_clipmap_ground(v->cm, lon, lat, &ground);
-	const struct view_look *look = &v->src->planet.look;
-	return look->sea && ground < look->sea_level ? look->sea_level : ground;
+	if (!v->src->planet.look.sea)
+		return ground;
+	double sea = sea_height(v, lon, lat);
+	return ground < sea ? sea : ground;
 }
 
 /* One frame's state, passed from step to step by view_frame. */
@@ -1094,10 +1146,9 @@ static bool cell_range(struct view *v, int i, int c, double th0, double th1, dou
 		lo = fmin(lo, a);
 		hi = fmax(hi, b);
 	}
-	const struct view_look *look = &v->src->planet.look;
-	if (look->sea) {
-		lo = fmax(lo, look->sea_level);
-		hi = fmax(hi, look->sea_level);
+	if (v->src->planet.look.sea) {
+		lo = fmax(lo, v->sea_lo);
+		hi = fmax(hi, v->sea_hi);
 	}
 	*lo_out = lo * v->d.exaggeration;
 	*hi_out = hi * v->d.exaggeration;

@@ -15,6 +15,7 @@
 #include <stdint.h>
 
 #include "common/grid.h"
+#include "common/seagrid.h"
 #include "common/pixfmt.h"
 
 #define VIEW_MAX_LAYERS 8
@@ -44,6 +45,8 @@ struct view_look {
 	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB */
 	bool sea;
 	double sea_level;     /* metres above the ellipsoid */
+	struct sea_grid sea_grid; /* a sea on a geoid: its surface above sea_level (owned by the
+				   * source, which lives longer than the view); 0 × 0: none */
 };
 
 /* What the source serves: the body, its look and the published layers. */

@@ -473,6 +473,7 @@ static void ns_destroy(struct view_source *s)
 	free(ns->client_name);
 	free(ns->planet);
 	free(ns->tls_ca);
+	free(ns->base.planet.look.sea_grid.dm);
 	free(ns);
 }
 
@@ -590,6 +591,13 @@ int view_source_net_create_wait(const struct net_opts *o, const char *planet, do
 				       .air_color = { pp->air_color[0], pp->air_color[1],
 						      pp->air_color[2] },
 				       .sea = pp->sea != 0, .sea_level = pp->sea_level };
+	if (pp->sea_grid.rows) {
+		size_t bytes = (size_t)pp->sea_grid.rows * pp->sea_grid.cols * sizeof(int16_t);
+		vp->look.sea_grid = (struct sea_grid){ .rows = pp->sea_grid.rows,
+						       .cols = pp->sea_grid.cols,
+						       .dm = xmalloc(bytes) };
+		memcpy(vp->look.sea_grid.dm, pp->sea_grid.dm, bytes);
+	}
 	vp->nlayers = pp->nlayers < VIEW_MAX_LAYERS ? pp->nlayers : VIEW_MAX_LAYERS;
 	for (int i = 0; i < vp->nlayers; i++) {
 		snprintf(vp->layer[i].name, sizeof vp->layer[i].name, "%s", pp->layers[i].name);

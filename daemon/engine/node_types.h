@@ -38,6 +38,9 @@ extern const struct node_type node_type_file;
 /* `geoid`: input (height above the geoid) → height above the ellipsoid: + N(lat, lon) from a
  * GTX geoid grid (default EGM96 from proj-data); `sign = -1` reverses it. */
 extern const struct node_type node_type_geoid;
+/* A `geoid` node's undulation N at (lat, lon) degrees, metres (whatever its sign); false if n
+ * is not a geoid node. */
+bool geoid_undulation(const struct node *n, double lat, double lon, double *out);
 /* `craters`: seeded, size-distributed impact craters on the sphere, a height source or added
  * to an optional input height; band-limited per level (node_craters.c lists the parameters). */
 extern const struct node_type node_type_craters;

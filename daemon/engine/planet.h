@@ -7,7 +7,8 @@
  *   [planet]        name, description, body = wgs84 | sphere | custom, radius, flattening,
  *                   tile_size (power of two, 64..1024), max_level; the look:
  *                   atmosphere = none | earth | mars, atmosphere_density, atmosphere_height,
- *                   atmosphere_color (overriding the preset), sea_level (absent: no sea)
+ *                   atmosphere_color (overriding the preset), sea_level (absent: no sea),
+ *                   sea_geoid (a geoid node the sea follows)
  *   [node NAME]     type = <node type>, its input slots naming other nodes, its parameters
  *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
  *
@@ -24,6 +25,7 @@
 #include <stdint.h>
 #include <stdio.h>
 
+#include "common/seagrid.h"
 #include "node.h"
 
 struct geo_body;
@@ -46,6 +48,9 @@ struct planet_look {
 	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB; its hue tints the haze */
 	bool sea;	      /* a sea at sea_level covers what lies below it */
 	double sea_level;     /* metres above the ellipsoid (0 without a sea) */
+	/* With `sea_geoid = NODE`: the sea lies on that geoid node's geoid, sea_level above it
+	 * (a 1° lattice of it; owned). 0 × 0: at sea_level everywhere. */
+	struct sea_grid sea_grid;
 };
 
 struct planet {

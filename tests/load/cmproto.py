@@ -2,7 +2,7 @@
 docs/PROTOCOL.md alone (not from the project's C client), so the harness checks the daemon
 against the document. Python 3 standard library only.
 
-Frames: 12-byte header (magic "CLMP", version 2, flags 0, u16 type, u32 payload length),
+Frames: 12-byte header (magic "CLMP", version 3, flags 0, u16 type, u32 payload length),
 little-endian. Encoders return whole frames (bytes); decoders take a payload.
 """
 import socket
@@ -10,7 +10,7 @@ import struct
 import time
 
 MAGIC = b"CLMP"
-VERSION = 2
+VERSION = 3
 HDR = 12
 
 HELLO, HELLO_OK, BYE, ERROR = 1, 2, 3, 4
@@ -184,6 +184,8 @@ def decode_planet(p, off=0):
         off += 9
         layers.append({"name": lname, "format": fmt, "node": node})
     off += 8 + 8 + 3 + 1 + 8  # the look: air density, height, colour, sea, sea level
+    rows, cols = struct.unpack_from("<HH", p, off)  # the sea's lattice (version 3)
+    off += 4 + 2 * rows * cols
     return {"name": name, "a": a, "f": f, "tile_size": tile_size, "max_level": max_level,
             "layers": layers}, off
 

@@ -615,6 +615,30 @@ static void look(void **state)
 	load_fails("[planet]\nsea_level = 2e5\n" NODE_Z LAYER_Z,
 		   "p.ini:2: sea_level: expected metres");
 	load_fails("[planet]\nsea = 0\n" NODE_Z LAYER_Z, "p.ini:2: sea: unknown key in [planet]");
+
+	/* A sea on a geoid node (EGM96 from proj-data): a 1° lattice of its undulation, in
+	 * decimetres; sea_geoid without sea_level, or naming a node that is not a geoid. */
+#define NODE_G "[node g]\ntype = geoid\ninput = z\n"
+	p = load_ok("[planet]\nsea_level = 0\nsea_geoid = g\n" NODE_Z NODE_G LAYER_Z);
+	const struct sea_grid *g = &p->look.sea_grid;
+	assert_int_equal(g->rows, 181);
+	assert_int_equal(g->cols, 360);
+	double n_lanka = sea_grid_at(g, 9.5, 80.5), n_guinea = sea_grid_at(g, -5, 145);
+	fprintf(stderr, "geoid: %.1f m off Sri Lanka, %.1f m over New Guinea\n", n_lanka, n_guinea);
+	assert_true(n_lanka < -80 && n_lanka > -110);  /* EGM96's low south of India */
+	assert_true(n_guinea > 55 && n_guinea < 86);   /* and its high */
+	planet_unref(p);
+	p = load_ok("[planet]\nsea_level = 0\n" NODE_Z NODE_G LAYER_Z);
+	assert_int_equal(p->look.sea_grid.rows, 0); /* a geoid node alone moves no sea */
+	planet_unref(p);
+	load_fails("[planet]\nsea_geoid = g\n" NODE_Z NODE_G LAYER_Z,
+		   "p.ini:2: sea_geoid: a sea that follows a geoid needs sea_level");
+	load_fails("[planet]\nsea_level = 0\nsea_geoid = nope\n" NODE_Z NODE_G LAYER_Z,
+		   "p.ini:3: sea_geoid: unknown node \"nope\"");
+	load_fails("[planet]\nsea_level = 0\nsea_geoid = z\n" NODE_Z NODE_G LAYER_Z,
+		   "p.ini:3: sea_geoid: node \"z\" is of type constant; sea_geoid names a node of type "
+		   "geoid");
+#undef NODE_G
 }
 
 static void node_and_layer_errors(void **state)

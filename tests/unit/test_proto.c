@@ -42,6 +42,7 @@ struct fixture {
 	struct proto_lonlat points[PROTO_MAX_PATH];
 	uint32_t rings[3];
 	uint8_t payload[64 * 64 * 4];
+	int16_t sea[3 * 4];
 	struct proto_msg msgs[40];
 	int nmsgs;
 };
@@ -69,7 +70,10 @@ static struct fixture *fixture_create(void)
 					       .nlayers = PROTO_MAX_LAYERS, .layers = f->layers,
 					       .air_density = 100, .air_height = 1e6,
 					       .air_color = { 255, 0, 7 }, .sea = 1,
-					       .sea_level = -1e5 };
+					       .sea_level = -1e5,
+					       .sea_grid = { .rows = 3, .cols = 4, .dm = f->sea } };
+	for (int i = 0; i < 12; i++)
+		f->sea[i] = (int16_t)(i == 0 ? -INT16_MAX : i == 11 ? INT16_MAX : i * 10 - 60);
 	f->planets[2] = (struct proto_planet){ .name = "p", .a = 1, .tile_size = 1 };
 	for (int i = 0; i < PROTO_MAX_WANT; i++) {
 		uint8_t ly = (uint8_t)(i % (GRID_MAX_LEVEL + 1));
@@ -366,6 +370,7 @@ static void decoded_fields(void **state)
 {
 	struct fixture *f = *state;
 	struct pbuf b;
+	char err[256];
 	pbuf_init(&b);
 	struct proto_msg d;
 	size_t need;
@@ -388,7 +393,41 @@ static void decoded_fields(void **state)
 	assert_true(d.opened.planet.air_density == 100 && d.opened.planet.air_height == 1e6);
 	assert_memory_equal(d.opened.planet.air_color, ((uint8_t[3]){ 255, 0, 7 }), 3);
 	assert_true(d.opened.planet.sea == 1 && d.opened.planet.sea_level == -1e5);
+	/* the sea's lattice (version 3) */
+	const struct sea_grid *sg = &d.opened.planet.sea_grid;
+	assert_int_equal(sg->rows, 3);
+	assert_int_equal(sg->cols, 4);
+	assert_memory_equal(sg->dm, f->sea, sizeof f->sea);
+	/* its surface: nodes exact, bilinear between, wrapping east of the last column, held
+	 * beyond the poles */
+	assert_true(sea_grid_at(sg, -90, -180) == -3276.7);
+	assert_true(sea_grid_at(sg, 90, 90) == 3276.7);
+	assert_true(fabs(sea_grid_at(sg, 0, -180) - (-2.0)) < 1e-9);	/* row 1, col 0: 4·10−60 */
+	assert_true(fabs(sea_grid_at(sg, 0, -135) - (-1.5)) < 1e-9);	/* halfway to col 1 */
+	assert_true(fabs(sea_grid_at(sg, 0, 135) - (-0.5)) < 1e-9);	/* col 3 (1 m) → col 0 */
+	assert_true(fabs(sea_grid_at(sg, 0, 180) - sea_grid_at(sg, 0, -180)) < 1e-9);
+	assert_true(sea_grid_at(sg, 95, 90) == 3276.7);
+	double lo, hi;
+	sea_grid_range(sg, &lo, &hi);
+	assert_true(lo == -3276.7 && hi == 3276.7);
+	assert_true(sea_grid_at(&(struct sea_grid){ 0 }, 10, 10) == 0);
 	proto_msg_fini(&d);
+
+	/* the largest lattice: 0.1° (13 MB) */
+	struct proto_msg big = f->msgs[9];
+	struct sea_grid *bg = &big.opened.planet.sea_grid;
+	bg->rows = SEA_GRID_MAX_ROWS;
+	bg->cols = SEA_GRID_MAX_COLS;
+	bg->dm = xcalloc((size_t)bg->rows * bg->cols, sizeof *bg->dm);
+	bg->dm[(size_t)bg->rows * bg->cols - 1] = 1234;
+	b.len = 0;
+	if (proto_encode(&b, &big, err) <= 0)
+		fail_msg("the largest sea lattice: %s", err);
+	assert_true(proto_decode(b.data, b.len, &d, &need, NULL) > 0);
+	assert_int_equal(d.opened.planet.sea_grid.rows, SEA_GRID_MAX_ROWS);
+	assert_int_equal(d.opened.planet.sea_grid.dm[(size_t)bg->rows * bg->cols - 1], 1234);
+	proto_msg_fini(&d);
+	free(bg->dm);
 
 	b.len = 0;
 	assert_true(proto_encode(&b, &f->msgs[6], NULL) > 0); /* PLANETS: Earth, max, airless */
@@ -428,7 +467,7 @@ static void byte_layout(void **state)
 	struct pbuf b;
 	pbuf_init_fixed(&b, mem, sizeof(mem));
 	assert_int_equal(proto_encode(&b, &m, NULL), 20);
-	const uint8_t want[20] = { 'C', 'L', 'M', 'P', 2, 0, 18, 0, 8, 0, 0, 0,
+	const uint8_t want[20] = { 'C', 'L', 'M', 'P', 3, 0, 18, 0, 8, 0, 0, 0,
 				   4, 3, 2, 1, 2, 0, 'a', 'b' };
 	assert_memory_equal(mem, want, sizeof(want));
 
@@ -531,14 +570,18 @@ static void malformed_frames(void **state)
 	memcpy(f, "CLMQ", 4);
 	assert_int_equal(decode_bytes(f, 4, err), PROTO_ERR_MAGIC);
 
-	/* bad version: a version-1 peer (before the planet's look) and a future one */
+	/* bad version: a version-2 peer (before the sea's lattice), a version-1 one (before the
+	 * planet's look) and a future one */
 	header(f, PROTO_BYE, 0);
+	f[4] = 2;
+	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
+	assert_non_null(strstr(err, "version 2"));
 	f[4] = 1;
 	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
 	assert_non_null(strstr(err, "version 1"));
-	f[4] = 3;
+	f[4] = 4;
 	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
-	assert_non_null(strstr(err, "version 3"));
+	assert_non_null(strstr(err, "version 4"));
 
 	/* unknown flags */
 	header(f, PROTO_BYE, 0);
@@ -661,7 +704,22 @@ static void bad_fields(void **state)
 	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL); /* sea_level -1e5 without a sea */
 	assert_non_null(strstr(err, "sea_level"));
 	lk.opened.planet.sea_level = 0;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL); /* a lattice without a sea */
+	assert_non_null(strstr(err, "sea grid"));
+	lk.opened.planet.sea_grid = (struct sea_grid){ 0 };
 	assert_true(proto_encode(&b, &lk, err) > 0);
+	b.len = 0;
+	/* lattices that are none: one row, a row count without columns, too many columns */
+	static const uint16_t bad_grid[][2] = { { 1, 4 }, { 3, 0 }, { 0, 3 },
+						{ 3, SEA_GRID_MAX_COLS + 1 },
+						{ SEA_GRID_MAX_ROWS + 1, 2 } };
+	for (size_t i = 0; i < sizeof bad_grid / sizeof bad_grid[0]; i++) {
+		lk = f->msgs[9];
+		lk.opened.planet.sea_grid.rows = bad_grid[i][0];
+		lk.opened.planet.sea_grid.cols = bad_grid[i][1];
+		assert_int_equal(proto_encode(&b, &lk, err), -EINVAL);
+		assert_non_null(strstr(err, "sea grid"));
+	}
 	b.len = 0;
 
 	struct proto_msg p = f->msgs[20]; /* PREFETCH bbox */

@@ -265,6 +265,43 @@ static void sea(void **state)
 	free(px);
 }
 
+/* A sea on a geoid (sea_geoid): its surface follows the planet's lattice, so the same floor,
+ * 50 m below the ellipsoid, is dry land where the geoid lies lower (it is 80 m down at
+ * 45°W: the floor stands 30 m above that sea) and sea floor where it lies higher (30 m down
+ * at 45°E) — the viewer's water and its camera height follow. A sea at one level everywhere
+ * (the lattice ignored) would drown both. */
+static void sea_on_a_geoid(void **state)
+{
+	(void)state;
+	struct flat s = { { 0, 0 }, 140, -50, false };
+	/* rows: south pole, equator, north pole; columns at −180, −90, 0, 90 */
+	int16_t dm[12] = { 0, 0, 0, 0, 0, -1000, -600, 0, 0, 0, 0, 0 };
+	struct view_look geoid = { .sea = true, .sea_grid = { .rows = 3, .cols = 4, .dm = dm } };
+	struct view_look level = { .sea = true };
+	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
+	unsigned char land[4], water[4], drowned[4];
+	struct view_frame_stats st;
+	struct view_camera west = { 0, -45, 2000, 0, -90, 60, W, H };
+	struct view_camera east = { 0, 45, 2000, 0, -90, 60, W, H };
+	if (!render_stats(&s, &geoid, -1, &west, px, bg, &st))
+		skip();
+	memcpy(land, at(px, W / 2, H / 2), 4);
+	assert_true(st.ground == -50);		/* the floor, above this sea (−80 m) */
+	assert_true(render_stats(&s, &geoid, -1, &east, px, bg, &st));
+	memcpy(water, at(px, W / 2, H / 2), 4);
+	assert_true(fabs(st.ground - (-30)) < 0.05); /* the water's surface, bilinear: −30 m */
+	assert_true(render_stats(&s, &level, -1, &west, px, bg, &st));
+	memcpy(drowned, at(px, W / 2, H / 2), 4);
+	assert_true(st.ground == 0);
+	fprintf(stderr, "geoid sea: 45°W land %u,%u,%u; 45°E water %u,%u,%u; at sea level 0 "
+		"45°W %u,%u,%u\n", land[0], land[1], land[2], water[0], water[1], water[2],
+		drowned[0], drowned[1], drowned[2]);
+	assert_true(abs(land[0] - land[2]) < 12);	  /* grey ground, not water */
+	assert_true(water[2] > water[0] + 15);		  /* blue */
+	assert_true(drowned[2] > drowned[0] + 15);	  /* drowned without the lattice */
+	free(px);
+}
+
 /* Ice on the sea: where the colour layer is near-white below sea level (sea ice, an ice
  * shelf), the viewer draws that white, flat and without a glint — not dark water; a light
  * but saturated floor (shallows over sand) stays water. */
@@ -313,6 +350,7 @@ static void look_from_planet_file(void **state)
 	assert_true(k->air_density == 0.5 && k->air_height == 11100);
 	assert_memory_equal(k->air_color, mars_look.air_color, 3);
 	assert_true(k->sea && k->sea_level == -25);
+	assert_int_equal(k->sea_grid.rows, 0);
 	view_source_destroy(src);
 	assert_int_equal(unlink(path), 0);
 	assert_int_equal(rmdir(dir), 0);
@@ -327,6 +365,7 @@ int main(void)
 		cmocka_unit_test(sun_from_upper_left),
 		cmocka_unit_test(sea),
 		cmocka_unit_test(sea_ice),
+		cmocka_unit_test(sea_on_a_geoid),
 		cmocka_unit_test(look_from_planet_file),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

@@ -160,6 +160,14 @@ static float undulation(const struct geoid *g, double lat, double lon)
 	return (float)(top + (bot - top) * wr);
 }
 
+bool geoid_undulation(const struct node *n, double lat, double lon, double *out)
+{
+	if (!n || n->type != &node_type_geoid || !n->impl)
+		return false;
+	*out = undulation(n->impl, lat, lon);
+	return true;
+}
+
 static int geoid_generate(const struct node *n, struct gen_ctx *gc, const struct tile_key *k,
 			  struct tile *const *in, int nin, struct tile *out)
 {
