@@ -480,6 +480,9 @@ static void decode_planet(struct rd *r, struct proto_planet *p)
 			p->air_density);
 	if (!r->err && (p->sea > 1 || (!p->sea && p->sea_level != 0)))
 		rd_fail(r, PROTO_ERR_FIELD, "sea %u with sea_level %g", p->sea, p->sea_level);
+	p->sea_mask = rd_u8(r, "sea_mask");
+	if (!r->err && (p->sea_mask > 1 || (p->sea_mask && !p->sea)))
+		rd_fail(r, PROTO_ERR_FIELD, "sea_mask %u with sea %u", p->sea_mask, p->sea);
 	struct sea_grid *g = &p->sea_grid;
 	g->rows = rd_u16(r, "sea grid rows");
 	g->cols = rd_u16(r, "sea grid columns");
@@ -500,7 +503,7 @@ static void decode_planets(struct rd *r, struct proto_planets *p)
 	p->req = rd_u32(r, "req");
 	p->count = rd_u16(r, "planet count");
 	struct proto_planet *a =
-		rd_array(r, p->count, PROTO_MAX_PLANETS, 59, sizeof(*a), "planets");
+		rd_array(r, p->count, PROTO_MAX_PLANETS, 60, sizeof(*a), "planets");
 	p->planets = a;
 	for (uint16_t i = 0; i < p->count && !r->err; i++)
 		decode_planet(r, &a[i]);

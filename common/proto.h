@@ -176,6 +176,8 @@ struct proto_planet {
 	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB */
 	uint8_t sea;	      /* 1: a sea at sea_level; 0: none (sea_level 0) */
 	double sea_level;     /* metres above the ellipsoid, |x| ≤ 1e5 */
+	uint8_t sea_mask;     /* version 3: 1: the colour layers' alpha says where a sea may lie
+			       * (255: it may; 254 or less: dry land even below sea level) */
 	/* Version 3: where the sea follows a geoid, its surface above sea_level (common/seagrid.h;
 	 * OPENED carries it, PLANETS never); 0 × 0: the sea is at sea_level everywhere. */
 	struct sea_grid sea_grid;

@@ -165,6 +165,7 @@ static void enc_planet(struct wr *w, const struct proto_planet *p)
 		w8(w, p->air_color[i]);
 	w8(w, p->sea);
 	wf64(w, p->sea_level);
+	w8(w, p->sea_mask);
 	const struct sea_grid *g = &p->sea_grid;
 	if (!sea_grid_valid_size(g->rows, g->cols) || (g->rows && !g->dm)) {
 		if (!w->err) {

@@ -437,7 +437,8 @@ static void fill_planet(const struct planet *p, struct proto_planet *out, struct
 				      .air_height = p->look.air_height,
 				      .air_color = { p->look.air_color[0], p->look.air_color[1],
 						     p->look.air_color[2] },
-				      .sea = p->look.sea, .sea_level = p->look.sea_level };
+				      .sea = p->look.sea, .sea_level = p->look.sea_level,
+				      .sea_mask = p->look.sea_mask };
 	if (with_grid)
 		out->sea_grid = p->look.sea_grid;
 }

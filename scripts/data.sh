@@ -9,6 +9,8 @@
 #   data/mars/mars.tif        Mars colour (openuniverse-common mars.jpg)
 #   data/earth/lines.gpkg     coastlines, national borders, rivers (GSHHG/WDBII in gmt-gshhg-low,
 #                             dumped by gmt: scripts/earth_lines.sh; LGPL, public domain)
+#   data/earth/water.tif      where water lies, 1 (sea, lakes) or 0 (land), on a 2′ grid: GSHHG's
+#                             shorelines rasterised by gmt grdlandmask (earth.ini's sea_mask)
 # proj-data brings the EGM96 geoid (/usr/share/proj/egm96_15.gtx).
 set -eu
 BUILD=${BUILD:-build}
@@ -65,6 +67,7 @@ stale data/earth/bluemarble.tif "$FG"/world_[NS][1-4].png && need=1
 stale data/moon/moon.tif "$MOON" && need=1
 stale data/mars/mars.tif "$MARS" && need=1
 stale data/earth/lines.gpkg "$GSHHG"/binned_*_l.nc scripts/earth_lines.sh && need=1
+stale data/earth/water.tif "$GSHHG"/binned_*_l.nc scripts/data.sh && need=1
 [ $need -eq 0 ] && exit 0
 ${MAKE:-make} --no-print-directory -s "$CTL"
 mkdir -p data/earth data/moon data/mars
@@ -117,5 +120,13 @@ if stale data/earth/lines.gpkg "$GSHHG"/binned_*_l.nc scripts/earth_lines.sh; th
 	ts=$(now)
 	sh scripts/earth_lines.sh data/earth/lines.gpkg
 	echo "make data: data/earth/lines.gpkg ($(awk "BEGIN { printf \"%.1f\", $(now) - $ts }") s)"
+fi
+if stale data/earth/water.tif "$GSHHG"/binned_*_l.nc scripts/data.sh; then
+	# 1 over the ocean, lakes and ponds, 0 over land and islands in lakes (-N: ocean, land,
+	# lake, island, pond), pixel-registered on a 2′ grid (10800 × 5400; gmt writes NetCDF).
+	nc=$(mktemp -d)
+	(cd "$nc" && gmt grdlandmask -Rd -I2m -Dl -N1/0/1/0/1 -r -Gwater.nc)
+	imp data/earth/water.tif "$nc/water.nc"
+	rm -rf "$nc"
 fi
 echo "make data: ready in $(awk "BEGIN { printf \"%.1f\", $(now) - $t0 }") s"

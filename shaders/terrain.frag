@@ -48,6 +48,7 @@ in vec3 v_in;
 in vec3 v_eye;
 in float v_sea;         // the sea's surface (m, exaggerated): sea level, or on a geoid
 uniform sampler2DArray u_height;
+uniform float u_seamask; // 1: the colour's alpha says where the sea may lie (254 of 255: dry)
 uniform vec2 u_sea;     // sea level (m, exaggerated), 1 / exaggeration
 #endif
 #if !GEO_FRAG
@@ -93,11 +94,16 @@ vec3 srgb_to_linear(vec3 c)
 	return c * c;
 }
 
-vec3 tex_at(sampler2DArray s, vec2 g, vec4 p, vec2 vc, float slice)
+vec4 tex4_at(sampler2DArray s, vec2 g, vec4 p, vec2 vc, float slice)
 {
 	float u = p.x + g.x * p.z;
 	float v = clamp(p.y - g.y * p.w, vc.x, vc.y);
-	return texture(s, vec3(u / u_T, v / u_T, slice)).rgb;
+	return texture(s, vec3(u / u_T, v / u_T, slice));
+}
+
+vec3 tex_at(sampler2DArray s, vec2 g, vec4 p, vec2 vc, float slice)
+{
+	return tex4_at(s, g, p, vc, slice).rgb;
 }
 
 void main()
@@ -107,10 +113,15 @@ void main()
 #else
 	vec2 g = v_g;
 #endif
+	float open = 1.0; // the sea may lie here (the colour's alpha with a sea mask)
 #if COLOR
-	vec3 albedo = tex_at(u_color, g, u_df, u_dvf, u_dsf);
+	vec4 c4 = tex4_at(u_color, g, u_df, u_dvf, u_dsf);
 #if BLEND
-	albedo = mix(albedo, tex_at(u_color, g, u_dc, u_dvc, u_dsc), v_blend);
+	c4 = mix(c4, tex4_at(u_color, g, u_dc, u_dvc, u_dsc), v_blend);
+#endif
+	vec3 albedo = c4.rgb;
+#if SEA
+	open = u_seamask > 0.5 ? step(254.5 / 255.0, c4.a) : 1.0;
 #endif
 #if UNLIT
 	o_color = vec4(albedo, 1.0);
@@ -177,7 +188,7 @@ void main()
 	hd = mix(hd, tex_at(u_height, g, u_dc, u_dvc, u_dsc).r, v_blend);
 #endif
 	float depth = v_sea * u_sea.y - hd;
-	float below = step(0.0, depth); // at the sea's surface: water, or ice on it
+	float below = step(0.0, depth) * open; // at the sea's surface: water, or ice on it
 	float wet = below * (1.0 - ice);
 	float clear = exp2(max(depth, 0.0) * (-1.4427 / 30.0)); // e^(-depth / 30 m)
 	albedo = mix(albedo, mix(vec3(0.004, 0.02, 0.05), albedo * vec3(0.35, 0.6, 0.7), clear),

@@ -46,6 +46,14 @@ uniform sampler2DArray u_height;
 uniform sampler2D u_seag; // the sea's surface above sea level (m): a lat/lon lattice, rows from
 			  // the south pole to the north, columns from −180° east (seagrid.h)
 uniform vec3 u_seagrid;   // its rows and columns; the camera's longitude (rad)
+uniform float u_seamask;  // 1: the colour's alpha says where the sea may lie (254 of 255: dry)
+uniform sampler2DArray u_color;
+uniform vec4 u_df;        // the levels the colour comes from (as in the fragment shader)
+uniform vec2 u_dvf;
+uniform float u_dsf;
+uniform vec4 u_dc;
+uniform vec2 u_dvc;
+uniform float u_dsc;
 #endif
 
 out vec3 v_delta; // unit normal minus the camera's up, ENU: the fragment's up, (lon, lat)
@@ -95,6 +103,14 @@ float sea_at(vec2 g)
 		       ((lat + 0.5 * PI) / PI * (u_seagrid.x - 1.0) + 0.5) / u_seagrid.x);
 	return u_sea.x + textureLod(u_seag, st, 0.0).r * u_exag;
 }
+
+// The colour's alpha at (Δlon, Δlat) on a colour level (its focus, v clamp and slice).
+float alpha_at(vec2 g, vec4 p, vec2 vc, float slice)
+{
+	float u = p.x + g.x * p.z;
+	float v = clamp(p.y - g.y * p.w, vc.x, vc.y);
+	return textureLod(u_color, vec3(u / u_T, v / u_T, slice), 0.0).a;
+}
 #endif
 
 void main()
@@ -115,7 +131,16 @@ void main()
 #endif
 #if SEA
 	v_sea = sea_at(g);
-	h = max(h, v_sea); // the fragment shader tells water from land per fragment
+	bool open = true; // the sea may lie here (not a dry basin below sea level)
+	if (u_seamask > 0.5) {
+		float a = alpha_at(g, u_df, u_dvf, u_dsf);
+#if BLEND
+		a = mix(a, alpha_at(g, u_dc, u_dvc, u_dsc), w);
+#endif
+		open = a >= 254.5 / 255.0;
+	}
+	if (open)
+		h = max(h, v_sea); // the fragment shader tells water from land per fragment
 #endif
 
 	// P - C = (Nc+hc)·d + (N-Nc + h-hc)·n - e²·(N·(s-sc) + (N-Nc)·sc)·ẑ

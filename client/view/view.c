@@ -65,13 +65,13 @@
 enum {
 	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_DF,
 	U_DVF, U_DSF, U_DC, U_DVC, U_DSC, U_FADE, U_HEIGHT, U_NORMAL, U_COLOR, U_SUN, U_HAZE,
-	U_EXAG, U_SEA, U_SEAG, U_SEAGRID, U_COUNT
+	U_EXAG, U_SEA, U_SEAG, U_SEAGRID, U_SEAMASK, U_COUNT
 };
 static const char *const uniform_names[U_COUNT] = {
 	"u_vp",	 "u_lat", "u_body", "u_a",   "u_cap",	 "u_blend",  "u_T",	"u_pf",
 	"u_vf",	 "u_sf",  "u_pc",   "u_vc",  "u_sc",	 "u_df",     "u_dvf",	"u_dsf",
 	"u_dc",	 "u_dvc", "u_dsc",  "u_fade", "u_height", "u_normal", "u_color", "u_sun",
-	"u_haze", "u_exag", "u_sea",  "u_seag",  "u_seagrid",
+	"u_haze", "u_exag", "u_sea",  "u_seag",  "u_seagrid", "u_seamask",
 };
 
 /* Horizon culling's per-level results, kept while the camera and the heights stay. */
@@ -105,7 +105,7 @@ static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG"
 #define JUMP_HEIGHTS 10.0
 
 struct frame_uniforms {
-	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4], sea[2], seagrid[3];
+	float vp[16], lat[3], body[4], a, cap, sun[3], haze[4], sea[2], seagrid[3], seamask;
 };
 
 struct program {
@@ -500,6 +500,8 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->detail = xcalloc((size_t)v->nlevels, sizeof *v->detail);
 	int rc = view_clipmap_create_layer(gl, src, v->nlevels, d->color_layer, &v->cm, err);
 	if (rc == 0)
+		view_clipmap_keep_alpha(v->cm, p->look.sea_mask);
+	if (rc == 0)
 		/* every feature (lit): fail early */
 		rc = get_program(v, (NVARIANT - 1) & ~VAR_UNLIT, err) ? 0 : -EINVAL;
 	if (rc == 0) {
@@ -748,6 +750,7 @@ static int bind_program(struct view *v, int bits, int i, int c, float fade)
 		gl->Uniform2f(p->u[U_SEA], f->sea[0], f->sea[1]);
 		gl->Uniform1i(p->u[U_SEAG], SEA_UNIT);
 		gl->Uniform3f(p->u[U_SEAGRID], f->seagrid[0], f->seagrid[1], f->seagrid[2]);
+		gl->Uniform1f(p->u[U_SEAMASK], f->seamask);
 		p->frame = v->frame_no;
 	}
 	level_uniforms(v, i, p->u[U_PF], p->u[U_VF], p->u[U_SF]);
@@ -896,6 +899,7 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 	f->seagrid[0] = look->sea_grid.rows ? look->sea_grid.rows : 1;
 	f->seagrid[1] = look->sea_grid.rows ? look->sea_grid.cols : 1;
 	f->seagrid[2] = (float)(c->lon * DEG);
+	f->seamask = look->sea_mask && view_clipmap_texture(v->cm, VIEW_COLOR) ? 1.0f : 0.0f;
 	v->frame_bits = (look->sea ? VAR_SEA : 0) | (v->air.on ? VAR_HAZE : 0) |
 			(v->d.unlit ? VAR_UNLIT : 0) |
 			(v->d.exaggeration != 1 ? VAR_EXAG : 0) |
@@ -919,7 +923,11 @@ static double surface_height(const struct view *v, double lon, double lat)
 	view_clipmap_ground(v->cm, lon, lat, &ground);
 	if (!v->src->planet.look.sea)
 		return ground;
-	double sea = sea_height(v, lon, lat);
+	double sea = sea_height(v, lon, lat), a;
+	/* a sea mask in the colour's alpha: land below sea level stays land */
+	if (v->src->planet.look.sea_mask && view_clipmap_alpha(v->cm, lon, lat, &a) == 0 &&
+	    a < 254.5 / 255)
+		return ground;
 	return ground < sea ? sea : ground;
 }
 

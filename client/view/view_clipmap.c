@@ -40,6 +40,7 @@ struct level {
 	struct grid_quad next; /* its window there, asked for (look-ahead) before it is due */
 	struct slot slots[VIEW_NROLES][SLOTS];
 	float *hmirror; /* S × S heights, toroidal like the texture; NULL until first upload */
+	uint8_t *amirror; /* S × S colour alpha (with view_clipmap_keep_alpha), like hmirror */
 	bool hdirty;	/* hmirror changed since hlo/hhi were computed */
 	float hlo, hhi; /* the heights' range over the whole slice */
 	uint64_t hver;	/* counts hmirror's changes (from 1) */
@@ -62,6 +63,7 @@ struct view_clipmap {
 				 * draws the previous layer's colour until it is refilled */
 	unsigned tex[VIEW_NROLES];
 	unsigned char *zeros; /* a T×T tile of zeros for tiles that failed */
+	bool keep_alpha;      /* mirror the colour's alpha (view_clipmap_keep_alpha) */
 	bool has_motion;       /* the camera's ground motion, smoothed: */
 	double m_lon, m_lat, m_t, v_lon, v_lat; /* last position (deg), time (s), deg/s */
 	struct level *lv;
@@ -169,6 +171,7 @@ void view_clipmap_destroy(struct view_clipmap *cm)
 			for (int i = 0; i < SLOTS; i++)
 				drop(cm, &cm->lv[l].slots[r][i]);
 		free(cm->lv[l].hmirror);
+		free(cm->lv[l].amirror);
 	}
 	for (int r = 0; r < VIEW_NROLES; r++)
 		if (cm->tex[r])
@@ -537,6 +540,27 @@ static void mirror_region(struct view_clipmap *cm, struct level *L, const struct
 	L->hver++;
 }
 
+/* The colour region's alpha into the level's alpha mirror. */
+static void mirror_alpha(struct view_clipmap *cm, struct level *L, const struct grid_region *r,
+			 const unsigned char *tile, uint32_t period)
+{
+	uint32_t T = cm->T, S = cm->S;
+	if (!L->amirror)
+		L->amirror = xcalloc((size_t)S * S, 1);
+	for (uint32_t x = r->x; x < S; x += period)
+		for (uint32_t j = 0; j < r->h; j++) {
+			uint8_t *d = L->amirror + (size_t)(r->y + j) * S + x;
+			const unsigned char *s = tile + ((size_t)(r->sy + j) * T + r->sx) * 4 + 3;
+			for (uint32_t i = 0; i < r->w; i++)
+				d[i] = s[4 * i];
+		}
+}
+
+void view_clipmap_keep_alpha(struct view_clipmap *cm, bool on)
+{
+	cm->keep_alpha = on;
+}
+
 int view_clipmap_update(struct view_clipmap *cm, int level)
 {
 	struct level *L = &cm->lv[level];
@@ -586,6 +610,8 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 			}
 			if (r == VIEW_HEIGHT)
 				mirror_region(cm, L, g, base, period);
+			if (r == VIEW_COLOR && cm->keep_alpha)
+				mirror_alpha(cm, L, g, base, period);
 		}
 	}
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, 0);
@@ -625,6 +651,31 @@ int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, d
 				v[j][i] = L->hmirror[(size_t)yj * (size_t)S + (size_t)xi];
 			}
 		*h = (1 - ay) * ((1 - ax) * v[0][0] + ax * v[0][1]) +
+		     ay * ((1 - ax) * v[1][0] + ax * v[1][1]);
+		return 0;
+	}
+	return -ENOENT;
+}
+
+int view_clipmap_alpha(const struct view_clipmap *cm, double lon, double lat, double *a)
+{
+	int64_t S = cm->S;
+	for (int l = cm->nlevels - 1; l >= 0; l--) {
+		const struct level *L = &cm->lv[l];
+		if (!L->has_held || !L->amirror || !view_window_covers(&L->held, lon, lat, 0, 1))
+			continue;
+		double p[6];
+		view_level_params(&L->held, lon, lat, p);
+		double x = p[0] - 0.5, y = fmin(fmax(p[1], p[4]), p[5]) - 0.5;
+		double fx = floor(x), fy = floor(y), ax = x - fx, ay = y - fy;
+		int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
+		double v[2][2];
+		for (int j = 0; j < 2; j++)
+			for (int i = 0; i < 2; i++) {
+				int64_t xi = ((x0 + i) % S + S) % S, yj = ((y0 + j) % S + S) % S;
+				v[j][i] = L->amirror[(size_t)yj * (size_t)S + (size_t)xi] / 255.0;
+			}
+		*a = (1 - ay) * ((1 - ax) * v[0][0] + ax * v[0][1]) +
 		     ay * ((1 - ax) * v[1][0] + ax * v[1][1]);
 		return 0;
 	}

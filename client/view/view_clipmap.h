@@ -76,6 +76,12 @@ const struct grid_quad *view_clipmap_held(const struct view_clipmap *cm, int lev
 const struct grid_quad *view_clipmap_target_of(const struct view_clipmap *cm, int level);
 /* The ground height at (lon, lat) from the finest level that holds it. 0 or -ENOENT. */
 int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, double *h);
+/* Keep a CPU copy of the colour's alpha (a planet whose sea_mask is in it) for
+ * view_clipmap_alpha. Off by default. */
+void view_clipmap_keep_alpha(struct view_clipmap *cm, bool on);
+/* The colour's alpha (0..1) at (lon, lat) from the finest level holding it, bilinear. Returns 0,
+ * or -ENOENT where no level holds it (or view_clipmap_keep_alpha is off). */
+int view_clipmap_alpha(const struct view_clipmap *cm, double lon, double lat, double *a);
 
 /* The range of the heights a level's height slice holds (metres, not exaggerated): what the
  * shader can sample there, for culling. 0, or -ENOENT before the level's first upload. */

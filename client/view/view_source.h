@@ -45,6 +45,7 @@ struct view_look {
 	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB */
 	bool sea;
 	double sea_level;     /* metres above the ellipsoid */
+	bool sea_mask;	      /* the colour layer's alpha says where a sea may lie (254: dry) */
 	struct sea_grid sea_grid; /* a sea on a geoid: its surface above sea_level (owned by the
 				   * source, which lives longer than the view); 0 × 0: none */
 };

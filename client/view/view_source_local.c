@@ -199,7 +199,7 @@ int view_source_local_create(const char *planet_path, const struct view_source_l
 				       .air_color = { p->look.air_color[0], p->look.air_color[1],
 						      p->look.air_color[2] },
 				       .sea = p->look.sea, .sea_level = p->look.sea_level,
-				       .sea_grid = p->look.sea_grid };
+				       .sea_mask = p->look.sea_mask, .sea_grid = p->look.sea_grid };
 	vp->nlayers = (int)p->nlayers;
 	for (size_t i = 0; i < p->nlayers; i++) {
 		snprintf(vp->layer[i].name, sizeof vp->layer[i].name, "%s", p->layers[i].name);

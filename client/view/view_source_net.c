@@ -590,7 +590,8 @@ int view_source_net_create_wait(const struct net_opts *o, const char *planet, do
 	vp->look = (struct view_look){ .air_density = pp->air_density, .air_height = pp->air_height,
 				       .air_color = { pp->air_color[0], pp->air_color[1],
 						      pp->air_color[2] },
-				       .sea = pp->sea != 0, .sea_level = pp->sea_level };
+				       .sea = pp->sea != 0, .sea_level = pp->sea_level,
+				       .sea_mask = pp->sea_mask != 0 };
 	if (pp->sea_grid.rows) {
 		size_t bytes = (size_t)pp->sea_grid.rows * pp->sea_grid.cols * sizeof(int16_t);
 		vp->look.sea_grid = (struct sea_grid){ .rows = pp->sea_grid.rows,

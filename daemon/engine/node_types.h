@@ -38,6 +38,9 @@ extern const struct node_type node_type_file;
 /* `geoid`: input (height above the geoid) → height above the ellipsoid: + N(lat, lon) from a
  * GTX geoid grid (default EGM96 from proj-data); `sign = -1` reverses it. */
 extern const struct node_type node_type_geoid;
+/* `open_sea`: where a sea may lie (the ocean and closed basins of at least min_area), read
+ * from a global height raster: a 0..1 mask (color_filter's `alpha` carries it to a viewer). */
+extern const struct node_type node_type_open_sea;
 /* A `geoid` node's undulation N at (lat, lon) degrees, metres (whatever its sign); false if n
  * is not a geoid node. */
 bool geoid_undulation(const struct node *n, double lat, double lon, double *out);

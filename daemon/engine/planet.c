@@ -281,6 +281,16 @@ static int parse_look(struct loader *L, struct ini_section *s)
 					 e_sea->value);
 		k->sea = true;
 	}
+	struct ini_entry *e_mask = s ? ini_find(s, "sea_mask") : NULL;
+	if (e_mask) {
+		if (strcmp(e_mask->value, "color_alpha") != 0)
+			return cfg_error(L, e_mask->line, "sea_mask",
+					 "\"%s\" is not one of: color_alpha", e_mask->value);
+		if (!k->sea)
+			return cfg_error(L, e_mask->line, "sea_mask",
+					 "a mask of where the sea lies needs a sea (sea_level)");
+		k->sea_mask = true;
+	}
 	return 0;
 }
 
@@ -300,6 +310,7 @@ static int check_planet_keys(struct loader *L, struct ini_section *s)
 					    "atmosphere_color",
 					    "sea_level",
 					    "sea_geoid",
+					    "sea_mask",
 					    NULL };
 	for (size_t i = 0; s && i < s->n; i++) {
 		struct ini_entry *e = &s->entries[i];
@@ -311,7 +322,7 @@ static int check_planet_keys(struct loader *L, struct ini_section *s)
 					 "unknown key in [planet] (known: name, description, body, "
 					 "radius, flattening, tile_size, max_level, atmosphere, "
 					 "atmosphere_density, atmosphere_height, atmosphere_color, "
-					 "sea_level, sea_geoid)");
+					 "sea_level, sea_geoid, sea_mask)");
 		e->used = true;
 	}
 	return 0;
@@ -803,6 +814,18 @@ static void planet_free(struct planet *p)
 	free(p->path);
 	free(p->dir);
 	free(p);
+}
+
+char *planet_resolve_path(const struct planet *p, const char *path)
+{
+	if (path[0] == '/' || !p || !p->dir || !p->dir[0])
+		return xstrdup(path);
+	size_t a = strlen(p->dir), b = strlen(path);
+	char *s = xmalloc(a + b + 2);
+	memcpy(s, p->dir, a);
+	s[a] = '/';
+	memcpy(s + a + 1, path, b + 1);
+	return s;
 }
 
 struct node *planet_find_node(const struct planet *p, const char *name)

@@ -8,7 +8,7 @@
  *                   tile_size (power of two, 64..1024), max_level; the look:
  *                   atmosphere = none | earth | mars, atmosphere_density, atmosphere_height,
  *                   atmosphere_color (overriding the preset), sea_level (absent: no sea),
- *                   sea_geoid (a geoid node the sea follows)
+ *                   sea_geoid (a geoid node the sea follows), sea_mask = color_alpha
  *   [node NAME]     type = <node type>, its input slots naming other nodes, its parameters
  *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
  *
@@ -48,6 +48,8 @@ struct planet_look {
 	uint8_t air_color[3]; /* the sky's colour at the ground, sRGB; its hue tints the haze */
 	bool sea;	      /* a sea at sea_level covers what lies below it */
 	double sea_level;     /* metres above the ellipsoid (0 without a sea) */
+	bool sea_mask;	      /* sea_mask = color_alpha: the colour layers' alpha says where a sea
+			       * may lie (254 of 255: dry land, even below sea level) */
 	/* With `sea_geoid = NODE`: the sea lies on that geoid node's geoid, sea_level above it
 	 * (a 1° lattice of it; owned). 0 × 0: at sea_level everywhere. */
 	struct sea_grid sea_grid;
@@ -99,6 +101,9 @@ void planet_ref(const struct planet *p);
 /* Drops a reference: planet_load's or one taken with planet_ref (NULL is a no-op); the last
  * one frees the planet and its nodes. */
 void planet_unref(const struct planet *p);
+/* path as a node's data path: relative paths resolve against the planet file's directory.
+ * Returns an owned string. */
+char *planet_resolve_path(const struct planet *p, const char *path);
 struct node *planet_find_node(const struct planet *p, const char *name);
 const struct planet_layer *planet_find_layer(const struct planet *p, const char *name);
 /* Writes the graph as Graphviz dot. Returns 0 or -errno. */

@@ -183,7 +183,7 @@ def decode_planet(p, off=0):
         fmt, node = struct.unpack_from("<BQ", p, off)
         off += 9
         layers.append({"name": lname, "format": fmt, "node": node})
-    off += 8 + 8 + 3 + 1 + 8  # the look: air density, height, colour, sea, sea level
+    off += 8 + 8 + 3 + 1 + 8 + 1  # the look: air density, height, colour, sea, sea level, mask
     rows, cols = struct.unpack_from("<HH", p, off)  # the sea's lattice (version 3)
     off += 4 + 2 * rows * cols
     return {"name": name, "a": a, "f": f, "tile_size": tile_size, "max_level": max_level,

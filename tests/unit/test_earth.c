@@ -191,18 +191,38 @@ static void colours(void **state)
 	(void)state;
 	uint8_t c[4];
 	double clat, clon;
+	/* Land's alpha is 254, the viewer's mark of ground no sea covers (GSHHG's land, the
+	 * planet's sea_mask); water's is 255. */
 	texel("color", 3, 23, 10, c, &clat, &clon); /* Sahara: sand, red > green > blue */
-	if (!(c[0] > 150 && c[0] > c[1] && c[1] > c[2] && c[0] - c[2] > 40 && c[3] == 255))
+	if (!(c[0] > 150 && c[0] > c[1] && c[1] > c[2] && c[0] - c[2] > 40 && c[3] == 254))
 		fail_msg("Sahara: %d %d %d %d", c[0], c[1], c[2], c[3]);
 	texel("color", 3, -3, -60, c, &clat, &clon); /* Amazon: dark green forest */
-	if (!(c[1] + 5 >= c[0] && c[1] > c[2] + 15 && c[0] < 150 && c[1] < 150 && c[3] == 255))
+	if (!(c[1] + 5 >= c[0] && c[1] > c[2] + 15 && c[0] < 150 && c[1] < 150 && c[3] == 254))
 		fail_msg("Amazon: %d %d %d %d", c[0], c[1], c[2], c[3]);
 	texel("color", 3, -80, 0, c, &clat, &clon); /* Antarctica: white ice */
-	if (!(c[0] > 200 && c[1] > 200 && c[2] > 200 && abs(c[0] - c[2]) < 25 && c[3] == 255))
+	if (!(c[0] > 200 && c[1] > 200 && c[2] > 200 && abs(c[0] - c[2]) < 25 && c[3] == 254))
 		fail_msg("Antarctica: %d %d %d %d", c[0], c[1], c[2], c[3]);
 	texel("color", 3, 0, -140, c, &clat, &clon); /* Pacific: dark blue */
 	if (!(c[2] >= c[0] && c[2] >= c[1] && c[0] < 60 && c[3] == 255))
 		fail_msg("Pacific: %d %d %d %d", c[0], c[1], c[2], c[3]);
+	/* Below sea level and dry: the Qattara Depression (ETOPO5 −45 m here), the polders by
+	 * the IJsselmeer (−4 m); the Caspian (−30 m) is water. Level 7: 600 m texels. */
+	static const struct {
+		const char *name;
+		double lat, lon;
+		int alpha;
+	} low[] = { { "Qattara Depression", 29.5, 27.0, 254 },
+		    { "Flevoland polder", 52.45, 5.5, 254 },
+		    { "Caspian Sea", 42.0, 51.0, 255 } };
+	for (size_t i = 0; i < sizeof low / sizeof low[0]; i++) {
+		float h;
+		texel("height", 7, low[i].lat, low[i].lon, &h, &clat, &clon);
+		double n = egm96(clat, clon);
+		texel("color", 7, low[i].lat, low[i].lon, c, &clat, &clon);
+		if (!(h < n && c[3] == low[i].alpha))
+			fail_msg("%s: %.1f m with the sea at %.1f m, alpha %d (want below it, %d)",
+				 low[i].name, h, n, c[3], low[i].alpha);
+	}
 }
 
 int main(void)

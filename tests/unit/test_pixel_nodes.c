@@ -293,6 +293,51 @@ static void color_errors(void **state)
 	unmake(&tn);
 }
 
+/* color_filter's `sea_mask` input: an opaque texel where the mask is below ½ (NaN too) gets
+ * alpha 254, the viewer's mark of dry land; a mask of ½ or more, and a texel already not
+ * opaque, keep their alpha; the colour is untouched, with and without a filter; a non-height
+ * mask is refused. */
+static void color_alpha_mask(void **state)
+{
+	(void)state;
+	static const char *const params[] = { "", "gamma = 2" };
+	const float m[6] = { 0, 0.49f, 0.5f, 1, 7, NAN };
+	const uint8_t want_a[6] = { 254, 254, 255, 255, 255, 254 };
+	for (int p = 0; p < 2; p++) {
+		struct tnode tn;
+		assert_int_equal(make(&tn, &node_type_color_filter, &input_color, &input_height, NULL,
+				      params[p]),
+				 0);
+		struct tile *c = color_tile((const uint8_t[4]){ 10, 120, 240, 255 });
+		c->data[4 * 7 + 3] = 100; /* not opaque (mask 0.49): left as it is */
+		struct tile *mask = height_tile(0);
+		for (int i = 0; i < N; i++)
+			tile_f32(mask)[i] = m[i % 6];
+		struct tile *out = run1(&tn, c, mask, NULL);
+		struct tile *plain = NULL;
+		struct tnode tp;
+		assert_int_equal(make(&tp, &node_type_color_filter, &input_color, NULL, NULL,
+				      params[p]),
+				 0);
+		plain = run1(&tp, c, NULL, NULL);
+		for (int i = 0; i < N; i++) {
+			assert_int_equal(out->data[4 * i + 3], i == 7 ? 100 : want_a[i % 6]);
+			assert_memory_equal(out->data + 4 * i, plain->data + 4 * i, 3);
+		}
+		assert_int_equal(plain->data[3], 255); /* without the input alpha passes */
+		tile_unref(out);
+		tile_unref(plain);
+		tile_unref(c);
+		tile_unref(mask);
+		unmake(&tn);
+		unmake(&tp);
+	}
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_color_filter, &input_color, &input_color2, NULL, ""),
+			 -EINVAL);
+	unmake(&tn);
+}
+
 static void height_filter(void **state)
 {
 	(void)state;
@@ -741,6 +786,7 @@ int main(void)
 		cmocka_unit_test(blend_errors),	     cmocka_unit_test(hashes_differ),
 		cmocka_unit_test(color_reference),   cmocka_unit_test(ramp_reference),
 		cmocka_unit_test(blend_masked_and_normals), cmocka_unit_test(color_mask),
+		cmocka_unit_test(color_alpha_mask),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
 }

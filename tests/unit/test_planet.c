@@ -639,6 +639,15 @@ static void look(void **state)
 		   "p.ini:3: sea_geoid: node \"z\" is of type constant; sea_geoid names a node of type "
 		   "geoid");
 #undef NODE_G
+
+	/* sea_mask = color_alpha: the colour layers' alpha says where the sea may lie */
+	p = load_ok("[planet]\nsea_level = 0\nsea_mask = color_alpha\n" NODE_Z LAYER_Z);
+	assert_true(p->look.sea && p->look.sea_mask);
+	planet_unref(p);
+	load_fails("[planet]\nsea_mask = color_alpha\n" NODE_Z LAYER_Z,
+		   "p.ini:2: sea_mask: a mask of where the sea lies needs a sea (sea_level)");
+	load_fails("[planet]\nsea_level = 0\nsea_mask = alpha\n" NODE_Z LAYER_Z,
+		   "p.ini:3: sea_mask: \"alpha\" is not one of: color_alpha");
 }
 
 static void node_and_layer_errors(void **state)

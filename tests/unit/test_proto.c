@@ -70,7 +70,7 @@ static struct fixture *fixture_create(void)
 					       .nlayers = PROTO_MAX_LAYERS, .layers = f->layers,
 					       .air_density = 100, .air_height = 1e6,
 					       .air_color = { 255, 0, 7 }, .sea = 1,
-					       .sea_level = -1e5,
+					       .sea_level = -1e5, .sea_mask = 1,
 					       .sea_grid = { .rows = 3, .cols = 4, .dm = f->sea } };
 	for (int i = 0; i < 12; i++)
 		f->sea[i] = (int16_t)(i == 0 ? -INT16_MAX : i == 11 ? INT16_MAX : i * 10 - 60);
@@ -393,6 +393,7 @@ static void decoded_fields(void **state)
 	assert_true(d.opened.planet.air_density == 100 && d.opened.planet.air_height == 1e6);
 	assert_memory_equal(d.opened.planet.air_color, ((uint8_t[3]){ 255, 0, 7 }), 3);
 	assert_true(d.opened.planet.sea == 1 && d.opened.planet.sea_level == -1e5);
+	assert_int_equal(d.opened.planet.sea_mask, 1);
 	/* the sea's lattice (version 3) */
 	const struct sea_grid *sg = &d.opened.planet.sea_grid;
 	assert_int_equal(sg->rows, 3);
@@ -704,11 +705,18 @@ static void bad_fields(void **state)
 	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL); /* sea_level -1e5 without a sea */
 	assert_non_null(strstr(err, "sea_level"));
 	lk.opened.planet.sea_level = 0;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL); /* a mask without a sea */
+	assert_non_null(strstr(err, "sea_mask"));
+	lk.opened.planet.sea_mask = 0;
 	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL); /* a lattice without a sea */
 	assert_non_null(strstr(err, "sea grid"));
 	lk.opened.planet.sea_grid = (struct sea_grid){ 0 };
 	assert_true(proto_encode(&b, &lk, err) > 0);
 	b.len = 0;
+	lk = f->msgs[9];
+	lk.opened.planet.sea_mask = 2;
+	assert_int_equal(proto_encode(&b, &lk, err), -EINVAL);
+	assert_non_null(strstr(err, "sea_mask 2"));
 	/* lattices that are none: one row, a row count without columns, too many columns */
 	static const uint16_t bad_grid[][2] = { { 1, 4 }, { 3, 0 }, { 0, 3 },
 						{ 3, SEA_GRID_MAX_COLS + 1 },

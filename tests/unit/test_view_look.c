@@ -36,11 +36,11 @@ struct flat {
 	unsigned char grey;
 	float height;
 	bool tint; /* sand instead of grey: grey, 0.85 grey, 0.55 grey */
+	bool dry_west; /* the colour's alpha 254 west of 0° (a sea mask: dry land there) */
 };
 
 static void fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type f, void *data)
 {
-	(void)w;
 	const struct flat *s = ctx;
 	for (size_t o = 0; o < (size_t)T * T; o++) {
 		switch (f) {
@@ -57,6 +57,12 @@ static void fill(void *ctx, const struct view_want *w, uint32_t T, enum pix_type
 				((unsigned char *)data)[o * 4 + 2] = (unsigned char)(s->grey * 0.55);
 			}
 			((unsigned char *)data)[o * 4 + 3] = 255;
+			if (s->dry_west) {
+				double lon, lat;
+				grid_texel_center(&w->key, T, (uint32_t)(o % T), (uint32_t)(o / T), &lon,
+						  &lat);
+				((unsigned char *)data)[o * 4 + 3] = lon < 0 ? 254 : 255;
+			}
 			break;
 		}
 	}
@@ -122,7 +128,7 @@ struct horizon {
 
 static bool horizon_view(const struct view_look *look, float haze, struct horizon *h)
 {
-	struct flat s = { { 0, 0 }, 40, 0, false }; /* dark: the haze shows */
+	struct flat s = { { 0, 0 }, 40, 0, false, false }; /* dark: the haze shows */
 	struct view_camera cam = { 0, 0, 2000, 0, -3, 12, W, H };
 	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
 	if (!render(&s, look, haze, &cam, px, bg)) {
@@ -199,7 +205,7 @@ static void mars_air(void **state)
 /* Looking straight down, north up: the mean of the frame's middle. */
 static bool slope_brightness(double e, double n, double *out)
 {
-	struct flat s = { { e, n }, 140, 0, false };
+	struct flat s = { { e, n }, 140, 0, false, false };
 	struct view_camera cam = { 0, 0, 5000, 0, -90, 60, W, H };
 	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
 	if (!render(&s, NULL, 0, &cam, px, bg)) {
@@ -237,7 +243,7 @@ static void sun_from_upper_left(void **state)
 static void sea(void **state)
 {
 	(void)state;
-	struct flat s = { { 0, 0 }, 140, -500, false };
+	struct flat s = { { 0, 0 }, 140, -500, false, false };
 	struct view_look wet = { .sea = true, .sea_level = 0 }, dry = { .sea = false };
 	struct view_camera down = { 0, 0, 2000, 0, -90, 60, W, H };
 	/* towards the sun (azimuth 315), looking 35° down: the sun's mirror image in the middle */
@@ -273,7 +279,7 @@ static void sea(void **state)
 static void sea_on_a_geoid(void **state)
 {
 	(void)state;
-	struct flat s = { { 0, 0 }, 140, -50, false };
+	struct flat s = { { 0, 0 }, 140, -50, false, false };
 	/* rows: south pole, equator, north pole; columns at −180, −90, 0, 90 */
 	int16_t dm[12] = { 0, 0, 0, 0, 0, -1000, -600, 0, 0, 0, 0, 0 };
 	struct view_look geoid = { .sea = true, .sea_grid = { .rows = 3, .cols = 4, .dm = dm } };
@@ -302,13 +308,46 @@ static void sea_on_a_geoid(void **state)
 	free(px);
 }
 
+/* A sea mask in the colour's alpha (sea_mask = color_alpha): the same floor 50 m below sea
+ * level is sea east of 0°, where the colour's alpha is 255, and dry land west of it, where it
+ * is 254 (a polder, a closed depression): drawn as ground, and the camera's height is above
+ * that ground, not above a sea that is not there. Without the mask both sides are sea. */
+static void sea_mask_in_alpha(void **state)
+{
+	(void)state;
+	struct flat s = { { 0, 0 }, 140, -50, false, true };
+	struct view_look masked = { .sea = true, .sea_mask = true }, plain = { .sea = true };
+	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
+	unsigned char dry[4], wet[4], unmasked[4];
+	struct view_frame_stats st;
+	struct view_camera west = { 0, -10, 2000, 0, -90, 60, W, H };
+	struct view_camera east = { 0, 10, 2000, 0, -90, 60, W, H };
+	if (!render_stats(&s, &masked, -1, &west, px, bg, &st))
+		skip();
+	memcpy(dry, at(px, W / 2, H / 2), 4);
+	assert_true(st.ground == -50);
+	assert_true(render_stats(&s, &masked, -1, &east, px, bg, &st));
+	memcpy(wet, at(px, W / 2, H / 2), 4);
+	assert_true(st.ground == 0);
+	assert_true(render_stats(&s, &plain, -1, &west, px, bg, &st));
+	memcpy(unmasked, at(px, W / 2, H / 2), 4);
+	assert_true(st.ground == 0);
+	fprintf(stderr, "sea mask: west (alpha 254) %u,%u,%u; east %u,%u,%u; west without the mask "
+		"%u,%u,%u\n", dry[0], dry[1], dry[2], wet[0], wet[1], wet[2], unmasked[0],
+		unmasked[1], unmasked[2]);
+	assert_true(abs(dry[0] - dry[2]) < 12 && dry[0] > 60); /* grey ground */
+	assert_true(wet[2] > wet[0] + 15);			 /* water */
+	assert_true(unmasked[2] > unmasked[0] + 15);		 /* water without the mask */
+	free(px);
+}
+
 /* Ice on the sea: where the colour layer is near-white below sea level (sea ice, an ice
  * shelf), the viewer draws that white, flat and without a glint — not dark water; a light
  * but saturated floor (shallows over sand) stays water. */
 static void sea_ice(void **state)
 {
 	(void)state;
-	struct flat ice = { { 0.3, 0 }, 235, -50, false }, sand = { { 0.3, 0 }, 200, -50, true };
+	struct flat ice = { { 0.3, 0 }, 235, -50, false, false }, sand = { { 0.3, 0 }, 200, -50, true, false };
 	struct view_look wet = { .sea = true, .sea_level = 0 };
 	struct view_camera down = { 0, 0, 2000, 0, -90, 60, W, H };
 	unsigned char *px = xmalloc((size_t)W * H * 4), bg[4];
@@ -366,6 +405,7 @@ int main(void)
 		cmocka_unit_test(sea),
 		cmocka_unit_test(sea_ice),
 		cmocka_unit_test(sea_on_a_geoid),
+		cmocka_unit_test(sea_mask_in_alpha),
 		cmocka_unit_test(look_from_planet_file),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

@@ -1,6 +1,10 @@
 /* node_color — `color_filter`: per-channel levels → brightness → contrast → gamma baked into one
  * 256-entry table at create time, then (only when not identity) hue rotation and saturation as
- * one 3×3 fixed-point matrix. Alpha passes through.
+ * one 3×3 fixed-point matrix. Alpha passes through, except with the optional `sea_mask` input
+ * (a 0..1 mask, a height: where a sea may lie, e.g. open_sea's): where it is below ½ an opaque
+ * texel's alpha becomes 254, the mark a viewer reads as dry land even below sea level (the
+ * planet's sea_mask = color_alpha; 99.6 % opaque, so every other use of the colour shows it
+ * as opaque).
  *
  * Hue rotates about the grey axis (1,1,1) of RGB, so +120° maps red → green → blue exactly;
  * saturation scales the distance from Rec. 601 luma (0 gives grey). gamma > 1 brightens
@@ -188,13 +192,16 @@ static int color_generate(const struct node *n, struct gen_ctx *g, const struct 
 	const struct color_filter *f = n->impl;
 	if (nin < 1 || in[0]->type != PIX_COLOR || in[0]->size != out->size)
 		return -EINVAL;
+	bool with_alpha = n->in[1] != NULL;
+	if (with_alpha && (nin < 2 || in[1]->type != PIX_HEIGHT || in[1]->size != out->size))
+		return -EINVAL;
 	size_t count = (size_t)out->size * out->size;
 	/* Not restrict: the matrix pass runs in place over the table pass's output. */
 	const uint8_t *src = in[0]->data;
 	uint8_t *dst = out->data;
 	if (f->lut_identity && !f->matrix) {
 		memcpy(dst, src, count * 4);
-		return 0;
+		src = dst;
 	}
 	if (!f->lut_identity) {
 		const uint32_t *l0 = f->lut[0], *l1 = f->lut[1], *l2 = f->lut[2];
@@ -209,11 +216,18 @@ static int color_generate(const struct node *n, struct gen_ctx *g, const struct 
 	}
 	if (f->matrix)
 		matrix_run(f->m, src, dst, count);
+	if (with_alpha) {
+		const float *m = tile_f32(in[1]);
+		for (size_t i = 0; i < count; i++)
+			if (!(m[i] >= 0.5f) && dst[4 * i + 3] == 255) /* NaN: dry */
+				dst[4 * i + 3] = 254;
+	}
 	return 0;
 }
 
 static const struct node_slot color_slots[] = {
 	{ .name = "input", .type = PIX_COLOR },
+	{ .name = "sea_mask", .type = PIX_HEIGHT, .optional = true },
 };
 
 const struct node_type node_type_color_filter = {
@@ -221,7 +235,7 @@ const struct node_type node_type_color_filter = {
 	.doc = "levels, brightness, contrast, gamma, hue and saturation of a colour input",
 	.version = 1,
 	.slots = color_slots,
-	.nslots = 1,
+	.nslots = 2,
 	.create = color_create,
 	.destroy = node_free_impl,
 	.generate = color_generate,

@@ -74,18 +74,6 @@ static void file_destroy(struct node *nd)
 	nd->impl = NULL;
 }
 
-static char *resolve_path(const struct planet *pl, const char *path)
-{
-	if (path[0] == '/' || !pl || !pl->dir || !pl->dir[0])
-		return xstrdup(path);
-	size_t a = strlen(pl->dir), b = strlen(path);
-	char *s = xmalloc(a + b + 2);
-	memcpy(s, pl->dir, a);
-	s[a] = '/';
-	memcpy(s + a + 1, path, b + 1);
-	return s;
-}
-
 /* Rejects a height-only key on a colour node (rather than "unknown key"). */
 static int height_only(struct node_parse *p, const char *key)
 {
@@ -289,7 +277,7 @@ static int file_create(struct node *nd, struct node_parse *p)
 		pe->used = true;
 	if (!path || !path[0])
 		return np_error(p, "path", "missing: the image file to read");
-	f->path = resolve_path(nd->planet, path);
+	f->path = planet_resolve_path(nd->planet, path);
 	struct stat st;
 	if (stat(f->path, &st) != 0)
 		return np_error(p, "path", "cannot open %s: %s", f->path, strerror(errno));

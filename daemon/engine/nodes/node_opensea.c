@@ -1,0 +1,273 @@
+/* node_opensea — `open_sea`: where a sea may lie. Everything below sea level is not sea: the
+ * Qattara Depression, Death Valley, the Danakil and the Turpan lie below it and are dry land.
+ * The node reads a global height raster (`path`: equirectangular, the whole sphere, heights
+ * relative to `sea_level` as in the data — ETOPO5 gives them above mean sea level) once, at
+ * load, and finds its closed basins: the 8-connected regions of cells below sea level
+ * (longitude wraps; the first and last rows connect across the pole). The largest is the
+ * world ocean; a basin of at least `min_area` km² (default 100 000) is a sea of its own (the
+ * Caspian: 371 000 km², its surface 28 m below the ocean's but drawn at sea level); every
+ * other basin is dry. The mask is 1 where the sea may lie (the cells of the ocean and of the
+ * large basins, and the ground next to them: the coast) and 0 elsewhere (dry basins, and
+ * ground away from the sea, where detail that dips below sea level is no sea either).
+ *
+ * Output: a 0..1 mask (a height), bilinear between the raster's cell centres. A colour
+ * layer carries it to the viewer in its alpha (color_filter's `alpha` input; the planet key
+ * sea_mask = color_alpha, docs/PLANETS.md).
+ * Rasters wider than OPENSEA_MAX_W cells are read from a coarser MIP level (the mask of a
+ * 5′ grid finds every basin a 9 km viewer would show).
+ * Thread-safety: the mask is built in create and only read by generate.
+ */
+#include <errno.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "common/img.h"
+#include "common/xalloc.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "file_digest.h"
+
+#define OPENSEA_MAX_W 4320 /* 5′: ETOPO5 itself; about 100 MB while the basins are found */
+
+struct open_sea {
+	int w, h;
+	bool point;  /* grid-registered (h = w/2 + 1: cells centred on the poles and on −180°,
+		      * as ETOPO5), else cell-registered (h = w/2: centres half a cell in) */
+	uint8_t *m; /* w × h, row 0 north: 255 the sea may lie here, 0 dry */
+};
+
+/* Latitude of row y's centre, degrees. */
+static double row_lat(const struct open_sea *s, double y)
+{
+	return s->point ? 90 - y * 180 / (s->h - 1) : 90 - (y + 0.5) * 180 / s->h;
+}
+
+static void os_destroy(struct node *n)
+{
+	struct open_sea *s = n->impl;
+	if (s)
+		free(s->m);
+	free(s);
+	n->impl = NULL;
+}
+
+/* Cell (x, y)'s up to 8 neighbours into nb (indices); returns how many. x wraps; across the
+ * pole the first and last rows meet the cell half a turn round. */
+static int neighbours(int w, int h, int x, int y, uint32_t nb[9])
+{
+	int k = 0;
+	for (int dy = -1; dy <= 1; dy++)
+		for (int dx = -1; dx <= 1; dx++) {
+			if (!dx && !dy)
+				continue;
+			int yy = y + dy, xx = ((x + dx) % w + w) % w;
+			if (yy < 0 || yy >= h)
+				continue;
+			nb[k++] = (uint32_t)yy * (uint32_t)w + (uint32_t)xx;
+		}
+	if (y == 0 || y == h - 1)
+		nb[k++] = (uint32_t)y * (uint32_t)w + (uint32_t)((x + w / 2) % w);
+	return k;
+}
+
+/* Labels the basins of `below` (one label per 8-connected region, from 1) into lab and their
+ * areas (km², on a sphere of radius a) into *area (owned); returns how many. */
+static int basins(const struct open_sea *os, const uint8_t *below, double a, int32_t *lab,
+		  double **area)
+{
+	int w = os->w, h = os->h;
+	size_t n = (size_t)w * h, cap = 64;
+	int count = 0;
+	double *ar = xmalloc(cap * sizeof *ar);
+	uint32_t *queue = xmalloc(n * sizeof *queue);
+	double cell = (2 * M_PI / w) * (M_PI / h) * (a / 1e3) * (a / 1e3); /* km² × cos φ */
+	double *cosr = xmalloc((size_t)h * sizeof *cosr);
+	for (int y = 0; y < h; y++)
+		cosr[y] = cos(row_lat(os, y) * M_PI / 180);
+	for (size_t s = 0; s < n; s++) {
+		if (!below[s] || lab[s])
+			continue;
+		if ((size_t)count + 1 >= cap)
+			ar = xrealloc(ar, (cap *= 2) * sizeof *ar);
+		int id = ++count;
+		double sum = 0;
+		size_t head = 0, tail = 0;
+		queue[tail++] = (uint32_t)s;
+		lab[s] = id;
+		while (head < tail) {
+			uint32_t c = queue[head++];
+			int x = (int)(c % (uint32_t)w), y = (int)(c / (uint32_t)w);
+			sum += cell * cosr[y];
+			uint32_t nb[9];
+			int k = neighbours(w, h, x, y, nb);
+			for (int i = 0; i < k; i++)
+				if (below[nb[i]] && !lab[nb[i]]) {
+					lab[nb[i]] = id;
+					queue[tail++] = nb[i];
+				}
+		}
+		ar[id] = sum;
+	}
+	free(queue);
+	free(cosr);
+	*area = ar;
+	return count;
+}
+
+/* The mask of the raster's heights hv (w × h, row 0 north). */
+static void build_mask(struct open_sea *s, const float *hv, double sea, double min_km2, double a)
+{
+	int w = s->w, h = s->h;
+	size_t n = (size_t)w * h;
+	uint8_t *below = xmalloc(n);
+	for (size_t i = 0; i < n; i++)
+		below[i] = hv[i] < sea; /* NaN: not below */
+	int32_t *lab = xcalloc(n, sizeof *lab);
+	double *area;
+	int count = basins(s, below, a, lab, &area);
+	int ocean = 0;
+	for (int i = 1; i <= count; i++)
+		if (!ocean || area[i] > area[ocean])
+			ocean = i;
+	uint8_t *keep = xcalloc((size_t)count + 1, 1);
+	for (int i = 1; i <= count; i++)
+		keep[i] = i == ocean || area[i] >= min_km2;
+	/* The sea's cells and the ground next to them (the coast: the mask's bilinear ramp then
+	 * lies beyond the data's coastline, so detail that dips below sea level at the shore is
+	 * sea); nowhere else: no sea shows inland where detail (dunes, relief) dips below sea
+	 * level, nor in a dry basin. */
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++) {
+			size_t c = (size_t)y * w + x;
+			bool sea_cell = below[c] && keep[lab[c]], by_sea = false;
+			if (!below[c]) {
+				uint32_t nb[9];
+				int k = neighbours(w, h, x, y, nb);
+				for (int i = 0; i < k && !by_sea; i++)
+					by_sea = below[nb[i]] && keep[lab[nb[i]]];
+			}
+			s->m[c] = sea_cell || by_sea ? 255 : 0;
+		}
+	free(keep);
+	free(area);
+	free(lab);
+	free(below);
+}
+
+static int os_create(struct node *n, struct node_parse *p)
+{
+	const char *rel;
+	double sea, min_km2;
+	int rc;
+	if ((rc = np_string(p, "path", NULL, &rel)) ||
+	    (rc = np_double(p, "sea_level", 0, -1e5, 1e5, &sea)) ||
+	    (rc = np_double(p, "min_area", 100000, 0, 1e9, &min_km2)))
+		return rc;
+	if (!rel || !rel[0])
+		return np_error(p, "path", "missing: a global height raster (e.g. the one the "
+					   "planet's heights come from)");
+	char *path = planet_resolve_path(n->planet, rel);
+	struct stat st;
+	uint8_t digest[16];
+	char err[256];
+	if (stat(path, &st) != 0) {
+		rc = np_error(p, "path", "cannot open %s: %s", path, strerror(errno));
+		free(path);
+		return rc;
+	}
+	if ((rc = file_digest(path, &st, FILE_DIGEST_CACHE_MIN, digest, err))) {
+		free(path);
+		return np_error(p, "path", "%s", err);
+	}
+	np_hash_bytes(p, digest, sizeof digest);
+	struct img_cache *own = NULL, *c = n->planet ? n->planet->images : NULL;
+	if (!c)
+		c = own = img_cache_create(64);
+	struct img_info info;
+	rc = img_cache_info(c, path, &info, err);
+	int lev = 0, w = 0, h = 0;
+	if (rc == 0)
+		while ((rc = img_cache_level_size(c, path, lev, &w, &h, err)) == 0 &&
+		       w > OPENSEA_MAX_W && lev + 1 < info.mip_levels)
+			lev++;
+	if (rc)
+		rc = np_error(p, "path", "cannot read %s", err);
+	else if (w < 4 || (h != w / 2 && h != w / 2 + 1))
+		rc = np_error(p, "path", "%s is %d × %d: open_sea reads a global equirectangular "
+					 "raster, twice as wide as high (or one row more: "
+					 "grid-registered, as ETOPO5)",
+			      path, w, h);
+	float *hv = NULL;
+	if (rc == 0) {
+		hv = xmalloc((size_t)w * h * sizeof *hv);
+		if (img_cache_read(c, path, lev, 0, w, 0, h, 0, 1, IMG_F32, hv, 0, err))
+			rc = np_error(p, "path", "cannot read %s", err);
+	}
+	img_cache_unref(own);
+	free(path);
+	if (rc) {
+		free(hv);
+		return rc;
+	}
+	struct open_sea *s = xcalloc(1, sizeof *s);
+	s->w = w;
+	s->h = h;
+	s->point = h == w / 2 + 1;
+	s->m = xmalloc((size_t)w * h);
+	build_mask(s, hv, sea, min_km2, n->planet ? n->planet->a : 6371000.0);
+	free(hv);
+	n->impl = s;
+	n->out = PIX_HEIGHT;
+	return 0;
+}
+
+/* The mask at (lon, lat), 0..1, bilinear between cell centres. */
+static float mask_at(const struct open_sea *s, double lon, double lat)
+{
+	double fx = (lon + 180) / 360 * s->w - (s->point ? 0 : 0.5);
+	double fy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
+	fy = fy < 0 ? 0 : fy > s->h - 1 ? s->h - 1 : fy;
+	int y0 = (int)fy, y1 = y0 + 1 < s->h ? y0 + 1 : y0;
+	double x0f = floor(fx), ty = fy - y0, tx = fx - x0f;
+	int x0 = (((int)x0f % s->w) + s->w) % s->w, x1 = (x0 + 1) % s->w;
+	const uint8_t *a = s->m + (size_t)y0 * s->w, *b = s->m + (size_t)y1 * s->w;
+	double top = a[x0] + (a[x1] - a[x0]) * tx, bot = b[x0] + (b[x1] - b[x0]) * tx;
+	return (float)((top + (bot - top) * ty) / 255);
+}
+
+static int os_generate(const struct node *n, struct gen_ctx *gc, const struct tile_key *k,
+		       struct tile *const *in, int nin, struct tile *out)
+{
+	(void)in;
+	(void)nin;
+	const struct open_sea *s = n->impl;
+	uint32_t T = out->size;
+	double *lon = gen_scratch(gc, (size_t)T * sizeof *lon);
+	for (uint32_t i = 0; i < T; i++) {
+		double la;
+		grid_texel_center(k, T, i, 0, &lon[i], &la);
+	}
+	for (uint32_t j = 0; j < T; j++) {
+		double lo, lat;
+		grid_texel_center(k, T, 0, j, &lo, &lat);
+		float *row = tile_f32(out) + (size_t)j * T;
+		for (uint32_t i = 0; i < T; i++)
+			row[i] = mask_at(s, lon[i], lat);
+	}
+	return 0;
+}
+
+
+const struct node_type node_type_open_sea = {
+	.name = "open_sea",
+	.doc = "where a sea may lie: the ocean and large closed basins, not dry depressions",
+	.version = 1,
+	.nslots = 0,
+	.create = os_create,
+	.destroy = os_destroy,
+	.generate = os_generate,
+};

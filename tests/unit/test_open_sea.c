@@ -1,0 +1,158 @@
+/* test_open_sea — the `open_sea` node on a synthetic 64 × 32 height raster (5.625° cells):
+ * an ocean round a continent; in it a small closed basin below sea level (dry), a large one (a
+ * sea of its own, above min_area) and ground far from any sea (no sea even where detail would
+ * dip below sea level); a coast cell next to the ocean (the sea may reach it); a pocket below
+ * sea level at the north pole that joins the ocean only across the pole (the sea); and the
+ * errors a planet file can make. The whole world as one 64² tile of level (0, 0): texel i
+ * is cell column i, texel row j lies a quarter of a cell from a cell row's centre.
+ */
+#include <stdarg.h>
+#include <stddef.h>
+#include <stdint.h>
+#include <setjmp.h>
+#include <cmocka.h>
+
+#include <errno.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "common/img.h"
+#include "engine/node_types.h"
+#include "engine/planet.h"
+#include "engine/tile.h"
+#include "support/node_ini.h"
+
+#define W 64
+#define H 32
+
+static char dir[] = "/tmp/test_open_sea.XXXXXX";
+static char path[64];
+static struct planet pl;
+
+static void fill(float *h, int x0, int x1, int y0, int y1, float v)
+{
+	for (int y = y0; y <= y1; y++)
+		for (int x = x0; x <= x1; x++)
+			h[y * W + x] = v;
+}
+
+static int setup(void **state)
+{
+	(void)state;
+	if (!mkdtemp(dir))
+		return -1;
+	snprintf(path, sizeof path, "%s/dem.tif", dir);
+	static float h[W * H];
+	fill(h, 0, W - 1, 0, H - 1, -1000); /* the ocean */
+	fill(h, 10, 53, 4, 27, 100);	     /* a continent */
+	fill(h, 14, 16, 8, 10, -50);	     /* a small closed basin: dry */
+	fill(h, 25, 45, 8, 22, -50);	     /* a large one: a sea of its own */
+	fill(h, 0, W - 1, 0, 2, 100);	     /* land round the north pole */
+	fill(h, 2, 2, 0, 0, -50);	     /* a pocket at the pole … */
+	fill(h, 34, 34, 0, 2, -50);	     /* … half a turn from a channel to the ocean */
+	char err[256];
+	if (img_write(path, W, H, 1, IMG_F32, h, err)) {
+		fprintf(stderr, "%s\n", err);
+		return -1;
+	}
+	pl.a = 6371000;
+	return 0;
+}
+
+static int teardown(void **state)
+{
+	(void)state;
+	unlink(path);
+	return rmdir(dir);
+}
+
+/* The node's mask over the whole world (a 64² tile), into out (owned by the caller). */
+static void world(const char *extra, float *out)
+{
+	char text[512], err[256];
+	snprintf(text, sizeof text, "[node s]\ntype = open_sea\npath = %s\n%s", path, extra);
+	struct node_ini ni;
+	if (node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err))
+		fail_msg("open_sea: %s", err);
+	assert_int_equal(ni.n.out, PIX_HEIGHT);
+	struct tile_key k = { .node = ni.n.hash, .lx = 0, .ly = 0 };
+	struct tile *t = tile_create(&k, PIX_HEIGHT, W);
+	assert_int_equal(ni.n.type->generate(&ni.n, &ni.g, &k, NULL, 0, t), 0);
+	memcpy(out, tile_f32(t), sizeof(float) * W * W);
+	tile_unref(t);
+	node_ini_fini(&ni);
+}
+
+/* The texel of cell (x, y): its column, the texel row a quarter cell north of its centre
+ * (weights ¾ on row y, ¼ on row y − 1). */
+static float cell(const float *m, int x, int y)
+{
+	return m[(2 * y) * W + x];
+}
+
+static void basins(void **state)
+{
+	(void)state;
+	float *m = malloc(sizeof(float) * W * W);
+	world("min_area = 10000000\n", m);
+	assert_true(cell(m, 5, 15) == 1);   /* the ocean */
+	assert_true(cell(m, 35, 15) == 1);  /* the large basin */
+	assert_true(cell(m, 15, 9) == 0);   /* the small basin: dry */
+	assert_true(cell(m, 50, 24) == 0);  /* inland, far from the sea */
+	assert_true(cell(m, 10, 15) == 1);  /* the coast: land next to the ocean */
+	assert_true(cell(m, 2, 1) == 1);    /* land next to the pole's pocket: the ocean's coast */
+	for (int i = 0; i < W * W; i++)
+		assert_true(m[i] >= 0 && m[i] <= 1);
+	/* a larger min_area: the large basin is dry too */
+	world("min_area = 1e9\n", m);
+	assert_true(cell(m, 35, 15) == 0);
+	assert_true(cell(m, 5, 15) == 1); /* the ocean is always a sea */
+	/* sea_level: the raster's zero moved up 200 m: the continent (100 m) is sea floor */
+	world("sea_level = 200\n", m);
+	assert_true(cell(m, 50, 24) == 1);
+	free(m);
+}
+
+static void errors(void **state)
+{
+	(void)state;
+	char err[256];
+	struct node_ini ni;
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, "[node s]\ntype = open_sea\n",
+				       NULL, 0, err),
+			 -EINVAL);
+	assert_non_null(strstr(err, "path: missing"));
+	node_ini_fini(&ni);
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl,
+				       "[node s]\ntype = open_sea\npath = /nonexistent.tif\n", NULL,
+				       0, err),
+			 -EINVAL);
+	assert_non_null(strstr(err, "cannot open /nonexistent.tif"));
+	node_ini_fini(&ni);
+	/* not a global raster */
+	char p2[80], text[256];
+	snprintf(p2, sizeof p2, "%s/strip.tif", dir);
+	static float h[W * 10];
+	assert_int_equal(img_write(p2, W, 10, 1, IMG_F32, h, err), 0);
+	snprintf(text, sizeof text, "[node s]\ntype = open_sea\npath = %s\n", p2);
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err), -EINVAL);
+	assert_non_null(strstr(err, "64 × 10: open_sea reads a global equirectangular raster"));
+	node_ini_fini(&ni);
+	unlink(p2);
+	snprintf(text, sizeof text, "[node s]\ntype = open_sea\npath = %s\nmin_area = -1\n", path);
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err), -EINVAL);
+	assert_non_null(strstr(err, "min_area"));
+	node_ini_fini(&ni);
+}
+
+int main(void)
+{
+	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(basins),
+		cmocka_unit_test(errors),
+	};
+	return cmocka_run_group_tests(tests, setup, teardown);
+}
