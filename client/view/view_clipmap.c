@@ -631,55 +631,58 @@ const struct grid_quad *view_clipmap_target_of(const struct view_clipmap *cm, in
 	return cm->lv[level].has_target ? &cm->lv[level].target : NULL;
 }
 
-int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, double *h)
+/* The finest level whose held window covers (lon, lat) and has a mirror (the alpha mirror with
+ * alpha, else the heights'): its four texels round the point and their bilinear weights.
+ * Returns NULL where none. */
+static const struct level *mirror_taps(const struct view_clipmap *cm, double lon, double lat,
+				       bool alpha, size_t at[4], double w[4])
 {
 	int64_t S = cm->S;
 	for (int l = cm->nlevels - 1; l >= 0; l--) {
 		const struct level *L = &cm->lv[l];
-		if (!L->has_held || !L->hmirror || !view_window_covers(&L->held, lon, lat, 0, 1))
-			continue;
-		double p[6];
-		view_level_params(&L->held, lon, lat, p);
-		double x = p[0] - 0.5, y = fmin(fmax(p[1], p[4]), p[5]) - 0.5;
-		double fx = floor(x), fy = floor(y);
-		double ax = x - fx, ay = y - fy;
-		int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
-		double v[2][2];
-		for (int j = 0; j < 2; j++)
-			for (int i = 0; i < 2; i++) {
-				int64_t xi = ((x0 + i) % S + S) % S, yj = ((y0 + j) % S + S) % S;
-				v[j][i] = L->hmirror[(size_t)yj * (size_t)S + (size_t)xi];
-			}
-		*h = (1 - ay) * ((1 - ax) * v[0][0] + ax * v[0][1]) +
-		     ay * ((1 - ax) * v[1][0] + ax * v[1][1]);
-		return 0;
-	}
-	return -ENOENT;
-}
-
-int view_clipmap_alpha(const struct view_clipmap *cm, double lon, double lat, double *a)
-{
-	int64_t S = cm->S;
-	for (int l = cm->nlevels - 1; l >= 0; l--) {
-		const struct level *L = &cm->lv[l];
-		if (!L->has_held || !L->amirror || !view_window_covers(&L->held, lon, lat, 0, 1))
+		if (!L->has_held || !(alpha ? (void *)L->amirror : (void *)L->hmirror) ||
+		    !view_window_covers(&L->held, lon, lat, 0, 1))
 			continue;
 		double p[6];
 		view_level_params(&L->held, lon, lat, p);
 		double x = p[0] - 0.5, y = fmin(fmax(p[1], p[4]), p[5]) - 0.5;
 		double fx = floor(x), fy = floor(y), ax = x - fx, ay = y - fy;
 		int64_t x0 = (int64_t)fx, y0 = (int64_t)fy;
-		double v[2][2];
 		for (int j = 0; j < 2; j++)
 			for (int i = 0; i < 2; i++) {
 				int64_t xi = ((x0 + i) % S + S) % S, yj = ((y0 + j) % S + S) % S;
-				v[j][i] = L->amirror[(size_t)yj * (size_t)S + (size_t)xi] / 255.0;
+				at[2 * j + i] = (size_t)yj * (size_t)S + (size_t)xi;
+				w[2 * j + i] = (j ? ay : 1 - ay) * (i ? ax : 1 - ax);
 			}
-		*a = (1 - ay) * ((1 - ax) * v[0][0] + ax * v[0][1]) +
-		     ay * ((1 - ax) * v[1][0] + ax * v[1][1]);
-		return 0;
+		return L;
 	}
-	return -ENOENT;
+	return NULL;
+}
+
+int view_clipmap_ground(const struct view_clipmap *cm, double lon, double lat, double *h)
+{
+	size_t at[4];
+	double w[4];
+	const struct level *L = mirror_taps(cm, lon, lat, false, at, w);
+	if (!L)
+		return -ENOENT;
+	*h = 0;
+	for (int k = 0; k < 4; k++)
+		*h += w[k] * L->hmirror[at[k]];
+	return 0;
+}
+
+int view_clipmap_alpha(const struct view_clipmap *cm, double lon, double lat, double *a)
+{
+	size_t at[4];
+	double w[4];
+	const struct level *L = mirror_taps(cm, lon, lat, true, at, w);
+	if (!L)
+		return -ENOENT;
+	*a = 0;
+	for (int k = 0; k < 4; k++)
+		*a += w[k] * L->amirror[at[k]] / 255.0;
+	return 0;
 }
 
 unsigned view_clipmap_texture(const struct view_clipmap *cm, enum view_role r) { return cm->tex[r]; }
