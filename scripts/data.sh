@@ -9,7 +9,7 @@
 #   data/mars/mars.tif        Mars colour (openuniverse-common mars.jpg)
 #   data/earth/lines.gpkg     coastlines, national borders, rivers (GSHHG/WDBII in gmt-gshhg-low,
 #                             dumped by gmt: scripts/earth_lines.sh; LGPL, public domain)
-#   data/earth/water.tif      where water lies, 1 (sea, lakes) or 0 (land), on a 2′ grid: GSHHG's
+#   data/earth/water.tif      where water lies: 1 the ocean, 0.5 lakes, 0 land, on a 2′ grid: GSHHG's
 #                             shorelines rasterised by gmt grdlandmask (earth.ini's sea_mask)
 # proj-data brings the EGM96 geoid (/usr/share/proj/egm96_15.gtx).
 set -eu
@@ -122,10 +122,11 @@ if stale data/earth/lines.gpkg "$GSHHG"/binned_*_l.nc scripts/earth_lines.sh; th
 	echo "make data: data/earth/lines.gpkg ($(awk "BEGIN { printf \"%.1f\", $(now) - $ts }") s)"
 fi
 if stale data/earth/water.tif "$GSHHG"/binned_*_l.nc scripts/data.sh; then
-	# 1 over the ocean, lakes and ponds, 0 over land and islands in lakes (-N: ocean, land,
-	# lake, island, pond), pixel-registered on a 2′ grid (10800 × 5400; gmt writes NetCDF).
+	# 1 over the ocean, 0.5 over lakes and ponds, 0 over land and islands in lakes (-N: ocean,
+	# land, lake, island, pond), pixel-registered on a 2′ grid (10800 × 5400; gmt writes
+	# NetCDF).
 	nc=$(mktemp -d)
-	(cd "$nc" && gmt grdlandmask -Rd -I2m -Dl -N1/0/1/0/1 -r -Gwater.nc)
+	(cd "$nc" && gmt grdlandmask -Rd -I2m -Dl -N1/0/0.5/0/0.5 -r -Gwater.nc)
 	imp data/earth/water.tif "$nc/water.nc"
 	rm -rf "$nc"
 fi

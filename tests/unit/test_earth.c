@@ -206,13 +206,15 @@ static void colours(void **state)
 	if (!(c[2] >= c[0] && c[2] >= c[1] && c[0] < 60 && c[3] == 255))
 		fail_msg("Pacific: %d %d %d %d", c[0], c[1], c[2], c[3]);
 	/* Below sea level and dry: the Qattara Depression (ETOPO5 −45 m here), the polders by
-	 * the IJsselmeer (−4 m); the Caspian (−30 m) is water. Level 7: 600 m texels. */
+	 * the IJsselmeer (−4 m), the floor of Lake Superior (−30 m: a lake, not a sea); the
+	 * Caspian (−30 m), a closed basin of 371 000 km², is sea. Level 7: 600 m texels. */
 	static const struct {
 		const char *name;
 		double lat, lon;
 		int alpha;
 	} low[] = { { "Qattara Depression", 29.5, 27.0, 254 },
 		    { "Flevoland polder", 52.45, 5.5, 254 },
+		    { "Lake Superior's floor", 47.25, -86.58, 254 },
 		    { "Caspian Sea", 42.0, 51.0, 255 } };
 	for (size_t i = 0; i < sizeof low / sizeof low[0]; i++) {
 		float h;
