@@ -39,7 +39,11 @@
  *   poles, haze, exaggeration, which layers exist, a sea, unlit — compiled on first use).
  * - The look (the planet's, view_source.h): the air sets the sky's colour and the haze's
  *   extinction (air_init); a sea lifts the ground below it to the water's surface in the
- *   shader, so culling bounds and the camera's ground are taken at that surface too.
+ *   shader, so culling bounds and the camera's ground are taken at that surface too. The
+ *   surface is sea_level plus the planet's geoid lattice where it has one (sea_init: a small
+ *   texture the vertex shader samples); with a sea mask, ground whose colour's alpha is under
+ *   255 is never sea (the shaders, and the camera's ground through the clipmap's copy of that
+ *   alpha).
  * - Precision: the shader works with n − up (the direction from the nadir) and differences of
  *   radii; the camera sits at the origin of its east-north-up frame.
  */
@@ -384,12 +388,6 @@ static int build_fbo(struct view *v, char err[256])
 static const struct view_look earth_air = { .air_density = 1, .air_height = 8000,
 					    .air_color = { 133, 173, 222 } };
 
-/* The air from the planet's look; haze (view_desc) > 0 overrides its density, < 0 removes it.
- * The extinction's spectrum follows the cube of the sky's colour: Earth's (133, 173, 222)
- * gives Rayleigh's λ⁻⁴ blue plus a little grey Mie (7.4, 16.4, 34.6 µ/m, 58.4 in all at
- * density 1, as the viewer always drew it); Mars' butterscotch a red-heavy dust haze. The
- * light the air scatters into a ray is sunlight × (1 − transmittance), so the haze takes the
- * colour of the extinction. */
 /* The texture unit of the sea's lattice (the layers' textures take 0 .. VIEW_NROLES − 1). */
 #define SEA_UNIT VIEW_NROLES
 
@@ -426,6 +424,12 @@ static double sea_height(const struct view *v, double lon, double lat)
 	return look->sea_level + sea_grid_at(&look->sea_grid, lat, lon);
 }
 
+/* The air from the planet's look; haze (view_desc) > 0 overrides its density, < 0 removes it.
+ * The extinction's spectrum follows the cube of the sky's colour: Earth's (133, 173, 222)
+ * gives Rayleigh's λ⁻⁴ blue plus a little grey Mie (7.4, 16.4, 34.6 µ/m, 58.4 in all at
+ * density 1, as the viewer always drew it); Mars' butterscotch a red-heavy dust haze. The
+ * light the air scatters into a ray is sunlight × (1 − transmittance), so the haze takes the
+ * colour of the extinction. */
 static void air_init(struct air *air, const struct view_look *look, float haze)
 {
 	*air = (struct air){ .on = false };
