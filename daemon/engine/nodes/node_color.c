@@ -192,8 +192,8 @@ static int color_generate(const struct node *n, struct gen_ctx *g, const struct 
 	const struct color_filter *f = n->impl;
 	if (nin < 1 || in[0]->type != PIX_COLOR || in[0]->size != out->size)
 		return -EINVAL;
-	bool with_alpha = n->in[1] != NULL;
-	if (with_alpha && (nin < 2 || in[1]->type != PIX_HEIGHT || in[1]->size != out->size))
+	bool mark_dry = n->in[1] != NULL; /* the sea_mask input */
+	if (mark_dry && (nin < 2 || in[1]->type != PIX_HEIGHT || in[1]->size != out->size))
 		return -EINVAL;
 	size_t count = (size_t)out->size * out->size;
 	/* Not restrict: the matrix pass runs in place over the table pass's output. */
@@ -216,7 +216,7 @@ static int color_generate(const struct node *n, struct gen_ctx *g, const struct 
 	}
 	if (f->matrix)
 		matrix_run(f->m, src, dst, count);
-	if (with_alpha) {
+	if (mark_dry) {
 		const float *m = tile_f32(in[1]);
 		for (size_t i = 0; i < count; i++)
 			if (!(m[i] >= 0.5f) && dst[4 * i + 3] == 255) /* NaN: dry */

@@ -105,18 +105,16 @@ static int geoid_create(struct node *n, struct node_parse *p)
 		return rc;
 	if (sign == 0)
 		return np_error(p, "sign", "must be 1 (geoid → ellipsoid) or -1");
-	char full[4096];
-	if (path[0] != '/' && n->planet && n->planet->dir)
-		snprintf(full, sizeof full, "%s/%s", n->planet->dir, path);
-	else
-		snprintf(full, sizeof full, "%s", path);
+	char *full = planet_resolve_path(n->planet, path);
 	struct stat st;
 	if (stat(full, &st) == 0) {
 		int64_t id[2] = { (int64_t)st.st_size, (int64_t)st.st_mtime };
 		np_hash_bytes(p, id, sizeof id);
 	}
 	struct geoid *g = xcalloc(1, sizeof *g);
-	if ((rc = read_gtx(p, full, g))) {
+	rc = read_gtx(p, full, g);
+	free(full);
+	if (rc) {
 		free(g);
 		return rc;
 	}
