@@ -29,6 +29,12 @@ static const struct bcase cases[] = {
 	{ "constant", "type = constant\nheight = 5\n", 8 },
 	{ "noise fbm 8 oct", "type = noise\nkind = fbm\noctaves = 8\nwavelength = 20000\n", 12 },
 	{ "noise ridged 8 oct", "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\n", 12 },
+	{ "noise ridged, warp", "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\n"
+				      "warp = 4000\n", 12 },
+	{ "noise ridged L8",
+	  "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\n", 8 },
+	{ "noise ridged L8, warp",
+	  "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\nwarp = 4000\n", 8 },
 	{ "color_filter LUT", "type = color_filter\ninput = col\ngamma = 1.4\ncontrast = 1.2\n", 8 },
 	{ "color_filter LUT+hue/sat",
 	  "type = color_filter\ninput = col\ngamma = 1.4\nhue = 20\nsaturation = 1.3\n", 8 },

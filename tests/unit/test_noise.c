@@ -443,6 +443,89 @@ static void no_pole_pinch(void **state)
 	assert_true(hi - lo <= 2.0 * across);
 }
 
+/* Domain warp: every ISA path gives the scalar bits, tiles match the double oracle (which
+ * warps the point itself) where the warp is evaluated per texel (level 8) and where it is
+ * interpolated from the lattice (level 12), at a pole tile and across the antimeridian; the
+ * field moves (it is not the unwarped one) and its octaves fade in by the compressed
+ * wavelength (noise.strain), so a warped level never evaluates more octaves. */
+static void warped(void **state)
+{
+	(void)state;
+	const uint32_t T = 64;
+	const struct tile_key keys[] = {
+		key(9, 8, 100, 70),		     /* warp per texel (16 km = 52 texels) */
+		key(13, 12, 4000, 1234),	     /* warp on the lattice (840 texels) */
+		key(13, 12, 8191, 0),		     /* north pole, antimeridian (east) */
+		key(13, 12, 0, 0),		     /* its western neighbour */
+		key(21, 20, (1u << 21) - 1, 300000), /* fine */
+	};
+	for (int run = 0; run < 4; run++) {
+		int kind = run % 2, depth = run / 2 ? 2 : 0; /* all octaves warped, or the first 2 */
+		struct noise nz, plain;
+		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 12, 8000);
+		p.pole_amplitude = 900;
+		assert_int_equal(noise_init(&plain, &p), 0);
+		p.warp = 1500;
+		p.warp_wavelength = 16000;
+		p.warp_depth = depth;
+		assert_int_equal(noise_init(&nz, &p), 0);
+		assert_true(nz.strain > 1.2 && nz.strain < 2.0);
+		/* warped octaves fade in by their compressed wavelength, the others by their own */
+		for (int o = 0; o < 12; o++)
+			assert_true(nz.oct[o].lmin == (depth && o >= depth ? plain.oct[o].lmin
+									   : plain.oct[o].lmin / nz.strain));
+		float *v[5];
+		double all_moved = 0, all_rms = 0;
+		for (size_t i = 0; i < 5; i++) {
+			int n_w, n_p;
+			v[i] = gen(&nz, keys[i], T, NOISE_ISA_SCALAR, &n_w);
+			float *u = gen(&plain, keys[i], T, NOISE_ISA_AUTO, &n_p);
+			assert_true(n_w > 0 && n_w <= n_p);
+			assert_true(depth == 0 || n_w >= n_p - 1);
+			for (enum noise_isa isa = NOISE_ISA_AVX2; isa <= NOISE_ISA_AVX512; isa++) {
+				if (!noise_isa_supported(isa))
+					continue;
+				float *x = gen(&nz, keys[i], T, isa, NULL);
+				assert_memory_equal(x, v[i], (size_t)T * T * sizeof *x);
+				free(x);
+			}
+			double worst = 0, moved = 0, rms = 0;
+			for (uint32_t j = 0; j < T; j += 3)
+				for (uint32_t c = 0; c < T; c += 3) {
+					double lon, lat;
+					grid_texel_center(&keys[i], T, c, j, &lon, &lat);
+					double r = noise_point(&nz, lon, lat, keys[i].ly, T);
+					worst = fmax(worst, fabs(r - v[i][j * T + c]));
+					moved += fabs((double)v[i][j * T + c] - u[j * T + c]);
+					rms += (double)u[j * T + c] * u[j * T + c];
+				}
+			if (worst > 2e-5)
+				fail_msg("kind %d key %zu: worst error %g against the oracle", kind, i,
+					 worst);
+			if (getenv("TEST_NOISE_VERBOSE"))
+				printf("warp kind %d depth %d key %zu: oracle %g, moved %g, rms %g, "
+				       "octaves %d/%d\n", kind, depth, i, worst, moved / 484,
+				       sqrt(rms / 484), n_w, n_p);
+			all_moved += moved / 484;
+			all_rms += sqrt(rms / 484);
+			free(u);
+		}
+		/* the warp moves the field by a fair part of its own size */
+		assert_true(all_moved > 0.2 * all_rms);
+		edges_match_oracle(&nz, keys[2], v[2], keys[3], v[3], T); /* antimeridian */
+		assert_int_equal(seam_violations(v[2], v[3], T), 0);
+		for (size_t i = 0; i < 5; i++)
+			free(v[i]);
+	}
+	struct noise nz;
+	struct noise_params p = params(NOISE_FBM, 6, 8000);
+	p.warp = 1000; /* no warp_wavelength */
+	assert_int_equal(noise_init(&nz, &p), -EINVAL);
+	p.warp_wavelength = 16000;
+	p.warp_octaves = NOISE_WARP_MAX_OCTAVES + 1;
+	assert_int_equal(noise_init(&nz, &p), -EINVAL);
+}
+
 /* ---- precision ---- */
 
 struct smooth {
@@ -734,6 +817,8 @@ static void parameter_errors(void **state)
 		{ "[node n]\ntype = noise\ngain = 2\n", "test.ini:3: gain: " },
 		{ "[node n]\ntype = noise\nseed = x\n", "test.ini:3: seed: " },
 		{ "[node n]\ntype = noise\noctave = 3\n", "test.ini:3: octave: unknown key" },
+		{ "[node n]\ntype = noise\nwavelength = 8000\nwarp = 9000\n", "test.ini:4: warp: " },
+		{ "[node n]\ntype = noise\nwarp = 10\nwarp_octaves = 5\n", "test.ini:4: warp_octaves: " },
 	};
 	for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
 		struct fixture f;
@@ -763,6 +848,7 @@ int main(void)
 		cmocka_unit_test(isa_paths_identical),
 		cmocka_unit_test(matches_double_oracle),
 		cmocka_unit_test(stretched),
+		cmocka_unit_test(warped),
 		cmocka_unit_test(pole_fade),
 		cmocka_unit_test(multires_matches_exact),
 		cmocka_unit_test(seamless_east_west),

@@ -20,6 +20,17 @@
  *   stretch        1..16 (default 1): features that many times narrower north–south than
  *                  east–west (space compressed along the polar axis): crests run east–west,
  *                  like ripples under a meridional wind; isotropic at the poles, no seam
+ *   warp           metres, 0..warp_wavelength/4 (default 0: none): domain warp — the field is
+ *                  evaluated at p + w(p), w a smooth 3-D vector fBm reaching about ± warp
+ *                  (noise.h): one octave's crests, which isotropic noise closes into cells of
+ *                  one size (a honeycomb seen from afar), bend, stretch and join into longer
+ *                  ranges. Octaves fade in by the wavelength the warp can compress them to
+ *   warp_wavelength metres of the warp's first octave (default 4 × the first octave kept,
+ *                  min(wavelength, max_wavelength))
+ *   warp_octaves   1..4 (default 2): the warp's octaves (gain 0.5, lacunarity 2)
+ *   warp_depth     0..24 (default 0: all): only octaves 0 .. warp_depth − 1 (counted from the
+ *                  first, wavelength) are warped — the coarse ones whose crests make the
+ *                  cells; the finer ones keep their places and their full band
  * Near a pole, octaves that are not planar over a texel of the level (curvature × amplitude ×
  * texel size over NOISE_POLE_BEND) fade to 0 on the two rows nearest it (noise.h), so every
  * level's pole rows are independent of longitude.
@@ -68,7 +79,7 @@ static int noise_create(struct node *n, struct node_parse *p)
 	static const char *const kinds[] = { "fbm", "ridged", NULL };
 	static const char *const bools[] = { "false", "true", NULL };
 	struct noise_params np = { 0 };
-	long seed, octaves;
+	long seed, octaves, warp_octaves, warp_depth;
 	int kind, rc, from_parent;
 	double amplitude, offset;
 	if ((rc = np_int(p, "seed", 0, 0, 4294967295L, &seed)) ||
@@ -83,8 +94,15 @@ static int noise_create(struct node *n, struct node_parse *p)
 	    (rc = np_double(p, "ridge_gain", 2.0, 0.0, 16.0, &np.ridge_gain)) ||
 	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)) ||
 	    (rc = np_double(p, "stretch", 1.0, 1.0, 16.0, &np.stretch)) ||
+	    (rc = np_double(p, "warp", 0.0, 0.0, 1e7, &np.warp)) ||
+	    (rc = np_double(p, "warp_wavelength", 4 * fmin(np.wavelength, np.max_wavelength), 1e-3,
+			    1e10, &np.warp_wavelength)) ||
+	    (rc = np_int(p, "warp_octaves", 2, 1, NOISE_WARP_MAX_OCTAVES, &warp_octaves)) ||
+	    (rc = np_int(p, "warp_depth", 0, 0, NOISE_MAX_OCTAVES, &warp_depth)) ||
 	    (rc = np_enum(p, "from_parent", bools, 0, &from_parent)))
 		return rc;
+	np.warp_octaves = (int)warp_octaves;
+	np.warp_depth = (int)warp_depth;
 	if (from_parent && kind == 1)
 		return np_error(p, "from_parent",
 				"ridged noise cannot be built from its parent (its crests would be "
@@ -96,6 +114,11 @@ static int noise_create(struct node *n, struct node_parse *p)
 	np.octaves = (int)octaves;
 	np.radius = n->planet->a;
 	np.pole_amplitude = fabs(amplitude);
+	if (np.warp > 0 && np.warp > np.warp_wavelength / 4)
+		return np_error(p, "warp",
+				"a warp of %g m over warp_wavelength %g m folds the field onto "
+				"itself; keep warp at most a quarter of warp_wavelength",
+				np.warp, np.warp_wavelength);
 	struct noise_impl *im = xmalloc(sizeof *im);
 	if (noise_init(&im->nz, &np)) {
 		free(im);
@@ -127,7 +150,9 @@ static int noise_create(struct node *n, struct node_parse *p)
 				   sizeof node_type_noise_carry.version);
 		const double v[] = { np.wavelength, np.lacunarity, np.gain, np.max_wavelength,
 				     np.radius, np.stretch, np.pole_amplitude,
-				     (double)np.seed, (double)np.octaves, (double)n->planet->tile_size };
+				     (double)np.seed, (double)np.octaves, (double)n->planet->tile_size,
+				     np.warp, np.warp_wavelength, (double)np.warp_octaves,
+				     (double)np.warp_depth };
 		XXH3_64bits_update(st, v, sizeof v);
 		im->carry.hash = XXH3_64bits_digest(st);
 		XXH3_freeState(st);
@@ -226,10 +251,12 @@ const struct node_type node_type_noise = {
 	.name = "noise",
 	.doc = "seeded fBm/ridged simplex noise on the sphere (seed, kind=fbm|ridged, octaves, "
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
-	       "max_wavelength m, stretch), band-limited per level; optional input height gets the "
-	       "octaves with wavelength <= max_wavelength added",
+	       "max_wavelength m, stretch, warp m, warp_wavelength m, warp_octaves, warp_depth), "
+	       "band-limited per level; optional input height gets the octaves with wavelength <= "
+	       "max_wavelength added",
 	.version = 5, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice;
-		       * 4: octaves that bend over a texel fade out at the poles; 5: from_parent */
+		       * 4: octaves that bend over a texel fade out at the poles; 5: from_parent
+		       * (warp: new keys, hashed; without them the same bytes) */
 	.slots = slots,
 	.nslots = 1,
 	.create = noise_create,

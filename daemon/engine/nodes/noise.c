@@ -11,6 +11,7 @@
 #include <errno.h>
 #include <math.h>
 #include <stdatomic.h>
+#include <stdlib.h>
 #include <string.h>
 
 /* ---- scalar kernel ---- */
@@ -285,16 +286,111 @@ static bool included(const struct noise *nz, int k)
 	return !(nz->p.max_wavelength > 0 && nz->oct[k].lambda > nz->p.max_wavelength * (1 + 1e-9));
 }
 
+bool noise_warped(const struct noise *nz, int k)
+{
+	return nz->nwarp > 0 && (nz->p.warp_depth <= 0 || k < nz->p.warp_depth);
+}
+
+/* The warp's octaves (noise.nwarp, noise.warp): per octave q a wavelength warp_wavelength/2^q,
+ * amplitude ∝ 0.5^q summing to warp metres, one hashed seed per component and one rotation. */
+static void warp_setup(struct noise *nz)
+{
+	const struct noise_params *p = &nz->p;
+	nz->nwarp = p->warp > 0 ? (p->warp_octaves > 0 ? p->warp_octaves : 2) : 0;
+	double total = 0;
+	for (int q = 0; q < nz->nwarp; q++)
+		total += ldexp(1.0, -q);
+	for (int q = 0; q < nz->nwarp; q++)
+		for (int c = 0; c < 3; c++) {
+			struct noise_octave *o = &nz->warp[q][c];
+			o->lambda = o->lmin = ldexp(p->warp_wavelength, -q);
+			o->freq = (double)(float)(p->radius / o->lambda);
+			o->amp = p->warp * ldexp(1.0, -q) / total / p->radius;
+			o->seed = mix32(p->seed ^ mix32((uint32_t)(q * 3 + c) * 0x85ebca6bu +
+							0x2f1a7c33u));
+			octave_rotation(nz->warp[q][0].seed, o->rot);
+		}
+}
+
+/* Largest singular value of a 3×3 matrix (power iteration on AᵀA). */
+static double sigma_max(const double a[3][3])
+{
+	double m[3][3], v[3] = { 0.6, 0.5, 0.62 }, lam = 0;
+	for (int i = 0; i < 3; i++)
+		for (int j = 0; j < 3; j++)
+			m[i][j] = a[0][i] * a[0][j] + a[1][i] * a[1][j] + a[2][i] * a[2][j];
+	for (int it = 0; it < 40; it++) {
+		double u[3];
+		rotate((const double(*)[3])m, v, u);
+		lam = sqrt(u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+		if (!(lam > 0))
+			return 0;
+		for (int i = 0; i < 3; i++)
+			v[i] = u[i] / lam;
+	}
+	return sqrt(lam);
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return (x > y) - (x < y);
+}
+
+/* noise.strain: I + ∂w/∂p (w in metres over metres) by central differences of the reference
+ * simplex at a fixed sample of points in the warp's space (stationary: any region is as good
+ * as another), its largest singular value's 99th percentile. Deterministic. */
+static void warp_strain(struct noise *nz)
+{
+	enum { N = 512 };
+	static const double R3[3] = { 0.8191725133961645, 0.6710436067037893, 0.5497004779019703 };
+	double s[N];
+	nz->strain = 1;
+	if (nz->nwarp == 0)
+		return;
+	const double h = 1e-3; /* noise units of each octave */
+	for (int j = 0; j < N; j++) {
+		double x0[3], jac[3][3] = { { 1, 0, 0 }, { 0, 1, 0 }, { 0, 0, 1 } };
+		for (int a = 0; a < 3; a++)
+			x0[a] = fmod(0.5 + R3[a] * (j + 1), 1.0) * 61.0; /* warp_wavelength units */
+		for (int q = 0; q < nz->nwarp; q++) {
+			/* metres of displacement per metre: amp·radius (m) × 1/λ_q per noise unit */
+			double g = nz->warp[q][0].amp * nz->p.radius / nz->warp[q][0].lambda;
+			for (int c = 0; c < 3; c++)
+				for (int d = 0; d < 3; d++) {
+					double xp[3], xm[3];
+					for (int a = 0; a < 3; a++)
+						xp[a] = xm[a] = x0[a] * ldexp(1.0, q);
+					xp[d] += h;
+					xm[d] -= h;
+					uint32_t sd = nz->warp[q][c].seed;
+					double dn = noise_simplex_ref(xp[0], xp[1], xp[2], sd) -
+						    noise_simplex_ref(xm[0], xm[1], xm[2], sd);
+					jac[c][d] += g * dn / (2 * h);
+				}
+		}
+		s[j] = sigma_max(jac);
+	}
+	qsort(s, N, sizeof *s, cmp_double);
+	double v = s[(int)(0.99 * (N - 1))];
+	nz->strain = v > 1 ? v : 1;
+}
+
 int noise_init(struct noise *nz, const struct noise_params *p)
 {
 	if (p->octaves < 1 || p->octaves > NOISE_MAX_OCTAVES || !(p->wavelength > 0) ||
 	    !(p->lacunarity > 1) || !(p->gain >= 0) || !(p->radius > 0) ||
 	    !isfinite(p->wavelength) || !isfinite(p->radius) || !isfinite(p->gain) ||
 	    !(p->max_wavelength >= 0) || !isfinite(p->ridge_offset) || !isfinite(p->ridge_gain) ||
-	    !(p->stretch == 0 || (p->stretch >= 1 && p->stretch <= 16)))
+	    !(p->stretch == 0 || (p->stretch >= 1 && p->stretch <= 16)) || !(p->warp >= 0) ||
+	    !isfinite(p->warp) || p->warp_octaves < 0 || p->warp_octaves > NOISE_WARP_MAX_OCTAVES ||
+	    p->warp_depth < 0 ||
+	    (p->warp > 0 && !(p->warp_wavelength > 0 && isfinite(p->warp_wavelength))))
 		return -EINVAL;
 	memset(nz, 0, sizeof *nz);
 	nz->p = *p;
+	warp_setup(nz);
+	warp_strain(nz);
 	double total = 0;
 	for (int k = 0; k < p->octaves; k++)
 		total += pow(p->gain, k);
@@ -309,7 +405,7 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 		double st = p->stretch > 1 ? p->stretch : 1;
 		for (int a = 0; a < 3; a++)
 			o->rot[a][2] *= st;
-		o->lmin = o->lambda / st;
+		o->lmin = o->lambda / st / (noise_warped(nz, k) ? nz->strain : 1);
 	}
 	if (p->kind == NOISE_RIDGED) {
 		int k0 = 0;
@@ -328,13 +424,12 @@ static int active_octaves(const struct noise *nz, int ly, uint32_t T, double lo,
 	double s = noise_texel_size(nz->p.radius, ly, T);
 	int m = 0;
 	for (int k = 0; k < nz->p.octaves; k++) {
-		if (!included(nz, k) || nz->oct[k].lmin >= hi)
+		/* continue, not break: a warped octave's lmin may be under the next one's */
+		if (!included(nz, k) || nz->oct[k].lmin >= hi || nz->oct[k].lmin < lo)
 			continue;
-		if (nz->oct[k].lmin < lo)
-			break;
 		double bw = noise_band_weight(nz->oct[k].lmin, s);
 		if (bw <= 0)
-			break;
+			continue;
 		idx[m] = k;
 		w[m] = (float)bw;
 		m++;
@@ -364,12 +459,13 @@ static size_t lattice_row(uint32_t T)
 
 size_t noise_scratch_size(uint32_t T)
 {
-	/* texel rows: 2 double + 8 float arrays of T; lattice: 8 + NOISE_MAX_OCTAVES float
-	 * arrays of P (M² and a pad); per coarse octave one interpolated lattice row and its
-	 * slopes: 2 float arrays of M and a pad */
-	return (size_t)T * (2 * sizeof(double) + 8 * sizeof(float)) +
-	       lattice_p(T) * (8 + NOISE_MAX_OCTAVES) * sizeof(float) +
-	       lattice_row(T) * 2 * NOISE_MAX_OCTAVES * sizeof(float) + 64;
+	/* texel rows: 2 double + 8 float arrays of T and the warp's 6; lattice: 8 +
+	 * NOISE_MAX_OCTAVES float arrays of P (M² and a pad) and the warp's 6; per coarse octave
+	 * (and warp component) one interpolated lattice row and its slopes: 2 float arrays of M
+	 * and a pad */
+	return (size_t)T * (2 * sizeof(double) + 14 * sizeof(float)) +
+	       lattice_p(T) * (14 + NOISE_MAX_OCTAVES) * sizeof(float) +
+	       lattice_row(T) * (2 * NOISE_MAX_OCTAVES + 6) * sizeof(float) + 64;
 }
 
 /* Active octaves 0..mc-1 have a wavelength of at least NOISE_MR_MIN_TEXELS texels of the
@@ -385,6 +481,16 @@ static int coarse_count(const struct noise *nz, int lx, uint32_t T, const int id
 	while (mc < m && fmin(nz->oct[idx[mc]].lmin, circ) >= NOISE_MR_MIN_TEXELS * su)
 		mc++;
 	return mc;
+}
+
+/* Whether a tile of level lx interpolates the warp from its lattice: the warp's shortest
+ * octave passes coarse_count's test (so it is as precise as the coarse octaves). */
+static bool warp_on_lattice(const struct noise *nz, int lx, uint32_t T)
+{
+	if (nz->nwarp == 0 || nz->p.exact)
+		return false;
+	double circ = 2.0 * M_PI * nz->p.radius, su = circ / (ldexp(1.0, lx) * T);
+	return fmin(nz->warp[nz->nwarp - 1][0].lambda, circ) >= NOISE_MR_MIN_TEXELS * su;
 }
 
 int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T)
@@ -476,13 +582,65 @@ static void hermite_basis(float b[4][NOISE_MR_STRIDE])
 	}
 }
 
+/* A tile's domain warp (noise.warp): each warp octave's row set-up for the tile, its float
+ * rotation and per-component amplitudes; n = 0: none. */
+struct warp_eval {
+	int n;
+	struct noise_row rows[NOISE_WARP_MAX_OCTAVES][3];
+	float rot[NOISE_WARP_MAX_OCTAVES][9];
+	float amp[NOISE_WARP_MAX_OCTAVES];
+	/* on the lattice (noise.h): the displacement at the tile's lattice points (lw, M×M),
+	 * interpolated per texel row with the coarse octaves' cubic (hb; tc, td: room for an
+	 * interpolated row and its slopes per component) */
+	bool lattice;
+	uint32_t M;
+	const struct noise_sums *ns;
+	const float (*hb)[NOISE_MR_STRIDE];
+	const float *lw[3];
+	float *tc[3], *td[3];
+};
+
+/* The displacement w(pc + d) at the n points pc + (dx, dy, dz) (offsets from the tile's
+ * centre, unit-sphere units) into w[0..2]. tmp: 4 float arrays of n (rx, ry, rz, nb).
+ * Elementwise IEEE operations in a fixed order, through the ISA's own kernels: the same bits
+ * on every path. */
+static void warp_points(const struct warp_eval *we, const struct noise_sums *ns,
+			noise_row_fn *row_fn, const float *dx, const float *dy, const float *dz,
+			uint32_t n, float *const tmp[4], float *const w[3])
+{
+	float *rx = tmp[0], *ry = tmp[1], *rz = tmp[2], *nb = tmp[3];
+	for (int c = 0; c < 3; c++)
+		memset(w[c], 0, n * sizeof *w[c]);
+	for (int q = 0; q < we->n; q++) {
+		ns->rotate_row(we->rot[q], dx, dy, dz, rx, ry, rz, n);
+		for (int c = 0; c < 3; c++) {
+			row_fn(&we->rows[q][c], rx, ry, rz, nb, n);
+			ns->acc_fbm(w[c], nb, we->amp[q], n);
+		}
+	}
+}
+
+/* o = d + w over n points (the warped points). */
+static void warp_add(const float *dx, const float *dy, const float *dz, float *const w[3],
+		     float *const o[3], uint32_t n)
+{
+	for (uint32_t i = 0; i < n; i++) {
+		o[0][i] = dx[i] + w[0][i];
+		o[1][i] = dy[i] + w[1][i];
+		o[2][i] = dz[i] + w[2][i];
+	}
+}
+
 /* The octaves mc..m-1 of texel row j, evaluated at every texel and added into row (wt: the
- * ridged weights so far). tmp: 7 float arrays of T (dx, dy, dz, rx, ry, rz, nb). */
+ * ridged weights so far); the first nwa of all active octaves at the warped points. tmp: 13
+ * float arrays of T (dx, dy, dz, rx, ry, rz, nb, the warp's wx, wy, wz and the warped points'
+ * ox, oy, oz). */
 static void full_res_row(const struct noise *nz, const struct noise_sums *ns, noise_row_fn *row_fn,
 			 const struct tile_key *k, uint32_t T, uint32_t j, const double pc[3],
 			 const double *ccos, const double *csin, const struct noise_row *rows,
 			 const float (*rot)[9], const float *amp, const float *mean, int mc, int m,
-			 float *row, float *wt, float *const tmp[7])
+			 const struct warp_eval *we, int nwa, float *row, float *wt,
+			 float *const tmp[13])
 {
 	float *dx = tmp[0], *dy = tmp[1], *dz = tmp[2], *rx = tmp[3], *ry = tmp[4], *rz = tmp[5];
 	float *nb = tmp[6];
@@ -502,8 +660,22 @@ static void full_res_row(const struct noise *nz, const struct noise_sums *ns, no
 		memcpy(dy + i, &y2, sizeof y2);
 		dz[i] = dz[i + 1] = fz;
 	}
+	if (mc < nwa && we->lattice) {
+		for (int c = 0; c < 3; c++) {
+			ns->interp_cols(we->lw[c], we->M, j, we->hb, we->tc[c]);
+			ns->interp_slopes(we->tc[c], we->M, we->td[c]);
+			ns->interp_row(we->tc[c], we->td[c], we->M, we->hb, tmp[7 + c]);
+		}
+		warp_add(dx, dy, dz, tmp + 7, tmp + 10, T);
+	} else if (mc < nwa) {
+		warp_points(we, ns, row_fn, dx, dy, dz, T, tmp + 3, tmp + 7);
+		warp_add(dx, dy, dz, tmp + 7, tmp + 10, T);
+	}
 	for (int o = mc; o < m; o++) {
-		ns->rotate_row(rot[o], dx, dy, dz, rx, ry, rz, T);
+		if (o < nwa)
+			ns->rotate_row(rot[o], tmp[10], tmp[11], tmp[12], rx, ry, rz, T);
+		else
+			ns->rotate_row(rot[o], dx, dy, dz, rx, ry, rz, T);
 		row_fn(&rows[o], rx, ry, rz, nb, T);
 		if (!ridged)
 			ns->acc_fbm(row, nb, amp[o], T);
@@ -527,11 +699,16 @@ struct tile_eval {
 	struct noise_row rows[NOISE_MAX_OCTAVES];
 	float amp[NOISE_MAX_OCTAVES], mean[NOISE_MAX_OCTAVES], rot[NOISE_MAX_OCTAVES][9];
 	float hb[4][NOISE_MR_STRIDE];
+	struct warp_eval we;
+	int nwa;		/* the first nwa active octaves are warped */
 	/* scratch (noise_scratch_size): texel columns' cos/sin and rows; the lattice; per coarse
 	 * octave its raw lattice (ridged) and interpolated lattice row and slopes */
 	double *ccos, *csin;
 	float *dx, *dy, *dz, *nb, *wt, *rx, *ry, *rz;
 	float *ldx, *ldy, *ldz, *lrx, *lry, *lrz, *lnb, *ls, *ln, *tc, *td;
+	float *wx, *wy, *wz, *lwx, *lwy, *lwz; /* the warp's displacements (rows, lattice) */
+	float *ox, *oy, *oz, *lox, *loy, *loz; /* the warped points (rows, lattice) */
+	float *wtc, *wtd; /* the warp's interpolated lattice rows and slopes: 3 × MP each */
 };
 
 static void scratch_layout(struct tile_eval *t, void *scratch)
@@ -558,6 +735,20 @@ static void scratch_layout(struct tile_eval *t, void *scratch)
 	t->ln = t->ls + P; /* mc × P */
 	t->tc = t->ln + (size_t)NOISE_MAX_OCTAVES * P;
 	t->td = t->tc + (size_t)NOISE_MAX_OCTAVES * MP;
+	t->wx = t->td + (size_t)NOISE_MAX_OCTAVES * MP;
+	t->wy = t->wx + T;
+	t->wz = t->wy + T;
+	t->lwx = t->wz + T;
+	t->lwy = t->lwx + P;
+	t->lwz = t->lwy + P;
+	t->ox = t->lwz + P;
+	t->oy = t->ox + T;
+	t->oz = t->oy + T;
+	t->lox = t->oz + T;
+	t->loy = t->lox + P;
+	t->loz = t->loy + P;
+	t->wtc = t->loz + P;
+	t->wtd = t->wtc + 3 * (size_t)MP;
 }
 
 /* The tile's centre and each active octave's lattice origin, float rotation and weighted
@@ -576,13 +767,21 @@ static void octave_setup(struct tile_eval *t, const int idx[], const float w[])
 		t->amp[o] = (float)(nz->oct[idx[o]].amp * w[o]);
 		t->mean[o] = (float)nz->oct[idx[o]].mean;
 	}
+	t->we.n = nz->nwarp;
+	for (int q = 0; q < nz->nwarp; q++) {
+		for (int c = 0; c < 3; c++)
+			octave_row(&nz->warp[q][c], t->pc, &t->we.rows[q][c]);
+		for (int a = 0; a < 9; a++)
+			t->we.rot[q][a] = (float)nz->warp[q][0].rot[a / 3][a % 3];
+		t->we.amp[q] = (float)nz->warp[q][0].amp;
+	}
 }
 
 /* The coarse octaves at the lattice points (texel centres of level texels whose u and v are
  * multiples of h), as one flat array through the row kernel: fBm their weighted sum in ls;
  * ridged each octave's raw noise in ln (smooth, unlike the creased signal), put through the
  * ridge per texel after interpolation. Then the interpolation's basis. */
-static void coarse_lattice(struct tile_eval *t)
+static void coarse_lattice(struct tile_eval *t, bool octaves)
 {
 	const struct tile_key *k = t->k;
 	const struct noise_sums *ns = t->ns;
@@ -610,9 +809,21 @@ static void coarse_lattice(struct tile_eval *t)
 	}
 	for (uint32_t q = M * M; q < P; q++)
 		ldx[q] = ldy[q] = ldz[q] = 0;
+	hermite_basis(t->hb);
+	if (t->nwa > 0) {
+		float *const tmp[4] = { t->lrx, t->lry, t->lrz, t->lnb };
+		float *const w[3] = { t->lwx, t->lwy, t->lwz }, *const o[3] = { t->lox, t->loy, t->loz };
+		warp_points(&t->we, ns, t->row_fn, ldx, ldy, ldz, P, tmp, w);
+		warp_add(ldx, ldy, ldz, w, o, P);
+	}
+	if (!octaves)
+		return;
 	memset(t->ls, 0, P * sizeof *t->ls);
 	for (int o = 0; o < t->mc; o++) {
-		ns->rotate_row(t->rot[o], ldx, ldy, ldz, t->lrx, t->lry, t->lrz, P);
+		if (o < t->nwa)
+			ns->rotate_row(t->rot[o], t->lox, t->loy, t->loz, t->lrx, t->lry, t->lrz, P);
+		else
+			ns->rotate_row(t->rot[o], ldx, ldy, ldz, t->lrx, t->lry, t->lrz, P);
 		if (!t->ridged) {
 			t->row_fn(&t->rows[o], t->lrx, t->lry, t->lrz, t->lnb, P);
 			ns->acc_fbm(t->ls, t->lnb, t->amp[o], P);
@@ -620,7 +831,6 @@ static void coarse_lattice(struct tile_eval *t)
 			t->row_fn(&t->rows[o], t->lrx, t->lry, t->lrz, t->ln + (size_t)o * P, P);
 		}
 	}
-	hermite_basis(t->hb);
 }
 
 /* The longitudes' cos and sin at the texel columns' centres (for full_res_row; after
@@ -706,11 +916,29 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 		t.mc = t.mc < pf ? t.mc : pf;
 	}
 	octave_setup(&t, idx, w);
-	if (t.mc > 0)
-		coarse_lattice(&t);
+	t.nwa = 0;
+	while (t.nwa < t.m && noise_warped(nz, idx[t.nwa]))
+		t.nwa++;
+	/* the lattice carries the displacement where the full-resolution rows need it */
+	t.we.lattice = t.mc < t.nwa && warp_on_lattice(nz, k->lx, T);
+	if (t.we.lattice) {
+		t.we.M = t.M;
+		t.we.ns = ns;
+		t.we.hb = (const float(*)[NOISE_MR_STRIDE])t.hb;
+		t.we.lw[0] = t.lwx;
+		t.we.lw[1] = t.lwy;
+		t.we.lw[2] = t.lwz;
+		for (int c = 0; c < 3; c++) {
+			t.we.tc[c] = t.wtc + (size_t)c * t.MP;
+			t.we.td[c] = t.wtd + (size_t)c * t.MP;
+		}
+	}
+	if (t.mc > 0 || t.we.lattice)
+		coarse_lattice(&t, t.mc > 0);
 	if (t.mc < t.m)
 		texel_columns(&t);
-	float *const tmp[7] = { t.dx, t.dy, t.dz, t.rx, t.ry, t.rz, t.nb };
+	float *const tmp[13] = { t.dx, t.dy, t.dz, t.rx, t.ry, t.rz, t.nb, t.wx, t.wy, t.wz,
+				 t.ox, t.oy, t.oz };
 	float pamp[NOISE_MAX_OCTAVES];
 	for (uint32_t j = 0; j < T; j++) {
 		float *row = out + (size_t)j * T;
@@ -729,7 +957,7 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 		coarse_row(&t, j, row);
 		if (t.mc < t.m)
 			full_res_row(nz, ns, t.row_fn, k, T, j, t.pc, t.ccos, t.csin, t.rows, t.rot,
-				     amp, t.mean, t.mc, t.m, row, t.wt, tmp);
+				     amp, t.mean, t.mc, t.m, &t.we, t.nwa, row, t.wt, tmp);
 		if (scale)
 			ns->finish(row, base ? base + (size_t)j * T : NULL, amplitude, offset, T);
 	}
@@ -759,9 +987,21 @@ double noise_point(const struct noise *nz, double lon, double lat, int ly, uint3
 	double p0[3], p[3], sum = 0, wt = 1;
 	double ts = noise_texel_size(nz->p.radius, ly, T), tp = noise_pole_texels(lat, ly, T);
 	unit_vector(lon, lat, p0);
+	double wp[3] = { 0, 0, 0 };
+	for (int q = 0; q < nz->nwarp; q++) {
+		rotate(nz->warp[q][0].rot, p0, p);
+		for (int c = 0; c < 3; c++) {
+			const struct noise_octave *oc = &nz->warp[q][c];
+			wp[c] += oc->amp * noise_simplex_ref(p[0] * oc->freq, p[1] * oc->freq,
+							    p[2] * oc->freq, oc->seed);
+		}
+	}
+	double pw[3];
+	for (int a = 0; a < 3; a++)
+		pw[a] = p0[a] + wp[a];
 	for (int o = 0; o < m; o++) {
 		const struct noise_octave *oc = &nz->oct[idx[o]];
-		rotate(oc->rot, p0, p);
+		rotate(oc->rot, noise_warped(nz, idx[o]) ? pw : p0, p);
 		double n = noise_simplex_ref(p[0] * oc->freq, p[1] * oc->freq, p[2] * oc->freq,
 					     oc->seed);
 		double a = oc->amp * w[o];

@@ -61,7 +61,20 @@ struct noise_params {
 				 * out over the last texels before a pole. 0: no fade */
 	bool exact;		/* evaluate every octave at every texel (no coarse lattice): for
 				 * tests and benchmarks; false (the default) in the node */
+	double warp;		/* metres, ≥ 0 (0: none): domain warp — every octave is evaluated
+				 * at p + w(p) instead of p, w a smooth 3-D vector fBm (each
+				 * component its own seed) whose components reach about ± warp:
+				 * the crests of one octave, which isotropic noise closes into
+				 * cells of one size (a honeycomb from afar), bend, stretch and
+				 * merge. Band limits use the warp's measured strain (noise.strain) */
+	double warp_wavelength; /* metres of the warp's first octave (> 0 with warp) */
+	int warp_octaves;	/* 1..NOISE_WARP_MAX_OCTAVES (0 reads as 2); gain 0.5, lacunarity 2 */
+	int warp_depth;		/* only octaves 0..warp_depth-1 are warped (0: all): the coarse
+				 * ones whose crests would form the cells; finer octaves keep their
+				 * own positions and their full band */
 };
+
+#define NOISE_WARP_MAX_OCTAVES 4
 
 /* Per-octave constants, precomputed by noise_init. */
 struct noise_octave {
@@ -79,7 +92,19 @@ struct noise_octave {
 struct noise {
 	struct noise_params p;
 	struct noise_octave oct[NOISE_MAX_OCTAVES];
+	/* Domain warp: nwarp octaves (0: none), each with one field per component x, y, z
+	 * (freq, seed; amp in unit-sphere units; the three share the rotation of [q][0]).
+	 * strain: the factor by which the warp compresses features at most, but for the
+	 * rarest 1 % of places (the 99th percentile of the largest singular value of
+	 * I + ∂w/∂p over a fixed sample of the field; 1 without warp): a warped octave's lmin is
+	 * divided by it, so it still fades in from 2–4 texels. */
+	int nwarp;
+	double strain;
+	struct noise_octave warp[NOISE_WARP_MAX_OCTAVES][3];
 };
+
+/* Whether octave k is evaluated at the warped point (noise_params.warp, warp_depth). */
+bool noise_warped(const struct noise *nz, int k);
 
 /* Checks p and precomputes per-octave constants into nz. Returns 0 or -EINVAL. */
 int noise_init(struct noise *nz, const struct noise_params *p);
