@@ -93,10 +93,10 @@ struct hcache {
 /* Program variants: the shaders' #defines (see their headers). */
 enum {
 	VAR_BLEND = 1, VAR_GEO_FRAG = 2, VAR_HAZE = 4, VAR_EXAG = 8, VAR_COLOR = 16, VAR_NORMAL = 32,
-	VAR_SEA = 64, VAR_UNLIT = 128, NVARIANT = 256
+	VAR_SEA = 64, VAR_UNLIT = 128, VAR_DERIVE = 256, NVARIANT = 512
 };
-static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG",
-					     "COLOR", "NORMAL",	  "SEA",  "UNLIT" };
+static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE",  "EXAG",  "COLOR",
+					     "NORMAL", "SEA",	   "UNLIT", "DERIVE" };
 
 /* Horizon culling's cells: subsectors per sector, cells across a ring. */
 #define HSUB_PH 4
@@ -165,6 +165,7 @@ struct view {
 	struct program *cur;
 	uint64_t frame_no;
 	int frame_bits; /* this frame's variant bits that every level shares */
+	bool derive;	/* normals made from the heights (view_desc.normals) */
 	int *drawn;	/* this frame's levels drawn, coarse → fine */
 	int *detail;	/* per level drawn: the level its colour and normals come from */
 	double last_agl; /* the last frame's camera height above the ground */
@@ -502,12 +503,19 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->hc = xcalloc((size_t)v->nlevels, sizeof *v->hc);
 	v->drawn = xcalloc((size_t)v->nlevels, sizeof *v->drawn);
 	v->detail = xcalloc((size_t)v->nlevels, sizeof *v->detail);
-	int rc = view_clipmap_create_layer(gl, src, v->nlevels, d->color_layer, &v->cm, err);
+	bool has_normals = false;
+	for (int i = 0; i < p->nlayers; i++)
+		has_normals |= p->layer[i].format == PIX_NORMAL;
+	v->derive = d->normals == VIEW_NORMALS_DERIVE ||
+		    (d->normals == VIEW_NORMALS_AUTO && !has_normals);
+	int rc = view_clipmap_create_layer(gl, src, v->nlevels, d->color_layer, !v->derive,
+					   &v->cm, err);
 	if (rc == 0)
 		view_clipmap_keep_alpha(v->cm, p->look.sea_mask);
 	if (rc == 0)
-		/* every feature (lit): fail early */
-		rc = get_program(v, (NVARIANT - 1) & ~VAR_UNLIT, err) ? 0 : -EINVAL;
+		/* every feature (lit), with the normals as they will come: fail early */
+		rc = get_program(v, (NVARIANT - 1) & ~VAR_UNLIT & ~(v->derive ? VAR_NORMAL : VAR_DERIVE),
+				 err) ? 0 : -EINVAL;
 	if (rc == 0) {
 		build_geometry(v);
 		rc = build_fbo(v, err);
@@ -908,7 +916,8 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 			(v->d.unlit ? VAR_UNLIT : 0) |
 			(v->d.exaggeration != 1 ? VAR_EXAG : 0) |
 			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
-			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
+			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0) |
+			(v->derive ? VAR_DERIVE : 0);
 	const struct gl *gl = v->gl;
 	gl->ActiveTexture(GL_TEXTURE0 + SEA_UNIT);
 	gl->BindTexture(GL_TEXTURE_2D, v->sea_tex);

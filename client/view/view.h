@@ -29,6 +29,13 @@
 #define VIEW_SUN_AZ 315
 #define VIEW_SUN_EL 35
 
+/* Where the normals come from. FETCH: the planet's normal layer (none: flat shading); DERIVE:
+ * the viewer makes them from the height clipmap (the `normal` node's arithmetic, in the
+ * fragment shader) and never asks for the normal layer — a third fewer bytes on a slow link
+ * (Earth: 20 of a place's 57 KB); AUTO (0): FETCH where the planet publishes a normal layer,
+ * DERIVE where it does not. */
+enum view_normals { VIEW_NORMALS_AUTO = 0, VIEW_NORMALS_FETCH, VIEW_NORMALS_DERIVE };
+
 struct view_desc {
 	int width, height;  /* framebuffer; 0: 1280×720 */
 	int n_phi;	    /* steps around each ring; 0: 256 */
@@ -50,6 +57,7 @@ struct view_desc {
 			       * the textures put on screen) */
 	const char *color_layer; /* the colour layer drawn (borrowed); NULL: the one named
 				  * "color", else the first colour layer */
+	enum view_normals normals; /* where the shading's normals come from */
 };
 
 struct view_frame_stats {

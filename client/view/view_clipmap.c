@@ -88,11 +88,12 @@ static bool same_tile(const struct tile_key *a, const struct tile_key *b)
 int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
 			struct view_clipmap **out, char err[256])
 {
-	return view_clipmap_create_layer(gl, src, nlevels, NULL, out, err);
+	return view_clipmap_create_layer(gl, src, nlevels, NULL, true, out, err);
 }
 
 int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int nlevels,
-			      const char *color_layer, struct view_clipmap **out, char err[256])
+			      const char *color_layer, bool normals, struct view_clipmap **out,
+			      char err[256])
 {
 	const struct view_planet *p = &src->planet;
 	*out = NULL;
@@ -115,6 +116,8 @@ int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int 
 			if (p->layer[i].format == roles[r].type)
 				layer[r] = i;
 	}
+	if (!normals)
+		layer[VIEW_NORMAL] = -1;
 	if (layer[VIEW_HEIGHT] < 0) {
 		err_set(err, "planet %s publishes no height layer", p->name);
 		return -EINVAL;

@@ -40,9 +40,11 @@ struct view_clipmap;
 int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
 			struct view_clipmap **out, char err[256]);
 /* The same with the colour layer named (NULL: as view_clipmap_create); a planet without a
- * colour layer of that name is refused. */
+ * colour layer of that name is refused. normals false: no normal role (its layer is never
+ * asked for, view_clipmap_texture(VIEW_NORMAL) is 0). */
 int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int nlevels,
-			      const char *color_layer, struct view_clipmap **out, char err[256]);
+			      const char *color_layer, bool normals, struct view_clipmap **out,
+			      char err[256]);
 void view_clipmap_destroy(struct view_clipmap *cm);
 
 /* Sets level's target quad (NULL: the level is not wanted). Tiles farther than the ring

@@ -3,6 +3,7 @@
  * camera still), and bytes uploaded per frame in a smooth flight against the minimum (the
  * texels that entered each level's window). The procedural planet, evaluated in-process; the
  * frames are timed once its engine has gone quiet (the view and its prefetch ring loaded).
+ * BV_NORMALS=derive times the normals made from the heights (--normals derive).
  */
 #include <math.h>
 #include <stdio.h>
@@ -104,6 +105,10 @@ int main(int argc, char **argv)
 		return 1;
 	}
 	struct view_desc d = { .width = 1280, .height = 720, .no_prefetch = getenv("BV_NOPF") != NULL };
+	/* BV_NORMALS=derive: the normals made in the fragment shader (--normals derive) */
+	const char *bn = getenv("BV_NORMALS");
+	if (bn && !strcmp(bn, "derive"))
+		d.normals = VIEW_NORMALS_DERIVE;
 	struct view *v;
 	if (view_create(gl_context_api(ctx), src, &d, &v, err) < 0) {
 		fprintf(stderr, "bench_view: %s\n", err);
