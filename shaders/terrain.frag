@@ -7,8 +7,7 @@
 // BLEND samples the coarser level too, HAZE applies the vertex shader's air, EXAG steepens the
 // normals by the vertical exaggeration, COLOR and NORMAL say which layers exist, SEA draws
 // water where the vertex shader lifted the ground to sea level (ice where the colour layer
-// shows it there). DERIVE (instead of NORMAL) makes the normals here from the height clipmap,
-// as the `normal` node would (a viewer that does not fetch them). UNLIT writes the colour layer
+// shows it there). UNLIT writes the colour layer
 // as it is (no light, air or water: what the textures put on screen, for measuring).
 
 #ifndef BLEND
@@ -32,9 +31,6 @@
 #ifndef SEA
 #define SEA 1
 #endif
-#ifndef DERIVE
-#define DERIVE 0
-#endif
 #ifndef UNLIT
 #define UNLIT 0
 #endif
@@ -48,19 +44,10 @@ in float v_blend;
 in vec3 v_tr;
 in vec3 v_in;
 #endif
-#if SEA || DERIVE
-uniform sampler2DArray u_height;
-#endif
-#if DERIVE && GEO_FRAG
-uniform vec4 u_body;    // (as the vertex shader's) .w: e²
-uniform float u_a;      // equatorial radius
-#endif
-#if DERIVE && !GEO_FRAG
-in vec2 v_met;          // M(φ), N(φ)·cos φ: metres per radian north and east (vertex shader)
-#endif
 #if SEA
 in vec3 v_eye;
 in float v_sea;         // the sea's surface (m, exaggerated): sea level, or on a geoid
+uniform sampler2DArray u_height;
 uniform float u_seamask; // 1: the colour's alpha says where the sea may lie (254 of 255: dry)
 uniform vec2 u_sea;     // sea level (m, exaggerated), 1 / exaggeration
 #endif
@@ -119,40 +106,6 @@ vec3 tex_at(sampler2DArray s, vec2 g, vec4 p, vec2 vc, float slice)
 	return tex4_at(s, g, p, vc, slice).rgb;
 }
 
-#if DERIVE
-// The slopes (east, north) of the level at texel position (u, v) from its heights: central
-// differences with metric texel spacing on the ellipsoid (east N(φ)·cos φ·Δλ, north M(φ)·Δφ),
-// the `normal` node's arithmetic (node_normal.c) — including its wider east stencil next to a
-// pole, where texels are far narrower east–west than tall (k texels, the chord of the
-// parallel; at most 8 here: the window holds little more). Bilinear samples at ±1 texel give
-// the bilinear blend of the texel-centre differences, as a fetched normal map would.
-vec2 slopes_at(vec2 g, vec4 p, vec2 vc, float slice)
-{
-	float u = p.x + g.x * p.z;
-	float v = clamp(p.y - g.y * p.w, vc.x, vc.y);
-#if GEO_FRAG
-	// near a pole: per fragment (the vertices' values would interpolate across it)
-	float lat = u_lat.z + g.y;
-	float sl = sin(lat);
-	float w = 1.0 - u_body.w * sl * sl;
-	float rn = u_a * inversesqrt(w);
-	vec2 met = vec2(u_a * (1.0 - u_body.w) / (w * sqrt(w)), rn * max(cos(lat), 0.0));
-#else
-	vec2 met = v_met;
-#endif
-	float dy = met.x / p.w, dx = met.y / p.z;
-	float k = dy >= 8.0 * dx ? min(floor(dy / (4.0 * dx)), 8.0) : 1.0;
-	float len = k == 1.0 ? 2.0 * dx : 2.0 * met.y * sin(k / p.z);
-	float he = texture(u_height, vec3((u + k) / u_T, v / u_T, slice)).r;
-	float hw = texture(u_height, vec3((u - k) / u_T, v / u_T, slice)).r;
-	float hn = texture(u_height, vec3(u / u_T, max(v - 1.0, vc.x) / u_T, slice)).r;
-	float hs = texture(u_height, vec3(u / u_T, min(v + 1.0, vc.y) / u_T, slice)).r;
-	// at the pole itself east is undefined (len → 0): no east slope there
-	vec2 gr = vec2(len > 1e-3 * dy ? (he - hw) / len : 0.0, (hn - hs) / (2.0 * dy));
-	return vec2(gr.x == gr.x ? gr.x : 0.0, gr.y == gr.y ? gr.y : 0.0);
-}
-#endif
-
 void main()
 {
 #if GEO_FRAG
@@ -194,13 +147,6 @@ void main()
 	en = mix(en, tex_at(u_normal, g, u_dc, u_dvc, u_dsc).rg, v_blend);
 #endif
 	en = en * (255.0 / 127.5) - 1.0;
-#elif DERIVE
-	vec2 gr = slopes_at(g, u_df, u_dvf, u_dsf);
-#if BLEND
-	if (v_blend > 0.0) // most of a ring is not blended: 4 samples, not 8
-		gr = mix(gr, slopes_at(g, u_dc, u_dvc, u_dsc), v_blend);
-#endif
-	vec2 en = -gr * inversesqrt(1.0 + dot(gr, gr));
 #else
 	vec2 en = vec2(0.0);
 #endif

@@ -20,9 +20,6 @@
 #ifndef GEO_FRAG
 #define GEO_FRAG 1
 #endif
-#ifndef DERIVE
-#define DERIVE 0
-#endif
 
 layout(location = 0) in vec3 a_ring; // sin φ̃, cos φ̃ (φ̃ = 0: north), θ̃ (angle from the nadir)
 
@@ -74,9 +71,6 @@ out float v_sea;   // the sea's surface here (m, exaggerated)
 #endif
 #if !GEO_FRAG
 out vec3 v_sunl;   // towards the sun in the point's east-north-up frame
-#endif
-#if DERIVE && !GEO_FRAG
-out vec2 v_met;    // metres per radian north and east here: M(φ), N(φ)·cos φ (DERIVE)
 #endif
 
 // (Δlon, Δlat) of the direction up + d from the camera's nadir, without cancellation.
@@ -162,9 +156,6 @@ void main()
 
 	v_delta = d;
 	v_g = g;
-#if DERIVE && !GEO_FRAG
-	v_met = vec2(N * (1.0 - e2) / (A * A), N * sqrt(max(1.0 - s * s, 0.0)));
-#endif
 #if GEO_FRAG
 #if SEA
 	v_eye = -pos;

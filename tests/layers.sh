@@ -22,7 +22,7 @@ check() { # wing, allowed include prefixes (regex), files...
 }
 out=$(
 	check common 'common/' common/*.c common/*.h common/*.cpp
-	check engine 'common/(grid|seagrid|ini|img|geo|xalloc|xthread|errbuf|clock|pixfmt|tilecodec)\.h|engine/' \
+	check engine 'common/(grid|seagrid|ini|img|geo|normalmap|xalloc|xthread|errbuf|clock|pixfmt|tilecodec)\.h|engine/' \
 		daemon/engine/*.[ch] daemon/engine/nodes/*.[ch]
 	check server 'common/|engine/' daemon/*.[ch]
 	check client 'common/' client/*.[ch]

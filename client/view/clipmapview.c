@@ -68,7 +68,7 @@ static void usage(FILE *f)
 		"                      for coast, borders and rivers)\n"
 		"  --normals auto|fetch|derive  shading's normals: the planet's normal layer\n"
 		"                      (fetch), or made here from the heights (derive: never\n"
-		"                      asks for them, ~1/3 fewer bytes on a slow link); auto\n"
+		"                      asks for them, ~1/3 fewer bytes, same picture); auto\n"
 		"                      (default): fetch if the planet has a normal layer\n"
 		"  --switch-layer-at FRAME:NAME  switch to colour layer NAME before frame FRAME\n"
 		"                      (0-based; repeatable): scripted L presses\n"

@@ -93,10 +93,10 @@ struct hcache {
 /* Program variants: the shaders' #defines (see their headers). */
 enum {
 	VAR_BLEND = 1, VAR_GEO_FRAG = 2, VAR_HAZE = 4, VAR_EXAG = 8, VAR_COLOR = 16, VAR_NORMAL = 32,
-	VAR_SEA = 64, VAR_UNLIT = 128, VAR_DERIVE = 256, NVARIANT = 512
+	VAR_SEA = 64, VAR_UNLIT = 128, NVARIANT = 256
 };
-static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE",  "EXAG",  "COLOR",
-					     "NORMAL", "SEA",	   "UNLIT", "DERIVE" };
+static const char *const variant_names[] = { "BLEND", "GEO_FRAG", "HAZE", "EXAG",
+					     "COLOR", "NORMAL",	  "SEA",  "UNLIT" };
 
 /* Horizon culling's cells: subsectors per sector, cells across a ring. */
 #define HSUB_PH 4
@@ -165,7 +165,7 @@ struct view {
 	struct program *cur;
 	uint64_t frame_no;
 	int frame_bits; /* this frame's variant bits that every level shares */
-	bool derive;	/* normals made from the heights (view_desc.normals) */
+	bool derive;	/* normals made from the heights (view_desc.normals, view_clipmap) */
 	int *drawn;	/* this frame's levels drawn, coarse → fine */
 	int *detail;	/* per level drawn: the level its colour and normals come from */
 	double last_agl; /* the last frame's camera height above the ground */
@@ -513,9 +513,8 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	if (rc == 0)
 		view_clipmap_keep_alpha(v->cm, p->look.sea_mask);
 	if (rc == 0)
-		/* every feature (lit), with the normals as they will come: fail early */
-		rc = get_program(v, (NVARIANT - 1) & ~VAR_UNLIT & ~(v->derive ? VAR_NORMAL : VAR_DERIVE),
-				 err) ? 0 : -EINVAL;
+		/* every feature (lit): fail early */
+		rc = get_program(v, (NVARIANT - 1) & ~VAR_UNLIT, err) ? 0 : -EINVAL;
 	if (rc == 0) {
 		build_geometry(v);
 		rc = build_fbo(v, err);
@@ -916,8 +915,7 @@ static void frame_uniforms(struct view *v, double agl, double cap)
 			(v->d.unlit ? VAR_UNLIT : 0) |
 			(v->d.exaggeration != 1 ? VAR_EXAG : 0) |
 			(view_clipmap_texture(v->cm, VIEW_COLOR) ? VAR_COLOR : 0) |
-			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0) |
-			(v->derive ? VAR_DERIVE : 0);
+			(view_clipmap_texture(v->cm, VIEW_NORMAL) ? VAR_NORMAL : 0);
 	const struct gl *gl = v->gl;
 	gl->ActiveTexture(GL_TEXTURE0 + SEA_UNIT);
 	gl->BindTexture(GL_TEXTURE_2D, v->sea_tex);

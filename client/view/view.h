@@ -30,10 +30,10 @@
 #define VIEW_SUN_EL 35
 
 /* Where the normals come from. FETCH: the planet's normal layer (none: flat shading); DERIVE:
- * the viewer makes them from the height clipmap (the `normal` node's arithmetic, in the
- * fragment shader) and never asks for the normal layer — a third fewer bytes on a slow link
- * (Earth: 20 of a place's 57 KB); AUTO (0): FETCH where the planet publishes a normal layer,
- * DERIVE where it does not. */
+ * the viewer makes them from its height clipmap as heights are uploaded (the `normal` node's
+ * arithmetic, view_clipmap) and never asks for the normal layer — a third fewer bytes on a
+ * slow link (Earth: 20 of a place's 57 KB); AUTO (0): FETCH where the planet publishes a
+ * normal layer, DERIVE where it does not. */
 enum view_normals { VIEW_NORMALS_AUTO = 0, VIEW_NORMALS_FETCH, VIEW_NORMALS_DERIVE };
 
 struct view_desc {

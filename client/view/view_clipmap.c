@@ -1,7 +1,8 @@
 /* view_clipmap — see view_clipmap.h. Each level keeps at most SLOTS tiles per role: the
  * tiles its window touches (up to (n+1)², n = CLIPMAP_WINDOW_TILES), the ring around them and the
  * look-ahead. A CPU copy of the height slices answers ground-height queries (camera height
- * above the terrain) without reading the GPU back.
+ * above the terrain) without reading the GPU back, and, when the normals are derived, is
+ * what they are made from (derive_normals).
  */
 #include "view_clipmap.h"
 
@@ -11,7 +12,10 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "common/clock.h"
 #include "common/errbuf.h"
+#include "common/geo.h"
+#include "common/normalmap.h"
 #include "common/xalloc.h"
 #include "view_levels.h"
 
@@ -62,6 +66,10 @@ struct view_clipmap {
 	uint32_t cgen;		/* counts colour layer switches: a held level whose cgen differs
 				 * draws the previous layer's colour until it is refilled */
 	unsigned tex[VIEW_NROLES];
+	bool derive;		 /* normals made from the heights (no normal layer asked for) */
+	struct geo_body *body;	 /* with derive: the ellipsoid, for the metric spacing */
+	uint8_t *nbuf;		 /* with derive: a region's normals, (T + 2)² RG8 */
+	uint32_t *ncol;		 /* with derive: 2 column tables of (T + 2) + 2·T entries */
 	unsigned char *zeros; /* a T×T tile of zeros for tiles that failed */
 	bool keep_alpha;      /* mirror the colour's alpha (view_clipmap_keep_alpha) */
 	bool has_motion;       /* the camera's ground motion, smoothed: */
@@ -118,6 +126,9 @@ int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int 
 	}
 	if (!normals)
 		layer[VIEW_NORMAL] = -1;
+	struct geo_body *body = NULL;
+	if (!normals && geo_body_create(p->a, p->f, &body, err) < 0)
+		return -EINVAL;
 	if (layer[VIEW_HEIGHT] < 0) {
 		err_set(err, "planet %s publishes no height layer", p->name);
 		return -EINVAL;
@@ -129,12 +140,18 @@ int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int 
 	cm->S = CLIPMAP_WINDOW_TILES * cm->T;
 	cm->nlevels = nlevels;
 	memcpy(cm->layer, layer, sizeof layer);
+	cm->derive = !normals;
+	cm->body = body;
+	if (cm->derive) {
+		cm->nbuf = xmalloc((size_t)(cm->T + 2) * (cm->T + 2) * 2);
+		cm->ncol = xmalloc(2 * ((size_t)cm->T + 2 + 2 * (size_t)cm->T) * sizeof *cm->ncol);
+	}
 	cm->zeros = xcalloc((size_t)cm->T * cm->T, 4);
 	cm->lv = xcalloc((size_t)nlevels, sizeof *cm->lv);
 	while (gl->GetError() != GL_NO_ERROR)
 		;
 	for (int r = 0; r < VIEW_NROLES; r++) {
-		if (layer[r] < 0)
+		if (layer[r] < 0 && !(r == VIEW_NORMAL && cm->derive))
 			continue;
 		gl->GenTextures(1, &cm->tex[r]);
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
@@ -181,6 +198,9 @@ void view_clipmap_destroy(struct view_clipmap *cm)
 			cm->gl->DeleteTextures(1, &cm->tex[r]);
 	free(cm->lv);
 	free(cm->zeros);
+	free(cm->nbuf);
+	free(cm->ncol);
+	geo_body_destroy(cm->body);
 	free(cm);
 }
 
@@ -564,6 +584,136 @@ void view_clipmap_keep_alpha(struct view_clipmap *cm, bool on)
 	cm->keep_alpha = on;
 }
 
+/* ---- normals made from the heights (derive) ---- */
+
+/* Level texel u wrapped into [0, W). */
+static int64_t wrap_u(int64_t u, int64_t W)
+{
+	u %= W;
+	return u < 0 ? u + W : u;
+}
+
+/* Copies w × h RG8 normals (rows of w) for level texels from (u, v) into the normal slice:
+ * split where the texture wraps, repeated across it where the level is narrower than S. */
+static void upload_normals(struct view_clipmap *cm, int level, int64_t W, int64_t u, int64_t v,
+			   uint32_t w, uint32_t h, const uint8_t *px)
+{
+	const struct gl *gl = cm->gl;
+	uint32_t S = cm->S, period = W < S ? (uint32_t)W : S;
+	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, (GLint)w);
+	for (uint32_t j = 0; j < h;) {
+		uint32_t y = (uint32_t)((v + j) % S), nh = h - j < S - y ? h - j : S - y;
+		for (uint32_t i = 0; i < w;) {
+			int64_t uu = wrap_u(u + i, W);
+			uint32_t x = (uint32_t)(uu % S);
+			uint32_t nw = w - i;
+			if (nw > period - x % period)
+				nw = period - x % period;
+			if ((int64_t)nw > W - uu)
+				nw = (uint32_t)(W - uu);
+			for (uint32_t xr = x % period; xr < S; xr += period) {
+				gl->TexSubImage3D(GL_TEXTURE_2D_ARRAY, 0, (GLint)xr, (GLint)y, level,
+						  (GLsizei)nw, (GLsizei)nh, 1, GL_RG, GL_UNSIGNED_BYTE,
+						  px + ((size_t)j * w + i) * 2);
+				cm->st.bytes_uploaded += (uint64_t)nw * nh * 2;
+				cm->st.regions_uploaded++;
+			}
+			i += nw;
+		}
+		j += nh;
+	}
+	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, (GLint)cm->T);
+}
+
+/* The normals of level texels [u0, u0 + w) × [v0, v0 + h) (inside the held window q) from the
+ * height mirror, with the `normal` node's arithmetic (common/normalmap.h): central
+ * differences, metric spacing on the ellipsoid, the wider east stencil near a pole, and
+ * across a pole the texel half a turn round. Where a stencil leaves the window (its outer
+ * texels) it is cut to the window and its length with it; interior texels get the node's
+ * bytes. Into cm->nbuf (w·h·2), then the normal slice. */
+static void derive_rect(struct view_clipmap *cm, const struct level *L, int level,
+			const struct grid_quad *q, int64_t u0, int64_t v0, uint32_t w, uint32_t h)
+{
+	const uint32_t T = cm->T, S = cm->S;
+	const uint64_t t0 = clock_now_ns();
+	const int64_t W = (int64_t)grid_tiles_x(q->lx) * T, H = (int64_t)grid_tiles_y(q->ly) * T;
+	const bool ring = (int64_t)q->w >= W; /* the window holds whole parallels */
+	const double dlam = 2 * M_PI / (double)W, dphi = M_PI / (double)H;
+	uint64_t quarter = (uint64_t)W / 4;
+	uint32_t kmax = quarter < T ? (uint32_t)(quarter > 0 ? quarter : 1) : T;
+	/* the mirror's column of level texel u0 + i − kmax, and half a turn round (across a
+	 * pole), for i in [0, w + 2·kmax) */
+	uint32_t *col = cm->ncol, *colp = cm->ncol + (w + 2 * (size_t)kmax);
+	for (uint32_t i = 0; i < w + 2 * kmax; i++) {
+		int64_t u = u0 + (int64_t)i - kmax;
+		col[i] = (uint32_t)(wrap_u(u, W) % S);
+		colp[i] = (uint32_t)(wrap_u(u + W / 2, W) % S);
+	}
+	const int64_t du0 = wrap_u(u0 - q->u0, W); /* room west of the first texel */
+	for (uint32_t j = 0; j < h; j++) {
+		int64_t v = v0 + j;
+		double lat = grid_v_to_lat(q->ly, T, (double)v + 0.5), mrad, nrad, len;
+		geo_radii(cm->body, lat, &mrad, &nrad);
+		double dy = mrad * dphi, r = nrad * cos(lat * (M_PI / 180.0));
+		uint32_t k = normalmap_east_stencil(r, dlam, dy, kmax, &len);
+		float fx = (float)(1.0 / len);
+		bool has_n = v > q->v0, has_s = v + 1 < q->v0 + (int64_t)q->h;
+		bool over_n = v == 0 && ring, over_s = v == H - 1 && ring;
+		float fy = (has_n || over_n) && (has_s || over_s) ? (float)(1.0 / (2 * dy))
+								  : (float)(1.0 / dy);
+		const float *row = L->hmirror + (size_t)(v % S) * S;
+		const float *rn = has_n ? L->hmirror + (size_t)((v - 1) % S) * S : row;
+		const float *rs = has_s ? L->hmirror + (size_t)((v + 1) % S) * S : row;
+		const uint32_t *cn = has_n || !over_n ? col : colp, *cs = has_s || !over_s ? col : colp;
+		uint8_t *out = cm->nbuf + (size_t)j * w * 2;
+		for (uint32_t i = 0; i < w; i++) {
+			uint32_t c = i + kmax; /* this texel in col */
+			int64_t kw = k, ke = k;
+			if (!ring) { /* cut to the window */
+				int64_t west = du0 + i, east = (int64_t)q->w - 1 - west;
+				kw = west < k ? west : k;
+				ke = east < k ? east : k;
+			}
+			float f = fx;
+			if (kw != k || ke != k)
+				f = kw + ke == 0 ? 0.0f
+						 : (float)(1.0 / (r * (sin((double)kw * dlam) +
+								       sin((double)ke * dlam))));
+			float ctr = row[col[c]];
+			float up = has_n || over_n ? rn[cn[c]] : ctr;
+			float dn = has_s || over_s ? rs[cs[c]] : ctr;
+			normalmap_texel(row[col[c - kw]], row[col[c + ke]], up, dn, f, fy, out + 2 * i);
+		}
+	}
+	cm->st.normals_derived += (uint64_t)w * h;
+	cm->st.derive_ns += clock_now_ns() - t0;
+	upload_normals(cm, level, W, u0, v0, w, h, cm->nbuf);
+}
+
+/* After region g of the heights changed: its normals and those of the texels round it
+ * (their stencils reach into it), inside the window. */
+static void derive_region(struct view_clipmap *cm, const struct level *L, int level,
+			  const struct grid_quad *q, const struct grid_region *g)
+{
+	const int64_t W = (int64_t)grid_tiles_x(q->lx) * cm->T;
+	int64_t ua = (int64_t)g->tx * cm->T + g->sx - 1, ub = ua + g->w + 2;
+	int64_t va = (int64_t)g->ty * cm->T + g->sy - 1, vb = va + g->h + 2;
+	if (va < q->v0)
+		va = q->v0;
+	if (vb > q->v0 + (int64_t)q->h)
+		vb = q->v0 + (int64_t)q->h;
+	if ((int64_t)q->w < W) { /* not the whole parallel: stay inside the window */
+		if (wrap_u(ua - q->u0, W) >= (int64_t)q->w)
+			ua++;
+		if (wrap_u(ub - 1 - q->u0, W) >= (int64_t)q->w)
+			ub--;
+	} else if (ub - ua > W) {
+		ub = ua + W;
+	}
+	if (ub > ua && vb > va)
+		derive_rect(cm, L, level, q, ua, va, (uint32_t)(ub - ua), (uint32_t)(vb - va));
+}
+
 int view_clipmap_update(struct view_clipmap *cm, int level)
 {
 	struct level *L = &cm->lv[level];
@@ -616,6 +766,11 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 			if (r == VIEW_COLOR && cm->keep_alpha)
 				mirror_alpha(cm, L, g, base, period);
 		}
+	}
+	if (cm->derive) {
+		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[VIEW_NORMAL]);
+		for (int i = 0; i < nr; i++)
+			derive_region(cm, L, level, &L->target, &rg[i]);
 	}
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, 0);
 	L->held = L->target;

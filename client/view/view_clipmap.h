@@ -31,6 +31,8 @@ struct view_clipmap_stats {
 	uint64_t tiles_dropped;	  /* arrived but no longer needed */
 	uint64_t tiles_failed;
 	size_t tiles_held;
+	uint64_t normals_derived; /* normal texels made from the heights (derive) */
+	uint64_t derive_ns;	  /* CPU time that took */
 };
 
 struct view_clipmap;
@@ -40,8 +42,10 @@ struct view_clipmap;
 int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
 			struct view_clipmap **out, char err[256]);
 /* The same with the colour layer named (NULL: as view_clipmap_create); a planet without a
- * colour layer of that name is refused. normals false: no normal role (its layer is never
- * asked for, view_clipmap_texture(VIEW_NORMAL) is 0). */
+ * colour layer of that name is refused. normals false: the normal layer is never asked for;
+ * the normal slices are made from the height mirror when heights are uploaded, with the
+ * `normal` node's arithmetic (common/normalmap.h): the node's bytes except on the window's
+ * outermost texels, whose stencils are cut to the window. */
 int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int nlevels,
 			      const char *color_layer, bool normals, struct view_clipmap **out,
 			      char err[256]);

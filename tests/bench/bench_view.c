@@ -186,8 +186,14 @@ int main(int argc, char **argv)
 		if ((had[l] = q != NULL))
 			prev[l] = *q;
 	}
-	uint64_t up = 0, minb = 0;
+	uint64_t up = 0, minb = 0, dn0, dt0;
 	int frames = 60;
+	{
+		struct view_clipmap_stats cs;
+		view_clipmap_get_stats(cm, &cs);
+		dn0 = cs.normals_derived;
+		dt0 = cs.derive_ns;
+	}
 	double bpt = 4 + 2 + 4; /* bytes per texel over the three layers */
 	for (int f = 0; f < frames; f++) {
 		c.lon += 250.0 / (111320.0 * cos(c.lat * M_PI / 180));
@@ -213,6 +219,14 @@ int main(int argc, char **argv)
 	printf("view/flight 10 km, 250 m/frame: %.1f KiB uploaded per frame, minimum %.1f KiB "
 	       "(changed texels only)\n",
 	       up / 1024.0 / frames, minb / 1024.0 / frames);
+	struct view_clipmap_stats ce;
+	view_clipmap_get_stats(cm, &ce);
+	if (ce.normals_derived > dn0)
+		printf("view/flight normals derived: %.0f texels, %.2f ms per frame (%.1f ns a "
+		       "texel)\n",
+		       (double)(ce.normals_derived - dn0) / frames,
+		       (double)(ce.derive_ns - dt0) * 1e-6 / frames,
+		       (double)(ce.derive_ns - dt0) / (double)(ce.normals_derived - dn0));
 	free(prev);
 	free(had);
 out:

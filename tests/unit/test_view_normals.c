@@ -1,15 +1,17 @@
 /* clipmapview's derived normals (view_desc.normals, --normals derive): the viewer makes the
- * shading's normals from its height clipmap instead of fetching the normal layer. In-process
- * on Mesa llvmpipe, over a planet written here (ridged relief on WGS84, a `normal` node of it as
- * the normal layer, no colour: grey, so the pixels are the shading alone), every frame
- * complete at 320×180:
+ * shading's normals from its heights as they are uploaded instead of fetching the normal
+ * layer. In-process on Mesa llvmpipe, over a planet written here (ridged relief on WGS84, a
+ * `normal` node of it as the normal layer, no colour: grey, so the pixels are the shading
+ * alone), every frame complete at 320×180:
  *  - derived and fetched pictures agree: at the equator from 20 km, at 60°N from 3 km and
- *    looking down on the north pole from 2 km, the mean luminance difference is at most 1.5
- *    levels and under a fifth of what flat shading (no normals) differs by, and 99.9 % of
- *    pixels are within 25 levels (what differs most: the ridges' creases, where blending
- *    slopes and blending 8-bit normals part);
- *  - deriving asks for no normal tile: the clipmap has no normal texture and takes half the
- *    tiles fetching takes (heights only, not heights and normals);
+ *    looking down on the north pole from 2 km, the mean luminance difference is at most 0.3
+ *    levels and under a twentieth of what flat shading (no normals) differs by, and 99.9 %
+ *    of pixels are within 3 levels (measured: 0.00 and 0.0);
+ *  - the normal slices hold the node's bytes: at least 97 % of their texels equal the
+ *    fetched ones (the rest: each window's outermost texels, whose stencils are cut to the
+ *    window);
+ *  - deriving asks for no normal tile: half the tiles fetching takes (heights only, not
+ *    heights and normals);
  *  - a planet without a normal layer is shaded by default (auto derives): not flat.
  * VIEW_NORMALS_PNG=DIR writes the frames; VIEW_NORMALS_VERBOSE=1 prints the figures.
  * Skipped with a message without GL.
@@ -73,6 +75,8 @@ struct run {
 	unsigned char px[3][FW * FH * 4];
 	uint64_t tiles;
 	bool normal_texture;
+	uint8_t *normals; /* the normal slices after the last shot (RG8), or NULL */
+	size_t nsize;
 };
 
 /* Renders every shot of planet `name` with normals `mode` into r. */
@@ -111,7 +115,16 @@ static void render(struct gl_context *gl, const char *name, enum view_normals mo
 	struct view_clipmap_stats cs;
 	view_clipmap_get_stats(view_get_clipmap(v), &cs);
 	r->tiles = cs.tiles_received;
-	r->normal_texture = view_clipmap_texture(view_get_clipmap(v), VIEW_NORMAL) != 0;
+	struct view_clipmap *cm = view_get_clipmap(v);
+	r->normal_texture = view_clipmap_texture(cm, VIEW_NORMAL) != 0;
+	r->normals = NULL;
+	if (r->normal_texture) {
+		uint32_t S = view_clipmap_window_size(cm);
+		r->nsize = (size_t)S * S * (size_t)view_clipmap_levels(cm) * 2;
+		r->normals = malloc(r->nsize);
+		assert_non_null(r->normals);
+		assert_int_equal(view_clipmap_read(cm, VIEW_NORMAL, r->normals, r->nsize), 0);
+	}
 	view_destroy(v);
 	src->ops->destroy(src);
 }
@@ -192,9 +205,9 @@ static void derived_like_fetched(void **state)
 			       lum_sd(derive->px[i]), lum_sd(flat->px[i]));
 		/* Nearly every pixel close (what differs most: the creases of the ridges, where
 		 * blending slopes and blending 8-bit normals part). */
-		if (dm > 25)
+		if (dm > 3)
 			fail_msg("%s: 99.9 %% of pixels within %.1f levels", shots[i].name, dm);
-		if (!(d <= 1.5 && d < 0.2 * f))
+		if (!(d <= 0.3 && d < 0.05 * f))
 			fail_msg("%s: derived normals differ from fetched by %.2f levels (flat: %.2f)",
 				 shots[i].name, d, f);
 		/* without a normal layer, auto derives: the same picture as deriving */
@@ -204,11 +217,24 @@ static void derived_like_fetched(void **state)
 	if (verbose)
 		printf("tiles: fetched %llu, derived %llu\n", (unsigned long long)fetch->tiles,
 		       (unsigned long long)derive->tiles);
-	assert_true(fetch->normal_texture);
-	assert_false(derive->normal_texture);
-	assert_false(autod->normal_texture);
+	/* the normal slices made here hold the node's bytes but for the windows' outermost
+	 * texels (their stencils cut to the window) */
+	assert_true(fetch->normal_texture && derive->normal_texture && autod->normal_texture);
+	assert_true(fetch->nsize == derive->nsize);
+	size_t same = 0;
+	for (size_t b = 0; b < fetch->nsize; b += 2)
+		same += fetch->normals[b] == derive->normals[b] &&
+			fetch->normals[b + 1] == derive->normals[b + 1];
+	double share = (double)same / (double)(fetch->nsize / 2);
+	if (verbose)
+		printf("normal texels identical to the fetched ones: %.3f %%\n", 100 * share);
+	assert_true(share >= 0.97);
 	/* the same heights, and no normal tile */
 	assert_true(derive->tiles * 2 <= fetch->tiles + 8 && derive->tiles * 2 + 8 >= fetch->tiles);
+	free(fetch->normals);
+	free(derive->normals);
+	free(flat->normals);
+	free(autod->normals);
 	free(fetch);
 	free(derive);
 	free(flat);

@@ -19,6 +19,7 @@
 #endif
 
 #include "common/geo.h"
+#include "common/normalmap.h"
 #include "common/xalloc.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
@@ -85,16 +86,8 @@ static void normal_row_scalar(const float *restrict we, const float *restrict ea
 			      const float *restrict up, const float *restrict dn, float fx, float fy,
 			      uint8_t *restrict out, uint32_t from, uint32_t T)
 {
-	for (uint32_t i = from; i < T; i++) {
-		float gx = (ea[i] - we[i]) * fx;
-		float gy = (up[i] - dn[i]) * fy;
-		gx = gx == gx ? gx : 0.0f;
-		gy = gy == gy ? gy : 0.0f;
-		float inv = 1.0f / sqrtf(gx * gx + gy * gy + 1.0f);
-		/* round((c + 1)·127.5) = floor(c·127.5 + 128) and the argument is ≥ 0.5 */
-		out[2 * i] = (uint8_t)(int)(-gx * inv * 127.5f + 128.0f);
-		out[2 * i + 1] = (uint8_t)(int)(-gy * inv * 127.5f + 128.0f);
-	}
+	for (uint32_t i = from; i < T; i++)
+		normalmap_texel(we[i], ea[i], up[i], dn[i], fx, fy, out + 2 * i);
 }
 
 #ifdef __SSE2__
@@ -151,28 +144,6 @@ static const float *pole_row(const struct tile *t, uint32_t r, bool half, float 
 	return buf;
 }
 
-/* The east stencil's half-width in texels for a row whose texels are dx metres apart east
- * and dy north, and its length in metres. Near a pole dx shrinks with cos(latitude) (at
- * (lx 0, ly 19) the row next to the pole has texels 1.8 mm apart, 0.15 m tall) and a
- * difference of float heights over ±1 texel is rounding noise (a float's step at 2800 m is
- * 0.24 mm): the normals next to the pole turned every way. So where dy ≥ 8·dx the stencil
- * widens to k = dy / (4·dx) texels (the neighbour tiles are at hand: up to T, and up to a
- * quarter turn), and its length is the chord 2·r·sin(k·Δλ) of the parallel (radius r): the
- * chord is parallel to the east direction at the texel, so the difference over it is the
- * exact east slope of any plane — the stencil widens without bending. Elsewhere (k = 1) the
- * arithmetic is the plain central difference. */
-static uint32_t east_stencil(double r, double dlam, double dy, uint32_t kmax, double *len)
-{
-	double dx = r * dlam;
-	uint32_t k = 1;
-	if (dy >= 8 * dx) {
-		double kk = floor(dy / (4 * dx));
-		k = kk < kmax ? (uint32_t)kk : kmax;
-	}
-	*len = k == 1 ? 2 * dx : 2 * r * sin(k * dlam);
-	return k;
-}
-
 static int normal_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			   struct tile *const *in, int nin, struct tile *out)
 {
@@ -207,7 +178,8 @@ static int normal_generate(const struct node *n, struct gen_ctx *g, const struct
 		double mrad, nrad, len;
 		geo_radii(n->planet->body, lat, &mrad, &nrad);
 		double dy = mrad * dphi;
-		uint32_t ks = east_stencil(nrad * cos(lat * (M_PI / 180.0)), dlam, dy, kmax, &len);
+		uint32_t ks = normalmap_east_stencil(nrad * cos(lat * (M_PI / 180.0)), dlam, dy, kmax,
+						     &len);
 		float fx = (float)(nm->exaggeration / len);
 		float fy = (float)(nm->exaggeration / (2 * dy));
 		/* rowbuf: kmax texels of the west neighbour, the row, kmax of the east one. */
