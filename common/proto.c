@@ -459,16 +459,24 @@ static void decode_planet(struct rd *r, struct proto_planet *p)
 	if (!r->err && p->max_level > GRID_MAX_LEVEL)
 		rd_fail(r, PROTO_ERR_FIELD, "max_level %u > %d", p->max_level, GRID_MAX_LEVEL);
 	p->nlayers = rd_u16(r, "layer count");
-	struct proto_layer *l = rd_array(r, p->nlayers, PROTO_MAX_LAYERS, 11, sizeof(*l), "layers");
+	struct proto_layer *l = rd_array(r, p->nlayers, PROTO_MAX_LAYERS, 12, sizeof(*l), "layers");
 	p->layers = l;
 	for (uint16_t i = 0; i < p->nlayers && !r->err; i++) {
 		l[i].name = rd_str(r, PROTO_MAX_NAME, true, "layer name");
 		l[i].format = rd_u8(r, "layer format");
 		l[i].node = rd_u64(r, "layer node");
+		l[i].normal_of = rd_u8(r, "layer normal_of");
 		if (!r->err && (l[i].format == PIX_NONE || l[i].format >= PIX_COUNT))
 			rd_fail(r, PROTO_ERR_FIELD, "layer %s: unknown format %u", l[i].name,
 				l[i].format);
 	}
+	for (uint16_t i = 0; i < p->nlayers && !r->err; i++)
+		if (l[i].normal_of && (l[i].format != PIX_NORMAL || l[i].normal_of > p->nlayers ||
+				       l[i].normal_of - 1 == i ||
+				       l[l[i].normal_of - 1].format != PIX_HEIGHT))
+			rd_fail(r, PROTO_ERR_FIELD,
+				"layer %s: normal_of %u is not a normal layer made of a height layer",
+				l[i].name, l[i].normal_of);
 	p->air_density = rd_range(r, 0, 100, "air_density");
 	p->air_height = rd_range(r, 0, 1e6, "air_height");
 	for (int i = 0; i < 3; i++)

@@ -24,7 +24,7 @@
 /* ---- framing ---------------------------------------------------------------------------- */
 
 #define PROTO_MAGIC "CLMP" /* the first 4 bytes of every frame */
-#define PROTO_VERSION 3	   /* frame layout and message set; HELLO negotiates it */
+#define PROTO_VERSION 4	   /* frame layout and message set; HELLO negotiates it */
 #define PROTO_HDR 12	   /* frame header bytes */
 #define PROTO_MAX_FRAME (16u << 20) /* payload bytes, any type */
 
@@ -158,8 +158,11 @@ struct proto_error {
 
 struct proto_layer {
 	const char *name;
-	uint8_t format; /* enum pix_type */
-	uint64_t node;	/* content hash of the layer's node: part of every tile key */
+	uint8_t format;	   /* enum pix_type */
+	uint64_t node;	   /* content hash of the layer's node: part of every tile key */
+	uint8_t normal_of; /* version 4: 0; or, for a normal layer that is the plain `normal`
+			    * (exaggeration 1) of height layer i, i + 1: a client may make these
+			    * normals itself from that layer's tiles instead of asking for them */
 };
 
 struct proto_planet {

@@ -155,9 +155,21 @@ static void enc_planet(struct wr *w, const struct proto_planet *p)
 	if (!wcount(w, p->nlayers, PROTO_MAX_LAYERS, "layers"))
 		return;
 	for (uint16_t i = 0; i < p->nlayers; i++) {
-		wstr(w, p->layers[i].name, "layer name");
-		w8(w, p->layers[i].format);
-		w64(w, p->layers[i].node);
+		const struct proto_layer *l = &p->layers[i];
+		if (l->normal_of && (l->format != PIX_NORMAL || l->normal_of > p->nlayers ||
+				     l->normal_of - 1 == i ||
+				     p->layers[l->normal_of - 1].format != PIX_HEIGHT)) {
+			if (!w->err) {
+				err_set(w->errbuf, "layer %s: normal_of %u is not a normal layer made "
+					"of a height layer", l->name ? l->name : "?", l->normal_of);
+				w->err = PROTO_ERR_FIELD;
+			}
+			return;
+		}
+		wstr(w, l->name, "layer name");
+		w8(w, l->format);
+		w64(w, l->node);
+		w8(w, l->normal_of);
 	}
 	wf64(w, p->air_density);
 	wf64(w, p->air_height);

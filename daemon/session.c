@@ -428,7 +428,8 @@ static void fill_planet(const struct planet *p, struct proto_planet *out, struct
 	for (size_t i = 0; i < p->nlayers; i++)
 		ls[i] = (struct proto_layer){ .name = p->layers[i].name,
 					      .format = (uint8_t)p->layers[i].type,
-					      .node = p->layers[i].node->hash };
+					      .node = p->layers[i].node->hash,
+					      .normal_of = (uint8_t)(p->layers[i].normal_of + 1) };
 	*out = (struct proto_planet){ .name = p->name, .description = p->description, .a = p->a,
 				      .f = p->f, .tile_size = p->tile_size,
 				      .max_level = (uint8_t)p->max_level,

@@ -69,7 +69,7 @@ static void usage(FILE *f)
 		"  --normals auto|fetch|derive  shading's normals: the planet's normal layer\n"
 		"                      (fetch), or made here from the heights (derive: never\n"
 		"                      asks for them, ~1/3 fewer bytes, same picture); auto\n"
-		"                      (default): fetch if the planet has a normal layer\n"
+		"                      (default): derive where the planet says that is the same\n"
 		"  --switch-layer-at FRAME:NAME  switch to colour layer NAME before frame FRAME\n"
 		"                      (0-based; repeatable): scripted L presses\n"
 		"  --backend egl|osmesa, --workers N, --no-prefetch\n"

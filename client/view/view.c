@@ -503,11 +503,8 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->hc = xcalloc((size_t)v->nlevels, sizeof *v->hc);
 	v->drawn = xcalloc((size_t)v->nlevels, sizeof *v->drawn);
 	v->detail = xcalloc((size_t)v->nlevels, sizeof *v->detail);
-	bool has_normals = false;
-	for (int i = 0; i < p->nlayers; i++)
-		has_normals |= p->layer[i].format == PIX_NORMAL;
 	v->derive = d->normals == VIEW_NORMALS_DERIVE ||
-		    (d->normals == VIEW_NORMALS_AUTO && !has_normals);
+		    (d->normals == VIEW_NORMALS_AUTO && view_clipmap_can_derive(p));
 	int rc = view_clipmap_create_layer(gl, src, v->nlevels, d->color_layer, !v->derive,
 					   &v->cm, err);
 	if (rc == 0)

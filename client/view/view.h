@@ -31,9 +31,10 @@
 
 /* Where the normals come from. FETCH: the planet's normal layer (none: flat shading); DERIVE:
  * the viewer makes them from its height clipmap as heights are uploaded (the `normal` node's
- * arithmetic, view_clipmap) and never asks for the normal layer — a third fewer bytes on a
- * slow link (Earth: 20 of a place's 57 KB); AUTO (0): FETCH where the planet publishes a
- * normal layer, DERIVE where it does not. */
+ * arithmetic, view_clipmap) and never asks for the normal layer — a third fewer bytes (Earth:
+ * 20 of a place's 57 KB on a slow link); AUTO (0): DERIVE where that draws what the normal
+ * layer holds (the planet says its normal layer is the plain `normal` of its heights) or the
+ * planet has no normal layer, else FETCH. */
 enum view_normals { VIEW_NORMALS_AUTO = 0, VIEW_NORMALS_FETCH, VIEW_NORMALS_DERIVE };
 
 struct view_desc {

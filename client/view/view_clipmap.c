@@ -93,6 +93,26 @@ static bool same_tile(const struct tile_key *a, const struct tile_key *b)
 	return a->x == b->x && a->y == b->y && a->lx == b->lx && a->ly == b->ly;
 }
 
+/* The layer of p that role r draws: the one named name (NULL: the role's own name, as
+ * "height"), else (name NULL) the first of the role's format; -1 without one. */
+static int pick_layer(const struct view_planet *p, enum view_role r, const char *name)
+{
+	const char *want = name ? name : roles[r].name;
+	for (int i = 0; i < p->nlayers; i++)
+		if (p->layer[i].format == roles[r].type && !strcmp(p->layer[i].name, want))
+			return i;
+	for (int i = 0; !name && i < p->nlayers; i++)
+		if (p->layer[i].format == roles[r].type)
+			return i;
+	return -1;
+}
+
+bool view_clipmap_can_derive(const struct view_planet *p)
+{
+	int h = pick_layer(p, VIEW_HEIGHT, NULL), n = pick_layer(p, VIEW_NORMAL, NULL);
+	return h >= 0 && (n < 0 || p->layer[n].normal_of == h + 1);
+}
+
 int view_clipmap_create(const struct gl *gl, struct view_source *src, int nlevels,
 			struct view_clipmap **out, char err[256])
 {
@@ -111,18 +131,11 @@ int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int 
 	}
 	int layer[VIEW_NROLES];
 	for (int r = 0; r < VIEW_NROLES; r++) {
-		const char *name = r == VIEW_COLOR && color_layer ? color_layer : roles[r].name;
-		layer[r] = -1;
-		for (int i = 0; i < p->nlayers && layer[r] < 0; i++)
-			if (p->layer[i].format == roles[r].type && !strcmp(p->layer[i].name, name))
-				layer[r] = i;
+		layer[r] = pick_layer(p, (enum view_role)r, r == VIEW_COLOR ? color_layer : NULL);
 		if (r == VIEW_COLOR && color_layer && layer[r] < 0) {
 			err_set(err, "planet %s has no colour layer \"%s\"", p->name, color_layer);
 			return -EINVAL;
 		}
-		for (int i = 0; i < p->nlayers && layer[r] < 0; i++)
-			if (p->layer[i].format == roles[r].type)
-				layer[r] = i;
 	}
 	if (!normals)
 		layer[VIEW_NORMAL] = -1;
@@ -766,11 +779,14 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 			if (r == VIEW_COLOR && cm->keep_alpha)
 				mirror_alpha(cm, L, g, base, period);
 		}
-	}
-	if (cm->derive) {
-		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[VIEW_NORMAL]);
-		for (int i = 0; i < nr; i++)
-			derive_region(cm, L, level, &L->target, &rg[i]);
+		/* Derived normals once the heights are in the mirror — here, before the colour:
+		 * each role leaves its texture bound on the active unit, and the colour's must
+		 * be the last (a frame that uploads draws with the bindings as they are). */
+		if (r == VIEW_HEIGHT && cm->derive) {
+			gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[VIEW_NORMAL]);
+			for (int i = 0; i < nr; i++)
+				derive_region(cm, L, level, &L->target, &rg[i]);
+		}
 	}
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, 0);
 	L->held = L->target;

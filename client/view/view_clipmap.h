@@ -50,6 +50,10 @@ int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int 
 			      const char *color_layer, bool normals, struct view_clipmap **out,
 			      char err[256]);
 void view_clipmap_destroy(struct view_clipmap *cm);
+/* Whether normals made from p's height layer are what its normal layer holds (the planet
+ * says so: view_planet.layer[].normal_of), or it has no normal layer: then deriving them
+ * (normals false above) draws what fetching would, or better than flat. */
+bool view_clipmap_can_derive(const struct view_planet *p);
 
 /* Sets level's target quad (NULL: the level is not wanted). Tiles farther than the ring
  * around the new quad are released. Returns whether the target changed. */

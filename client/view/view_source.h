@@ -61,6 +61,8 @@ struct view_planet {
 	struct {
 		char name[32];
 		enum pix_type format;
+		int normal_of; /* a normal layer that is the plain `normal` of height layer i:
+				* i + 1 (the viewer may make it itself); else 0, as zeroed */
 	} layer[VIEW_MAX_LAYERS];
 };
 

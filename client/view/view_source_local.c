@@ -204,6 +204,7 @@ int view_source_local_create(const char *planet_path, const struct view_source_l
 	for (size_t i = 0; i < p->nlayers; i++) {
 		snprintf(vp->layer[i].name, sizeof vp->layer[i].name, "%s", p->layers[i].name);
 		vp->layer[i].format = p->layers[i].type;
+		vp->layer[i].normal_of = p->layers[i].normal_of + 1;
 	}
 	err[0] = '\0';
 	if (o->store && (rc = store_open_file(o->store, o->store_mb, &l->store, err)) < 0) {

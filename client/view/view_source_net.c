@@ -206,6 +206,7 @@ static int check_planet(struct net_source *ns, const struct proto_opened *op)
 		    (pp->nlayers < VIEW_MAX_LAYERS ? pp->nlayers : VIEW_MAX_LAYERS) == vp->nlayers;
 	for (int i = 0; same && i < vp->nlayers; i++)
 		same = pp->layers[i].format == vp->layer[i].format &&
+		       pp->layers[i].normal_of == vp->layer[i].normal_of &&
 		       strcmp(pp->layers[i].name, vp->layer[i].name) == 0;
 	if (!same) {
 		err_set(ns->err, "%s serves planet %s with another shape (tile size, levels or "
@@ -603,6 +604,7 @@ int view_source_net_create_wait(const struct net_opts *o, const char *planet, do
 	for (int i = 0; i < vp->nlayers; i++) {
 		snprintf(vp->layer[i].name, sizeof vp->layer[i].name, "%s", pp->layers[i].name);
 		vp->layer[i].format = pp->layers[i].format;
+		vp->layer[i].normal_of = pp->layers[i].normal_of;
 	}
 	proto_msg_fini(&m);
 	*out = &ns->base;

@@ -29,6 +29,9 @@ extern const struct node_type node_type_blend;
 /* `normal`: input (height) → normal (RG8), metric spacing from the body's ellipsoid, seamless
  * across tile borders, the antimeridian and the poles; `exaggeration`. */
 extern const struct node_type node_type_normal;
+/* The height node a `normal` node with exaggeration 1 makes its normals of, or NULL (not a
+ * normal node, or exaggerated): what a viewer can make itself from that node's tiles. */
+const struct node *node_normal_plain_input(const struct node *n);
 /* `slope`: input (height) → height: the slope magnitude |∇h| (m/m), metric, seamless like
  * `normal`; `scale` (m) measures it over a fixed distance on every finer level. */
 extern const struct node_type node_type_slope;

@@ -701,6 +701,13 @@ static int parse_layers(struct loader *L)
 	if (p->nlayers == 0)
 		return cfg_error(L, 0, NULL,
 				 "no [layer NAME] section: a planet publishes at least one layer");
+	for (size_t i = 0; i < p->nlayers; i++) {
+		const struct node *in = node_normal_plain_input(p->layers[i].node);
+		p->layers[i].normal_of = -1;
+		for (size_t j = 0; in && j < p->nlayers && p->layers[i].normal_of < 0; j++)
+			if (p->layers[j].node == in && p->layers[j].type == PIX_HEIGHT)
+				p->layers[i].normal_of = (int)j;
+	}
 	return 0;
 }
 

@@ -39,6 +39,9 @@ struct planet_layer {
 	char *name;
 	struct node *node; /* borrowed from the planet */
 	enum pix_type type;
+	int normal_of;	   /* a normal layer that is the `normal` (exaggeration 1) of the node of
+			    * height layer normal_of: that index (a viewer can make these normals
+			    * itself); else -1 */
 };
 
 /* How the planet looks beyond its layers: its air and its sea (docs/PLANETS.md). */

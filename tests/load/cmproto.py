@@ -2,7 +2,7 @@
 docs/PROTOCOL.md alone (not from the project's C client), so the harness checks the daemon
 against the document. Python 3 standard library only.
 
-Frames: 12-byte header (magic "CLMP", version 3, flags 0, u16 type, u32 payload length),
+Frames: 12-byte header (magic "CLMP", version 4, flags 0, u16 type, u32 payload length),
 little-endian. Encoders return whole frames (bytes); decoders take a payload.
 """
 import socket
@@ -10,7 +10,7 @@ import struct
 import time
 
 MAGIC = b"CLMP"
-VERSION = 3
+VERSION = 4
 HDR = 12
 
 HELLO, HELLO_OK, BYE, ERROR = 1, 2, 3, 4
@@ -180,9 +180,9 @@ def decode_planet(p, off=0):
     layers = []
     for _ in range(nlayers):
         lname, off = _rd_str(p, off)
-        fmt, node = struct.unpack_from("<BQ", p, off)
-        off += 9
-        layers.append({"name": lname, "format": fmt, "node": node})
+        fmt, node, normal_of = struct.unpack_from("<BQB", p, off)  # normal_of: version 4
+        off += 10
+        layers.append({"name": lname, "format": fmt, "node": node, "normal_of": normal_of})
     off += 8 + 8 + 3 + 1 + 8 + 1  # the look: air density, height, colour, sea, sea level, mask
     rows, cols = struct.unpack_from("<HH", p, off)  # the sea's lattice (version 3)
     off += 4 + 2 * rows * cols

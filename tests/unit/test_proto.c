@@ -468,7 +468,7 @@ static void byte_layout(void **state)
 	struct pbuf b;
 	pbuf_init_fixed(&b, mem, sizeof(mem));
 	assert_int_equal(proto_encode(&b, &m, NULL), 20);
-	const uint8_t want[20] = { 'C', 'L', 'M', 'P', 3, 0, 18, 0, 8, 0, 0, 0,
+	const uint8_t want[20] = { 'C', 'L', 'M', 'P', 4, 0, 18, 0, 8, 0, 0, 0,
 				   4, 3, 2, 1, 2, 0, 'a', 'b' };
 	assert_memory_equal(mem, want, sizeof(want));
 
@@ -571,18 +571,21 @@ static void malformed_frames(void **state)
 	memcpy(f, "CLMQ", 4);
 	assert_int_equal(decode_bytes(f, 4, err), PROTO_ERR_MAGIC);
 
-	/* bad version: a version-2 peer (before the sea's lattice), a version-1 one (before the
-	 * planet's look) and a future one */
+	/* bad version: a version-3 peer (before normal_of), a version-2 one (before the sea's
+	 * lattice), a version-1 one (before the planet's look) and a future one */
 	header(f, PROTO_BYE, 0);
+	f[4] = 3;
+	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
+	assert_non_null(strstr(err, "version 3"));
 	f[4] = 2;
 	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
 	assert_non_null(strstr(err, "version 2"));
 	f[4] = 1;
 	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
 	assert_non_null(strstr(err, "version 1"));
-	f[4] = 4;
+	f[4] = 5;
 	assert_int_equal(decode_bytes(f, 5, err), PROTO_ERR_VERSION);
-	assert_non_null(strstr(err, "version 4"));
+	assert_non_null(strstr(err, "version 5"));
 
 	/* unknown flags */
 	header(f, PROTO_BYE, 0);
@@ -645,6 +648,58 @@ static void malformed_frames(void **state)
 }
 
 /* Field values out of range are rejected by the decoder and refused by the encoder. */
+/* normal_of (version 4): a normal layer made of a height layer survives the round trip; one
+ * that names no height layer, itself, a layer past the list, or sits on a layer that is not
+ * a normal layer is refused by the encoder and, with the byte patched in, by the decoder. */
+static void normal_of_field(void **state)
+{
+	(void)state;
+	struct proto_layer ls[3] = {
+		{ .name = "height", .format = PIX_HEIGHT, .node = 1 },
+		{ .name = "color", .format = PIX_COLOR, .node = 2 },
+		{ .name = "normal", .format = PIX_NORMAL, .node = 3, .normal_of = 1 },
+	};
+	struct proto_msg m = { .type = PROTO_OPENED,
+			       .opened = { .req = 1, .planet_id = 1,
+					   .planet = { .name = "p", .description = "", .a = 1e6,
+						       .tile_size = 64, .max_level = 10,
+						       .nlayers = 3, .layers = ls } } };
+	struct pbuf b;
+	pbuf_init(&b);
+	char err[256];
+	struct proto_msg d;
+	size_t need;
+	assert_true(proto_encode(&b, &m, err) > 0);
+	assert_true(proto_decode(b.data, b.len, &d, &need, err) > 0);
+	assert_int_equal(d.opened.planet.layers[2].normal_of, 1);
+	assert_int_equal(d.opened.planet.layers[0].normal_of, 0);
+	proto_msg_fini(&d);
+	/* where the byte is: the last of the third layer entry (… "normal", rg8, node 3) */
+	size_t at = 0;
+	for (size_t i = 0; i + 7 < b.len; i++)
+		if (!memcmp(b.data + i, "normal", 6) && b.data[i + 6] == PIX_NORMAL)
+			at = i + 6 + 1 + 8;
+	assert_true(at > 0 && b.data[at] == 1);
+	static const uint8_t bad[] = { 2 /* colour */, 3 /* itself */, 4 /* past the list */ };
+	for (size_t i = 0; i < sizeof bad; i++) {
+		ls[2].normal_of = bad[i];
+		size_t len = b.len;
+		b.len = 0;
+		assert_int_equal(proto_encode(&b, &m, err), -EINVAL);
+		assert_non_null(strstr(err, "normal_of"));
+		ls[2].normal_of = 1;
+		assert_true(proto_encode(&b, &m, err) == (ssize_t)len);
+		b.data[at] = bad[i];
+		assert_int_equal(proto_decode(b.data, b.len, &d, &need, err), PROTO_ERR_FIELD);
+		assert_non_null(strstr(err, "normal_of"));
+	}
+	ls[2].normal_of = 1;
+	ls[1].normal_of = 1; /* on a colour layer */
+	b.len = 0;
+	assert_int_equal(proto_encode(&b, &m, err), -EINVAL);
+	pbuf_fini(&b);
+}
+
 static void bad_fields(void **state)
 {
 	struct fixture *f = *state;
@@ -928,6 +983,7 @@ int main(void)
 		cmocka_unit_test(byte_layout),
 		cmocka_unit_test_setup_teardown(byte_by_byte, setup, teardown),
 		cmocka_unit_test(malformed_frames),
+		cmocka_unit_test(normal_of_field),
 		cmocka_unit_test_setup_teardown(bad_fields, setup, teardown),
 		cmocka_unit_test_setup_teardown(caps, setup, teardown),
 		cmocka_unit_test_setup_teardown(fixed_buffer, setup, teardown),

@@ -12,7 +12,10 @@
  *    window);
  *  - deriving asks for no normal tile: half the tiles fetching takes (heights only, not
  *    heights and normals);
- *  - a planet without a normal layer is shaded by default (auto derives): not flat.
+ *  - by default (auto) the viewer derives where the planet says its normal layer is the
+ *    plain `normal` of its heights (as many tiles as deriving), fetches where that layer is
+ *    exaggerated (as many as fetching; a steeper picture), and shades a planet without a
+ *    normal layer (derived): not flat.
  * VIEW_NORMALS_PNG=DIR writes the frames; VIEW_NORMALS_VERBOSE=1 prints the figures.
  * Skipped with a message without GL.
  */
@@ -59,14 +62,17 @@ static const struct shot shots[] = {
 
 static char dir[64];
 
-static void write_planet(const char *name, bool with_normals)
+static void write_planet(const char *name, bool with_normals, bool exaggerated)
 {
 	char path[128];
 	snprintf(path, sizeof path, "%s/%s.ini", dir, name);
 	FILE *f = fopen(path, "w");
 	assert_non_null(f);
 	fputs(planet_text, f);
-	if (with_normals)
+	if (exaggerated) /* not the plain normal of the heights: a viewer must fetch it */
+		fputs("[node steep]\ntype = normal\ninput = relief\nexaggeration = 2\n"
+		      "[layer normal]\nnode = steep\n", f);
+	else if (with_normals)
 		fputs(normal_layer, f);
 	assert_int_equal(fclose(f), 0);
 }
@@ -180,18 +186,29 @@ static void derived_like_fetched(void **state)
 		fprintf(stderr, "test_view_normals: no GL context: %s — skipped\n", err);
 		skip();
 	}
+	bool verbose = getenv("VIEW_NORMALS_VERBOSE") != NULL;
 	snprintf(dir, sizeof dir, "/tmp/test_view_normals.XXXXXX");
 	assert_non_null(mkdtemp(dir));
-	write_planet("with", true);
-	write_planet("without", false);
+	write_planet("with", true, false);
+	write_planet("without", false, false);
+	write_planet("steep", true, true);
 	struct run *fetch = malloc(sizeof *fetch), *derive = malloc(sizeof *derive),
-		   *flat = malloc(sizeof *flat), *autod = malloc(sizeof *autod);
-	assert_true(fetch && derive && flat && autod);
+		   *flat = malloc(sizeof *flat), *autod = malloc(sizeof *autod),
+		   *autow = malloc(sizeof *autow), *autos = malloc(sizeof *autos);
+	assert_true(fetch && derive && flat && autod && autow && autos);
 	render(gl, "with", VIEW_NORMALS_FETCH, fetch);
 	render(gl, "with", VIEW_NORMALS_DERIVE, derive);
 	render(gl, "without", VIEW_NORMALS_FETCH, flat);
 	render(gl, "without", VIEW_NORMALS_AUTO, autod);
-	bool verbose = getenv("VIEW_NORMALS_VERBOSE") != NULL;
+	render(gl, "with", VIEW_NORMALS_AUTO, autow);	/* the plain normal: derived */
+	render(gl, "steep", VIEW_NORMALS_AUTO, autos); /* exaggerated: fetched */
+	if (verbose)
+		printf("auto: %llu tiles with a plain normal layer, %llu with an exaggerated one\n",
+		       (unsigned long long)autow->tiles, (unsigned long long)autos->tiles);
+	assert_true(autow->tiles == derive->tiles);
+	assert_true(autos->tiles == fetch->tiles);
+	/* the exaggerated normals are steeper: not what deriving would draw */
+	assert_true(mean_diff(autos->px[0], derive->px[0]) > 1);
 	for (size_t i = 0; i < sizeof shots / sizeof *shots; i++) {
 		double d = mean_diff(fetch->px[i], derive->px[i]);
 		double f = mean_diff(fetch->px[i], flat->px[i]);
@@ -231,14 +248,11 @@ static void derived_like_fetched(void **state)
 	assert_true(share >= 0.97);
 	/* the same heights, and no normal tile */
 	assert_true(derive->tiles * 2 <= fetch->tiles + 8 && derive->tiles * 2 + 8 >= fetch->tiles);
-	free(fetch->normals);
-	free(derive->normals);
-	free(flat->normals);
-	free(autod->normals);
-	free(fetch);
-	free(derive);
-	free(flat);
-	free(autod);
+	struct run *runs[] = { fetch, derive, flat, autod, autow, autos };
+	for (size_t i = 0; i < sizeof runs / sizeof *runs; i++) {
+		free(runs[i]->normals);
+		free(runs[i]);
+	}
 	char cmd[128];
 	snprintf(cmd, sizeof cmd, "rm -rf %s", dir);
 	if (system(cmd) != 0)

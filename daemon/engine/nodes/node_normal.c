@@ -69,6 +69,14 @@ static int normal_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
+const struct node *node_normal_plain_input(const struct node *n)
+{
+	if (!n || n->type != &node_type_normal || !n->impl || !n->in[0])
+		return NULL;
+	const struct normal *nm = n->impl;
+	return nm->exaggeration == 1 ? n->in[0] : NULL;
+}
+
 static int normal_deps(const struct node *n, const struct tile_key *k, struct node_dep *out)
 {
 	struct nbhood nb;
