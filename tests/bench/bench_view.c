@@ -3,7 +3,8 @@
  * camera still), and bytes uploaded per frame in a smooth flight against the minimum (the
  * texels that entered each level's window). The procedural planet, evaluated in-process; the
  * frames are timed once its engine has gone quiet (the view and its prefetch ring loaded).
- * BV_NORMALS=derive times the normals made from the heights (--normals derive).
+ * BV_NORMALS=fetch|derive picks where the normals come from (default auto: made from the
+ * heights as they are uploaded, on this planet; the flight line then says what that cost).
  */
 #include <math.h>
 #include <stdio.h>
@@ -105,10 +106,12 @@ int main(int argc, char **argv)
 		return 1;
 	}
 	struct view_desc d = { .width = 1280, .height = 720, .no_prefetch = getenv("BV_NOPF") != NULL };
-	/* BV_NORMALS=derive: the normals made in the fragment shader (--normals derive) */
+	/* BV_NORMALS=fetch|derive (default: auto, which derives on the procedural planet) */
 	const char *bn = getenv("BV_NORMALS");
 	if (bn && !strcmp(bn, "derive"))
 		d.normals = VIEW_NORMALS_DERIVE;
+	else if (bn && !strcmp(bn, "fetch"))
+		d.normals = VIEW_NORMALS_FETCH;
 	struct view *v;
 	if (view_create(gl_context_api(ctx), src, &d, &v, err) < 0) {
 		fprintf(stderr, "bench_view: %s\n", err);
