@@ -445,6 +445,13 @@ static void decode_error(struct rd *r, struct proto_error *e)
 	e->message = rd_str(r, PROTO_MAX_TEXT, false, "message");
 }
 
+bool proto_layer_normal_of_valid(const struct proto_layer *l, uint16_t n, uint16_t i)
+{
+	uint8_t k = l[i].normal_of;
+	return k == 0 || (l[i].format == PIX_NORMAL && k <= n && k - 1 != i &&
+			  l[k - 1].format == PIX_HEIGHT);
+}
+
 static void decode_planet(struct rd *r, struct proto_planet *p)
 {
 	p->name = rd_str(r, PROTO_MAX_NAME, true, "planet name");
@@ -471,9 +478,7 @@ static void decode_planet(struct rd *r, struct proto_planet *p)
 				l[i].format);
 	}
 	for (uint16_t i = 0; i < p->nlayers && !r->err; i++)
-		if (l[i].normal_of && (l[i].format != PIX_NORMAL || l[i].normal_of > p->nlayers ||
-				       l[i].normal_of - 1 == i ||
-				       l[l[i].normal_of - 1].format != PIX_HEIGHT))
+		if (!proto_layer_normal_of_valid(l, p->nlayers, i))
 			rd_fail(r, PROTO_ERR_FIELD,
 				"layer %s: normal_of %u is not a normal layer made of a height layer",
 				l[i].name, l[i].normal_of);

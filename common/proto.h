@@ -165,6 +165,10 @@ struct proto_layer {
 			    * normals itself from that layer's tiles instead of asking for them */
 };
 
+/* Whether layer i of the n layers l may carry its normal_of (0 always may): a normal layer
+ * naming another layer, a height layer. The encoder and the decoder both check it. */
+bool proto_layer_normal_of_valid(const struct proto_layer *l, uint16_t n, uint16_t i);
+
 struct proto_planet {
 	const char *name;
 	const char *description;

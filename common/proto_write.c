@@ -156,9 +156,7 @@ static void enc_planet(struct wr *w, const struct proto_planet *p)
 		return;
 	for (uint16_t i = 0; i < p->nlayers; i++) {
 		const struct proto_layer *l = &p->layers[i];
-		if (l->normal_of && (l->format != PIX_NORMAL || l->normal_of > p->nlayers ||
-				     l->normal_of - 1 == i ||
-				     p->layers[l->normal_of - 1].format != PIX_HEIGHT)) {
+		if (!proto_layer_normal_of_valid(p->layers, p->nlayers, i)) {
 			if (!w->err) {
 				err_set(w->errbuf, "layer %s: normal_of %u is not a normal layer made "
 					"of a height layer", l->name ? l->name : "?", l->normal_of);

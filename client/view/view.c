@@ -165,7 +165,6 @@ struct view {
 	struct program *cur;
 	uint64_t frame_no;
 	int frame_bits; /* this frame's variant bits that every level shares */
-	bool derive;	/* normals made from the heights (view_desc.normals, view_clipmap) */
 	int *drawn;	/* this frame's levels drawn, coarse → fine */
 	int *detail;	/* per level drawn: the level its colour and normals come from */
 	double last_agl; /* the last frame's camera height above the ground */
@@ -503,9 +502,10 @@ int view_create(const struct gl *gl, struct view_source *src, const struct view_
 	v->hc = xcalloc((size_t)v->nlevels, sizeof *v->hc);
 	v->drawn = xcalloc((size_t)v->nlevels, sizeof *v->drawn);
 	v->detail = xcalloc((size_t)v->nlevels, sizeof *v->detail);
-	v->derive = d->normals == VIEW_NORMALS_DERIVE ||
-		    (d->normals == VIEW_NORMALS_AUTO && view_clipmap_can_derive(p));
-	int rc = view_clipmap_create_layer(gl, src, v->nlevels, d->color_layer, !v->derive,
+	/* normals made from the heights (view_desc.normals, view_clipmap), or fetched */
+	bool derive = d->normals == VIEW_NORMALS_DERIVE ||
+		      (d->normals == VIEW_NORMALS_AUTO && view_clipmap_can_derive(p));
+	int rc = view_clipmap_create_layer(gl, src, v->nlevels, d->color_layer, !derive,
 					   &v->cm, err);
 	if (rc == 0)
 		view_clipmap_keep_alpha(v->cm, p->look.sea_mask);

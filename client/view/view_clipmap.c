@@ -139,13 +139,13 @@ int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int 
 	}
 	if (!normals)
 		layer[VIEW_NORMAL] = -1;
-	struct geo_body *body = NULL;
-	if (!normals && geo_body_create(p->a, p->f, &body, err) < 0)
-		return -EINVAL;
 	if (layer[VIEW_HEIGHT] < 0) {
 		err_set(err, "planet %s publishes no height layer", p->name);
 		return -EINVAL;
 	}
+	struct geo_body *body = NULL;
+	if (!normals && geo_body_create(p->a, p->f, &body, err) < 0)
+		return -EINVAL;
 	struct view_clipmap *cm = xcalloc(1, sizeof *cm);
 	cm->gl = gl;
 	cm->src = src;

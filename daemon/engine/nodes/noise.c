@@ -286,7 +286,8 @@ static bool included(const struct noise *nz, int k)
 	return !(nz->p.max_wavelength > 0 && nz->oct[k].lambda > nz->p.max_wavelength * (1 + 1e-9));
 }
 
-bool noise_warped(const struct noise *nz, int k)
+/* Whether octave k is evaluated at the warped point (noise_params.warp, warp_depth). */
+static bool noise_warped(const struct noise *nz, int k)
 {
 	return nz->nwarp > 0 && (nz->p.warp_depth <= 0 || k < nz->p.warp_depth);
 }
@@ -594,7 +595,6 @@ struct warp_eval {
 	 * interpolated row and its slopes per component) */
 	bool lattice;
 	uint32_t M;
-	const struct noise_sums *ns;
 	const float (*hb)[NOISE_MR_STRIDE];
 	const float *lw[3];
 	float *tc[3], *td[3];
@@ -923,7 +923,6 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 	t.we.lattice = t.mc < t.nwa && warp_on_lattice(nz, k->lx, T);
 	if (t.we.lattice) {
 		t.we.M = t.M;
-		t.we.ns = ns;
 		t.we.hb = (const float(*)[NOISE_MR_STRIDE])t.hb;
 		t.we.lw[0] = t.lwx;
 		t.we.lw[1] = t.lwy;

@@ -103,9 +103,6 @@ struct noise {
 	struct noise_octave warp[NOISE_WARP_MAX_OCTAVES][3];
 };
 
-/* Whether octave k is evaluated at the warped point (noise_params.warp, warp_depth). */
-bool noise_warped(const struct noise *nz, int k);
-
 /* Checks p and precomputes per-octave constants into nz. Returns 0 or -EINVAL. */
 int noise_init(struct noise *nz, const struct noise_params *p);
 
