@@ -2,7 +2,8 @@
  * MIP-mapped TIFF (8192×4096, 256² tiles, zip; created once in /tmp and reused) on a hot
  * image cache, against memcpy bandwidth measured in the same run. Also: the OIIO region read
  * alone (to tell which step costs), the bilinear path, a MIP level, and a first (cold-cache)
- * read. One worker. Prints one line per figure. */
+ * read; the east–west prefilter (`isotropic`) against the node without it. One worker.
+ * Prints one line per figure. */
 #include <errno.h>
 #include <math.h>
 #include <stdint.h>
@@ -241,6 +242,44 @@ int main(void)
 		       "memcpy\n", T, bw / 1e6, 100 * bw / mc_dram);
 	}
 	bnode_fini(&b);
+
+	/* The east–west prefilter (isotropic, file_resample.h) against the same node without
+	 * it: a whole level (rows above ~69° filtered, the rest unchanged) and a polar band
+	 * (the 2 tile rows nearest each pole of a 4× magnified level, viewer-like lx = ly). */
+	static const struct {
+		int lx, ly;
+		uint32_t y0, y1;
+		bool poles;
+		const char *what;
+	} iv[] = {
+		{ 5, 4, 0, 16, false, "whole level, 1:1" },
+		{ 6, 5, 0, 32, false, "whole level, 2x magnified" },
+		{ 6, 6, 0, 2, true, "polar rows (84-90 deg), 4x magnified, lx = ly" },
+	};
+	struct bnode raw;
+	snprintf(text, sizeof text, "[node bench]\ntype = file\npath = %s\ncache_mb = 512\n"
+		 "bounds = -180,-90,180,90\n", f32);
+	bnode_init(&b, &pl, text);
+	snprintf(text, sizeof text, "[node bench]\ntype = file\npath = %s\ncache_mb = 512\n"
+		 "bounds = -180,-90,180,90\nisotropic = false\n", f32);
+	bnode_init(&raw, &pl, text);
+	for (size_t i = 0; i < sizeof iv / sizeof iv[0]; i++) {
+		double bw[2];
+		for (int a = 0; a < 2; a++) {
+			struct bnode *nb = a ? &raw : &b;
+			uint32_t n = grid_tiles_y(iv[i].ly);
+			run_level(nb, iv[i].lx, iv[i].ly, 256, iv[i].y0, iv[i].y1, 1);
+			double t = run_level(nb, iv[i].lx, iv[i].ly, 256, iv[i].y0, iv[i].y1, 3);
+			if (iv[i].poles) /* the south's rows too: the harmonic mean of both rates */
+				t = 2 / (1 / t + 1 / run_level(nb, iv[i].lx, iv[i].ly, 256,
+								 n - iv[i].y1, n - iv[i].y0, 3));
+			bw[a] = t;
+		}
+		printf("file/f32 T=256 %s, isotropic: %.0f MB/s vs %.0f without = %.2fx the time\n",
+		       iv[i].what, bw[0] / 1e6, bw[1] / 1e6, bw[1] / bw[0]);
+	}
+	bnode_fini(&b);
+	bnode_fini(&raw);
 
 	for (uint32_t T = 256; T <= 512; T *= 2) {
 		double bw = read_only(f32, T, 2);

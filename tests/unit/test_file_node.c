@@ -78,6 +78,9 @@ struct fnode {
 
 /* Bounds for test images without georeferencing (img_write writes none). */
 #define GLOBAL "bounds = -180,-90,180,90\n"
+/* ... and without the east–west prefilter, for tests of the resampling itself (1:1 copies,
+ * bilinear against an analytic function, the caps' formula) at every latitude. */
+#define GLOBAL_RAW GLOBAL "isotropic = false\n"
 
 static int fnode_init(struct fnode *f, const char *text, char err[256])
 {
@@ -180,7 +183,7 @@ static void analytic_global(void **state)
 	(void)state;
 	write_fn("g.tif", 512, 256, -180, -90, 180, 90);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = g.tif\n" GLOBAL);
+	fnode_ok(&f, "[node x]\ntype = file\npath = g.tif\n" GLOBAL_RAW);
 	assert_int_equal(f.n.out, PIX_HEIGHT);
 	static const uint32_t xy[][2] = { { 0, 0 }, { 5, 2 }, { 7, 3 }, { 3, 1 } };
 	for (int i = 0; i < 4; i++) {
@@ -372,7 +375,7 @@ static void nodata(void **state)
 	assert_int_equal(img_write_tiled(tpath("nd.tif"), w, h, 1, IMG_I16, px, 64, true, err), 0);
 	free(px);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = nd.tif\nnodata = -32768\nfill = -7\n" GLOBAL);
+	fnode_ok(&f, "[node x]\ntype = file\npath = nd.tif\nnodata = -32768\nfill = -7\n" GLOBAL_RAW);
 	/* Level (1,0) T=256: 512 texels over 360 pixels (bilinear), and (0,0) T=64 (filtered). */
 	static const int lv[][3] = { { 1, 0, 256 }, { 0, 0, 64 }, { 2, 1, 64 } };
 	for (int l = 0; l < 3; l++) {
@@ -424,7 +427,7 @@ static void nodata(void **state)
 	for (int i = 0; i < 64 * 32; i++)
 		fp[i] = (i % 64 >= 16 && i % 64 < 24) ? NAN : 5.0f;
 	assert_int_equal(img_write(tpath("nan.exr"), 64, 32, 1, IMG_F32, fp, err), 0);
-	fnode_ok(&f, "[node x]\ntype = file\npath = nan.exr\nfill = -1\n" GLOBAL);
+	fnode_ok(&f, "[node x]\ntype = file\npath = nan.exr\nfill = -1\n" GLOBAL_RAW);
 	struct tile *t = gen(&f, 0, 0, 0, 0, 64); /* 64×64 over 64×32: 1:1 in x, 2× in y */
 	for (int j = 0; j < 64; j++)
 		for (int i = 0; i < 64; i++) {
@@ -467,7 +470,7 @@ static void color_channels(void **state)
 		      { "ga.png", { 99, 99, 99, 128 } } };
 	for (int c = 0; c < 3; c++) {
 		struct fnode f;
-		fnode_ok(&f, "[node x]\ntype = file\npath = %s\nkind = color\n" GLOBAL, cases[c].file);
+		fnode_ok(&f, "[node x]\ntype = file\npath = %s\nkind = color\n" GLOBAL_RAW, cases[c].file);
 		for (int lv = 0; lv < 2; lv++) {
 			struct tile *t = gen(&f, 2 + lv, 1 + lv, 1, 1, 64);
 			for (int i = 0; i < 64 * 64; i++)
@@ -482,7 +485,7 @@ static void color_channels(void **state)
 		rgba[i] = (uint8_t)(i * 13 + i / 1024);
 	assert_int_equal(img_write(tpath("rgba.png"), 256, 128, 4, IMG_U8, rgba, err), 0);
 	struct fnode f;
-	fnode_ok(&f, "[node x]\ntype = file\npath = rgba.png\nkind = color\n" GLOBAL);
+	fnode_ok(&f, "[node x]\ntype = file\npath = rgba.png\nkind = color\n" GLOBAL_RAW);
 	struct tile *t = gen(&f, 2, 1, 3, 1, 64);
 	for (int j = 0; j < 64; j++)
 		assert_memory_equal(t->data + j * 64 * 4, rgba + ((64 + j) * 256 + 192) * 4, 64 * 4);
@@ -1062,6 +1065,174 @@ static void huge_nodata_coarse(void **state)
 	fnode_fini(&f);
 }
 
+/* A noise value per column (±100), the same for every row that uses it. */
+static float col_noise(int x)
+{
+	uint32_t h = (uint32_t)x * 2654435761u;
+	h ^= h >> 15;
+	h *= 2246822519u;
+	h ^= h >> 13;
+	return (float)(h % 2001) / 10.0f - 100.0f;
+}
+
+/* A texel row's steepest east–west slope per radian of ground arc (heights per radian of
+ * latitude would be the same unit), over the texels of nt tiles side by side. */
+static double ew_slope(struct tile *const *t, int nt, uint32_t j)
+{
+	uint32_t T = t[0]->size;
+	double lon0, lon1, lat;
+	grid_texel_center(&t[0]->key, T, 0, j, &lon0, &lat);
+	grid_texel_center(&t[0]->key, T, 1, j, &lon1, &lat);
+	double dx = (lon1 - lon0) * (M_PI / 180) * cos(lat * (M_PI / 180)), worst = 0;
+	for (int a = 0; a < nt; a++)
+		for (uint32_t i = 0; i < T; i++) {
+			bool last = i + 1 == T;
+			if (last && a + 1 == nt)
+				break;
+			float v0 = tile_f32(t[a])[j * T + i];
+			float v1 = last ? tile_f32(t[a + 1])[j * T] : tile_f32(t[a])[j * T + i + 1];
+			double sl = fabs(v1 - v0) / dx;
+			worst = sl > worst ? sl : worst;
+		}
+	return worst;
+}
+
+/* The east–west prefilter (isotropic, file_resample.h) on an image like ETOPO5 near its
+ * poles: the two rows next to each pole vary with longitude (±100 m of column noise, the
+ * same in both rows) over a smooth function. Near a pole no texel row may be steeper east–
+ * west than √2 × (the source rows' range / their spacing) on the ground (the unfiltered
+ * node is >10× steeper there: the test can fail); tiles are the quadrants of a tile of the
+ * same spacing (the widened region gives every tile the same filtered rows) and join across
+ * the antimeridian; below 44° nothing changes, bit for bit; missing data is still missing. */
+static void isotropic_rows(void **state)
+{
+	(void)state;
+	int w = 720, h = 360; /* 0.5° pixels */
+	float *px = malloc((size_t)w * h * sizeof *px);
+	float lo = INFINITY, hi = -INFINITY;
+	for (int y = 0; y < h; y++)
+		for (int x = 0; x < w; x++) {
+			float v = (float)fn(-180 + (x + 0.5) * 0.5, 90 - (y + 0.5) * 0.5);
+			if (y < 2 || y >= h - 2) {
+				v += col_noise(x);
+				lo = v < lo ? v : lo;
+				hi = v > hi ? v : hi;
+			}
+			px[(size_t)y * w + x] = v;
+		}
+	char err[256];
+	assert_int_equal(img_write(tpath("iso.tif"), w, h, 1, IMG_F32, px, err), 0);
+	struct fnode f, raw;
+	fnode_ok(&f, "[node x]\ntype = file\npath = iso.tif\n" GLOBAL);
+	fnode_ok(&raw, "[node x]\ntype = file\npath = iso.tif\n" GLOBAL_RAW);
+	double bound = sqrt(2) * (hi - lo) / (0.5 * M_PI / 180);
+
+	/* Near both poles, magnified (ly 8: texels 0.011° tall) and coarser, at the viewer's
+	 * isotropic and anisotropic lx: three tiles round the antimeridian. */
+	static const int lv[][2] = { { 9, 8 }, { 8, 8 }, { 6, 8 }, { 3, 8 }, { 1, 8 },
+				     { 7, 6 }, { 4, 6 }, { 5, 4 }, { 2, 4 } };
+	for (size_t l = 0; l < sizeof lv / sizeof lv[0]; l++) {
+		int lx = lv[l][0], ly = lv[l][1];
+		uint32_t nx = 1u << lx, T = 64;
+		for (int pole = 0; pole < 2; pole++) {
+			uint32_t y = pole ? (1u << ly) - 1 : 0;
+			struct tile *t[3], *r[3];
+			uint32_t xs[3] = { nx - 1, 0, nx > 1 ? 1 : 0 };
+			int nt = nx > 2 ? 3 : 1;
+			for (int a = 0; a < nt; a++) {
+				t[a] = gen(&f, lx, ly, xs[nt == 1 ? 1 : a], y, T);
+				r[a] = gen(&raw, lx, ly, xs[nt == 1 ? 1 : a], y, T);
+			}
+			double worst = 0, worst_raw = 0;
+			for (uint32_t j = 0; j < T; j++) {
+				double lon, lat;
+				grid_texel_center(&t[0]->key, T, 0, j, &lon, &lat);
+				/* Within the caps (past the edge rows' centres) the texels blend
+				 * to the pole's mean; beyond the noise rows the image is smooth. */
+				if (fabs(lat) > 89.75 || fabs(lat) < 89.25)
+					continue;
+				double s = ew_slope(t, nt, j), sr = ew_slope(r, nt, j);
+				worst = s > worst ? s : worst;
+				worst_raw = sr > worst_raw ? sr : worst_raw;
+			}
+			if (worst > bound || getenv("TEST_VERBOSE"))
+				fprintf(stderr, "(%d,%d) %s pole: east-west slope %.0f, unfiltered "
+						"%.0f, bound %.0f\n", lx, ly, pole ? "south" : "north",
+					worst, worst_raw, bound);
+			if (ly >= 6) {
+				assert_true(worst > 0);
+				assert_true(worst <= bound);
+			}
+			if (ly == 8 && lx >= 6)
+				assert_true(worst_raw > 10 * bound);
+			for (int a = 0; a < nt; a++) {
+				tile_unref(t[a]);
+				tile_unref(r[a]);
+			}
+		}
+	}
+
+	/* Quadrants of a tile with the same texel spacing, at the antimeridian's west side, near
+	 * the north pole, magnified and at 1.4 texels a pixel. */
+	static const int big[][2] = { { 7, 6 }, { 3, 2 } };
+	for (int b = 0; b < 2; b++) {
+		struct tile *bt = gen(&f, big[b][0], big[b][1], 0, 0, 64);
+		for (uint32_t q = 0; q < 4; q++) {
+			uint32_t qx = q & 1, qy = q >> 1;
+			struct tile *st = gen(&f, big[b][0] + 1, big[b][1] + 1, qx, qy, 32);
+			for (uint32_t j = 0; j < 32; j++)
+				for (uint32_t i = 0; i < 32; i++)
+					assert_float_equal(tile_f32(st)[j * 32 + i],
+							   tile_f32(bt)[(qy * 32 + j) * 64 + qx * 32 + i],
+							   1e-3);
+			tile_unref(st);
+		}
+		tile_unref(bt);
+	}
+
+	/* Below 44°: the same bits as without the filter; at 76°, not. */
+	static const int same[][4] = { { 6, 5, 9, 10 }, { 4, 3, 5, 3 }, { 5, 4, 7, 5 },
+				       { 7, 6, 40, 20 }, { 10, 9, 511, 256 }, { 9, 8, 100, 180 } };
+	for (size_t l = 0; l < sizeof same / sizeof same[0]; l++) {
+		struct tile *a = gen(&f, same[l][0], same[l][1], (uint32_t)same[l][2],
+				     (uint32_t)same[l][3], 64);
+		struct tile *b = gen(&raw, same[l][0], same[l][1], (uint32_t)same[l][2],
+				     (uint32_t)same[l][3], 64);
+		assert_memory_equal(a->data, b->data, 64 * 64 * sizeof(float));
+		tile_unref(a);
+		tile_unref(b);
+	}
+	struct tile *a = gen(&f, 7, 6, 40, 5, 64), *b = gen(&raw, 7, 6, 40, 5, 64); /* 75.9° */
+	assert_memory_not_equal(a->data, b->data, 64 * 64 * sizeof(float));
+	tile_unref(a);
+	tile_unref(b);
+	fnode_fini(&f);
+	fnode_fini(&raw);
+
+	/* Missing samples near the pole: never NaN, never outside the valid values or the fill. */
+	for (int y = 0; y < 6; y++)
+		for (int x = 300; x < 340; x++)
+			px[(size_t)y * w + x] = NAN;
+	assert_int_equal(img_write(tpath("isonan.tif"), w, h, 1, IMG_F32, px, err), 0);
+	free(px);
+	fnode_ok(&f, "[node x]\ntype = file\npath = isonan.tif\nfill = -5000\n" GLOBAL);
+	int fills = 0;
+	/* Rows 0–1 (filtered over 30–115 pixels: the 40 missing columns are outvoted) and
+	 * 4–5 (over ~10: the block's middle stays missing), tiles over and beside the block. */
+	for (uint32_t x = 0; x < 16; x++) {
+		struct tile *t = gen(&f, 8, 8, 104 + (x & 7) * 3, x < 8 ? 0 : 3, 64);
+		for (int i = 0; i < 64 * 64; i++) {
+			float v = tile_f32(t)[i];
+			if (!(v == -5000 || (v >= lo - 1 && v <= hi + 1)))
+				fail_msg("tile %u texel %d: %g", x, i, v);
+			fills += v == -5000;
+		}
+		tile_unref(t);
+	}
+	assert_true(fills > 0);
+	fnode_fini(&f);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1071,6 +1242,7 @@ int main(void)
 		cmocka_unit_test(coarse_is_filtered),
 		cmocka_unit_test(nodata),
 		cmocka_unit_test(color_channels),
+		cmocka_unit_test(isotropic_rows),
 		cmocka_unit_test(bad_params),
 		cmocka_unit_test(content_hash),
 		cmocka_unit_test(content_hash_copies),

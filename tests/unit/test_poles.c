@@ -24,6 +24,7 @@
 #include "engine/node.h"
 #include "engine/planet.h"
 #include "engine/tile.h"
+#include "engine/nodes/file_resample.h"
 
 /* A file node of a shipped planet and what the test needs to know of its source. */
 struct pole_case {
@@ -358,6 +359,121 @@ static void mars_layers(void **state)
 	check_layers("conf/planets/mars.ini", "data/mars/mars.tif", 0.05, 3);
 }
 
+/* No radial dashes near the Earth's south pole. ETOPO5's four rows before the pole (−89.58°
+ * … −89.92°) are one row repeated, varying 2774–2865 m with longitude: read as is, each
+ * column became a wedge 9–45 km long on its meridian, dashes converging on the pole once
+ * shaded. The file node filters rows east–west to their spacing (file_resample.h,
+ * isotropic): at the viewer's levels near the pole, isotropic and anisotropic, no texel row
+ * between −89.5° and the cap may be steeper east–west than √2 × (the range of the source's
+ * last rows / their 5′ spacing) on the ground, at eight places where the repeated row
+ * jumps (unfiltered: 2–130× that, failing at every level tried). */
+static void earth_no_radial_dashes(void **state)
+{
+	(void)state;
+	const struct pole_case *pc = &cases[0];
+	if (access(pc->image, R_OK)) {
+		fprintf(stderr, "test_poles: planet data missing (%s): run `make data` (as root) "
+				"first — skipped\n", pc->image);
+		skip();
+	}
+	struct planet *pl;
+	char err[256];
+	if (planet_load(pc->planet, &pl, err))
+		fail_msg("%s", err);
+	struct node *n = planet_find_node(pl, pc->node);
+	assert_non_null(n);
+	struct img_info info;
+	if (img_cache_info(pl->images, pc->image, &info, err))
+		fail_msg("%s", err);
+	int W = info.width, H = info.height, rows = 12;
+	float *px = malloc((size_t)W * rows * sizeof *px);
+	assert_non_null(px);
+	if (img_cache_read(pl->images, pc->image, 0, 0, W, H - rows, H, 0, 1, IMG_F32, px, 0, err))
+		fail_msg("%s", err);
+	double lo = INFINITY, hi = -INFINITY;
+	for (size_t i = 0; i < (size_t)W * rows; i++) {
+		lo = px[i] < lo ? px[i] : lo;
+		hi = px[i] > hi ? px[i] : hi;
+	}
+	/* Where dashes were: between columns of the repeated rows that differ (the row's runs
+	 * of one value end there). Eight of them, spread round the pole: the longitudes half
+	 * way between the two columns' centres. */
+	const struct file_source *fs = n->impl;
+	const float *rep = px + (size_t)(rows - 4) * W; /* −89.75° */
+	int njump = 0;
+	for (int c = 0; c + 1 < W; c++)
+		njump += fabsf(rep[c + 1] - rep[c]) > 10;
+	assert_true(njump >= 8);
+	double jump_lon[8];
+	for (int c = 0, seen = 0, k = 0; c + 1 < W && k < 8; c++)
+		if (fabsf(rep[c + 1] - rep[c]) > 10 && seen++ == k * njump / 8)
+			jump_lon[k++] = fs->west + (c + 1) * (360.0 / W);
+	free(px);
+	double spacing = (pc->north - pc->south) / H * (M_PI / 180);
+	double bound = sqrt(2) * (hi - lo) / spacing;
+	struct gen_ctx g = { 0 };
+	uint32_t T = pl->tile_size;
+	static const int lys[] = { 9, 11, 13 }, dlx[] = { -1, 0, 2, 5 };
+	int bad = 0;
+	for (size_t a = 0; a < sizeof lys / sizeof lys[0]; a++) {
+		int ly = lys[a];
+		double tile_deg = 180.0 / (1u << ly);
+		for (size_t b = 0; b < sizeof dlx / sizeof dlx[0]; b++) {
+			int lx = ly - dlx[b];
+			uint32_t nx = 1u << lx;
+			/* Rows from the cap (the last row's centre, −89.917°) to −89.5°. */
+			for (uint32_t y = (uint32_t)((90 + 89.5) / tile_deg); y < 1u << ly; y++) {
+				double worst = 0;
+				for (int q8 = 0; q8 < 8; q8++) {
+					/* The tile holding the jump, and the next east. */
+					double u = fmod(jump_lon[q8] + 180, 360) / 360;
+					uint32_t x0 = (uint32_t)(u * nx) % nx;
+					struct tile *t[2];
+					for (int q = 0; q < 2; q++) {
+						struct tile_key k = { .node = n->hash, .lx = (uint8_t)lx,
+								      .ly = (uint8_t)ly,
+								      .x = (x0 + q) % nx, .y = y };
+						t[q] = tile_create(&k, n->out, T);
+						int rc = n->type->generate(n, &g, &k, NULL, 0, t[q]);
+						if (rc)
+							fail_msg("generate (%d,%d) %u,%u: %d", lx, ly,
+								 k.x, y, rc);
+					}
+					for (uint32_t j = 0; j < T; j++) {
+						double lon0, lon1, lat;
+						grid_texel_center(&t[0]->key, T, 0, j, &lon0, &lat);
+						grid_texel_center(&t[0]->key, T, 1, j, &lon1, &lat);
+						if (lat > -89.5 || lat < -89.9)
+							continue;
+						double dx = (lon1 - lon0) * (M_PI / 180) *
+							    cos(lat * (M_PI / 180));
+						for (uint32_t i = 0; i < T; i++) {
+							float v0 = tile_f32(t[0])[j * T + i];
+							float v1 = i + 1 < T || nx == 1
+									   ? tile_f32(t[0])[j * T + (i + 1) % T]
+									   : tile_f32(t[1])[j * T];
+							double sl = fabs(v1 - v0) / dx;
+							worst = sl > worst ? sl : worst;
+						}
+					}
+					tile_unref(t[0]);
+					tile_unref(t[1]);
+				}
+				bool ok = worst <= bound;
+				if (!ok || getenv("TEST_POLES_VERBOSE"))
+					fprintf(stderr, "etopo (%d,%d) row %u: east-west slope %.0f m/rad,"
+							" bound %.0f%s\n", lx, ly, y, worst, bound,
+						ok ? "" : "  FAIL");
+				bad += !ok;
+			}
+		}
+	}
+	gen_ctx_fini(&g);
+	planet_unref(pl);
+	if (bad)
+		fail_msg("%d tile rows near the south pole show radial dashes", bad);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -366,6 +482,7 @@ int main(void)
 		cmocka_unit_test(moon_albedo),
 		cmocka_unit_test(mars_albedo),
 		cmocka_unit_test(earth_layers),
+		cmocka_unit_test(earth_no_radial_dashes),
 		cmocka_unit_test(moon_layers),
 		cmocka_unit_test(mars_layers),
 	};

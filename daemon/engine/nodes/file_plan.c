@@ -12,6 +12,14 @@
 
 #define FILE_REGION_BUDGET ((size_t)1 << 22) /* source pixels a tile reads, unless... */
 #define FILE_MAX_REGION ((size_t)1 << 26)    /* ...its level is the coarsest: then this */
+/* The prefilter (file_resample.h) leaves footprints up to this many times narrower east–west
+ * than the rows are apart on the ground. 1: isotropic (2 left short dashes converging on the
+ * Earth's south pole from 20 km: ETOPO5's runs of one value, 2:1 and shaded). */
+#define FILE_ISO_RATIO 1.0
+/* Rows whose box is wider than this many pixels are read whole (file_resample.c, iso_rows)
+ * instead of widening the whole region for them: near a pole only its last rows need boxes
+ * that wide (a 1:1 tile of 256 columns at 80–90° read 8192-pixel rows for all 260 rows). */
+#define FILE_ISO_WIDE 256.0
 
 /* Tap indices a latitude table holds for the virtual rows of the polar caps until axis_build
  * rebases them to the rows just after the buffer's: bh + (index - TAP_VIRTUAL). */
@@ -226,6 +234,73 @@ static void plan_caps(struct file_plan *q, double spany)
 		a->taps = 3;
 }
 
+/* The prefilter's box at latitude lat (see file_plan_iso_width). */
+static double iso_width_lat(const struct file_plan *q, double lat)
+{
+	double c = cos(fmin(fabs(lat), 90) * (M_PI / 180));
+	double w = c > 1e-300 ? q->iso_aspect / (FILE_ISO_RATIO * c) : INFINITY, r = q->iso_rx;
+	double p = w > r ? sqrt(w * w - r * r) : 0; /* inf stays inf */
+	return p < 1 ? 0 : p < q->wm ? p : q->wm;
+}
+
+double file_plan_iso_width(const struct file_plan *q, int64_t Y)
+{
+	if (q->iso_wmax <= 0)
+		return 0;
+	const struct file_source *f = q->f;
+	double w = iso_width_lat(q, f->north - (Y + 0.5) * ((f->north - f->south) / q->hm));
+	return w < q->iso_wmax ? w : q->iso_wmax;
+}
+
+/* The prefilter's widest box for the rows this tile may read (its edges and two rows more),
+ * and the region bound that leaves room for it. */
+static void plan_iso(struct file_plan *q, double spanx, double spany)
+{
+	const struct file_source *f = q->f;
+	q->iso_wmax = 0;
+	if (!f->isotropic)
+		return;
+	q->iso_aspect = (spany / q->hm) / (spanx / q->wm);
+	q->iso_rx = q->rx < 2 ? 1 : q->rx; /* one bilinear tap, or a box of rx sub-taps */
+	double reach = fmax(fabs(q->r.north), fabs(q->r.south)) + 2 * spany / q->hm;
+	q->iso_wmax = iso_width_lat(q, reach);
+	q->iso_wreg = q->iso_wmax < FILE_ISO_WIDE ? q->iso_wmax : FILE_ISO_WIDE;
+	size_t e = (size_t)ceil(q->iso_wreg / 2) + 1, wm = (size_t)q->wm;
+	if (q->iso_wmax > 0 && q->bwmax < wm)
+		q->bwmax = q->bwmax + 2 * e < wm ? q->bwmax + 2 * e : wm;
+}
+
+/* Widens the columns read by half the widest box the region's rows need (file_resample.c
+ * filters them before the horizontal pass): to the whole row at most, where the filter runs
+ * round the circle. The tap indices follow the new first column. */
+static void iso_extend(struct file_plan *q)
+{
+	struct file_axis *a = &q->ax;
+	double w = fmax(file_plan_iso_width(q, q->ay.lo), file_plan_iso_width(q, q->ay.hi - 1));
+	w = w < q->iso_wreg ? w : q->iso_wreg;
+	q->iso_t0 = 0;
+	q->iso_t1 = a->hi - a->lo;
+	if (w <= 0 || !a->any || !q->ay.any)
+		return;
+	int64_t wm = q->wm, bw = a->hi - a->lo, e = (int64_t)ceil(w / 2) + 1, lo, hi;
+	if (q->f->wrap) {
+		if (bw >= wm)
+			return;
+		lo = bw + 2 * e >= wm ? a->lo - (wm - bw) / 2 : a->lo - e;
+		hi = bw + 2 * e >= wm ? lo + wm : a->hi + e;
+	} else {
+		lo = a->lo - e > 0 ? a->lo - e : 0;
+		hi = a->hi + e < wm ? a->hi + e : wm;
+	}
+	int32_t shift = (int32_t)(a->lo - lo);
+	for (size_t i = 0; i < (size_t)q->T * a->K; i++)
+		a->idx[i] += shift;
+	q->iso_t0 = shift;
+	q->iso_t1 = shift + (a->hi - a->lo);
+	a->lo = lo;
+	a->hi = hi;
+}
+
 int file_plan_init(struct file_plan *q, const struct file_source *f, const struct tile_key *k,
 		   uint32_t T)
 {
@@ -249,6 +324,7 @@ int file_plan_init(struct file_plan *q, const struct file_source *f, const struc
 	q->ax.K = q->ax.taps * q->ax.n;
 	q->ay.K = q->ay.taps * q->ay.n;
 	region_bounds(f, q->m, q->rx, q->ry, T, &q->bwmax, &q->bhmax);
+	plan_iso(q, spanx, spany);
 	if (q->bwmax * q->bhmax > FILE_MAX_REGION)
 		return -EFBIG; /* only a file with a truncated MIP pyramid, at a very coarse level */
 	q->maskable = f->has_nodata || f->rtype == IMG_F32;
@@ -270,8 +346,11 @@ void file_plan_buffers(struct file_plan *q, struct gen_ctx *g)
 	size_t s_row = align64(T * (C + 1) * sizeof(float));
 	size_t s_praw = align64(wm * C * q->tsz), s_pv = align64(wm * C * sizeof(float));
 	size_t s_pm = q->maskable ? align64(wm * sizeof(float)) : 0;
+	size_t s_psum = q->iso_wmax > 0
+				? align64(((q->bwmax > wm ? q->bwmax : wm) + 1) * sizeof(double))
+				: 0;
 	char *sp = gen_scratch(g, s_coord + s_tabx + s_taby + s_in + s_raw + s_src + s_mask +
-					  s_tmp + s_tmpm + s_row + s_praw + s_pv + s_pm);
+					  s_tmp + s_tmpm + s_row + s_praw + s_pv + s_pm + s_psum);
 	q->cx = (double *)(void *)sp;
 	q->cy = q->cx + T;
 	sp += s_coord;
@@ -301,6 +380,8 @@ void file_plan_buffers(struct file_plan *q, struct gen_ctx *g)
 	q->pv = (float *)(void *)sp;
 	sp += s_pv;
 	q->pm = q->maskable ? (float *)(void *)sp : NULL;
+	sp += s_pm;
+	q->psum = s_psum ? (double *)(void *)sp : NULL;
 }
 
 /* Columns run from texel 0's base (col_coord). */
@@ -327,6 +408,8 @@ bool file_plan_aligned(struct file_plan *q)
 	const struct file_source *f = q->f;
 	uint32_t T = q->T;
 	struct file_axis *ax = &q->ax, *ay = &q->ay;
+	if (q->iso_wmax > 0) /* some row is filtered first */
+		return false;
 	if (!aligned_axis(q->cx[0], q->rx, T, q->wm, f->wrap, &ax->lo) ||
 	    !aligned_axis(q->cy[0], q->ry, T, q->hm, false, &ay->lo))
 		return false;
@@ -342,4 +425,5 @@ void file_plan_tables(struct file_plan *q)
 		q->cx[i] = col_coord(f, &q->r, q->dlon, q->wm, q->base, i);
 	axis_build(&q->ax, q->cx, q->T, q->rx, q->wm, f->wrap);
 	axis_build(&q->ay, q->cy, q->T, q->ry, q->hm, false);
+	iso_extend(q);
 }

@@ -52,6 +52,14 @@ struct file_plan {
 	size_t bwmax, bhmax; /* bounds of the region read */
 	bool maskable;	     /* the source can have missing samples */
 	double base;	     /* with wrapping: texel 0's offset east of the west bound, degrees */
+	/* The east–west prefilter (`isotropic`, file_resample.h): a level-m pixel's height over
+	 * its width in degrees, the horizontal pass's own footprint in pixels, and the widest
+	 * box a row of this tile's reach may need (0: none; the region grows by half of it). */
+	double iso_aspect, iso_rx, iso_wmax;
+	double iso_wreg;	/* the widest box the region's widening serves (FILE_ISO_WIDE at
+				 * most); a row needing more is read whole (a few rows by a pole) */
+	int64_t iso_t0, iso_t1; /* the columns the taps read, relative to the region's first */
+	double *psum; /* one row's prefix sums: (max(bwmax, level width) + 1) doubles */
 	double *cx, *cy;     /* texel centres, level-m pixel units */
 	void *raw;	     /* the region as read */
 	float *src, *mask;   /* ... as float (sv: src, or raw itself for float files) */
@@ -69,6 +77,9 @@ struct file_plan {
  * Borrows f (kept in q->f) and k. Returns 0 or -EFBIG (the region would be too large). */
 int file_plan_init(struct file_plan *q, const struct file_source *f, const struct tile_key *k,
 		   uint32_t T);
+/* The prefilter's box width in level-m pixels for source row Y (0: no filter), at most the
+ * level's width (a whole row: its mean). */
+double file_plan_iso_width(const struct file_plan *q, int64_t Y);
 /* Carves q's buffers out of g's scratch (valid until g's next gen_scratch). */
 void file_plan_buffers(struct file_plan *q, struct gen_ctx *g);
 /* Texel centres in level-m pixel units: rows all, columns texel 0's only (the rest in

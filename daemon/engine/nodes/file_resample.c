@@ -382,11 +382,14 @@ static int cap_rows(struct file_plan *q, int p, int64_t edge, int64_t cap, float
 	for (uint32_t i = 0; i < q->T; i++)
 		for (size_t c = 0; c < C; c++)
 			mean[i * C + c] = (float)(st.sum[c] / wm);
+	/* The cap row is box-filtered (iso_rows): its first harmonic by sinc(π w / wm). */
+	double x = M_PI * file_plan_iso_width(q, cap) / (double)wm;
+	double damp = x > 0 ? sin(x) / x : 1;
 	for (uint32_t i = 0; i < q->T; i++) {
 		double lam = (q->r.west + (i + 0.5) * q->dlon) * (M_PI / 180);
 		double cl = cos(lam), sl = sin(lam);
 		for (size_t c = 0; c < C; c++)
-			harm[i * C + c] = (float)(2 * (st.ca[c] * cl + st.sa[c] * sl) / wm);
+			harm[i * C + c] = (float)(2 * damp * (st.ca[c] * cl + st.sa[c] * sl) / wm);
 	}
 	if (meanm)
 		for (uint32_t i = 0; i < q->T; i++)
@@ -434,6 +437,137 @@ static int read_source(struct file_plan *q)
 		for (size_t i = 0; i < q->bw * q->bh; i++)
 			q->mask[i] = 1; /* the region had nothing missing */
 		q->missing = true;
+	}
+	return 0;
+}
+
+/* The integral from -1/2 to x of the piecewise-constant row whose prefix sums are P (pixel k
+ * spans [k - 1/2, k + 1/2]; 0 <= x + 1/2 <= n). */
+static double row_integral(const double *P, size_t n, double x)
+{
+	double u = x + 0.5;
+	size_t k = (size_t)u;
+	if (k >= n)
+		return P[n];
+	return P[k] + (u - (double)k) * (P[k + 1] - P[k]);
+}
+
+/* Prefix sums P[0..m] of m samples v[0], v[stride], … */
+static void prefix_sums(const float *v, size_t stride, size_t m, double *P)
+{
+	P[0] = 0;
+	for (size_t i = 0; i < m; i++)
+		P[i + 1] = P[i] + v[i * stride];
+}
+
+/* The mean over the box [x - w/2, x + w/2] of the piecewise-constant row whose prefix sums
+ * are P (n samples; the prefilter of file_resample.h). Circular when p > 0 (period p = n:
+ * any x), else the box is clipped to the row and renormalised. */
+static double box_mean(const double *P, size_t n, bool circular, double x, double w)
+{
+	double a = x - w / 2, b = x + w / 2;
+	if (circular) {
+		/* Whole turns, then the rest within [-1/2, n - 1/2). */
+		double fa = floor((a + 0.5) / (double)n), fb = floor((b + 0.5) / (double)n);
+		return ((fb - fa) * P[n] + row_integral(P, n, b - fb * (double)n) -
+			row_integral(P, n, a - fa * (double)n)) / w;
+	}
+	a = a < -0.5 ? -0.5 : a;
+	b = b > (double)n - 0.5 ? (double)n - 0.5 : b;
+	return (row_integral(P, n, b) - row_integral(P, n, a)) / (b - a);
+}
+
+/* Region row samples v[j·stride], j in [o0, o1), become the box means of a row with prefix
+ * sums P (n samples, circular or not) at x = base + j. The box's ends move one pixel a
+ * sample, their fractions fixed: no floor() or division per sample (box_mean only where a
+ * clipped box needs renormalising). */
+static void box_write(float *v, size_t stride, size_t o0, size_t o1, const double *P, size_t n,
+		      bool circular, double base, double w)
+{
+	double ua = base + (double)o0 - w / 2 + 0.5, ub = ua + w; /* pixel k spans [k, k + 1) */
+	double fla = floor(ua), flb = floor(ub), fa = ua - fla, fb = ub - flb, inv = 1 / w;
+	int64_t ka = (int64_t)fla, kb = (int64_t)flb, N = (int64_t)n;
+	double turns = 0; /* whole turns between the box's ends' pixels, times the row's sum */
+	if (circular) {
+		int64_t ta = ka >= 0 ? ka / N : -((-ka + N - 1) / N);
+		int64_t tb = kb >= 0 ? kb / N : -((-kb + N - 1) / N);
+		ka -= ta * N;
+		kb -= tb * N;
+		turns = (double)(tb - ta) * P[n];
+	}
+	for (size_t j = o0; j < o1; j++) {
+		if (!circular && (ka < 0 || kb >= N)) {
+			v[j * stride] = (float)box_mean(P, n, false, base + (double)j, w);
+		} else {
+			double Ga = P[ka] + fa * (P[ka + 1] - P[ka]);
+			double Gb = P[kb] + fb * (P[kb + 1] - P[kb]);
+			v[j * stride] = (float)((turns + Gb - Ga) * inv);
+		}
+		ka++, kb++;
+		if (circular) {
+			if (ka == N)
+				ka = 0, turns -= P[n];
+			if (kb == N)
+				kb = 0, turns += P[n];
+		}
+	}
+}
+
+/* The east–west prefilter (`isotropic`, file_resample.h) of every region row that needs
+ * it, values and valid weights alike, at the columns the taps read. A row whose box is
+ * wider than the region's widening serves (the last rows before a pole) is read whole.
+ * Before the horizontal pass. Returns 0 or -EIO. */
+static int iso_rows(struct file_plan *q)
+{
+	if (q->iso_wmax <= 0)
+		return 0;
+	const struct file_source *f = q->f;
+	size_t bw = q->bw, C = (size_t)q->C, wm = (size_t)q->wm;
+	bool whole = f->wrap && bw >= wm; /* the region holds every column: filter round it */
+	size_t o0 = (size_t)q->iso_t0, o1 = (size_t)q->iso_t1;
+	for (size_t y = 0; y < q->bh; y++) {
+		int64_t Y = q->ay.lo + (int64_t)y;
+		double w = file_plan_iso_width(q, Y);
+		if (w <= 0)
+			continue;
+		float *sv = q->sv + y * bw * C, *mk = q->mask ? q->mask + y * bw : NULL;
+		if (whole || w <= q->iso_wreg) {
+			size_t n = whole ? wm : bw;
+			for (size_t c = 0; c < C; c++) {
+				prefix_sums(sv + c, C, n, q->psum);
+				box_write(sv + c, C, o0, o1, q->psum, n, whole, 0, w);
+			}
+			if (q->missing) {
+				prefix_sums(mk, 1, n, q->psum);
+				box_write(mk, 1, o0, o1, q->psum, n, whole, 0, w);
+			}
+			continue;
+		}
+		float *row;
+		int rc = read_row(q, Y, &row);
+		if (rc < 0)
+			return rc;
+		if (rc > 0 && !q->missing) {
+			for (size_t i = 0; i < bw * q->bh; i++)
+				q->mask[i] = 1; /* the region had nothing missing */
+			q->missing = true;
+		}
+		/* Region column j is level column ax.lo + j (wrapped round a 360° row). */
+		double base = (double)q->ax.lo;
+		for (size_t c = 0; c < C; c++) {
+			prefix_sums(row + c, C, wm, q->psum);
+			box_write(sv + c, C, o0, o1, q->psum, wm, f->wrap, base, w);
+		}
+		if (q->missing) {
+			if (rc > 0) {
+				prefix_sums(q->pm, 1, wm, q->psum);
+			} else { /* a whole row without a missing sample */
+				q->psum[0] = 0;
+				for (size_t i = 0; i < wm; i++)
+					q->psum[i + 1] = (double)(i + 1);
+			}
+			box_write(mk, 1, o0, o1, q->psum, wm, f->wrap, base, w);
+		}
 	}
 	return 0;
 }
@@ -560,6 +694,8 @@ int file_resample(const struct file_source *f, struct gen_ctx *g, const struct t
 		return 0;
 	}
 	if ((rc = read_source(&q)))
+		return rc;
+	if ((rc = iso_rows(&q)))
 		return rc;
 	hpass(&q);
 	vpass(&q, out);

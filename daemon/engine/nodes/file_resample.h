@@ -43,6 +43,27 @@
  * texels nearest a pole do not depend on longitude, at every level, the viewer's pole (one
  * point, reached from every meridian) is one value, and no crease converges on it.
  *
+ * East–west detail no finer than the rows (key `isotropic`, on by default). A plate-carrée
+ * image's pixels narrow east–west as cos(latitude) while its rows stay as far apart: at
+ * 89.8° an ETOPO5 pixel is 30 m wide and 9 km tall. Global products are resampled onto that
+ * grid from sources whose ground resolution is about the same both ways (ETOPO5 repeats its
+ * last four rows before the south pole, each varying 90 m with longitude), so near a pole
+ * their columns carry no real detail: read as is, every column becomes a wedge 9–45 km long
+ * on its meridian, and shaded relief shows radial dashes converging on the pole. So each
+ * source row of level m is first box-filtered east–west (a box over the piecewise-constant
+ * row, fractional at its ends, circular on a 360° image) to the width w = (row height /
+ * pixel width) / cos(latitude) pixels that makes its footprint as wide on the ground as the
+ * rows are apart (FILE_ISO_RATIO), less what the horizontal pass averages anyway (the widths
+ * add as box variances: w_pre = sqrt(w² − r_x²), r_x the texel spacing, 1 below two
+ * sub-taps). A box narrower than a pixel is no filter, so below 45° (square pixels) nothing
+ * changes, and at 60° a magnified texel averages 1.7 pixels across. The region read grows by
+ * half the box each side (FILE_ISO_WIDE pixels at most: the few rows by a pole that need
+ * more are read whole) and a tile that reaches such rows is never copied 1:1. The cap's
+ * harmonic row is damped like the cap row (sinc of the box). A texel row's east–west slope
+ * is then at most √2 × its source row's range / the row spacing on the ground. A regional
+ * survey in latitude/longitude whose columns are genuine (LiDAR at 78°N) sets
+ * `isotropic = false`.
+ *
  * Missing data. A texel whose centre is outside the bounds gets the fill. Inside, nodata
  * (and NaN) samples get weight 0 and the others are renormalised: the texel keeps the
  * weighted mean of its valid samples when they carry at least half of its weight, and gets
@@ -108,6 +129,7 @@ struct file_source {
 	float nodata;
 	float fill_h;
 	uint8_t fill_c[4];
+	bool isotropic; /* box-filter rows east–west to their spacing on the ground (above) */
 	struct file_poles *poles; /* owned by the node */
 };
 

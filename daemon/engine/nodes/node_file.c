@@ -23,6 +23,9 @@
  *             where data is missing
  *   lon_wrap  true | false: bilinear wraps across the east/west edges (default true when the
  *             bounds span 360°; only allowed then)
+ *   isotropic true | false: east–west detail no finer on the ground than the rows are apart
+ *             (default true: global products near the poles; file_resample.h); false keeps
+ *             every column (a regional survey whose columns are genuine)
  *   cache_mb  deprecated and ignored (still checked: 1..1048576): the image cache is the
  *             planet's, sized by clipmapd's [engine] image_cache_mb. Not hashed.
  * Checked at load: the file reads to its end (img_check_readable: a truncated file is refused
@@ -344,6 +347,10 @@ static int file_create(struct node *nd, struct node_parse *p)
 	f->wrap = wrap & 1;
 	if (f->wrap && !global)
 		return np_error(p, "lon_wrap", "needs bounds spanning 360 degrees of longitude");
+	int iso;
+	if ((rc = np_enum(p, "isotropic", bool_names, 1, &iso)))
+		return rc;
+	f->isotropic = iso & 1;
 	if (kind == FILE_KIND_COLOR)
 		return parse_color(p, f);
 	if ((rc = parse_height(p, f, &geo)))
@@ -370,7 +377,7 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 const struct node_type node_type_file = {
 	.name = "file",
 	.doc = "an image file (OpenImageIO) resampled onto the grid: heights or colour",
-	.version = 1,
+	.version = 2, /* 2: the east–west prefilter (isotropic) */
 	.slots = NULL,
 	.nslots = 0,
 	.create = file_create,
