@@ -3,7 +3,7 @@
  * against ETOPO5 read independently from the source NetCDF with GDAL (bilinear at the same
  * point), at the data's resolution (no detail octaves: within 1 m) and finer (detail added:
  * within its amplitude); the colour of the Sahara, the Amazon and Antarctica in plausible
- * ranges; the detail smooth on ice sheets and rugged on snowy mountains. Tiles go through render_layer: the same cache and scheduler the daemon uses. */
+ * ranges (sea ice at the North Pole); the detail smooth on ice sheets and rugged on snowy mountains. Tiles go through render_layer: the same cache and scheduler the daemon uses. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -205,6 +205,15 @@ static void colours(void **state)
 	texel("color", 3, 0, -140, c, &clat, &clon); /* Pacific: dark blue */
 	if (!(c[2] >= c[0] && c[2] >= c[1] && c[0] < 60 && c[3] == 255))
 		fail_msg("Pacific: %d %d %d %d", c[0], c[1], c[2], c[3]);
+	/* The North Pole: sea ice (near-white, unsaturated: what the viewer draws as ice) on
+	 * the sea (alpha 255), though the Blue Marble shows open water; the Norwegian Sea at
+	 * 70°N stays open. */
+	texel("color", 3, 89.5, 0, c, &clat, &clon);
+	if (!(c[0] > 220 && c[1] > 220 && c[2] > 220 && abs(c[0] - c[2]) < 20 && c[3] == 255))
+		fail_msg("North Pole: %d %d %d %d", c[0], c[1], c[2], c[3]);
+	texel("color", 3, 70, 0, c, &clat, &clon);
+	if (!(c[2] >= c[0] && c[0] < 60 && c[3] == 255))
+		fail_msg("Norwegian Sea: %d %d %d %d", c[0], c[1], c[2], c[3]);
 	/* Below sea level and dry: the Qattara Depression (ETOPO5 −45 m here), the polders by
 	 * the IJsselmeer (−4 m), the floor of Lake Superior (−30 m: a lake, not a sea); the
 	 * Caspian (−30 m), a closed basin of 371 000 km², is sea. Level 7: 600 m texels. */
