@@ -46,7 +46,7 @@ static int subtaps(double r)
  * (one slope, no creases: the kinks fade as t²), R exactly at the cap row, and exactly the
  * plane where R is one. In taps: the cap row with t², the mean row with 1 - t², the harmonic
  * row with t - t². Returns whether s is in a cap (taps filled). */
-static bool pole_taps(struct file_axis *a, double s, int64_t t[3], double w[3])
+static bool pole_taps(struct file_axis *a, double s, int64_t t[4], double w[4])
 {
 	double u;
 	if (!isnan(a->cap_s) && s > a->cap_s) {
@@ -64,15 +64,19 @@ static bool pole_taps(struct file_axis *a, double s, int64_t t[3], double w[3])
 	}
 	double r = 1 - (u < 1 ? u : 1); /* ρ/ρ1 */
 	w[0] = r * r, w[1] = 1 - r * r, w[2] = r - r * r;
+	t[3] = t[0], w[3] = 0;
 	return true;
 }
 
-/* The taps (a->taps of them: bilinear, and a third of weight 0 where caps are in reach) of a
- * sample at s (pixel i's centre at s = i). */
-static void sample_taps(struct file_axis *a, double s, int size, bool wrap, int64_t t[3],
-			double w[3])
+/* The taps (a->taps of them) of a sample at s (pixel i's centre at s = i): bilinear (2);
+ * Catmull-Rom (4) on a magnified axis of heights, so the surface has no crease along the
+ * source's rows and columns (bilinear's slope jumps there: shaded, every 9 km cell edge of
+ * ETOPO5 was a straight line across the terrain, one under the camera's track a seam); the
+ * polar caps' three (pole_taps) where they are in reach. Unused taps have weight 0. */
+static void sample_taps(struct file_axis *a, double s, int size, bool wrap, int64_t t[4],
+			double w[4])
 {
-	if (a->taps == 3 && pole_taps(a, s, t, w))
+	if (a->caps && pole_taps(a, s, t, w))
 		return;
 	double fl = floor(s), fr = s - fl;
 	if (fr < 1e-6) {
@@ -81,13 +85,30 @@ static void sample_taps(struct file_axis *a, double s, int size, bool wrap, int6
 		fl += 1;
 		fr = 0;
 	}
-	int64_t i0 = (int64_t)fl, i1 = fr > 0 ? i0 + 1 : i0;
+	int64_t i0 = (int64_t)fl;
+	/* Catmull-Rom where its four pixels exist (at an edge of a bounded axis, bilinear: a
+	 * clamped tap would bend the curve towards the edge pixel, 0.5 m in 1000 at a pole). */
+	if (a->taps == 4 && (wrap || (i0 >= 1 && i0 + 2 < size))) {
+		double f2 = fr * fr, f3 = f2 * fr;
+		w[0] = 0.5 * (-f3 + 2 * f2 - fr);
+		w[1] = 0.5 * (3 * f3 - 5 * f2 + 2);
+		w[2] = 0.5 * (-3 * f3 + 4 * f2 + fr);
+		w[3] = 0.5 * (f3 - f2);
+		for (int k = 0; k < 4; k++) {
+			int64_t i = i0 - 1 + k;
+			t[k] = wrap ? i : i < 0 ? 0 : i >= size ? size - 1 : i;
+		}
+		if (fr == 0) /* on a pixel: that pixel alone (no taps past the edges) */
+			t[0] = t[2] = t[3] = t[1], w[0] = w[2] = w[3] = 0;
+		return;
+	}
+	int64_t i1 = fr > 0 ? i0 + 1 : i0;
 	if (!wrap) {
 		i0 = i0 < 0 ? 0 : i0 >= size ? size - 1 : i0;
 		i1 = i1 < 0 ? 0 : i1 >= size ? size - 1 : i1;
 	}
-	t[0] = i0, t[1] = i1, t[2] = i0;
-	w[0] = 1 - fr, w[1] = fr, w[2] = 0;
+	t[0] = i0, t[1] = i1, t[2] = t[3] = i0;
+	w[0] = 1 - fr, w[1] = fr, w[2] = w[3] = 0;
 }
 
 /* c[i]: texel i's centre in source pixel units (edges at integers), NAN when outside. */
@@ -107,8 +128,8 @@ static void axis_build(struct file_axis *a, const double *c, uint32_t T, double 
 			continue;
 		}
 		for (int t = 0; t < n; t++) {
-			int64_t tp[3];
-			double wt[3];
+			int64_t tp[4];
+			double wt[4];
 			sample_taps(a, c[i] + ((t + 0.5) / n - 0.5) * r - 0.5, size, wrap, tp, wt);
 			for (int q = 0; q < nt; q++) {
 				ix[nt * t + q] = (int32_t)tp[q];
@@ -173,12 +194,12 @@ static bool aligned_axis(double c0, double r, uint32_t T, int size, bool wrap, i
 }
 
 /* The source region (columns × rows of level m) a tile with texel spacings rx × ry level-m
- * pixels may read: (T-1)·r + r + 2 taps per axis (see axis_build), within the level. */
+ * pixels may read: (T-1)·r + r + 4 taps per axis (see axis_build), within the level. */
 static void region_bounds(const struct file_source *f, int m, double rx, double ry, uint32_t T,
 			  size_t *bw, size_t *bh)
 {
-	*bw = (size_t)ceil(T * rx) + 4;
-	*bh = (size_t)ceil(T * ry) + 4;
+	*bw = (size_t)ceil(T * rx) + 6;
+	*bh = (size_t)ceil(T * ry) + 6;
 	if (!f->wrap && *bw > (size_t)f->lw[m])
 		*bw = (size_t)f->lw[m];
 	if (*bh > (size_t)f->lh[m])
@@ -230,8 +251,10 @@ static void plan_caps(struct file_plan *q, double spany)
 		a->cap_n = cn;
 		a->pole_n = pn;
 	}
-	if (!isnan(a->cap_s) || !isnan(a->cap_n))
-		a->taps = 3;
+	if (!isnan(a->cap_s) || !isnan(a->cap_n)) {
+		a->caps = true;
+		a->taps = a->taps > 3 ? a->taps : 3;
+	}
 }
 
 /* The prefilter's box at latitude lat (see file_plan_iso_width). */
@@ -317,8 +340,12 @@ int file_plan_init(struct file_plan *q, const struct file_source *f, const struc
 	double spanx = f->east - f->west, spany = f->north - f->south;
 	q->rx = q->dlon * q->wm / spanx;
 	q->ry = q->dlat * q->hm / spany;
-	q->ax = (struct file_axis){ .n = subtaps(q->rx), .taps = 2, .cap_n = NAN, .cap_s = NAN };
-	q->ay = (struct file_axis){ .n = subtaps(q->ry), .taps = 2, .cap_n = NAN, .cap_s = NAN };
+	/* Heights magnified (texels finer than the level's pixels): Catmull-Rom (sample_taps). */
+	bool cubic = f->kind == FILE_KIND_HEIGHT;
+	q->ax = (struct file_axis){ .n = subtaps(q->rx), .taps = cubic && q->rx < 1 ? 4 : 2,
+				    .cap_n = NAN, .cap_s = NAN };
+	q->ay = (struct file_axis){ .n = subtaps(q->ry), .taps = cubic && q->ry < 1 ? 4 : 2,
+				    .cap_n = NAN, .cap_s = NAN };
 	if (spanx == 360) /* exact: parse_bounds snaps near-360 spans */
 		plan_caps(q, spany);
 	q->ax.K = q->ax.taps * q->ax.n;
@@ -416,6 +443,35 @@ bool file_plan_aligned(struct file_plan *q)
 	ax->hi = ax->lo + T;
 	ay->hi = ay->lo + T;
 	return true;
+}
+
+/* Rebases an axis's table, built over [a->lo, a->hi), onto the region [lo, hi) read before
+ * (which holds it): pixel taps shift, the caps' virtual rows follow the region's rows. */
+static void axis_rebase(struct file_axis *a, uint32_t T, int64_t lo, int64_t hi)
+{
+	int32_t own = (int32_t)(a->hi - a->lo), shift = (int32_t)(a->lo - lo);
+	for (size_t q = 0; q < (size_t)T * a->K; q++)
+		a->idx[q] = a->idx[q] >= own ? a->idx[q] - own + (int32_t)(hi - lo)
+					     : a->idx[q] + shift;
+	a->lo = lo;
+	a->hi = hi;
+}
+
+void file_plan_bilinear(struct file_plan *q)
+{
+	const struct file_source *f = q->f;
+	struct file_axis *ax = &q->ax, *ay = &q->ay;
+	int64_t xl = ax->lo, xh = ax->hi, yl = ay->lo, yh = ay->hi;
+	for (int k = 0; k < 2; k++) {
+		struct file_axis *a = k ? ay : ax;
+		if (a->taps == 4)
+			a->taps = a->caps ? 3 : 2;
+		a->K = a->taps * a->n;
+	}
+	axis_build(ax, q->cx, q->T, q->rx, q->wm, f->wrap);
+	axis_build(ay, q->cy, q->T, q->ry, q->hm, false);
+	axis_rebase(ax, q->T, xl, xh);
+	axis_rebase(ay, q->T, yl, yh);
 }
 
 void file_plan_tables(struct file_plan *q)

@@ -23,7 +23,8 @@
 enum { VROW_MEAN_N, VROW_MEAN_S, VROW_HARM_N, VROW_HARM_S, VROWS };
 
 /* The per-axis resampling table: output texel i reads taps idx[i·K + k] (relative to the
- * buffer's first source pixel `lo`) with weights w[i·K + k], K = taps·n. */
+ * buffer's first source pixel `lo`) with weights w[i·K + k], K = taps·n: taps 2 (bilinear),
+ * 3 (with the polar caps in reach), 4 (Catmull-Rom: heights magnified). */
 struct file_axis {
 	int n, K, taps;
 	int32_t *idx;
@@ -35,6 +36,7 @@ struct file_axis {
 	 * (row i's centre at i) the last row centre short of each pole and the pole (NAN: no
 	 * cap in this tile's reach: clamp); whether some tap reads a cap's virtual rows. */
 	double cap_n, cap_s, pole_n, pole_s;
+	bool caps; /* a cap is in this tile's reach: taps may be pole_taps */
 	bool use_n, use_s;
 };
 
@@ -91,5 +93,10 @@ bool file_plan_aligned(struct file_plan *q);
 /* The remaining column centres and both axes' tap tables (idx, w, in, lo, hi, any, all,
  * use_n, use_s). After file_plan_coords. */
 void file_plan_tables(struct file_plan *q);
+
+/* The tables again, bilinear where they were Catmull-Rom, over the region already read
+ * (its bounds kept): for a tile whose samples turned out to have missing ones (a cubic's
+ * negative weights would extrapolate past the valid data). After file_plan_tables. */
+void file_plan_bilinear(struct file_plan *q);
 
 #endif

@@ -695,6 +695,8 @@ int file_resample(const struct file_source *f, struct gen_ctx *g, const struct t
 	}
 	if ((rc = read_source(&q)))
 		return rc;
+	if (q.missing && (q.ax.taps == 4 || q.ay.taps == 4))
+		file_plan_bilinear(&q);
 	if ((rc = iso_rows(&q)))
 		return rc;
 	hpass(&q);

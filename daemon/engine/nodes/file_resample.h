@@ -15,7 +15,10 @@
  * the tile. Filtering (seed 000 §4.3): with r = texel spacing / pixel spacing per axis, the
  * read uses MIP level m = floor(log2(min(rx, ry))) (the file's own levels or OIIO's automip,
  * each a 2×2 box of the one above): there the narrower axis is at most 2× finer than the output
- * and bilinear suffices. The wider axis (anisotropic levels, lx < ly + 1: texels up to 2^20
+ * and bilinear suffices (heights magnified, r < 1: Catmull-Rom, C1 across the source's
+ * rows and columns where bilinear facets crease; bilinear at a bounded axis's edge pixels and
+ * for a tile whose samples include missing ones, whose renormalised negative weights would
+ * extrapolate). The wider axis (anisotropic levels, lx < ly + 1: texels up to 2^20
  * times wider in longitude than tall) is averaged by n = ceil(r) bilinear sub-taps spread
  * across the texel (a box of bilinears) at that same level; m rises only when n would pass
  * FILE_MAX_SUBTAPS or the region FILE_REGION_BUDGET pixels.

@@ -377,7 +377,7 @@ static int file_generate(const struct node *nd, struct gen_ctx *g, const struct 
 const struct node_type node_type_file = {
 	.name = "file",
 	.doc = "an image file (OpenImageIO) resampled onto the grid: heights or colour",
-	.version = 2, /* 2: the east–west prefilter (isotropic) */
+	.version = 2, /* 2: the east–west prefilter (isotropic), Catmull-Rom magnified heights */
 	.slots = NULL,
 	.nslots = 0,
 	.create = file_create,
