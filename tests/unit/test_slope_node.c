@@ -189,8 +189,18 @@ static double *level_slope(struct fixture *fx, int lx, int ly)
 	return s;
 }
 
-/* Every tile of level (lx + dx, ly + d) against the level (lx, ly) slope interpolated
- * bilinearly at its texel centres (d = 0: the level's own slope). */
+/* The cubic B-spline's weights of the four samples around t ∈ [0, 1) (t from the second). */
+static void bspline(double t, double w[4])
+{
+	double u = 1 - t;
+	w[0] = u * u * u / 6;
+	w[1] = (3 * t * t * t - 6 * t * t + 4) / 6;
+	w[2] = (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6;
+	w[3] = t * t * t / 6;
+}
+
+/* Every tile of level (lx + dx, ly + d) against the level (lx, ly) slope interpolated with a
+ * cubic B-spline at its texel centres (d = 0: the level's own slope). */
 static void seamless_level(const char *params, int lx, int ly, int d, int dx, uint32_t T)
 {
 	struct fixture fx;
@@ -211,18 +221,21 @@ static void seamless_level(const char *params, int lx, int ly, int d, int dx, ui
 					double fu = ((double)x * T + i + 0.5) * ldexp(1.0, -dx) - 0.5;
 					double fv = ((double)y * T + j + 0.5) * step - 0.5;
 					int u0 = (int)floor(fu), v0 = (int)floor(fv);
-					double wu = fu - u0, wv = fv - v0, c[2][2];
-					for (int b = 0; b < 2; b++)
-						for (int a = 0; a < 2; a++) {
-							int u = u0 + a, v = v0 + b;
+					double bu[4], bv[4], want = 0;
+					bspline(fu - u0, bu);
+					bspline(fv - v0, bv);
+					for (int b = 0; b < 4; b++)
+						for (int a = 0; a < 4; a++) {
+							int u = u0 - 1 + a, v = v0 - 1 + b;
 							if (v < 0 || v >= H) {
 								v = v < 0 ? -1 - v : 2 * H - 1 - v;
 								u += W / 2;
 							}
-							c[b][a] = s[(size_t)v * W + (size_t)((u % W + W) % W)];
+							want += bu[a] * bv[b] *
+								s[(size_t)v * W + (size_t)((u % W + W) % W)];
 						}
-					double want = (c[0][0] * (1 - wu) + c[0][1] * wu) * (1 - wv) +
-						      (c[1][0] * (1 - wu) + c[1][1] * wu) * wv;
+					if (d == 0) /* on its own level: the texel itself */
+						want = s[(size_t)(y * T + j) * W + x * T + i];
 					/* faded to 0 over the last source texel before a pole */
 					double lat = fabs(grid_v_to_lat(ly + d, T, (double)y * T + j + 0.5));
 					double fade = (90 - lat) / (180.0 / H) - 0.5;

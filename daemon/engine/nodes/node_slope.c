@@ -5,13 +5,15 @@
  *
  * `scale` (metres, default 0: every level its own texels) fixes the distance the slope is
  * measured over: a level whose texels are finer than scale / 2 takes the slope of the finest
- * level ls whose texels are at least that (its "source level") and interpolates it bilinearly
- * to its texel centres (a tile with lx < ly − ls, near a pole, keeps lx 0 in longitude). Every finer level so shows one smooth field: no colour popping from
+ * level ls whose texels are at least that (its "source level") and interpolates it with a
+ * cubic B-spline (C2, weights ≥ 0: never past the field's own range) to its texel centres (a tile with lx < ly − ls, near a pole, keeps lx 0 in longitude). Every finer level so shows one smooth field: no colour popping from
  * level to level, no steps along the cells of a coarse raster (whose bilinear gradient is
- * piecewise constant).
+ * piecewise constant), and no creases along the source level's rows and columns (bilinear's
+ * were: a detail amplitude scaled by it showed straight lines across the Earth's mountains,
+ * one 9.8 km apart each way, a seam under a camera flying along one).
  *
- * Seamless: deps() asks for the source level's tiles under the tile's footprint and two texels
- * around it (up to 3×3: x wraps, and beyond a pole the rows continue on the far side; on its
+ * Seamless: deps() asks for the source level's tiles under the tile's footprint and three
+ * texels around it (up to 3×3: x wraps, and beyond a pole the rows continue on the far side; on its
  * own level only the four edge neighbours, as the normal node, whose tiles those are), so a
  * texel's value depends only on its position and the heights, never on which tile holds it.
  * Near the poles the east spacing is held at ≥ 1/8 of the north one (the float differences
@@ -33,7 +35,7 @@
 #include "engine/node_types.h"
 #include "engine/planet.h"
 
-#define PAD 2 /* height texels around the footprint: the slope's own ring plus its stencil */
+#define PAD 3 /* height texels around the footprint: the spline's two, plus the stencil's */
 
 struct slope {
 	int source_ly; /* the finest level whose texels are ≥ scale / 2; -1: every level its own */
@@ -170,7 +172,7 @@ static int gather_row(const struct footprint *f, struct tile *const *in, uint32_
 static void slope_field(const struct node *n, const struct footprint *f, const float *h,
 			uint32_t T, uint32_t lo, uint32_t hi, float *s)
 {
-	const uint32_t PW = T + 2 * PAD, SW = T + 2;
+	const uint32_t PW = T + 2 * PAD, SW = T + 2 * PAD - 2;
 	const double dlam = 2 * M_PI / f->W, dphi = M_PI / f->H;
 	for (uint32_t r = lo; r <= hi; r++) {
 		int64_t v = f->v0 + (int64_t)r - PAD;
@@ -192,13 +194,17 @@ static void slope_field(const struct node *n, const struct footprint *f, const f
 }
 
 /* Texel i of a tile d levels under the source, as a position in the slope field (whose index
- * 0 is source texel −1): index *i0 and weight *w of *i0 + 1. */
-static void fine_to_field(uint32_t sub, int d, uint32_t T, uint32_t i, uint32_t *i0, float *w)
+ * 0 is source texel −2): the first of its four field indices *i0 … *i0 + 3 and their cubic
+ * B-spline weights w[0..3]. */
+static void fine_to_field(uint32_t sub, int d, uint32_t T, uint32_t i, uint32_t *i0, float w[4])
 {
-	double x = ((double)sub * T + i + 0.5) / ldexp(1.0, d) - 0.5 + 1;
-	double fl = floor(x);
-	*i0 = (uint32_t)fl;
-	*w = (float)(x - fl);
+	double x = ((double)sub * T + i + 0.5) / ldexp(1.0, d) - 0.5 + 2;
+	double fl = floor(x), t = x - fl, u = 1 - t;
+	*i0 = (uint32_t)fl - 1;
+	w[0] = (float)(u * u * u / 6);
+	w[1] = (float)((3 * t * t * t - 6 * t * t + 4) / 6);
+	w[2] = (float)((-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6);
+	w[3] = (float)(t * t * t / 6);
 }
 
 /* Rows of tile k within one source texel of a pole scaled by (distance to the pole in source
@@ -230,14 +236,14 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 	for (int i = 0; i < nin; i++)
 		if (in[i]->type != PIX_HEIGHT || in[i]->size != T)
 			return -EINVAL;
-	const uint32_t PW = T + 2 * PAD, SW = T + 2;
-	float *h = gen_scratch(g, ((size_t)PW * PW + (size_t)SW * SW + 2 * (size_t)T) * sizeof *h);
+	const uint32_t PW = T + 2 * PAD, SW = T + 2 * PAD - 2;
+	float *h = gen_scratch(g, ((size_t)PW * PW + (size_t)SW * SW + 5 * (size_t)T) * sizeof *h);
 	float *s = h + (size_t)PW * PW, *wx = s + (size_t)SW * SW;
-	uint32_t *ix = (uint32_t *)(void *)(wx + T);
+	uint32_t *ix = (uint32_t *)(void *)(wx + 4 * (size_t)T);
 	/* On its own level the slope is needed on the tile only (padded texels PAD … PAD + T − 1),
-	 * from the heights one texel around it, corners excepted; interpolating, one texel more
-	 * each way, corners included. */
-	const uint32_t lo = f.d ? PAD - 1 : PAD, hi = PW - 1 - lo;
+	 * from the heights one texel around it, corners excepted; interpolating, two texels more
+	 * each way (the spline's reach), corners included. */
+	const uint32_t lo = f.d ? PAD - 2 : PAD, hi = PW - 1 - lo;
 	for (uint32_t r = lo - 1; r <= hi + 1; r++) {
 		bool outside = r < PAD || r >= PAD + T;
 		uint32_t c0 = outside && !f.d ? PAD : lo - 1, c1 = outside && !f.d ? PAD + T : hi + 2;
@@ -248,22 +254,27 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 	float *o = tile_f32(out);
 	if (!f.d) {
 		for (uint32_t j = 0; j < T; j++)
-			memcpy(o + (size_t)j * T, s + (size_t)(j + 1) * SW + 1, T * sizeof *o);
+			memcpy(o + (size_t)j * T, s + (size_t)(j + PAD - 1) * SW + PAD - 1,
+			       T * sizeof *o);
 		pole_fade(k, &f, T, o);
 		return 0;
 	}
 	const uint32_t mx = ((uint32_t)1 << f.dx) - 1, my = ((uint32_t)1 << f.d) - 1;
 	for (uint32_t i = 0; i < T; i++)
-		fine_to_field(k->x & mx, f.dx, T, i, &ix[i], &wx[i]);
+		fine_to_field(k->x & mx, f.dx, T, i, &ix[i], wx + 4 * (size_t)i);
 	for (uint32_t j = 0; j < T; j++) {
 		uint32_t j0;
-		float wy;
-		fine_to_field(k->y & my, f.d, T, j, &j0, &wy);
-		const float *a = s + (size_t)j0 * SW, *b = a + SW;
+		float wy[4];
+		fine_to_field(k->y & my, f.d, T, j, &j0, wy);
+		const float *r0 = s + (size_t)j0 * SW;
 		for (uint32_t i = 0; i < T; i++) {
-			float top = a[ix[i]] + (a[ix[i] + 1] - a[ix[i]]) * wx[i];
-			float bot = b[ix[i]] + (b[ix[i] + 1] - b[ix[i]]) * wx[i];
-			o[(size_t)j * T + i] = top + (bot - top) * wy;
+			const float *w = wx + 4 * (size_t)i;
+			float acc = 0;
+			for (int b = 0; b < 4; b++) {
+				const float *r = r0 + (size_t)b * SW + ix[i];
+				acc += wy[b] * (w[0] * r[0] + w[1] * r[1] + w[2] * r[2] + w[3] * r[3]);
+			}
+			o[(size_t)j * T + i] = acc;
 		}
 	}
 	pole_fade(k, &f, T, o);
@@ -277,7 +288,7 @@ static const struct node_slot slope_slots[] = {
 const struct node_type node_type_slope = {
 	.name = "slope",
 	.doc = "slope magnitude |grad h| of heights (metric, seamless), measured over `scale` m",
-	.version = 1,
+	.version = 2, /* 2: cubic B-spline between levels (was bilinear) */
 	.slots = slope_slots,
 	.nslots = 1,
 	.create = slope_create,
