@@ -237,8 +237,9 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 		if (in[i]->type != PIX_HEIGHT || in[i]->size != T)
 			return -EINVAL;
 	const uint32_t PW = T + 2 * PAD, SW = T + 2 * PAD - 2;
-	float *h = gen_scratch(g, ((size_t)PW * PW + (size_t)SW * SW + 5 * (size_t)T) * sizeof *h);
-	float *s = h + (size_t)PW * PW, *wx = s + (size_t)SW * SW;
+	float *h = gen_scratch(g, ((size_t)PW * PW + (size_t)SW * SW + 5 * (size_t)T +
+				   (size_t)SW * T) * sizeof *h);
+	float *s = h + (size_t)PW * PW, *wx = s + (size_t)SW * SW, *sx = wx + 5 * (size_t)T;
 	uint32_t *ix = (uint32_t *)(void *)(wx + 4 * (size_t)T);
 	/* On its own level the slope is needed on the tile only (padded texels PAD … PAD + T − 1),
 	 * from the heights one texel around it, corners excepted; interpolating, two texels more
@@ -262,20 +263,26 @@ static int slope_generate(const struct node *n, struct gen_ctx *g, const struct 
 	const uint32_t mx = ((uint32_t)1 << f.dx) - 1, my = ((uint32_t)1 << f.d) - 1;
 	for (uint32_t i = 0; i < T; i++)
 		fine_to_field(k->x & mx, f.dx, T, i, &ix[i], wx + 4 * (size_t)i);
+	/* Separable: the field rows the tile reaches, in x (sx), then each texel row in y. */
+	uint32_t jlo, jhi;
+	float wy[4];
+	fine_to_field(k->y & my, f.d, T, 0, &jlo, wy);
+	fine_to_field(k->y & my, f.d, T, T - 1, &jhi, wy);
+	for (uint32_t r = jlo; r <= jhi + 3; r++) {
+		const float *row = s + (size_t)r * SW;
+		float *d = sx + (size_t)r * T;
+		for (uint32_t i = 0; i < T; i++) {
+			const float *w = wx + 4 * (size_t)i, *v = row + ix[i];
+			d[i] = w[0] * v[0] + w[1] * v[1] + w[2] * v[2] + w[3] * v[3];
+		}
+	}
 	for (uint32_t j = 0; j < T; j++) {
 		uint32_t j0;
-		float wy[4];
 		fine_to_field(k->y & my, f.d, T, j, &j0, wy);
-		const float *r0 = s + (size_t)j0 * SW;
-		for (uint32_t i = 0; i < T; i++) {
-			const float *w = wx + 4 * (size_t)i;
-			float acc = 0;
-			for (int b = 0; b < 4; b++) {
-				const float *r = r0 + (size_t)b * SW + ix[i];
-				acc += wy[b] * (w[0] * r[0] + w[1] * r[1] + w[2] * r[2] + w[3] * r[3]);
-			}
-			o[(size_t)j * T + i] = acc;
-		}
+		const float *a = sx + (size_t)j0 * T, *b = a + T, *c = b + T, *e = c + T;
+		float *d = o + (size_t)j * T;
+		for (uint32_t i = 0; i < T; i++)
+			d[i] = wy[0] * a[i] + wy[1] * b[i] + wy[2] * c[i] + wy[3] * e[i];
 	}
 	pole_fade(k, &f, T, o);
 	return 0;
