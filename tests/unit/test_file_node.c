@@ -207,6 +207,24 @@ static void analytic_global(void **state)
 	fnode_fini(&f);
 }
 
+/* The four tiles of level (lx + 1, ly + 1) under tile (x, y) of level (lx, ly), T / 2
+ * texels square, equal the quadrants of that tile, T square (the same texel spacing). */
+static void quadrants_join(struct fnode *f, int lx, int ly, uint32_t x, uint32_t y, uint32_t T)
+{
+	uint32_t H = T / 2;
+	struct tile *big = gen(f, lx, ly, x, y, T);
+	for (uint32_t q = 0; q < 4; q++) {
+		uint32_t qx = q & 1, qy = q >> 1;
+		struct tile *s = gen(f, lx + 1, ly + 1, 2 * x + qx, 2 * y + qy, H);
+		for (uint32_t j = 0; j < H; j++)
+			for (uint32_t i = 0; i < H; i++)
+				assert_float_equal(tile_f32(s)[j * H + i],
+						   tile_f32(big)[(qy * H + j) * T + qx * H + i], 1e-3);
+		tile_unref(s);
+	}
+	tile_unref(big);
+}
+
 /* Neighbouring tiles join: four T tiles equal the quadrants of one 2T tile with the same
  * texel spacing, and the antimeridian columns are bilinear across the wrap. */
 static void tiles_join(void **state)
@@ -215,18 +233,7 @@ static void tiles_join(void **state)
 	write_fn("j.tif", 500, 250, -180, -90, 180, 90); /* not a power of two: never aligned */
 	struct fnode f;
 	fnode_ok(&f, "[node x]\ntype = file\npath = j.tif\n" GLOBAL);
-	struct tile *big = gen(&f, 3, 2, 3, 1, 64);
-	for (uint32_t q = 0; q < 4; q++) {
-		uint32_t qx = q & 1, qy = q >> 1;
-		struct tile *s = gen(&f, 4, 3, 6 + qx, 2 + qy, 32);
-		for (uint32_t j = 0; j < 32; j++)
-			for (uint32_t i = 0; i < 32; i++)
-				assert_float_equal(tile_f32(s)[j * 32 + i],
-						   tile_f32(big)[(qy * 32 + j) * 64 + qx * 32 + i],
-						   1e-3);
-		tile_unref(s);
-	}
-	tile_unref(big);
+	quadrants_join(&f, 3, 2, 3, 1, 64);
 	fnode_fini(&f);
 	/* The antimeridian: 512 texels over 100 pixels (3.6°), so the edge texels lie between
 	 * the image's last and first columns. Bilinear error ≤ h²/8·|f''| ≈ 1.1 m; clamping
@@ -1177,20 +1184,8 @@ static void isotropic_rows(void **state)
 	/* Quadrants of a tile with the same texel spacing, at the antimeridian's west side, near
 	 * the north pole, magnified and at 1.4 texels a pixel. */
 	static const int big[][2] = { { 7, 6 }, { 3, 2 } };
-	for (int b = 0; b < 2; b++) {
-		struct tile *bt = gen(&f, big[b][0], big[b][1], 0, 0, 64);
-		for (uint32_t q = 0; q < 4; q++) {
-			uint32_t qx = q & 1, qy = q >> 1;
-			struct tile *st = gen(&f, big[b][0] + 1, big[b][1] + 1, qx, qy, 32);
-			for (uint32_t j = 0; j < 32; j++)
-				for (uint32_t i = 0; i < 32; i++)
-					assert_float_equal(tile_f32(st)[j * 32 + i],
-							   tile_f32(bt)[(qy * 32 + j) * 64 + qx * 32 + i],
-							   1e-3);
-			tile_unref(st);
-		}
-		tile_unref(bt);
-	}
+	for (int b = 0; b < 2; b++)
+		quadrants_join(&f, big[b][0], big[b][1], 0, 0, 64);
 
 	/* Below 44°: the same bits as without the filter; at 76°, not. */
 	static const int same[][4] = { { 6, 5, 9, 10 }, { 4, 3, 5, 3 }, { 5, 4, 7, 5 },
