@@ -515,12 +515,13 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
 	return n;
 }
 
-int view_clipmap_receive(struct view_clipmap *cm)
+int view_clipmap_receive(struct view_clipmap *cm, double until_ms)
 {
 	int got = 0;
 	struct view_tile t;
-	int rc;
-	while ((rc = cm->src->ops->poll(cm->src, &t)) == 1) {
+	int rc = 0;
+	while ((until_ms <= 0 || got == 0 || clock_now_ms() < until_ms) &&
+	       (rc = cm->src->ops->poll(cm->src, &t)) == 1) {
 		got++;
 		cm->st.tiles_received++;
 		int role = -1;

@@ -76,8 +76,12 @@ void view_clipmap_motion_reset(struct view_clipmap *cm);
  * (class VIEW_CLASS_AHEAD, at most 96). Returns the count (≤ cap). */
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
 			  size_t cap);
-/* Takes every tile the source has ready. Returns how many arrived, or -errno. */
-int view_clipmap_receive(struct view_clipmap *cm);
+/* Takes the tiles the source has ready, until clock_now_ms() reaches until_ms (0: every
+ * one). A source that delivers faster than they are taken (a daemon with a burst ready, over
+ * a fast link) would otherwise keep a frame in here for as long as the burst lasts: 0.1-1.2 s
+ * were measured (bench_keepup). What is left waits in the socket for the next call. Returns
+ * how many arrived, or -errno. */
+int view_clipmap_receive(struct view_clipmap *cm, double until_ms);
 /* If level's target quad is complete, copies the changed regions into the textures.
  * Returns 1 when the texture holds the target quad, 0 when tiles are missing. */
 int view_clipmap_update(struct view_clipmap *cm, int level);

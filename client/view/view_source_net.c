@@ -71,7 +71,11 @@ struct net_source {
 	uint32_t ping_req;		  /* the LIST_PLANETS awaited (0: none) */
 	double ping_ms, next_ping_ms;	  /* sent at; the next one due */
 	double rtt_min_ms, rtt_last_ms;	  /* 0: none yet on this connection */
-	void *spare[8]; /* released buffers of spare_len bytes, for the next tiles */
+	/* Released buffers of spare_len bytes, for the next tiles: a burst of tiles is held until
+	 * uploaded, and buffers given back to malloc come back as fresh pages (glibc maps or
+	 * trims them), whose first write costs 20-30x a warm one under this project's VMs
+	 * (engine/tilemem.c). 64 of 256² RGBA: 16 MiB. */
+	void *spare[64];
 	int nspare;
 	size_t spare_len;
 	char err[256];

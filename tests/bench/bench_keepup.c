@@ -66,6 +66,7 @@
 #define N_PHI 256
 #define NALT 9
 #define MAX_TRIALS 8
+#define RECEIVE_MS 4.0 /* a frame takes tiles for this long at most (as client/view/view.c) */
 
 /* Seed 003 Table 1. */
 static const struct {
@@ -219,71 +220,6 @@ static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
 	return 0;
 }
 
-/* ---- a copying wrapper around the net source ------------------------------------------
- * view_source_net decodes into one buffer and allows one polled tile at a time, while
- * view_clipmap keeps the tiles of a quad until it is complete: each polled tile is copied
- * out here and released at once (a 256² tile copy costs ~10 µs). */
-
-struct copy_source {
-	struct view_source base; /* first */
-	struct view_source *inner;
-};
-
-static int cs_want(struct view_source *s, const struct view_want *w, size_t n,
-		   const struct view_focus *f)
-{
-	struct view_source *in = ((struct copy_source *)s)->inner;
-	return in->ops->want(in, w, n, f);
-}
-
-static int cs_poll(struct view_source *s, struct view_tile *out)
-{
-	struct view_source *in = ((struct copy_source *)s)->inner;
-	int rc = in->ops->poll(in, out);
-	if (rc != 1)
-		return rc;
-	void *copy = NULL;
-	if (out->texels) {
-		size_t n = (size_t)out->size * out->size * pix_bytes(out->format);
-		copy = xmalloc(n);
-		memcpy(copy, out->texels, n);
-	}
-	in->ops->release(in, out);
-	out->texels = copy;
-	out->handle = copy;
-	return 1;
-}
-
-static int cs_wait(struct view_source *s, int timeout_ms)
-{
-	struct view_source *in = ((struct copy_source *)s)->inner;
-	return in->ops->wait(in, timeout_ms);
-}
-
-static void cs_release(struct view_source *s, struct view_tile *t)
-{
-	(void)s;
-	free(t->handle);
-	t->handle = NULL;
-}
-
-static void cs_destroy(struct view_source *s)
-{
-	view_source_destroy(((struct copy_source *)s)->inner);
-	free(s);
-}
-
-static const struct view_source_ops cs_ops = { cs_want, cs_poll, cs_wait, cs_release, cs_destroy };
-
-static struct view_source *copy_source_wrap(struct view_source *inner)
-{
-	struct copy_source *c = xcalloc(1, sizeof *c);
-	c->base.ops = &cs_ops;
-	c->base.planet = inner->planet;
-	c->inner = inner;
-	return &c->base;
-}
-
 /* ---- the headless frame (view_frame without drawing) ----------------------------------- */
 
 struct client {
@@ -337,7 +273,7 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	}
 	if (c->ahead)
 		changed |= view_clipmap_motion(c->cm, lon, lat, t0);
-	int rc = view_clipmap_receive(c->cm);
+	int rc = view_clipmap_receive(c->cm, clock_now_ms() + RECEIVE_MS);
 	if (rc < 0)
 		return rc;
 	f->received = rc;
@@ -396,7 +332,7 @@ static void idle_until(struct client *c, double t, bool drain)
 		if (left <= 0)
 			return;
 		if (c->src->ops->wait(c->src, (int)ceil(left * 1e3)) == 1)
-			view_clipmap_receive(c->cm);
+			view_clipmap_receive(c->cm, t * 1e3);
 	}
 }
 
@@ -481,14 +417,12 @@ static int prefetch_route(struct net_conn *c, const char *planet, double a, doub
 
 enum mode { COLD, PREFETCHED, RESTARTED };
 
-/* The viewer's tile source on planet `name`, wrapped (copy_source_wrap). */
+/* The viewer's tile source on planet `name` (as clipmapview --connect: the tiles it polls are
+ * its own until released, so the clipmap holds them without a copy). */
 static int open_source(const struct net_opts *no, const char *name, struct view_source **out,
 		       char err[256])
 {
-	int rc = view_source_net_create(no, name, out, err);
-	if (rc == 0)
-		*out = copy_source_wrap(*out);
-	return rc;
+	return view_source_net_create(no, name, out, err);
 }
 
 /* After a prefetch into the store: waits until its write queue is empty, then restarts the

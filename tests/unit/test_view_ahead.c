@@ -122,7 +122,7 @@ static void look_ahead(void **state)
 	bool west, north, south;
 	ring_lines(cm, w, n, 10, &west, &north, &south); /* at rest: the whole ring */
 	assert_true(west && north && south);
-	assert_true(view_clipmap_receive(cm) > 0);
+	assert_true(view_clipmap_receive(cm, 0) > 0);
 
 	/* Moving east at 5°/s: level 10 tiles are 360/2^11 ≈ 0.18° wide (≈ 4 crossed in 0.15 s:
 	 * 2 lines), level 6 tiles 2.8° (0.27: none). */
@@ -159,7 +159,7 @@ static void look_ahead(void **state)
 	ring_lines(cm, w, n, 10, &west, &north, &south);
 	assert_false(west);
 	assert_true(north != south);
-	while (view_clipmap_receive(cm) > 0)
+	while (view_clipmap_receive(cm, 0) > 0)
 		;
 
 	/* One level-10 tile further east: the new quad and its ring are already here. */
@@ -182,7 +182,7 @@ static void look_ahead(void **state)
 			assert_int_equal(w[i].cls, VIEW_CLASS_AHEAD); /* only the new far line */
 
 	/* Turning back west: the lines ahead in the east are released. */
-	while (view_clipmap_receive(cm) > 0)
+	while (view_clipmap_receive(cm, 0) > 0)
 		;
 	view_clipmap_get_stats(cm, &st0);
 	for (int k = 0; k < 3; k++) {
@@ -250,7 +250,7 @@ static void next_lx_window(void **state)
 				assert_int_equal(w[i].cls, VIEW_CLASS_AHEAD);
 				asked_next = true;
 			}
-		while (view_clipmap_receive(cm) > 0)
+		while (view_clipmap_receive(cm, 0) > 0)
 			;
 		for (int l = 0; l < NLEVELS; l++)
 			view_clipmap_update(cm, l);

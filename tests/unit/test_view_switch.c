@@ -92,7 +92,7 @@ static void switch_refills(void **state)
 	aim(cm);
 	size_t n = view_clipmap_wants(cm, false, w, MAX_WANTS);
 	assert_int_equal(s->ops->want(s, w, n, &f), 0);
-	assert_true(view_clipmap_receive(cm) > 0);
+	assert_true(view_clipmap_receive(cm, 0) > 0);
 	for (int l = 0; l < NLEVELS; l++)
 		assert_int_equal(view_clipmap_update(cm, l), 1);
 	int held[NLEVELS];
@@ -122,7 +122,7 @@ static void switch_refills(void **state)
 	size_t half = n / 2;
 	int split = w[half].key.ly; /* the level the half ends in (its tiles partly in) */
 	assert_int_equal(s->ops->want(s, w, half, &f), 0);
-	assert_true(view_clipmap_receive(cm) > 0);
+	assert_true(view_clipmap_receive(cm, 0) > 0);
 	for (int l = 0; l < NLEVELS; l++)
 		assert_int_equal(view_clipmap_update(cm, l), l < split);
 	slices(cm, held);
@@ -137,7 +137,7 @@ static void switch_refills(void **state)
 	for (size_t i = 0; i < n; i++)
 		assert_true(w[i].layer == L_WARM && w[i].key.ly >= split);
 	assert_int_equal(s->ops->want(s, w, n, &f), 0);
-	assert_true(view_clipmap_receive(cm) > 0);
+	assert_true(view_clipmap_receive(cm, 0) > 0);
 	for (int l = 0; l < NLEVELS; l++) {
 		assert_int_equal(view_clipmap_update(cm, l), 1);
 		assert_false(view_clipmap_color_stale(cm, l));
