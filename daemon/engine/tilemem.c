@@ -78,7 +78,8 @@ static struct cls *class_of(size_t sz, bool create)
  * shadows the guest's page tables (this project's VMs), a 4 KiB page's first touch from user
  * space exits to the hypervisor even after MAP_POPULATE: 270-700 MB/s for the first write to
  * fresh memory against 13-20 GB/s after; with huge pages populated this way the first write
- * runs at 13 GB/s and populating costs ~0.1 s per GiB (measured on the 2-core VM). A growing
+ * runs at 13-21 GB/s and populating costs 0.05-0.1 s per GiB (1.6 s the first time the VM
+ * ever uses that memory; bench_machine's last line, measured on the 2-core VM). A growing
  * cache writes every tile into fresh memory, so this was a worker's and the loop's largest cost
  * while serving stored tiles (bench_keepup "restarted": tilecodec_unfilter and the socket's
  * copy_from_iter stalled on first touches). */
