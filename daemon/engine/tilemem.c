@@ -7,7 +7,6 @@
 #include <errno.h>
 #include <pthread.h>
 #include <stdbool.h>
-#include <stdint.h>
 #include <stdlib.h>
 #include <sys/mman.h>
 
@@ -72,45 +71,20 @@ static struct cls *class_of(size_t sz, bool create)
 }
 
 /* Maps a slab for class c and pushes its buffers onto the warm stack. Needs mu. Returns 0 or
- * -ENOMEM.
- * The slab is aligned to 2 MiB, asks for transparent huge pages and is written once through
- * (MADV_POPULATE_WRITE), so a tile's first write finds its pages mapped. Under a hypervisor that
- * shadows the guest's page tables (this project's VMs), a 4 KiB page's first touch from user
- * space exits to the hypervisor even after MAP_POPULATE: 270-700 MB/s for the first write to
- * fresh memory against 13-20 GB/s after; with huge pages populated this way the first write
- * runs at 13-21 GB/s and populating costs 0.05-0.1 s per GiB (1.6 s the first time the VM
- * ever uses that memory; bench_machine's last line, measured on the 2-core VM). A growing
- * cache writes every tile into fresh memory, so this was a worker's and the loop's largest cost
- * while serving stored tiles (bench_keepup "restarted": tilecodec_unfilter and the socket's
- * copy_from_iter stalled on first touches). */
-#define HUGE ((size_t)2 << 20)
+ * -ENOMEM. */
 static int grow(struct cls *c)
 {
 	size_t per = SLAB_BYTES / c->size;
 	if (per < 1)
 		per = 1;
-	size_t bytes = per * c->size, span = bytes + HUGE;
-	char *m = mmap(NULL, span, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+	size_t bytes = per * c->size;
+	void *m = mmap(NULL, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_POPULATE,
+		       -1, 0);
 	if (m == MAP_FAILED)
 		return -ENOMEM;
-	char *a = (char *)(((uintptr_t)m + HUGE - 1) & ~(uintptr_t)(HUGE - 1));
-	if (a > m)
-		(void)munmap(m, (size_t)(a - m));
-	if (a + bytes < m + span)
-		(void)munmap(a + bytes, (size_t)(m + span - (a + bytes)));
-#ifdef MADV_HUGEPAGE
-	(void)madvise(a, bytes, MADV_HUGEPAGE);
-#endif
-	int populated = -1;
-#ifdef MADV_POPULATE_WRITE
-	populated = madvise(a, bytes, MADV_POPULATE_WRITE);
-#endif
-	if (populated != 0) /* a kernel before 5.14: touch each page instead */
-		for (size_t i = 0; i < bytes; i += PAGE)
-			((volatile char *)a)[i] = 0;
 	mapped_bytes += bytes;
 	for (size_t i = per; i-- > 0;)
-		push(&c->warm, a + i * c->size);
+		push(&c->warm, (char *)m + i * c->size);
 	warm_bytes += bytes;
 	return 0;
 }
