@@ -520,7 +520,7 @@ int view_clipmap_receive(struct view_clipmap *cm, double until_ms)
 	int got = 0;
 	struct view_tile t;
 	int rc = 0;
-	while ((until_ms <= 0 || got == 0 || clock_now_ms() < until_ms) &&
+	while ((until_ms <= 0 || got < VIEW_RECEIVE_MIN || clock_now_ms() < until_ms) &&
 	       (rc = cm->src->ops->poll(cm->src, &t)) == 1) {
 		got++;
 		cm->st.tiles_received++;

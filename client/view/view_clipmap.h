@@ -76,11 +76,14 @@ void view_clipmap_motion_reset(struct view_clipmap *cm);
  * (class VIEW_CLASS_AHEAD, at most 96). Returns the count (≤ cap). */
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
 			  size_t cap);
-/* Takes the tiles the source has ready, until clock_now_ms() reaches until_ms (0: every
- * one). A source that delivers faster than they are taken (a daemon with a burst ready, over
- * a fast link) would otherwise keep a frame in here for as long as the burst lasts: 0.1-1.2 s
- * were measured (bench_keepup). What is left waits in the socket for the next call. Returns
- * how many arrived, or -errno. */
+/* Takes the tiles the source has ready: the first VIEW_RECEIVE_MIN of them whatever the time
+ * (a level's quad of a layer: a frame whose first tile was slow to decode still takes the
+ * tiles that came with it), then until clock_now_ms() reaches until_ms (0: every one). A
+ * source that delivers faster than they are taken (a daemon with a burst ready, over a fast
+ * link) would otherwise keep a frame in here for as long as the burst lasts: 0.1-1.2 s were
+ * measured (bench_keepup). What is left waits in the socket for the next call. Returns how
+ * many arrived, or -errno. */
+#define VIEW_RECEIVE_MIN 16
 int view_clipmap_receive(struct view_clipmap *cm, double until_ms);
 /* If level's target quad is complete, copies the changed regions into the textures.
  * Returns 1 when the texture holds the target quad, 0 when tiles are missing. */

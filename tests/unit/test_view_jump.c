@@ -272,9 +272,12 @@ static void still_after_jump_keeps_levels(void **state)
 	gl_context_destroy(ctx);
 }
 
-/* The budget counts the frame's uploads, not the time it took to take the tiles: a frame
- * whose tiles took longer than the budget to come in (all of the new place's, at once)
- * uploads every level. (Before the fix it uploaded one and drew that one alone.) */
+/* The budget counts the frame's uploads, not the time it took to take the tiles: frames
+ * whose tiles took longer than the budget to come in (each frame's first poll a 30 ms decode,
+ * the budget 20 ms) still upload the levels whose quads they completed, and the new place is
+ * complete after a few frames. A frame takes VIEW_RECEIVE_MIN tiles after its deadline passed,
+ * not the whole burst (view_clipmap_receive), so the place comes in over several frames.
+ * (Before the budget fix such a frame uploaded one level and drew that one alone.) */
 static void slow_tiles_leave_the_budget(void **state)
 {
 	(void)state;
@@ -282,7 +285,7 @@ static void slow_tiles_leave_the_budget(void **state)
 	if (!ctx)
 		skip();
 	struct throttle *t = throttle_create();
-	struct view *v = make_view(ctx, t, 64, 64, 200);
+	struct view *v = make_view(ctx, t, 64, 64, 20);
 	struct view_camera a = { 20, 10, 5000, 0, -20, 60, 0, 0 };
 	struct view_camera b = { -30, 100, 5000, 0, -20, 60, 0, 0 };
 	double now = 1;
@@ -291,14 +294,21 @@ static void slow_tiles_leave_the_budget(void **state)
 	refill(t, 0, 0);
 	now += 1.0 / 30;
 	assert_int_equal(view_frame(v, &b, now, &st), 0); /* asks for the new place */
-	refill(t, 1 << 20, 250);
-	now += 1.0 / 30;
-	assert_int_equal(view_frame(v, &b, now, &st), 0);
-	assert_true(st.tiles_received > 0);
-	assert_true(st.levels_uploaded >= 1);
+	int frames = 0, uploading = 0;
+	do {
+		refill(t, 1 << 20, 30);
+		now += 1.0 / 30;
+		assert_int_equal(view_frame(v, &b, now, &st), 0);
+		assert_true(st.tiles_received >= VIEW_RECEIVE_MIN || st.complete);
+		uploading += st.levels_uploaded >= 1;
+		frames++;
+	} while (!st.complete && frames < 300);
+	assert_true(st.complete);
+	assert_true(uploading >= 2); /* levels went up on slow frames, not only the last */
 	for (int l = st.lmin; l <= st.dmax; l++)
 		assert_true(resident(v, l));
-	assert_true(st.complete);
+	print_message("slow_tiles_leave_the_budget: complete after %d slow frames, %d uploaded\n",
+		      frames, uploading);
 	view_destroy(v);
 	view_source_destroy(&t->base);
 	gl_context_destroy(ctx);
