@@ -69,9 +69,9 @@ static double copy_threads(size_t n, int reps, int threads)
 }
 
 /* The first write to n bytes of fresh anonymous memory, GB/s: mapped with MAP_POPULATE on
- * the default pages (huge = false), or aligned to 2 MiB, asked for transparent huge pages and
- * populated with MADV_POPULATE_WRITE as engine/tilemem.c maps its slabs (huge = true; the
- * mapping and populating counted). Under a hypervisor that shadows page tables the first is
+ * the default pages, as engine/tilemem.c maps its slabs (huge = false), or aligned to 2 MiB,
+ * asked for transparent huge pages and populated with MADV_POPULATE_WRITE (huge = true; the
+ * mapping and populating counted: a pool on such pages was tried, see issue 13's notes). Under a hypervisor that shadows page tables the first is
  * 20-50x slower than writing warm memory, the second close to it once the host has backed the
  * memory (the first time the guest ever uses it, populating is slow too: 1.6 s for a GiB, then
  * 0.05 s, measured one after the other); on bare metal they are close. Returns 0 when the
@@ -135,8 +135,8 @@ int main(void)
 	printf("memcpy 256 KiB (one 256x256 RGBA8 tile), 1 thread: %.1f GB/s\n",
 	       copy_threads(256u << 10, 500, 1));
 	printf("first write to fresh memory (256 MiB in 256 KiB tiles), 1 thread: %.2f GB/s on 4 KiB "
-	       "pages (MAP_POPULATE), %.2f GB/s on 2 MiB pages (MADV_POPULATE_WRITE, as the tile "
-	       "pool; populating included)\n",
+	       "pages (MAP_POPULATE, as the tile pool), %.2f GB/s on 2 MiB pages "
+	       "(MADV_POPULATE_WRITE; populating included)\n",
 	       fresh_write(256u << 20, false), fresh_write(256u << 20, true));
 	return 0;
 }
