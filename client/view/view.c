@@ -65,9 +65,6 @@
 
 #define DEG (M_PI / 180.0)
 #define MAX_WANTS 4096
-/* A real-time frame takes tiles for this long at most before it plans and draws: a 256² tile
- * costs ~30 µs from a Unix socket, ~0.3 ms with zstd over TCP (bench_codec), so 13-130 tiles. */
-#define RECEIVE_MS 4.0
 
 enum {
 	U_VP, U_LAT, U_BODY, U_A, U_CAP, U_BLEND, U_T, U_PF, U_VF, U_SF, U_PC, U_VC, U_SC, U_DF,
@@ -1014,9 +1011,10 @@ static int frame_receive(struct view *v, const struct view_camera *cam, struct f
 	 * offline rendering — has no motion). */
 	if (f->now_s > 0)
 		changed |= view_clipmap_motion(v->cm, cam->lon, cam->lat, f->now_s);
-	/* Real time: the tiles that arrived, for RECEIVE_MS at most (the rest wait in the socket
-	 * for the idle time between frames, or the next frame). */
-	int rc = view_clipmap_receive(v->cm, v->d.budget_ms > 0 ? clock_now_ms() + RECEIVE_MS : 0);
+	/* Real time: the tiles that arrived, for VIEW_RECEIVE_MS at most (the rest wait in the
+	 * socket for the idle time between frames, or the next frame). */
+	int rc = view_clipmap_receive(v->cm,
+				      v->d.budget_ms > 0 ? clock_now_ms() + VIEW_RECEIVE_MS : 0);
 	if (rc < 0)
 		return rc;
 	f->s.tiles_received = rc + v->idle_tiles;

@@ -84,6 +84,10 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
  * measured (bench_keepup). What is left waits in the socket for the next call. Returns how
  * many arrived, or -errno. */
 #define VIEW_RECEIVE_MIN 16
+/* How long a real-time frame takes tiles before it plans and draws (view.c, and bench_keepup's
+ * headless frame): a 256² tile costs ~30 µs from a Unix socket, ~0.3 ms with zstd over TCP
+ * (bench_codec), so 13-130 tiles. */
+#define VIEW_RECEIVE_MS 4.0
 int view_clipmap_receive(struct view_clipmap *cm, double until_ms);
 /* If level's target quad is complete, copies the changed regions into the textures.
  * Returns 1 when the texture holds the target quad, 0 when tiles are missing. */

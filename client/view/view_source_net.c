@@ -74,7 +74,7 @@ struct net_source {
 	/* Released buffers of spare_len bytes, for the next tiles: a burst of tiles is held until
 	 * uploaded, and buffers given back to malloc come back as fresh pages (glibc maps or
 	 * trims them), whose first write costs 20-30x a warm one under this project's VMs
-	 * (engine/tilemem.c). 64 of 256² RGBA: 16 MiB. */
+	 * (bench_machine's last line). 64 of 256² RGBA: 16 MiB. */
 	void *spare[64];
 	int nspare;
 	size_t spare_len;

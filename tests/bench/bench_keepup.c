@@ -66,7 +66,6 @@
 #define N_PHI 256
 #define NALT 9
 #define MAX_TRIALS 8
-#define RECEIVE_MS 4.0 /* a frame takes tiles for this long at most (as client/view/view.c) */
 
 /* Seed 003 Table 1. */
 static const struct {
@@ -273,7 +272,7 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 	}
 	if (c->ahead)
 		changed |= view_clipmap_motion(c->cm, lon, lat, t0);
-	int rc = view_clipmap_receive(c->cm, clock_now_ms() + RECEIVE_MS);
+	int rc = view_clipmap_receive(c->cm, clock_now_ms() + VIEW_RECEIVE_MS);
 	if (rc < 0)
 		return rc;
 	f->received = rc;
