@@ -34,6 +34,30 @@ void ready_src_unref(struct ready_src *src)
 		free(src);
 }
 
+void ready_src_report(struct ready_src *src, const struct tile_key *key, struct tile *t,
+		      int err)
+{
+	struct ready_item it = { .s = src->s, .src = ready_src_ref(src), .key = *key, .err = err };
+	if (t) {
+		uint64_t q = atomic_load_explicit(&src->queued, memory_order_relaxed);
+		if (src->queue_cap && q && q + t->nbytes > src->queue_cap) {
+			it.parked = true; /* the first one always goes: the loop is never starved */
+		} else {
+			it.t = tile_ref(t);
+			it.queued = t->nbytes;
+			atomic_fetch_add_explicit(&src->queued, it.queued, memory_order_relaxed);
+		}
+	}
+	readyq_push(src->q, &it);
+}
+
+void ready_item_taken(struct ready_item *it)
+{
+	if (it->src && it->queued)
+		atomic_fetch_sub_explicit(&it->src->queued, it->queued, memory_order_relaxed);
+	it->queued = 0;
+}
+
 int readyq_init(struct readyq *q)
 {
 	*q = (struct readyq){ .evfd = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC) };
@@ -48,6 +72,7 @@ void readyq_fini(struct readyq *q)
 	if (q->evfd < 0)
 		return;
 	for (size_t i = 0; i < q->n; i++) {
+		ready_item_taken(&q->items[i]);
 		tile_unref(q->items[i].t);
 		ready_src_unref(q->items[i].src);
 	}
@@ -97,6 +122,7 @@ void readyq_purge(struct readyq *q, const struct session *s)
 	size_t k = 0;
 	for (size_t i = 0; i < q->n; i++) {
 		if (q->items[i].s == s) {
+			ready_item_taken(&q->items[i]);
 			tile_unref(q->items[i].t);
 			ready_src_unref(q->items[i].src);
 		} else

@@ -925,6 +925,7 @@ static void on_ready(struct server *srv)
 	for (size_t i = 0; i < n; i++) {
 		struct ready_item *it = &batch[i];
 		if (it->src) {
+			ready_item_taken(it);
 			bool dead = it->src->dead;
 			ready_src_unref(it->src);
 			it->src = NULL;

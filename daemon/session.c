@@ -12,7 +12,9 @@
  * shared encoding counts its whole frame, as if copied, and one still being encoded its raw
  * size); beyond it
  * they are parked (released) and looked up in the cache again when room appears, or wanted
- * again when the cache let them go. A session thus holds at most about 2 × max_pending, and
+ * again when the cache let them go. Reports still waiting for the loop hold at most
+ * max_pending more (ready_src.queue_cap; beyond it they arrive parked). A session thus holds
+ * at most about 3 × max_pending, and
  * its output buffer is given back whenever it drains. Once it parks with its output full, its
  * wants are withdrawn from the scheduler (paused: nothing is made for a client that does not
  * read) until the output drains to half of max_pending; then the want-set's WANTED entries
@@ -370,7 +372,7 @@ void session_on_ready(struct session *s, struct ready_item *it)
 	}
 	bool parked;
 	uint64_t max = s->env->limits->max_pending;
-	if (wantset_ready(&s->ws, &it->key, it->t, it->err, max, &parked)) {
+	if (wantset_ready(&s->ws, &it->key, it->t, it->err, it->parked, max, &parked)) {
 		s->env->counters->tiles_parked += parked;
 		if (parked && !s->paused && conn_pending(&s->c) >= max) {
 			/* held tiles and output both full: make nothing more for it for now */
@@ -386,10 +388,7 @@ void session_on_ready(struct session *s, struct ready_item *it)
  * report to the loop, marked with the session's handle (ud, a reference of the request's). */
 static void sess_ready_cb(void *ud, const struct want *w, struct tile *t, int err)
 {
-	struct ready_src *src = ud;
-	struct ready_item it = { .s = src->s, .src = ready_src_ref(src), .key = w->key,
-				 .t = t ? tile_ref(t) : NULL, .err = err };
-	readyq_push(src->q, &it);
+	ready_src_report(ud, &w->key, t, err);
 }
 
 /* The manager is done with the request: its reference on the handle goes. */
@@ -937,6 +936,7 @@ struct session *session_create(const struct session_env *env, int fd, const stru
 	struct control_host host = { .s = s, .id = s->id, .send = send_msg, .error = ctl_error };
 	control_init(&s->ctl, env, &host);
 	s->src = ready_src_new(env->ready, s);
+	s->src->queue_cap = env->limits->max_pending;
 	/* The scheduler request comes with the handshake (on_hello): closing a connection that
 	 * never authenticated involves no other thread. */
 	peer_name(fd, s->peer, sizeof s->peer);

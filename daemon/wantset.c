@@ -233,9 +233,9 @@ struct want *wantset_wants(const struct wantset *ws, size_t *n)
 }
 
 bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t, int err,
-		   uint64_t budget, bool *parked)
+		   bool park, uint64_t budget, bool *parked)
 {
-	*parked = false;
+	*parked = park;
 	long i = wantset_find(ws, k);
 	if (i < 0 || ws->e[i].state != WS_WANTED) {
 		tile_unref(t);
@@ -243,7 +243,7 @@ bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t,
 	}
 	struct wantset_entry *e = &ws->e[i];
 	e->state = WS_READY;
-	e->err = t ? 0 : (err < 0 ? err : -EIO);
+	e->err = t || park ? 0 : (err < 0 ? err : -EIO);
 	if (t && ws->held && ws->held + t->nbytes > budget) {
 		tile_unref(t);
 		t = NULL;

@@ -69,12 +69,13 @@ size_t wantset_rebind(struct wantset *ws, wantset_resolve_fn *resolve, void *ud,
 		      struct wantset_drops *d);
 /* The WANTED entries as a scheduler want list: an owned array of *n (free it). */
 struct want *wantset_wants(const struct wantset *ws, size_t *n);
-/* A tile for key is ready (t taken, NULL with err < 0). Returns false, releasing t, when the
- * key is not waiting for one (it left the set, or a repeated report). When holding t would
- * take the held bytes over `budget` (and some are held already), the entry is parked: t is
- * released and *parked set. */
+/* A tile for key is ready (t taken, NULL with err < 0, or NULL with `park`: ready but its
+ * tile not carried). Returns false, releasing t, when the key is not waiting for one (it left
+ * the set, or a repeated report). When holding t would take the held bytes over `budget` (and
+ * some are held already), or with `park`, the entry is parked: t is released and *parked
+ * set. */
 bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t, int err,
-		   uint64_t budget, bool *parked);
+		   bool park, uint64_t budget, bool *parked);
 /* Whether a popped entry is parked (READY without its tile: look it up again). */
 static inline bool wantset_parked(const struct wantset_entry *e)
 {

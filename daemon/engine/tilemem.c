@@ -7,6 +7,7 @@
 #include <errno.h>
 #include <pthread.h>
 #include <stdbool.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <sys/mman.h>
 
@@ -39,8 +40,21 @@ struct cls {
 	struct stack warm, cold;
 };
 
+/* The slabs mapped, for the release path: once a slab gives pages back it is marked
+ * MADV_NOHUGEPAGE (the whole slab, once: one VMA, not one per buffer). A huge page released in
+ * part is split; without the mark, the next fault in an emptied 2 MiB range would populate all
+ * of it again for one buffer, up to 8x the buffer (test_serve_load's slow readers: peak RSS 742
+ * MiB against a bound of 347). */
+struct slab {
+	char *base;
+	size_t bytes;
+	bool small; /* marked MADV_NOHUGEPAGE */
+};
+
 static pthread_mutex_t mu = PTHREAD_MUTEX_INITIALIZER;
 static struct cls classes[MAX_CLASSES];
+static struct slab *slabs;
+static size_t nslabs, capslabs;
 static size_t keep_bytes = SIZE_MAX, warm_bytes, cold_bytes, mapped_bytes, used_bytes;
 
 static size_t round_page(size_t n) { return (n + PAGE - 1) & ~(size_t)(PAGE - 1); }
@@ -70,23 +84,86 @@ static struct cls *class_of(size_t sz, bool create)
 	return NULL;
 }
 
-/* Maps a slab for class c and pushes its buffers onto the warm stack. Needs mu. Returns 0 or
- * -ENOMEM. */
-static int grow(struct cls *c)
+#define HUGE ((size_t)2 << 20)
+
+/* A slab for buffers of sz bytes, mapped with no lock held. Returns the base, NULL on ENOMEM;
+ * *bytes its size.
+ * The slab is aligned to 2 MiB and asks for transparent huge pages. Under a hypervisor that
+ * shadows the guest's page tables (this project's VMs), the first write from user space to a
+ * fresh 4 KiB page exits to the hypervisor, even after MAP_POPULATE: 0.3-0.9 GB/s for a first
+ * write against ~20 GB/s for the next; on huge pages faulted in by the write itself the first
+ * write runs at 12 GB/s (bench_machine's last line, the 2-core VM). A growing cache writes
+ * every tile into fresh memory: serving stored tiles (bench_keepup "restarted"), the workers'
+ * tilecodec_unfilter and the loop's socket copies stalled on first touches.
+ * Not populated here: MADV_POPULATE_WRITE holds the process's mmap lock while it works (20-50
+ * ms a slab the first time the VM uses the memory), and every other thread's mprotect waited
+ * behind it (malloc growing a thread's arena: the scheduler's manager took 0.3-0.5 s to create
+ * a want-set's jobs while workers kept making tiles, test_serve_load's slow readers went to
+ * 700 MiB). A first touch faults in a whole huge page under the VMA's own lock. */
+static char *map_slab(size_t sz, size_t *bytes)
 {
-	size_t per = SLAB_BYTES / c->size;
+	size_t per = SLAB_BYTES / sz;
 	if (per < 1)
 		per = 1;
-	size_t bytes = per * c->size;
-	void *m = mmap(NULL, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_POPULATE,
-		       -1, 0);
+	*bytes = per * sz;
+	size_t span = *bytes + HUGE;
+	char *m = mmap(NULL, span, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
 	if (m == MAP_FAILED)
-		return -ENOMEM;
+		return NULL;
+	char *a = (char *)(((uintptr_t)m + HUGE - 1) & ~(uintptr_t)(HUGE - 1));
+	if (a > m)
+		(void)munmap(m, (size_t)(a - m));
+	if (a + *bytes < m + span)
+		(void)munmap(a + *bytes, (size_t)(m + span - (a + *bytes)));
+#ifdef MADV_HUGEPAGE
+	(void)madvise(a, *bytes, MADV_HUGEPAGE);
+#endif
+	return a;
+}
+
+/* Adds the slab at a (bytes long) to class c's warm buffers. Needs mu. */
+static void add_slab(struct cls *c, char *a, size_t bytes)
+{
+	if (nslabs == capslabs) {
+		capslabs = capslabs ? 2 * capslabs : 16;
+		slabs = xrealloc(slabs, capslabs * sizeof *slabs);
+	}
+	slabs[nslabs++] = (struct slab){ .base = a, .bytes = bytes };
 	mapped_bytes += bytes;
-	for (size_t i = per; i-- > 0;)
-		push(&c->warm, (char *)m + i * c->size);
+	for (size_t i = bytes / c->size; i-- > 0;)
+		push(&c->warm, a + i * c->size);
 	warm_bytes += bytes;
-	return 0;
+}
+
+/* Marks the slab holding p as about to give pages back. Needs mu. Returns the slab's range
+ * when it must leave huge pages first (the first release in it), else NULL. */
+static char *mark_small(void *p, size_t *bytes)
+{
+	for (size_t i = 0; i < nslabs; i++) {
+		struct slab *b = &slabs[i];
+		if ((char *)p >= b->base && (char *)p < b->base + b->bytes) {
+			if (b->small)
+				return NULL;
+			b->small = true;
+			*bytes = b->bytes;
+			return b->base;
+		}
+	}
+	return NULL;
+}
+
+/* Gives buffer p's sz bytes back to the system, its slab off huge pages first (slab NULL when
+ * it is already). No lock held. */
+static void release(void *p, size_t sz, char *slab, size_t slab_bytes)
+{
+#ifdef MADV_NOHUGEPAGE
+	if (slab)
+		(void)madvise(slab, slab_bytes, MADV_NOHUGEPAGE);
+#else
+	(void)slab;
+	(void)slab_bytes;
+#endif
+	(void)madvise(p, sz, MADV_DONTNEED);
 }
 
 void *tilemem_alloc(size_t n)
@@ -94,12 +171,20 @@ void *tilemem_alloc(size_t n)
 	size_t sz = round_page(n);
 	if (POOLED && n >= POOL_MIN) {
 		void *p = NULL;
-		bool populate = false;
+		bool populate = false, mapped = false;
 		pthread_mutex_lock(&mu);
 		struct cls *c = class_of(sz, true);
+		while (c && !c->warm.n && !c->cold.n && !mapped) {
+			pthread_mutex_unlock(&mu);
+			size_t bytes;
+			char *a = map_slab(sz, &bytes);
+			pthread_mutex_lock(&mu);
+			if (!a)
+				break;
+			add_slab(c, a, bytes);
+			mapped = true;
+		}
 		if (c) {
-			if (!c->warm.n && !c->cold.n)
-				(void)grow(c);
 			if (c->warm.n) {
 				p = c->warm.p[--c->warm.n];
 				warm_bytes -= sz;
@@ -137,15 +222,19 @@ void tilemem_free(void *p, size_t n)
 		struct cls *c = class_of(sz, false);
 		if (c) {
 			used_bytes -= sz;
-			bool release = warm_bytes + sz > keep_bytes;
-			if (release) {
-				(void)madvise(p, sz, MADV_DONTNEED);
-				push(&c->cold, p);
-				cold_bytes += sz;
-			} else {
+			if (warm_bytes + sz <= keep_bytes) {
 				push(&c->warm, p);
 				warm_bytes += sz;
+				pthread_mutex_unlock(&mu);
+				return;
 			}
+			size_t sb = 0;
+			char *slab = mark_small(p, &sb);
+			pthread_mutex_unlock(&mu);
+			release(p, sz, slab, sb);
+			pthread_mutex_lock(&mu);
+			push(&c->cold, p);
+			cold_bytes += sz;
 			pthread_mutex_unlock(&mu);
 			return;
 		}
@@ -163,7 +252,9 @@ void tilemem_keep(size_t bytes)
 		struct cls *c = &classes[i];
 		while (c->warm.n && warm_bytes > keep_bytes) {
 			void *p = c->warm.p[--c->warm.n];
-			(void)madvise(p, c->size, MADV_DONTNEED);
+			size_t sb = 0;
+			char *slab = mark_small(p, &sb);
+			release(p, c->size, slab, sb); /* under mu: a reload's rare shrink */
 			push(&c->cold, p);
 			warm_bytes -= c->size;
 			cold_bytes += c->size;

@@ -68,17 +68,24 @@ static double copy_threads(size_t n, int reps, int threads)
 	return sum;
 }
 
-/* The first write to n bytes of fresh anonymous memory, GB/s: mapped with MAP_POPULATE on
- * the default pages, as engine/tilemem.c maps its slabs (huge = false), or aligned to 2 MiB,
- * asked for transparent huge pages and populated with MADV_POPULATE_WRITE (huge = true; the
- * mapping and populating counted: a pool on such pages was tried, see issue 13's notes). Under a hypervisor that shadows page tables the first is
- * 20-50x slower than writing warm memory, the second close to it once the host has backed the
- * memory (the first time the guest ever uses it, populating is slow too: 1.6 s for a GiB, then
- * 0.05 s, measured one after the other); on bare metal they are close. Returns 0 when the
- * mapping failed. */
-static double fresh_write(size_t n, bool huge)
+/* How a fresh mapping is given its pages before the first write (fresh_write). */
+enum fresh_mode {
+	FRESH_SMALL,	/* default pages, MAP_POPULATE */
+	FRESH_HUGE,	/* aligned to 2 MiB, MADV_HUGEPAGE, faulted in by the write itself: as
+			 * engine/tilemem.c maps its slabs */
+	FRESH_HUGE_POP, /* the same, populated first with MADV_POPULATE_WRITE (counted) */
+};
+
+/* The first write to n bytes of fresh anonymous memory, GB/s (mapping and populating counted,
+ * except MAP_POPULATE's own time). Under a hypervisor that shadows page tables the first write
+ * to a default page is 20-50x slower than writing warm memory; on huge pages it is close to it
+ * once the host has backed the memory (the first time the guest ever uses it, populating is
+ * slow too: 1.6 s for a GiB, then 0.05 s, measured one after the other); on bare metal they are
+ * close. Returns 0 when the mapping failed. */
+static double fresh_write(size_t n, enum fresh_mode mode)
 {
 	const size_t H = (size_t)2 << 20;
+	bool huge = mode != FRESH_SMALL;
 	char *buf = malloc(256u << 10);
 	if (!buf)
 		return 0;
@@ -91,11 +98,13 @@ static double fresh_write(size_t n, bool huge)
 		return 0;
 	}
 	char *a = huge ? (char *)(((uintptr_t)m + H - 1) & ~(uintptr_t)(H - 1)) : m;
-#if defined(MADV_HUGEPAGE) && defined(MADV_POPULATE_WRITE)
-	if (huge) {
+#ifdef MADV_HUGEPAGE
+	if (huge)
 		(void)madvise(a, n, MADV_HUGEPAGE);
+#endif
+#ifdef MADV_POPULATE_WRITE
+	if (mode == FRESH_HUGE_POP)
 		(void)madvise(a, n, MADV_POPULATE_WRITE);
-	}
 #endif
 	if (!huge)
 		t0 = clock_now_s(); /* MAP_POPULATE's own time is not the first write's */
@@ -135,8 +144,10 @@ int main(void)
 	printf("memcpy 256 KiB (one 256x256 RGBA8 tile), 1 thread: %.1f GB/s\n",
 	       copy_threads(256u << 10, 500, 1));
 	printf("first write to fresh memory (256 MiB in 256 KiB tiles), 1 thread: %.2f GB/s on 4 KiB "
-	       "pages (MAP_POPULATE, as the tile pool), %.2f GB/s on 2 MiB pages "
-	       "(MADV_POPULATE_WRITE; populating included)\n",
-	       fresh_write(256u << 20, false), fresh_write(256u << 20, true));
+	       "pages (MAP_POPULATE), %.2f GB/s on 2 MiB pages faulted in by the write (as the "
+	       "tile pool), %.2f GB/s on 2 MiB pages populated first (MADV_POPULATE_WRITE, "
+	       "counted)\n",
+	       fresh_write(256u << 20, FRESH_SMALL), fresh_write(256u << 20, FRESH_HUGE),
+	       fresh_write(256u << 20, FRESH_HUGE_POP));
 	return 0;
 }

@@ -369,12 +369,15 @@ static void test_paused_session_resumes(void **state)
 	cl_open(obs);
 	struct cl *c = cl_connect(&E, 4096);
 	uint32_t pid = cl_open(c);
-	/* 2 × 64 tiles at level 8 and 2 × 4 at level 6 (coarser, wanted last) */
-	enum { N = 136 };
+	/* 2 × 576 tiles at level 8 and 2 × 4 at level 6 (coarser, wanted last). Enough that
+	 * making them all takes longer than pausing: on huge pages two workers made 136 such
+	 * tiles within one 100 ms poll, and a session whose tiles are all made has nothing to
+	 * pause for. */
+	enum { W8 = 24, N = 2 * W8 * W8 + 8 };
 	struct proto_want_entry e[N];
 	uint32_t n = 0;
 	for (int ly = 8; ly >= 6; ly -= 2) {
-		uint32_t w = ly == 8 ? 8 : 2;
+		uint32_t w = ly == 8 ? W8 : 2;
 		for (uint32_t y = 0; y < w; y++)
 			for (uint32_t x = 0; x < w; x++)
 				for (uint8_t l = 0; l < 2; l++)

@@ -1,6 +1,7 @@
 /* Tile memory pool tests (engine/tilemem.h): a freed buffer is reused for the next tile of its
  * size, sizes do not mix, the keep bound gives pages back and a released buffer comes back
- * writable, small sizes bypass the pool, and threads never get one buffer twice. Under
+ * writable, small sizes bypass the pool, threads never get one buffer twice, and slabs sit on
+ * huge pages where the kernel has them. Under
  * AddressSanitizer the pool is bypassed: the checks of reuse and of the counters are skipped
  * there, the rest runs. */
 #include <stdarg.h>
@@ -12,6 +13,8 @@
 #include <pthread.h>
 #include <sched.h>
 #include <stdbool.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "common/xthread.h"
@@ -135,12 +138,66 @@ static void threads_never_share(void **state)
 	}
 }
 
+/* The AnonHugePages of the mapping holding p, kB (/proc/self/smaps); -1 when not found. */
+static long huge_kb(const void *p)
+{
+	FILE *f = fopen("/proc/self/smaps", "r");
+	if (!f)
+		return -1;
+	char line[512];
+	bool in = false;
+	long kb = -1;
+	while (fgets(line, sizeof line, f)) {
+		unsigned long lo, hi;
+		if (sscanf(line, "%lx-%lx ", &lo, &hi) == 2 && strchr(line, '-') < strchr(line, ' ')) {
+			in = (uintptr_t)p >= lo && (uintptr_t)p < hi;
+			continue;
+		}
+		if (in && sscanf(line, "AnonHugePages: %ld kB", &kb) == 1)
+			break;
+	}
+	fclose(f);
+	return kb;
+}
+
+/* The pool's slabs are on transparent huge pages where the kernel offers them (first writes to
+ * fresh memory: 12 GB/s on them against 0.3-0.9 on 4 KiB pages on this project's VMs), faulted
+ * in by the tiles' own writes. */
+static void slabs_on_huge_pages(void **state)
+{
+	(void)state;
+	char mode[128] = "";
+	FILE *f = fopen("/sys/kernel/mm/transparent_hugepage/enabled", "r");
+	if (f) {
+		if (!fgets(mode, sizeof mode, f))
+			mode[0] = '\0';
+		fclose(f);
+	}
+	if (!pooled() || (!strstr(mode, "[madvise]") && !strstr(mode, "[always]")))
+		skip(); /* sanitized build, or no transparent huge pages here */
+	const size_t sz = (size_t)384 << 10; /* a class no other test uses: a fresh slab */
+	enum { N = 16 };			/* 6 MiB: at least two whole huge pages */
+	void *b[N];
+	for (int i = 0; i < N; i++) {
+		b[i] = tilemem_alloc(sz);
+		memset(b[i], i + 1, sz);
+	}
+	long kb = huge_kb(b[0]);
+	print_message("the slab holds %ld kB on huge pages\n", kb);
+	assert_true(kb >= 2048);
+	for (int i = 0; i < N; i++) {
+		assert_int_equal(((unsigned char *)b[i])[sz - 1], i + 1);
+		tilemem_free(b[i], sz);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(reuse_by_size),
 		cmocka_unit_test(keep_bound_releases),
 		cmocka_unit_test(threads_never_share),
+		cmocka_unit_test(slabs_on_huge_pages),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

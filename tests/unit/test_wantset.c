@@ -65,7 +65,7 @@ static void test_ready_order(void **state)
 	assert_int_equal(nwanted(&ws), n);
 	assert_int_equal(d.dropped, 0);
 	for (size_t i = n; i-- > 0;)
-		assert_true(wantset_ready(&ws, &add[i].key, mk_tile(&add[i].key), 0, ALL, &parked));
+		assert_true(wantset_ready(&ws, &add[i].key, mk_tile(&add[i].key), 0, false, ALL, &parked));
 	assert_int_equal(wantset_nready(&ws), n);
 	assert_int_equal(nwanted(&ws), 0);
 	const size_t expect[] = { 1, 2, 0, 4, 3 }; /* ly 2 (order 1, 2), ly 5, ly 9, prefetch */
@@ -91,20 +91,20 @@ static void test_ready_unknown(void **state)
 	struct wantset_entry e = ent(&node_a, 1, 3, 2, 1, SCHED_VISIBLE, 0);
 	struct tile *t = mk_tile(&e.key);
 	tile_ref(t);
-	assert_false(wantset_ready(&ws, &e.key, t, 0, ALL, &parked)); /* empty set */
+	assert_false(wantset_ready(&ws, &e.key, t, 0, false, ALL, &parked)); /* empty set */
 	assert_int_equal(refs(t), 1);
 	struct wantset_drops d = { 0 };
 	wantset_replace(&ws, 1, &e, 1, &d);
 	tile_ref(t);
-	assert_true(wantset_ready(&ws, &e.key, t, 0, ALL, &parked));
+	assert_true(wantset_ready(&ws, &e.key, t, 0, false, ALL, &parked));
 	tile_ref(t);
-	assert_false(wantset_ready(&ws, &e.key, t, 0, ALL, &parked)); /* repeated */
+	assert_false(wantset_ready(&ws, &e.key, t, 0, false, ALL, &parked)); /* repeated */
 	assert_int_equal(refs(t), 2);
 	/* A failed generation is ready too, without a tile. */
 	struct wantset_entry f = ent(&node_a, 1, 3, 3, 1, SCHED_VISIBLE, 1);
 	struct wantset_entry both[] = { e, f };
 	wantset_replace(&ws, 1, both, 2, &d);
-	assert_true(wantset_ready(&ws, &f.key, NULL, -5, ALL, &parked));
+	assert_true(wantset_ready(&ws, &f.key, NULL, -5, false, ALL, &parked));
 	assert_int_equal(wantset_nready(&ws), 2);
 	wantset_fini(&ws); /* releases the ready tile */
 	assert_int_equal(refs(t), 1);
@@ -138,7 +138,7 @@ static void test_replace_carries_state(void **state)
 	tile_unref(t[3]); /* never reported ready: the set never holds it */
 	for (int i = 0; i < 5; i++)
 		if (i != 3)
-			assert_true(wantset_ready(&ws, &p1[i].key, t[i], 0, ALL, &parked));
+			assert_true(wantset_ready(&ws, &p1[i].key, t[i], 0, false, ALL, &parked));
 	struct wantset_entry *e = wantset_pop(&ws);
 	assert_int_equal(e->order, 0);
 	wantset_sent(&ws, e);
@@ -213,8 +213,8 @@ static void test_rebind(void **state)
 	wantset_replace(&ws, 1, p1, 2, &d);
 	wantset_replace(&ws, 2, p2, 3, &d);
 	struct tile *t = tile_ref(mk_tile(&p1[1].key));
-	assert_true(wantset_ready(&ws, &p1[1].key, t, 0, ALL, &parked));
-	assert_true(wantset_ready(&ws, &p2[0].key, mk_tile(&p2[0].key), 0, ALL, &parked));
+	assert_true(wantset_ready(&ws, &p1[1].key, t, 0, false, ALL, &parked));
+	assert_true(wantset_ready(&ws, &p2[0].key, mk_tile(&p2[0].key), 0, false, ALL, &parked));
 	wantset_sent(&ws, wantset_pop(&ws)); /* p1's x 1 or p2's x 0: both ly 2, order 0 vs 1 */
 	/* p2's x 0 has order 0: it went; p1's x 1 is still ready */
 	long k = wantset_find(&ws, &p2[0].key);
@@ -272,15 +272,15 @@ static void test_held_budget(void **state)
 	}
 	size_t one = t[0]->nbytes;
 	uint64_t budget = 2 * one; /* two tiles */
-	assert_true(wantset_ready(&ws, &add[0].key, t[0], 0, budget, &parked));
+	assert_true(wantset_ready(&ws, &add[0].key, t[0], 0, false, budget, &parked));
 	assert_false(parked);
-	assert_true(wantset_ready(&ws, &add[3].key, t[3], 0, budget, &parked));
+	assert_true(wantset_ready(&ws, &add[3].key, t[3], 0, false, budget, &parked));
 	assert_false(parked);
 	assert_int_equal(wantset_held(&ws), 2 * one);
-	assert_true(wantset_ready(&ws, &add[1].key, t[1], 0, budget, &parked));
+	assert_true(wantset_ready(&ws, &add[1].key, t[1], 0, false, budget, &parked));
 	assert_true(parked);
 	assert_int_equal(refs(t[1]), 1); /* released */
-	assert_true(wantset_ready(&ws, &add[2].key, t[2], 0, budget, &parked));
+	assert_true(wantset_ready(&ws, &add[2].key, t[2], 0, false, budget, &parked));
 	assert_true(parked);
 	assert_int_equal(wantset_held(&ws), 2 * one);
 	assert_int_equal(wantset_nready(&ws), 4);
@@ -298,7 +298,7 @@ static void test_held_budget(void **state)
 	assert_true(wantset_parked(e));
 	wantset_rewant(&ws, e); /* not in the cache any more */
 	assert_int_equal(nwanted(&ws), 1);
-	assert_true(wantset_ready(&ws, &add[2].key, tile_ref(t[2]), 0, ALL, &parked));
+	assert_true(wantset_ready(&ws, &add[2].key, tile_ref(t[2]), 0, false, ALL, &parked));
 	assert_false(parked);
 	assert_int_equal(wantset_held(&ws), 3 * one);
 	/* A replace that drops the held tiles drops their bytes. */
@@ -310,7 +310,7 @@ static void test_held_budget(void **state)
 	}
 	/* A failed generation is never taken for a parked tile. */
 	wantset_replace(&ws, 1, add, 1, &d);
-	assert_true(wantset_ready(&ws, &add[0].key, NULL, -5, 0, &parked));
+	assert_true(wantset_ready(&ws, &add[0].key, NULL, -5, false, 0, &parked));
 	e = wantset_pop(&ws);
 	assert_false(wantset_parked(e));
 	assert_int_equal(e->err, -5);
