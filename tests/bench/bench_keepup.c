@@ -16,7 +16,7 @@
  * KEEPUP_ONLY=substring of a configuration's label, KEEPUP_ALTS=row digits (0 = 800 km … 8 =
  * 50 m) for quick runs; KEEPUP_CONFIRM=N (3) flights of KEEPUP_CONFIRM_S (8) seconds confirm
  * each row's searched velocity: the row keeps it if their median is ≥ 95 % full detail, else
- * one search step lower (at most twice), else 0 (KEEPUP_CONFIRM=0: the search's answer, the
+ * one search step lower (at most six times), else 0 (KEEPUP_CONFIRM=0: the search's answer, the
  * best of short flights, as before); KEEPUP_V=R one trial per row at R × the seed's velocity (for A/B
  * comparisons); KEEPUP_DEBUG=1 prints every frame (its finest detail level and the first
  * level whose window is not yet its target, "stale") and each node's tiles and worker time
