@@ -171,18 +171,16 @@ void *tilemem_alloc(size_t n)
 	size_t sz = round_page(n);
 	if (POOLED && n >= POOL_MIN) {
 		void *p = NULL;
-		bool populate = false, mapped = false;
+		bool populate = false;
 		pthread_mutex_lock(&mu);
 		struct cls *c = class_of(sz, true);
-		while (c && !c->warm.n && !c->cold.n && !mapped) {
+		if (c && !c->warm.n && !c->cold.n) {
 			pthread_mutex_unlock(&mu);
 			size_t bytes;
 			char *a = map_slab(sz, &bytes);
 			pthread_mutex_lock(&mu);
-			if (!a)
-				break;
-			add_slab(c, a, bytes);
-			mapped = true;
+			if (a) /* another thread may have added one meanwhile: both stay */
+				add_slab(c, a, bytes);
 		}
 		if (c) {
 			if (c->warm.n) {
