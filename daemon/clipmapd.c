@@ -9,6 +9,7 @@
 #include <malloc.h>
 #include <signal.h>
 #include <stdbool.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -632,6 +633,10 @@ static int serve(struct daemon *d, struct planet_set *ps)
 	ran = true;
 	sd_notify(0, "STOPPING=1");
 out:
+	/* Exiting: the pool keeps what is freed from here on. Giving each buffer's pages back
+	 * (one madvise and TLB shootdown a buffer) made a full cache's exit take 0.6-0.8 s more
+	 * (14 000-24 000 tiles); the process's exit returns them all at once. */
+	tilemem_keep(SIZE_MAX);
 	http_destroy(d->http); /* before the scheduler its requests use */
 	d->http = NULL;
 	server_destroy(d->srv);

@@ -43,6 +43,7 @@
 #include "common/xalloc.h"
 #include "common/xthread.h"
 #include "encq.h"
+#include "engine/tilemem.h"
 #include "lookahead.h"
 #include "loopstat.h"
 #include "prefetch.h"
@@ -612,6 +613,12 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_loop(&b, &srv->loop);
 	stat_u(&b, "memory.trims", atomic_load(&srv->trims));
 	stat_f(&b, "memory.trim_max_ms", (double)atomic_load(&srv->trim_max_ns) * 1e-6);
+	struct tilemem_stats tm;
+	tilemem_stats(&tm);
+	stat_u(&b, "memory.pool.mapped", tm.mapped);
+	stat_u(&b, "memory.pool.in_use", tm.in_use);
+	stat_u(&b, "memory.pool.free_warm", tm.free_warm);
+	stat_u(&b, "memory.pool.released", tm.released);
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_links(&b, srv);
 	stat_nodes(&b, srv->planets);

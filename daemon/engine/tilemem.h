@@ -1,15 +1,17 @@
 /* tilemem — the memory tile pixels live in: buffers of one size class (the tile's bytes,
- * rounded up to a page) carved from 32 MiB slabs mapped with MAP_POPULATE, and kept on a free
- * list when a tile is freed instead of going back to the system.
+ * rounded up to a page) carved from 32 MiB slabs, 2 MiB-aligned and asking for transparent
+ * huge pages, and kept on a free list when a tile is freed instead of going back to the system.
  *
  * Why: on the virtual machines this project runs on (docs/ARCHITECTURE.md, "Memory"), the
- * first touch of a page costs ~11 µs, 0.37 GB/s: a fresh 256 KiB tile paid ~0.7 ms in page
- * faults before a node wrote a texel, more than most nodes take to fill it. Mapping a slab
- * with MAP_POPULATE faults it in ~8 GB/s, and a recycled buffer costs nothing.
+ * first write to a fresh 4 KiB page costs ~11 µs (0.3-0.9 GB/s, even after MAP_POPULATE): a
+ * fresh 256 KiB tile paid ~0.7 ms in page faults before a node wrote a texel, more than most
+ * nodes take to fill it. A huge page faulted in by the write itself runs at ~12 GB/s, and a
+ * recycled buffer costs nothing.
  *
  * What is kept: every buffer ever carved stays mapped. Free buffers beyond tilemem_keep's
- * bytes give their pages back (MADV_DONTNEED) and are populated again (MADV_POPULATE_WRITE)
- * when reused, so a shrunken cache (a reload, a purge) does not keep its peak resident.
+ * bytes give their pages back (MADV_DONTNEED, their slab off huge pages first) and are
+ * populated again (MADV_POPULATE_WRITE) when reused, so a shrunken cache (a reload, a purge)
+ * does not keep its peak resident.
  * Under AddressSanitizer the pool is bypassed (plain aligned allocations), so use-after-free
  * of tile memory is still caught.
  *

@@ -171,6 +171,9 @@ struct dstats {
 	} node[MAX_NODES];
 };
 
+/* KEEPUP_DEBUG: get_stats prints the daemon's memory, cache and store counters. */
+static bool dump_stats;
+
 static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
 {
 	memset(out, 0, sizeof *out);
@@ -197,6 +200,10 @@ static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
 			out->disk_hits = s->u;
 		else if (strcmp(s->key, "store.disk.queued") == 0)
 			out->queued = s->u;
+		if (dump_stats && s->kind == PROTO_STAT_U64 &&
+		    (strncmp(s->key, "memory.", 7) == 0 || strncmp(s->key, "cache.", 6) == 0 ||
+		     strncmp(s->key, "store.disk.", 11) == 0 || strncmp(s->key, "tiles.", 6) == 0))
+			fprintf(stderr, "    stat %s %llu\n", s->key, (unsigned long long)s->u);
 		else if (strncmp(s->key, "node.", 5) == 0) {
 			/* node.PLANET.NODE.generated / .mean_ms, in that order */
 			const char *dot = strrchr(s->key, '.');
@@ -234,6 +241,8 @@ struct client {
 struct frame {
 	bool complete;
 	int lmin, lmax, llast, received;
+	int idle_received; /* tiles taken while waiting for the next tick after it */
+	int wants;	   /* entries of the want-set sent this frame (0: none sent) */
 	int dmax, stale; /* the finest detail level; the first level whose held quad is not its target (-1) */
 	int stale_lx[2];  /* that level's held and target lx */
 	double cpu_ms;
@@ -283,6 +292,7 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 		if (rc < 0)
 			return rc;
 		c->sent_once = true;
+		f->wants = (int)n;
 	}
 	int first = -1, llast = -1;
 	for (int j = lmin; j >= 0 && first < 0; j--)
@@ -320,18 +330,21 @@ static int client_frame(struct client *c, double lat, double lon, double agl, st
 /* Waits for the next tick. drain: takes tiles as they arrive meanwhile (the socket holds
  * less than one 256² RGBA tile, so a client that reads once per frame gets about one tile
  * per frame); else sleeps like a viewer blocked on its swap. */
-static void idle_until(struct client *c, double t, bool drain)
+static int idle_until(struct client *c, double t, bool drain)
 {
 	if (!drain) {
 		sleep_until(t);
-		return;
+		return 0;
 	}
+	int got = 0;
 	for (;;) {
 		double left = t - clock_now_s();
 		if (left <= 0)
-			return;
-		if (c->src->ops->wait(c->src, (int)ceil(left * 1e3)) == 1)
-			view_clipmap_receive(c->cm, t * 1e3);
+			return got;
+		if (c->src->ops->wait(c->src, (int)ceil(left * 1e3)) == 1) {
+			int rc = view_clipmap_receive(c->cm, t * 1e3);
+			got += rc > 0 ? rc : 0;
+		}
 	}
 }
 
@@ -555,10 +568,10 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		if (getenv("KEEPUP_DEBUG"))
 			fprintf(stderr,
 				"    t %.3f full %d lmin %d llast %d lmax %d dmax %d stale %d (lx %d of %d) "
-				"recv %d ms %.1f lat %.2f\n",
+				"recv %d+%d wants %d ms %.1f lat %.2f\n",
 				t, fr[n].complete, fr[n].lmin, fr[n].llast, fr[n].lmax, fr[n].dmax,
 				fr[n].stale, fr[n].stale_lx[0], fr[n].stale_lx[1], fr[n].received,
-				fr[n].cpu_ms, lat);
+				n ? fr[n - 1].idle_received : 0, fr[n].wants, fr[n].cpu_ms, lat);
 		if (t >= warm_s) {
 			ms[counted++] = fr[n].cpu_ms;
 			full += fr[n].complete;
@@ -570,10 +583,12 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		double next = t0 + (k + 1) / HZ;
 		if (clock_now_s() > next)
 			late++, k = (int)((clock_now_s() - t0) * HZ); /* a missed tick is skipped */
-		idle_until(&c, t0 + (k + 1) / HZ, x->drain);
+		fr[n - 1].idle_received = idle_until(&c, t0 + (k + 1) / HZ, x->drain);
 	}
 	double fly = clock_now_s() - (tc > 0 ? tc : t0);
+	dump_stats = getenv("KEEPUP_DEBUG") != NULL;
 	rc = get_stats(sc, &s1, err);
+	dump_stats = false;
 	if (rc) {
 		free(ms);
 		goto out;

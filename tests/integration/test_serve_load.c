@@ -337,6 +337,18 @@ static void test_slow_readers_memory(void **state)
 			break;
 	}
 	print_message("malloc_trim took up to %.1f ms\n", cl_stat_opt(obs, "memory.trim_max_ms"));
+	/* The tile pool (off under ASan: all 0): what closed sessions held is free again, and
+	 * the free memory it keeps resident is within its bound (cache_mb / 4 + 64 MiB). */
+	double pool = cl_stat(obs, "memory.pool.mapped"), in_use = cl_stat(obs, "memory.pool.in_use");
+	double warm = cl_stat(obs, "memory.pool.free_warm");
+	print_message("tile pool after they closed: %.0f MiB mapped, %.0f MiB in use, %.0f MiB "
+		      "free and resident, %.0f MiB released\n", pool / MIB, in_use / MIB, warm / MIB,
+		      cl_stat(obs, "memory.pool.released") / MIB);
+	if (pool > 0) {
+		assert_true(in_use <= pool);
+		assert_true(in_use <= (CACHE_MB + 16) * MIB);
+		assert_true(warm <= (CACHE_MB / 4 + 64) * MIB + 1);
+	}
 	print_message("slow readers: RSS at start %.0f MiB, peak %.0f MiB (bound %.0f MiB), "
 		      "%.0f MiB after they closed; %.0f tiles made, %.0f parked, held max %.1f MiB\n",
 		      base / MIB, peak / MIB, bound / MIB, after / MIB, gen, parked, held_max / MIB);
