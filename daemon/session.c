@@ -10,15 +10,20 @@
  * Memory: ready tiles waiting for output room are held up to the session's allowance
  * (max_pending bytes of raw tiles, the same figure that caps its queued output, in which a
  * shared encoding counts its whole frame, as if copied, and one still being encoded its raw
- * size); beyond it
- * they are parked (released) and looked up in the cache again when room appears, or wanted
- * again when the cache let them go. Reports still waiting for the loop hold at most
- * max_pending more (ready_src.queue_cap; beyond it they arrive parked). A session thus holds
- * at most about 3 × max_pending, and
- * its output buffer is given back whenever it drains. Once it parks with its output full, its
- * wants are withdrawn from the scheduler (paused: nothing is made for a client that does not
- * read) until the output drains to half of max_pending; then the want-set's WANTED entries
- * are submitted again, in order, so coarse-first and replacement work as before.
+ * size); beyond it they are parked (released) and looked up in the cache again when room
+ * appears, or wanted again when the cache let them go. Reports still waiting for the loop hold
+ * at most max_pending more (ready_src.queue_cap; beyond it they arrive parked). A session thus
+ * holds at most about 3 × max_pending, and its output buffer is given back whenever it drains.
+ *
+ * Asking: a session gives the scheduler only what it can take, its first WANTED entries in
+ * the order the scheduler serves them (class, level, want order) whose bytes, with those of
+ * its READY entries not yet sent, fit in its credit (2 × max_pending + the send window).
+ * Sending frees credit; each time a quarter of it is free the next entries are asked for.
+ * (Asking for the whole want-set at once made a slow reader's tiles several times over:
+ * parked, let go by the cache before it read them, made again.) Once it parks with its output
+ * full, its wants are withdrawn from the scheduler (paused: nothing is made for a client that
+ * does not read) until the output drains to half of max_pending; then they are asked for
+ * again, in order, so coarse-first and replacement work as before.
  *
  * Closing never waits for the scheduler: the request is released (sched_req_release) and the
  * manager frees it later; reports for it that still come are marked with the session's
@@ -92,6 +97,8 @@ struct session {
 	size_t nahead;		 /* tiles the look-ahead holds wanted now */
 	struct ready_src *src; /* this session's handle on the ready queue (reference) */
 	bool paused; /* its wants are withdrawn while its output is full (see the top) */
+	bool sub_left;	   /* the last submission left WANTED entries out (credit) */
+	uint64_t sub_freed; /* bytes sent or dropped since that submission */
 	bool has_focus;
 	double lon, lat, vel[3];
 	double focus_a; /* the focus planet's equatorial radius (m) */
@@ -286,6 +293,13 @@ static uint64_t window(const struct session *s)
 	return linkest_window(&s->le, s->env->queue_ms, s->env->limits->max_pending);
 }
 
+/* What a session may have asked for and not yet sent (see the top): its held tiles, its
+ * output window and as much again waiting in the cache. */
+static uint64_t credit(const struct session *s)
+{
+	return 2 * s->env->limits->max_pending + window(s);
+}
+
 static bool has_room(const struct session *s)
 {
 	return wantset_nready(&s->ws) && conn_pending(&s->c) < window(s);
@@ -339,8 +353,13 @@ bool session_pump(struct session *s, size_t *budget)
 			cnt->tiles_relooked++;
 		}
 		encode_tile(s, e);
+		s->sub_freed += wantset_entry_bytes(e);
 		wantset_sent(&s->ws, e);
 	}
+	/* Sent tiles made room in the credit: ask for the next ones (by a quarter of it, so as
+	 * not to give the scheduler a new list for every tile). */
+	if (s->sub_left && s->sub_freed >= credit(s) / 4)
+		rewant = true;
 	if (rewant)
 		submit_wants(s, 0, 0); /* when paused: resume_if_drained does it */
 	resume_if_drained(s);
@@ -404,7 +423,8 @@ static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id)
 	if (s->paused)
 		return; /* flush submits them when the output drains */
 	size_t n;
-	struct want *list = wantset_wants(&s->ws, &n);
+	struct want *list = wantset_wants_within(&s->ws, credit(s), &n, &s->sub_left);
+	s->sub_freed = 0;
 	int rc = sched_req_want(s->req, list, n);
 	free(list);
 	if (rc)

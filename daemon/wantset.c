@@ -6,8 +6,10 @@
 #include <errno.h>
 #include <stdlib.h>
 
+#include "common/pixfmt.h"
 #include "common/xalloc.h"
 #include "engine/node.h"
+#include "engine/planet.h"
 
 #define MOVED 0xff /* an old entry whose state went to the new set */
 
@@ -229,6 +231,53 @@ struct want *wantset_wants(const struct wantset *ws, size_t *n)
 			list[k++] = (struct want){ .node = ws->e[i].node, .key = ws->e[i].key,
 						   .cls = (enum sched_class)ws->e[i].cls };
 	*n = k;
+	return list;
+}
+
+uint64_t wantset_entry_bytes(const struct wantset_entry *e)
+{
+	uint64_t T = e->node->planet->tile_size;
+	return T * T * pix_bytes(e->node->out);
+}
+
+static int cmp_prio(const void *a, const void *b, void *ud)
+{
+	const struct wantset *ws = ud;
+	uint64_t x = prio(&ws->e[*(const uint32_t *)a]), y = prio(&ws->e[*(const uint32_t *)b]);
+	return (x > y) - (x < y);
+}
+
+struct want *wantset_wants_within(const struct wantset *ws, uint64_t credit, size_t *n, bool *left)
+{
+	uint64_t used = 0;
+	size_t nwant = 0;
+	for (size_t i = 0; i < ws->n; i++) {
+		if (ws->e[i].state == WS_WANTED)
+			nwant++;
+		else if (ws->e[i].state == WS_READY)
+			used += wantset_entry_bytes(&ws->e[i]);
+	}
+	uint32_t *idx = xmalloc((nwant ? nwant : 1) * sizeof *idx);
+	size_t k = 0;
+	for (size_t i = 0; i < ws->n; i++)
+		if (ws->e[i].state == WS_WANTED)
+			idx[k++] = (uint32_t)i;
+	qsort_r(idx, nwant, sizeof *idx, cmp_prio, (void *)ws);
+	struct want *list = xmalloc((nwant ? nwant : 1) * sizeof *list);
+	bool first = used == 0;
+	for (k = 0; k < nwant; k++) {
+		const struct wantset_entry *e = &ws->e[idx[k]];
+		uint64_t b = wantset_entry_bytes(e);
+		if (used + b > credit && !first)
+			break;
+		first = false;
+		used += b;
+		list[k] = (struct want){ .node = e->node, .key = e->key,
+					 .cls = (enum sched_class)e->cls };
+	}
+	free(idx);
+	*n = k;
+	*left = k < nwant;
 	return list;
 }
 

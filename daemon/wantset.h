@@ -69,6 +69,14 @@ size_t wantset_rebind(struct wantset *ws, wantset_resolve_fn *resolve, void *ud,
 		      struct wantset_drops *d);
 /* The WANTED entries as a scheduler want list: an owned array of *n (free it). */
 struct want *wantset_wants(const struct wantset *ws, size_t *n);
+/* A tile's raw bytes for entry e (its node's format and tile size). */
+uint64_t wantset_entry_bytes(const struct wantset_entry *e);
+/* The first WANTED entries in the order the scheduler serves them (class, then level coarse
+ * first, then want order) whose bytes, with those of the READY entries not yet sent (held or
+ * parked), stay within `credit`: what a session asks to be made while its earlier tiles wait
+ * for output room. At least one when nothing is READY. *n the count, *left whether WANTED
+ * entries were left out. An owned array (free it). */
+struct want *wantset_wants_within(const struct wantset *ws, uint64_t credit, size_t *n, bool *left);
 /* A tile for key is ready (t taken, NULL with err < 0, or NULL with `park`: ready but its
  * tile not carried). Returns false, releasing t, when the key is not waiting for one (it left
  * the set, or a repeated report). When holding t would take the held bytes over `budget` (and

@@ -369,7 +369,7 @@ static void test_slow_readers_memory(void **state)
 }
 
 /* A client that stops reading is paused (its held tiles and output full); when it reads
- * again it gets every tile it wants, each once, coarse levels first. */
+ * again it gets every tile it wants, each once, coarse levels first, and few are made twice. */
 static void test_paused_session_resumes(void **state)
 {
 	(void)state;
@@ -433,6 +433,10 @@ static void test_paused_session_resumes(void **state)
 		      cl_stat(obs, "sched.generated"), cl_stat(obs, "tiles.relooked"),
 		      cl_stat(obs, "tiles.rewanted"));
 	assert_true(made < N); /* it did stop making them */
+	/* it asked for no more than it could hold: tiles made, parked beyond its held budget and
+	 * let go by the 64 MiB cache before it read them, made again, were 2 039 (of 3 754 made)
+	 * when a session asked for its whole want-set at once */
+	assert_true(cl_stat(obs, "tiles.rewanted") <= N / 8);
 	/* coarse first: the 8 level-6 tiles, wanted last, are among the first sent (what the
 	 * socket held at the pause, ≤ 40 tiles, plus themselves) */
 	assert_true(last_coarse <= 48);

@@ -12,10 +12,14 @@
 
 #include "daemon/wantset.h"
 #include "engine/node.h"
+#include "engine/planet.h"
 #include "engine/sched.h"
 #include "engine/tile.h"
 
-static struct node node_a = { .hash = 0xa }, node_b = { .hash = 0xb }, node_c = { .hash = 0xc };
+static struct planet planet4 = { .tile_size = 4 }; /* 4 × 4 f32: 64 bytes a tile */
+static struct node node_a = { .hash = 0xa, .planet = &planet4, .out = PIX_HEIGHT },
+		   node_b = { .hash = 0xb, .planet = &planet4, .out = PIX_HEIGHT },
+		   node_c = { .hash = 0xc, .planet = &planet4, .out = PIX_HEIGHT };
 
 static struct wantset_entry ent(struct node *n, uint32_t pid, int ly, uint32_t x, uint32_t y,
 				uint8_t cls, uint32_t order)
@@ -317,6 +321,67 @@ static void test_held_budget(void **state)
 	wantset_fini(&ws);
 }
 
+/* What a session asks the scheduler for within its credit: the WANTED entries in the order
+ * the scheduler serves them (class, level coarse first, want order), as many as fit beside the
+ * READY entries not yet sent (held or parked); at least one when none is READY. */
+static void test_wants_within(void **state)
+{
+	(void)state;
+	struct wantset ws;
+	wantset_init(&ws);
+	struct wantset_entry add[] = {
+		ent(&node_a, 1, 5, 0, 0, SCHED_VISIBLE, 0), ent(&node_a, 1, 2, 1, 0, SCHED_VISIBLE, 1),
+		ent(&node_a, 1, 2, 0, 0, SCHED_VISIBLE, 2), ent(&node_a, 1, 0, 0, 0, SCHED_PREFETCH, 3),
+		ent(&node_a, 1, 9, 0, 0, SCHED_VISIBLE, 4),
+	};
+	struct wantset_drops d = { 0 };
+	wantset_replace(&ws, 1, add, 5, &d);
+	const uint64_t one = 64;
+	assert_int_equal(wantset_entry_bytes(&ws.e[0]), one);
+	size_t n;
+	bool left;
+	struct want *w = wantset_wants_within(&ws, 3 * one, &n, &left);
+	assert_int_equal(n, 3);
+	assert_true(left);
+	assert_true(grid_key_equal(&w[0].key, &add[1].key)); /* ly 2, order 1 */
+	assert_true(grid_key_equal(&w[1].key, &add[2].key)); /* ly 2, order 2 */
+	assert_true(grid_key_equal(&w[2].key, &add[0].key)); /* ly 5 */
+	assert_int_equal(w[2].cls, SCHED_VISIBLE);
+	free(w);
+	w = wantset_wants_within(&ws, UINT64_MAX, &n, &left);
+	assert_int_equal(n, 5);
+	assert_false(left);
+	assert_true(grid_key_equal(&w[3].key, &add[4].key)); /* ly 9 */
+	assert_true(grid_key_equal(&w[4].key, &add[3].key)); /* prefetch last */
+	free(w);
+	/* Nothing READY: one entry even when it does not fit. */
+	w = wantset_wants_within(&ws, 0, &n, &left);
+	assert_int_equal(n, 1);
+	assert_true(left);
+	free(w);
+	/* Two READY (one held, one parked) take two tiles' room from the credit. */
+	assert_true(wantset_ready(&ws, &add[1].key, mk_tile(&add[1].key), 0, false, ALL, &parked));
+	assert_true(wantset_ready(&ws, &add[2].key, NULL, 0, true, ALL, &parked));
+	assert_true(parked);
+	w = wantset_wants_within(&ws, 3 * one, &n, &left);
+	assert_int_equal(n, 1);
+	assert_true(left);
+	assert_true(grid_key_equal(&w[0].key, &add[0].key));
+	free(w);
+	w = wantset_wants_within(&ws, one, &n, &left); /* no room left: none */
+	assert_int_equal(n, 0);
+	assert_true(left);
+	free(w);
+	/* Sent entries take none. */
+	wantset_sent(&ws, wantset_pop(&ws));
+	wantset_sent(&ws, wantset_pop(&ws));
+	w = wantset_wants_within(&ws, 3 * one, &n, &left);
+	assert_int_equal(n, 3);
+	assert_false(left);
+	free(w);
+	wantset_fini(&ws);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -325,6 +390,7 @@ int main(void)
 		cmocka_unit_test(test_replace_carries_state),
 		cmocka_unit_test(test_rebind),
 		cmocka_unit_test(test_held_budget),
+		cmocka_unit_test(test_wants_within),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
