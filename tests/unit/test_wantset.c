@@ -50,6 +50,16 @@ static size_t nwanted(const struct wantset *ws)
 	return n;
 }
 
+/* Five wants of planet 1, in want order 0..4: levels 5, 2, 2 (visible), 0 (prefetch), 9. */
+static void five_entries(struct wantset_entry add[5])
+{
+	add[0] = ent(&node_a, 1, 5, 0, 0, SCHED_VISIBLE, 0);
+	add[1] = ent(&node_a, 1, 2, 1, 0, SCHED_VISIBLE, 1);
+	add[2] = ent(&node_a, 1, 2, 0, 0, SCHED_VISIBLE, 2);
+	add[3] = ent(&node_a, 1, 0, 0, 0, SCHED_PREFETCH, 3);
+	add[4] = ent(&node_a, 1, 9, 0, 0, SCHED_VISIBLE, 4);
+}
+
 /* Tiles leave the heap by class, then level coarse first, then want order, whatever the order
  * they became ready in. */
 static void test_ready_order(void **state)
@@ -57,11 +67,8 @@ static void test_ready_order(void **state)
 	(void)state;
 	struct wantset ws;
 	wantset_init(&ws);
-	struct wantset_entry add[] = {
-		ent(&node_a, 1, 5, 0, 0, SCHED_VISIBLE, 0), ent(&node_a, 1, 2, 1, 0, SCHED_VISIBLE, 1),
-		ent(&node_a, 1, 2, 0, 0, SCHED_VISIBLE, 2), ent(&node_a, 1, 0, 0, 0, SCHED_PREFETCH, 3),
-		ent(&node_a, 1, 9, 0, 0, SCHED_VISIBLE, 4),
-	};
+	struct wantset_entry add[5];
+	five_entries(add);
 	size_t n = sizeof add / sizeof add[0];
 	struct wantset_drops d = { 0 };
 	wantset_replace(&ws, 1, add, n, &d);
@@ -329,11 +336,8 @@ static void test_wants_within(void **state)
 	(void)state;
 	struct wantset ws;
 	wantset_init(&ws);
-	struct wantset_entry add[] = {
-		ent(&node_a, 1, 5, 0, 0, SCHED_VISIBLE, 0), ent(&node_a, 1, 2, 1, 0, SCHED_VISIBLE, 1),
-		ent(&node_a, 1, 2, 0, 0, SCHED_VISIBLE, 2), ent(&node_a, 1, 0, 0, 0, SCHED_PREFETCH, 3),
-		ent(&node_a, 1, 9, 0, 0, SCHED_VISIBLE, 4),
-	};
+	struct wantset_entry add[5];
+	five_entries(add);
 	struct wantset_drops d = { 0 };
 	wantset_replace(&ws, 1, add, 5, &d);
 	const uint64_t one = 64;
