@@ -17,8 +17,10 @@
  *
  * Asking: a session gives the scheduler only what it can take, its first WANTED entries in
  * the order the scheduler serves them (class, level, want order) whose bytes, with those of
- * its READY entries not yet sent, fit in its credit (2 × max_pending + the send window).
- * Sending frees credit; each time a quarter of it is free the next entries are asked for.
+ * its READY entries not yet sent, fit in its credit (2 × max_pending + the send window), and
+ * beyond it those the cache holds (nothing to make: one trip through the scheduler instead of
+ * one per quarter of the credit for a want-set of cached tiles). Sending frees credit; each
+ * time a quarter of it is free the next entries are asked for.
  * (Asking for the whole want-set at once made a slow reader's tiles several times over:
  * parked, let go by the cache before it read them, made again.) Once it parks with its output
  * full, its wants are withdrawn from the scheduler (paused: nothing is made for a client that
@@ -418,12 +420,19 @@ static void sess_req_fin(void *ud)
 
 /* Gives the scheduler what is still wanted; a failure is reported as an ERROR referring to
  * (ref_type, ref_id). */
+/* A tile the cache holds costs nothing to make: asked for beyond the credit too. */
+static bool in_cache(void *ud, const struct tile_key *k)
+{
+	return cache_contains(ud, k);
+}
+
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id)
 {
 	if (s->paused)
 		return; /* flush submits them when the output drains */
 	size_t n;
-	struct want *list = wantset_wants_within(&s->ws, credit(s), &n, &s->sub_left);
+	struct want *list =
+		wantset_wants_within(&s->ws, credit(s), in_cache, s->env->cache, &n, &s->sub_left);
 	s->sub_freed = 0;
 	int rc = sched_req_want(s->req, list, n);
 	free(list);

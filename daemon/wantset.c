@@ -247,7 +247,8 @@ static int cmp_prio(const void *a, const void *b, void *ud)
 	return (x > y) - (x < y);
 }
 
-struct want *wantset_wants_within(const struct wantset *ws, uint64_t credit, size_t *n, bool *left)
+struct want *wantset_wants_within(const struct wantset *ws, uint64_t credit, wantset_made_fn *made,
+				  void *ud, size_t *n, bool *left)
 {
 	uint64_t used = 0;
 	size_t nwant = 0;
@@ -264,20 +265,22 @@ struct want *wantset_wants_within(const struct wantset *ws, uint64_t credit, siz
 			idx[k++] = (uint32_t)i;
 	qsort_r(idx, nwant, sizeof *idx, cmp_prio, (void *)ws);
 	struct want *list = xmalloc((nwant ? nwant : 1) * sizeof *list);
-	bool first = used == 0;
+	bool first = used == 0, full = false;
+	size_t m = 0;
 	for (k = 0; k < nwant; k++) {
 		const struct wantset_entry *e = &ws->e[idx[k]];
 		uint64_t b = wantset_entry_bytes(e);
-		if (used + b > credit && !first)
-			break;
+		full = full || (used + b > credit && !first);
+		if (full && !(made && made(ud, &e->key)))
+			continue;
 		first = false;
-		used += b;
-		list[k] = (struct want){ .node = e->node, .key = e->key,
-					 .cls = (enum sched_class)e->cls };
+		used += full ? 0 : b;
+		list[m++] = (struct want){ .node = e->node, .key = e->key,
+					   .cls = (enum sched_class)e->cls };
 	}
 	free(idx);
-	*n = k;
-	*left = k < nwant;
+	*n = m;
+	*left = m < nwant;
 	return list;
 }
 

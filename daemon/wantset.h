@@ -74,9 +74,13 @@ uint64_t wantset_entry_bytes(const struct wantset_entry *e);
 /* The first WANTED entries in the order the scheduler serves them (class, then level coarse
  * first, then want order) whose bytes, with those of the READY entries not yet sent (held or
  * parked), stay within `credit`: what a session asks to be made while its earlier tiles wait
- * for output room. At least one when nothing is READY. *n the count, *left whether WANTED
- * entries were left out. An owned array (free it). */
-struct want *wantset_wants_within(const struct wantset *ws, uint64_t credit, size_t *n, bool *left);
+ * for output room. At least one when nothing is READY. Beyond the credit, entries for which
+ * `made` (may be NULL) says the tile exists already (the cache holds it: nothing to make)
+ * come too. *n the count, *left whether WANTED entries were left out. An owned array (free
+ * it). */
+typedef bool wantset_made_fn(void *ud, const struct tile_key *k);
+struct want *wantset_wants_within(const struct wantset *ws, uint64_t credit, wantset_made_fn *made,
+				  void *ud, size_t *n, bool *left);
 /* A tile for key is ready (t taken, NULL with err < 0, or NULL with `park`: ready but its
  * tile not carried). Returns false, releasing t, when the key is not waiting for one (it left
  * the set, or a repeated report). When holding t would take the held bytes over `budget` (and

@@ -328,9 +328,16 @@ static void test_held_budget(void **state)
 	wantset_fini(&ws);
 }
 
+static bool made_ly9(void *ud, const struct tile_key *k)
+{
+	(void)ud;
+	return k->ly == 9;
+}
+
 /* What a session asks the scheduler for within its credit: the WANTED entries in the order
  * the scheduler serves them (class, level coarse first, want order), as many as fit beside the
- * READY entries not yet sent (held or parked); at least one when none is READY. */
+ * READY entries not yet sent (held or parked); at least one when none is READY; beyond the
+ * credit, those whose tile exists already. */
 static void test_wants_within(void **state)
 {
 	(void)state;
@@ -344,7 +351,7 @@ static void test_wants_within(void **state)
 	assert_int_equal(wantset_entry_bytes(&ws.e[0]), one);
 	size_t n;
 	bool left;
-	struct want *w = wantset_wants_within(&ws, 3 * one, &n, &left);
+	struct want *w = wantset_wants_within(&ws, 3 * one, NULL, NULL, &n, &left);
 	assert_int_equal(n, 3);
 	assert_true(left);
 	assert_true(grid_key_equal(&w[0].key, &add[1].key)); /* ly 2, order 1 */
@@ -352,14 +359,20 @@ static void test_wants_within(void **state)
 	assert_true(grid_key_equal(&w[2].key, &add[0].key)); /* ly 5 */
 	assert_int_equal(w[2].cls, SCHED_VISIBLE);
 	free(w);
-	w = wantset_wants_within(&ws, UINT64_MAX, &n, &left);
+	/* Beyond the credit, a tile that exists already (the cache holds it) comes too. */
+	w = wantset_wants_within(&ws, 3 * one, made_ly9, NULL, &n, &left);
+	assert_int_equal(n, 4);
+	assert_true(left); /* the prefetch entry */
+	assert_true(grid_key_equal(&w[3].key, &add[4].key));
+	free(w);
+	w = wantset_wants_within(&ws, UINT64_MAX, NULL, NULL, &n, &left);
 	assert_int_equal(n, 5);
 	assert_false(left);
 	assert_true(grid_key_equal(&w[3].key, &add[4].key)); /* ly 9 */
 	assert_true(grid_key_equal(&w[4].key, &add[3].key)); /* prefetch last */
 	free(w);
 	/* Nothing READY: one entry even when it does not fit. */
-	w = wantset_wants_within(&ws, 0, &n, &left);
+	w = wantset_wants_within(&ws, 0, NULL, NULL, &n, &left);
 	assert_int_equal(n, 1);
 	assert_true(left);
 	free(w);
@@ -367,19 +380,19 @@ static void test_wants_within(void **state)
 	assert_true(wantset_ready(&ws, &add[1].key, mk_tile(&add[1].key), 0, false, ALL, &parked));
 	assert_true(wantset_ready(&ws, &add[2].key, NULL, 0, true, ALL, &parked));
 	assert_true(parked);
-	w = wantset_wants_within(&ws, 3 * one, &n, &left);
+	w = wantset_wants_within(&ws, 3 * one, NULL, NULL, &n, &left);
 	assert_int_equal(n, 1);
 	assert_true(left);
 	assert_true(grid_key_equal(&w[0].key, &add[0].key));
 	free(w);
-	w = wantset_wants_within(&ws, one, &n, &left); /* no room left: none */
+	w = wantset_wants_within(&ws, one, NULL, NULL, &n, &left); /* no room left: none */
 	assert_int_equal(n, 0);
 	assert_true(left);
 	free(w);
 	/* Sent entries take none. */
 	wantset_sent(&ws, wantset_pop(&ws));
 	wantset_sent(&ws, wantset_pop(&ws));
-	w = wantset_wants_within(&ws, 3 * one, &n, &left);
+	w = wantset_wants_within(&ws, 3 * one, NULL, NULL, &n, &left);
 	assert_int_equal(n, 3);
 	assert_false(left);
 	free(w);
