@@ -418,14 +418,14 @@ static void sess_req_fin(void *ud)
 	ready_src_unref(ud);
 }
 
-/* Gives the scheduler what is still wanted; a failure is reported as an ERROR referring to
- * (ref_type, ref_id). */
 /* A tile the cache holds costs nothing to make: asked for beyond the credit too. */
 static bool in_cache(void *ud, const struct tile_key *k)
 {
 	return cache_contains(ud, k);
 }
 
+/* Gives the scheduler what is still wanted, within the credit (see the top); a failure is
+ * reported as an ERROR referring to (ref_type, ref_id). */
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id)
 {
 	if (s->paused)

@@ -219,21 +219,6 @@ size_t wantset_rebind(struct wantset *ws, wantset_resolve_fn *resolve, void *ud,
 	return regen;
 }
 
-struct want *wantset_wants(const struct wantset *ws, size_t *n)
-{
-	size_t nwant = 0;
-	for (size_t i = 0; i < ws->n; i++)
-		nwant += ws->e[i].state == WS_WANTED;
-	struct want *list = xmalloc((nwant ? nwant : 1) * sizeof *list);
-	size_t k = 0;
-	for (size_t i = 0; i < ws->n; i++)
-		if (ws->e[i].state == WS_WANTED)
-			list[k++] = (struct want){ .node = ws->e[i].node, .key = ws->e[i].key,
-						   .cls = (enum sched_class)ws->e[i].cls };
-	*n = k;
-	return list;
-}
-
 uint64_t wantset_entry_bytes(const struct wantset_entry *e)
 {
 	uint64_t T = e->node->planet->tile_size;

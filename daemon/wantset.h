@@ -67,8 +67,6 @@ typedef struct node *wantset_resolve_fn(void *ud, uint32_t pid, uint8_t layer);
  * now collide) leave. Rebuilds the ready heap. Returns how many are wanted afresh. */
 size_t wantset_rebind(struct wantset *ws, wantset_resolve_fn *resolve, void *ud,
 		      struct wantset_drops *d);
-/* The WANTED entries as a scheduler want list: an owned array of *n (free it). */
-struct want *wantset_wants(const struct wantset *ws, size_t *n);
 /* A tile's raw bytes for entry e (its node's format and tile size). */
 uint64_t wantset_entry_bytes(const struct wantset_entry *e);
 /* The first WANTED entries in the order the scheduler serves them (class, then level coarse

@@ -375,7 +375,8 @@ struct trial {
 	/* CPU over the flight: the machine's busy share of all its cores, and the daemon's and
 	 * this process's (the client) time in cores */
 	double cpu_busy, cpu_daemon, cpu_client;
-	uint64_t tiles_recv; /* tiles the client took during the flight */
+	uint64_t tiles_recv;   /* tiles the client took during the flight */
+	double tiles_in_per_s; /* and per second of it */
 };
 
 /* CPU time so far (/proc, clock ticks): the machine's busy and total (all cores), the
@@ -652,6 +653,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	cpu_mark(d.daemon, &cm1);
 	if (tc > 0)
 		cpu_shares(&cm0, &cm1, fly, tr);
+	tr->tiles_in_per_s = fly > 0 ? (double)tr->tiles_recv / fly : 0;
 	dump_stats = getenv("KEEPUP_DEBUG") != NULL;
 	rc = get_stats(sc, &s1, err);
 	dump_stats = false;
@@ -753,7 +755,7 @@ static void limiting_stage(struct row *r)
 		snprintf(r->limit, sizeof r->limit,
 			 "CPU: %ld cores %.0f%% busy (daemon %.1f, client %.1f cores; %.0f tiles/s in)%s",
 			 ncpu, t->cpu_busy * 100, t->cpu_daemon, t->cpu_client,
-			 t->frames ? (double)t->tiles_recv * HZ / t->frames : 0, load);
+			 t->tiles_in_per_s, load);
 	else if (t->fine_lag > 0.5)
 		snprintf(r->limit, sizeof r->limit,
 			 "latency: 2 finest late in %.0f%% of short frames, workers %.0f%%, CPU %.0f%%%s",
@@ -850,7 +852,7 @@ static void search(const struct ctx *x, const char *planet, enum mode mode, int 
 			v, tr.full * 100, tr.gen_per_s, tr.hit_ratio * 100, tr.util * 100,
 			tr.frame_p95_ms, tr.hover_s, tr.fine_lag * 100, tr.load1, tr.cpu_busy * 100,
 			tr.cpu_daemon, tr.cpu_client,
-			tr.frames ? (double)tr.tiles_recv * HZ / tr.frames : 0,
+			tr.tiles_in_per_s,
 			(unsigned long long)tr.gen_flight, (unsigned long long)tr.gen_hover,
 			(unsigned long long)tr.disk_hits, prefetch ? "" : "");
 		if (pass) {
@@ -983,7 +985,7 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 				r->capped ? "true" : "false", r->v / r->seed_v, t->full, t->gen_per_s,
 				t->hit_ratio, t->util, t->frame_p95_ms, r->trials, r->pass.prefetch_s,
 				r->v_search, r->median_full, t->cpu_busy, t->cpu_daemon, t->cpu_client,
-				t->frames ? (double)t->tiles_recv * HZ / t->frames : 0, r->limit,
+				t->tiles_in_per_s, r->limit,
 				i + 1 < NALT ? "," : "");
 		}
 		fprintf(f, "    ]}");

@@ -46,7 +46,8 @@ static int refs(struct tile *t)
 static size_t nwanted(const struct wantset *ws)
 {
 	size_t n;
-	free(wantset_wants(ws, &n));
+	bool left;
+	free(wantset_wants_within(ws, UINT64_MAX, NULL, NULL, &n, &left));
 	return n;
 }
 
