@@ -21,6 +21,7 @@
 
 #include "errbuf.h"
 #include "tilecodec_lossy.h"
+#include "unfilter_sse2.h"
 #include "xalloc.h"
 
 /* The filters' loops run over rows T texels long. GCC's -O2 vectorises only loops whose length
@@ -432,7 +433,13 @@ static inline __attribute__((always_inline)) void unfilter_as(enum pix_type form
 							     enum tfilter f, const void *in,
 							     void *out)
 {
-	if (format == PIX_HEIGHT)
+	if (unfilter_sse2_fits(T, f)) {
+		uint32_t rows[2 * TILECODEC_MAX_SIZE];
+		if (format == PIX_HEIGHT)
+			unfilter_f32_sse2(T, f, in, out, rows);
+		else
+			unfilter_u8_sse2(T, format == PIX_COLOR ? 4 : 2, f, in, out);
+	} else if (format == PIX_HEIGHT)
 		unfilter_f32(T, f, in, out);
 	else if (format == PIX_COLOR)
 		unfilter_u8(T, 4, f, in, out);

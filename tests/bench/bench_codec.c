@@ -1,6 +1,6 @@
 /* bench_codec — tile payload coding: compression ratio and encode/decode speed per layer type
  * (f32 heights, RGBA8 colour, RG8 normals; 256² each, synthesized to look like terrain), per
- * pre-filter and codec. One line per figure; speeds are MB/s of raw texels, one thread.
+ * pre-filter and codec, and the pre-filters alone. One line per figure; speeds are MB/s of raw texels, one thread.
  * Then real tiles of the shipped planets (conf/planets: procedural, and Earth when data/ has
  * it) at levels 4, 8, 12 and 16 near the Alps: bytes per tile, zstd (what clipmapd sends
  * below raw_above_mbit) against the lossy codecs with clipmapd's settings (encpick.h), and
@@ -95,6 +95,32 @@ static void make_normals(const float *h, uint8_t *n)
 			n[2 * (y * T + x) + 0] = clamp8((-dzdx / len + 1) * 127.5);
 			n[2 * (y * T + x) + 1] = clamp8((-dzdy / len + 1) * 127.5);
 		}
+}
+
+/* The pre-filter alone, both ways (what a store read or a zstd tile pays besides zstd). */
+static void bench_filter(const char *layer, enum pix_type fmt, const void *texels, enum tfilter f)
+{
+	size_t raw = (size_t)T * T * pix_bytes(fmt);
+	unsigned char *mid = xmalloc(raw), *back = xmalloc(raw);
+	int reps = 0, rc = 0;
+	double t0 = clock_now_s(), t1;
+	do {
+		rc |= tilecodec_filter(fmt, T, f, texels, mid);
+		reps++;
+	} while ((t1 = clock_now_s()) - t0 < 0.15);
+	double fil = raw * reps / (t1 - t0) / 1e6;
+	int ureps = 0;
+	t0 = clock_now_s();
+	do {
+		rc |= tilecodec_unfilter(fmt, T, f, mid, back);
+		ureps++;
+	} while ((t1 = clock_now_s()) - t0 < 0.15);
+	double unf = raw * ureps / (t1 - t0) / 1e6;
+	printf("filter/%s T=%d %s: filter %.0f MB/s, unfilter %.0f MB/s%s\n", layer, T,
+	       tilecodec_filter_name(f), fil, unf,
+	       rc || memcmp(back, texels, raw) ? " ROUND TRIP FAILED" : "");
+	free(mid);
+	free(back);
 }
 
 static void bench_one(struct tilecodec *tc, const char *layer, enum pix_type fmt,
@@ -318,6 +344,8 @@ int main(void)
 	for (size_t l = 0; l < 3; l++) {
 		bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, TFILTER_NONE,
 			  TCODEC_NONE, 0);
+		for (int f = 1; f < TFILTER_COUNT; f++)
+			bench_filter(layers[l].name, layers[l].fmt, layers[l].data, f);
 		for (int f = 0; f < TFILTER_COUNT; f++) {
 			bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, f, TCODEC_LZ4, 0);
 			bench_one(tc, layers[l].name, layers[l].fmt, layers[l].data, f, TCODEC_ZSTD, 1);
