@@ -214,6 +214,7 @@ fleet-demo: deps
 FUZZ_SECONDS ?= 60
 FUZZ_SRC := $(wildcard tests/fuzz/fuzz_*.c)
 FUZZ_LIBSRC := common/proto.c common/proto_write.c common/tilecodec.c common/tilecodec_lossy.c \
+               common/unfilter_sse2.c \
                common/pixfmt.c common/grid.c common/seagrid.c \
                common/xalloc.c common/errbuf.c
 FUZZ_FLAGS := -std=c11 -D_GNU_SOURCE -g -O1 -fsanitize=fuzzer,address,undefined \
