@@ -34,4 +34,10 @@ static inline void normalmap_texel(float we, float ea, float up, float dn, float
 	out[1] = (uint8_t)(int)(-gy * inv * 127.5f + 128.0f);
 }
 
+/* normalmap_texel for n texels of a row: we[i], ea[i] the heights at texel i's east stencil
+ * ends, up[i], dn[i] north and south of it; fx, fy as there. 8 texels at a time where the
+ * build has SSE2, with the same bytes. */
+void normalmap_row(const float *restrict we, const float *restrict ea, const float *restrict up,
+		   const float *restrict dn, float fx, float fy, uint8_t *restrict out, uint32_t n);
+
 #endif

@@ -55,6 +55,15 @@ struct level {
 		float lo, hi;
 	} near[2]; /* the last two disks asked of view_clipmap_height_range_near */
 	int near_next; /* the entry the next one replaces */
+	/* with derive: each row's stencil figures, by level row v mod S (they depend on the
+	 * row's latitude and the level's lx only; computing them is most of a thin strip's
+	 * cost) */
+	struct nrow_par {
+		int64_t v; /* −1: unset */
+		int lx;
+		double dy, r, len;
+		uint32_t k;
+	} *nrp;
 };
 
 struct view_clipmap {
@@ -70,6 +79,7 @@ struct view_clipmap {
 	struct geo_body *body;	 /* with derive: the ellipsoid, for the metric spacing */
 	uint8_t *nbuf;		 /* with derive: a region's normals, (T + 2)² RG8 */
 	uint32_t *ncol;		 /* with derive: 2 column tables of (T + 2) + 2·T entries */
+	float *nrow;		 /* with derive: a row's 4 stencil heights, 4 × (T + 2) */
 	unsigned char *zeros; /* a T×T tile of zeros for tiles that failed */
 	bool keep_alpha;      /* mirror the colour's alpha (view_clipmap_keep_alpha) */
 	bool has_motion;       /* the camera's ground motion, smoothed: */
@@ -158,6 +168,7 @@ int view_clipmap_create_layer(const struct gl *gl, struct view_source *src, int 
 	if (cm->derive) {
 		cm->nbuf = xmalloc((size_t)(cm->T + 2) * (cm->T + 2) * 2);
 		cm->ncol = xmalloc(2 * ((size_t)cm->T + 2 + 2 * (size_t)cm->T) * sizeof *cm->ncol);
+		cm->nrow = xmalloc(4 * ((size_t)cm->T + 2) * sizeof *cm->nrow);
 	}
 	cm->zeros = xcalloc((size_t)cm->T * cm->T, 4);
 	cm->lv = xcalloc((size_t)nlevels, sizeof *cm->lv);
@@ -204,6 +215,7 @@ void view_clipmap_destroy(struct view_clipmap *cm)
 			for (int i = 0; i < SLOTS; i++)
 				drop(cm, &cm->lv[l].slots[r][i]);
 		free(cm->lv[l].hmirror);
+		free(cm->lv[l].nrp);
 		free(cm->lv[l].amirror);
 	}
 	for (int r = 0; r < VIEW_NROLES; r++)
@@ -213,6 +225,7 @@ void view_clipmap_destroy(struct view_clipmap *cm)
 	free(cm->zeros);
 	free(cm->nbuf);
 	free(cm->ncol);
+	free(cm->nrow);
 	geo_body_destroy(cm->body);
 	free(cm);
 }
@@ -639,13 +652,27 @@ static void upload_normals(struct view_clipmap *cm, int level, int64_t W, int64_
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, (GLint)cm->T);
 }
 
+/* Texel i of a row whose east stencil the window cuts (west: texels west of it in the
+ * window): its normal again, with the stencil's own length. */
+static void derive_cut(const struct grid_quad *q, int64_t west, int64_t k, double r, double dlam,
+		       float fy, const float *we, const float *ea, const float *nu,
+		       const float *sd, int64_t i, uint8_t *out)
+{
+	int64_t east = (int64_t)q->w - 1 - west;
+	int64_t kw = west < k ? west : k, ke = east < k ? east : k;
+	float f = kw + ke == 0
+			  ? 0.0f
+			  : (float)(1.0 / (r * (sin((double)kw * dlam) + sin((double)ke * dlam))));
+	normalmap_texel(we[i], ea[i], nu[i], sd[i], f, fy, out + 2 * i);
+}
+
 /* The normals of level texels [u0, u0 + w) × [v0, v0 + h) (inside the held window q) from the
  * height mirror, with the `normal` node's arithmetic (common/normalmap.h): central
  * differences, metric spacing on the ellipsoid, the wider east stencil near a pole, and
  * across a pole the texel half a turn round. Where a stencil leaves the window (its outer
  * texels) it is cut to the window and its length with it; interior texels get the node's
  * bytes. Into cm->nbuf (w·h·2), then the normal slice. */
-static void derive_rect(struct view_clipmap *cm, const struct level *L, int level,
+static void derive_rect(struct view_clipmap *cm, struct level *L, int level,
 			const struct grid_quad *q, int64_t u0, int64_t v0, uint32_t w, uint32_t h)
 {
 	const uint32_t T = cm->T, S = cm->S;
@@ -655,21 +682,44 @@ static void derive_rect(struct view_clipmap *cm, const struct level *L, int leve
 	const double dlam = 2 * M_PI / (double)W, dphi = M_PI / (double)H;
 	uint64_t quarter = (uint64_t)W / 4;
 	uint32_t kmax = quarter < T ? (uint32_t)(quarter > 0 ? quarter : 1) : T;
-	/* the mirror's column of level texel u0 + i − kmax, and half a turn round (across a
-	 * pole), for i in [0, w + 2·kmax) */
-	uint32_t *col = cm->ncol, *colp = cm->ncol + (w + 2 * (size_t)kmax);
-	for (uint32_t i = 0; i < w + 2 * kmax; i++) {
-		int64_t u = u0 + (int64_t)i - kmax;
-		col[i] = (uint32_t)(wrap_u(u, W) % S);
-		colp[i] = (uint32_t)(wrap_u(u + W / 2, W) % S);
-	}
 	const int64_t du0 = wrap_u(u0 - q->u0, W); /* room west of the first texel */
+	if (!L->nrp) {
+		L->nrp = xmalloc((size_t)S * sizeof *L->nrp);
+		for (uint32_t i = 0; i < S; i++)
+			L->nrp[i].v = -1;
+	}
+	/* each row's stencil figures (cached by row), and the widest east stencil among them */
+	uint32_t kneed = 1;
 	for (uint32_t j = 0; j < h; j++) {
 		int64_t v = v0 + j;
-		double lat = grid_v_to_lat(q->ly, T, (double)v + 0.5), mrad, nrad, len;
-		geo_radii(cm->body, lat, &mrad, &nrad);
-		double dy = mrad * dphi, r = nrad * cos(lat * (M_PI / 180.0));
-		uint32_t k = normalmap_east_stencil(r, dlam, dy, kmax, &len);
+		struct nrow_par *P = &L->nrp[v % S];
+		if (P->v != v || P->lx != q->lx) {
+			double lat = grid_v_to_lat(q->ly, T, (double)v + 0.5), mrad, nrad;
+			geo_radii(cm->body, lat, &mrad, &nrad);
+			P->v = v;
+			P->lx = q->lx;
+			P->dy = mrad * dphi;
+			P->r = nrad * cos(lat * (M_PI / 180.0));
+			P->k = normalmap_east_stencil(P->r, dlam, P->dy, kmax, &P->len);
+		}
+		kneed = P->k > kneed ? P->k : kneed;
+	}
+	/* the mirror's column of level texel u0 + i − kmax, and half a turn round (across a
+	 * pole), for i in [kmax − kneed, kmax + w + kneed): the stencils' reach (a thin strip
+	 * far from a pole needs w + 2 columns, not the w + 2·kmax a pole row could) */
+	uint32_t *col = cm->ncol, *colp = cm->ncol + (w + 2 * (size_t)kmax);
+	int64_t uc = wrap_u(u0 - kneed, W), up2 = wrap_u(u0 - kneed + W / 2, W);
+	for (uint32_t i = kmax - kneed; i < kmax + w + kneed; i++) {
+		col[i] = (uint32_t)(uc % S);
+		colp[i] = (uint32_t)(up2 % S);
+		uc = uc + 1 == W ? 0 : uc + 1;
+		up2 = up2 + 1 == W ? 0 : up2 + 1;
+	}
+	for (uint32_t j = 0; j < h; j++) {
+		int64_t v = v0 + j;
+		const struct nrow_par *P = &L->nrp[v % S];
+		const double dy = P->dy, r = P->r, len = P->len;
+		const uint32_t k = P->k;
 		float fx = (float)(1.0 / len);
 		bool has_n = v > q->v0, has_s = v + 1 < q->v0 + (int64_t)q->h;
 		bool over_n = v == 0 && ring, over_s = v == H - 1 && ring;
@@ -680,6 +730,10 @@ static void derive_rect(struct view_clipmap *cm, const struct level *L, int leve
 		const float *rs = has_s ? L->hmirror + (size_t)((v + 1) % S) * S : row;
 		const uint32_t *cn = has_n || !over_n ? col : colp, *cs = has_s || !over_s ? col : colp;
 		uint8_t *out = cm->nbuf + (size_t)j * w * 2;
+		/* the stencils' heights gathered into rows, then normalmap_row over them all
+		 * with the row's east factor; texels whose stencil the window cuts (only when
+		 * it does not hold whole parallels) are made again with their own */
+		float *we = cm->nrow, *ea = we + w, *nu = ea + w, *sd = nu + w;
 		for (uint32_t i = 0; i < w; i++) {
 			uint32_t c = i + kmax; /* this texel in col */
 			int64_t kw = k, ke = k;
@@ -688,15 +742,21 @@ static void derive_rect(struct view_clipmap *cm, const struct level *L, int leve
 				kw = west < k ? west : k;
 				ke = east < k ? east : k;
 			}
-			float f = fx;
-			if (kw != k || ke != k)
-				f = kw + ke == 0 ? 0.0f
-						 : (float)(1.0 / (r * (sin((double)kw * dlam) +
-								       sin((double)ke * dlam))));
 			float ctr = row[col[c]];
-			float up = has_n || over_n ? rn[cn[c]] : ctr;
-			float dn = has_s || over_s ? rs[cs[c]] : ctr;
-			normalmap_texel(row[col[c - kw]], row[col[c + ke]], up, dn, f, fy, out + 2 * i);
+			we[i] = row[col[c - kw]];
+			ea[i] = row[col[c + ke]];
+			nu[i] = has_n || over_n ? rn[cn[c]] : ctr;
+			sd[i] = has_s || over_s ? rs[cs[c]] : ctr;
+		}
+		normalmap_row(we, ea, nu, sd, fx, fy, out, w);
+		if (!ring) { /* west of wend the west end is cut, from estart the east end */
+			int64_t wend = k - du0, estart = (int64_t)q->w - du0 - k;
+			wend = wend < 0 ? 0 : wend < (int64_t)w ? wend : (int64_t)w;
+			estart = estart < wend ? wend : estart < (int64_t)w ? estart : (int64_t)w;
+			for (int64_t i = 0; i < wend; i++)
+				derive_cut(q, du0 + i, k, r, dlam, fy, we, ea, nu, sd, i, out);
+			for (int64_t i = estart; i < (int64_t)w; i++)
+				derive_cut(q, du0 + i, k, r, dlam, fy, we, ea, nu, sd, i, out);
 		}
 	}
 	cm->st.normals_derived += (uint64_t)w * h;
@@ -706,7 +766,7 @@ static void derive_rect(struct view_clipmap *cm, const struct level *L, int leve
 
 /* After region g of the heights changed: its normals and those of the texels round it
  * (their stencils reach into it), inside the window. */
-static void derive_region(struct view_clipmap *cm, const struct level *L, int level,
+static void derive_region(struct view_clipmap *cm, struct level *L, int level,
 			  const struct grid_quad *q, const struct grid_region *g)
 {
 	const int64_t W = (int64_t)grid_tiles_x(q->lx) * cm->T;
