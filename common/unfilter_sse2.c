@@ -147,23 +147,24 @@ static inline __attribute__((always_inline)) void f32_rows(uint32_t T, enum tfil
 	}
 }
 
+/* u8_rows with the filter a constant in each call (nc a constant from the caller). */
+static inline __attribute__((always_inline)) void u8_any(uint32_t T, unsigned nc,
+							enum tfilter f, const void *in, void *out)
+{
+	if (f == TFILTER_DELTA)
+		u8_rows(T, nc, TFILTER_DELTA, in, out);
+	else if (f == TFILTER_GRAD)
+		u8_rows(T, nc, TFILTER_GRAD, in, out);
+	else
+		u8_rows(T, nc, TFILTER_XOR, in, out);
+}
+
 void unfilter_u8_sse2(uint32_t T, unsigned nc, enum tfilter f, const void *in, void *out)
 {
-	if (nc == 4) {
-		if (f == TFILTER_DELTA)
-			u8_rows(T, 4, TFILTER_DELTA, in, out);
-		else if (f == TFILTER_GRAD)
-			u8_rows(T, 4, TFILTER_GRAD, in, out);
-		else
-			u8_rows(T, 4, TFILTER_XOR, in, out);
-	} else {
-		if (f == TFILTER_DELTA)
-			u8_rows(T, 2, TFILTER_DELTA, in, out);
-		else if (f == TFILTER_GRAD)
-			u8_rows(T, 2, TFILTER_GRAD, in, out);
-		else
-			u8_rows(T, 2, TFILTER_XOR, in, out);
-	}
+	if (nc == 4)
+		u8_any(T, 4, f, in, out);
+	else
+		u8_any(T, 2, f, in, out);
 }
 
 void unfilter_f32_sse2(uint32_t T, enum tfilter f, const void *in, void *out, uint32_t *rows)

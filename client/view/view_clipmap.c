@@ -652,18 +652,19 @@ static void upload_normals(struct view_clipmap *cm, int level, int64_t W, int64_
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, (GLint)cm->T);
 }
 
-/* Texel i of a row whose east stencil the window cuts (west: texels west of it in the
- * window): its normal again, with the stencil's own length. */
+/* A texel whose east stencil the window cuts (west: texels west of it in the window; c: its
+ * index in col, the row's mirror columns): its normal again, with the stencil's ends and
+ * length cut to the window. */
 static void derive_cut(const struct grid_quad *q, int64_t west, int64_t k, double r, double dlam,
-		       float fy, const float *we, const float *ea, const float *nu,
-		       const float *sd, int64_t i, uint8_t *out)
+		       float fy, const float *row, const uint32_t *col, uint32_t c, float up,
+		       float dn, uint8_t *out)
 {
 	int64_t east = (int64_t)q->w - 1 - west;
 	int64_t kw = west < k ? west : k, ke = east < k ? east : k;
 	float f = kw + ke == 0
 			  ? 0.0f
 			  : (float)(1.0 / (r * (sin((double)kw * dlam) + sin((double)ke * dlam))));
-	normalmap_texel(we[i], ea[i], nu[i], sd[i], f, fy, out + 2 * i);
+	normalmap_texel(row[col[c - kw]], row[col[c + ke]], up, dn, f, fy, out);
 }
 
 /* The normals of level texels [u0, u0 + w) × [v0, v0 + h) (inside the held window q) from the
@@ -731,20 +732,14 @@ static void derive_rect(struct view_clipmap *cm, struct level *L, int level,
 		const uint32_t *cn = has_n || !over_n ? col : colp, *cs = has_s || !over_s ? col : colp;
 		uint8_t *out = cm->nbuf + (size_t)j * w * 2;
 		/* the stencils' heights gathered into rows, then normalmap_row over them all
-		 * with the row's east factor; texels whose stencil the window cuts (only when
+		 * with the row's east stencil; texels whose stencil the window cuts (only when
 		 * it does not hold whole parallels) are made again with their own */
 		float *we = cm->nrow, *ea = we + w, *nu = ea + w, *sd = nu + w;
 		for (uint32_t i = 0; i < w; i++) {
 			uint32_t c = i + kmax; /* this texel in col */
-			int64_t kw = k, ke = k;
-			if (!ring) { /* cut to the window */
-				int64_t west = du0 + i, east = (int64_t)q->w - 1 - west;
-				kw = west < k ? west : k;
-				ke = east < k ? east : k;
-			}
 			float ctr = row[col[c]];
-			we[i] = row[col[c - kw]];
-			ea[i] = row[col[c + ke]];
+			we[i] = row[col[c - k]];
+			ea[i] = row[col[c + k]];
 			nu[i] = has_n || over_n ? rn[cn[c]] : ctr;
 			sd[i] = has_s || over_s ? rs[cs[c]] : ctr;
 		}
@@ -754,9 +749,11 @@ static void derive_rect(struct view_clipmap *cm, struct level *L, int level,
 			wend = wend < 0 ? 0 : wend < (int64_t)w ? wend : (int64_t)w;
 			estart = estart < wend ? wend : estart < (int64_t)w ? estart : (int64_t)w;
 			for (int64_t i = 0; i < wend; i++)
-				derive_cut(q, du0 + i, k, r, dlam, fy, we, ea, nu, sd, i, out);
+				derive_cut(q, du0 + i, k, r, dlam, fy, row, col, (uint32_t)i + kmax,
+					   nu[i], sd[i], out + 2 * i);
 			for (int64_t i = estart; i < (int64_t)w; i++)
-				derive_cut(q, du0 + i, k, r, dlam, fy, we, ea, nu, sd, i, out);
+				derive_cut(q, du0 + i, k, r, dlam, fy, row, col, (uint32_t)i + kmax,
+					   nu[i], sd[i], out + 2 * i);
 		}
 	}
 	cm->st.normals_derived += (uint64_t)w * h;
