@@ -21,47 +21,17 @@
 #include "engine/nodes/noise.h"
 #include "engine/planet.h"
 #include "engine/sched.h"
+#include "support/planet_variant.h"
 
 #define PLANET "conf/planets/procedural.ini"
 #define RUNS 5
 
-static char planet_fp[64], planet_direct[64];
+static char planet_fp[64], planet_direct[64]; /* from_parent, direct (planet_variant.h) */
 
-/* Two variants of the shipped procedural planet: `from_parent = true` on every fBm node
- * (planet_fp), and none (planet_direct, the direct evaluation), whatever the shipped file
- * sets. */
 static int write_planets(void)
 {
-	FILE *in = fopen(PLANET, "r");
-	if (!in)
-		return -1;
-	snprintf(planet_fp, sizeof planet_fp, "/tmp/%s_%d.ini", "bench_noise_parent", (int)getpid());
-	snprintf(planet_direct, sizeof planet_direct, "/tmp/%s_d%d.ini", "bench_noise_parent", (int)getpid());
-	FILE *fp = fopen(planet_fp, "w"), *fd = fopen(planet_direct, "w");
-	if (!fp || !fd) {
-		fclose(in);
-		if (fp)
-			fclose(fp);
-		if (fd)
-			fclose(fd);
-		return -1;
-	}
-	char line[4096];
-	int n = 0;
-	while (fgets(line, sizeof line, in)) {
-		if (strncmp(line, "from_parent", 11) == 0)
-			continue;
-		fputs(line, fp);
-		fputs(line, fd);
-		if (strncmp(line, "kind = fbm", 10) == 0) {
-			fputs("from_parent = true\n", fp);
-			n++;
-		}
-	}
-	fclose(in);
-	fclose(fp);
-	fclose(fd);
-	return n > 0 ? 0 : -1;
+	return planet_variant_write(PLANET, "bench_noise_parent", planet_fp, planet_direct,
+				    sizeof planet_fp);
 }
 
 static struct tile_key at(int lx, int ly, double lon, double lat, uint32_t T, uint64_t node)
@@ -113,13 +83,17 @@ int main(void)
 {
 	char err[256];
 	struct planet *pd, *pp;
-	if (write_planets() || planet_load(planet_direct, &pd, err) ||
-	    planet_load(planet_fp, &pp, err)) {
+	if (write_planets()) {
+		fprintf(stderr, "bench_noise_parent: cannot write the variants of %s to /tmp\n", PLANET);
+		return 1;
+	}
+	int bad = planet_load(planet_direct, &pd, err) || planet_load(planet_fp, &pp, err);
+	unlink(planet_fp);
+	unlink(planet_direct);
+	if (bad) {
 		fprintf(stderr, "bench_noise_parent: %s\n", err);
 		return 1;
 	}
-	unlink(planet_fp);
-	unlink(planet_direct);
 	const uint32_t T = pd->tile_size;
 	struct cache *c = cache_create(1024u << 20);
 	struct sched *s = sched_create(&(struct sched_desc){ .cache = c, .workers = 2 });

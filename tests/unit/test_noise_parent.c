@@ -30,6 +30,7 @@
 #include "engine/nodes/noise.h"
 #include "engine/planet.h"
 #include "engine/sched.h"
+#include "support/planet_variant.h"
 
 #define PLANET "conf/planets/procedural.ini"
 
@@ -42,53 +43,12 @@
 #define BOUND_TERRAIN_DEEP_M 0.1 /* ly ≥ 15 */
 #define BOUND_SEAM_REL 3e-3 /* the step across a tile edge, pole or antimeridian */
 
-static char planet_fp[64], planet_direct[64];
+static char planet_fp[64], planet_direct[64]; /* from_parent, direct (planet_variant.h) */
 
-/* Two variants of the shipped procedural planet: `from_parent = true` on every fBm node
- * (planet_fp), and none (planet_direct, the direct evaluation), whatever the shipped file
- * sets. */
 static int write_planets(void)
 {
-	FILE *in = fopen(PLANET, "r");
-	if (!in)
-		return -1;
-	snprintf(planet_fp, sizeof planet_fp, "/tmp/%s_%d.ini", "test_noise_parent", (int)getpid());
-	snprintf(planet_direct, sizeof planet_direct, "/tmp/%s_d%d.ini", "test_noise_parent", (int)getpid());
-	FILE *fp = fopen(planet_fp, "w"), *fd = fopen(planet_direct, "w");
-	if (!fp || !fd) {
-		fclose(in);
-		if (fp)
-			fclose(fp);
-		if (fd)
-			fclose(fd);
-		return -1;
-	}
-	char line[4096], dir[PATH_MAX];
-	if (!realpath("conf/planets", dir))
-		snprintf(dir, sizeof dir, "conf/planets");
-	int n = 0;
-	while (fgets(line, sizeof line, in)) {
-		if (strncmp(line, "from_parent", 11) == 0)
-			continue;
-		if (strncmp(line, "path = ", 7) == 0 && line[7] != '/') {
-			/* a data file beside the planet (the site's GeoJSON): by its full path */
-			char abs[PATH_MAX + 4200];
-			snprintf(abs, sizeof abs, "path = %s/%s", dir, line + 7);
-			fputs(abs, fp);
-			fputs(abs, fd);
-			continue;
-		}
-		fputs(line, fp);
-		fputs(line, fd);
-		if (strncmp(line, "kind = fbm", 10) == 0) {
-			fputs("from_parent = true\n", fp);
-			n++;
-		}
-	}
-	fclose(in);
-	fclose(fp);
-	fclose(fd);
-	return n > 0 ? 0 : -1;
+	return planet_variant_write(PLANET, "test_noise_parent", planet_fp, planet_direct,
+				    sizeof planet_fp);
 }
 
 struct env {
