@@ -18,7 +18,7 @@ static bool is_counter(const char *key)
 					  "write_drops", "write_errors", "sent", "dropped",
 					  "stale",   "refused",	  "auth_failures", "requests",
 					  "writes",  "drops",	  "bad",	  "waits",
-					  "takeovers", "errors", "expired", "handshakes", "reloads" };
+					  "takeovers", "errors", "expired", "handshakes", "reloads", "skipped" };
 	const char *last = strrchr(key, '.');
 	last = last ? last + 1 : key;
 	for (size_t i = 0; i < sizeof ev / sizeof ev[0]; i++)

@@ -542,6 +542,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "sched.workers.busy", ss.running);
 	stat_u(&b, "sched.generated", ss.generated);
 	stat_u(&b, "sched.merged", ss.merged);
+	stat_u(&b, "sched.skipped", ss.skipped);
 	stat_u(&b, "sched.cancelled", ss.cancelled);
 	stat_u(&b, "sched.failed", ss.failed);
 	stat_u(&b, "cache.bytes", cs.bytes);

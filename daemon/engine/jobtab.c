@@ -279,13 +279,56 @@ static void link_dep(struct job *j, int k, struct job *dj)
 	dj->dependents[dj->ndependents++] = j;
 }
 
+static int deps_of(const struct job *j, struct node_dep *deps)
+{
+	const struct node *node = j->node;
+	return node->type->deps ? node->type->deps(node, &j->key, deps)
+				: node_default_deps(node, &j->key, deps);
+}
+
+/* Links j to the job making dependency k (or holds the cached tile). */
+static struct job *hold_or_link(struct jobgraph *g, struct job *j, int k, const struct node_dep *d)
+{
+	struct job *dj = jobmap_find(&g->map, &d->key);
+	if (dj) {
+		atomic_fetch_add(&g->merged, 1);
+	} else {
+		j->in[k] = cache_lookup(g->cache, &d->key);
+		if (j->in[k])
+			return NULL;
+		dj = jobgraph_create(g, d->node, &d->key);
+	}
+	link_dep(j, k, dj);
+	return dj;
+}
+
+/* j holds every dependency but its lazy ones: asks the node which of those it needs and
+ * makes (or holds) them, each new job at j's priority. */
+static void open_lazy(struct jobgraph *g, struct job *j)
+{
+	struct node_dep deps[NODE_MAX_DEPS];
+	uint32_t lazy = j->lazy;
+	j->lazy = 0;
+	int nd = deps_of(j, deps);
+	for (int k = 0; k < nd && k < j->nin; k++) {
+		if (!(lazy & 1u << k))
+			continue;
+		if (!j->node->type->needed(j->node, k, j->in, j->nin)) {
+			atomic_fetch_add(&g->skipped, 1);
+			continue;
+		}
+		struct job *dj = hold_or_link(g, j, k, &deps[k]);
+		if (dj)
+			jobgraph_visit(g, dj, &j->prio);
+	}
+}
+
 /* Creates j's missing dependencies (or holds cached ones) and queues j when none is missing. */
 static void resolve(struct jobgraph *g, struct job *j)
 {
 	struct node_dep deps[NODE_MAX_DEPS];
 	struct node *node = j->node;
-	int nd = node->type->deps ? node->type->deps(node, &j->key, deps)
-				  : node_default_deps(node, &j->key, deps);
+	int nd = deps_of(j, deps);
 	if (nd < 0 || nd > NODE_MAX_DEPS) {
 		j->err = nd < 0 ? nd : -E2BIG;
 		j->mstate = JOB_SUBMITTED;
@@ -298,18 +341,29 @@ static void resolve(struct jobgraph *g, struct job *j)
 		j->dep = xcalloc(NODE_MAX_DEPS, sizeof *j->dep);
 	}
 	j->nin = nd;
-	for (int k = 0; k < nd; k++) {
+	j->lazy = node->type->lazy && node->type->needed ? node->type->lazy(node, &j->key) : 0;
+	j->lazy &= nd < 32 ? (1u << nd) - 1 : ~0u;
+	for (int k = 0; k < nd; k++)
+		if (!(j->lazy & 1u << k))
+			hold_or_link(g, j, k, &deps[k]);
+	/* A lazy input that is cached or being made anyway (often by the other inputs' own
+	 * subgraphs, just created) costs nothing: hold it now rather than miss it later, when the
+	 * cache may have let it go. */
+	for (int k = 0; k < nd && j->lazy; k++) {
+		if (!(j->lazy & 1u << k))
+			continue;
 		struct job *dj = jobmap_find(&g->map, &deps[k].key);
 		if (dj) {
 			atomic_fetch_add(&g->merged, 1);
-		} else {
-			j->in[k] = cache_lookup(g->cache, &deps[k].key);
-			if (j->in[k])
-				continue;
-			dj = jobgraph_create(g, deps[k].node, &deps[k].key);
+			link_dep(j, k, dj);
+		} else if (!cache_contains(g->cache, &deps[k].key) ||
+			   !(j->in[k] = cache_lookup(g->cache, &deps[k].key))) {
+			continue; /* (not counted as a miss: nobody asked for it yet) */
 		}
-		link_dep(j, k, dj);
+		j->lazy &= ~(1u << k);
 	}
+	if (j->missing == 0 && j->lazy)
+		open_lazy(g, j); /* its new jobs get j's priority when the caller visits j */
 	if (j->missing == 0) {
 		j->mstate = JOB_SUBMITTED;
 		jobgraph_ready(g, j);
@@ -450,6 +504,8 @@ void jobgraph_complete(struct jobgraph *g, struct job *j)
 			d->in[k] = tile_ref(t);
 			d->missing--;
 		}
+		if (d->missing == 0 && d->lazy)
+			open_lazy(g, d);
 		if (d->missing == 0) {
 			waiting_del(g, d);
 			d->mstate = JOB_SUBMITTED;
@@ -479,6 +535,7 @@ void jobgraph_init(struct jobgraph *g, struct cache *c,
 	g->report = report;
 	g->ud = ud;
 	atomic_init(&g->merged, 0);
+	atomic_init(&g->skipped, 0);
 	atomic_init(&g->waiting, 0);
 	atomic_init(&g->cancelled, 0);
 	atomic_init(&g->failed, 0);

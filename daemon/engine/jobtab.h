@@ -73,6 +73,7 @@ struct job {
 	uint64_t mark; /* epoch of the last marking pass that reached it */
 	struct job_prio prio;
 	int nin, missing;
+	uint32_t lazy;	   /* deps not made yet, until the others are held (node_type.lazy) */
 	struct tile **in;  /* held inputs (owned references): nin slots, in_s or allocated */
 	struct job **dep;  /* pending input jobs (NULL once held): nin slots, dep_s or allocated */
 	struct tile *in_s[JOB_INLINE_DEPS];
@@ -145,6 +146,7 @@ struct jobgraph {
 	void (*report)(void *ud, const struct job_wanter *w, struct tile *t, int err);
 	void *ud;
 	atomic_uint_fast64_t merged, waiting, cancelled, failed;
+	atomic_uint_fast64_t skipped; /* lazy dependencies found not needed (node_type.lazy) */
 };
 
 void jobgraph_init(struct jobgraph *g, struct cache *c,

@@ -333,3 +333,48 @@ void node_count_generation(struct node *n, uint64_t ns)
 	atomic_fetch_add(&n->gen_ns, ns);
 	atomic_fetch_add(&n->gen_hist[b], 1);
 }
+
+static bool among(const struct node *n, const struct node *const *set, int ns)
+{
+	for (int i = 0; i < ns; i++)
+		if (set[i] == n)
+			return true;
+	return false;
+}
+
+/* Adds every node reachable from n to seen[] (up to cap entries; a deeper graph is cut),
+ * not going past a node in stop[0..nstop) (nor adding it), nor, with lazy_too false, along
+ * an input the node makes lazily (a type with the default deps, whose lazy bits are its
+ * present inputs in slot order): work behind such an edge is not "needed anyway". */
+static void reach(const struct node *n, const struct node **seen, int *ns, int cap,
+		  const struct node *const *stop, int nstop, bool lazy_too)
+{
+	if (!n || among(n, seen, *ns) || among(n, stop, nstop) || *ns == cap)
+		return;
+	seen[(*ns)++] = n;
+	uint32_t lazy = 0;
+	if (!lazy_too && n->type && n->type->lazy && n->type->needed && !n->type->deps)
+		lazy = n->type->lazy(n, NULL);
+	for (int i = 0, d = 0; i < NODE_MAX_INPUTS; i++) {
+		if (!n->in[i])
+			continue;
+		if (!(lazy & 1u << d++))
+			reach(n->in[i], seen, ns, cap, stop, nstop, lazy_too);
+	}
+}
+
+bool node_exclusive_costly(const struct node *from, const struct node *const *others, int n)
+{
+	enum { CAP = 1024 };
+	const struct node **shared = xmalloc(2 * CAP * sizeof *shared), **mine = shared + CAP;
+	int ns = 0, nm = 0;
+	for (int i = 0; i < n; i++)
+		reach(others[i], shared, &ns, CAP, NULL, 0, false);
+	/* what only b needs: a node the others need anyway is theirs, with all below it */
+	reach(from, mine, &nm, CAP, shared, ns, true);
+	bool costly = false;
+	for (int i = 0; i < nm && !costly; i++)
+		costly = mine[i]->type && mine[i]->type->costly;
+	free(shared);
+	return costly;
+}

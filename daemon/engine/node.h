@@ -91,6 +91,19 @@ struct node_type {
 	 * in deps() order. No locks held. Returns 0 or -errno (e.g. -EIO on an unreadable file). */
 	int (*generate)(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			struct tile *const *in, int nin, struct tile *out);
+	/* Optional, both or neither: dependencies that may prove not needed (a blend's b where
+	 * its mask is 0 on the whole tile). lazy() names them (bits, in deps() order); the
+	 * scheduler makes the others first and, once it holds them all, asks needed() about
+	 * each lazy one (in[] holds the others, NULL in the lazy slots) and makes only those it
+	 * says yes to; generate() gets NULL for the rest. The output must be the same bytes
+	 * whether a dependency was skipped or not: what needed() refuses must be what generate()
+	 * would not have read. Any thread, like deps(); k NULL: the bits for every key (a type
+	 * whose lazy inputs depend on the key must then name them all). */
+	uint32_t (*lazy)(const struct node *n, const struct tile_key *k);
+	bool (*needed)(const struct node *n, int k, struct tile *const *in, int nin);
+	/* Tiles of this type cost far more than a per-texel filter's (noise, craters): worth
+	 * leaving out where a lazy input allows (node_exclusive_costly). */
+	bool costly;
 };
 
 #define NODE_GEN_BUCKETS 12 /* 0.25, 0.5, 1, … 256 ms, and longer */
@@ -132,6 +145,10 @@ int node_opt_height_input(const struct node *n, struct tile *const *in, int nin,
 void node_fini(struct node *n);
 /* Node deps() helper: key k on every present input. */
 int node_default_deps(const struct node *n, const struct tile_key *k, struct node_dep *out);
+/* Whether a node reachable from `from` but from none of others[0..n) (NULL entries skipped;
+ * their inputs that are themselves lazy not followed) is of a costly type: what skipping
+ * `from` would save besides cheap filters. */
+bool node_exclusive_costly(const struct node *from, const struct node *const *others, int n);
 /* The node type registry. */
 const struct node_type *node_type_find(const char *name);
 /* NULL-terminated list of every node type. */

@@ -955,6 +955,7 @@ void sched_get_stats(struct sched *s, struct sched_stats *out)
 	out->generated = atomic_load(&s->generated);
 	out->loaded = atomic_load(&s->loaded);
 	out->merged = atomic_load(&s->g.merged);
+	out->skipped = atomic_load(&s->g.skipped);
 	out->cancelled = atomic_load(&s->g.cancelled);
 	out->failed = atomic_load(&s->g.failed);
 	out->workers = s->nworkers;

@@ -69,6 +69,7 @@ struct sched_stats {
 	uint64_t generated;	       /* tiles generated since start */
 	uint64_t loaded;	       /* tiles loaded from the store since start */
 	uint64_t merged;	       /* wants that joined existing work instead of adding a job */
+	uint64_t skipped;	       /* inputs found not needed before they were made (node.h lazy) */
 	uint64_t cancelled;	       /* queued jobs dropped because nobody wanted them */
 	uint64_t failed;	       /* generations that returned an error */
 	int workers;

@@ -5,12 +5,19 @@
  *             a takes b (NaN is "no data").
  *   mask      lerp(a, b, clamp(mask, 0, 1) × opacity) on every channel (needs `mask`).
  *   add       heights only: a + b × weight × opacity × mask.
+ *   Heights are a's own where the weight is 0 (version 2: a NaN in b there no longer reached
+ *   an add's sum, and −0 stays −0).
  *   multiply  colour only: rgb = lerp(a, a·b/255, opacity × mask); alpha stays a's.
+ * With a mask that is 0 (or NaN) over a whole tile the output is a, and b is not made at all
+ * (node_type.lazy): a noise masked to a small part of the planet costs nothing elsewhere.
+ * Except where a decides it (a NaN height in a takes b; over on colours clears a texel whose
+ * a and b are both transparent): then b is made as usual.
  * Thread-safety: parameters are set in create and only read by generate.
  */
 #include <errno.h>
 #include <stdint.h>
 #include <stdlib.h>
+#include <string.h>
 
 #include "common/xalloc.h"
 #include "engine/node_types.h"
@@ -21,6 +28,7 @@ static const char *const blend_modes[] = { "over", "mask", "add", "multiply", NU
 
 struct blend {
 	int mode;
+	bool lazy_b; /* b is made only where the mask lets it through (blend_lazy) */
 	float opacity, weight;
 	uint32_t kb[256]; /* over, colour, no mask: b's weight in 1/65536 by b's alpha */
 };
@@ -52,6 +60,12 @@ static int blend_create(struct node *n, struct node_parse *p)
 	b->weight = (float)weight;
 	for (int a = 0; a < 256; a++)
 		b->kb[a] = (uint32_t)(a * b->opacity * (65536.0f / 255) + 0.5f);
+	/* Deferring b pays only where skipping it saves costly work that a and the mask do not
+	 * need anyway; elsewhere it would only make b's inputs later, when the cache may have
+	 * let them go (measured: Earth's colour blends over its dunes and canopy made those
+	 * again). */
+	const struct node *others[2] = { n->in[SLOT_A], n->in[SLOT_MASK] };
+	b->lazy_b = n->in[SLOT_MASK] && node_exclusive_costly(n->in[SLOT_B], others, 2);
 	n->impl = b;
 	n->out = ta;
 	return 0;
@@ -80,10 +94,10 @@ static void blend_heights(const struct blend *bl, const float *a, const float *b
 		float x = a[i], y = b[i];
 		switch (bl->mode) {
 		case BLEND_ADD:
-			o[i] = x + y * (bl->weight * w);
+			o[i] = w > 0.0f ? x + y * (bl->weight * w) : x;
 			break;
 		default: /* over, mask */
-			o[i] = y != y ? x : x != x ? y : x + (y - x) * w;
+			o[i] = y != y ? x : x != x ? y : w > 0.0f ? x + (y - x) * w : x;
 			break;
 		}
 	}
@@ -154,6 +168,53 @@ static void blend_bytes(const struct blend *bl, const uint8_t *a, const uint8_t 
 	}
 }
 
+/* b may be skipped when the mask is given (deps: a, b, mask). */
+static uint32_t blend_lazy(const struct node *n, const struct tile_key *k)
+{
+	(void)k;
+	const struct blend *bl = n->impl;
+	return bl->lazy_b ? 1u << SLOT_B : 0;
+}
+
+/* Whether every weight of the mask tile is 0 (≤ 0 or NaN: weight_at). */
+static bool mask_zero(const float *m, size_t count)
+{
+	int any = 0;
+	for (size_t i = 0; i < count; i++)
+		any |= m[i] > 0.0f; /* no early exit: a whole zero tile is the case that pays */
+	return !any;
+}
+
+/* Whether a, at weight 0 everywhere, gives itself whatever b holds (the header's exceptions). */
+static bool a_decides(const struct blend *bl, const struct tile *a)
+{
+	size_t count = (size_t)a->size * a->size;
+	if (a->type == PIX_HEIGHT && bl->mode != BLEND_ADD) {
+		const float *x = tile_f32(a);
+		int nan = 0;
+		for (size_t i = 0; i < count; i++)
+			nan |= x[i] != x[i];
+		return !nan;
+	}
+	if (a->type == PIX_COLOR && bl->mode == BLEND_OVER) {
+		int clear = 0;
+		for (size_t i = 0; i < count; i++)
+			clear |= a->data[4 * i + 3] == 0;
+		return !clear;
+	}
+	return true;
+}
+
+static bool blend_needed(const struct node *n, int k, struct tile *const *in, int nin)
+{
+	const struct blend *bl = n->impl;
+	if (k != SLOT_B || nin < 3 || !in[SLOT_A] || !in[SLOT_MASK] ||
+	    in[SLOT_MASK]->type != PIX_HEIGHT || in[SLOT_MASK]->size != in[SLOT_A]->size)
+		return true;
+	size_t count = (size_t)in[SLOT_A]->size * in[SLOT_A]->size;
+	return !mask_zero(tile_f32(in[SLOT_MASK]), count) || !a_decides(bl, in[SLOT_A]);
+}
+
 static int blend_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			  struct tile *const *in, int nin, struct tile *out)
 {
@@ -164,10 +225,19 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 	if (nin < want)
 		return -EINVAL;
 	for (int i = 0; i < want; i++)
-		if (in[i]->size != out->size || in[i]->type != (i == 2 ? PIX_HEIGHT : out->type))
+		if ((!in[i] && i != SLOT_B) ||
+		    (in[i] && (in[i]->size != out->size ||
+			       in[i]->type != (i == 2 ? PIX_HEIGHT : out->type))))
 			return -EINVAL;
 	const float *mask = want == 3 ? tile_f32(in[2]) : NULL;
 	size_t count = (size_t)out->size * out->size;
+	if (!in[SLOT_B]) {
+		/* skipped (blend_needed): the mask is 0 everywhere and a decides */
+		if (!mask)
+			return -EINVAL;
+		memcpy(out->data, in[SLOT_A]->data, out->nbytes);
+		return 0;
+	}
 	if (out->type == PIX_HEIGHT)
 		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
 	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && !mask)
@@ -187,10 +257,12 @@ static const struct node_slot blend_slots[] = {
 const struct node_type node_type_blend = {
 	.name = "blend",
 	.doc = "combine two inputs: over, mask, add (heights), multiply (colours)",
-	.version = 1,
+	.version = 2, /* 2: add gives a where the weight is 0 */
 	.slots = blend_slots,
 	.nslots = 3,
 	.create = blend_create,
 	.destroy = node_free_impl,
 	.generate = blend_generate,
+	.lazy = blend_lazy,
+	.needed = blend_needed,
 };

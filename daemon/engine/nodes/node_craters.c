@@ -104,6 +104,7 @@ const struct node_type node_type_craters = {
 	.version = 2, /* 2: classes that bend over a texel fade out at the poles */
 	.slots = slots,
 	.nslots = 1,
+	.costly = true,
 	.create = craters_create,
 	.destroy = node_free_impl,
 	.deps = NULL,

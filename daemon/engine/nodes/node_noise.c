@@ -259,6 +259,7 @@ const struct node_type node_type_noise = {
 		       * (warp: new keys, hashed; without them the same bytes) */
 	.slots = slots,
 	.nslots = 1,
+	.costly = true,
 	.create = noise_create,
 	.destroy = node_free_impl,
 	.deps = noise_deps,

@@ -267,6 +267,7 @@ const struct node_type node_type_open_sea = {
 	.doc = "where a sea may lie: the ocean and large closed basins, not dry depressions",
 	.version = 1,
 	.nslots = 0,
+	.costly = true,
 	.create = os_create,
 	.destroy = os_destroy,
 	.generate = os_generate,
