@@ -147,7 +147,19 @@ struct jobgraph {
 	void *ud;
 	atomic_uint_fast64_t merged, waiting, cancelled, failed;
 	atomic_uint_fast64_t skipped; /* lazy dependencies found not needed (node_type.lazy) */
+	/* Keys whose lazy inputs were found not needed lately (skipped, or made and found so by
+	 * generate: tile.lazy_unneeded): a
+	 * job defers its lazy inputs only when its parent key's were not needed. Two generations
+	 * of up to JOBGRAPH_SKIPMEM / 2 keys each (open addressing, JOBGRAPH_SKIPMEM slots); when
+	 * the newer fills, the older is dropped. Allocated on first use. */
+	struct skipset {
+		struct tile_key *k;
+		uint64_t *h; /* 0: an empty slot */
+		size_t n;
+	} skip[2];
 };
+
+#define JOBGRAPH_SKIPMEM (1u << 15)
 
 void jobgraph_init(struct jobgraph *g, struct cache *c,
 		   void (*report)(void *ud, const struct job_wanter *w, struct tile *t, int err),

@@ -92,10 +92,12 @@ struct node_type {
 	int (*generate)(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			struct tile *const *in, int nin, struct tile *out);
 	/* Optional, both or neither: dependencies that may prove not needed (a blend's b where
-	 * its mask is 0 on the whole tile). lazy() names them (bits, in deps() order); the
-	 * scheduler makes the others first and, once it holds them all, asks needed() about
-	 * each lazy one (in[] holds the others, NULL in the lazy slots) and makes only those it
-	 * says yes to; generate() gets NULL for the rest. The output must be the same bytes
+	 * its mask is 0 on the whole tile). lazy() names them (bits, in deps() order). Where the
+	 * parent key's were not needed lately (jobtab's skip memory: a skip, or generate()
+	 * setting tile.lazy_unneeded) the scheduler makes the others first and, once it holds
+	 * them all, asks needed() about each lazy one (in[] holds the others, NULL in the lazy
+	 * slots) and makes only those it says yes to; generate() gets NULL for the rest.
+	 * Elsewhere they are made at once like any input. The output must be the same bytes
 	 * whether a dependency was skipped or not: what needed() refuses must be what generate()
 	 * would not have read. Any thread, like deps(); k NULL: the bits for every key (a type
 	 * whose lazy inputs depend on the key must then name them all). */

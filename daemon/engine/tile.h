@@ -29,6 +29,10 @@ struct tile {
 	 * Set once before the tile is shared; the cache evicts cheap tiles first (cache.h). */
 	float cost_ms;
 	bool layer; /* a planet layer's tile (what viewers ask for), not an intermediate one */
+	/* Set by generate(): its node's lazy inputs were not needed for it (a blend's mask 0 on
+	 * the whole tile), whether they were made or not; the scheduler's guess for its children
+	 * (jobtab's skip memory). */
+	bool lazy_unneeded;
 };
 
 /* A new tile with uninitialised data; returns one owned reference (aborts on ENOMEM). */

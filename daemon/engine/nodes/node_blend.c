@@ -236,8 +236,11 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 		if (!mask)
 			return -EINVAL;
 		memcpy(out->data, in[SLOT_A]->data, out->nbytes);
+		out->lazy_unneeded = true;
 		return 0;
 	}
+	if (bl->lazy_b && mask) /* made at once: tell the children whether it was worth it */
+		out->lazy_unneeded = mask_zero(mask, count);
 	if (out->type == PIX_HEIGHT)
 		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
 	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && !mask)
