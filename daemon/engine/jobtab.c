@@ -284,7 +284,9 @@ static void link_dep(struct job *j, int k, struct job *dj)
  * chain: over land a cold flight at 6000 m fell from 96 % to 50-61 % full frames, measured).
  * A tile's mask is much like its parent's, so a job defers only where its parent key (level
  * lx - 1, ly - 1: its quarter) found them not needed; the top levels, and keys whose parent
- * was not made lately, make them at once, as before there were lazy inputs. */
+ * was not made lately, make them at once, as before there were lazy inputs. The table is
+ * exact (whole keys compared), so a guess is never another key's. */
+
 /* The slot of k in s: where it is, or the empty one where it would go. */
 static size_t skip_slot(const struct skipset *s, const struct tile_key *k, uint64_t h)
 {
