@@ -342,15 +342,19 @@ static int deps_of(const struct job *j, struct node_dep *deps)
 				: node_default_deps(node, &j->key, deps);
 }
 
-/* Links j to the job making dependency k (or holds the cached tile). */
-static struct job *hold_or_link(struct jobgraph *g, struct job *j, int k, const struct node_dep *d)
+/* Links j to the job making dependency k, or holds the cached tile, or (create) makes the
+ * job. Returns the job linked (NULL: held, or absent without create). Without create it
+ * only looks: an absent tile is not counted as a cache miss (nobody asked for it yet). */
+static struct job *hold_or_link(struct jobgraph *g, struct job *j, int k, const struct node_dep *d,
+				bool create)
 {
 	struct job *dj = jobmap_find(&g->map, &d->key);
 	if (dj) {
 		atomic_fetch_add(&g->merged, 1);
 	} else {
-		j->in[k] = cache_lookup(g->cache, &d->key);
-		if (j->in[k])
+		if (create || cache_contains(g->cache, &d->key))
+			j->in[k] = cache_lookup(g->cache, &d->key);
+		if (j->in[k] || !create)
 			return NULL;
 		dj = jobgraph_create(g, d->node, &d->key);
 	}
@@ -374,7 +378,7 @@ static void open_lazy(struct jobgraph *g, struct job *j)
 			skip_remember(g, &j->key);
 			continue;
 		}
-		struct job *dj = hold_or_link(g, j, k, &deps[k]);
+		struct job *dj = hold_or_link(g, j, k, &deps[k], true);
 		if (dj)
 			jobgraph_visit(g, dj, &j->prio);
 	}
@@ -404,23 +408,13 @@ static void resolve(struct jobgraph *g, struct job *j)
 	j->lazy &= nd < 32 ? (1u << nd) - 1 : ~0u;
 	for (int k = 0; k < nd; k++)
 		if (!(j->lazy & 1u << k))
-			hold_or_link(g, j, k, &deps[k]);
+			hold_or_link(g, j, k, &deps[k], true);
 	/* A lazy input that is cached or being made anyway (often by the other inputs' own
 	 * subgraphs, just created) costs nothing: hold it now rather than miss it later, when the
 	 * cache may have let it go. */
-	for (int k = 0; k < nd && j->lazy; k++) {
-		if (!(j->lazy & 1u << k))
-			continue;
-		struct job *dj = jobmap_find(&g->map, &deps[k].key);
-		if (dj) {
-			atomic_fetch_add(&g->merged, 1);
-			link_dep(j, k, dj);
-		} else if (!cache_contains(g->cache, &deps[k].key) ||
-			   !(j->in[k] = cache_lookup(g->cache, &deps[k].key))) {
-			continue; /* (not counted as a miss: nobody asked for it yet) */
-		}
-		j->lazy &= ~(1u << k);
-	}
+	for (int k = 0; k < nd && j->lazy; k++)
+		if ((j->lazy & 1u << k) && (hold_or_link(g, j, k, &deps[k], false) || j->in[k]))
+			j->lazy &= ~(1u << k);
 	if (j->missing == 0 && j->lazy)
 		open_lazy(g, j); /* its new jobs get j's priority when the caller visits j */
 	if (j->missing == 0) {
