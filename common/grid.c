@@ -184,7 +184,33 @@ int grid_quad_tiles(const struct grid_quad *q, uint64_t node, struct tile_key *o
 bool grid_quad_equal(const struct grid_quad *a, const struct grid_quad *b)
 {
 	return a->lx == b->lx && a->ly == b->ly && a->T == b->T && a->S == b->S &&
-	       a->u0 == b->u0 && a->v0 == b->v0;
+	       a->u0 == b->u0 && a->v0 == b->v0 && a->w == b->w && a->h == b->h;
+}
+
+void grid_window_core(const struct grid_quad *q, uint32_t w, struct grid_quad *out)
+{
+	int64_t T = q->T, W = (int64_t)grid_tiles_x(q->lx) * T, H = (int64_t)grid_tiles_y(q->ly) * T;
+	*out = *q;
+	/* columns: the middle of q's (they wrap), unless q holds whole parallels: then all */
+	if (w < q->w && (int64_t)q->w < W) {
+		out->u0 = (q->u0 + (int64_t)(q->w - w) / 2) % W;
+		out->w = w;
+	}
+	/* rows: the middle of q's, unless q was kept inside the level at a pole's edge: then
+	 * the core keeps to that edge too */
+	if (w < q->h) {
+		int64_t v0 = q->v0 + (int64_t)(q->h - w) / 2;
+		if (q->v0 == 0)
+			v0 = 0;
+		else if (q->v0 + (int64_t)q->h >= H)
+			v0 = H - w;
+		out->v0 = v0;
+		out->h = w;
+	}
+	out->tx0 = (uint32_t)(out->u0 / T);
+	out->ty0 = (uint32_t)(out->v0 / T);
+	out->ntx = (uint8_t)((out->u0 % T + out->w + T - 1) / T);
+	out->nty = (uint8_t)((out->v0 % T + out->h + T - 1) / T);
 }
 
 /* Splits [a, a+len) at every tile border inside it and at the edges of [ia, ib) (the part
@@ -238,12 +264,12 @@ int grid_update_regions(const struct grid_quad *prev, const struct grid_quad *ne
 	    prev->S == S) {
 		int64_t du = W <= S ? 0 : wrapped_delta(prev->u0, next->u0, W);
 		int64_t dv = next->v0 - prev->v0;
-		if (du < next->w && du > -(int64_t)next->w && dv < next->h &&
+		if (du < prev->w && du > -(int64_t)next->w && dv < prev->h &&
 		    dv > -(int64_t)next->h) {
 			ia = next->u0 - du;
-			ib = ia + next->w;
+			ib = ia + prev->w;
 			ja = next->v0 - dv;
-			jb = ja + next->h;
+			jb = ja + prev->h;
 		}
 	}
 	int64_t xs[GRID_WINDOW_MAX_TILES + 5], ys[GRID_WINDOW_MAX_TILES + 5];

@@ -99,6 +99,13 @@ void grid_window(int lx, int ly, uint32_t T, uint32_t S, double lon, double lat,
  * set to `node`, row by row from the north-west one. Returns the count. */
 int grid_quad_tiles(const struct grid_quad *q, uint64_t node, struct tile_key *out);
 bool grid_quad_equal(const struct grid_quad *a, const struct grid_quad *b);
+/* The window `w` texels wide and high in the middle of q's window, on q's texture (same S:
+ * texel (u, v) at (u mod S, v mod S)), its rows kept inside the level as q's are: q's core, the
+ * part of it a viewer needs first (view_clipmap: a level is drawn once the tiles its ring needs
+ * are in, before the rest of its window). Where q holds whole parallels the core does too (only
+ * its rows shrink); an extent of q no larger than w stays; so where neither shrinks,
+ * *out = *q. */
+void grid_window_core(const struct grid_quad *q, uint32_t w, struct grid_quad *out);
 
 struct grid_region {
 	uint32_t x, y, w, h; /* texels in the S×S toroidal texture */
@@ -108,6 +115,7 @@ struct grid_region {
 
 /* The regions of `next`'s window that `prev` did not hold (seed 003 §5.2), each inside one
  * tile and one period of the texture: none when nothing changed, a few for a small move.
+ * prev's extent may differ from next's (a core, grid_window_core, growing to its window).
  * prev == NULL, another level/size, or a move of the window's size or more gives the full
  * window (one region per tile it touches). Every texel of the window is in exactly one region
  * or was in prev. out holds GRID_MAX_REGIONS. */

@@ -491,6 +491,35 @@ static int ring_tiles(const struct level *L, struct tile_key out[LINE * LINE])
 	return n;
 }
 
+/* Sorts a window's tiles (grid_quad_tiles' order) from its middle out: by the Chebyshev
+ * distance of each tile's centre from the window's centre (the cores view_clipmap_update
+ * draws first are squares about it), then the Euclidean. Stable; n ≤ GRID_WINDOW_MAX_KEYS. */
+static void middle_out(const struct grid_quad *q, struct tile_key *k, int n)
+{
+	double cu = (double)q->u0 + q->w / 2.0, cv = (double)q->v0 + q->h / 2.0, T = q->T;
+	double key[GRID_WINDOW_MAX_KEYS][2];
+	for (int i = 0; i < n; i++) {
+		double dx = ((double)q->tx0 + i % q->ntx + 0.5) * T - cu;
+		double dy = ((double)q->ty0 + i / q->ntx + 0.5) * T - cv;
+		key[i][0] = fmax(fabs(dx), fabs(dy));
+		key[i][1] = dx * dx + dy * dy;
+	}
+	for (int i = 1; i < n; i++) {
+		struct tile_key kt = k[i];
+		double a = key[i][0], b = key[i][1];
+		int j = i;
+		for (; j > 0 && (key[j - 1][0] > a || (key[j - 1][0] == a && key[j - 1][1] > b));
+		     j--) {
+			k[j] = k[j - 1];
+			key[j][0] = key[j - 1][0];
+			key[j][1] = key[j - 1][1];
+		}
+		k[j] = kt;
+		key[j][0] = a;
+		key[j][1] = b;
+	}
+}
+
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
 			  size_t cap)
 {
@@ -510,12 +539,15 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
 			int nk = pass == 0   ? grid_quad_tiles(&L->target, 0, k)
 				 : pass == 1 ? ring_tiles(L, k)
 					     : nnext + ahead_tiles(L, k + nnext);
-			for (int r = 0; r < VIEW_NROLES; r++) {
-				if (cm->layer[r] < 0)
-					continue;
-				for (int i = 0; i < nk; i++) {
-					bool capped = pass == 2 && i >= nnext;
-					if (find(L, r, &k[i]) || n >= cap ||
+			/* the window from its middle out, each tile's layers together: the cores
+			 * a level is drawn from first arrive first (screen importance: the middle
+			 * is the ground under and around the camera, the nearest on screen) */
+			if (pass == 0)
+				middle_out(&L->target, k, nk);
+			for (int i = 0; i < nk; i++) {
+				bool capped = pass == 2 && i >= nnext;
+				for (int r = 0; r < VIEW_NROLES; r++) {
+					if (cm->layer[r] < 0 || find(L, r, &k[i]) || n >= cap ||
 					    (capped && ahead >= AHEAD_CAP))
 						continue;
 					ahead += capped;
@@ -785,31 +817,30 @@ static void derive_region(struct view_clipmap *cm, struct level *L, int level,
 		derive_rect(cm, L, level, q, ua, va, (uint32_t)(ub - ua), (uint32_t)(vb - va));
 }
 
-int view_clipmap_update(struct view_clipmap *cm, int level)
+/* Copies into the level's textures the regions of window `to` that the held window lacks
+ * (the colour: all of `to` when its slice is stale), if every tile they copy from is here,
+ * for every role; `to` is then held. Returns 1, or 0 (a tile missing: nothing copied). */
+static int upload_window(struct view_clipmap *cm, int level, const struct grid_quad *to,
+			 bool stale)
 {
 	struct level *L = &cm->lv[level];
-	if (!L->has_target)
-		return 0;
-	bool stale = view_clipmap_color_stale(cm, level);
-	if (L->has_held && grid_quad_equal(&L->held, &L->target) && !stale)
-		return 1;
 	/* Heights and normals: the regions the held window lacks. Colour after a layer switch:
 	 * the whole target from the new layer at once, so a slice never holds two layers. */
 	struct grid_region rg[GRID_MAX_REGIONS], whole[GRID_MAX_REGIONS];
-	int nr = grid_update_regions(L->has_held ? &L->held : NULL, &L->target, rg);
+	int nr = grid_update_regions(L->has_held ? &L->held : NULL, to, rg);
 	const struct grid_region *crg = stale ? whole : rg; /* the colour's regions */
-	int ncr = stale ? grid_update_regions(NULL, &L->target, whole) : nr;
+	int ncr = stale ? grid_update_regions(NULL, to, whole) : nr;
 	/* Every tile a region copies from must be here, for every role. */
 	for (int r = 0; r < VIEW_NROLES; r++) {
 		const struct grid_region *g = r == VIEW_COLOR ? crg : rg;
 		for (int i = 0; cm->layer[r] >= 0 && i < (r == VIEW_COLOR ? ncr : nr); i++) {
-			struct tile_key k = { 0, g[i].tx, g[i].ty, L->target.lx, L->target.ly };
+			struct tile_key k = { 0, g[i].tx, g[i].ty, to->lx, to->ly };
 			if (!find(L, r, &k))
 				return 0;
 		}
 	}
 	const struct gl *gl = cm->gl;
-	uint32_t T = cm->T, period = level_period(cm, &L->target);
+	uint32_t T = cm->T, period = level_period(cm, to);
 	gl->PixelStorei(GL_UNPACK_ALIGNMENT, 1);
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, (GLint)T);
 	for (int r = 0; r < VIEW_NROLES; r++) {
@@ -821,7 +852,7 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 		gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[r]);
 		for (int i = 0; i < nrr; i++) {
 			const struct grid_region *g = &rgr[i];
-			struct tile_key k = { 0, g->tx, g->ty, L->target.lx, L->target.ly };
+			struct tile_key k = { 0, g->tx, g->ty, to->lx, to->ly };
 			const struct slot *s = find(L, r, &k);
 			const unsigned char *base = s->t.texels ? s->t.texels : cm->zeros;
 			for (uint32_t x = g->x; x < cm->S; x += period) {
@@ -843,14 +874,69 @@ int view_clipmap_update(struct view_clipmap *cm, int level)
 		if (r == VIEW_HEIGHT && cm->derive) {
 			gl->BindTexture(GL_TEXTURE_2D_ARRAY, cm->tex[VIEW_NORMAL]);
 			for (int i = 0; i < nr; i++)
-				derive_region(cm, L, level, &L->target, &rg[i]);
+				derive_region(cm, L, level, to, &rg[i]);
 		}
 	}
 	gl->PixelStorei(GL_UNPACK_ROW_LENGTH, 0);
-	L->held = L->target;
+	L->held = *to;
 	L->has_held = true;
 	L->cgen = cm->cgen;
 	return 1;
+}
+
+/* How far (texels) window q reaches round the middle of target: the least distance from it
+ * to q's edges (columns unbounded where q holds whole parallels, rows where it reaches the
+ * level's edge); negative when the middle is outside q. */
+static double window_reach(const struct grid_quad *q, const struct grid_quad *target)
+{
+	int64_t W = (int64_t)grid_tiles_x(q->lx) * q->T, H = (int64_t)grid_tiles_y(q->ly) * q->T;
+	if (q->lx != target->lx || q->ly != target->ly)
+		return -INFINITY;
+	double cu = (double)target->u0 + target->w / 2.0, cv = (double)target->v0 + target->h / 2.0;
+	double r = INFINITY;
+	if ((int64_t)q->w < W) {
+		double du = fmod(cu - (double)q->u0, (double)W);
+		if (du < 0)
+			du += (double)W;
+		if (du > (W + q->w) / 2.0)
+			du -= (double)W;
+		r = fmin(du, (double)q->w - du);
+	}
+	if (q->v0 > 0)
+		r = fmin(r, cv - (double)q->v0);
+	if (q->v0 + (int64_t)q->h < H)
+		r = fmin(r, (double)q->v0 + q->h - cv);
+	return r;
+}
+
+int view_clipmap_update(struct view_clipmap *cm, int level)
+{
+	struct level *L = &cm->lv[level];
+	if (!L->has_target)
+		return 0;
+	bool stale = view_clipmap_color_stale(cm, level);
+	if (L->has_held && grid_quad_equal(&L->held, &L->target) && !stale)
+		return 1;
+	if (upload_window(cm, level, &L->target, stale))
+		return 1;
+	/* The target is not all here: its core (the middle half of the window, then the middle
+	 * quarter), as soon as the tiles of one are, where it reaches farther round the
+	 * target's middle than the held window does (never a step back: a held window that
+	 * holds the core, as after a move of a tile, stays). The level's own ring needs the
+	 * quarter (a radius of 3/8 of a tile), the ring it gives detail to the half, only the
+	 * ring two coarser the whole window (common/clipmap.h): with the tiles asked for from
+	 * the middle out (view_clipmap_wants) a level is drawn after 1-4 tiles of each layer
+	 * instead of 16-25. Not during a colour switch (the slice is refilled whole). */
+	double held_reach = L->has_held ? window_reach(&L->held, &L->target) : -INFINITY;
+	for (uint32_t w = cm->S / 2; !stale && w >= cm->T; w /= 2) {
+		struct grid_quad core;
+		grid_window_core(&L->target, w, &core);
+		if (grid_quad_equal(&core, &L->target) || window_reach(&core, &L->target) <= held_reach)
+			break;
+		if (upload_window(cm, level, &core, false))
+			break;
+	}
+	return 0;
 }
 
 const struct grid_quad *view_clipmap_held(const struct view_clipmap *cm, int level)

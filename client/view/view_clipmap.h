@@ -4,7 +4,7 @@
  * lives at (u mod S, v mod S); a level narrower than S repeats across it. Each level has a
  * target window (grid_window: where the camera wants it) and the window its texture holds;
  * when every tile of the target has arrived, only the changed regions are copied
- * (grid_update_regions). Tiles are kept while they are in or next to their level's target
+ * (grid_update_regions); before that, the window's core once its tiles are in. Tiles are kept while they are in or next to their level's target
  * window (the prefetch ring)
  * or ahead of it along the camera's motion (view_clipmap_motion), released otherwise: the
  * client never holds more than that.
@@ -71,7 +71,8 @@ bool view_clipmap_motion(struct view_clipmap *cm, double lon, double lat, double
 void view_clipmap_motion_reset(struct view_clipmap *cm);
 
 /* The want-set for the current targets: every missing tile of every target quad, coarse
- * levels first, then (prefetch) the missing ring tiles — while the camera moves
+ * levels first, each window from its middle out with a tile's layers together (the cores
+ * view_clipmap_update draws first arrive first), then (prefetch) the missing ring tiles — while the camera moves
  * (view_clipmap_motion) only those on the side it moves to — then the missing look-ahead tiles
  * (class VIEW_CLASS_AHEAD, at most 96). Returns the count (≤ cap). */
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
@@ -89,7 +90,11 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
  * (bench_codec), so 13-130 tiles. */
 #define VIEW_RECEIVE_MS 4.0
 int view_clipmap_receive(struct view_clipmap *cm, double until_ms);
-/* If level's target quad is complete, copies the changed regions into the textures.
+/* If level's target quad is complete, copies the changed regions into the textures. Else,
+ * where the tiles of its core are in (grid_window_core: the middle half of the window, else
+ * the middle quarter) and that core reaches farther round the window's middle than what the
+ * texture holds, copies the core: the level can be drawn from it (a ring needs only the
+ * middle of its level's window) before the rest arrives; view_clipmap_held says what is held.
  * Returns 1 when the texture holds the target quad, 0 when tiles are missing. */
 int view_clipmap_update(struct view_clipmap *cm, int level);
 /* The quad level's texture holds, or NULL (nothing uploaded yet). */

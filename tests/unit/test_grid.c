@@ -337,6 +337,19 @@ static void replay(struct sim *s, int lx, int ly)
 		int had = s->have;
 		grid_window(lx, ly, T, S, lon, lat, &next);
 		int64_t copied;
+		if (step % 3 == 1) {
+			/* the viewer's partial level: the window's core first (half or a quarter
+			 * of it, as view_clipmap_update), then the window grown from it */
+			struct grid_quad core;
+			grid_window_core(&next, S / (step % 2 ? 2 : 4), &core);
+			assert_true(core.w <= next.w && core.h <= next.h);
+			assert_true(core.v0 >= next.v0 && core.v0 + core.h <= next.v0 + next.h);
+			apply(s, &core, &copied);
+			apply(s, &next, &copied);
+			assert_int_equal(copied, (int64_t)next.w * next.h -
+							 (int64_t)core.w * core.h);
+			continue;
+		}
 		apply(s, &next, &copied);
 		int64_t all = (int64_t)next.w * next.h;
 		if (had) {
@@ -385,6 +398,51 @@ static void toroidal_updates(void **state)
 	}
 }
 
+/* A window's core: centred in it (the columns wrap), kept to a pole's edge with it, whole
+ * where the level is no wider or taller than the core. */
+static void cores(void **state)
+{
+	(void)state;
+	const uint32_t T = 16, S = 4 * T;
+	struct grid_quad q, c;
+	grid_window(7, 6, T, S, 20.3, 0.2, &q);
+	grid_window_core(&q, S / 2, &c);
+	assert_int_equal(c.w, S / 2);
+	assert_int_equal(c.u0, q.u0 + S / 4);
+	assert_int_equal(c.v0, q.v0 + S / 4);
+	assert_int_equal(c.ntx, (c.u0 % T + S / 2 + T - 1) / T);
+	/* across the antimeridian: u wraps */
+	grid_window(7, 6, T, S, 179.99, 10.0, &q);
+	grid_window_core(&q, S / 4, &c);
+	int64_t W = (int64_t)grid_tiles_x(7) * T;
+	assert_int_equal(c.u0, (q.u0 + 3 * S / 8) % W);
+	assert_true(c.tx0 < grid_tiles_x(7));
+	/* at the north pole the window keeps to the level's first row; so does the core */
+	grid_window(7, 6, T, S, 0.0, 89.9, &q);
+	assert_int_equal(q.v0, 0);
+	grid_window_core(&q, S / 2, &c);
+	assert_int_equal(c.v0, 0);
+	grid_window(7, 6, T, S, 0.0, -89.9, &q);
+	grid_window_core(&q, S / 2, &c);
+	assert_int_equal(c.v0 + c.h, (int64_t)grid_tiles_y(6) * T);
+	/* a level narrower and lower than the core: the window itself */
+	grid_window(1, 1, T, S, 0.0, 0.0, &q);
+	grid_window_core(&q, S / 2, &c);
+	assert_true(grid_quad_equal(&c, &q));
+	/* a window of whole parallels (a polar level): the core keeps every column */
+	grid_window(0, 3, T, S, 0.0, 60.0, &q);
+	assert_int_equal(q.w, grid_tiles_x(0) * T);
+	grid_window_core(&q, S / 2, &c);
+	assert_int_equal(c.u0, q.u0);
+	assert_int_equal(c.w, q.w);
+	assert_int_equal(c.h, S / 2);
+	/* windows of two extents are never equal */
+	grid_window(7, 6, T, S, 20.3, 0.2, &q);
+	c = q;
+	c.w /= 2;
+	assert_false(grid_quad_equal(&c, &q));
+}
+
 static void key_hash(void **state)
 {
 	(void)state;
@@ -407,7 +465,8 @@ int main(void)
 		cmocka_unit_test(texel_centres),   cmocka_unit_test(texel_nesting),
 		cmocka_unit_test(neighbours),	   cmocka_unit_test(quads),
 		cmocka_unit_test(windows),
-		cmocka_unit_test(toroidal_updates), cmocka_unit_test(key_hash),
+		cmocka_unit_test(toroidal_updates), cmocka_unit_test(cores),
+		cmocka_unit_test(key_hash),
 	};
 	return cmocka_run_group_tests_name("grid", tests, NULL, NULL);
 }
