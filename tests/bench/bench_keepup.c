@@ -2,7 +2,9 @@
  * the back-end keeps up with the client at each of the table's nine altitudes. The client is
  * the real one minus rasterisation: view_levels picks the levels (1280×720, 60°, 256 steps
  * around a ring, as clipmapview), view_clipmap builds the want-sets and uploads into real GL
- * textures (a tiny EGL/OSMesa context), tiles come from build/clipmapd over a Unix socket
+ * textures (a tiny EGL/OSMesa context) and, as clipmapview's --normals auto, makes the normals
+ * from the heights where the planet says that is the same (every shipped planet; until
+ * 4 December the bench fetched them: KEEPUP_NORMALS=fetch), tiles come from build/clipmapd over a Unix socket
  * (view_source_net). The frame below mirrors view_frame() (client/view/view.c) without the draw
  * calls. A 60 Hz frame clock runs in real time; the camera flies a great circle at constant
  * height above the ground. A frame is "full detail" when every level visibility wants holds
@@ -573,7 +575,12 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	c.T = p->tile_size;
 	c.wants = xmalloc(MAX_WANTS * sizeof *c.wants);
 	c.ahead = x->ahead;
-	rc = view_clipmap_create(x->gl, c.src, c.nlevels, &c.cm, err);
+	/* normals as clipmapview's default (--normals auto): made from the heights where the
+	 * planet says that is the same (every shipped planet), else fetched; KEEPUP_NORMALS=fetch
+	 * always fetches */
+	const char *ne = getenv("KEEPUP_NORMALS");
+	bool fetch = (ne && strcmp(ne, "fetch") == 0) || !view_clipmap_can_derive(p);
+	rc = view_clipmap_create_layer(x->gl, c.src, c.nlevels, NULL, fetch, &c.cm, err);
 	if (rc)
 		goto out;
 	/* Hover at the start until the view is settled: complete, and every tile of its rings
