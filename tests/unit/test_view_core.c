@@ -246,15 +246,22 @@ static void one_place(struct gl_context *ctx, double lon, double lat, bool bound
 	rig_close(&a);
 }
 
-static void cores(void **state)
+/* A GL context, or the test is skipped (saying why). */
+static struct gl_context *gl_or_skip(void)
 {
-	(void)state;
 	struct gl_context *ctx = NULL;
 	char err[256];
 	if (gl_context_create(GL_BACKEND_AUTO, &ctx, err) < 0) {
 		printf("view_core: skipped (no GL: %s)\n", err);
 		skip();
 	}
+	return ctx;
+}
+
+static void cores(void **state)
+{
+	(void)state;
+	struct gl_context *ctx = gl_or_skip();
 	one_place(ctx, 20.3, 0.2, true);
 	one_place(ctx, 7.4, 46.3, true);
 	one_place(ctx, -60.2, -70.1, true);
@@ -269,12 +276,7 @@ static void cores(void **state)
 static void derived_normals(void **state)
 {
 	(void)state;
-	struct gl_context *ctx = NULL;
-	char err[256];
-	if (gl_context_create(GL_BACKEND_AUTO, &ctx, err) < 0) {
-		printf("view_core: skipped (no GL: %s)\n", err);
-		skip();
-	}
+	struct gl_context *ctx = gl_or_skip();
 	static const double place[][2] = { { 20.3, 0.2 }, { 7.4, 46.3 }, { 179.95, -35.0 } };
 	for (size_t p = 0; p < sizeof place / sizeof place[0]; p++) {
 		struct rig a, b;
