@@ -137,6 +137,16 @@ int grid_neighbor(const struct tile_key *k, int dx, int dy, struct tile_key *out
 	return 0;
 }
 
+/* The tiles q's window touches (tx0, ty0, ntx, nty), from its origin and extent. */
+static void touched_tiles(struct grid_quad *q)
+{
+	int64_t T = q->T;
+	q->tx0 = (uint32_t)(q->u0 / T);
+	q->ty0 = (uint32_t)(q->v0 / T);
+	q->ntx = (uint8_t)((q->u0 % T + q->w + T - 1) / T);
+	q->nty = (uint8_t)((q->v0 % T + q->h + T - 1) / T);
+}
+
 void grid_window(int lx, int ly, uint32_t T, uint32_t S, double lon, double lat,
 		 struct grid_quad *q)
 {
@@ -160,10 +170,7 @@ void grid_window(int lx, int ly, uint32_t T, uint32_t S, double lon, double lat,
 	q->v0 = v0;
 	q->w = (uint32_t)w;
 	q->h = (uint32_t)h;
-	q->tx0 = (uint32_t)(u0 / T);
-	q->ty0 = (uint32_t)(v0 / T);
-	q->ntx = (uint8_t)((u0 % T + w + T - 1) / T);
-	q->nty = (uint8_t)((v0 % T + h + T - 1) / T);
+	touched_tiles(q);
 }
 
 void grid_quad(int lx, int ly, uint32_t T, double lon, double lat, struct grid_quad *q)
@@ -207,10 +214,18 @@ void grid_window_core(const struct grid_quad *q, uint32_t w, struct grid_quad *o
 		out->v0 = v0;
 		out->h = w;
 	}
-	out->tx0 = (uint32_t)(out->u0 / T);
-	out->ty0 = (uint32_t)(out->v0 / T);
-	out->ntx = (uint8_t)((out->u0 % T + out->w + T - 1) / T);
-	out->nty = (uint8_t)((out->v0 % T + out->h + T - 1) / T);
+	touched_tiles(out);
+}
+
+double grid_window_rel_u(const struct grid_quad *q, double u)
+{
+	double W = (double)grid_tiles_x(q->lx) * q->T;
+	double rel = fmod(u - (double)q->u0, W);
+	if (rel < 0)
+		rel += W;
+	if (rel > (W + q->w) / 2)
+		rel -= W;
+	return rel;
 }
 
 /* Splits [a, a+len) at every tile border inside it and at the edges of [ia, ib) (the part

@@ -106,6 +106,9 @@ bool grid_quad_equal(const struct grid_quad *a, const struct grid_quad *b);
  * its rows shrink); an extent of q no larger than w stays; so where neither shrinks,
  * *out = *q. */
 void grid_window_core(const struct grid_quad *q, uint32_t w, struct grid_quad *out);
+/* Level texel column u (any real) relative to q's first column, the short way round the
+ * level: within [-(W - w)/2, (W + w)/2], so inside the window is [0, w). */
+double grid_window_rel_u(const struct grid_quad *q, double u);
 
 struct grid_region {
 	uint32_t x, y, w, h; /* texels in the S×S toroidal texture */

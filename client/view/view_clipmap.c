@@ -895,11 +895,7 @@ static double window_reach(const struct grid_quad *q, const struct grid_quad *ta
 	double cu = (double)target->u0 + target->w / 2.0, cv = (double)target->v0 + target->h / 2.0;
 	double r = INFINITY;
 	if ((int64_t)q->w < W) {
-		double du = fmod(cu - (double)q->u0, (double)W);
-		if (du < 0)
-			du += (double)W;
-		if (du > (W + q->w) / 2.0)
-			du -= (double)W;
+		double du = grid_window_rel_u(q, cu);
 		r = fmin(du, (double)q->w - du);
 	}
 	if (q->v0 > 0)

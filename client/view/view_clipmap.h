@@ -4,9 +4,9 @@
  * lives at (u mod S, v mod S); a level narrower than S repeats across it. Each level has a
  * target window (grid_window: where the camera wants it) and the window its texture holds;
  * when every tile of the target has arrived, only the changed regions are copied
- * (grid_update_regions); before that, the window's core once its tiles are in. Tiles are kept while they are in or next to their level's target
- * window (the prefetch ring)
- * or ahead of it along the camera's motion (view_clipmap_motion), released otherwise: the
+ * (grid_update_regions); before that, the window's core once its tiles are in. Tiles are
+ * kept while they are in or next to their level's target window (the prefetch ring) or ahead
+ * of it along the camera's motion (view_clipmap_motion), released otherwise: the
  * client never holds more than that.
  *
  * Threads: one thread (the GL context's). Ownership: the clipmap borrows gl and the source,
@@ -72,8 +72,9 @@ void view_clipmap_motion_reset(struct view_clipmap *cm);
 
 /* The want-set for the current targets: every missing tile of every target quad, coarse
  * levels first, each window from its middle out with a tile's layers together (the cores
- * view_clipmap_update draws first arrive first), then (prefetch) the missing ring tiles — while the camera moves
- * (view_clipmap_motion) only those on the side it moves to — then the missing look-ahead tiles
+ * view_clipmap_update draws first arrive first), then (prefetch) the missing ring tiles —
+ * while the camera moves (view_clipmap_motion) only those on the side it moves to — then the
+ * missing look-ahead tiles
  * (class VIEW_CLASS_AHEAD, at most 96). Returns the count (≤ cap). */
 size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct view_want *out,
 			  size_t cap);

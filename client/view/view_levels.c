@@ -58,13 +58,7 @@ int view_detail_max(const struct view_body *b, const struct view_camera *c, doub
 /* The focus's u relative to the window origin, in (-(W-w)/2, (W+w)/2]. */
 static double focus_rel_u(const struct grid_quad *q, double lon_deg)
 {
-	double W = (double)grid_tiles_x(q->lx) * q->T;
-	double rel = fmod(grid_lon_to_u(q->lx, q->T, lon_deg) - (double)q->u0, W);
-	if (rel < 0)
-		rel += W;
-	if (rel > (W + q->w) / 2)
-		rel -= W;
-	return rel;
+	return grid_window_rel_u(q, grid_lon_to_u(q->lx, q->T, lon_deg));
 }
 
 bool view_window_covers(const struct grid_quad *q, double lon_deg, double lat_deg, double r,
