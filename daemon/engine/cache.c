@@ -102,7 +102,7 @@ static void unlink_entry(struct cache *c, struct centry *e)
 	while (*p != e)
 		p = &(*p)->next;
 	*p = e->next;
-	c->bytes -= e->t->nbytes;
+	c->bytes -= tile_charge(e->t);
 	c->ntiles--;
 }
 
@@ -353,7 +353,7 @@ static void insert(struct cache *c, struct tile *t, bool cold)
 		e->used_ns = now;
 		e->next = c->buckets[h & (c->nbuckets - 1)];
 		c->buckets[h & (c->nbuckets - 1)] = e;
-		c->bytes += t->nbytes;
+		c->bytes += tile_charge(t);
 		c->ntiles++;
 		c->inserts++;
 		if (c->ntiles > c->nbuckets)
@@ -442,7 +442,7 @@ size_t cache_drop_node(struct cache *c, uint64_t node)
 				continue;
 			}
 			*p = e->next;
-			c->bytes -= e->t->nbytes;
+			c->bytes -= tile_charge(e->t);
 			c->ntiles--;
 			if (n == cap) {
 				cap = cap ? cap * 2 : 64;

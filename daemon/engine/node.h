@@ -28,6 +28,9 @@ struct node_slot {
 	const char *name;   /* e.g. "input", "a", "b", "mask", "height" */
 	enum pix_type type; /* required output type of the input; PIX_NONE accepts any */
 	bool optional;
+	/* The node reads a summary of this input's height tiles (tile.h: lo, hi, any NaN): the
+	 * input's tiles are summarized as they are made. */
+	bool summary;
 };
 
 /* One tile a generation needs: a node and a key (key.node = that node's hash). */
@@ -119,6 +122,7 @@ struct node {
 	const struct planet *planet;	  /* borrowed */
 	void *impl;			  /* owned by the node type */
 	int line;			  /* its section's line in the planet file */
+	bool summarize; /* height tiles summarized as they are made (a slot's summary) */
 	atomic_uint_fast64_t generated;	  /* tiles generated */
 	atomic_uint_fast64_t gen_ns;	  /* total generation time */
 	/* generation times: counts at most node_gen_bound_ms(i) (the last bucket: longer) */

@@ -611,6 +611,9 @@ static int init_nodes(struct loader *L)
 			n->type = NULL; /* node_init already released what create made */
 			return rc;
 		}
+		for (int k = 0; k < n->type->nslots && k < NODE_MAX_INPUTS; k++)
+			if (n->in[k] && n->type->slots[k].summary && n->in[k]->out == PIX_HEIGHT)
+				n->in[k]->summarize = true;
 	}
 	return 0;
 }

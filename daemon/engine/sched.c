@@ -550,6 +550,8 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sche
 		rc = store_get(s->store, &j->key, n->out, n->planet->tile_size, tc, &t);
 	if (rc == 0) {
 		t->layer = true; /* the stores keep layer tiles only (set before it is shared) */
+		if (n->summarize)
+			tile_summarize(t);
 		atomic_fetch_add(&s->loaded, 1);
 	} else if (s->remote) {
 		/* The fleet's tier: another daemon's tile, or this daemon's turn to make it. */
@@ -559,6 +561,8 @@ static void load(struct sched *s, struct tilecodec *tc, struct job *j, enum sche
 					 retry, &t);
 		if (rc == 0)
 			t->layer = true;
+		if (rc == 0 && n->summarize)
+			tile_summarize(t); /* before the store's writer sees it */
 		if (rc == 0 && s->store)
 			store_put(s->store, t, cls == SCHED_BULK ? STORE_KEEP_PREFETCHED
 								 : STORE_KEEP_INCIDENTAL);
@@ -630,6 +634,8 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
+		if (n->summarize)
+			tile_summarize(t); /* no-op when generate() set it */
 		t->cost_ms = chain_cost_ms(j, dt);
 		t->layer = store_keeps(n); /* one walk of the planet's layers, read below */
 		bool bulk = cls == SCHED_BULK, stored = false;

@@ -1,10 +1,13 @@
 /* tile — see tile.h. */
 #include "tile.h"
 
+#include <math.h>
+#include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "common/xalloc.h"
+#include "common/xthread.h"
 #include "tilemem.h"
 
 struct tile *tile_create(const struct tile_key *key, enum pix_type type, uint32_t size)
@@ -19,6 +22,137 @@ struct tile *tile_create(const struct tile_key *key, enum pix_type type, uint32_
 	return t;
 }
 
+static void drop_bytes(struct tile *t)
+{
+	if (t->base)
+		tile_unref(t->base);
+	else
+		tilemem_free(t->data, t->nbytes);
+	t->base = NULL;
+	t->data = NULL;
+	t->uniform = false;
+}
+
+void tile_alias(struct tile *t, struct tile *src)
+{
+	struct tile *owner = src->base ? src->base : src; /* never a chain */
+	tile_ref(owner);
+	drop_bytes(t);
+	t->base = owner;
+	t->data = owner->data;
+	t->uniform = src->uniform;
+	t->summarized = src->summarized;
+	t->any_nan = src->any_nan;
+	t->lo = src->lo;
+	t->hi = src->hi;
+}
+
+/* The shared uniform buffers: one owner tile per (type, size, value), kept for the process's
+ * life (reachable from here, so not a leak to the sanitizers). */
+#define UNIFORM_MAX 64
+static struct {
+	pthread_mutex_t mu;
+	int n;
+	struct tile *t[UNIFORM_MAX];
+} uniform = { .mu = PTHREAD_MUTEX_INITIALIZER };
+
+static void fill(unsigned char *d, size_t count, const void *texel, size_t pb)
+{
+	if (pb == 4) {
+		uint32_t v;
+		memcpy(&v, texel, 4);
+		uint32_t *w = (uint32_t *)(void *)d;
+		for (size_t i = 0; i < count; i++)
+			w[i] = v;
+		return;
+	}
+	for (size_t i = 0; i < count; i++)
+		memcpy(d + pb * i, texel, pb);
+}
+
+static struct tile *uniform_owner(enum pix_type type, uint32_t size, const void *texel)
+{
+	size_t pb = pix_bytes(type);
+	struct tile *found = NULL;
+	xmutex_lock(&uniform.mu);
+	for (int i = 0; i < uniform.n && !found; i++) {
+		struct tile *u = uniform.t[i];
+		if (u->type == type && u->size == size && memcmp(u->data, texel, pb) == 0)
+			found = u;
+	}
+	if (!found && uniform.n < UNIFORM_MAX) {
+		struct tile_key k = { 0 };
+		found = tile_create(&k, type, size);
+		fill(found->data, (size_t)size * size, texel, pb);
+		uniform.t[uniform.n++] = found; /* the registry's reference, never dropped */
+	}
+	xmutex_unlock(&uniform.mu);
+	return found;
+}
+
+void tile_fill_uniform(struct tile *t, const void *texel)
+{
+	struct tile *u = uniform_owner(t->type, t->size, texel);
+	if (u) {
+		tile_ref(u);
+		drop_bytes(t);
+		t->base = u;
+		t->data = u->data;
+		t->uniform = true;
+	} else {
+		fill(t->data, (size_t)t->size * t->size, texel, pix_bytes(t->type));
+	}
+	if (t->type == PIX_HEIGHT) {
+		float v;
+		memcpy(&v, texel, sizeof v);
+		t->summarized = true;
+		t->any_nan = v != v;
+		t->lo = v != v ? INFINITY : v;
+		t->hi = v != v ? -INFINITY : v;
+	}
+}
+
+/* 16-texel blocks so the loop vectorises at -O2 (T is a multiple of 16). NaN fails every
+ * comparison, so it neither lowers lo nor raises hi. */
+void tile_summarize(struct tile *t)
+{
+	if (t->type != PIX_HEIGHT || t->summarized)
+		return;
+	const float *x = tile_f32(t);
+	size_t count = (size_t)t->size * t->size;
+	float lo = INFINITY, hi = -INFINITY;
+	int nan = 0;
+	size_t i = 0;
+	if (count % 16 == 0) {
+		float l[16], h[16];
+		int nn[16] = { 0 };
+		for (int k = 0; k < 16; k++)
+			l[k] = INFINITY, h[k] = -INFINITY;
+		for (; i < count; i += 16)
+			for (int k = 0; k < 16; k++) {
+				float v = x[i + k];
+				l[k] = v < l[k] ? v : l[k];
+				h[k] = v > h[k] ? v : h[k];
+				nn[k] |= v != v;
+			}
+		for (int k = 0; k < 16; k++) {
+			lo = l[k] < lo ? l[k] : lo;
+			hi = h[k] > hi ? h[k] : hi;
+			nan |= nn[k];
+		}
+	}
+	for (; i < count; i++) {
+		float v = x[i];
+		lo = v < lo ? v : lo;
+		hi = v > hi ? v : hi;
+		nan |= v != v;
+	}
+	t->lo = lo;
+	t->hi = hi;
+	t->any_nan = nan != 0;
+	t->summarized = true;
+}
+
 struct tile *tile_ref(struct tile *t)
 {
 	atomic_fetch_add_explicit(&t->refs, 1, memory_order_relaxed);
@@ -30,7 +164,7 @@ void tile_unref(struct tile *t)
 	if (!t)
 		return;
 	if (atomic_fetch_sub_explicit(&t->refs, 1, memory_order_acq_rel) == 1) {
-		tilemem_free(t->data, t->nbytes);
+		drop_bytes(t);
 		free(t);
 	}
 }

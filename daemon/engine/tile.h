@@ -23,6 +23,16 @@ struct tile {
 	struct tile_key key;
 	size_t nbytes; /* size · size · pix_bytes(type) */
 	unsigned char *data;
+	/* The tile whose bytes data points into (tile_alias, tile_fill_uniform), one reference
+	 * held; NULL when data is this tile's own buffer. */
+	struct tile *base;
+	bool uniform; /* base is a shared uniform buffer (tile_fill_uniform): no memory of its own */
+	/* Heights only, when summarized: the least and greatest texel (NaN left out; lo > hi when
+	 * every texel is NaN) and whether any texel is NaN. Set before the tile is shared, by
+	 * the worker (tile_summarize) or by a node that knows them for free; readers that find
+	 * it unset scan the texels instead. */
+	bool summarized, any_nan;
+	float lo, hi;
 	/* What making it again would cost, ms of a worker: its own generation and, once per
 	 * input node, that input's cost (its parent and neighbours in its own node left out,
 	 * so the figure stays the chain's, not the level's). 0 when unknown (a loaded tile).
@@ -37,6 +47,20 @@ struct tile {
 
 /* A new tile with uninitialised data; returns one owned reference (aborts on ENOMEM). */
 struct tile *tile_create(const struct tile_key *key, enum pix_type type, uint32_t size);
+/* Makes t's texels src's (same type and size; t not yet shared): t's own buffer goes back
+ * and t holds a reference to the tile owning src's bytes, so a node whose output equals an
+ * input byte for byte writes nothing. Copies src's summary. */
+void tile_alias(struct tile *t, struct tile *src);
+/* Makes every texel of t (not yet shared) the pix_bytes(t->type) bytes at texel, on a
+ * process-wide buffer shared by every tile of that type, size and value (a few dozen values
+ * at most; beyond them t's own buffer is filled). Sets the summary of a height tile. */
+void tile_fill_uniform(struct tile *t, const void *texel);
+/* The bytes t holds memory for, as the cache counts them: none on a shared uniform buffer.
+ * (An alias of another tile counts its full size: the bytes it keeps alive once that tile
+ * has gone.) */
+static inline size_t tile_charge(const struct tile *t) { return t->uniform ? 0 : t->nbytes; }
+/* Scans a height tile (not yet shared) for its summary; other types are left unsummarized. */
+void tile_summarize(struct tile *t);
 /* Adds a reference and returns t. */
 struct tile *tile_ref(struct tile *t);
 /* Drops a reference; NULL is a no-op. */

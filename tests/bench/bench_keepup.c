@@ -357,6 +357,7 @@ struct ctx {
 	const struct gl *gl;
 	double trial_s;
 	bool drain, ahead;
+	double ramp_s;	   /* seconds from rest to full velocity, not counted (0: a jump to it) */
 	int confirm;	   /* flights that confirm a row's velocity (0: the search's answer) */
 	double confirm_s;  /* their length */
 };
@@ -523,6 +524,15 @@ static int restart_daemon(struct daemon_env *d, struct net_conn **sc, const stru
 	return rc ? rc : net_connect(no, sc, err);
 }
 
+/* Distance flown t seconds after leaving the hover: from rest to v at constant acceleration
+ * over ramp_s seconds, then at v. */
+static double flown(double ramp_s, double v, double t)
+{
+	if (ramp_s <= 0)
+		return v * t;
+	return t < ramp_s ? 0.5 * v * t * t / ramp_s : v * (t - 0.5 * ramp_s);
+}
+
 static int run_trial(const struct ctx *x, const char *planet_ini, double agl, double v,
 		     enum mode mode, struct trial *tr)
 {
@@ -546,7 +556,9 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		goto out;
 	const struct view_planet *p = &c.src->planet;
 	levels_at(c.src, agl, &tr->lmin, &tr->lmax);
-	double warm_s = 0.25, len = v * (x->trial_s + 0.5);
+	/* The frames not counted: the ramp from rest to v (constant acceleration), else a
+	 * quarter second at v. */
+	double warm_s = x->ramp_s > 0 ? x->ramp_s : 0.25, len = v * (x->trial_s + warm_s + 0.5);
 	if (prefetch) {
 		double t0 = clock_now_s();
 		rc = prefetch_route(sc, name, p->a, len, tr->lmax, &tr->prefetch_tiles, err);
@@ -628,7 +640,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 			cpu_mark(d.daemon, &cm0);
 		}
 		double lat, lon;
-		route_point(p->a, v * t, &lat, &lon);
+		route_point(p->a, flown(x->ramp_s, v, t), &lat, &lon);
 		rc = client_frame(&c, lat, lon, agl, &fr[n]);
 		if (rc) {
 			free(ms);
@@ -1176,6 +1188,7 @@ int main(int argc, char **argv)
 		x.confirm_s = 0.5;
 	x.drain = !getenv("KEEPUP_DRAIN") || atoi(getenv("KEEPUP_DRAIN")) > 0;
 	x.ahead = !getenv("KEEPUP_AHEAD") || atoi(getenv("KEEPUP_AHEAD")) > 0;
+	x.ramp_s = getenv("KEEPUP_RAMP_S") ? atof(getenv("KEEPUP_RAMP_S")) : 0;
 	const char *only = getenv("KEEPUP_ONLY"); /* a label substring, for quick runs */
 	const char *route = getenv("KEEPUP_ROUTE");
 	if (route && !set_route(route)) {

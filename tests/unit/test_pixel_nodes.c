@@ -774,6 +774,163 @@ static void hashes_differ(void **state)
 	unmake(&c);
 }
 
+/* ---- shared bytes: summaries, uniform tiles, aliases (tile.h) ------------------------------ */
+
+/* A T×T height tile of a wavy field in [lo, lo + span], optionally with NaN and −0 texels. */
+static struct tile *field_tile(float lo, float span, bool nan, bool neg0)
+{
+	struct tile *t = tile_create(&key0, PIX_HEIGHT, T);
+	for (int i = 0; i < N; i++)
+		tile_f32(t)[i] = lo + span * (0.5f + 0.5f * sinf((float)i * 0.37f));
+	if (nan)
+		tile_f32(t)[N / 3] = NAN;
+	if (neg0)
+		tile_f32(t)[N / 2] = -0.0f;
+	return t;
+}
+
+static void tile_summaries(void **state)
+{
+	(void)state;
+	struct tile *t = field_tile(-5, 10, true, false);
+	tile_f32(t)[7] = -7.5f;
+	tile_f32(t)[9] = 12.25f;
+	tile_summarize(t);
+	assert_true(t->summarized && t->any_nan);
+	assert_true(t->lo == -7.5f && t->hi == 12.25f);
+	tile_unref(t);
+	struct tile *all_nan = height_tile(NAN);
+	tile_summarize(all_nan);
+	assert_true(all_nan->any_nan && all_nan->lo > all_nan->hi);
+	tile_unref(all_nan);
+	/* Uniform tiles: one buffer per type, size and value, held by every such tile; no
+	 * memory charged to the cache; the summary set without a scan. */
+	float one = 1, other = 2;
+	struct tile *u1 = tile_create(&key0, PIX_HEIGHT, T), *u2 = tile_create(&key0, PIX_HEIGHT, T);
+	struct tile *u3 = tile_create(&key0, PIX_HEIGHT, T);
+	tile_fill_uniform(u1, &one);
+	tile_fill_uniform(u2, &one);
+	tile_fill_uniform(u3, &other);
+	assert_ptr_equal(u1->data, u2->data);
+	assert_ptr_not_equal(u1->data, u3->data);
+	assert_true(u1->uniform && tile_charge(u1) == 0 && u1->summarized && u1->lo == 1 &&
+		    u1->hi == 1 && !u1->any_nan);
+	for (int i = 0; i < N; i++)
+		assert_true(tile_f32(u3)[i] == 2);
+	uint8_t px[4] = { 1, 2, 3, 4 };
+	struct tile *c = tile_create(&key0, PIX_COLOR, T);
+	tile_fill_uniform(c, px);
+	assert_memory_equal(c->data + 4 * (N - 1), px, 4);
+	assert_ptr_not_equal((void *)c->data, (void *)u1->data);
+	/* An alias of an alias holds the owner, and outlives the tiles it was made from. */
+	struct tile *f = field_tile(0, 100, false, false);
+	tile_summarize(f);
+	struct tile *a1 = tile_create(&key0, PIX_HEIGHT, T), *a2 = tile_create(&key0, PIX_HEIGHT, T);
+	tile_alias(a1, f);
+	tile_alias(a2, a1);
+	assert_ptr_equal(a1->base, f);
+	assert_ptr_equal(a2->base, f);
+	assert_true(a2->summarized && a2->lo == f->lo && a2->hi == f->hi && !a2->uniform);
+	assert_int_equal(tile_charge(a2), a2->nbytes);
+	float v = tile_f32(f)[5];
+	tile_unref(f);
+	tile_unref(a1);
+	assert_true(tile_f32(a2)[5] == v);
+	struct tile *a3 = tile_create(&key0, PIX_HEIGHT, T);
+	tile_alias(a3, u1);
+	assert_true(a3->uniform && tile_charge(a3) == 0);
+	tile_unref(a2);
+	tile_unref(a3);
+	tile_unref(u1);
+	tile_unref(u2);
+	tile_unref(u3);
+	tile_unref(c);
+}
+
+/* A height_filter with a summarized input gives the bytes it gives without one (a shared
+ * uniform tile where every texel clamps, strictly), and a summary equal to a scan's. */
+static void height_filter_summary(void **state)
+{
+	(void)state;
+	static const char *const params[] = {
+		"scale = 0.001\noffset = 0\nmin = 0\nmax = 1",	  /* ramps within the range */
+		"scale = 0.001\noffset = -5\nmin = 0\nmax = 1",	  /* all below min: uniform 0 */
+		"scale = 0.001\noffset = 5\nmin = 0\nmax = 1",	  /* all above max: uniform 1 */
+		"scale = -0.01\noffset = 0.5\nmin = 0\nmax = 1",  /* decreasing */
+		"scale = -0.01\noffset = 50\nmin = 0\nmax = 1",	  /* decreasing, all above */
+		"scale = 1\noffset = 0\nmin = 0",		  /* −0 lands on min = +0 */
+		"scale = 2\noffset = 1",			  /* no clamp */
+	};
+	struct {
+		float lo, span;
+		bool nan, neg0;
+	} inputs[] = { { 0, 1000, false, false }, { -300, 200, false, false },
+		       { 0, 1000, true, false },  { -0.0f, 0, false, true },
+		       { 10, 0, false, false } };
+	for (size_t p = 0; p < sizeof params / sizeof params[0]; p++)
+		for (size_t k = 0; k < sizeof inputs / sizeof inputs[0]; k++) {
+			struct tnode tn;
+			assert_int_equal(make(&tn, &node_type_height_filter, &input_height, NULL,
+					      NULL, params[p]),
+					 0);
+			struct tile *plain = field_tile(inputs[k].lo, inputs[k].span, inputs[k].nan,
+							inputs[k].neg0);
+			struct tile *summed = field_tile(inputs[k].lo, inputs[k].span,
+							 inputs[k].nan, inputs[k].neg0);
+			tile_summarize(summed);
+			struct tile *o1 = run1(&tn, plain, NULL, NULL), *o2 = run1(&tn, summed, NULL, NULL);
+			assert_memory_equal(o1->data, o2->data, o1->nbytes);
+			assert_false(o1->summarized || o1->uniform);
+			assert_true(o2->summarized);
+			struct tile *scan = tile_create(&key0, PIX_HEIGHT, T);
+			memcpy(scan->data, o2->data, scan->nbytes);
+			tile_summarize(scan);
+			assert_true(scan->lo == o2->lo && scan->hi == o2->hi &&
+				    scan->any_nan == o2->any_nan);
+			if (p == 1 || p == 2 || p == 4)
+				assert_true(o2->uniform || inputs[k].nan);
+			tile_unref(scan);
+			tile_unref(plain);
+			tile_unref(summed);
+			tile_unref(o1);
+			tile_unref(o2);
+			unmake(&tn);
+		}
+}
+
+/* A blend whose mask is 0 everywhere shares a's bytes instead of copying them, exactly
+ * where the loop would give a's bytes (no NaN in a), whatever b holds. */
+static void blend_shares_a(void **state)
+{
+	(void)state;
+	static const char *const modes[] = { "mode = mask", "mode = over", "mode = add" };
+	for (int m = 0; m < 3; m++)
+		for (int nan = 0; nan < 2; nan++) {
+			struct tnode tn;
+			assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2,
+					      &input_height, modes[m]),
+					 0);
+			struct tile *a = field_tile(-100, 500, nan, true), *b = field_tile(7, 3, true, false);
+			struct tile *mask = field_tile(-2, 1.5f, true, false); /* ≤ −0.5 and NaN */
+			struct tile *mask_s = field_tile(-2, 1.5f, true, false);
+			tile_summarize(mask_s);
+			tile_summarize(a);
+			struct tile *o1 = run1(&tn, a, b, mask), *o2 = run1(&tn, a, b, mask_s);
+			assert_memory_equal(o1->data, o2->data, o1->nbytes);
+			bool shared = o2->base == a;
+			/* add gives a whatever a holds; over and mask take b where a is NaN */
+			assert_int_equal(shared, m == 2 || !nan);
+			assert_false(o1->base);
+			tile_unref(a);
+			tile_unref(b);
+			tile_unref(mask);
+			tile_unref(mask_s);
+			tile_unref(o1);
+			tile_unref(o2);
+			unmake(&tn);
+		}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -787,6 +944,8 @@ int main(void)
 		cmocka_unit_test(color_reference),   cmocka_unit_test(ramp_reference),
 		cmocka_unit_test(blend_masked_and_normals), cmocka_unit_test(color_mask),
 		cmocka_unit_test(color_alpha_mask),
+		cmocka_unit_test(tile_summaries), cmocka_unit_test(height_filter_summary),
+		cmocka_unit_test(blend_shares_a),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
 }

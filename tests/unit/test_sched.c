@@ -163,7 +163,8 @@ static int deps_bad(const struct node *n, const struct tile_key *k, struct node_
 	return -EINVAL;
 }
 
-static const struct node_slot slots2[] = { { "a", PIX_HEIGHT, false }, { "b", PIX_HEIGHT, false } };
+static const struct node_slot slots2[] = { { .name = "a", .type = PIX_HEIGHT },
+					   { .name = "b", .type = PIX_HEIGHT } };
 static const struct node_type t_count = { .name = "count", .generate = gen_count };
 static const struct node_type t_sum = { .name = "sum", .slots = slots2, .nslots = 2,
 					.generate = gen_sum };

@@ -176,20 +176,28 @@ static uint32_t blend_lazy(const struct node *n, const struct tile_key *k)
 	return bl->lazy_b ? 1u << SLOT_B : 0;
 }
 
-/* Whether every weight of the mask tile is 0 (≤ 0 or NaN: weight_at). */
-static bool mask_zero(const float *m, size_t count)
+/* Whether every weight of the mask tile is 0 (≤ 0 or NaN: weight_at): from its summary when
+ * it has one, else by a scan. */
+static bool mask_zero(const struct tile *mt)
 {
+	if (mt->summarized)
+		return !(mt->hi > 0.0f);
+	const float *m = tile_f32(mt);
+	size_t count = (size_t)mt->size * mt->size;
 	int any = 0;
 	for (size_t i = 0; i < count; i++)
 		any |= m[i] > 0.0f; /* no early exit: a whole zero tile is the case that pays */
 	return !any;
 }
 
-/* Whether a, at weight 0 everywhere, gives itself whatever b holds (the header's exceptions). */
+/* Whether a, at weight 0 everywhere, gives itself whatever b holds (the header's exceptions):
+ * then the output is a's bytes. */
 static bool a_decides(const struct blend *bl, const struct tile *a)
 {
 	size_t count = (size_t)a->size * a->size;
 	if (a->type == PIX_HEIGHT && bl->mode != BLEND_ADD) {
+		if (a->summarized)
+			return !a->any_nan;
 		const float *x = tile_f32(a);
 		int nan = 0;
 		for (size_t i = 0; i < count; i++)
@@ -211,8 +219,7 @@ static bool blend_needed(const struct node *n, int k, struct tile *const *in, in
 	if (k != SLOT_B || nin < 3 || !in[SLOT_A] || !in[SLOT_MASK] ||
 	    in[SLOT_MASK]->type != PIX_HEIGHT || in[SLOT_MASK]->size != in[SLOT_A]->size)
 		return true;
-	size_t count = (size_t)in[SLOT_A]->size * in[SLOT_A]->size;
-	return !mask_zero(tile_f32(in[SLOT_MASK]), count) || !a_decides(bl, in[SLOT_A]);
+	return !mask_zero(in[SLOT_MASK]) || !a_decides(bl, in[SLOT_A]);
 }
 
 static int blend_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
@@ -235,12 +242,19 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 		/* skipped (blend_needed): the mask is 0 everywhere and a decides */
 		if (!mask)
 			return -EINVAL;
-		memcpy(out->data, in[SLOT_A]->data, out->nbytes);
+		tile_alias(out, in[SLOT_A]);
 		out->lazy_unneeded = true;
 		return 0;
 	}
+	/* A mask 0 everywhere gives a's bytes (a_decides): shared, not copied. Known for free
+	 * from a summarized mask; a lazy b's children want to know anyway. */
+	bool zero = mask && (in[2]->summarized || bl->lazy_b) && mask_zero(in[2]);
 	if (bl->lazy_b && mask) /* made at once: tell the children whether it was worth it */
-		out->lazy_unneeded = mask_zero(mask, count);
+		out->lazy_unneeded = zero;
+	if (zero && a_decides(bl, in[SLOT_A])) {
+		tile_alias(out, in[SLOT_A]);
+		return 0;
+	}
 	if (out->type == PIX_HEIGHT)
 		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
 	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && !mask)
@@ -252,9 +266,9 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 }
 
 static const struct node_slot blend_slots[] = {
-	{ .name = "a", .type = PIX_NONE },
+	{ .name = "a", .type = PIX_NONE, .summary = true },
 	{ .name = "b", .type = PIX_NONE },
-	{ .name = "mask", .type = PIX_HEIGHT, .optional = true },
+	{ .name = "mask", .type = PIX_HEIGHT, .optional = true, .summary = true },
 };
 
 const struct node_type node_type_blend = {

@@ -52,18 +52,13 @@ static int constant_generate(const struct node *n, struct gen_ctx *g, const stru
 {
 	(void)g, (void)k, (void)in, (void)nin;
 	const struct constant *c = n->impl;
-	size_t texels = (size_t)out->size * out->size;
 	if (out->type != n->out)
 		return -EINVAL;
-	if (n->out == PIX_HEIGHT) {
-		float *d = tile_f32(out);
-		for (size_t i = 0; i < texels; i++)
-			d[i] = c->height;
-	} else {
-		unsigned char *d = out->data;
-		for (size_t i = 0; i < texels; i++)
-			memcpy(d + 4 * i, c->rgba, 4);
-	}
+	/* one shared buffer for every tile of the value */
+	if (n->out == PIX_HEIGHT)
+		tile_fill_uniform(out, &c->height);
+	else
+		tile_fill_uniform(out, c->rgba);
 	return 0;
 }
 

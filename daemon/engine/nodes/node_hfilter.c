@@ -49,6 +49,19 @@ static void hf_run(const float *restrict src, float *restrict dst, size_t count,
 	}
 }
 
+/* One texel, as hf_run computes it. */
+static float hf_one(float s, struct height_filter f)
+{
+	float v = s * f.scale + f.offset;
+	v = v < f.lo ? f.lo : v;
+	return v > f.hi ? f.hi : v;
+}
+
+/* With the input's summary the output's is known without a scan: the filter is monotone
+ * (non-decreasing, or non-increasing for a negative scale, in every float step), so the
+ * extreme outputs are the extreme inputs' images. Where every texel lands strictly beyond a
+ * clamp (no NaN) the tile is that bound throughout: a shared uniform tile, nothing written.
+ * Strictly: a texel landing exactly on a bound could be −0 where the bound is +0. */
 static int hf_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 		       struct tile *const *in, int nin, struct tile *out)
 {
@@ -57,12 +70,40 @@ static int hf_generate(const struct node *n, struct gen_ctx *g, const struct til
 	const struct height_filter *f = n->impl;
 	if (nin < 1 || in[0]->type != PIX_HEIGHT || in[0]->size != out->size || out->size % 16)
 		return -EINVAL;
-	hf_run(tile_f32(in[0]), tile_f32(out), (size_t)out->size * out->size, *f);
+	const struct tile *src = in[0];
+	bool known = src->summarized && src->lo <= src->hi;
+	float a = 0, b = 0;
+	if (known) {
+		a = src->lo * f->scale + f->offset;
+		b = src->hi * f->scale + f->offset;
+		float vmin = a < b ? a : b, vmax = a < b ? b : a;
+		if (!src->any_nan && vmax < f->lo) {
+			tile_fill_uniform(out, &f->lo);
+			return 0;
+		}
+		if (!src->any_nan && vmin > f->hi) {
+			tile_fill_uniform(out, &f->hi);
+			return 0;
+		}
+	}
+	hf_run(tile_f32(src), tile_f32(out), (size_t)out->size * out->size, *f);
+	if (known) {
+		float x = hf_one(src->lo, *f), y = hf_one(src->hi, *f);
+		out->lo = x < y ? x : y;
+		out->hi = x < y ? y : x;
+		out->any_nan = src->any_nan;
+		out->summarized = true;
+	} else if (src->summarized) { /* every texel NaN, and so every output */
+		out->lo = src->lo;
+		out->hi = src->hi;
+		out->any_nan = true;
+		out->summarized = true;
+	}
 	return 0;
 }
 
 static const struct node_slot hf_slots[] = {
-	{ .name = "input", .type = PIX_HEIGHT },
+	{ .name = "input", .type = PIX_HEIGHT, .summary = true },
 };
 
 const struct node_type node_type_height_filter = {
