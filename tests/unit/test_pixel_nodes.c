@@ -17,6 +17,8 @@
 #include "common/ini.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
+#include "engine/nodes/node_ramp.h"
+#include "engine/nodes/noise.h"
 #include "engine/tile.h"
 
 #define T 16
@@ -774,6 +776,47 @@ static void hashes_differ(void **state)
 	unmake(&c);
 }
 
+/* The AVX2 base ramp gives the scalar loop's bytes: heights across every stop, on them, just
+ * either side of them (one ulp), beyond both ends, ±∞, −0 and NaN. */
+static void ramp_vector_bytes(void **state)
+{
+	(void)state;
+	if (!noise_isa_supported(NOISE_ISA_AVX2))
+		skip();
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_ramp, &input_height, NULL, NULL,
+			      "stops = -9000 4 10 40, -5000 10 30 90, -1 140 208 222, 0 196 184 140, "
+			      "20 96 130 62, 350 66 108 48, 3700 190 188 184\nsea_level = 3.5"),
+			 0);
+	const struct ramp_table *rt = tn.n.impl; /* struct ramp's first member */
+	enum { M = 1 << 16 };
+	float *h = malloc(M * sizeof *h);
+	uint8_t *a = malloc(4 * M), *b = malloc(4 * M);
+	uint32_t seed = 99;
+	for (int i = 0; i < M; i++)
+		h[i] = (float)((int)(rng(&seed) % 2000000) - 1000000) / 80.0f;
+	int k = 0;
+	for (int s = 0; s < rt->nstops; s++) {
+		h[k++] = rt->h[s];
+		h[k++] = nextafterf(rt->h[s], -INFINITY);
+		h[k++] = nextafterf(rt->h[s], INFINITY);
+	}
+	float odd[] = { NAN, INFINITY, -INFINITY, -0.0f, 0.0f, 1e30f, -1e30f, 3.5f, -3.5f };
+	for (size_t i = 0; i < sizeof odd / sizeof odd[0]; i++)
+		h[k++] = odd[i];
+	ramp_base_scalar(rt, h, a, M);
+	ramp_base_avx2(rt, h, b, M);
+	for (int i = 0; i < M; i++)
+		if (memcmp(a + 4 * i, b + 4 * i, 4))
+			fail_msg("height %.9g: scalar %d %d %d %d, avx2 %d %d %d %d", (double)h[i],
+				 a[4 * i], a[4 * i + 1], a[4 * i + 2], a[4 * i + 3], b[4 * i],
+				 b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]);
+	free(h);
+	free(a);
+	free(b);
+	unmake(&tn);
+}
+
 /* ---- shared bytes: summaries, uniform tiles, aliases (tile.h) ------------------------------ */
 
 /* A T×T height tile of a wavy field in [lo, lo + span], optionally with NaN and −0 texels. */
@@ -929,6 +972,32 @@ static void blend_shares_a(void **state)
 			tile_unref(o2);
 			unmake(&tn);
 		}
+	/* a and b one uniform tile: a lerp gives a's bytes whatever the mask (not for −0,
+	 * whose x + 0 is +0, nor for an add) */
+	static const float vals[] = { 0.0f, 3.25f, -0.0f };
+	for (int m = 0; m < 3; m++)
+		for (int v = 0; v < 3; v++) {
+			struct tnode tn;
+			assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2,
+					      &input_height, modes[m]),
+					 0);
+			struct tile *a = tile_create(&key0, PIX_HEIGHT, T), *b = tile_create(&key0, PIX_HEIGHT, T);
+			struct tile *pa = height_tile(vals[v]), *pb = height_tile(vals[v]);
+			tile_fill_uniform(a, &vals[v]);
+			tile_fill_uniform(b, &vals[v]);
+			struct tile *mask = field_tile(-0.5f, 2, true, false);
+			struct tile *o1 = run1(&tn, pa, pb, mask), *o2 = run1(&tn, a, b, mask);
+			assert_memory_equal(o1->data, o2->data, o1->nbytes);
+			assert_int_equal(o2->data == a->data, m < 2 && v < 2);
+			tile_unref(a);
+			tile_unref(b);
+			tile_unref(pa);
+			tile_unref(pb);
+			tile_unref(mask);
+			tile_unref(o1);
+			tile_unref(o2);
+			unmake(&tn);
+		}
 }
 
 int main(void)
@@ -945,7 +1014,7 @@ int main(void)
 		cmocka_unit_test(blend_masked_and_normals), cmocka_unit_test(color_mask),
 		cmocka_unit_test(color_alpha_mask),
 		cmocka_unit_test(tile_summaries), cmocka_unit_test(height_filter_summary),
-		cmocka_unit_test(blend_shares_a),
+		cmocka_unit_test(blend_shares_a), cmocka_unit_test(ramp_vector_bytes),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
 }

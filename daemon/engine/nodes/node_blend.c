@@ -15,6 +15,7 @@
  * Thread-safety: parameters are set in create and only read by generate.
  */
 #include <errno.h>
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -213,6 +214,17 @@ static bool a_decides(const struct blend *bl, const struct tile *a)
 	return true;
 }
 
+/* Whether a and b are one uniform height tile of a finite value other than −0 in a lerp
+ * (over, mask): then every texel is x + (x − x)·w = x, a's bytes, whatever the mask. */
+static bool same_uniform(const struct blend *bl, const struct tile *a, const struct tile *b)
+{
+	if (!b || a->type != PIX_HEIGHT || !a->uniform || a->data != b->data ||
+	    (bl->mode != BLEND_OVER && bl->mode != BLEND_MASK))
+		return false;
+	float v = tile_f32(a)[0];
+	return isfinite(v) && !(v == 0 && signbit(v));
+}
+
 static bool blend_needed(const struct node *n, int k, struct tile *const *in, int nin)
 {
 	const struct blend *bl = n->impl;
@@ -251,7 +263,7 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 	bool zero = mask && (in[2]->summarized || bl->lazy_b) && mask_zero(in[2]);
 	if (bl->lazy_b && mask) /* made at once: tell the children whether it was worth it */
 		out->lazy_unneeded = zero;
-	if (zero && a_decides(bl, in[SLOT_A])) {
+	if ((zero && a_decides(bl, in[SLOT_A])) || same_uniform(bl, in[SLOT_A], in[SLOT_B])) {
 		tile_alias(out, in[SLOT_A]);
 		return 0;
 	}

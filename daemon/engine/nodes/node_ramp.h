@@ -1,0 +1,26 @@
+/* node_ramp internals shared with its vector kernel (ramp_avx2.c): one list of stops and its
+ * lookup tables. Not a public interface. */
+#ifndef CLIPMAP_NODE_RAMP_H
+#define CLIPMAP_NODE_RAMP_H
+#include <stddef.h>
+#include <stdint.h>
+
+#define RAMP_MAX_STOPS 64
+#define RAMP_BINS 2048
+
+struct ramp_table {
+	int nstops;
+	float h[RAMP_MAX_STOPS + 1]; /* stop heights + sea level, then +∞ */
+	float c[RAMP_MAX_STOPS][4];  /* stop colours, alpha 255 */
+	float dc[RAMP_MAX_STOPS][4]; /* colour per metre from stop s to s + 1; 0 at the end */
+	float inv_bin;		     /* bins per metre */
+	uint8_t bin_seg[RAMP_BINS + 4]; /* the segment where the bin starts (+4: 32-bit gathers) */
+};
+
+/* The base ramp over count texels, one at a time (node_ramp.c). */
+void ramp_base_scalar(const struct ramp_table *r, const float *h, uint8_t *d, size_t count);
+/* The base ramp over count texels (a multiple of 8) with AVX2, the same bytes as the scalar
+ * loop without a slope (NaN → transparent black). */
+void ramp_base_avx2(const struct ramp_table *r, const float *h, uint8_t *d, size_t count);
+
+#endif
