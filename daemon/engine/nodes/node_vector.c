@@ -601,8 +601,9 @@ static int vector_generate(const struct node *n, struct gen_ctx *g, const struct
 	memset(sc.seen, 0, nf);
 	size_t nids = vec_source_query(s, r.west - pad, fmax(r.south - pad, -90), r.east + pad,
 				       fmin(r.north + pad, 90), sc.ids, sc.seen);
-	if (nids == 0) {
-		memset(out->data, 0, tt * pix_bytes(out->type));
+	if (nids == 0) { /* nothing here: the shared all-zero tile, nothing written */
+		static const uint8_t zero[4];
+		tile_fill_uniform(out, zero);
 		return 0;
 	}
 	struct vr_acc acc;
