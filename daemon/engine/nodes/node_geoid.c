@@ -132,30 +132,57 @@ static void geoid_destroy(struct node *n)
 	free(g);
 }
 
-/* N at (lat, lon), bilinear between grid nodes. */
-static float undulation(const struct geoid *g, double lat, double lon)
+/* Where a longitude falls between grid columns: c0, c1 and the weight of c1. */
+struct gcol {
+	int c0, c1;
+	double wc;
+};
+
+static struct gcol geoid_col(const struct geoid *g, double lon)
 {
-	double fr = (lat - g->lat0) / g->dlat, fc = (lon - g->lon0) / g->dlon;
+	double fc = (lon - g->lon0) / g->dlon;
 	if (g->wrap) {
 		fc = fmod(fc, g->cols);
 		if (fc < 0)
 			fc += g->cols;
 	}
-	if (fr < 0)
-		fr = 0;
-	if (fr > g->rows - 1)
-		fr = g->rows - 1;
 	if (!g->wrap && fc < 0)
 		fc = 0;
 	if (!g->wrap && fc > g->cols - 1)
 		fc = g->cols - 1;
-	int r0 = (int)fr, c0 = (int)fc;
-	int r1 = r0 + 1 < g->rows ? r0 + 1 : r0;
-	int c1 = c0 + 1 < g->cols ? c0 + 1 : (g->wrap ? 0 : c0);
-	double wr = fr - r0, wc = fc - c0;
-	const float *a = g->n + (size_t)r0 * g->cols, *b = g->n + (size_t)r1 * g->cols;
-	double top = a[c0] + (a[c1] - a[c0]) * wc, bot = b[c0] + (b[c1] - b[c0]) * wc;
+	int c0 = (int)fc;
+	return (struct gcol){ c0, c0 + 1 < g->cols ? c0 + 1 : (g->wrap ? 0 : c0), fc - c0 };
+}
+
+/* The two grid rows round a latitude and the weight of the second. */
+static const float *geoid_rows(const struct geoid *g, double lat, const float **b, double *wr)
+{
+	double fr = (lat - g->lat0) / g->dlat;
+	if (fr < 0)
+		fr = 0;
+	if (fr > g->rows - 1)
+		fr = g->rows - 1;
+	int r0 = (int)fr, r1 = r0 + 1 < g->rows ? r0 + 1 : r0;
+	*wr = fr - r0;
+	*b = g->n + (size_t)r1 * g->cols;
+	return g->n + (size_t)r0 * g->cols;
+}
+
+/* N between the rows a, b (weight wr) at column c: bilinear between grid nodes. */
+static inline float geoid_at(const float *a, const float *b, double wr, struct gcol c)
+{
+	double top = a[c.c0] + (a[c.c1] - a[c.c0]) * c.wc;
+	double bot = b[c.c0] + (b[c.c1] - b[c.c0]) * c.wc;
 	return (float)(top + (bot - top) * wr);
+}
+
+/* N at (lat, lon). */
+static float undulation(const struct geoid *g, double lat, double lon)
+{
+	const float *b;
+	double wr;
+	const float *a = geoid_rows(g, lat, &b, &wr);
+	return geoid_at(a, b, wr, geoid_col(g, lon));
 }
 
 bool geoid_undulation(const struct node *n, double lat, double lon, double *out)
@@ -173,22 +200,23 @@ static int geoid_generate(const struct node *n, struct gen_ctx *gc, const struct
 	if (nin < 1 || in[0]->type != PIX_HEIGHT || in[0]->size != out->size)
 		return -EINVAL;
 	uint32_t T = out->size;
-	/* N varies over ~28 km (15′): sampling it on a coarse lattice of the tile and
-	 * interpolating would do, but one bilinear lookup per texel is already cheap. */
-	float *lon_col = gen_scratch(gc, (size_t)T * sizeof *lon_col);
+	/* The grid columns depend on the texel's longitude only and the rows on its latitude:
+	 * worked out once per column and per row, the same arithmetic as undulation(). */
+	struct gcol *cols = gen_scratch(gc, (size_t)T * sizeof *cols);
 	for (uint32_t i = 0; i < T; i++) {
 		double lon, lat;
 		grid_texel_center(k, T, i, 0, &lon, &lat);
-		lon_col[i] = (float)lon;
+		cols[i] = geoid_col(g, (double)(float)lon);
 	}
 	const float *src = tile_f32(in[0]);
 	float *dst = tile_f32(out);
 	for (uint32_t j = 0; j < T; j++) {
-		double lon, lat;
+		double lon, lat, wr;
 		grid_texel_center(k, T, 0, j, &lon, &lat);
+		const float *b, *a = geoid_rows(g, lat, &b, &wr);
 		for (uint32_t i = 0; i < T; i++) {
 			size_t at = (size_t)j * T + i;
-			dst[at] = src[at] + g->sign * undulation(g, lat, lon_col[i]);
+			dst[at] = src[at] + g->sign * geoid_at(a, b, wr, cols[i]);
 		}
 	}
 	return 0;
