@@ -17,6 +17,7 @@
 #include "common/ini.h"
 #include "engine/node.h"
 #include "engine/node_types.h"
+#include "engine/nodes/colormask.h"
 #include "engine/nodes/node_ramp.h"
 #include "engine/nodes/noise.h"
 #include "engine/tile.h"
@@ -817,6 +818,54 @@ static void ramp_vector_bytes(void **state)
 	unmake(&tn);
 }
 
+/* The AVX2 colour mask gives color_mask_texel's values bit for bit over a lattice of the RGB
+ * cube (every third level of each channel, the references' own colours among them), and
+ * says whether any is not 0; a tile nowhere near becomes the shared all-zero tile. */
+static void color_mask_vector(void **state)
+{
+	(void)state;
+	if (!noise_isa_supported(NOISE_ISA_AVX2))
+		skip();
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_color_mask, &input_color, NULL, NULL,
+			      "colors = 188 142 98, 208 184 146, 25 42 11\nnear = 20\nfar = 60"),
+			 0);
+	const struct color_mask *m = tn.n.impl;
+	enum { L = 86, M = L * L * L + 8 - (L * L * L) % 8 };
+	uint8_t *px = calloc(M, 4);
+	float *a = malloc(M * sizeof *a), *b = malloc(M * sizeof *b);
+	size_t k = 0;
+	for (int r = 0; r < L; r++)
+		for (int g = 0; g < L; g++)
+			for (int bl = 0; bl < L; bl++, k++) {
+				px[4 * k] = (uint8_t)(3 * r);
+				px[4 * k + 1] = (uint8_t)(3 * g);
+				px[4 * k + 2] = (uint8_t)(3 * bl);
+				px[4 * k + 3] = (uint8_t)k;
+			}
+	static const uint8_t refs[][3] = { { 188, 142, 98 }, { 208, 184, 146 }, { 25, 42, 11 } };
+	for (int i = 0; i < 3 && k < M; i++, k++)
+		memcpy(px + 4 * k, refs[i], 3);
+	for (size_t i = 0; i < M; i++)
+		a[i] = color_mask_texel(m, px + 4 * i);
+	assert_true(color_mask_avx2(m, px, b, M));
+	for (size_t i = 0; i < M; i++)
+		if (memcmp(&a[i], &b[i], sizeof a[i]))
+			fail_msg("rgb %d %d %d: %.9g against %.9g", px[4 * i], px[4 * i + 1],
+				 px[4 * i + 2], (double)a[i], (double)b[i]);
+	/* deep blue sea, nowhere near a reference */
+	const uint8_t sea[4] = { 10, 20, 90, 255 };
+	struct tile *in = color_tile(sea), *o = run1(&tn, in, NULL, NULL);
+	assert_false(color_mask_avx2(m, in->data, b, N));
+	assert_true(o->uniform && o->summarized && o->hi == 0 && tile_f32(o)[N - 1] == 0);
+	tile_unref(in);
+	tile_unref(o);
+	free(px);
+	free(a);
+	free(b);
+	unmake(&tn);
+}
+
 /* ---- shared bytes: summaries, uniform tiles, aliases (tile.h) ------------------------------ */
 
 /* A T×T height tile of a wavy field in [lo, lo + span], optionally with NaN and −0 texels. */
@@ -1015,6 +1064,7 @@ int main(void)
 		cmocka_unit_test(color_alpha_mask),
 		cmocka_unit_test(tile_summaries), cmocka_unit_test(height_filter_summary),
 		cmocka_unit_test(blend_shares_a), cmocka_unit_test(ramp_vector_bytes),
+		cmocka_unit_test(color_mask_vector),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
 }

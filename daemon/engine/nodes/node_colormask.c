@@ -10,17 +10,10 @@
 #include <stdint.h>
 #include <stdlib.h>
 
+#include "colormask.h"
 #include "common/xalloc.h"
 #include "engine/node_types.h"
-
-#define CM_MAX 8
-
-struct color_mask {
-	int n;
-	float ref[CM_MAX][3];
-	float near2, far2; /* squared distances */
-	float near, inv;   /* near, 1 / (far - near) */
-};
+#include "noise.h"
 
 static int cm_create(struct node *n, struct node_parse *p)
 {
@@ -54,7 +47,7 @@ static int cm_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-static float cm_texel(const struct color_mask *m, const uint8_t *px)
+float color_mask_texel(const struct color_mask *m, const uint8_t *px)
 {
 	float best = INFINITY;
 	for (int i = 0; i < m->n; i++) {
@@ -81,8 +74,16 @@ static int cm_generate(const struct node *n, struct gen_ctx *g, const struct til
 	size_t count = (size_t)out->size * out->size;
 	const uint8_t *src = in[0]->data;
 	float *dst = tile_f32(out);
+	enum noise_isa isa = noise_isa_best();
+	if (count % 8 == 0 && (isa == NOISE_ISA_AVX2 || isa == NOISE_ISA_AVX512)) {
+		if (!color_mask_avx2(m, src, dst, count)) {
+			static const float zero = 0; /* nowhere near: the shared all-zero tile */
+			tile_fill_uniform(out, &zero);
+		}
+		return 0;
+	}
 	for (size_t i = 0; i < count; i++)
-		dst[i] = cm_texel(m, src + 4 * i);
+		dst[i] = color_mask_texel(m, src + 4 * i);
 	return 0;
 }
 
