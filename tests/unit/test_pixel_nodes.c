@@ -866,6 +866,50 @@ static void color_mask_vector(void **state)
 	unmake(&tn);
 }
 
+/* A colour multiply gives, texel for texel, rgb = x + (x·y/255 − x)·w rounded, alpha x's, w the
+ * mask clamped to [0, 1] (NaN 0) times the opacity: the vector kernel's bytes against that
+ * formula over random colours and masks (NaN, −0, below 0, above 1 among them). */
+static void blend_multiply_bytes(void **state)
+{
+	(void)state;
+	struct tnode tn;
+	assert_int_equal(make(&tn, &node_type_blend, &input_color, &input_color2, &input_height,
+			      "mode = multiply\nopacity = 0.8"),
+			 0);
+	uint32_t seed = 5;
+	for (int rep = 0; rep < 64; rep++) {
+		struct tile *a = tile_create(&key0, PIX_COLOR, T), *b = tile_create(&key0, PIX_COLOR, T);
+		struct tile *m = tile_create(&key0, PIX_HEIGHT, T);
+		for (size_t i = 0; i < a->nbytes; i++) {
+			a->data[i] = (uint8_t)rng(&seed);
+			b->data[i] = (uint8_t)rng(&seed);
+		}
+		static const float odd[] = { NAN, -0.0f, -3.0f, 0.0f, 1.0f, 7.5f, 0.5f };
+		for (int i = 0; i < N; i++)
+			tile_f32(m)[i] = i % 5 == 0 ? odd[(i / 5) % 7] : (float)(rng(&seed) % 1000) / 999.0f;
+		struct tile *o = run1(&tn, a, b, m);
+		for (int i = 0; i < N; i++) {
+			float w = tile_f32(m)[i];
+			w = w > 0.0f ? w : 0.0f;
+			w = (w < 1.0f ? w : 1.0f) * 0.8f;
+			for (int c = 0; c < 3; c++) {
+				uint8_t x = a->data[4 * i + c], y = b->data[4 * i + c];
+				float prod = x * (float)y * (1.0f / 255);
+				uint8_t want = (uint8_t)(int)(x + (prod - x) * w + 0.5f);
+				if (o->data[4 * i + c] != want)
+					fail_msg("x %d y %d mask %g: %d, want %d", x, y,
+						 (double)tile_f32(m)[i], o->data[4 * i + c], want);
+			}
+			assert_int_equal(o->data[4 * i + 3], a->data[4 * i + 3]);
+		}
+		tile_unref(a);
+		tile_unref(b);
+		tile_unref(m);
+		tile_unref(o);
+	}
+	unmake(&tn);
+}
+
 /* ---- shared bytes: summaries, uniform tiles, aliases (tile.h) ------------------------------ */
 
 /* A T×T height tile of a wavy field in [lo, lo + span], optionally with NaN and −0 texels. */
@@ -1064,7 +1108,7 @@ int main(void)
 		cmocka_unit_test(color_alpha_mask),
 		cmocka_unit_test(tile_summaries), cmocka_unit_test(height_filter_summary),
 		cmocka_unit_test(blend_shares_a), cmocka_unit_test(ramp_vector_bytes),
-		cmocka_unit_test(color_mask_vector),
+		cmocka_unit_test(color_mask_vector), cmocka_unit_test(blend_multiply_bytes),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);
 }
