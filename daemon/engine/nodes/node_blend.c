@@ -236,12 +236,6 @@ static bool blend_needed(const struct node *n, int k, struct tile *const *in, in
 	return !mask_zero(in[SLOT_MASK]) || !a_decides(bl, in[SLOT_A]);
 }
 
-static bool vector_isa(void)
-{
-	enum noise_isa isa = noise_isa_best();
-	return isa == NOISE_ISA_AVX2 || isa == NOISE_ISA_AVX512;
-}
-
 static int blend_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			  struct tile *const *in, int nin, struct tile *out)
 {
@@ -279,7 +273,7 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
 	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && !mask)
 		over_color(bl, in[0]->data, in[1]->data, out->data, count);
-	else if (bl->mode == BLEND_MULTIPLY && count % 8 == 0 && vector_isa())
+	else if (bl->mode == BLEND_MULTIPLY && count % 8 == 0 && noise_isa_has_avx2())
 		blend_multiply_avx2(in[0]->data, in[1]->data, mask, bl->opacity, out->data, count);
 	else
 		blend_bytes(bl, in[0]->data, in[1]->data, mask, out->data, count,

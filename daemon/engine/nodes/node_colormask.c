@@ -74,8 +74,7 @@ static int cm_generate(const struct node *n, struct gen_ctx *g, const struct til
 	size_t count = (size_t)out->size * out->size;
 	const uint8_t *src = in[0]->data;
 	float *dst = tile_f32(out);
-	enum noise_isa isa = noise_isa_best();
-	if (count % 8 == 0 && (isa == NOISE_ISA_AVX2 || isa == NOISE_ISA_AVX512)) {
+	if (count % 8 == 0 && noise_isa_has_avx2()) {
 		if (!color_mask_avx2(m, src, dst, count)) {
 			static const float zero = 0; /* nowhere near: the shared all-zero tile */
 			tile_fill_uniform(out, &zero);

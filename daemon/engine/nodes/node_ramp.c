@@ -22,7 +22,6 @@
 #include <errno.h>
 #include <math.h>
 #include <stdbool.h>
-#include <stdatomic.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -298,12 +297,7 @@ static inline int segment(const struct ramp_table *r, float h, float *t)
 {
 	const float h0 = r->h[0], hl = r->h[r->nstops - 1];
 	h = h < h0 ? h0 : h > hl ? hl : h;
-	int b = (int)((h - h0) * r->inv_bin);
-	int s = r->bin_seg[b < RAMP_BINS ? b : RAMP_BINS - 1];
-	while (h >= r->h[s + 1]) /* the bin holds a stop */
-		s++;
-	while (h < r->h[s]) /* rounding put h just below the bin's start */
-		s--;
+	int s = ramp_segment_of(r, h);
 	*t = h - r->h[s];
 	return s;
 }
@@ -334,19 +328,6 @@ void ramp_base_scalar(const struct ramp_table *r, const float *h, uint8_t *d, si
 	}
 }
 
-/* Whether the AVX2 kernel runs here (decided once; the same bytes either way). */
-static bool ramp_vector(void)
-{
-	static atomic_int v; /* 0 unknown, 1 no, 2 yes */
-	int x = atomic_load_explicit(&v, memory_order_relaxed);
-	if (x == 0) {
-		enum noise_isa isa = noise_isa_best();
-		x = isa == NOISE_ISA_AVX2 || isa == NOISE_ISA_AVX512 ? 2 : 1;
-		atomic_store_explicit(&v, x, memory_order_relaxed);
-	}
-	return x == 2;
-}
-
 static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			 struct tile *const *in, int nin, struct tile *out)
 {
@@ -360,7 +341,7 @@ static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct t
 	const float *src = tile_f32(in[0]), *slope = steep ? tile_f32(in[1]) : NULL;
 	uint8_t *dst = out->data;
 	/* The base ramp everywhere, then the steep texels over it. */
-	if (count % 8 == 0 && ramp_vector())
+	if (count % 8 == 0 && noise_isa_has_avx2())
 		ramp_base_avx2(&r->base, src, dst, count);
 	else
 		ramp_base_scalar(&r->base, src, dst, count);

@@ -17,6 +17,20 @@ struct ramp_table {
 	uint8_t bin_seg[RAMP_BINS + 4]; /* the segment where the bin starts (+4: 32-bit gathers) */
 };
 
+/* The segment holding h ∈ [h[0], h[last]]: the one s with h[s] ≤ h < h[s + 1] (h[last + 1] is
+ * +∞), from the bin table and a short walk (the bin holds a stop; rounding put h just below
+ * the bin's start). */
+static inline int ramp_segment_of(const struct ramp_table *r, float h)
+{
+	int b = (int)((h - r->h[0]) * r->inv_bin);
+	int s = r->bin_seg[b < RAMP_BINS ? b : RAMP_BINS - 1];
+	while (h >= r->h[s + 1])
+		s++;
+	while (h < r->h[s])
+		s--;
+	return s;
+}
+
 /* The base ramp over count texels, one at a time (node_ramp.c). */
 void ramp_base_scalar(const struct ramp_table *r, const float *h, uint8_t *d, size_t count);
 /* The base ramp over count texels (a multiple of 8) with AVX2, the same bytes as the scalar

@@ -139,6 +139,12 @@ static enum noise_isa isa_detect(void)
 	return NOISE_ISA_SCALAR;
 }
 
+bool noise_isa_has_avx2(void)
+{
+	enum noise_isa isa = noise_isa_best();
+	return isa == NOISE_ISA_AVX2 || isa == NOISE_ISA_AVX512;
+}
+
 enum noise_isa noise_isa_best(void)
 {
 	int v = atomic_load_explicit(&isa_cached, memory_order_relaxed);

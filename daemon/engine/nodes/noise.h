@@ -254,6 +254,9 @@ double noise_texel_size(double a, int ly, uint32_t T);
 
 int noise_isa_supported(enum noise_isa isa); /* 1 or 0; AUTO → 1 */
 enum noise_isa noise_isa_best(void);
+/* Whether 8-lane AVX2 kernels (the pixel nodes' too) may run here: the best ISA is AVX2 or
+ * better. Cached after the first call. */
+bool noise_isa_has_avx2(void);
 const char *noise_isa_name(enum noise_isa isa); /* "scalar", "avx2", "avx512", "auto" */
 
 /* ---- internal: per-ISA row kernels (noise.c, noise_avx2.c, noise_avx512.c) ---- */

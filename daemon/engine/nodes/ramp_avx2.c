@@ -22,18 +22,6 @@ static inline float hmax8(__m256 v)
 	return _mm_cvtss_f32(m);
 }
 
-/* The segment holding h ∈ [h[0], h[last]] (the scalar's walk: the one s with
- * h[s] ≤ h < h[s + 1]). */
-static inline int segment_of(const struct ramp_table *r, float h)
-{
-	int b = (int)((h - r->h[0]) * r->inv_bin);
-	int s = r->bin_seg[b < RAMP_BINS ? b : RAMP_BINS - 1];
-	while (h >= r->h[s + 1])
-		s++;
-	while (h < r->h[s])
-		s--;
-	return s;
-}
 
 /* Eight texels of one segment s: the colours from broadcasts, no gathers. */
 static inline __m256i one_segment(const struct ramp_table *r, int s, __m256 hc)
@@ -69,7 +57,7 @@ void ramp_base_avx2(const struct ramp_table *r, const float *h, uint8_t *d, size
 		hc = _mm256_blendv_ps(hc, h0, nan); /* NaN lanes: any valid segment, cleared below */
 		/* Neighbours nearly always share a segment: then no gathers at all. */
 		float lo = hmin8(hc), hi = hmax8(hc);
-		int s0 = segment_of(r, lo);
+		int s0 = ramp_segment_of(r, lo);
 		if (hi < r->h[s0 + 1]) {
 			__m256i px = _mm256_andnot_si256(_mm256_castps_si256(nan),
 							 one_segment(r, s0, hc));
