@@ -1,6 +1,8 @@
 /* net — see net.h. Reads go into one growable buffer that proto_decode looks at until a frame
  * is whole; a decoded frame is consumed at the start of the next net_recv, because a TILE's
- * payload points into it. Deadlines are absolute (CLOCK_MONOTONIC) so EINTR and partial
+ * payload points into it. A tile sent in parts (TILE_PART) is put together in a buffer of
+ * its own and handed out as one TILE; any other frame before its last part means the server
+ * stopped it (its bytes are dropped and counted). Deadlines are absolute (CLOCK_MONOTONIC) so EINTR and partial
  * reads never stretch a timeout.
  */
 #include "net.h"
@@ -46,6 +48,11 @@ struct net_conn {
 		PH_HELLO_WAIT
 	} phase;
 	uint32_t offered;		    /* codecs offered in HELLO */
+	struct pbuf part;		    /* a tile arriving in parts: its payload so far */
+	struct proto_tile part_tile;	    /* its fields (from the first part) */
+	bool part_open;			    /* some of its parts came, not the last */
+	uint64_t part_wire;		    /* its parts' bytes on the wire so far */
+	uint64_t last_wire, parts_dropped;  /* net_last_wire, net_parts_dropped */
 	struct pbuf out;		    /* HELLO's bytes not yet sent */
 	struct addrinfo *ai_list, *ai;	    /* a TCP name's addresses, the one being tried */
 	bool use_tls;			    /* TLS before HELLO: */
@@ -221,6 +228,37 @@ int net_send(struct net_conn *c, const struct proto_msg *m, char err[256])
 	return rc;
 }
 
+/* A TILE_PART of wire bytes: returns 1 when it completed its tile (in c->part), 0 when more
+ * parts are to come, or -EPROTO (a part out of order). */
+static int take_part(struct net_conn *c, const struct proto_tile_part *p, size_t wire,
+		     char err[256])
+{
+	if (p->offset == 0) {
+		c->part.len = 0;
+		if (pbuf_reserve(&c->part, p->total)) {
+			err_set(err, "%s: no memory for a tile of %u bytes", c->peer, p->total);
+			return -ENOMEM;
+		}
+		c->part_tile = p->tile;
+		c->part_open = true;
+		c->part_wire = 0;
+	} else if (!c->part_open || p->offset != c->part.len ||
+		   p->total != c->part_tile.payload_len) {
+		err_set(err, "%s: bad message from server: a part at byte %u of a %u-byte tile, "
+			"where %zu bytes of a %u-byte tile came", c->peer, p->offset, p->total,
+			c->part_open ? c->part.len : 0,
+			c->part_open ? c->part_tile.payload_len : 0);
+		return -EPROTO;
+	}
+	memcpy(c->part.data + c->part.len, p->bytes, p->len);
+	c->part.len += p->len;
+	c->part_wire += wire;
+	if (c->part.len < p->total)
+		return 0;
+	c->part_open = false;
+	return 1;
+}
+
 int net_recv(struct net_conn *c, struct proto_msg *m, int timeout_ms, char err[256])
 {
 	if (c->consume) {
@@ -232,8 +270,28 @@ int net_recv(struct net_conn *c, struct proto_msg *m, int timeout_ms, char err[2
 		size_t need = 0;
 		char e2[256];
 		ssize_t r = proto_decode(c->rd.data, c->rd.len, m, &need, e2);
+		if (r > 0 && c->part_open &&
+		    !(m->type == PROTO_TILE_PART && m->tile_part.offset != 0)) {
+			c->parts_dropped += c->part_wire; /* the server stopped that tile */
+			c->part_open = false;
+		}
+		if (r > 0 && m->type == PROTO_TILE_PART) {
+			int rc = take_part(c, &m->tile_part, (size_t)r, err);
+			proto_msg_fini(m);
+			pbuf_consume(&c->rd, (size_t)r);
+			if (rc < 0)
+				return rc;
+			if (rc == 0)
+				continue;
+			*m = (struct proto_msg){ .type = PROTO_TILE, .tile = c->part_tile };
+			m->tile.payload = c->part.data;
+			m->tile.payload_len = (uint32_t)c->part.len;
+			c->last_wire = c->part_wire;
+			return 0;
+		}
 		if (r > 0) {
 			c->consume = (size_t)r;
+			c->last_wire = (size_t)r;
 			return 0;
 		}
 		if (r < 0) {
@@ -389,7 +447,8 @@ static int conn_new(int fd, const char *peer, const struct net_opts *o, struct n
 	struct net_conn *c = xcalloc(1, sizeof *c);
 	c->fd = fd;
 	c->timeout_ms = o->timeout_ms ? o->timeout_ms : NET_DEFAULT_TIMEOUT_MS;
-	c->offered = o->codecs ? o->codecs : TCODEC_LOSSLESS_MASK;
+	c->offered = (o->codecs ? o->codecs : TCODEC_LOSSLESS_MASK) |
+		     (o->whole_tiles ? 0 : PROTO_FEAT_PARTS);
 	c->phase = fd >= 0 ? PH_CONNECTED : PH_CONNECTING;
 	snprintf(c->peer, sizeof c->peer, "%s", peer ? peer : "server");
 	/* TLS over TCP (the daemon's Unix socket is always plain): --tls-ca, $CLIPMAP_TLS_CA or
@@ -408,6 +467,7 @@ static int conn_new(int fd, const char *peer, const struct net_opts *o, struct n
 	}
 	pbuf_init(&c->rd);
 	pbuf_init(&c->out);
+	pbuf_init(&c->part);
 	int rc = hello_encode(o, c->offered, &c->out, err);
 	if (rc) {
 		pbuf_fini(&c->out);
@@ -431,6 +491,7 @@ static void conn_free(struct net_conn *c)
 		freeaddrinfo(c->ai_list);
 	pbuf_fini(&c->out);
 	pbuf_fini(&c->rd);
+	pbuf_fini(&c->part);
 	tilecodec_destroy(c->tc);
 	free(c);
 }
@@ -754,6 +815,9 @@ bool net_is_tls(const struct net_conn *c) { return c->tls != NULL; }
 const char *net_peer(const struct net_conn *c) { return c->peer; }
 const struct proto_hello_ok *net_hello(const struct net_conn *c) { return &c->hello; }
 uint32_t net_next_req(struct net_conn *c) { return ++c->next_req; }
+uint64_t net_last_wire(const struct net_conn *c) { return c->last_wire; }
+uint64_t net_parts_dropped(const struct net_conn *c) { return c->parts_dropped; }
+uint64_t net_parts_open(const struct net_conn *c) { return c->part_open ? c->part_wire : 0; }
 
 int net_tile_decode(struct net_conn *c, const struct proto_tile *t, void *texels, size_t cap,
 		    char err[256])

@@ -35,6 +35,7 @@ struct net_opts {
 	 * only), else TLS only with `tls`, trusting the system's store. */
 	const char *tls_ca;
 	bool tls;
+	bool whole_tiles; /* do not offer PROTO_FEAT_PARTS: every tile in one TILE frame */
 };
 
 struct net_conn;
@@ -80,6 +81,14 @@ int net_fd(const struct net_conn *c);
 bool net_is_tls(const struct net_conn *c);
 const char *net_peer(const struct net_conn *c);		   /* "/run/…sock" or "host:port" */
 const struct proto_hello_ok *net_hello(const struct net_conn *c); /* borrowed; name owned by c */
+/* Bytes on the wire of the message net_recv returned last, frame headers included (a tile
+ * that came in parts: all its TILE_PART frames). */
+uint64_t net_last_wire(const struct net_conn *c);
+/* Bytes of tiles begun in parts that the server stopped sending (it no longer wanted them
+ * sent), since the connection opened: received, and dropped here. */
+uint64_t net_parts_dropped(const struct net_conn *c);
+/* Bytes on the wire of the parts of a tile received so far whose last part has not come. */
+uint64_t net_parts_open(const struct net_conn *c);
 /* A fresh request id (1, 2, …) for LIST_PLANETS/OPEN/STATS_REQ/CACHE_LS/PREFETCH. */
 uint32_t net_next_req(struct net_conn *c);
 

@@ -42,6 +42,7 @@ static const struct type_info types[] = {
 	{ PROTO_WANT, "WANT", 64u << 10, FROM_CLIENT },
 	{ PROTO_TILE, "TILE", PROTO_MAX_FRAME, FROM_SERVER },
 	{ PROTO_TILE_FAIL, "TILE_FAIL", 8192, FROM_SERVER },
+	{ PROTO_TILE_PART, "TILE_PART", PROTO_MAX_FRAME, FROM_SERVER },
 	{ PROTO_STATS_REQ, "STATS_REQ", 4, FROM_CLIENT },
 	{ PROTO_STATS, "STATS", 8u << 20, FROM_SERVER },
 	{ PROTO_CACHE_LS, "CACHE_LS", 512, FROM_CLIENT },
@@ -433,7 +434,7 @@ static void decode_hello_ok(struct rd *r, struct proto_hello_ok *h)
 	h->name = rd_str(r, PROTO_MAX_NAME, false, "server name");
 	if (!r->err && h->version < 1)
 		rd_fail(r, PROTO_ERR_FIELD, "version 0");
-	if (!r->err && (h->codecs & ~TCODEC_ALL_MASK))
+	if (!r->err && (h->codecs & ~(TCODEC_ALL_MASK | PROTO_FEAT_PARTS)))
 		rd_fail(r, PROTO_ERR_FIELD, "unknown codec bits 0x%x", h->codecs);
 }
 
@@ -606,6 +607,25 @@ static void decode_tile(struct rd *r, struct proto_tile *t)
 	decode_tile_head(r, t, payload_len);
 	t->payload = r->p + r->off;
 	r->off += r->err ? 0 : payload_len;
+}
+
+static void decode_tile_part(struct rd *r, struct proto_tile_part *t)
+{
+	t->offset = rd_u32(r, "offset");
+	t->total = rd_u32(r, "total");
+	if (!r->err && t->offset == 0 && rd_need(r, TILE_HEAD, "tile fields"))
+		decode_tile_head(r, &t->tile, t->total);
+	if (r->err)
+		return;
+	size_t len = r->n - r->off;
+	if (len == 0 || len > t->total || t->offset > t->total - len) {
+		rd_fail(r, PROTO_ERR_FIELD, "part of %zu bytes at %u of a %u-byte tile", len,
+			t->offset, t->total);
+		return;
+	}
+	t->bytes = r->p + r->off;
+	t->len = (uint32_t)len;
+	r->off += len;
 }
 
 static void decode_tile_fail(struct rd *r, struct proto_tile_fail *t)
@@ -909,6 +929,7 @@ int proto_decode_payload(uint16_t type, const void *payload, size_t len, struct 
 	case PROTO_WANT: decode_want(&r, &m->want); break;
 	case PROTO_TILE: decode_tile(&r, &m->tile); break;
 	case PROTO_TILE_FAIL: decode_tile_fail(&r, &m->tile_fail); break;
+	case PROTO_TILE_PART: decode_tile_part(&r, &m->tile_part); break;
 	case PROTO_STATS_REQ: m->stats_req.req = rd_u32(&r, "req"); break;
 	case PROTO_STATS: decode_stats(&r, &m->stats); break;
 	case PROTO_CACHE_LS: decode_cache_ls(&r, &m->cache_ls); break;

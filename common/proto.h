@@ -55,6 +55,7 @@ enum proto_type {
 	PROTO_WANT = 32,	/* C→S */
 	PROTO_TILE = 33,	/* S→C */
 	PROTO_TILE_FAIL = 34,	/* S→C */
+	PROTO_TILE_PART = 35,	/* S→C: a TILE in parts, to a client that offered PROTO_FEAT_PARTS */
 	PROTO_STATS_REQ = 48,	/* C→S */
 	PROTO_STATS = 49,	/* S→C */
 	PROTO_CACHE_LS = 50,	/* C→S */
@@ -243,6 +244,25 @@ struct proto_tile {
 	uint32_t payload_len;
 };
 
+/* HELLO / HELLO_OK `codecs` bit 31 (not a codec): the client reassembles TILE_PART frames, so
+ * the server may send a tile in parts and stop between two parts when the tile is no longer
+ * wanted (docs/PROTOCOL.md "TILE_PART"). */
+#define PROTO_FEAT_PARTS (1u << 31)
+/* Bytes of TILE_PART's fields before its bytes: offset and total, and in the first part the
+ * TILE's own 44 bytes. */
+#define PROTO_PART_HEAD 8u
+#define PROTO_PART_FIRST_HEAD (PROTO_PART_HEAD + 44u)
+
+/* TILE_PART: bytes [offset, offset + len) of a tile's payload of `total` bytes. The first
+ * part (offset 0) carries the tile's fields (tile, its payload_len = total); a part that is
+ * not the first has only offset, total and bytes (tile zeroed). */
+struct proto_tile_part {
+	uint32_t offset, total;
+	struct proto_tile tile; /* offset 0: the TILE's fields; tile.payload unset */
+	const uint8_t *bytes;	/* decoded: borrowed from the frame buffer */
+	uint32_t len;
+};
+
 struct proto_tile_fail {
 	uint32_t seq;
 	uint32_t planet_id;
@@ -401,6 +421,7 @@ struct proto_msg {
 		struct proto_opened opened;
 		struct proto_want want;
 		struct proto_tile tile;
+		struct proto_tile_part tile_part;
 		struct proto_tile_fail tile_fail;
 		struct proto_req stats_req;
 		struct proto_stats stats;
@@ -461,6 +482,10 @@ ssize_t proto_encode(struct pbuf *b, const struct proto_msg *m, char err[256]);
 /* Appends a TILE frame's header and fields but not its payload, its length counting
  * t->payload_len bytes the caller sends next (writev without copying). Same returns. */
 ssize_t proto_encode_tile_head(struct pbuf *b, const struct proto_tile *t, char err[256]);
+/* Appends a TILE_PART frame's header and fields for bytes [offset, offset + len) of t's
+ * payload (t->payload_len bytes in all), not the bytes themselves. Same returns. */
+ssize_t proto_encode_tile_part_head(struct pbuf *b, const struct proto_tile *t, uint32_t offset,
+				    uint32_t len, char err[256]);
 
 /* ---- session helpers (pure; the session owns the state) -------------------------------- */
 

@@ -305,6 +305,21 @@ static void enc_tile(struct wr *w, const struct proto_msg *m)
 	put(w, m->tile.payload, m->tile.payload_len);
 }
 
+static void enc_tile_part(struct wr *w, const struct proto_msg *m)
+{
+	const struct proto_tile_part *t = &m->tile_part;
+	if (t->len && !t->bytes) {
+		err_set(w->errbuf, "TILE_PART without its bytes");
+		w->err = -EINVAL;
+		return;
+	}
+	w32(w, t->offset);
+	w32(w, t->total);
+	if (t->offset == 0)
+		enc_tile_head(w, &t->tile);
+	put(w, t->bytes, t->len);
+}
+
 static void enc_tile_fail(struct wr *w, const struct proto_msg *m)
 {
 	const struct proto_tile_fail *t = &m->tile_fail;
@@ -529,6 +544,7 @@ static const struct {
 	{ PROTO_WANT, enc_want },
 	{ PROTO_TILE, enc_tile },
 	{ PROTO_TILE_FAIL, enc_tile_fail },
+	{ PROTO_TILE_PART, enc_tile_part },
 	{ PROTO_STATS_REQ, enc_req },
 	{ PROTO_STATS, enc_stats },
 	{ PROTO_CACHE_LS, enc_cache_ls },
@@ -617,6 +633,32 @@ ssize_t proto_encode_tile_head(struct pbuf *b, const struct proto_tile *t, char 
 	return (ssize_t)(b->len - start);
 }
 
+ssize_t proto_encode_tile_part_head(struct pbuf *b, const struct proto_tile *t, uint32_t offset,
+				    uint32_t len, char err[256])
+{
+	if (len == 0 || len > t->payload_len || offset > t->payload_len - len) {
+		err_set(err, "part of %u bytes at %u of a %u-byte tile", len, offset,
+			t->payload_len);
+		return -EINVAL;
+	}
+	int rc = offset ? 0 : proto_tile_check(t, err);
+	if (rc)
+		return rc;
+	size_t start = b->len;
+	struct wr w = { .b = b, .errbuf = err };
+	put_header(&w, PROTO_TILE_PART,
+		   (offset ? PROTO_PART_HEAD : PROTO_PART_FIRST_HEAD) + len);
+	w32(&w, offset);
+	w32(&w, t->payload_len);
+	if (!offset)
+		enc_tile_head(&w, t);
+	if (w.err) {
+		b->len = start;
+		return w.err;
+	}
+	return (ssize_t)(b->len - start);
+}
+
 /* ---- session helpers -------------------------------------------------------------------- */
 
 static bool from_client(uint16_t type)
@@ -636,7 +678,8 @@ static bool from_server(uint16_t type)
 {
 	switch (type) {
 	case PROTO_HELLO_OK: case PROTO_BYE: case PROTO_ERROR: case PROTO_PLANETS:
-	case PROTO_OPENED: case PROTO_TILE: case PROTO_TILE_FAIL: case PROTO_STATS:
+	case PROTO_OPENED: case PROTO_TILE: case PROTO_TILE_FAIL: case PROTO_TILE_PART:
+	case PROTO_STATS:
 	case PROTO_CACHE_ENTRIES: case PROTO_PREFETCH_PROGRESS: case PROTO_PREFETCH_ESTIMATE:
 	case PROTO_CACHE_STAT: case PROTO_CACHE_DONE:
 		return true;

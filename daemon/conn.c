@@ -172,6 +172,46 @@ void conn_consume(struct conn *c, size_t n)
 	pbuf_consume(&c->in, n);
 }
 
+/* A tile in parts (conn_seg.part): part i is its frame header and fields (the first part's
+ * are longer: they carry the TILE's) and then payload bytes [i·P, min((i + 1)·P, len)).
+ * The headers lie one after another in the piece's `b`; the piece's bytes are the parts in
+ * order. */
+#define PART_H0 (PROTO_HDR + PROTO_PART_FIRST_HEAD)
+#define PART_H (PROTO_HDR + PROTO_PART_HEAD)
+
+struct part_at {
+	size_t start;	     /* where part i starts among the piece's bytes */
+	size_t hoff, hlen;   /* its header in b */
+	size_t poff, plen;   /* its payload bytes */
+};
+
+static struct part_at part_of(const struct conn_seg *g, size_t off)
+{
+	size_t P = g->part, len = g->e->len;
+	size_t i = off < PART_H0 + P ? 0 : 1 + (off - PART_H0 - P) / (PART_H + P);
+	struct part_at a = { .start = i ? PART_H0 + P + (i - 1) * (PART_H + P) : 0,
+			     .hoff = i ? PART_H0 + (i - 1) * PART_H : 0,
+			     .hlen = i ? PART_H : PART_H0,
+			     .poff = i * P };
+	a.plen = len - a.poff < P ? len - a.poff : P;
+	return a;
+}
+
+/* The headers of g's parts, into g->b. Returns 0 or -EINVAL. */
+static int part_heads(struct conn_seg *g)
+{
+	size_t P = g->part, len = g->e->len, np = (len + P - 1) / P;
+	if (pbuf_reserve(&g->b, PART_H0 + (np - 1) * PART_H))
+		return -ENOMEM;
+	for (size_t i = 0; i < np; i++) {
+		size_t n = len - i * P < P ? len - i * P : P;
+		if (proto_encode_tile_part_head(&g->b, &g->pt, (uint32_t)(i * P), (uint32_t)n,
+						NULL) != (ssize_t)(i ? PART_H : PART_H0))
+			return -EINVAL;
+	}
+	return 0;
+}
+
 /* Whether piece g can go out; a TILE whose encoding became ready gets its header now (and
  * its count corrected), one whose encoding failed is emptied (skipped). */
 static bool settle(struct conn *c, struct conn_seg *g)
@@ -185,18 +225,29 @@ static bool settle(struct conn *c, struct conn_seg *g)
 		g->pt.enc = g->e->enc;
 		g->pt.payload = g->e->payload;
 		g->pt.payload_len = g->e->len;
-		pbuf_reserve(&g->b, TILE_HEAD);
-		c->owned += g->b.cap;
-		if (proto_encode_tile_head(&g->b, &g->pt, NULL) == (ssize_t)TILE_HEAD)
-			now = TILE_HEAD + g->e->len;
-		else
-			g->b.len = 0;
+		if (g->part && g->e->len > g->part) {
+			size_t was = g->b.cap;
+			if (part_heads(g) == 0)
+				now = g->b.len + g->e->len;
+			else
+				g->b.len = 0;
+			c->owned += g->b.cap - was;
+		} else {
+			g->part = 0;
+			pbuf_reserve(&g->b, TILE_HEAD);
+			c->owned += g->b.cap;
+			if (proto_encode_tile_head(&g->b, &g->pt, NULL) == (ssize_t)TILE_HEAD)
+				now = TILE_HEAD + g->e->len;
+			else
+				g->b.len = 0;
+		}
 	}
 	if (!now) {
 		/* nothing to send: an empty header and no payload */
 		etile_unref(g->e);
 		g->e = NULL;
 	}
+	g->end = now;
 	c->pending = c->pending - g->counted + now;
 	g->counted = now;
 	return true;
@@ -204,7 +255,7 @@ static bool settle(struct conn *c, struct conn_seg *g)
 
 static size_t seg_len(const struct conn_seg *g)
 {
-	return g->b.len + (g->e ? g->e->len : 0);
+	return g->e ? g->end : g->b.len;
 }
 
 /* Whether the head piece is ready to go (settling the pieces at the head). */
@@ -231,11 +282,26 @@ static void drop_sent(struct conn *c)
 	}
 }
 
-/* The unsent part of piece g as up to two iovecs. */
-static int seg_iov(const struct conn_seg *g, struct iovec *v)
+/* The unsent part of piece g as at most maxv (>= 2) iovecs: a whole TILE as its header and
+ * payload, a tile in parts as each part's header and bytes in turn. */
+static int seg_iov(const struct conn_seg *g, struct iovec *v, int maxv)
 {
 	int k = 0;
 	size_t off = g->off;
+	if (g->e && g->part) {
+		while (off < g->end && k + 2 <= maxv) {
+			struct part_at a = part_of(g, off);
+			size_t in = off - a.start;
+			if (in < a.hlen) {
+				v[k++] = (struct iovec){ g->b.data + a.hoff + in, a.hlen - in };
+				in = a.hlen;
+			}
+			in -= a.hlen;
+			v[k++] = (struct iovec){ (void *)(g->e->payload + a.poff + in), a.plen - in };
+			off = a.start + a.hlen + a.plen;
+		}
+		return k;
+	}
 	if (off < g->b.len) {
 		v[k++] = (struct iovec){ g->b.data + off, g->b.len - off };
 		off = 0;
@@ -280,7 +346,7 @@ static int flush_tls(struct conn *c, uint64_t *sent, size_t max)
 	uint64_t was = *sent;
 	while (head_ready(c) && !tls_stream_unsent(c->tls) && *sent - was < max) {
 		struct iovec v[2];
-		int k = seg_iov(&c->seg[c->head], v);
+		int k = seg_iov(&c->seg[c->head], v, 2);
 		ssize_t n = k ? tls_stream_send(c->tls, v[0].iov_base, v[0].iov_len) : 0;
 		if (n == -EAGAIN)
 			break;
@@ -311,7 +377,7 @@ int conn_flush(struct conn *c, uint64_t *sent, size_t max)
 		for (size_t i = c->head; i < c->n && k + 2 <= IOV_MAX_OUT && len < left; i++) {
 			if (!settle(c, &c->seg[i]))
 				break;
-			int j = seg_iov(&c->seg[i], v + k);
+			int j = seg_iov(&c->seg[i], v + k, IOV_MAX_OUT - k);
 			for (int q = k; q < k + j; q++)
 				len += v[q].iov_len;
 			k += j;
@@ -388,10 +454,11 @@ void conn_msg_end(struct conn *c)
 	g->counted = unsent;
 }
 
-void conn_put_tile(struct conn *c, struct etile *e, const struct proto_tile *pt)
+void conn_put_tile(struct conn *c, struct etile *e, const struct proto_tile *pt, uint32_t part)
 {
 	struct conn_seg *g = seg_new(c);
 	g->e = etile_ref(e);
+	g->part = part;
 	g->pt = *pt;
 	g->pt.payload = NULL;
 	g->pt.payload_len = 0;
@@ -413,6 +480,18 @@ size_t conn_recall(struct conn *c, bool (*drop)(void *ud, const struct tile_key 
 			seg_fini(c, g);
 			gone++;
 			continue;
+		}
+		if (g->e && g->part && g->off && g->off < g->end && drop(ud, &g->pt.key)) {
+			/* begun: it stops after the part the socket has (the peer drops it) */
+			struct part_at a = part_of(g, g->off);
+			size_t cut = g->off == a.start ? g->off : a.start + a.hlen + a.plen;
+			if (cut < g->end) {
+				*bytes += g->end - cut;
+				c->pending -= g->end - cut;
+				g->counted -= g->end - cut;
+				g->end = cut;
+				gone++;
+			}
 		}
 		c->seg[keep++] = *g;
 	}

@@ -1,8 +1,8 @@
 /* conn — a framed, non-blocking stream connection: input accumulates in a buffer and is cut
  * into protocol frames (proto_decode, with the session's frame-size cap); output is a queue
  * of pieces (conn_seg: owned message bytes, or TILE frames whose payload is a shared
- * encoding) that conn_flush writes out with sendmsg as far as the socket takes, without
- * copying the payloads. Reading pauses while too much output is pending (a peer that does
+ * encoding, whole or as TILE_PART frames) that conn_flush writes out with sendmsg as far as
+ * the socket takes, without copying the payloads. Reading pauses while too much output is pending (a peer that does
  * not read cannot make us queue without bound).
  *
  * With TLS (conn_start_tls, on a TCP listener with [tls]) the same calls carry the stream
@@ -32,6 +32,8 @@ struct conn_seg {
 	size_t off;	    /* bytes of this piece the socket already took */
 	uint64_t counted;   /* bytes counted in the conn's pending for it */
 	struct proto_tile pt; /* TILE: this session's fields (seq, planet id, layer, key) */
+	uint32_t part;	      /* TILE: sent as TILE_PART frames of this many payload bytes; 0: whole */
+	size_t end;	      /* TILE: bytes of the piece that go out (less once a recall cut it) */
 };
 
 struct conn {
@@ -97,10 +99,13 @@ void conn_throttle(struct conn *c, uint64_t max_pending);
 struct pbuf *conn_msg_begin(struct conn *c);
 void conn_msg_end(struct conn *c);
 /* Queues a TILE frame: e's payload (a reference is taken) with a header made from pt's seq,
- * planet_id, layer and key once e is ready. An encoding that failed is skipped. */
-void conn_put_tile(struct conn *c, struct etile *e, const struct proto_tile *pt);
+ * planet_id, layer and key once e is ready. An encoding that failed is skipped. part > 0 (the
+ * peer reassembles TILE_PART): a payload longer than part bytes goes as TILE_PART frames of
+ * part bytes each, so that a recall can stop it between two of them. */
+void conn_put_tile(struct conn *c, struct etile *e, const struct proto_tile *pt, uint32_t part);
 /* Takes the TILE frames of which no byte went out yet and for which drop(ud, key) is true
- * out of the output. Returns how many, and their bytes in *bytes. */
+ * out of the output, and cuts a tile sent in parts after the part the socket has begun.
+ * Returns how many tiles, and the bytes taken back in *bytes. */
 size_t conn_recall(struct conn *c, bool (*drop)(void *ud, const struct tile_key *k), void *ud,
 		   uint64_t *bytes);
 

@@ -92,3 +92,14 @@ double linkest_delay_ms(const struct linkest *le, uint64_t bytes)
 {
 	return le->tcp && le->rate ? (double)bytes * 1000.0 / (double)le->rate : 0.0;
 }
+
+uint32_t linkest_part(const struct linkest *le)
+{
+	if (!le->tcp)
+		return 0;
+	if (!le->rate)
+		return LINKEST_PART_MAX;
+	uint64_t b = le->rate * LINKEST_PART_MS / 1000u;
+	return b < LINKEST_PART_MIN ? LINKEST_PART_MIN : b > LINKEST_PART_MAX ? LINKEST_PART_MAX
+									    : (uint32_t)b;
+}

@@ -20,9 +20,12 @@
 #define LINKEST_FLOOR (32u << 10)		/* bytes: the send window's least size */
 #define LINKEST_WINDOW_NS 1000000000ull	/* the bandwidth filter's window */
 #define LINKEST_SAMPLE_NS 5000000ull	/* TCP_INFO at most this often */
-#define LINKEST_LOWAT_MIN (4u << 10)	/* TCP_NOTSENT_LOWAT's bounds */
+#define LINKEST_LOWAT_MIN (2u << 10)	/* TCP_NOTSENT_LOWAT's bounds */
 #define LINKEST_LOWAT_MAX (1u << 20)
 #define LINKEST_LOWAT_MS 10u		/* TCP_NOTSENT_LOWAT: this much of the rate */
+#define LINKEST_PART_MS 20u		/* a tile in parts (TILE_PART): this much of the rate each */
+#define LINKEST_PART_MIN (2u << 10)	/* and these bounds (the most before a rate is measured) */
+#define LINKEST_PART_MAX (64u << 10)
 
 struct linkest {
 	int fd;
@@ -51,6 +54,11 @@ void linkest_sample(struct linkest *le, uint64_t now_ns, bool force);
 /* The send window in bytes: queue_ms of the rate, within [LINKEST_FLOOR, cap]; cap on a Unix
  * socket. queue_ms 0: cap (the window is not sized from the link). */
 uint64_t linkest_window(const struct linkest *le, uint32_t queue_ms, uint64_t cap);
+/* The payload bytes of one TILE_PART to a peer that reassembles them: LINKEST_PART_MS of the
+ * rate within [LINKEST_PART_MIN, LINKEST_PART_MAX], the most before a rate is measured; 0
+ * (whole tiles) on a Unix socket. A recall stops a tile after its part in flight, so this is
+ * what a new want-set may wait behind. */
+uint32_t linkest_part(const struct linkest *le);
 /* How long `bytes` take at the measured rate, in milliseconds (0 when not measured). */
 double linkest_delay_ms(const struct linkest *le, uint64_t bytes);
 

@@ -82,6 +82,7 @@ struct session {
 	uint32_t rate_viol;
 	uint8_t codec;	 /* the lossless codec */
 	uint32_t codecs; /* HELLO_OK's: codec, and the lossy ones agreed */
+	bool parts;	 /* the client reassembles TILE_PART (PROTO_FEAT_PARTS) */
 
 	struct sopen opened[MAX_OPEN];
 	int nopened;
@@ -283,7 +284,7 @@ static void encode_tile(struct session *s, const struct wantset_entry *e)
 	struct etile *et = encq_get(s->env->encq, e->t, pick.codec, &pick.lossy, s->src);
 	struct proto_tile pt = { .seq = e->seq, .planet_id = e->pid, .layer = e->layer,
 				 .key = e->key };
-	conn_put_tile(&s->c, et, &pt);
+	conn_put_tile(&s->c, et, &pt, s->parts ? linkest_part(&s->le) : 0);
 	etile_unref(et);
 	s->tiles_sent++;
 	cnt->tiles_sent++;
@@ -517,13 +518,16 @@ static void on_hello(struct session *s, const struct proto_hello *h)
 	struct encpick_policy pol = { .lossless = (enum tcodec)codec, .offered = h->codecs,
 				      .lossy_below_bps = s->le.tcp ? env->lossy_below_bps : 0 };
 	s->codecs = encpick_agreed(&pol);
+	/* tiles in parts, where a new want-set may stop one: only over a measured link */
+	s->parts = (h->codecs & PROTO_FEAT_PARTS) && s->le.tcp && env->queue_ms;
 	s->st = PROTO_ST_READY;
 	char nm[40];
 	snprintf(s->name + strlen(s->name), sizeof s->name - strlen(s->name), " %s",
 		 log_escape(nm, sizeof nm, h->name));
 	struct proto_msg m = { .type = PROTO_HELLO_OK,
 			       .hello_ok = { .version = PROTO_VERSION,
-					     .codecs = s->codecs,
+					     .codecs = s->codecs |
+						       (s->parts ? PROTO_FEAT_PARTS : 0),
 					     .session = s->id, .name = "clipmapd/0.1",
 					     .limits = *env->limits } };
 	send_msg(s, &m);

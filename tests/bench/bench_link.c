@@ -8,7 +8,8 @@
  * bbr = false (the 8 MiB queue, nothing recalled, the kernel's own buffering and congestion
  * control: the daemon before issue 15), and the configured daemon again with a client that
  * offers the lossy codecs (as clipmapview does: WebP colour, 16-bit heights below
- * lossy_below_mbit, 50 by default). Figures, not pass/fail;
+ * lossy_below_mbit, 50 by default), and with a client that takes every tile whole (no
+ * TILE_PART: a begun tile cannot be stopped, as before 4 December). Figures, not pass/fail;
  * on a loaded machine read the ratios. Then per rate and configuration the real viewer
  * (clipmapview offscreen, 320x180, 4 frames a second) flies 20 s over the link: lon 0 to 40
  * at lat 10, 150 km up over the test planet (1000 km radius: 35 km/s, levels 0-5), and the
@@ -38,7 +39,7 @@ static void stop_daemon(void)
 }
 
 static int run_rate(struct shaped_link *sl, struct daemon_env *e, unsigned mbit, uint32_t codecs,
-		    struct link_jump_result *r)
+		    bool whole, struct link_jump_result *r)
 {
 	char err[256];
 	if (shaped_link_shape(sl, mbit * 1000, DELAY_MS, err)) {
@@ -46,7 +47,7 @@ static int run_rate(struct shaped_link *sl, struct daemon_env *e, unsigned mbit,
 		return -1;
 	}
 	uint32_t pid;
-	struct net_conn *c = shaped_link_session(sl, e, codecs, &pid, err);
+	struct net_conn *c = shaped_link_session(sl, e, whole, codecs, &pid, err);
 	if (!c) {
 		fprintf(stderr, "bench_link: %s\n", err);
 		return -1;
@@ -140,14 +141,18 @@ int main(void)
 	       "2x2 tiles, 2 layers (40 tiles); 128^2 tiles (~50 KB with zstd)\n", DELAY_MS);
 	printf("%-10s %-16s %10s %10s %10s %12s %12s %12s\n", "rate", "daemon", "first", "coarse",
 	       "all", "stale", "goodput", "20 s flight");
-	struct link_jump_result res[3][8];
-	const char *names[3] = { "window 100 ms", "8 MiB queue", "window + lossy" };
-	const char *queues[3] = { "session.send_queue_ms = 100", "session.send_queue_ms = 0",
-				  "session.send_queue_ms = 100" };
-	const char *ccs[3] = { "session.bbr = true", "session.bbr = false", "session.bbr = true" };
-	const uint32_t codecs[3] = { 0, 0, TCODEC_ALL_MASK };
+	enum { NK = 4 };
+	struct link_jump_result res[NK][8];
+	const char *names[NK] = { "window 100 ms", "8 MiB queue", "window + lossy",
+				  "window, whole" };
+	const char *queues[NK] = { "session.send_queue_ms = 100", "session.send_queue_ms = 0",
+				   "session.send_queue_ms = 100", "session.send_queue_ms = 100" };
+	const char *ccs[NK] = { "session.bbr = true", "session.bbr = false", "session.bbr = true",
+				"session.bbr = true" };
+	const uint32_t codecs[NK] = { 0, 0, TCODEC_ALL_MASK, 0 };
+	const bool whole[NK] = { false, false, false, true }; /* the client takes no TILE_PART */
 	int failed = 0;
-	for (int k = 0; k < 3; k++) {
+	for (int k = 0; k < NK; k++) {
 		struct daemon_env e;
 		char tcp[64], err[256];
 		snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", sl.addr);
@@ -166,7 +171,7 @@ int main(void)
 		}
 		for (int i = 0; i < nr; i++) {
 			struct link_jump_result *r = &res[k][i];
-			if (run_rate(&sl, &e, rates[i], codecs[k], r)) {
+			if (run_rate(&sl, &e, rates[i], codecs[k], whole[k], r)) {
 				failed = 1;
 				continue;
 			}
@@ -178,7 +183,8 @@ int main(void)
 			snprintf(st, sizeof st, "%.0f KB", (double)r->stale_bytes / 1000);
 			snprintf(gp, sizeof gp, "%.2f Mbit/s", r->warm_bps * 1e-6);
 			const char *fe = getenv("LINK_FLIGHT");
-			double fc = fe && atoi(fe) == 0 ? -1 : flight(&sl, &e, codecs[k] == 0);
+			double fc = (fe && atoi(fe) == 0) || whole[k] ? -1
+									: flight(&sl, &e, codecs[k] == 0);
 			char fs[24] = "-";
 			if (fc >= 0)
 				snprintf(fs, sizeof fs, "%.0f%% complete", 100 * fc);
@@ -215,6 +221,17 @@ int main(void)
 			printf("  %u Mbit/s: coarsest level %.1fx, all of B %.1fx\n", rates[i],
 			       a->coarse_ms / (l->coarse_ms > 0 ? l->coarse_ms : 1),
 			       a->full_ms / l->full_ms);
+	}
+	printf("tiles in parts over whole tiles (window, lossless): the new place's first tile "
+	       "and the old place's bytes after the jump\n");
+	for (int i = 0; i < nr; i++) {
+		const struct link_jump_result *a = &res[0][i], *w = &res[3][i];
+		char fa[16], fw[16];
+		fmt_ms(fa, sizeof fa, a->first_ms);
+		fmt_ms(fw, sizeof fw, w->first_ms);
+		printf("  %u Mbit/s: first tile %s vs %s, stale %.1f KB vs %.1f KB (150 ms of the "
+		       "link: %.1f KB)\n", rates[i], fa, fw, (double)a->stale_bytes / 1000,
+		       (double)w->stale_bytes / 1000, rates[i] * 1e6 * 0.150 / 8 / 1000);
 	}
 	shaped_link_fini(&sl);
 	return failed;

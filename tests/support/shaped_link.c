@@ -383,7 +383,7 @@ int shaped_link_daemon_start(const struct shaped_link *sl, struct daemon_env *e,
 	return 0;
 }
 
-struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
+struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e, bool whole,
 				     uint32_t codecs, uint32_t *pid, char why[256])
 {
 	int fd = shaped_link_connect(sl, e->port);
@@ -396,7 +396,7 @@ struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon
 	snprintf(tokf, sizeof tokf, "%s/token", e->dir);
 	snprintf(peer, sizeof peer, "%s:%d", sl->addr, e->port);
 	struct net_opts o = { .token_file = tokf, .name = "shaped_link", .timeout_ms = 10000,
-			      .codecs = codecs };
+			      .codecs = codecs, .whole_tiles = whole };
 	struct net_conn *c = NULL;
 	if (net_connect_fd(fd, peer, &o, &c, why))
 		return NULL;
@@ -482,7 +482,7 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 		if (rc)
 			return rc;
 		if (m.type == PROTO_TILE) {
-			uint64_t fb = PROTO_HDR + 44u + m.tile.payload_len;
+			uint64_t fb = net_last_wire(c); /* a tile in parts: all of them */
 			r->max_frame = fb > r->max_frame ? fb : r->max_frame;
 			if (first_a)
 				warm_bytes += fb;
@@ -497,6 +497,9 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 	if (rc)
 		return rc;
 	uint64_t tj = clock_now_ns(), end = tj + (uint64_t)p->deadline_ms * 1000000u;
+	/* the parts of a tile that came before the jump are not stale: they are subtracted
+	 * once that tile completes (a stale TILE) or is stopped (dropped parts) */
+	uint64_t dropped0 = net_parts_dropped(c), before = net_parts_open(c);
 	uint32_t coarse = 0;
 	while ((now = clock_now_ns()) < end) {
 		rc = net_recv(c, &m, (int)((end - now) / 1000000u) + 1, why);
@@ -512,12 +515,21 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 			return -EIO;
 		}
 		if (m.type == PROTO_TILE) {
-			uint64_t fb = PROTO_HDR + 44u + m.tile.payload_len;
+			uint64_t fb = net_last_wire(c);
 			r->max_frame = fb > r->max_frame ? fb : r->max_frame;
 			if (m.tile.seq == 1) {
 				r->stale_bytes += fb;
 				r->stale_tiles++;
 			} else if (m.tile.seq == 2) {
+				/* whole and right, parts and all: its checksum holds */
+				static float texels[256 * 256];
+				char e2[256];
+				if (net_tile_decode(c, &m.tile, texels, sizeof texels, e2)) {
+					err_set(why, "tile %u/%u/%u of B: %s", m.tile.key.ly,
+						m.tile.key.x, m.tile.key.y, e2);
+					proto_msg_fini(&m);
+					return -EBADMSG;
+				}
 				if (r->first_ms < 0) {
 					r->first_ms = at;
 					r->first_frame = fb;
@@ -534,6 +546,11 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 		if (r->full_ms >= 0 || (!p->full && r->coarse_ms >= 0))
 			break;
 	}
+	/* A's tiles the daemon stopped between two parts: their parts came, and count */
+	r->stale_cut = net_parts_dropped(c) - dropped0;
+	r->stale_bytes += r->stale_cut;
+	r->stale_bytes = r->stale_bytes > before ? r->stale_bytes - before : 0;
+	r->stale_cut = r->stale_cut > before ? r->stale_cut - before : 0;
 	return 0;
 }
 

@@ -62,8 +62,9 @@ void shaped_link_on_fini(void (*fn)(void));
 extern const char shaped_link_planet[];
 struct daemon_env;
 /* A session to the daemon of e (listening on sl->addr, token file DIR/token) from the client's
- * namespace, planet "test" open (its id in *pid). Returns it, or NULL with why filled. */
-struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e,
+ * namespace, planet "test" open (its id in *pid), offering codecs (0: the lossless ones) and,
+ * unless whole, to reassemble TILE_PART. Returns it, or NULL with why filled. */
+struct net_conn *shaped_link_session(struct shaped_link *sl, const struct daemon_env *e, bool whole,
 				     uint32_t codecs, uint32_t *pid, char why[256]);
 
 /* Starts clipmapd in e (daemon_env_init with tag, the planet above as "test", the token)
@@ -84,10 +85,11 @@ struct link_jump_plan {
 
 struct link_jump_result {
 	double warm_bps;	      /* goodput received before the jump (bits/s) */
-	uint64_t max_frame;	      /* the largest TILE frame received (bytes) */
-	uint64_t first_frame;	      /* the new place's first TILE frame (bytes) */
+	uint64_t max_frame;	      /* the largest TILE frame received (bytes; in parts: all) */
+	uint64_t first_frame;	      /* the new place's first tile's frames (bytes) */
 	double first_ms, coarse_ms, full_ms; /* after the jump; < 0: not within the deadline */
-	uint64_t stale_bytes, stale_tiles;   /* A's TILE frames received after the jump */
+	uint64_t stale_bytes, stale_tiles;   /* A's TILE frames received after the jump, and */
+	uint64_t stale_cut;		     /* of those bytes, parts of tiles stopped midway */
 	uint32_t b_tiles, b_wanted;
 	uint32_t b_raw; /* B's tiles sent raw (codec none) */
 };

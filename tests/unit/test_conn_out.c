@@ -4,7 +4,9 @@
  * whose encoding is still under way, partial writes resumed anywhere (in a header, in a
  * payload); the pending count ends at zero; a recall takes out the TILE frames not yet begun
  * and never the one the socket has begun; the same encoding is shared (one encoding for two
- * requests) and an encoding outlives the cache that made it while a queue refers to it.
+ * requests) and an encoding outlives the cache that made it while a queue refers to it. Tiles
+ * in parts (TILE_PART): the frames proto_encode makes of each part, in order, and a recall
+ * that stops a begun tile after the part the socket has begun.
  */
 #include <stdarg.h>
 #include <stddef.h>
@@ -131,9 +133,9 @@ static void test_order_bytes_and_waiting(void **state)
 	struct etile *e2b = encq_get(q, t2, TCODEC_ZSTD, NULL, NULL); /* the same encoding */
 	assert_ptr_equal(e2, e2b);
 	struct proto_tile f1 = tile_fields(5, t1), f2 = tile_fields(6, t2);
-	conn_put_tile(&c, e1, &f1);
-	conn_put_tile(&c, e2, &f2);
-	conn_put_tile(&c, e2b, &f2);
+	conn_put_tile(&c, e1, &f1, 0);
+	conn_put_tile(&c, e2, &f2, 0);
+	conn_put_tile(&c, e2b, &f2, 0);
 	put_msg(&c, 2);
 	etile_unref(e2b);
 	/* before any encoding is ready: the first message only */
@@ -173,7 +175,7 @@ static void test_order_bytes_and_waiting(void **state)
 	assert_false(c.want_out);
 
 	/* the cache goes first; the queue's references keep nothing dangling */
-	conn_put_tile(&c, e2, &f2);
+	conn_put_tile(&c, e2, &f2, 0);
 	size_t f2len = PROTO_HDR + 44 + e2->len;
 	etile_unref(e1);
 	etile_unref(e2);
@@ -220,7 +222,7 @@ static void test_recall(void **state)
 		e[i] = encq_get(q, t[i], TCODEC_NONE, NULL, NULL);
 		wait_ready(q, e[i]);
 		struct proto_tile f = tile_fields(9, t[i]);
-		conn_put_tile(&c, e[i], &f);
+		conn_put_tile(&c, e[i], &f, 0);
 	}
 	uint64_t frame = PROTO_HDR + 44 + t[0]->nbytes;
 	assert_int_equal(conn_pending(&c), 3 * frame);
@@ -255,11 +257,112 @@ static void test_recall(void **state)
 	pbuf_fini(&got);
 }
 
+/* The TILE_PART frames of t's payload (e) in parts of P bytes, from part i0 to i1 − 1. */
+static void expect_parts(struct pbuf *b, uint32_t seq, const struct tile *t,
+			 const struct etile *e, uint32_t P, uint32_t i0, uint32_t i1)
+{
+	struct proto_tile f = tile_fields(seq, t);
+	f.enc = e->enc;
+	f.payload = e->payload;
+	f.payload_len = e->len;
+	for (uint32_t i = i0; i < i1; i++) {
+		uint32_t off = i * P, n = e->len - off < P ? e->len - off : P;
+		struct proto_msg m = { .type = PROTO_TILE_PART,
+				       .tile_part = { .offset = off, .total = e->len,
+						      .bytes = e->payload + off, .len = n } };
+		if (!off)
+			m.tile_part.tile = f;
+		assert_true(proto_encode(b, &m, NULL) > 0);
+	}
+}
+
+static void test_parts(void **state)
+{
+	(void)state;
+	int fds[2];
+	pair(fds);
+	struct encq *q;
+	assert_int_equal(encq_create(1, 1u << 20, no_wake, &q), 0);
+	enum { P = 3000 }; /* 16 KiB tiles: five parts of 3000 and one of 1384 */
+	struct tile *t[3];
+	struct etile *e[3];
+	struct conn c;
+	conn_init(&c, fds[0]);
+	for (int i = 0; i < 3; i++) {
+		t[i] = make_tile((uint32_t)i + 20, (uint8_t)(i + 3));
+		e[i] = encq_get(q, t[i], TCODEC_NONE, NULL, NULL);
+		wait_ready(q, e[i]);
+	}
+	/* all of it goes out: a message between the tiles, a tile that fits one part whole */
+	struct proto_tile f0 = tile_fields(4, t[0]), f1 = tile_fields(4, t[1]);
+	conn_put_tile(&c, e[0], &f0, P);
+	put_msg(&c, 3);
+	conn_put_tile(&c, e[1], &f1, P);
+	conn_put_tile(&c, e[1], &f1, 1u << 20);
+	struct pbuf got, want;
+	pbuf_init(&got);
+	pbuf_init(&want);
+	uint64_t sent = pump_out(&c, fds[1], &got);
+	uint32_t np = (t[0]->nbytes + P - 1) / P;
+	expect_parts(&want, 4, t[0], e[0], P, 0, np);
+	expect_msg(&want, 3);
+	expect_parts(&want, 4, t[1], e[1], P, 0, np);
+	expect_tile(&want, 4, t[1], e[1]);
+	assert_int_equal(got.len, want.len);
+	assert_memory_equal(got.data, want.data, want.len);
+	assert_int_equal(sent, want.len);
+	assert_int_equal(conn_pending(&c), 0);
+
+	/* the peer does not read: a recall stops the begun tile after its part in flight */
+	for (int i = 0; i < 3; i++) {
+		struct proto_tile f = tile_fields(5, t[i]);
+		conn_put_tile(&c, e[i], &f, P);
+	}
+	sent = 0;
+	assert_int_equal(conn_flush(&c, &sent, SIZE_MAX), 0);
+	uint64_t h0 = PROTO_HDR + PROTO_PART_FIRST_HEAD, h = PROTO_HDR + PROTO_PART_HEAD;
+	uint64_t frames = h0 + (np - 1) * h + t[0]->nbytes;
+	assert_true(sent > 0 && sent < frames);
+	/* the part the socket has begun: the first whose end is past `sent` */
+	uint32_t k = 1;
+	while (h0 + P + (k - 1) * (h + P) < sent)
+		k++;
+	uint64_t cut = h0 + P + (k - 1) * (h + P);
+	int asked = 0;
+	uint64_t bytes = 0;
+	assert_int_equal(conn_recall(&c, drop_all, &asked, &bytes), 3);
+	assert_int_equal(conn_pending(&c), cut - sent);
+	assert_int_equal(bytes, frames - cut + 2 * frames);
+	pbuf_fini(&got);
+	pbuf_init(&got);
+	sent += pump_out(&c, fds[1], &got);
+	pbuf_fini(&want);
+	pbuf_init(&want);
+	expect_parts(&want, 5, t[0], e[0], P, 0, k);
+	assert_int_equal(got.len, cut);
+	assert_int_equal(sent, cut);
+	assert_memory_equal(got.data, want.data, want.len);
+	assert_int_equal(conn_pending(&c), 0);
+	assert_false(c.want_out);
+
+	conn_close(&c);
+	conn_fini(&c);
+	close(fds[1]);
+	for (int i = 0; i < 3; i++) {
+		etile_unref(e[i]);
+		tile_unref(t[i]);
+	}
+	encq_destroy(q);
+	pbuf_fini(&got);
+	pbuf_fini(&want);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(test_order_bytes_and_waiting),
 		cmocka_unit_test(test_recall),
+		cmocka_unit_test(test_parts),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

@@ -560,6 +560,110 @@ static void tile_fetch(void **state)
 	assert_int_equal(srv_join(&s), 0);
 }
 
+/* ---- a tile in parts (TILE_PART) ---------------------------------------------------------- */
+
+static uint8_t part_rgba[8 * 8 * 4];
+
+/* Sends bytes [off, off + n) of t's payload as a TILE_PART; returns its frame's size or < 0. */
+static ssize_t send_part(struct srv *s, const struct proto_tile *t, uint32_t off, uint32_t n)
+{
+	struct proto_msg m = { .type = PROTO_TILE_PART,
+			       .tile_part = { .offset = off, .total = t->payload_len,
+					      .bytes = t->payload + off, .len = n } };
+	if (off == 0)
+		m.tile_part.tile = *t;
+	struct pbuf b;
+	pbuf_init(&b);
+	ssize_t r = proto_encode(&b, &m, NULL);
+	if (r > 0 && srv_write(s, b.data, b.len))
+		r = -EIO;
+	pbuf_fini(&b);
+	return r;
+}
+
+static int script_parts(struct srv *s)
+{
+	struct proto_msg m = { 0 };
+	if (srv_recv(s, &m) || m.type != PROTO_HELLO || !(m.hello.codecs & PROTO_FEAT_PARTS)) {
+		proto_msg_fini(&m);
+		return -1;
+	}
+	proto_msg_fini(&m);
+	struct proto_msg ok = { .type = PROTO_HELLO_OK,
+				.hello_ok = { .version = PROTO_VERSION,
+					      .codecs = PROTO_FEAT_PARTS, .session = 43,
+					      .name = "fake/1" } };
+	if (srv_send(s, &ok))
+		return -1;
+	struct tilecodec_hdr h;
+	struct tilecodec *tc = tilecodec_create();
+	uint8_t payload[1024];
+	ssize_t n = tilecodec_encode(tc, PIX_COLOR, 8, TCODEC_NONE, TFILTER_NONE, 0, part_rgba,
+				     &h, payload, sizeof payload);
+	tilecodec_destroy(tc);
+	if (n != 256)
+		return -2;
+	struct proto_tile t = { .seq = 7, .planet_id = 1, .layer = 1,
+				.key = { .node = 0x33, .lx = 2, .ly = 1, .x = 1, .y = 1 },
+				.enc = h, .payload = payload, .payload_len = 256 };
+	s->bytewise = true;
+	/* A whole, in three parts; B stopped after its first; C whole; then a stray part */
+	bool bad = send_part(s, &t, 0, 100) != PROTO_HDR + PROTO_PART_FIRST_HEAD + 100 ||
+		   send_part(s, &t, 100, 100) != PROTO_HDR + PROTO_PART_HEAD + 100 ||
+		   send_part(s, &t, 200, 56) < 0;
+	s->bytewise = false;
+	t.key.x = 2;
+	bad = bad || send_part(s, &t, 0, 100) < 0;
+	t.key.x = 3;
+	struct proto_msg whole = { .type = PROTO_TILE, .tile = t };
+	bad = bad || srv_send(s, &whole) || send_part(s, &t, 100, 100) < 0;
+	if (bad)
+		return -3;
+	/* wait for the client to hang up */
+	char c;
+	while (read(s->fd, &c, 1) > 0)
+		;
+	return 0;
+}
+
+static void tile_parts(void **state)
+{
+	(void)state;
+	for (size_t i = 0; i < sizeof part_rgba; i++)
+		part_rgba[i] = (uint8_t)(i * 7 + 1);
+	struct srv s = { 0 };
+	int fd = srv_start(&s, script_parts);
+	struct net_opts o = { 0 };
+	struct net_conn *c;
+	char err[256];
+	assert_int_equal(net_connect_fd(fd, "peerP", &o, &c, err), 0);
+	assert_true(net_hello(c)->codecs & PROTO_FEAT_PARTS);
+	struct proto_msg m = { 0 };
+	assert_int_equal(net_recv(c, &m, 5000, err), 0);
+	assert_int_equal(m.type, PROTO_TILE);
+	assert_int_equal(m.tile.key.x, 1);
+	assert_int_equal(m.tile.seq, 7);
+	assert_int_equal(m.tile.payload_len, 256);
+	assert_memory_equal(m.tile.payload, part_rgba, 256);
+	uint64_t three = 3 * PROTO_HDR + PROTO_PART_FIRST_HEAD + 2 * PROTO_PART_HEAD + 256;
+	assert_int_equal(net_last_wire(c), three);
+	assert_int_equal(net_parts_dropped(c), 0);
+	proto_msg_fini(&m);
+	/* B's first part is dropped when C comes whole */
+	assert_int_equal(net_recv(c, &m, 5000, err), 0);
+	assert_int_equal(m.type, PROTO_TILE);
+	assert_int_equal(m.tile.key.x, 3);
+	assert_memory_equal(m.tile.payload, part_rgba, 256);
+	assert_int_equal(net_last_wire(c), PROTO_HDR + 44 + 256);
+	assert_int_equal(net_parts_dropped(c), PROTO_HDR + PROTO_PART_FIRST_HEAD + 100);
+	proto_msg_fini(&m);
+	/* a part with no first part before it: the stream is broken, said so */
+	assert_int_equal(net_recv(c, &m, 5000, err), -EPROTO);
+	assert_non_null(strstr(err, "a part at byte 100 of a 256-byte tile"));
+	net_close(c);
+	assert_int_equal(srv_join(&s), 0);
+}
+
 /* ---- prefetch through the fake server ------------------------------------------------------ */
 
 static int open_reply(struct srv *s)
@@ -1148,6 +1252,7 @@ int main(void)
 		cmocka_unit_test(timeout),
 		cmocka_unit_test(garbage),
 		cmocka_unit_test(tile_fetch),
+		cmocka_unit_test(tile_parts),
 		cmocka_unit_test(prefetch_done),
 		cmocka_unit_test(prefetch_interrupted),
 		cmocka_unit_test(prefetch_bad_levels),

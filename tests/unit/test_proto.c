@@ -219,6 +219,20 @@ static struct fixture *fixture_create(void)
 				       .bytes = UINT64_MAX, .budget = 1u << 30, .used = 7,
 				       .max_tiles = 250000, .nlevels = GRID_MAX_LEVEL + 1,
 				       .levels = lv } };
+	*m++ = (struct proto_msg){
+		.type = PROTO_TILE_PART,
+		.tile_part = { .offset = 0, .total = sizeof(f->payload),
+			       .tile = { .seq = 79, .planet_id = 1, .layer = 1,
+					 .key = { .node = 7, .lx = 3, .ly = 2, .x = 7, .y = 3 },
+					 .enc = { .format = PIX_COLOR, .codec = TCODEC_NONE,
+						  .size = 64, .raw_len = sizeof(f->payload),
+						  .checksum = 3 },
+					 .payload_len = sizeof(f->payload) },
+			       .bytes = f->payload, .len = 1000 } };
+	*m++ = (struct proto_msg){
+		.type = PROTO_TILE_PART,
+		.tile_part = { .offset = 1000, .total = sizeof(f->payload),
+			       .bytes = f->payload + 1000, .len = sizeof(f->payload) - 1000 } };
 	f->nmsgs = (int)(m - f->msgs);
 	return f;
 }
@@ -491,7 +505,7 @@ static void byte_by_byte(void **state)
 	struct pbuf stream, in;
 	pbuf_init(&stream);
 	pbuf_init(&in);
-	size_t ends[32];
+	size_t ends[sizeof f->msgs / sizeof f->msgs[0]];
 	for (int i = 0; i < f->nmsgs; i++) {
 		if (f->msgs[i].type == PROTO_CACHE_ENTRIES || f->msgs[i].type == PROTO_TILE)
 			continue; /* big or borrowed: covered by the round trip */
@@ -973,6 +987,91 @@ static void session_limits(void **state)
 	assert_true(proto_rate_take(&r, 0, 0, 0)); /* rate 0: unlimited */
 }
 
+/* TILE_PART's own checks: no empty part, none past its tile's end, and the first part's
+ * TILE fields checked as a TILE's with the whole tile's length. */
+static void tile_part_fields(void **state)
+{
+	(void)state;
+	static uint8_t bytes[300];
+	struct proto_tile t = { .seq = 1, .planet_id = 1, .key = { .lx = 1, .ly = 0, .x = 1 },
+				.enc = { .format = PIX_COLOR, .codec = TCODEC_NONE, .size = 8,
+					 .raw_len = 256 },
+				.payload_len = 256 };
+	struct { uint32_t offset, total, len; bool ok; } c[] = {
+		{ 0, 256, 256, true },	{ 0, 256, 100, true },	{ 200, 256, 56, true },
+		{ 0, 256, 0, false },	{ 200, 256, 57, false }, { 256, 256, 1, false },
+		{ UINT32_MAX, 256, 1, false }, { 0, 255, 100, false }, /* raw tile: 256 bytes */
+	};
+	for (size_t i = 0; i < sizeof c / sizeof c[0]; i++) {
+		struct proto_msg m = { .type = PROTO_TILE_PART,
+				       .tile_part = { .offset = c[i].offset, .total = c[i].total,
+						      .bytes = bytes, .len = c[i].len } };
+		if (!c[i].offset) {
+			m.tile_part.tile = t;
+			m.tile_part.tile.payload_len = c[i].total;
+		}
+		struct pbuf b;
+		pbuf_init(&b);
+		char err[256] = "";
+		ssize_t n = proto_encode(&b, &m, err);
+		if (c[i].ok != (n > 0))
+			fail_msg("case %zu: %zd %s", i, n, err);
+		/* and the decoder, on the same bytes written by hand */
+		pbuf_fini(&b);
+		pbuf_init(&b);
+		uint8_t hdr[PROTO_HDR + PROTO_PART_FIRST_HEAD] = { 'C', 'L', 'M', 'P', PROTO_VERSION, 0,
+								  PROTO_TILE_PART, 0 };
+		struct pbuf head;
+		pbuf_init(&head);
+		t.payload_len = c[i].total;
+		size_t hl = c[i].offset ? PROTO_HDR + PROTO_PART_HEAD : PROTO_HDR + PROTO_PART_FIRST_HEAD;
+		if (c[i].offset == 0 && c[i].ok)
+			assert_int_equal(proto_encode_tile_part_head(&head, &t, 0, c[i].len, err),
+					 (ssize_t)hl);
+		pbuf_fini(&head);
+		uint32_t plen = (uint32_t)(hl - PROTO_HDR) + c[i].len;
+		memcpy(hdr + 8, &plen, 4);
+		memcpy(hdr + 12, &c[i].offset, 4);
+		memcpy(hdr + 16, &c[i].total, 4);
+		pbuf_append(&b, hdr, hl);
+		if (c[i].offset == 0) {
+			/* the 44 TILE fields as enc_tile_head writes them */
+			struct pbuf tb;
+			pbuf_init(&tb);
+			struct proto_msg tm = { .type = PROTO_TILE, .tile = t };
+			tm.tile.payload_len = 256;
+			tm.tile.payload = bytes;
+			assert_true(proto_encode(&tb, &tm, NULL) > 0);
+			memcpy(b.data + PROTO_HDR + PROTO_PART_HEAD, tb.data + PROTO_HDR, 44);
+			pbuf_fini(&tb);
+		}
+		pbuf_append(&b, bytes, c[i].len);
+		struct proto_msg d;
+		size_t need;
+		ssize_t r = proto_decode(b.data, b.len, &d, &need, err);
+		if (c[i].ok != (r > 0))
+			fail_msg("decode case %zu: %zd %s", i, r, err);
+		if (r > 0) {
+			assert_int_equal(d.tile_part.offset, c[i].offset);
+			assert_int_equal(d.tile_part.len, c[i].len);
+			proto_msg_fini(&d);
+		}
+		pbuf_fini(&b);
+		t.payload_len = 256;
+	}
+	/* a client that says it reassembles parts: HELLO_OK may echo the bit, no other */
+	struct proto_msg ok = { .type = PROTO_HELLO_OK,
+				.hello_ok = { .version = PROTO_VERSION,
+					      .codecs = PROTO_FEAT_PARTS | 1u << TCODEC_ZSTD,
+					      .name = "s" } };
+	struct pbuf b;
+	pbuf_init(&b);
+	assert_true(proto_encode(&b, &ok, NULL) > 0);
+	ok.hello_ok.codecs = 1u << 30;
+	assert_true(proto_encode(&b, &ok, NULL) < 0);
+	pbuf_fini(&b);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -981,6 +1080,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(round_trip_every_type, setup, teardown),
 		cmocka_unit_test_setup_teardown(decoded_fields, setup, teardown),
 		cmocka_unit_test(byte_layout),
+		cmocka_unit_test(tile_part_fields),
 		cmocka_unit_test_setup_teardown(byte_by_byte, setup, teardown),
 		cmocka_unit_test(malformed_frames),
 		cmocka_unit_test(normal_of_field),
