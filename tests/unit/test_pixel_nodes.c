@@ -818,6 +818,87 @@ static void ramp_vector_bytes(void **state)
 	unmake(&tn);
 }
 
+/* The steep blend and the snow, eight texels at a time, give the scalar loops' bytes: random
+ * heights across both tables' stops (and at them, and NaN, ±∞), slopes across the weight's
+ * ramp (and NaN), over random colours; snow lines with and without sea ice and a slope row. */
+static void ramp_steep_snow_vector_bytes(void **state)
+{
+	(void)state;
+	if (!noise_isa_supported(NOISE_ISA_AVX2))
+		skip();
+	struct tnode ta, tb;
+	assert_int_equal(make(&ta, &node_type_ramp, &input_height, NULL, NULL,
+			      "stops = -9000 4 10 40, -1 140 208 222, 0 196 184 140, 20 96 130 62, "
+			      "350 66 108 48, 3700 190 188 184"),
+			 0);
+	assert_int_equal(make(&tb, &node_type_ramp, &input_height, NULL, NULL,
+			      "stops = -9000 4 10 40, 0 156 146 124, 300 134 128 116, "
+			      "2600 132 130 126, 3600 152 150 148"),
+			 0);
+	const struct ramp_table *base = ta.n.impl, *steep = tb.n.impl;
+	enum { M = 1 << 16 };
+	float *h = malloc(M * sizeof *h), *sl = malloc(M * sizeof *sl);
+	uint8_t *d0 = malloc(4 * M), *a = malloc(4 * M), *b = malloc(4 * M);
+	uint32_t seed = 7;
+	for (int i = 0; i < M; i++) {
+		h[i] = (float)((int)(rng(&seed) % 1400000) - 1000000) / 100.0f;
+		sl[i] = (float)(rng(&seed) % 1000) / 1000.0f;
+		for (int c = 0; c < 4; c++)
+			d0[4 * i + c] = (uint8_t)rng(&seed);
+	}
+	int k = 0;
+	for (int s = 0; s < base->nstops; s++, k += 3) {
+		h[k] = base->h[s];
+		h[k + 1] = nextafterf(base->h[s], -INFINITY);
+		h[k + 2] = nextafterf(base->h[s], INFINITY);
+	}
+	float odd[] = { NAN, INFINITY, -INFINITY, -0.0f, 0.0f, 1e30f, -1e30f };
+	for (size_t i = 0; i < sizeof odd / sizeof odd[0]; i++, k++)
+		h[k] = odd[i];
+	for (int i = 0; i < 64; i++)
+		sl[k + i] = i % 3 ? 0.25f + (float)i / 256.0f : NAN;
+	const struct ramp_steep st = { base, steep, 0.25f, 4.0f };
+	memcpy(a, d0, 4 * M);
+	memcpy(b, d0, 4 * M);
+	ramp_steep_scalar(&st, h, sl, a, M);
+	ramp_steep_avx2(&st, h, sl, b, M);
+	for (int i = 0; i < M; i++)
+		if (memcmp(a + 4 * i, b + 4 * i, 4))
+			fail_msg("steep: height %.9g slope %.9g: scalar %d %d %d %d, avx2 %d %d %d %d",
+				 (double)h[i], (double)sl[i], a[4 * i], a[4 * i + 1], a[4 * i + 2],
+				 a[4 * i + 3], b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]);
+	assert_true(memcmp(a, d0, 4 * M) != 0); /* it did blend */
+	struct ramp_snow sn[] = {
+		{ .line = 1033.5f, .inv = 1.0f / 400, .ice = -0.25f, .sea_ice = true,
+		  .snow = { 242, 245, 250, 255 }, .from = 0.25f, .inv_steep = 4.0f },
+		{ .line = 600.0f, .inv = 1.0f / 400, .ice = 0.6f, .sea_ice = true,
+		  .snow = { 242, 245, 250, 255 }, .from = 0.25f, .inv_steep = 4.0f },
+		{ .line = 4300.0f, .inv = 1.0f / 250, .ice = 0, .sea_ice = false,
+		  .snow = { 10, 200, 255, 255 } },
+	};
+	for (size_t c = 0; c < sizeof sn / sizeof sn[0]; c++)
+		for (int withslope = 0; withslope < 2; withslope++) {
+			memcpy(a, d0, 4 * M);
+			memcpy(b, d0, 4 * M);
+			ramp_snow_scalar(&sn[c], h, withslope ? sl : NULL, a, M);
+			ramp_snow_avx2(&sn[c], h, withslope ? sl : NULL, b, M);
+			for (int i = 0; i < M; i++)
+				if (memcmp(a + 4 * i, b + 4 * i, 4))
+					fail_msg("snow %zu/%d: height %.9g: scalar %d %d %d %d, avx2 "
+						 "%d %d %d %d", c, withslope, (double)h[i], a[4 * i],
+						 a[4 * i + 1], a[4 * i + 2], a[4 * i + 3], b[4 * i],
+						 b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]);
+			assert_true(memcmp(a, d0, 4 * M) != 0); /* it did snow */
+		}
+	free(h);
+	free(sl);
+	free(d0);
+	free(a);
+	free(b);
+	unmake(&ta);
+	unmake(&tb);
+}
+
 /* The AVX2 colour mask gives color_mask_texel's values bit for bit over a lattice of the RGB
  * cube (every third level of each channel, the references' own colours among them), and
  * says whether any is not 0; a tile nowhere near becomes the shared all-zero tile. */
@@ -1108,6 +1189,7 @@ int main(void)
 		cmocka_unit_test(color_alpha_mask),
 		cmocka_unit_test(tile_summaries), cmocka_unit_test(height_filter_summary),
 		cmocka_unit_test(blend_shares_a), cmocka_unit_test(ramp_vector_bytes),
+		cmocka_unit_test(ramp_steep_snow_vector_bytes),
 		cmocka_unit_test(color_mask_vector), cmocka_unit_test(blend_multiply_bytes),
 	};
 	return cmocka_run_group_tests_name("pixel_nodes", tests, NULL, NULL);

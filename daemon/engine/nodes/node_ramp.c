@@ -229,15 +229,13 @@ static inline void put(uint8_t *d, const float *c, const float *sl, float t)
 #endif
 
 /* 0 below steep_from, 1 from steep_to, linear between; 0 for NaN. */
-static inline float steep_weight(const struct ramp *r, float slope)
+static inline float steep_weight(float from, float inv, float slope)
 {
-	float w = (slope - r->steep_from) * r->inv_steep;
+	float w = (slope - from) * inv;
 	w = w > 0.0f ? w : 0.0f;
 	return w < 1.0f ? w : 1.0f;
 }
 
-/* Fades a row towards snow above its latitude's snow line (and all of it past the sea-ice
- * latitude); with a slope row, less on steep texels. */
 /* The greatest of n heights, NaN left out (−∞ when every one is NaN); 8 lanes so the loop
  * vectorises at -O2. */
 static float row_max(const float *h, uint32_t n)
@@ -256,39 +254,53 @@ static float row_max(const float *h, uint32_t n)
 	return top;
 }
 
-static void snow_row(const struct ramp *r, double lat, const float *h, const float *slope,
-		     uint8_t *d, uint32_t T)
+void ramp_snow_scalar(const struct ramp_snow *s, const float *h, const float *slope, uint8_t *d,
+		      size_t n)
 {
-	double c = cos(lat * M_PI / 180.0);
-	double line = r->snow_pole + (r->snow_equator - r->snow_pole) * c * c;
-	/* Sea ice: starts at sea_ice_latitude over shallow water and reaches deep water 8° later,
-	 * so its edge follows the sea floor instead of a parallel. */
-	float ice = (float)((fabs(lat) - r->sea_ice_latitude) / 8.0);
-	float inv = (float)(1.0 / r->snow_blend);
-	/* A row whose highest texel is below the line, where the sea ice cannot reach (its ti ≤
-	 * ice ≤ 0), keeps its colours: the loop below would change nothing (t only grows with h,
-	 * NaN never snows). */
-	if (r->sea_ice_latitude > 90 || !(ice > 0)) {
-		float top = row_max(h, T);
-		if (!((top - (float)line) * inv > 0))
-			return;
-	}
-	for (uint32_t i = 0; i < T; i++) {
-		float t = (h[i] - (float)line) * inv;
-		float ti = ice + (h[i] < 0 ? h[i] / 6000.0f : 0.0f);
-		if (r->sea_ice_latitude <= 90 && ti > t)
+	for (size_t i = 0; i < n; i++) {
+		float t = (h[i] - s->line) * s->inv;
+		float ti = s->ice + (h[i] < 0 ? h[i] / 6000.0f : 0.0f);
+		if (s->sea_ice && ti > t)
 			t = ti * 4.0f;
 		if (!(t > 0))
 			continue;
 		if (t > 1)
 			t = 1;
 		if (slope)
-			t *= 1.0f - steep_weight(r, slope[i]);
+			t *= 1.0f - steep_weight(s->from, s->inv_steep, slope[i]);
 		for (int ch = 0; ch < 3; ch++) {
-			float v = d[4 * i + ch] + (r->snow[ch] - d[4 * i + ch]) * t;
+			float v = d[4 * i + ch] + (s->snow[ch] - d[4 * i + ch]) * t;
 			d[4 * i + ch] = (uint8_t)(v + 0.5f);
 		}
 	}
+}
+
+/* Fades a row towards snow above its latitude's snow line (and all of it past the sea-ice
+ * latitude); with a slope row, less on steep texels. */
+static void snow_row(const struct ramp *r, double lat, const float *h, const float *slope,
+		     uint8_t *d, uint32_t T, bool avx2)
+{
+	double c = cos(lat * M_PI / 180.0);
+	double line = r->snow_pole + (r->snow_equator - r->snow_pole) * c * c;
+	/* Sea ice: starts at sea_ice_latitude over shallow water and reaches deep water 8° later,
+	 * so its edge follows the sea floor instead of a parallel. */
+	struct ramp_snow s = { .line = (float)line, .inv = (float)(1.0 / r->snow_blend),
+			       .ice = (float)((fabs(lat) - r->sea_ice_latitude) / 8.0),
+			       .sea_ice = r->sea_ice_latitude <= 90,
+			       .from = r->steep_from, .inv_steep = r->inv_steep };
+	memcpy(s.snow, r->snow, sizeof s.snow);
+	/* A row whose highest texel is below the line, where the sea ice cannot reach (its ti ≤
+	 * ice ≤ 0), keeps its colours: the loop would change nothing (t only grows with h, NaN
+	 * never snows). */
+	if (!s.sea_ice || !(s.ice > 0)) {
+		float top = row_max(h, T);
+		if (!((top - s.line) * s.inv > 0))
+			return;
+	}
+	if (avx2 && T % 8 == 0)
+		ramp_snow_avx2(&s, h, slope, d, T);
+	else
+		ramp_snow_scalar(&s, h, slope, d, T);
 }
 
 /* The segment of table r holding h (clamped to its ends, where the last stop's segment has
@@ -302,17 +314,22 @@ static inline int segment(const struct ramp_table *r, float h, float *t)
 	return s;
 }
 
-/* A texel of the base ramp mixed with the steep ramp by weight w > 0. */
-static void put_steep(const struct ramp *r, float h, float w, uint8_t *d)
+void ramp_steep_scalar(const struct ramp_steep *r, const float *h, const float *slope,
+		       uint8_t *d, size_t count)
 {
-	float ta, tb;
-	int sa = segment(&r->base, h, &ta), sb = segment(&r->steep, h, &tb);
-	for (int i = 0; i < 3; i++) {
-		float a = r->base.c[sa][i] + ta * r->base.dc[sa][i];
-		float b = r->steep.c[sb][i] + tb * r->steep.dc[sb][i];
-		d[i] = (uint8_t)(int)(a + (b - a) * w + 0.5f);
+	for (size_t i = 0; i < count; i++) {
+		float w = steep_weight(r->from, r->inv, slope[i]);
+		if (!(w > 0 && h[i] == h[i]))
+			continue;
+		float ta, tb;
+		int sa = segment(r->base, h[i], &ta), sb = segment(r->steep, h[i], &tb);
+		for (int ch = 0; ch < 3; ch++) {
+			float a = r->base->c[sa][ch] + ta * r->base->dc[sa][ch];
+			float b = r->steep->c[sb][ch] + tb * r->steep->dc[sb][ch];
+			d[4 * i + ch] = (uint8_t)(int)(a + (b - a) * w + 0.5f);
+		}
+		d[4 * i + 3] = 255;
 	}
-	d[3] = 255;
 }
 
 void ramp_base_scalar(const struct ramp_table *r, const float *h, uint8_t *d, size_t count)
@@ -340,24 +357,26 @@ static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct t
 	size_t count = (size_t)out->size * out->size;
 	const float *src = tile_f32(in[0]), *slope = steep ? tile_f32(in[1]) : NULL;
 	uint8_t *dst = out->data;
-	/* The base ramp everywhere, then the steep texels over it. */
-	if (count % 8 == 0 && noise_isa_has_avx2())
+	/* The base ramp everywhere, then the steep texels over it, then the snow. */
+	const bool avx2 = count % 8 == 0 && noise_isa_has_avx2();
+	if (avx2)
 		ramp_base_avx2(&r->base, src, dst, count);
 	else
 		ramp_base_scalar(&r->base, src, dst, count);
-	if (steep)
-		for (size_t i = 0; i < count; i++) {
-			float w = steep_weight(r, slope[i]);
-			if (w > 0 && src[i] == src[i])
-				put_steep(r, src[i], w, dst + 4 * i);
-		}
+	if (steep) {
+		const struct ramp_steep st = { &r->base, &r->steep, r->steep_from, r->inv_steep };
+		if (avx2)
+			ramp_steep_avx2(&st, src, slope, dst, count);
+		else
+			ramp_steep_scalar(&st, src, slope, dst, count);
+	}
 	if (r->snow_equator < NAN_DEFAULT || r->sea_ice_latitude <= 90) {
 		uint32_t T = out->size;
 		for (uint32_t j = 0; j < T; j++) {
 			double lon, lat;
 			grid_texel_center(k, T, 0, j, &lon, &lat);
 			snow_row(r, lat, src + (size_t)j * T, slope ? slope + (size_t)j * T : NULL,
-				 dst + (size_t)j * T * 4, T);
+				 dst + (size_t)j * T * 4, T, avx2);
 		}
 	}
 	return 0;

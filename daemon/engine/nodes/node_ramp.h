@@ -2,6 +2,7 @@
  * lookup tables. Not a public interface. */
 #ifndef CLIPMAP_NODE_RAMP_H
 #define CLIPMAP_NODE_RAMP_H
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -31,10 +32,39 @@ static inline int ramp_segment_of(const struct ramp_table *r, float h)
 	return s;
 }
 
+/* The steep ramp's blend over a ramp already drawn: texels whose slope is past `from` (weight
+ * w = clamp((slope − from)·inv, 0, 1) > 0, height not NaN) become base + (steep − base)·w. */
+struct ramp_steep {
+	const struct ramp_table *base, *steep;
+	float from, inv;
+};
+
+/* One row's snow: t = (h − line)·inv, or with sea ice (sea_ice) 4·(ice + min(h, 0)/6000) where
+ * that is more; where t > 0 the colour fades towards snow by min(t, 1)·(1 − w) (w the steep
+ * weight when there is a slope row). */
+struct ramp_snow {
+	float line, inv, ice;
+	bool sea_ice;
+	float snow[4];
+	float from, inv_steep;
+};
+
 /* The base ramp over count texels, one at a time (node_ramp.c). */
 void ramp_base_scalar(const struct ramp_table *r, const float *h, uint8_t *d, size_t count);
 /* The base ramp over count texels (a multiple of 8) with AVX2, the same bytes as the scalar
  * loop without a slope (NaN → transparent black). */
 void ramp_base_avx2(const struct ramp_table *r, const float *h, uint8_t *d, size_t count);
+/* The steep blend over count texels, one at a time / eight at a time (count a multiple of 8),
+ * the same bytes. */
+void ramp_steep_scalar(const struct ramp_steep *r, const float *h, const float *slope,
+		       uint8_t *d, size_t count);
+void ramp_steep_avx2(const struct ramp_steep *r, const float *h, const float *slope, uint8_t *d,
+		     size_t count);
+/* The snow over n texels of a row (slope NULL: none), one at a time / eight at a time (n a
+ * multiple of 8), the same bytes. */
+void ramp_snow_scalar(const struct ramp_snow *s, const float *h, const float *slope, uint8_t *d,
+		      size_t n);
+void ramp_snow_avx2(const struct ramp_snow *s, const float *h, const float *slope, uint8_t *d,
+		    size_t n);
 
 #endif

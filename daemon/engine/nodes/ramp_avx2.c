@@ -1,7 +1,8 @@
-/* ramp_avx2 — node_ramp's base ramp, eight texels at a time (AVX2 gathers). The arithmetic is
- * the scalar loop's, step for step (clamp, bin, segment walk, c + t·dc, + 0.5, truncate,
- * saturate), with no fused multiply-add (ISO C mode: no contraction), so the bytes match it.
- * Thread-safety: reads its arguments only. */
+/* ramp_avx2 — node_ramp's base ramp, its steep blend and its snow, eight texels at a time
+ * (AVX2 gathers). The arithmetic is the scalar loops', step for step (clamp, bin, segment
+ * walk, c + t·dc, + 0.5, truncate, saturate; the steep weight's clamps as max/min in the
+ * scalar's operand order), with no fused multiply-add (ISO C mode: no contraction), so the
+ * bytes match them. Thread-safety: reads its arguments only. */
 #include <immintrin.h>
 
 #include "node_ramp.h"
@@ -41,20 +42,62 @@ static inline __m256i one_segment(const struct ramp_table *r, int s, __m256 hc)
 	return px;
 }
 
+/* The segments of table r holding eight heights hc (within its ends, no NaN), and in *t the
+ * metres into them: ramp_segment_of's bin and walk, gathered. */
+static inline __m256i seg8(const struct ramp_table *r, __m256 hc, __m256 *t)
+{
+	const __m256 h0 = _mm256_set1_ps(r->h[0]), inv_bin = _mm256_set1_ps(r->inv_bin);
+	const __m256i last_bin = _mm256_set1_epi32(RAMP_BINS - 1), one = _mm256_set1_epi32(1);
+	__m256i b = _mm256_cvttps_epi32(_mm256_mul_ps(_mm256_sub_ps(hc, h0), inv_bin));
+	b = _mm256_min_epi32(b, last_bin);
+	__m256i s = _mm256_and_si256(
+		_mm256_i32gather_epi32((const int *)(const void *)r->bin_seg, b, 1),
+		_mm256_set1_epi32(0xff));
+	for (;;) { /* the bin holds a stop */
+		__m256 hn = _mm256_i32gather_ps(r->h, _mm256_add_epi32(s, one), 4);
+		__m256i up = _mm256_castps_si256(_mm256_cmp_ps(hc, hn, _CMP_GE_OQ));
+		if (_mm256_testz_si256(up, up))
+			break;
+		s = _mm256_sub_epi32(s, up);
+	}
+	__m256 hs;
+	for (;;) { /* rounding put h just below the bin's start */
+		hs = _mm256_i32gather_ps(r->h, s, 4);
+		__m256i down = _mm256_castps_si256(_mm256_cmp_ps(hc, hs, _CMP_LT_OQ));
+		if (_mm256_testz_si256(down, down))
+			break;
+		s = _mm256_add_epi32(s, down);
+	}
+	*t = _mm256_sub_ps(hc, hs);
+	return s;
+}
+
+/* Channel ch of table r's colour at segments s, t metres in: c + t·dc. */
+static inline __m256 colour8(const struct ramp_table *r, __m256i s, __m256 t, int ch)
+{
+	__m256i idx = _mm256_add_epi32(_mm256_slli_epi32(s, 2), _mm256_set1_epi32(ch));
+	return _mm256_add_ps(_mm256_i32gather_ps(&r->c[0][0], idx, 4),
+			     _mm256_mul_ps(t, _mm256_i32gather_ps(&r->dc[0][0], idx, 4)));
+}
+
+/* x clamped to table r's ends as the scalar does it (h < h0 ? h0 : h > hl ? hl : h; a −0 made
+ * +0 here only adds ±0), NaN lanes set to h0 (any valid segment: their result is discarded). */
+static inline __m256 clamp8(const struct ramp_table *r, __m256 x, __m256 nan)
+{
+	__m256 hc = _mm256_min_ps(_mm256_max_ps(x, _mm256_set1_ps(r->h[0])),
+				  _mm256_set1_ps(r->h[r->nstops - 1]));
+	return _mm256_blendv_ps(hc, _mm256_set1_ps(r->h[0]), nan);
+}
+
 void ramp_base_avx2(const struct ramp_table *r, const float *h, uint8_t *d, size_t count)
 {
-	const __m256 h0 = _mm256_set1_ps(r->h[0]), hl = _mm256_set1_ps(r->h[r->nstops - 1]);
-	const __m256 inv_bin = _mm256_set1_ps(r->inv_bin), half = _mm256_set1_ps(0.5f);
-	const __m256i last_bin = _mm256_set1_epi32(RAMP_BINS - 1), one = _mm256_set1_epi32(1);
+	const __m256 half = _mm256_set1_ps(0.5f);
 	const __m256i lo8 = _mm256_set1_epi32(0xff), zero = _mm256_setzero_si256();
 	const __m256i alpha = _mm256_set1_epi32((int)0xff000000u);
-	const float *c = &r->c[0][0], *dc = &r->dc[0][0];
 	for (size_t i = 0; i < count; i += 8) {
 		__m256 x = _mm256_loadu_ps(h + i);
 		__m256 nan = _mm256_cmp_ps(x, x, _CMP_UNORD_Q);
-		/* the scalar's h < h0 ? h0 : h > hl ? hl : h (a −0 made +0 here only adds ±0) */
-		__m256 hc = _mm256_min_ps(_mm256_max_ps(x, h0), hl);
-		hc = _mm256_blendv_ps(hc, h0, nan); /* NaN lanes: any valid segment, cleared below */
+		__m256 hc = clamp8(r, x, nan);
 		/* Neighbours nearly always share a segment: then no gathers at all. */
 		float lo = hmin8(hc), hi = hmax8(hc);
 		int s0 = ramp_segment_of(r, lo);
@@ -64,38 +107,97 @@ void ramp_base_avx2(const struct ramp_table *r, const float *h, uint8_t *d, size
 			_mm256_storeu_si256((__m256i *)(void *)(d + 4 * i), px);
 			continue;
 		}
-		__m256i b = _mm256_cvttps_epi32(_mm256_mul_ps(_mm256_sub_ps(hc, h0), inv_bin));
-		b = _mm256_min_epi32(b, last_bin);
-		__m256i s = _mm256_and_si256(
-			_mm256_i32gather_epi32((const int *)(const void *)r->bin_seg, b, 1), lo8);
-		for (;;) { /* the bin holds a stop */
-			__m256 hn = _mm256_i32gather_ps(r->h, _mm256_add_epi32(s, one), 4);
-			__m256i up = _mm256_castps_si256(_mm256_cmp_ps(hc, hn, _CMP_GE_OQ));
-			if (_mm256_testz_si256(up, up))
-				break;
-			s = _mm256_sub_epi32(s, up);
-		}
-		__m256 hs;
-		for (;;) { /* rounding put h just below the bin's start */
-			hs = _mm256_i32gather_ps(r->h, s, 4);
-			__m256i down = _mm256_castps_si256(_mm256_cmp_ps(hc, hs, _CMP_LT_OQ));
-			if (_mm256_testz_si256(down, down))
-				break;
-			s = _mm256_add_epi32(s, down);
-		}
-		__m256 t = _mm256_sub_ps(hc, hs);
-		__m256i s4 = _mm256_slli_epi32(s, 2), px = alpha;
+		__m256 t;
+		__m256i s = seg8(r, hc, &t), px = alpha;
 		for (int ch = 0; ch < 3; ch++) {
-			__m256i idx = _mm256_add_epi32(s4, _mm256_set1_epi32(ch));
-			__m256 v = _mm256_add_ps(
-				_mm256_add_ps(_mm256_i32gather_ps(c, idx, 4),
-					      _mm256_mul_ps(t, _mm256_i32gather_ps(dc, idx, 4))),
-				half);
+			__m256 v = _mm256_add_ps(colour8(r, s, t, ch), half);
 			__m256i q = _mm256_cvttps_epi32(v);
 			q = _mm256_min_epi32(_mm256_max_epi32(q, zero), lo8);
 			px = _mm256_or_si256(px, _mm256_slli_epi32(q, 8 * ch));
 		}
 		px = _mm256_andnot_si256(_mm256_castps_si256(nan), px);
+		_mm256_storeu_si256((__m256i *)(void *)(d + 4 * i), px);
+	}
+}
+
+/* The steep weight of eight slopes: max((slope − from)·inv, 0) then min(·, 1), NaN → 0 (the
+ * scalar's w > 0 ? w : 0 and w < 1 ? w : 1). */
+static inline __m256 weight8(float from, float inv, __m256 slope)
+{
+	__m256 w = _mm256_mul_ps(_mm256_sub_ps(slope, _mm256_set1_ps(from)), _mm256_set1_ps(inv));
+	w = _mm256_max_ps(w, _mm256_setzero_ps());
+	return _mm256_min_ps(w, _mm256_set1_ps(1.0f));
+}
+
+void ramp_steep_avx2(const struct ramp_steep *r, const float *h, const float *slope, uint8_t *d,
+		     size_t count)
+{
+	const __m256 half = _mm256_set1_ps(0.5f), zero = _mm256_setzero_ps();
+	const __m256i lo8 = _mm256_set1_epi32(0xff);
+	const __m256i alpha = _mm256_set1_epi32((int)0xff000000u);
+	for (size_t i = 0; i < count; i += 8) {
+		__m256 w = weight8(r->from, r->inv, _mm256_loadu_ps(slope + i));
+		__m256 x = _mm256_loadu_ps(h + i);
+		__m256 nan = _mm256_cmp_ps(x, x, _CMP_UNORD_Q);
+		__m256 on = _mm256_andnot_ps(nan, _mm256_cmp_ps(w, zero, _CMP_GT_OQ));
+		if (_mm256_testz_ps(on, on))
+			continue; /* most of a tile: not steep */
+		__m256 ta, tb;
+		__m256i sa = seg8(r->base, clamp8(r->base, x, nan), &ta);
+		__m256i sb = seg8(r->steep, clamp8(r->steep, x, nan), &tb);
+		__m256i px = alpha;
+		for (int ch = 0; ch < 3; ch++) {
+			__m256 a = colour8(r->base, sa, ta, ch), b = colour8(r->steep, sb, tb, ch);
+			__m256 v = _mm256_add_ps(_mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), w)),
+						 half);
+			__m256i q = _mm256_and_si256(_mm256_cvttps_epi32(v), lo8);
+			px = _mm256_or_si256(px, _mm256_slli_epi32(q, 8 * ch));
+		}
+		__m256i old = _mm256_loadu_si256((const __m256i *)(const void *)(d + 4 * i));
+		px = _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(old),
+							  _mm256_castsi256_ps(px), on));
+		_mm256_storeu_si256((__m256i *)(void *)(d + 4 * i), px);
+	}
+}
+
+void ramp_snow_avx2(const struct ramp_snow *s, const float *h, const float *slope, uint8_t *d,
+		    size_t n)
+{
+	const __m256 line = _mm256_set1_ps(s->line), inv = _mm256_set1_ps(s->inv);
+	const __m256 ice = _mm256_set1_ps(s->ice), zero = _mm256_setzero_ps();
+	const __m256 one = _mm256_set1_ps(1.0f), half = _mm256_set1_ps(0.5f);
+	const __m256 four = _mm256_set1_ps(4.0f), k6000 = _mm256_set1_ps(6000.0f);
+	const __m256i lo8 = _mm256_set1_epi32(0xff);
+	const __m256i alpha = _mm256_set1_epi32((int)0xff000000u);
+	for (size_t i = 0; i < n; i += 8) {
+		__m256 x = _mm256_loadu_ps(h + i);
+		__m256 t = _mm256_mul_ps(_mm256_sub_ps(x, line), inv);
+		if (s->sea_ice) {
+			__m256 neg = _mm256_cmp_ps(x, zero, _CMP_LT_OQ);
+			__m256 ti = _mm256_add_ps(ice, _mm256_blendv_ps(zero, _mm256_div_ps(x, k6000),
+									 neg));
+			t = _mm256_blendv_ps(t, _mm256_mul_ps(ti, four),
+					     _mm256_cmp_ps(ti, t, _CMP_GT_OQ));
+		}
+		__m256 on = _mm256_cmp_ps(t, zero, _CMP_GT_OQ);
+		if (_mm256_testz_ps(on, on))
+			continue;
+		t = _mm256_min_ps(t, one); /* t > 0 here: the scalar's t > 1 ? 1 : t */
+		if (slope)
+			t = _mm256_mul_ps(t, _mm256_sub_ps(one, weight8(s->from, s->inv_steep,
+									 _mm256_loadu_ps(slope + i))));
+		__m256i old = _mm256_loadu_si256((const __m256i *)(const void *)(d + 4 * i));
+		__m256i px = _mm256_and_si256(old, alpha);
+		for (int ch = 0; ch < 3; ch++) {
+			__m256 c = _mm256_cvtepi32_ps(
+				_mm256_and_si256(_mm256_srli_epi32(old, 8 * ch), lo8));
+			__m256 v = _mm256_add_ps(c, _mm256_mul_ps(_mm256_sub_ps(_mm256_set1_ps(s->snow[ch]),
+										 c), t));
+			__m256i q = _mm256_and_si256(_mm256_cvttps_epi32(_mm256_add_ps(v, half)), lo8);
+			px = _mm256_or_si256(px, _mm256_slli_epi32(q, 8 * ch));
+		}
+		px = _mm256_castps_si256(_mm256_blendv_ps(_mm256_castsi256_ps(old),
+							  _mm256_castsi256_ps(px), on));
 		_mm256_storeu_si256((__m256i *)(void *)(d + 4 * i), px);
 	}
 }
