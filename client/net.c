@@ -229,10 +229,15 @@ int net_send(struct net_conn *c, const struct proto_msg *m, char err[256])
 }
 
 /* A TILE_PART of wire bytes: returns 1 when it completed its tile (in c->part), 0 when more
- * parts are to come, or -EPROTO (a part out of order). */
+ * parts are to come, or -EBADMSG (a part out of order, or parts never agreed in HELLO_OK). */
 static int take_part(struct net_conn *c, const struct proto_tile_part *p, size_t wire,
 		     char err[256])
 {
+	if (!(c->hello.codecs & PROTO_FEAT_PARTS)) {
+		err_set(err, "%s: bad message from server: TILE_PART, which this session did not "
+			"agree to", c->peer);
+		return -EBADMSG;
+	}
 	if (p->offset == 0) {
 		c->part.len = 0;
 		if (pbuf_reserve(&c->part, p->total)) {
@@ -248,7 +253,7 @@ static int take_part(struct net_conn *c, const struct proto_tile_part *p, size_t
 			"where %zu bytes of a %u-byte tile came", c->peer, p->offset, p->total,
 			c->part_open ? c->part.len : 0,
 			c->part_open ? c->part_tile.payload_len : 0);
-		return -EPROTO;
+		return -EBADMSG;
 	}
 	memcpy(c->part.data + c->part.len, p->bytes, p->len);
 	c->part.len += p->len;

@@ -500,6 +500,7 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 	/* the parts of a tile that came before the jump are not stale: they are subtracted
 	 * once that tile completes (a stale TILE) or is stopped (dropped parts) */
 	uint64_t dropped0 = net_parts_dropped(c), before = net_parts_open(c);
+	bool first = true, open_dropped = false;
 	uint32_t coarse = 0;
 	while ((now = clock_now_ns()) < end) {
 		rc = net_recv(c, &m, (int)((end - now) / 1000000u) + 1, why);
@@ -508,6 +509,11 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 		if (rc)
 			return rc;
 		double at = (double)(clock_now_ns() - tj) * 1e-6;
+		/* the tile open at the jump was dropped before the first message after it came,
+		 * or it is that message */
+		if (first)
+			open_dropped = before && net_parts_dropped(c) > dropped0;
+		first = false;
 		if (m.type == PROTO_TILE_FAIL && m.tile_fail.seq == 2) {
 			err_set(why, "tile %u/%u/%u of B failed: %s", m.tile_fail.key.ly,
 				m.tile_fail.key.x, m.tile_fail.key.y, m.tile_fail.message);
@@ -550,7 +556,8 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 	r->stale_cut = net_parts_dropped(c) - dropped0;
 	r->stale_bytes += r->stale_cut;
 	r->stale_bytes = r->stale_bytes > before ? r->stale_bytes - before : 0;
-	r->stale_cut = r->stale_cut > before ? r->stale_cut - before : 0;
+	if (open_dropped) /* else the open tile completed, and its TILE held those bytes */
+		r->stale_cut = r->stale_cut > before ? r->stale_cut - before : 0;
 	return 0;
 }
 
