@@ -2,8 +2,8 @@
  * is whole; a decoded frame is consumed at the start of the next net_recv, because a TILE's
  * payload points into it. A tile sent in parts (TILE_PART) is put together in a buffer of
  * its own and handed out as one TILE; any other frame before its last part means the server
- * stopped it (its bytes are dropped and counted). Deadlines are absolute (CLOCK_MONOTONIC) so EINTR and partial
- * reads never stretch a timeout.
+ * stopped it (its bytes are dropped and counted). Deadlines are absolute (CLOCK_MONOTONIC)
+ * so EINTR and partial reads never stretch a timeout.
  */
 #include "net.h"
 

@@ -199,6 +199,20 @@ static void test_order_bytes_and_waiting(void **state)
 	pbuf_fini(&want);
 }
 
+/* Closes the connection and its peer, and lets go of n tiles, their encodings and q. */
+static void finish(struct conn *c, int peer, struct tile **t, struct etile **e, int n,
+		   struct encq *q)
+{
+	conn_close(c);
+	conn_fini(c);
+	close(peer);
+	for (int i = 0; i < n; i++) {
+		etile_unref(e[i]);
+		tile_unref(t[i]);
+	}
+	encq_destroy(q);
+}
+
 static bool drop_all(void *ud, const struct tile_key *k)
 {
 	(void)k;
@@ -246,14 +260,7 @@ static void test_recall(void **state)
 	assert_int_equal(m.tile.key.x, 10);
 	assert_memory_equal(m.tile.payload, t[0]->data, t[0]->nbytes);
 	proto_msg_fini(&m);
-	conn_close(&c);
-	conn_fini(&c);
-	close(fds[1]);
-	for (int i = 0; i < 3; i++) {
-		etile_unref(e[i]);
-		tile_unref(t[i]);
-	}
-	encq_destroy(q);
+	finish(&c, fds[1], t, e, 3, q);
 	pbuf_fini(&got);
 }
 
@@ -345,14 +352,7 @@ static void test_parts(void **state)
 	assert_int_equal(conn_pending(&c), 0);
 	assert_false(c.want_out);
 
-	conn_close(&c);
-	conn_fini(&c);
-	close(fds[1]);
-	for (int i = 0; i < 3; i++) {
-		etile_unref(e[i]);
-		tile_unref(t[i]);
-	}
-	encq_destroy(q);
+	finish(&c, fds[1], t, e, 3, q);
 	pbuf_fini(&got);
 	pbuf_fini(&want);
 }
