@@ -207,7 +207,10 @@ static void cap_area_antimeridian_pole(void **state)
 static void country_area(void **state)
 {
 	(void)state;
-	FILE *g = popen("gmt coast -EEG -M 2>/dev/null", "r");
+	/* gmt writes gmt.history and gmt.conf into its working directory: run it in ours */
+	char cmd[160];
+	snprintf(cmd, sizeof cmd, "cd '%s' && gmt coast -EEG -M 2>/dev/null", dir);
+	FILE *g = popen(cmd, "r");
 	assert_non_null(g);
 	FILE *f = fopen(tpath("egypt.geojson"), "w");
 	assert_non_null(f);
