@@ -21,6 +21,35 @@ static void set_lowat(struct linkest *le, uint32_t v)
 	le->lowat = v;
 }
 
+uint32_t linkest_cap(uint64_t rate, uint32_t min_rtt_us)
+{
+	if (!rate || rate >= LINKEST_CAP_BELOW)
+		return 0;
+	uint64_t b = rate * ((uint64_t)min_rtt_us + LINKEST_CAP_MS * 1000u) / 1000000u;
+	return b < LINKEST_CAP_MIN ? LINKEST_CAP_MIN : (uint32_t)b;
+}
+
+/* SO_SNDBUF (the kernel doubles it for its bookkeeping) to the cap; once capped, a link
+ * found faster gets LINKEST_UNCAPPED, the buffer's lock cannot be undone. Moves of less
+ * than a quarter are left. */
+void linkest_set_cap(struct linkest *le)
+{
+	uint32_t v = linkest_cap(le->rate, le->min_rtt_us);
+	if (!v) {
+		if (!le->sndbuf || le->sndbuf == LINKEST_UNCAPPED)
+			return;
+		v = LINKEST_UNCAPPED;
+	} else if (le->sndbuf && v * 4 <= le->sndbuf * 5 && v * 5 >= le->sndbuf * 4) {
+		return;
+	}
+	int iv = (int)v;
+	if (setsockopt(le->fd, SOL_SOCKET, SO_SNDBUF, &iv, sizeof iv)) {
+		log_msg(LOG_DEBUG, "SO_SNDBUF: %s", strerror(errno));
+		return;
+	}
+	le->sndbuf = v;
+}
+
 void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, bool bbr, uint64_t now_ns)
 {
 	*le = (struct linkest){ .fd = fd, .tcp = tcp, .win_start = now_ns };
@@ -77,6 +106,8 @@ void linkest_sample(struct linkest *le, uint64_t now_ns, bool force)
 	/* only moves of a quarter or more: a setsockopt per sample is for nothing */
 	if (le->lowat && (lw * 4 > (uint64_t)le->lowat * 5 || lw * 5 < (uint64_t)le->lowat * 4))
 		set_lowat(le, (uint32_t)lw);
+	if (le->lowat) /* the send window is on (send_queue_ms > 0) */
+		linkest_set_cap(le);
 }
 
 uint64_t linkest_window(const struct linkest *le, uint32_t queue_ms, uint64_t cap)

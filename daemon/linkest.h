@@ -26,6 +26,19 @@
 #define LINKEST_PART_MS 20u		/* a tile in parts (TILE_PART): this much of the rate each */
 #define LINKEST_PART_MIN (2u << 10)	/* and these bounds (the most before a rate is measured) */
 #define LINKEST_PART_MAX (64u << 10)
+/* On slow links the kernel's send buffer (SO_SNDBUF) is held to the bandwidth-delay product
+ * and LINKEST_CAP_MS more: BBR's floors count packets (four in its least cwnd, three TSO
+ * goals of quantisation budget), so below a few Mbit/s they let it keep 150 ms and more of
+ * the rate in flight, and a new want-set waits behind it. Measured at 1 Mbit/s, 40 ms
+ * (bench_link, lossy tiles): 19 KB in flight → 11-14 KB, stale after a jump 22 → 15-17 KB.
+ * Above LINKEST_CAP_BELOW the kernel's own buffering stays: there BBR holds about one BDP
+ * itself, and a locked buffer made it hold more (20 Mbit/s: 91-104 KB in flight → 150-160).
+ * The cap still lets W/min_rtt run (1 + CAP_MS/min_rtt) times over the estimate, so a link
+ * that got faster is found. */
+#define LINKEST_CAP_MS 40u
+#define LINKEST_CAP_BELOW 500000u	/* bytes/s (4 Mbit/s) */
+#define LINKEST_CAP_MIN (8u << 10)	/* the least send buffer asked for */
+#define LINKEST_UNCAPPED (4u << 20)	/* asked for when a capped link turns out faster */
 
 struct linkest {
 	int fd;
@@ -39,6 +52,7 @@ struct linkest {
 	uint64_t notsent;    /* tcpi_notsent_bytes: in the kernel, not yet sent */
 	uint64_t unacked;    /* bytes sent, not yet acknowledged (tcpi_unacked × mss) */
 	uint32_t lowat;	     /* TCP_NOTSENT_LOWAT set (0: not set) */
+	uint32_t sndbuf;     /* SO_SNDBUF asked for by the slow-link cap (0: the kernel's own) */
 };
 
 /* Starts measuring fd (borrowed); tcp false for a Unix socket. On TCP with lowat true it sets
@@ -49,7 +63,8 @@ struct linkest {
  * kernel has no BBR or does not allow it, the system's default stays (logged at debug). */
 void linkest_init(struct linkest *le, int fd, bool tcp, bool lowat, bool bbr, uint64_t now_ns);
 /* Takes a TCP_INFO sample unless one is younger than LINKEST_SAMPLE_NS (force: take it
- * anyway), updates the rate and RTT and, when the rate moved, TCP_NOTSENT_LOWAT. */
+ * anyway), updates the rate and RTT and, when the rate moved, TCP_NOTSENT_LOWAT and (where
+ * the send window is on) the slow-link cap on SO_SNDBUF. */
 void linkest_sample(struct linkest *le, uint64_t now_ns, bool force);
 /* The send window in bytes: queue_ms of the rate, within [LINKEST_FLOOR, cap]; cap on a Unix
  * socket. queue_ms 0: cap (the window is not sized from the link). */
@@ -59,6 +74,12 @@ uint64_t linkest_window(const struct linkest *le, uint32_t queue_ms, uint64_t ca
  * (whole tiles) on a Unix socket. A recall stops a tile after its part in flight, so this is
  * what a new want-set may wait behind. */
 uint32_t linkest_part(const struct linkest *le);
+/* The send buffer the slow-link cap asks for at this rate and least RTT (0: none, the
+ * kernel's own: no rate yet, or rate >= LINKEST_CAP_BELOW). */
+uint32_t linkest_cap(uint64_t rate, uint32_t min_rtt_us);
+/* Asks the kernel for that cap at le's rate and least RTT (linkest_sample does, where the send
+ * window is on); a capped socket whose rate passed LINKEST_CAP_BELOW gets LINKEST_UNCAPPED. */
+void linkest_set_cap(struct linkest *le);
 /* How long `bytes` take at the measured rate, in milliseconds (0 when not measured). */
 double linkest_delay_ms(const struct linkest *le, uint64_t bytes);
 

@@ -15,7 +15,10 @@
  * at lat 10, 150 km up over the test planet (1000 km radius: 35 km/s, levels 0-5), and the
  * share of its frames that were complete is printed (skipped without a GL context).
  * Skips (exit 0, saying why) without root or namespaces.
- * LINK_RATES="4 20" picks rates (Mbit/s); LINK_FLIGHT=0 leaves the flights out.
+ * LINK_RATES="4 20" picks rates (Mbit/s); LINK_FLIGHT=0 leaves the flights out; LINK_ONLY=02
+ * runs only those configurations (0 window, 1 8 MiB queue, 2 lossy, 3 whole; the ratios of
+ * one left out read 0); LINK_DEBUG=1 prints each of the old place's tiles that came after the
+ * jump (when, how big, its codec and level) on stderr.
  */
 #include <errno.h>
 #include <signal.h>
@@ -153,6 +156,8 @@ int main(void)
 	const bool whole[NK] = { false, false, false, true }; /* the client takes no TILE_PART */
 	int failed = 0;
 	for (int k = 0; k < NK; k++) {
+		if (getenv("LINK_ONLY") && !strchr(getenv("LINK_ONLY"), '0' + k))
+			continue;
 		struct daemon_env e;
 		char tcp[64], err[256];
 		snprintf(tcp, sizeof tcp, "listen.tcp = %s:0", sl.addr);

@@ -526,6 +526,9 @@ int link_jump_run(struct net_conn *c, uint32_t pid, const struct link_jump_plan 
 			if (m.tile.seq == 1) {
 				r->stale_bytes += fb;
 				r->stale_tiles++;
+				if (getenv("LINK_DEBUG"))
+					fprintf(stderr, "stale %7.1f ms %6llu B codec %u layer %u lvl %u\n", at,
+						(unsigned long long)fb, m.tile.enc.codec, m.tile.layer, m.tile.key.ly);
 			} else if (m.tile.seq == 2) {
 				/* whole and right, parts and all: its checksum holds */
 				static float texels[256 * 256];

@@ -15,6 +15,7 @@
 #include <netinet/tcp.h>
 #include <poll.h>
 #include <stdlib.h>
+#include <stdio.h>
 #include <string.h>
 #include <sys/socket.h>
 #include <unistd.h>
@@ -22,20 +23,30 @@
 #include "common/clock.h"
 #include "linkest.h"
 
-/* A connected loopback TCP pair: fds[0] the accepted (server) end. */
-static void tcp_pair(int fds[2])
+/* A connected loopback TCP pair: fds[0] the accepted (server) end; mss > 0 sets the segment
+ * size (loopback's own is 64 KB: a paced link of those would be measured in bursts). */
+static void tcp_pair_mss(int fds[2], int mss)
 {
 	int l = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	if (mss)
+		assert_int_equal(setsockopt(l, IPPROTO_TCP, TCP_MAXSEG, &mss, sizeof mss), 0);
 	struct sockaddr_in sa = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
 	socklen_t len = sizeof sa;
 	assert_int_equal(bind(l, (struct sockaddr *)&sa, sizeof sa), 0);
 	assert_int_equal(listen(l, 1), 0);
 	assert_int_equal(getsockname(l, (struct sockaddr *)&sa, &len), 0);
 	fds[1] = socket(AF_INET, SOCK_STREAM | SOCK_CLOEXEC, 0);
+	if (mss)
+		assert_int_equal(setsockopt(fds[1], IPPROTO_TCP, TCP_MAXSEG, &mss, sizeof mss), 0);
 	assert_int_equal(connect(fds[1], (struct sockaddr *)&sa, sizeof sa), 0);
 	fds[0] = accept(l, NULL, NULL);
 	assert_true(fds[0] >= 0);
 	close(l);
+}
+
+static void tcp_pair(int fds[2])
+{
+	tcp_pair_mss(fds, 0);
 }
 
 static void test_unix_not_measured(void **state)
@@ -111,6 +122,64 @@ static void test_tcp_measured(void **state)
 	close(fds[1]);
 }
 
+/* The slow-link cap: below LINKEST_CAP_BELOW the send buffer is held to the rate's BDP and
+ * LINKEST_CAP_MS more; a link found faster is uncapped. (Loopback cannot be made slow enough
+ * to be measured as a slow link — paced, its delivery samples still see microsecond RTTs — so
+ * the rate is set here; test_link_shaped measures a real slow link end to end.) */
+static void test_slow_cap(void **state)
+{
+	(void)state;
+	/* the arithmetic: 1 Mbit/s with 40 ms is 5 KB a BDP, the cap LINKEST_CAP_MS more */
+	assert_int_equal(linkest_cap(125000, 40000), 125000u * (40 + LINKEST_CAP_MS) / 1000);
+	assert_int_equal(linkest_cap(0, 40000), 0);
+	assert_int_equal(linkest_cap(LINKEST_CAP_BELOW, 40000), 0);
+	assert_int_equal(linkest_cap(LINKEST_CAP_BELOW - 1, 40000),
+			 (uint64_t)(LINKEST_CAP_BELOW - 1) * (40 + LINKEST_CAP_MS) / 1000);
+	assert_int_equal(linkest_cap(1000, 40000), LINKEST_CAP_MIN);
+	int fds[2];
+	tcp_pair(fds);
+	struct linkest le;
+	linkest_init(&le, fds[0], true, true, false, clock_now_ns());
+	int v = 0;
+	socklen_t vl = sizeof v;
+	/* 1 Mbit/s, 40 ms */
+	le.rate = 125000;
+	le.min_rtt_us = 40000;
+	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, linkest_cap(125000, 40000));
+	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &v, &vl), 0);
+	assert_int_equal(v, 2 * (int)le.sndbuf); /* the kernel doubles what it is asked */
+	/* a move of less than a quarter is left; more is followed */
+	le.rate = 140000;
+	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, linkest_cap(125000, 40000));
+	le.rate = 250000;
+	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, linkest_cap(250000, 40000));
+	vl = sizeof v;
+	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &v, &vl), 0);
+	assert_int_equal(v, 2 * (int)le.sndbuf);
+	/* the link turned out fast: uncapped, once */
+	le.rate = 10u << 20;
+	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, LINKEST_UNCAPPED);
+	vl = sizeof v;
+	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &v, &vl), 0);
+	assert_true(v >= (int)LINKEST_UNCAPPED / 2); /* within net.core.wmem_max, doubled */
+	/* a fast link never capped keeps the kernel's own buffer (autotuning) */
+	int g[2];
+	tcp_pair(g);
+	struct linkest fast;
+	linkest_init(&fast, g[0], true, true, false, clock_now_ns());
+	fast.rate = 10u << 20;
+	linkest_set_cap(&fast);
+	assert_int_equal(fast.sndbuf, 0);
+	close(g[0]);
+	close(g[1]);
+	close(fds[0]);
+	close(fds[1]);
+}
+
 /* send_queue_ms 0: the kernel's default stays (no TCP_NOTSENT_LOWAT) and the window is the cap. */
 static void test_tcp_unshaped(void **state)
 {
@@ -136,6 +205,7 @@ int main(void)
 		cmocka_unit_test(test_unix_not_measured),
 		cmocka_unit_test(test_tcp_measured),
 		cmocka_unit_test(test_tcp_unshaped),
+		cmocka_unit_test(test_slow_cap),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
