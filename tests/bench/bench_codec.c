@@ -4,7 +4,9 @@
  * Then real tiles of the shipped planets (conf/planets: procedural, and Earth when data/ has
  * it) at levels 4, 8, 12 and 16 near the Alps: bytes per tile, zstd (what clipmapd sends
  * below raw_above_mbit) against the lossy codecs with clipmapd's settings (encpick.h), and
- * their errors. Also times the frame codec for a WANT of 1024 entries and a TILE head.
+ * their errors; for the height layers also what a height tile of half the texels each way would
+ * save and cost the picture ("codec/half-heights", docs/LINKS.md "Per-layer tile sizes"). Also
+ * times the frame codec for a WANT of 1024 entries and a TILE head.
  */
 #include <math.h>
 #include <stdint.h>
@@ -269,6 +271,125 @@ static void real_tile(struct tilecodec *tc, const struct planet *p, size_t l, co
 	free(back);
 }
 
+/* The 2×2 block of layer l's tiles at level ly near (7.5°E, 46.5°N) into t[4] (NULL where a
+ * tile failed); returns the level used (the planet's finest where ly is past it). */
+static int fetch_block(struct sched *s, const struct planet *p, size_t l, int ly, struct tile *t[4])
+{
+	ly = ly > p->max_level ? p->max_level : ly;
+	int lx = ly + 1;
+	uint32_t x0 = (uint32_t)((7.5 + 180) / 360 * ldexp(1, lx)),
+		 y0 = (uint32_t)((90 - 46.5) / 180 * ldexp(1, ly));
+	struct want w[4];
+	for (int k = 0; k < 4; k++) {
+		t[k] = NULL;
+		w[k] = (struct want){ .node = p->layers[l].node, .cls = SCHED_VISIBLE,
+				      .key = { .node = p->layers[l].node->hash, .lx = (uint8_t)lx,
+					       .ly = (uint8_t)ly,
+					       .x = (x0 + (uint32_t)(k & 1)) % (1u << lx),
+					       .y = y0 + (uint32_t)(k >> 1) } };
+	}
+	sched_fetch(s, w, 4, t);
+	return ly;
+}
+
+/* Per-layer tile sizes (issue 15; seed 003 sent 64² heights under 256² colour): what a height
+ * tile of half the texels each way would save on a slow link and what it would cost the
+ * picture. The half tile keeps every second texel of the real one (its texels are the next
+ * coarser level's); the viewer would interpolate the rest (linearly, here). Printed per level:
+ * q16 bytes of the T² and the (T/2)² tile (each with clipmapd's step for its texel, encpick.h),
+ * and, inside the tile (a texel from its edge, where a real one would use its neighbour's),
+ * the interpolated heights' error and the derived normals' (clipmapview --normals derive):
+ * their mean angle and a Lambert shading's difference (sun 45° up in the north-west, in
+ * 8-bit levels; over 8 levels is a step a person sees on a smooth slope). */
+static void half_heights(struct tilecodec *tc, struct sched *s, const struct planet *p, size_t l)
+{
+	const int levels[] = { 4, 8, 12, 16 };
+	for (int li = 0; li < 4; li++) {
+		struct tile *t[4];
+		int ly = fetch_block(s, p, l, levels[li], t);
+		uint32_t ts = 0;
+		double full = 0, half = 0, herr = 0, ang = 0, sh = 0, vis = 0, n = 0, tiles = 0;
+		double dy = M_PI * p->a / ldexp(1, ly), dx;
+		for (int k = 0; k < 4; k++) {
+			if (!t[k] || t[k]->type != PIX_HEIGHT)
+				goto next;
+			ts = t[k]->size;
+			const float *h = (const float *)(const void *)t[k]->data;
+			uint32_t H = ts / 2;
+			float *d = xmalloc(sizeof(float) * H * H), *u = xmalloc(sizeof(float) * ts * ts);
+			size_t cap = tilecodec_bound(TCODEC_ZSTD, (size_t)ts * ts * 4);
+			unsigned char *out = xmalloc(cap);
+			struct tilecodec_hdr hd;
+			struct encpick_policy pol = { .lossless = TCODEC_ZSTD,
+						      .offered = TCODEC_ALL_MASK,
+						      .lossy_below_bps = 50000000 };
+			struct encpick e;
+			encpick(&pol, PIX_HEIGHT, ly, ts, p->a, 4000000, &e);
+			ssize_t nf = tilecodec_encode_lossy(tc, PIX_HEIGHT, ts, e.codec, &e.lossy, h, &hd,
+							    out, cap);
+			for (uint32_t y = 0; y < H; y++)
+				for (uint32_t x = 0; x < H; x++)
+					d[y * H + x] = h[2 * y * ts + 2 * x];
+			encpick(&pol, PIX_HEIGHT, ly > 0 ? ly - 1 : 0, H, p->a, 4000000, &e);
+			ssize_t nh = tilecodec_encode_lossy(tc, PIX_HEIGHT, H, e.codec, &e.lossy, d, &hd,
+							    out, cap);
+			/* back to T²: even texels as sent, odd ones between their neighbours */
+			for (uint32_t y = 0; y < ts; y++)
+				for (uint32_t x = 0; x < ts; x++) {
+					uint32_t y0 = y / 2, x0 = x / 2;
+					uint32_t y1 = y0 + 1 < H ? y0 + 1 : y0, x1 = x0 + 1 < H ? x0 + 1 : x0;
+					float fy = (float)(y & 1) * 0.5f, fx = (float)(x & 1) * 0.5f;
+					float a = d[y0 * H + x0] + (d[y0 * H + x1] - d[y0 * H + x0]) * fx;
+					float b = d[y1 * H + x0] + (d[y1 * H + x1] - d[y1 * H + x0]) * fx;
+					u[y * ts + x] = a + (b - a) * fy;
+				}
+			double lat = (90.0 - ((double)t[k]->key.y + 0.5) * 180.0 / ldexp(1, ly)) * M_PI / 180;
+			dy = M_PI * p->a / ldexp(1, ly) / ts;
+			dx = dy * cos(lat);
+			const double L[3] = { -0.5, 0.5, M_SQRT1_2 }; /* sun from the north-west, 45° up */
+			for (uint32_t y = 2; y + 3 < ts; y++)
+				for (uint32_t x = 2; x + 3 < ts; x++) {
+					const float *g[2] = { h, u };
+					double nv[2][3], shade[2];
+					for (int q = 0; q < 2; q++) {
+						const float *f = g[q];
+						double gx = (f[y * ts + x + 1] - f[y * ts + x - 1]) / (2 * dx);
+						double gy = (f[(y - 1) * ts + x] - f[(y + 1) * ts + x]) / (2 * dy);
+						double m = sqrt(gx * gx + gy * gy + 1);
+						nv[q][0] = -gx / m, nv[q][1] = -gy / m, nv[q][2] = 1 / m;
+						double c = nv[q][0] * L[0] + nv[q][1] * L[1] + nv[q][2] * L[2];
+						shade[q] = 255 * (c > 0 ? c : 0);
+					}
+					double c = nv[0][0] * nv[1][0] + nv[0][1] * nv[1][1] + nv[0][2] * nv[1][2];
+					ang += acos(c > 1 ? 1 : c) * 180 / M_PI;
+					double ds = fabs(shade[0] - shade[1]);
+					sh += ds;
+					vis += ds > 8;
+					double dh = (double)h[y * ts + x] - u[y * ts + x];
+					herr += dh * dh;
+					n++;
+				}
+			full += (double)nf;
+			half += (double)nh;
+			tiles++;
+			free(d);
+			free(u);
+			free(out);
+		next:
+			tile_unref(t[k]);
+		}
+		if (!tiles || !n)
+			continue;
+		printf("codec/half-heights %s.%s level %d: q16 %u² %.0f bytes, %u² %.0f bytes (%.1f× "
+		       "fewer, %.1f KB less a tile); interpolated: height rms %.3g m (%.3f of a "
+		       "texel), normals %.2f° apart, shading %.2f levels apart, %.1f %% of texels "
+		       "over 8 levels\n",
+		       p->name, p->layers[l].name, ly, ts, full / tiles, ts / 2, half / tiles, full / half,
+		       (full - half) / tiles / 1000, sqrt(herr / n), sqrt(herr / n) / dy, ang / n, sh / n,
+		       100 * vis / n);
+	}
+}
+
 /* The tiles of a 2×2 block at each level near (7.5°E, 46.5°N), every layer of the planet. */
 static void bench_real(struct tilecodec *tc, const char *path)
 {
@@ -284,19 +405,8 @@ static void bench_real(struct tilecodec *tc, const char *path)
 	for (size_t l = 0; l < p->nlayers; l++) {
 		double tot[3] = { 0 }, tiles = 0;
 		for (int li = 0; li < 4; li++) {
-			int ly = levels[li] > p->max_level ? p->max_level : levels[li];
-			int lx = ly + 1;
-			uint32_t x0 = (uint32_t)((7.5 + 180) / 360 * ldexp(1, lx)),
-				 y0 = (uint32_t)((90 - 46.5) / 180 * ldexp(1, ly));
-			struct want w[4];
-			struct tile *t[4] = { 0 };
-			for (int k = 0; k < 4; k++)
-				w[k] = (struct want){ .node = p->layers[l].node, .cls = SCHED_VISIBLE,
-						      .key = { .node = p->layers[l].node->hash,
-							       .lx = (uint8_t)lx, .ly = (uint8_t)ly,
-							       .x = (x0 + (uint32_t)(k & 1)) % (1u << lx),
-							       .y = y0 + (uint32_t)(k >> 1) } };
-			sched_fetch(s, w, 4, t);
+			struct tile *t[4];
+			int ly = fetch_block(s, p, l, levels[li], t);
 			double sums[3] = { 0 };
 			int got = 0;
 			for (int k = 0; k < 4; k++)
@@ -321,6 +431,8 @@ static void bench_real(struct tilecodec *tc, const char *path)
 			printf("codec/real %s.%s all levels: zstd %.0f, lossy %.0f bytes per tile "
 			       "(%.1f× fewer)\n",
 			       p->name, p->layers[l].name, tot[0] / tiles, tot[1] / tiles, tot[0] / tot[1]);
+		if (p->layers[l].type == PIX_HEIGHT)
+			half_heights(tc, s, p, l);
 	}
 	sched_destroy(s);
 	cache_destroy(cache);
