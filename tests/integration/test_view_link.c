@@ -9,15 +9,16 @@
  *   or the coarsest level the viewer wants there when that is finer; + LOAD_SLACK_S). On
  *   this small planet levels 0-2 of the two places share most of their tiles; the printed
  *   per-level times show the finer ones (level 3 at ~3.5 s);
- * - issue 15: "every wanted level within 5 s (with the lossy encodings)": those encodings do
- *   not exist yet, and with zstd tiles of ~40 KB the viewer's want-set at this place is
- *   ~1.2 MB a level: the link needs 7-9 s for it. So the time is printed against the 5 s, and
- *   what is asserted is that the viewer fills the new place as fast as the link lets it: a
- *   complete frame within the hold, the tile bytes it received from the jump to that frame
- *   arriving at ≥ 50 % of the link's rate (nothing stalls: no stale queue, no idle link);
+ * - issue 15: "every wanted level within 5 s (with the lossy encodings)": asserted for the
+ *   viewer as shipped (it offers the lossy codecs; 0.5 s measured, + LOAD_SLACK_S). With
+ *   --lossless (zstd tiles of ~40 KB, ~1.2 MB a level at this place) the link needs 7-9 s, so
+ *   there what is asserted is that the viewer fills the new place as fast as the link lets
+ *   it: a complete frame within the hold, the tile bytes it received from the jump to that
+ *   frame arriving at >= 50 % of the link's rate (nothing stalls: no stale queue, no idle
+ *   link), and the lossy run needing at most a third of those bytes (19.8x fewer measured);
  * - issue 15: "a viewer holding still after the jump has ≥ 50 % of its frames complete over
- *   the next 10 s": printed; asserted for the frames after the first complete one (a viewer
- *   holding still stays complete: ≥ 90 % of those);
+ *   the next 10 s": asserted with the lossy codecs (96 % measured); for both runs, the frames
+ *   after the first complete one (a viewer holding still stays complete: ≥ 90 % of those);
  * - issue 15: "its HUD/--stats show link rate, RTT and queue delay": every frame's link_bps,
  *   rtt_ms and queue_ms are present; the highest rate is within a factor of two of the link's,
  *   the least RTT at least the link's; and the mean queue delay the viewer sees is below
