@@ -23,25 +23,58 @@ static void set_lowat(struct linkest *le, uint32_t v)
 
 uint32_t linkest_cap(uint64_t rate, uint32_t min_rtt_us)
 {
-	if (!rate || rate >= LINKEST_CAP_BELOW)
+	if (!rate || rate >= LINKEST_CAP_BELOW || !min_rtt_us || min_rtt_us > LINKEST_CAP_RTT_MAX)
 		return 0;
+	/* < 500 kB/s × (10 s + 40 ms): fits */
 	uint64_t b = rate * ((uint64_t)min_rtt_us + LINKEST_CAP_MS * 1000u) / 1000000u;
 	return b < LINKEST_CAP_MIN ? LINKEST_CAP_MIN : (uint32_t)b;
 }
 
-/* SO_SNDBUF (the kernel doubles it for its bookkeeping) to the cap; once capped, a link
- * found faster gets LINKEST_UNCAPPED, the buffer's lock cannot be undone. Moves of less
- * than a quarter are left. */
-void linkest_set_cap(struct linkest *le)
+static bool capped(const struct linkest *le)
 {
-	uint32_t v = linkest_cap(le->rate, le->min_rtt_us);
-	if (!v) {
-		if (!le->sndbuf || le->sndbuf == LINKEST_UNCAPPED)
-			return;
-		v = LINKEST_UNCAPPED;
-	} else if (le->sndbuf && v * 4 <= le->sndbuf * 5 && v * 5 >= le->sndbuf * 4) {
+	return le->sndbuf && le->sndbuf != LINKEST_UNCAPPED;
+}
+
+/* Gives the buffer back to the kernel's autotuning: SO_BUF_LOCK 0 (Linux 5.14); before that
+ * kernel, the most SO_SNDBUF gives (LINKEST_UNCAPPED, within net.core.wmem_max), locked. */
+static void uncap(struct linkest *le)
+{
+#ifdef SO_BUF_LOCK
+	int zero = 0;
+	if (setsockopt(le->fd, SOL_SOCKET, SO_BUF_LOCK, &zero, sizeof zero) == 0) {
+		le->sndbuf = 0;
 		return;
 	}
+	log_msg(LOG_DEBUG, "SO_BUF_LOCK: %s", strerror(errno));
+#endif
+	int v = (int)LINKEST_UNCAPPED;
+	if (setsockopt(le->fd, SOL_SOCKET, SO_SNDBUF, &v, sizeof v))
+		log_msg(LOG_DEBUG, "SO_SNDBUF: %s", strerror(errno));
+	else
+		le->sndbuf = LINKEST_UNCAPPED;
+}
+
+/* Only on a link measured once while it was the limit (a sample not application-limited: an
+ * idle session's estimate says nothing of the link). Rises of a sixteenth are followed (a
+ * capped sender's samples can beat the estimate only by the cap's headroom, so a long round
+ * trip must not be held below its rate by a coarse rule), falls of a quarter; a capped link
+ * is let go at 1.25 × LINKEST_CAP_BELOW (an estimate near the threshold does not flap). */
+void linkest_set_cap(struct linkest *le)
+{
+	if (!le->measured)
+		return;
+	uint64_t r = le->rate;
+	if (capped(le) && r >= LINKEST_CAP_BELOW && r < (uint64_t)LINKEST_CAP_BELOW * 5 / 4)
+		r = LINKEST_CAP_BELOW - 1;
+	uint32_t v = linkest_cap(r, le->min_rtt_us);
+	if (!v) {
+		if (capped(le))
+			uncap(le);
+		return;
+	}
+	uint64_t was = capped(le) ? le->sndbuf : 0;
+	if (was && (uint64_t)v * 16 <= was * 17 && (uint64_t)v * 5 >= was * 4)
+		return;
 	int iv = (int)v;
 	if (setsockopt(le->fd, SOL_SOCKET, SO_SNDBUF, &iv, sizeof iv)) {
 		log_msg(LOG_DEBUG, "SO_SNDBUF: %s", strerror(errno));
@@ -91,14 +124,17 @@ void linkest_sample(struct linkest *le, uint64_t now_ns, bool force)
 		return;
 	le->last_ns = now_ns;
 	le->rtt_us = ti.tcpi_rtt;
-	le->min_rtt_us = ti.tcpi_min_rtt ? ti.tcpi_min_rtt : ti.tcpi_rtt;
+	/* ~0: no RTT sample yet */
+	le->min_rtt_us = ti.tcpi_min_rtt && ti.tcpi_min_rtt != ~0u ? ti.tcpi_min_rtt : ti.tcpi_rtt;
 	le->notsent = ti.tcpi_notsent_bytes;
 	le->unacked = (uint64_t)ti.tcpi_unacked * ti.tcpi_snd_mss;
 	bool grew = ti.tcpi_bytes_acked > le->acked;
 	le->acked = ti.tcpi_bytes_acked;
 	/* a delivery-rate sample is new only when more was acknowledged */
-	if (grew)
+	if (grew) {
 		add_rate(le, now_ns, ti.tcpi_delivery_rate, ti.tcpi_delivery_rate_app_limited);
+		le->measured |= ti.tcpi_delivery_rate && !ti.tcpi_delivery_rate_app_limited;
+	}
 	else
 		add_rate(le, now_ns, 0, true);
 	uint64_t lw = le->rate * LINKEST_LOWAT_MS / 1000;

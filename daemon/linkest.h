@@ -30,15 +30,19 @@
  * and LINKEST_CAP_MS more: BBR's floors count packets (four in its least cwnd, three TSO
  * goals of quantisation budget), so below a few Mbit/s they let it keep 150 ms and more of
  * the rate in flight, and a new want-set waits behind it. Measured at 1 Mbit/s, 40 ms
- * (bench_link, lossy tiles): 19 KB in flight → 11-14 KB, stale after a jump 22 → 15-17 KB.
+ * (bench_link): stale bytes after a jump 22 → 12-15 KB with lossy tiles, 14-17 → 12 KB with
+ * lossless ones. The kernel doubles what it is asked and counts each packet's overhead in
+ * it, so what it holds in flight is about 1.1-1.4 × rate × (least RTT + LINKEST_CAP_MS).
  * Above LINKEST_CAP_BELOW the kernel's own buffering stays: there BBR holds about one BDP
  * itself, and a locked buffer made it hold more (20 Mbit/s: 91-104 KB in flight → 150-160).
- * The cap still lets W/min_rtt run (1 + CAP_MS/min_rtt) times over the estimate, so a link
- * that got faster is found. */
+ * A capped sender's samples can still beat the estimate by that 1.1-1.4 × (1 + CAP_MS /
+ * least RTT) — over 1.1 × at any round trip up to LINKEST_CAP_RTT_MAX — so a link that got
+ * faster is found; rises are followed in sixteenths for that. */
 #define LINKEST_CAP_MS 40u
-#define LINKEST_CAP_BELOW 500000u	/* bytes/s (4 Mbit/s) */
+#define LINKEST_CAP_BELOW 500000u	/* bytes/s (4 Mbit/s); let go at 1.25 × this */
 #define LINKEST_CAP_MIN (8u << 10)	/* the least send buffer asked for */
-#define LINKEST_UNCAPPED (4u << 20)	/* asked for when a capped link turns out faster */
+#define LINKEST_CAP_RTT_MAX 10000000u	/* µs: a least RTT beyond this is not believed */
+#define LINKEST_UNCAPPED (4u << 20)	/* asked for where SO_BUF_LOCK cannot let go */
 
 struct linkest {
 	int fd;
@@ -52,7 +56,9 @@ struct linkest {
 	uint64_t notsent;    /* tcpi_notsent_bytes: in the kernel, not yet sent */
 	uint64_t unacked;    /* bytes sent, not yet acknowledged (tcpi_unacked × mss) */
 	uint32_t lowat;	     /* TCP_NOTSENT_LOWAT set (0: not set) */
-	uint32_t sndbuf;     /* SO_SNDBUF asked for by the slow-link cap (0: the kernel's own) */
+	uint32_t sndbuf;     /* SO_SNDBUF asked for by the slow-link cap (0: the kernel's own;
+			      * LINKEST_UNCAPPED: let go where SO_BUF_LOCK is not known) */
+	bool measured;	     /* a delivery-rate sample not application-limited was seen */
 };
 
 /* Starts measuring fd (borrowed); tcp false for a Unix socket. On TCP with lowat true it sets
@@ -77,8 +83,9 @@ uint32_t linkest_part(const struct linkest *le);
 /* The send buffer the slow-link cap asks for at this rate and least RTT (0: none, the
  * kernel's own: no rate yet, or rate >= LINKEST_CAP_BELOW). */
 uint32_t linkest_cap(uint64_t rate, uint32_t min_rtt_us);
-/* Asks the kernel for that cap at le's rate and least RTT (linkest_sample does, where the send
- * window is on); a capped socket whose rate passed LINKEST_CAP_BELOW gets LINKEST_UNCAPPED. */
+/* Asks the kernel for that cap at le's rate and least RTT once the link was measured
+ * (linkest_sample does, where the send window is on); a capped socket whose rate passed
+ * 1.25 × LINKEST_CAP_BELOW is given back to the kernel's autotuning. */
 void linkest_set_cap(struct linkest *le);
 /* How long `bytes` take at the measured rate, in milliseconds (0 when not measured). */
 double linkest_delay_ms(const struct linkest *le, uint64_t bytes);

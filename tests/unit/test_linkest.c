@@ -18,6 +18,7 @@
 #include <stdio.h>
 #include <string.h>
 #include <sys/socket.h>
+#include <linux/socket.h>
 #include <unistd.h>
 
 #include "common/clock.h"
@@ -123,9 +124,11 @@ static void test_tcp_measured(void **state)
 }
 
 /* The slow-link cap: below LINKEST_CAP_BELOW the send buffer is held to the rate's BDP and
- * LINKEST_CAP_MS more; a link found faster is uncapped. (Loopback cannot be made slow enough
- * to be measured as a slow link — paced, its delivery samples still see microsecond RTTs — so
- * the rate is set here; test_link_shaped measures a real slow link end to end.) */
+ * LINKEST_CAP_MS more, once the link was measured; rises of a sixteenth are followed, falls of
+ * a quarter; a link found faster (1.25 × the threshold) goes back to the kernel's autotuning.
+ * (Loopback cannot be made slow enough to be measured as a slow link — paced, its delivery
+ * samples still see microsecond RTTs — so the rate is set here; test_link_shaped measures a
+ * real slow link end to end.) */
 static void test_slow_cap(void **state)
 {
 	(void)state;
@@ -136,46 +139,65 @@ static void test_slow_cap(void **state)
 	assert_int_equal(linkest_cap(LINKEST_CAP_BELOW - 1, 40000),
 			 (uint64_t)(LINKEST_CAP_BELOW - 1) * (40 + LINKEST_CAP_MS) / 1000);
 	assert_int_equal(linkest_cap(1000, 40000), LINKEST_CAP_MIN);
+	/* no RTT (or the kernel's ~0 "none yet", or one past belief): no cap */
+	assert_int_equal(linkest_cap(125000, 0), 0);
+	assert_int_equal(linkest_cap(125000, ~0u), 0);
+	assert_int_equal(linkest_cap(LINKEST_CAP_BELOW - 1, LINKEST_CAP_RTT_MAX),
+			 (uint64_t)(LINKEST_CAP_BELOW - 1) * (LINKEST_CAP_RTT_MAX + LINKEST_CAP_MS * 1000) /
+				 1000000);
 	int fds[2];
 	tcp_pair(fds);
 	struct linkest le;
 	linkest_init(&le, fds[0], true, true, false, clock_now_ns());
 	int v = 0;
 	socklen_t vl = sizeof v;
-	/* 1 Mbit/s, 40 ms */
+	/* 1 Mbit/s, 40 ms, but only ever application-limited samples: not capped */
 	le.rate = 125000;
 	le.min_rtt_us = 40000;
 	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, 0);
+	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_BUF_LOCK, &v, &vl), 0);
+	assert_int_equal(v & SOCK_SNDBUF_LOCK, 0);
+	/* measured: capped */
+	le.measured = true;
+	linkest_set_cap(&le);
 	assert_int_equal(le.sndbuf, linkest_cap(125000, 40000));
+	vl = sizeof v;
 	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &v, &vl), 0);
 	assert_int_equal(v, 2 * (int)le.sndbuf); /* the kernel doubles what it is asked */
-	/* a move of less than a quarter is left; more is followed */
-	le.rate = 140000;
+	/* a rise of less than a sixteenth is left, more is followed; a fall of less than a
+	 * quarter is left, more is followed */
+	le.rate = 128000;
 	linkest_set_cap(&le);
 	assert_int_equal(le.sndbuf, linkest_cap(125000, 40000));
-	le.rate = 250000;
+	le.rate = 140000;
 	linkest_set_cap(&le);
-	assert_int_equal(le.sndbuf, linkest_cap(250000, 40000));
+	assert_int_equal(le.sndbuf, linkest_cap(140000, 40000));
+	le.rate = 120000;
+	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, linkest_cap(140000, 40000));
+	le.rate = 100000;
+	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, linkest_cap(100000, 40000));
 	vl = sizeof v;
 	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &v, &vl), 0);
 	assert_int_equal(v, 2 * (int)le.sndbuf);
-	/* the link turned out fast: uncapped, once */
-	le.rate = 10u << 20;
+	/* just over the threshold: still capped, at the threshold's cap (no flapping) */
+	le.rate = LINKEST_CAP_BELOW + 1000;
 	linkest_set_cap(&le);
-	assert_int_equal(le.sndbuf, LINKEST_UNCAPPED);
+	assert_int_equal(le.sndbuf, linkest_cap(LINKEST_CAP_BELOW - 1, 40000));
+	/* 1.25 × the threshold: back to the kernel's own (the lock let go) */
+	le.rate = LINKEST_CAP_BELOW * 5 / 4;
+	linkest_set_cap(&le);
+	assert_true(le.sndbuf == 0 || le.sndbuf == LINKEST_UNCAPPED);
 	vl = sizeof v;
-	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &v, &vl), 0);
-	assert_true(v >= (int)LINKEST_UNCAPPED / 2); /* within net.core.wmem_max, doubled */
-	/* a fast link never capped keeps the kernel's own buffer (autotuning) */
-	int g[2];
-	tcp_pair(g);
-	struct linkest fast;
-	linkest_init(&fast, g[0], true, true, false, clock_now_ns());
-	fast.rate = 10u << 20;
-	linkest_set_cap(&fast);
-	assert_int_equal(fast.sndbuf, 0);
-	close(g[0]);
-	close(g[1]);
+	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_BUF_LOCK, &v, &vl), 0);
+	if (le.sndbuf == 0)
+		assert_int_equal(v & SOCK_SNDBUF_LOCK, 0);
+	/* and capped again if it turns slow */
+	le.rate = 125000;
+	linkest_set_cap(&le);
+	assert_int_equal(le.sndbuf, linkest_cap(125000, 40000));
 	close(fds[0]);
 	close(fds[1]);
 }
