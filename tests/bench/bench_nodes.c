@@ -2,7 +2,8 @@
  * 1 and 2 workers at T = 256 and 512, and ns per texel per worker (best of 5 rounds of 64
  * tiles). A node's inputs are generated and cached first, so each figure is that node's own
  * cost plus scheduling.
- * Writes its planet files (and one 4096×2048 tiled TIFF for the file node) under /tmp. */
+ * Writes its planet files (and one 4096×2048 tiled TIFF for the file node) under /tmp.
+ * BENCH_NODES_ONLY=TEXT runs only the cases whose name holds TEXT. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -35,6 +36,14 @@ static const struct bcase cases[] = {
 	  "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\n", 8 },
 	{ "noise ridged L8, warp",
 	  "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\nwarp = 4000\n", 8 },
+	/* earth.ini's detail_noise (ridged, its two longest octaves warped ±2.5 km over 10 km)
+	 * where the warp is evaluated per texel (L11) and on the tile's lattice (L14) */
+#define EARTH_DETAIL "type = noise\nkind = ridged\nseed = 5\noctaves = 20\nwavelength = 8000\n" \
+		     "gain = 0.5\namplitude = 900\nmax_wavelength = 8000\nwarp = 2500\n"        \
+		     "warp_wavelength = 10000\nwarp_octaves = 1\nwarp_depth = 2\n"
+	{ "earth detail_noise L9", EARTH_DETAIL, 9 },
+	{ "earth detail_noise L11", EARTH_DETAIL, 11 },
+	{ "earth detail_noise L14", EARTH_DETAIL, 14 },
 	{ "color_filter LUT", "type = color_filter\ninput = col\ngamma = 1.4\ncontrast = 1.2\n", 8 },
 	{ "color_filter LUT+hue/sat",
 	  "type = color_filter\ninput = col\ngamma = 1.4\nhue = 20\nsaturation = 1.3\n", 8 },
@@ -175,13 +184,15 @@ static int make_file(void)
 	return rc;
 }
 
+/* BENCH_NODES_ONLY=TEXT: only the cases whose name holds TEXT */
 int main(void)
 {
+	const char *only = getenv("BENCH_NODES_ONLY");
 	if (system("mkdir -p " DIR) != 0 || make_file())
 		return 1;
 	for (uint32_t T = 256; T <= 512; T *= 2)
 		for (size_t i = 0; i < sizeof cases / sizeof cases[0]; i++)
-			if (run_case(&cases[i], T))
+			if ((!only || strstr(cases[i].name, only)) && run_case(&cases[i], T))
 				return 1;
 	return 0;
 }
