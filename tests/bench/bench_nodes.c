@@ -36,11 +36,13 @@ static const struct bcase cases[] = {
 	  "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\n", 8 },
 	{ "noise ridged L8, warp",
 	  "type = noise\nkind = ridged\noctaves = 8\nwavelength = 20000\nwarp = 4000\n", 8 },
-	/* earth.ini's detail_noise (ridged, its two longest octaves warped ±2.5 km over 10 km)
+	/* earth.ini's detail_noise (ridged, its two longest octaves warped ±2.5 km over 10 km, a
+	 * weight floor of 0.3)
 	 * where the warp is evaluated per texel (L11) and on the tile's lattice (L14) */
 #define EARTH_DETAIL "type = noise\nkind = ridged\nseed = 5\noctaves = 20\nwavelength = 8000\n" \
 		     "gain = 0.5\namplitude = 900\nmax_wavelength = 8000\nwarp = 2500\n"        \
-		     "warp_wavelength = 10000\nwarp_octaves = 1\nwarp_depth = 2\n"
+		     "warp_wavelength = 10000\nwarp_octaves = 1\nwarp_depth = 2\n"   \
+		     "ridge_floor = 0.3\n"
 	{ "earth detail_noise L9", EARTH_DETAIL, 9 },
 	{ "earth detail_noise L11", EARTH_DETAIL, 11 },
 	{ "earth detail_noise L14", EARTH_DETAIL, 14 },

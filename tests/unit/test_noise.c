@@ -66,9 +66,10 @@ static void isa_paths_identical(void **state)
 		key(21, 20, (1u << 21) - 1, 5000), /* fine, antimeridian */
 		key(29, 28, 123456789, 98765432),  /* finest (texel 0.3 mm) */
 	};
-	for (int kind = 0; kind < 2; kind++) {
+	for (int kind = 0; kind < 3; kind++) { /* fbm, ridged, ridged with a weight floor */
 		struct noise nz;
 		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 24, 4e6);
+		p.ridge_floor = kind == 2 ? 0.3 : 0;
 		assert_int_equal(noise_init(&nz, &p), 0);
 		for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
 			uint32_t T = i == 5 ? 256 : 64;
@@ -102,10 +103,11 @@ static void matches_double_oracle(void **state)
 	(void)state;
 	const struct tile_key keys[] = { key(1, 0, 1, 0), key(5, 4, 31, 0), key(17, 16, 70000, 30000),
 					 key(29, 28, 536870911, 100000000) };
-	for (int kind = 0; kind < 2; kind++) {
+	for (int kind = 0; kind < 3; kind++) { /* fbm, ridged, ridged with a weight floor */
 		struct noise nz;
 		struct noise_params p = params(kind ? NOISE_RIDGED : NOISE_FBM, 24, 4e6);
 		p.lacunarity = 2.5;
+		p.ridge_floor = kind == 2 ? 0.3 : 0;
 		assert_int_equal(noise_init(&nz, &p), 0);
 		for (size_t i = 0; i < sizeof keys / sizeof *keys; i++) {
 			uint32_t T = 64;
@@ -262,18 +264,20 @@ static void multires_matches_exact(void **state)
 	static const struct {
 		enum noise_kind kind;
 		int octaves;
-		double wavelength, gain;
+		double wavelength, gain, floor;
 	} fields[] = {
-		{ NOISE_FBM, 9, 9e6, 0.45 },	 /* procedural.ini continents */
-		{ NOISE_RIDGED, 14, 7e5, 0.56 }, /* ranges */
-		{ NOISE_FBM, 20, 4e4, 0.53 },	 /* terrain */
-		{ NOISE_RIDGED, 24, 4e6, 0.5 },
+		{ NOISE_FBM, 9, 9e6, 0.45, 0 },	    /* procedural.ini continents */
+		{ NOISE_RIDGED, 14, 7e5, 0.56, 0 }, /* ranges */
+		{ NOISE_FBM, 20, 4e4, 0.53, 0 },    /* terrain */
+		{ NOISE_RIDGED, 24, 4e6, 0.5, 0 },
+		{ NOISE_RIDGED, 20, 8000, 0.5, 0.3 }, /* earth.ini's detail, its weight floor */
 	};
 	double worst_all[2] = { 0, 0 };
 	for (size_t f = 0; f < sizeof fields / sizeof *fields; f++) {
 		struct noise mr, ex;
 		struct noise_params p = params(fields[f].kind, fields[f].octaves, fields[f].wavelength);
 		p.gain = fields[f].gain;
+		p.ridge_floor = fields[f].floor;
 		assert_int_equal(noise_init(&mr, &p), 0);
 		p.exact = true;
 		assert_int_equal(noise_init(&ex, &p), 0);
@@ -819,6 +823,7 @@ static void parameter_errors(void **state)
 		{ "[node n]\ntype = noise\noctave = 3\n", "test.ini:3: octave: unknown key" },
 		{ "[node n]\ntype = noise\nwavelength = 8000\nwarp = 9000\n", "test.ini:4: warp: " },
 		{ "[node n]\ntype = noise\nwarp = 10\nwarp_octaves = 5\n", "test.ini:4: warp_octaves: " },
+		{ "[node n]\ntype = noise\nkind = ridged\nridge_floor = 1.5\n", "test.ini:4: ridge_floor: " },
 	};
 	for (size_t i = 0; i < sizeof cases / sizeof *cases; i++) {
 		struct fixture f;
@@ -830,6 +835,11 @@ static void parameter_errors(void **state)
 	}
 	struct noise nz;
 	struct noise_params p = params(NOISE_FBM, 0, 4e6);
+	assert_int_equal(noise_init(&nz, &p), -EINVAL);
+	p = params(NOISE_RIDGED, 8, 4e6);
+	p.ridge_floor = -0.1;
+	assert_int_equal(noise_init(&nz, &p), -EINVAL);
+	p.ridge_floor = NAN;
 	assert_int_equal(noise_init(&nz, &p), -EINVAL);
 	p = params(NOISE_FBM, 8, 4e6);
 	assert_int_equal(noise_init(&nz, &p), 0);

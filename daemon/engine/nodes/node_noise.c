@@ -13,8 +13,12 @@
  *   amplitude      metres per unit of noise (default 1000); the fractal is roughly in [-1, 1]
  *   offset         metres added (default 0)
  *   ridge_offset   ridged: signal = (ridge_offset − |n|)², 0..2 (default 1)
- *   ridge_gain     ridged: next octave's weight = clamp(signal · ridge_gain, 0, 1), 0..16
- *                  (default 2)
+ *   ridge_gain     ridged: next octave's weight = clamp(signal · ridge_gain, ridge_floor, 1),
+ *                  0..16 (default 2)
+ *   ridge_floor    ridged: that weight's least, 0..1 (default 0, Musgrave's): the weight is
+ *                  small away from the crests, so with 0 the finer octaves vanish on the long
+ *                  crests' flanks and leave plain, smooth sheets between sharp rims; a floor
+ *                  keeps that share of them everywhere
  *   max_wavelength metres (default: wavelength): only octaves with a wavelength ≤ this
  *                  contribute — with an input, the "detail below the data's resolution"
  *   stretch        1..16 (default 1): features that many times narrower north–south than
@@ -92,6 +96,7 @@ static int noise_create(struct node *n, struct node_parse *p)
 	    (rc = np_double(p, "offset", 0.0, -1e7, 1e7, &offset)) ||
 	    (rc = np_double(p, "ridge_offset", 1.0, 0.0, 2.0, &np.ridge_offset)) ||
 	    (rc = np_double(p, "ridge_gain", 2.0, 0.0, 16.0, &np.ridge_gain)) ||
+	    (rc = np_double(p, "ridge_floor", 0.0, 0.0, 1.0, &np.ridge_floor)) ||
 	    (rc = np_double(p, "max_wavelength", np.wavelength, 1e-3, 1e10, &np.max_wavelength)) ||
 	    (rc = np_double(p, "stretch", 1.0, 1.0, 16.0, &np.stretch)) ||
 	    (rc = np_double(p, "warp", 0.0, 0.0, 1e7, &np.warp)) ||
@@ -251,6 +256,7 @@ const struct node_type node_type_noise = {
 	.name = "noise",
 	.doc = "seeded fBm/ridged simplex noise on the sphere (seed, kind=fbm|ridged, octaves, "
 	       "wavelength m, lacunarity, gain, amplitude m, offset m, ridge_offset, ridge_gain, "
+	       "ridge_floor, "
 	       "max_wavelength m, stretch, warp m, warp_wavelength m, warp_octaves, warp_depth), "
 	       "band-limited per level; optional input height gets the octaves with wavelength <= "
 	       "max_wavelength added",

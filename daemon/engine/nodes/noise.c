@@ -254,7 +254,7 @@ static void ridged_means(struct noise *nz, int k0)
 			double s = nz->p.ridge_offset - fabs(n);
 			s = s * s * w;
 			w = s * nz->p.ridge_gain;
-			w = w < 0 ? 0 : w > 1 ? 1 : w;
+			w = w > nz->p.ridge_floor ? (w > 1 ? 1 : w) : nz->p.ridge_floor;
 			sum[k] += s;
 		}
 	}
@@ -389,6 +389,7 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 	    !(p->lacunarity > 1) || !(p->gain >= 0) || !(p->radius > 0) ||
 	    !isfinite(p->wavelength) || !isfinite(p->radius) || !isfinite(p->gain) ||
 	    !(p->max_wavelength >= 0) || !isfinite(p->ridge_offset) || !isfinite(p->ridge_gain) ||
+	    !(p->ridge_floor >= 0 && p->ridge_floor <= 1) ||
 	    !(p->stretch == 0 || (p->stretch >= 1 && p->stretch <= 16)) || !(p->warp >= 0) ||
 	    !isfinite(p->warp) || p->warp_octaves < 0 || p->warp_octaves > NOISE_WARP_MAX_OCTAVES ||
 	    p->warp_depth < 0 ||
@@ -650,7 +651,8 @@ static void full_res_row(const struct noise *nz, const struct noise_sums *ns, no
 {
 	float *dx = tmp[0], *dy = tmp[1], *dz = tmp[2], *rx = tmp[3], *ry = tmp[4], *rz = tmp[5];
 	float *nb = tmp[6];
-	const float ro = (float)nz->p.ridge_offset, rg = (float)nz->p.ridge_gain;
+	const float ro = (float)nz->p.ridge_offset, rg = (float)nz->p.ridge_gain,
+		    rf = (float)nz->p.ridge_floor;
 	const bool ridged = nz->p.kind == NOISE_RIDGED;
 	double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5) * (M_PI / 180.0);
 	double cl = cos(lat), sl = sin(lat);
@@ -686,7 +688,7 @@ static void full_res_row(const struct noise *nz, const struct noise_sums *ns, no
 		if (!ridged)
 			ns->acc_fbm(row, nb, amp[o], T);
 		else
-			ns->acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, o == 0, T);
+			ns->acc_ridged(row, wt, nb, amp[o], mean[o], ro, rg, rf, o == 0, T);
 	}
 }
 
@@ -699,7 +701,7 @@ struct tile_eval {
 	noise_row_fn *row_fn;
 	const struct noise_sums *ns;
 	bool ridged;
-	float ro, rg;		/* ridge offset and gain */
+	float ro, rg, rf;	/* ridge offset, gain and floor */
 	int m, mc;		/* active octaves; the first mc of them on the coarse lattice */
 	double pc[3];		/* the tile's centre */
 	struct noise_row rows[NOISE_MAX_OCTAVES];
@@ -869,7 +871,7 @@ static void coarse_row(struct tile_eval *t, uint32_t j, float *row)
 		for (int o = 0; o < mc; o++)
 			ns->interp_slopes(t->tc + (size_t)o * MP, M, t->td + (size_t)o * MP);
 		ns->ridged_coarse(row, t->wt, mc, t->tc, t->td, MP, M, t->hb, t->amp, t->mean,
-				  t->ro, t->rg);
+				  t->ro, t->rg, t->rf);
 	} else {
 		memset(row, 0, t->T * sizeof *row);
 	}
@@ -892,7 +894,7 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 		.nz = nz, .k = k, .T = T, .M = lattice_m(T), .P = (uint32_t)lattice_p(T),
 		.MP = (uint32_t)lattice_row(T), .row_fn = kernel_for(isa), .ns = sums_for(isa),
 		.ridged = nz->p.kind == NOISE_RIDGED, .ro = (float)nz->p.ridge_offset,
-		.rg = (float)nz->p.ridge_gain,
+		.rg = (float)nz->p.ridge_gain, .rf = (float)nz->p.ridge_floor,
 	};
 	const struct noise_sums *ns = t.ns;
 	int idx[NOISE_MAX_OCTAVES];
@@ -1019,7 +1021,7 @@ double noise_point(const struct noise *nz, double lon, double lat, int ly, uint3
 		double s = nz->p.ridge_offset - fabs(n);
 		s = s * s * wt;
 		wt = s * nz->p.ridge_gain;
-		wt = wt < 0 ? 0 : wt > 1 ? 1 : wt;
+		wt = wt > nz->p.ridge_floor ? (wt > 1 ? 1 : wt) : nz->p.ridge_floor;
 		sum += (s - oc->mean) * a;
 	}
 	return sum;

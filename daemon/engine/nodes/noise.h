@@ -47,7 +47,9 @@ struct noise_params {
 	double lacunarity;	/* > 1 */
 	double gain;		/* amplitude ratio between octaves */
 	double ridge_offset;	/* ridged: signal = (ridge_offset − |n|)² */
-	double ridge_gain;	/* ridged: next octave weight = clamp(signal · ridge_gain, 0, 1) */
+	double ridge_gain;	/* ridged: next octave weight = clamp(signal · ridge_gain, floor, 1) */
+	double ridge_floor;	/* ridged: that floor, 0..1 (0: Musgrave's; more keeps some detail
+				 * on the smooth sides of the long crests, which 0 leaves plain) */
 	double max_wavelength;	/* octaves with a longer wavelength are skipped; 0 = none */
 	double radius;		/* body radius in metres (the sphere the noise lives on) */
 	double stretch;		/* ≥ 1 (0 reads as 1): space is compressed by this factor along

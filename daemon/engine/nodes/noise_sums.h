@@ -22,9 +22,9 @@ struct noise_sums {
 			   float *rx, float *ry, float *rz, uint32_t n);
 	/* row += a · nb over T texels. */
 	void (*acc_fbm)(float *row, const float *nb, float a, uint32_t T);
-	/* Musgrave: s = (ro − |n|)² · weight; weight = clamp(s · rg, 0, 1); row += (s − mu) · a. */
+	/* Musgrave: s = (ro − |n|)² · weight; weight = clamp(s · rg, rf, 1); row += (s − mu) · a. */
 	void (*acc_ridged)(float *row, float *wt, const float *nb, float a, float mu, float ro,
-			   float rg, int first, uint32_t T);
+			   float rg, float rf, int first, uint32_t T);
 	/* Column pass of lattice row j: c[0..M) interpolated down the lattice columns. The
 	 * lattice l (M×M) must be followed by NOISE_LATTICE_PAD(M) readable floats, c must have
 	 * room for M + NOISE_ROW_PAD. */
@@ -42,7 +42,7 @@ struct noise_sums {
 	 * after the last one. Same bits as interp_row then acc_ridged per octave. */
 	void (*ridged_coarse)(float *row, float *wt, int mc, const float *c, const float *d,
 			      size_t stride, uint32_t M, const float b[4][NOISE_MR_STRIDE],
-			      const float *amp, const float *mean, float ro, float rg);
+			      const float *amp, const float *mean, float ro, float rg, float rf);
 	/* row = base + (off + a·row), or off + a·row when base is NULL, over T texels. */
 	void (*finish)(float *row, const float *base, float a, float off, uint32_t T);
 };
@@ -100,29 +100,31 @@ static void ns_acc_fbm(float *row, const float *nb, float a, uint32_t T)
 }
 
 /* One ridged step on vectors (a macro for the same reason as ns_store): s = (ro − |n|)²·w;
- * w = clamp(s·rg, 0, 1); r += (s − mu)·a. */
-#define ns_ridge(r, w, n, va, vmu, vro, vrg)                                                    \
+ * w = clamp(s·rg, rf, 1); r += (s − mu)·a. (NaN s·rg: rf, as the scalar's comparisons.) */
+#define ns_ridge(r, w, n, va, vmu, vro, vrg, vrf)                                               \
 	do {                                                                                     \
 		const ns_v8i am_ = { 0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff,            \
 				     0x7fffffff, 0x7fffffff, 0x7fffffff, 0x7fffffff };           \
-		const ns_v8f one_ = ns_set1(1.0f), zero_ = ns_set1(0.0f);                       \
+		const ns_v8f one_ = ns_set1(1.0f);                                               \
 		ns_v8f s_ = (vro) - (ns_v8f)((ns_v8i)(n) & am_);                                 \
 		s_ = s_ * s_ * (w);                                                              \
 		ns_v8f nw_ = s_ * (vrg);                                                         \
-		nw_ = (ns_v8f)((ns_v8i)nw_ & (nw_ > zero_));                                     \
+		ns_v8i up_ = nw_ > (vrf);                                                        \
+		nw_ = (ns_v8f)(((ns_v8i)nw_ & up_) | ((ns_v8i)(vrf) & ~up_));                    \
 		ns_v8i big_ = nw_ > one_;                                                        \
 		(w) = (ns_v8f)(((ns_v8i)one_ & big_) | ((ns_v8i)nw_ & ~big_));                   \
 		(r) = (r) + (s_ - (vmu)) * (va);                                                 \
 	} while (0)
 
 static void ns_acc_ridged(float *row, float *wt, const float *nb, float a, float mu, float ro,
-			  float rg, int first, uint32_t T)
+			  float rg, float rf, int first, uint32_t T)
 {
-	const ns_v8f va = ns_set1(a), vmu = ns_set1(mu), vro = ns_set1(ro), vrg = ns_set1(rg);
+	const ns_v8f va = ns_set1(a), vmu = ns_set1(mu), vro = ns_set1(ro), vrg = ns_set1(rg),
+		     vrf = ns_set1(rf);
 	for (uint32_t i = 0; i < T; i += 8) {
 		ns_v8f w = first ? ns_set1(1.0f) : ns_load(wt + i), r = ns_load(row + i);
 		ns_v8f n = ns_load(nb + i);
-		ns_ridge(r, w, n, va, vmu, vro, vrg);
+		ns_ridge(r, w, n, va, vmu, vro, vrg, vrf);
 		ns_store(row + i, r);
 		ns_store(wt + i, w);
 	}
@@ -172,11 +174,11 @@ static void ns_interp_row(const float *c, const float *d, uint32_t M,
 
 static void ns_ridged_coarse(float *row, float *wt, int mc, const float *c, const float *d,
 			     size_t stride, uint32_t M, const float b[4][NOISE_MR_STRIDE],
-			     const float *amp, const float *mean, float ro, float rg)
+			     const float *amp, const float *mean, float ro, float rg, float rf)
 {
 	const ns_v8f B0 = ns_load(b[0]), B1 = ns_load(b[1]), B2 = ns_load(b[2]),
 		     B3 = ns_load(b[3]);
-	const ns_v8f vro = ns_set1(ro), vrg = ns_set1(rg);
+	const ns_v8f vro = ns_set1(ro), vrg = ns_set1(rg), vrf = ns_set1(rf);
 	for (uint32_t cell = 0; cell + 5 < M; cell++) {
 		ns_v8f r = ns_set1(0.0f), w = ns_set1(1.0f);
 		for (int o = 0; o < mc; o++) {
@@ -184,7 +186,7 @@ static void ns_ridged_coarse(float *row, float *wt, int mc, const float *c, cons
 			ns_v8f n = ((B0 * ns_set1(co[2]) + B1 * ns_set1(dd[2])) + B2 * ns_set1(co[3])) +
 				   B3 * ns_set1(dd[3]);
 			const ns_v8f va = ns_set1(amp[o]), vmu = ns_set1(mean[o]);
-			ns_ridge(r, w, n, va, vmu, vro, vrg);
+			ns_ridge(r, w, n, va, vmu, vro, vrg, vrf);
 		}
 		ns_store(row + cell * NOISE_MR_STRIDE, r);
 		ns_store(wt + cell * NOISE_MR_STRIDE, w);
