@@ -192,8 +192,33 @@ static void test_slow_cap(void **state)
 	assert_true(le.sndbuf == 0 || le.sndbuf == LINKEST_UNCAPPED);
 	vl = sizeof v;
 	assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_BUF_LOCK, &v, &vl), 0);
-	if (le.sndbuf == 0)
+	if (le.sndbuf == 0) {
 		assert_int_equal(v & SOCK_SNDBUF_LOCK, 0);
+		/* and the kernel grows it again: 8 MiB through loopback, the reader draining */
+		int small = 0, grown = 0;
+		vl = sizeof small;
+		assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &small, &vl), 0);
+		static uint8_t buf[1 << 16];
+		uint64_t sent = 0, got = 0, end = clock_now_ns() + 10000000000ull;
+		while (got < (8u << 20) && clock_now_ns() < end) {
+			struct pollfd pf[2] = { { .fd = fds[0], .events = POLLOUT },
+						{ .fd = fds[1], .events = POLLIN } };
+			assert_true(poll(pf, 2, 1000) >= 0);
+			ssize_t n;
+			if ((pf[0].revents & POLLOUT) &&
+			    (n = send(fds[0], buf, sizeof buf, MSG_DONTWAIT)) > 0)
+				sent += (uint64_t)n;
+			if ((pf[1].revents & POLLIN) &&
+			    (n = recv(fds[1], buf, sizeof buf, MSG_DONTWAIT)) > 0)
+				got += (uint64_t)n;
+		}
+		while (got < sent && recv(fds[1], buf, sizeof buf, MSG_DONTWAIT) > 0)
+			;
+		vl = sizeof grown;
+		assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &grown, &vl), 0);
+		printf("let go: SO_SNDBUF %d while capped, %d after 8 MiB\n", small, grown);
+		assert_true(grown > small);
+	}
 	/* and capped again if it turns slow */
 	le.rate = 125000;
 	linkest_set_cap(&le);
