@@ -5,7 +5,7 @@
 #   orbit (straight down), 80 km, 10 km, 1 km, 100 m, 10 m, 2 m (looking down at an angle, the
 #   planet's showpiece in the middle of the picture: the Himalaya, the crater Tycho, Valles
 #   Marineris, a range of the procedural planet), north pole and south pole from 150 km
-#   (looking at the pole at 35° down).
+#   (looking at the pole at 35° down). Every cell is lit from its upper left.
 # The labels need a TrueType font (fc-match; DejaVu); without one the cells are unlabelled, in
 # the order above. OUT defaults to docs/img/contact-PLANET.png. 2 cores: about half a minute.
 #   CONTACT_CELL (320x180: the size of a cell; each is rendered at twice that and shrunk),
@@ -73,11 +73,16 @@ TMP=$(mktemp -d "${TMPDIR:-/tmp}/contact.XXXXXX")
 trap 'rm -rf "$TMP"' EXIT INT TERM
 t0=$(date +%s)
 n=0
-# cell LABEL LAT,LON,ALT,HEADING,PITCH
+# cell LABEL LAT,LON,ALT,HEADING,PITCH: lit from the picture's upper left (the sun's azimuth
+# 315° from the camera's heading, 35° up), as a map's hill shading is: lit from below, a
+# crater reads as a dome (issue 11)
 cell() {
 	n=$((n + 1))
 	f="$TMP/$n.png"
-	if ! "$VIEW" --planet "$INI" --camera "$2" --haze "$HAZE" --size "$((W * 2))x$((H * 2))" \
+	hdg=$(echo "$2" | cut -d, -f4)
+	sun=$(awk -v h="$hdg" 'BEGIN { a = h + 315; while (a >= 360) a -= 360; printf "%g,35", a }')
+	if ! "$VIEW" --planet "$INI" --camera "$2" --sun "$sun" --haze "$HAZE" \
+		--size "$((W * 2))x$((H * 2))" \
 		--wait-complete --timeout 120 -o "$TMP/big.png" >"$TMP/log" 2>&1; then
 		echo "$0: $PLANET $1: clipmapview failed:" >&2
 		cat "$TMP/log" >&2
