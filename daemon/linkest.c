@@ -134,9 +134,9 @@ void linkest_sample(struct linkest *le, uint64_t now_ns, bool force)
 	if (grew) {
 		add_rate(le, now_ns, ti.tcpi_delivery_rate, ti.tcpi_delivery_rate_app_limited);
 		le->measured |= ti.tcpi_delivery_rate && !ti.tcpi_delivery_rate_app_limited;
-	}
-	else
+	} else {
 		add_rate(le, now_ns, 0, true);
+	}
 	uint64_t lw = le->rate * LINKEST_LOWAT_MS / 1000;
 	lw = lw < LINKEST_LOWAT_MIN ? LINKEST_LOWAT_MIN : lw > LINKEST_LOWAT_MAX ? LINKEST_LOWAT_MAX : lw;
 	/* only moves of a quarter or more: a setsockopt per sample is for nothing */

@@ -236,6 +236,20 @@ static void bench_frames(void)
 	free(e);
 }
 
+/* A size² tile of `type` texels at level ly encoded as clipmapd sends it on a 4 Mbit/s link to a
+ * client that offered the lossy codecs (encpick.h: its codec and step); payload bytes as
+ * tilecodec_encode_lossy returns them. */
+static ssize_t slow_link_encode(struct tilecodec *tc, const struct planet *p, enum pix_type type,
+				int ly, uint32_t size, const void *texels, struct tilecodec_hdr *h,
+				void *out, size_t cap)
+{
+	const struct encpick_policy pol = { .lossless = TCODEC_ZSTD, .offered = TCODEC_ALL_MASK,
+					    .lossy_below_bps = 50000000 };
+	struct encpick e;
+	encpick(&pol, type, ly, size, p->a, 4000000, &e);
+	return tilecodec_encode_lossy(tc, type, size, e.codec, &e.lossy, texels, h, out, cap);
+}
+
 /* One real tile of layer l: zstd bytes, lossy bytes and error, as clipmapd would send it on a
  * slow link. Accumulates into sums[3] (zstd, lossy bytes, error). */
 static void real_tile(struct tilecodec *tc, const struct planet *p, size_t l, const struct tile *t,
@@ -246,14 +260,7 @@ static void real_tile(struct tilecodec *tc, const struct planet *p, size_t l, co
 	struct tilecodec_hdr h;
 	ssize_t z = tilecodec_encode(tc, t->type, t->size, TCODEC_ZSTD,
 				     tilecodec_default_filter(t->type), 1, t->data, &h, out, cap);
-	struct encpick_policy pol = { .lossless = TCODEC_ZSTD, .offered = TCODEC_ALL_MASK,
-				      .lossy_below_bps = 1 };
-	struct encpick e;
-	encpick(&pol, t->type, ly, t->size, p->a, 0, &e);
-	pol.lossy_below_bps = 50000000;
-	encpick(&pol, t->type, ly, t->size, p->a, 4000000, &e);
-	ssize_t n = tilecodec_encode_lossy(tc, t->type, t->size, e.codec, &e.lossy, t->data, &h, out,
-					   cap);
+	ssize_t n = slow_link_encode(tc, p, t->type, ly, t->size, t->data, &h, out, cap);
 	double err = 0;
 	if (n > 0 && tilecodec_decode(tc, &h, out, (size_t)n, back, raw, NULL) == 0) {
 		size_t nv = t->type == PIX_HEIGHT ? raw / 4 : raw;
@@ -309,7 +316,7 @@ static void half_heights(struct tilecodec *tc, struct sched *s, const struct pla
 		int ly = fetch_block(s, p, l, levels[li], t);
 		uint32_t ts = 0;
 		double full = 0, half = 0, herr = 0, ang = 0, sh = 0, vis = 0, n = 0, tiles = 0;
-		double dy = M_PI * p->a / ldexp(1, ly), dx;
+		double dy = 0, dx; /* a texel's metres north and east, the last tile's */
 		for (int k = 0; k < 4; k++) {
 			if (!t[k] || t[k]->type != PIX_HEIGHT)
 				goto next;
@@ -320,19 +327,13 @@ static void half_heights(struct tilecodec *tc, struct sched *s, const struct pla
 			size_t cap = tilecodec_bound(TCODEC_ZSTD, (size_t)ts * ts * 4);
 			unsigned char *out = xmalloc(cap);
 			struct tilecodec_hdr hd;
-			struct encpick_policy pol = { .lossless = TCODEC_ZSTD,
-						      .offered = TCODEC_ALL_MASK,
-						      .lossy_below_bps = 50000000 };
-			struct encpick e;
-			encpick(&pol, PIX_HEIGHT, ly, ts, p->a, 4000000, &e);
-			ssize_t nf = tilecodec_encode_lossy(tc, PIX_HEIGHT, ts, e.codec, &e.lossy, h, &hd,
-							    out, cap);
+			ssize_t nf = slow_link_encode(tc, p, PIX_HEIGHT, ly, ts, h, &hd, out, cap);
 			for (uint32_t y = 0; y < H; y++)
 				for (uint32_t x = 0; x < H; x++)
 					d[y * H + x] = h[2 * y * ts + 2 * x];
-			encpick(&pol, PIX_HEIGHT, ly > 0 ? ly - 1 : 0, H, p->a, 4000000, &e);
-			ssize_t nh = tilecodec_encode_lossy(tc, PIX_HEIGHT, H, e.codec, &e.lossy, d, &hd,
-							    out, cap);
+			/* its texels are the next coarser level's, and so is q16's step */
+			ssize_t nh = slow_link_encode(tc, p, PIX_HEIGHT, ly > 0 ? ly - 1 : 0, H, d, &hd,
+						      out, cap);
 			/* back to T²: even texels as sent, odd ones between their neighbours */
 			for (uint32_t y = 0; y < ts; y++)
 				for (uint32_t x = 0; x < ts; x++) {

@@ -50,6 +50,34 @@ static void tcp_pair(int fds[2])
 	tcp_pair_mss(fds, 0);
 }
 
+/* Sends total bytes from fds[0] to fds[1] through loopback, the reader draining as it goes
+ * (le, when not NULL, sampled on the way); returns the bytes received (total unless 20 s
+ * passed). */
+static uint64_t stream(int fds[2], uint64_t total, struct linkest *le)
+{
+	static uint8_t buf[1 << 16];
+	uint64_t sent = 0, got = 0, end = clock_now_ns() + 20000000000ull;
+	while (got < total && clock_now_ns() < end) {
+		struct pollfd pf[2] = { { .fd = fds[0], .events = sent < total ? POLLOUT : 0 },
+					{ .fd = fds[1], .events = POLLIN } };
+		assert_true(poll(pf, 2, 1000) >= 0);
+		if (pf[0].revents & POLLOUT) {
+			size_t want = total - sent < sizeof buf ? (size_t)(total - sent) : sizeof buf;
+			ssize_t n = send(fds[0], buf, want, MSG_DONTWAIT);
+			if (n > 0)
+				sent += (uint64_t)n;
+		}
+		if (pf[1].revents & POLLIN) {
+			ssize_t n = recv(fds[1], buf, sizeof buf, MSG_DONTWAIT);
+			if (n > 0)
+				got += (uint64_t)n;
+		}
+		if (le)
+			linkest_sample(le, clock_now_ns(), false);
+	}
+	return got;
+}
+
 static void test_unix_not_measured(void **state)
 {
 	(void)state;
@@ -81,26 +109,7 @@ static void test_tcp_measured(void **state)
 	assert_int_equal(linkest_window(&le, 100, 16u << 10), 16u << 10);
 	assert_int_equal(linkest_window(&le, 0, 8u << 20), 8u << 20);
 	/* 32 MiB through loopback, the reader draining as it goes */
-	static uint8_t buf[1 << 16];
-	uint64_t sent = 0, got = 0, total = 32u << 20;
-	uint64_t end = clock_now_ns() + 20000000000ull;
-	while (got < total && clock_now_ns() < end) {
-		struct pollfd pf[2] = { { .fd = fds[0], .events = sent < total ? POLLOUT : 0 },
-					{ .fd = fds[1], .events = POLLIN } };
-		assert_true(poll(pf, 2, 1000) >= 0);
-		if (pf[0].revents & POLLOUT) {
-			ssize_t n = send(fds[0], buf, sizeof buf, MSG_DONTWAIT);
-			if (n > 0)
-				sent += (uint64_t)n;
-		}
-		if (pf[1].revents & POLLIN) {
-			ssize_t n = recv(fds[1], buf, sizeof buf, MSG_DONTWAIT);
-			if (n > 0)
-				got += (uint64_t)n;
-		}
-		linkest_sample(&le, clock_now_ns(), false);
-	}
-	assert_int_equal(got, total);
+	assert_int_equal(stream(fds, 32u << 20, &le), 32u << 20);
 	linkest_sample(&le, clock_now_ns(), true);
 	/* loopback: far faster than 10 Mbit/s; an RTT under a second */
 	assert_true(le.rate > 10000000u / 8);
@@ -198,22 +207,7 @@ static void test_slow_cap(void **state)
 		int small = 0, grown = 0;
 		vl = sizeof small;
 		assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &small, &vl), 0);
-		static uint8_t buf[1 << 16];
-		uint64_t sent = 0, got = 0, end = clock_now_ns() + 10000000000ull;
-		while (got < (8u << 20) && clock_now_ns() < end) {
-			struct pollfd pf[2] = { { .fd = fds[0], .events = POLLOUT },
-						{ .fd = fds[1], .events = POLLIN } };
-			assert_true(poll(pf, 2, 1000) >= 0);
-			ssize_t n;
-			if ((pf[0].revents & POLLOUT) &&
-			    (n = send(fds[0], buf, sizeof buf, MSG_DONTWAIT)) > 0)
-				sent += (uint64_t)n;
-			if ((pf[1].revents & POLLIN) &&
-			    (n = recv(fds[1], buf, sizeof buf, MSG_DONTWAIT)) > 0)
-				got += (uint64_t)n;
-		}
-		while (got < sent && recv(fds[1], buf, sizeof buf, MSG_DONTWAIT) > 0)
-			;
+		assert_int_equal(stream(fds, 8u << 20, NULL), 8u << 20);
 		vl = sizeof grown;
 		assert_int_equal(getsockopt(fds[0], SOL_SOCKET, SO_SNDBUF, &grown, &vl), 0);
 		printf("let go: SO_SNDBUF %d while capped, %d after 8 MiB\n", small, grown);
