@@ -3,8 +3,10 @@
  * connections that never say HELLO on the TCP listener, sends waves of 48 frames announcing
  * 16 MiB before HELLO, leaves a connection silent and a frame half sent, and forges log lines
  * through a HELLO name and an OPEN name, while a well-behaved client on the Unix socket and on
- * TCP (another source address) keeps completing HELLO and `clipmapctl status` keeps
- * answering. The daemon's log escapes what the client sent and keeps connection chatter at
+ * TCP (another source address) keeps completing HELLO (a probe descheduled between its
+ * connect and its HELLO is, rightly, evicted as the oldest pre-auth connection now and then:
+ * it reconnects once, as clipmapview does; 1 in 20 allowed, a lockout fails) and
+ * `clipmapctl status` keeps answering. The daemon's log escapes what the client sent and keeps connection chatter at
  * debug. A second clipmapd on the same socket path refuses to start ("already in use") and
  * leaves the first one reachable; a stale socket file is replaced; a daemon that stops
  * removes only its own socket. Real processes (build/clipmapd, build/clipmapctl, python3);
