@@ -9,6 +9,7 @@ static const struct node_type *const all_types[] = {
 	&node_type_height_filter, &node_type_ramp,  &node_type_blend,
 	&node_type_normal,	 &node_type_slope, &node_type_file, &node_type_geoid,
 	&node_type_craters,	 &node_type_vector, &node_type_color_mask, &node_type_open_sea,
+	&node_type_cells,
 	NULL,
 };
 

@@ -50,6 +50,9 @@ bool geoid_undulation(const struct node *n, double lat, double lon, double *out)
 /* `craters`: seeded, size-distributed impact craters on the sphere, a height source or added
  * to an optional input height; band-limited per level (node_craters.c lists the parameters). */
 extern const struct node_type node_type_craters;
+/* `cells`: a patchwork of seeded Voronoi cells on the sphere, one value each in [0, 1) with
+ * optional borders (−1) between them, band-limited per level (node_cells.c). */
+extern const struct node_type node_type_cells;
 /* `vector`: a GDAL/OGR vector source (GeoJSON, GeoPackage, Shapefile, …) rasterized per tile
  * with exact area coverage: RGBA (styled by an attribute) or a 0..1 mask (node_vector.c). */
 extern const struct node_type node_type_vector;

@@ -46,6 +46,11 @@ static const struct bcase cases[] = {
 	{ "earth detail_noise L9", EARTH_DETAIL, 9 },
 	{ "earth detail_noise L11", EARTH_DETAIL, 11 },
 	{ "earth detail_noise L14", EARTH_DETAIL, 14 },
+	/* earth.ini's fields: cells 450 m with 8 m borders, where they fade in (L12) and at 10 m
+	 * texels (L14) */
+#define EARTH_FIELDS "type = cells\nseed = 41\nwavelength = 450\njitter = 0.9\nborder = 8\n"
+	{ "earth fields (cells) L12", EARTH_FIELDS, 12 },
+	{ "earth fields (cells) L14", EARTH_FIELDS, 14 },
 	{ "color_filter LUT", "type = color_filter\ninput = col\ngamma = 1.4\ncontrast = 1.2\n", 8 },
 	{ "color_filter LUT+hue/sat",
 	  "type = color_filter\ninput = col\ngamma = 1.4\nhue = 20\nsaturation = 1.3\n", 8 },
