@@ -44,6 +44,10 @@ extern const struct node_type node_type_geoid;
 /* `open_sea`: where a sea may lie (the ocean and closed basins of at least min_area), read
  * from a global height raster: a 0..1 mask (color_filter's `alpha` carries it to a viewer). */
 extern const struct node_type node_type_open_sea;
+/* The surface of an `open_sea` node's closed seas with a level of their own (its `levels`,
+ * metres relative to sea_level) into *level where a cell of one lies within reach degrees (of
+ * latitude, and of longitude) of (lat, lon), else 0; false if n is not an open_sea node. */
+bool open_sea_level(const struct node *n, double lat, double lon, double reach, double *level);
 /* A `geoid` node's undulation N at (lat, lon) degrees, metres (whatever its sign); false if n
  * is not a geoid node. */
 bool geoid_undulation(const struct node *n, double lat, double lon, double *out);

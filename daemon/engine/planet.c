@@ -310,6 +310,7 @@ static int check_planet_keys(struct loader *L, struct ini_section *s)
 					    "atmosphere_color",
 					    "sea_level",
 					    "sea_geoid",
+					    "sea_basins",
 					    "sea_mask",
 					    NULL };
 	for (size_t i = 0; s && i < s->n; i++) {
@@ -322,7 +323,7 @@ static int check_planet_keys(struct loader *L, struct ini_section *s)
 					 "unknown key in [planet] (known: name, description, body, "
 					 "radius, flattening, tile_size, max_level, atmosphere, "
 					 "atmosphere_density, atmosphere_height, atmosphere_color, "
-					 "sea_level, sea_geoid, sea_mask)");
+					 "sea_level, sea_geoid, sea_basins, sea_mask)");
 		e->used = true;
 	}
 	return 0;
@@ -618,36 +619,61 @@ static int init_nodes(struct loader *L)
 	return 0;
 }
 
-/* sea_geoid = NODE: the sea lies on the geoid of that `geoid` node, sea_level above it; the
- * viewer gets it as a 1° lattice (common/seagrid.h): 0.42 m RMS from EGM96's own 15′ grid,
- * 13 m at worst (Hawaii's steep flanks), measured over the whole sphere. */
+/* sea_geoid = NODE: the sea lies on the geoid of that `geoid` node, sea_level above it;
+ * sea_basins = NODE: the closed seas of that `open_sea` node lie at its `level` instead (the
+ * Caspian's −28 m). The viewer gets the surface as a 1° lattice (common/seagrid.h): 0.42 m RMS
+ * from EGM96's own 15′ grid, 13 m at worst (Hawaii's steep flanks), measured over the whole
+ * sphere. A node within 1¼ lattice steps of a closed sea's cell takes its level, so the
+ * bilinear surface holds it over the whole sea and its coast cells (and a step beyond, where
+ * no other sea lies). */
 #define SEA_GRID_STEP 1.0
-static int parse_sea_geoid(struct loader *L, struct ini_section *s)
+static int parse_sea_grid(struct loader *L, struct ini_section *s)
 {
 	struct planet *p = L->p;
-	struct ini_entry *e = s ? ini_find(s, "sea_geoid") : NULL;
-	if (!e)
+	struct ini_entry *eg = s ? ini_find(s, "sea_geoid") : NULL;
+	struct ini_entry *eb = s ? ini_find(s, "sea_basins") : NULL;
+	if (!eg && !eb)
 		return 0;
+	struct ini_entry *e = eg ? eg : eb;
 	if (!p->look.sea)
-		return cfg_error(L, e->line, "sea_geoid",
-				 "a sea that follows a geoid needs sea_level (metres above that "
-				 "geoid; 0 for mean sea level)");
-	struct node *n = planet_find_node(p, e->value);
-	if (!n)
-		return cfg_error(L, e->line, "sea_geoid", "unknown node \"%s\"", e->value);
-	double N;
-	if (!geoid_undulation(n, 0, 0, &N))
-		return cfg_error(L, e->line, "sea_geoid",
-				 "node \"%s\" is of type %s; sea_geoid names a node of type geoid",
-				 e->value, n->type ? n->type->name : "?");
+		return cfg_error(L, e->line, e->key,
+				 "a sea that follows a geoid or lies in basins needs sea_level "
+				 "(metres above that geoid; 0 for mean sea level)");
+	struct node *geoid = NULL, *basins = NULL;
+	double N, lev;
+	if (eg) {
+		geoid = planet_find_node(p, eg->value);
+		if (!geoid)
+			return cfg_error(L, eg->line, "sea_geoid", "unknown node \"%s\"", eg->value);
+		if (!geoid_undulation(geoid, 0, 0, &N))
+			return cfg_error(L, eg->line, "sea_geoid",
+					 "node \"%s\" is of type %s; sea_geoid names a node of type "
+					 "geoid",
+					 eg->value, geoid->type ? geoid->type->name : "?");
+	}
+	if (eb) {
+		basins = planet_find_node(p, eb->value);
+		if (!basins)
+			return cfg_error(L, eb->line, "sea_basins", "unknown node \"%s\"", eb->value);
+		if (!open_sea_level(basins, 0, 0, 0, &lev))
+			return cfg_error(L, eb->line, "sea_basins",
+					 "node \"%s\" is of type %s; sea_basins names a node of type "
+					 "open_sea",
+					 eb->value, basins->type ? basins->type->name : "?");
+	}
 	struct sea_grid *g = &p->look.sea_grid;
 	g->rows = (uint16_t)lround(180 / SEA_GRID_STEP) + 1;
 	g->cols = (uint16_t)lround(360 / SEA_GRID_STEP);
 	g->dm = xmalloc((size_t)g->rows * g->cols * sizeof *g->dm);
 	for (int r = 0; r < g->rows; r++)
 		for (int c = 0; c < g->cols; c++) {
-			geoid_undulation(n, -90 + r * SEA_GRID_STEP, -180 + c * SEA_GRID_STEP, &N);
-			double dm = round(N * 10);
+			double lat = -90 + r * SEA_GRID_STEP, lon = -180 + c * SEA_GRID_STEP;
+			N = lev = 0;
+			if (geoid)
+				geoid_undulation(geoid, lat, lon, &N);
+			if (basins)
+				open_sea_level(basins, lat, lon, 1.25 * SEA_GRID_STEP, &lev);
+			double dm = round((N + lev) * 10);
 			g->dm[(size_t)r * g->cols + c] =
 				(int16_t)(dm > INT16_MAX ? INT16_MAX : dm < -INT16_MAX ? -INT16_MAX : dm);
 		}
@@ -763,7 +789,7 @@ int planet_load_shared(const char *path, const struct node_type *const *types,
 	if (rc == 0)
 		rc = parse_layers(&L);
 	if (rc == 0)
-		rc = parse_sea_geoid(&L, ps);
+		rc = parse_sea_grid(&L, ps);
 	free(L.ln);
 	if (rc) {
 		planet_unref(p);

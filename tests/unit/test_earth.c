@@ -19,6 +19,8 @@
 #include <unistd.h>
 
 #include "client/ctl/render.h"
+#include "common/seagrid.h"
+#include "engine/node_types.h"
 #include "engine/planet.h"
 
 #define PLANET "conf/planets/earth.ini"
@@ -270,6 +272,35 @@ static double detail_spread(int ly, double lat, double lon)
  * plateau carry a few metres of it (ridged noise at the plain roughness gave ±50–180 m:
  * a field of cells seen from 100 km), while Everest's and Monte Rosa's snow keep hundreds
  * of metres. Level 9: 150 m texels, every detail octave from 8 km to 300 m in. */
+/* The sea's surface: the Caspian 28 m below the ocean's (earth.ini's sea_basins), the Black
+ * Sea (a closed basin of its own at 5′) and the open ocean on the geoid. */
+static void sea_surface(void **state)
+{
+	(void)state;
+	const struct sea_grid *g = &pl->look.sea_grid;
+	const struct node *geoid = planet_find_node(pl, "etopo_ellipsoid");
+	assert_non_null(geoid);
+	static const struct {
+		const char *name;
+		double lat, lon, level;
+	} seas[] = {
+		{ "the Caspian's middle", 42.0, 50.5, -28 },
+		{ "the north Caspian", 46.0, 50.0, -28 },
+		{ "the south Caspian", 38.0, 51.0, -28 },
+		{ "the Black Sea", 43.0, 34.0, 0 },
+		{ "the Sea of Azov", 46.0, 36.5, 0 },
+		{ "the Persian Gulf", 27.0, 51.5, 0 },
+		{ "the Mediterranean", 35.0, 18.0, 0 },
+	};
+	for (size_t i = 0; i < sizeof seas / sizeof seas[0]; i++) {
+		double N, at = sea_grid_at(g, seas[i].lat, seas[i].lon);
+		assert_true(geoid_undulation(geoid, seas[i].lat, seas[i].lon, &N));
+		print_message("%s: surface %.1f m, geoid %.1f m\n", seas[i].name, at, N);
+		/* 1° lattice, decimetres: within the grid's interpolation of the geoid */
+		assert_true(fabs(at - (N + seas[i].level)) < 2.0);
+	}
+}
+
 static void ice_sheets(void **state)
 {
 	(void)state;
@@ -299,6 +330,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(heights),
 		cmocka_unit_test(colours),
+		cmocka_unit_test(sea_surface),
 		cmocka_unit_test(ice_sheets),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

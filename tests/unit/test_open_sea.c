@@ -116,6 +116,71 @@ static void basins(void **state)
 	free(m);
 }
 
+/* The centre of cell (x, y): degrees. */
+static double cell_lon(int x) { return -180 + (x + 0.5) * 360.0 / W; }
+static double cell_lat(int y) { return 90 - (y + 0.5) * 180.0 / H; }
+
+/* levels: the large basin's sea at its own surface (where a planet's sea_basins lays its sea),
+ * within reach of its cells only; the ocean and everything else at sea level. */
+static void levels(void **state)
+{
+	(void)state;
+	char text[512], err[256];
+	snprintf(text, sizeof text,
+		 "[node s]\ntype = open_sea\npath = %s\nmin_area = 10000000\nlevels = %g %g -28\n",
+		 path, cell_lat(15), cell_lon(35));
+	struct node_ini ni;
+	if (node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err))
+		fail_msg("open_sea: %s", err);
+	double lev = 99;
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(35), 0.1, &lev));
+	assert_true(lev == -28); /* in the basin */
+	assert_true(open_sea_level(&ni.n, cell_lat(8), cell_lon(25), 0.1, &lev));
+	assert_true(lev == -28); /* its corner cell */
+	/* a cell beyond its edge: only within reach of it */
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(47), 0.1, &lev));
+	assert_true(lev == 0);
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(47), 2 * 5.625, &lev));
+	assert_true(lev == -28);
+	/* the ocean, the small dry basin: sea level */
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(5), 0.1, &lev));
+	assert_true(lev == 0);
+	assert_true(open_sea_level(&ni.n, cell_lat(9), cell_lon(15), 0.1, &lev));
+	assert_true(lev == 0);
+	/* the mask is the same with or without levels */
+	float *m = malloc(sizeof(float) * W * W);
+	world("min_area = 10000000\n", m);
+	struct tile_key k = { .node = ni.n.hash, .lx = 0, .ly = 0 };
+	struct tile *t = tile_create(&k, PIX_HEIGHT, W);
+	assert_int_equal(ni.n.type->generate(&ni.n, &ni.g, &k, NULL, 0, t), 0);
+	assert_memory_equal(tile_f32(t), m, sizeof(float) * W * W);
+	tile_unref(t);
+	free(m);
+	node_ini_fini(&ni);
+	/* not an open_sea node */
+	assert_false(open_sea_level(NULL, 0, 0, 1, &lev));
+	/* a point in no closed sea: the ocean, dry land, a basin under min_area; a bad list */
+	double where[][2] = { { cell_lat(15), cell_lon(5) },
+			      { cell_lat(24), cell_lon(50) },
+			      { cell_lat(9), cell_lon(15) } };
+	for (int i = 0; i < 3; i++) {
+		char extra[128];
+		snprintf(extra, sizeof extra, "levels = %g %g -28\n", where[i][0], where[i][1]);
+		snprintf(text, sizeof text,
+			 "[node s]\ntype = open_sea\npath = %s\nmin_area = 10000000\n%s", path,
+			 extra);
+		assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err),
+				 -EINVAL);
+		assert_non_null(strstr(err, "levels"));
+		assert_non_null(strstr(err, "no closed sea there"));
+		node_ini_fini(&ni);
+	}
+	snprintf(text, sizeof text, "[node s]\ntype = open_sea\npath = %s\nlevels = 1 2\n", path);
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err), -EINVAL);
+	assert_non_null(strstr(err, "expected \"LAT LON LEVEL"));
+	node_ini_fini(&ni);
+}
+
 static void errors(void **state)
 {
 	(void)state;
@@ -152,6 +217,7 @@ int main(void)
 {
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(basins),
+		cmocka_unit_test(levels),
 		cmocka_unit_test(errors),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);

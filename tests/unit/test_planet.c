@@ -632,12 +632,21 @@ static void look(void **state)
 	assert_int_equal(p->look.sea_grid.rows, 0); /* a geoid node alone moves no sea */
 	planet_unref(p);
 	load_fails("[planet]\nsea_geoid = g\n" NODE_Z NODE_G LAYER_Z,
-		   "p.ini:2: sea_geoid: a sea that follows a geoid needs sea_level");
+		   "p.ini:2: sea_geoid: a sea that follows a geoid or lies in basins needs sea_level");
 	load_fails("[planet]\nsea_level = 0\nsea_geoid = nope\n" NODE_Z NODE_G LAYER_Z,
 		   "p.ini:3: sea_geoid: unknown node \"nope\"");
 	load_fails("[planet]\nsea_level = 0\nsea_geoid = z\n" NODE_Z NODE_G LAYER_Z,
 		   "p.ini:3: sea_geoid: node \"z\" is of type constant; sea_geoid names a node of type "
 		   "geoid");
+	/* sea_basins names an open_sea node (test_open_sea, test_earth: the Caspian) */
+	load_fails("[planet]\nsea_basins = z\n" NODE_Z LAYER_Z,
+		   "p.ini:2: sea_basins: a sea that follows a geoid or lies in basins needs "
+		   "sea_level");
+	load_fails("[planet]\nsea_level = 0\nsea_basins = nope\n" NODE_Z LAYER_Z,
+		   "p.ini:3: sea_basins: unknown node \"nope\"");
+	load_fails("[planet]\nsea_level = 0\nsea_geoid = g\nsea_basins = g\n" NODE_Z NODE_G LAYER_Z,
+		   "p.ini:4: sea_basins: node \"g\" is of type geoid; sea_basins names a node of "
+		   "type open_sea");
 #undef NODE_G
 
 	/* sea_mask = color_alpha: the colour layers' alpha says where the sea may lie */

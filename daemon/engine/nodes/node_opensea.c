@@ -5,8 +5,11 @@
  * load, and finds its closed basins: the 8-connected regions of cells below sea level
  * (longitude wraps; the first and last rows connect across the pole). The largest is the
  * world ocean; a basin of at least `min_area` km² (default 100 000) is a sea of its own (the
- * Caspian: 371 000 km², its surface 28 m below the ocean's but drawn at sea level); every
- * other basin is dry. The mask is 1 where the sea may lie (the cells of the ocean and of the
+ * Caspian: 371 000 km², its surface 28 m below the ocean's; at 5′ also the Black Sea, whose
+ * Bosporus the raster does not resolve); every other basin is dry. `levels` = "LAT LON LEVEL,
+ * …" puts the sea of the basin holding each point at its own LEVEL (metres relative to
+ * sea_level; the Caspian's −28); the others lie at sea level. The planet's `sea_basins = NODE`
+ * lays its sea surface there (open_sea_level). The mask is 1 where the sea may lie (the cells of the ocean and of the
  * large basins, and the ground next to them: the coast) and 0 elsewhere (dry basins, and
  * ground away from the sea, where detail that dips below sea level is no sea either).
  *
@@ -32,12 +35,15 @@
 #include "file_digest.h"
 
 #define OPENSEA_MAX_W 4320 /* 5′: ETOPO5 itself; about 100 MB while the basins are found */
+#define OPENSEA_MAX_LEVELS 8 /* basins with a level of their own */
 
 struct open_sea {
 	int w, h;
 	bool point;  /* grid-registered (h = w/2 + 1: cells centred on the poles and on −180°,
 		      * as ETOPO5), else cell-registered (h = w/2: centres half a cell in) */
 	uint8_t *m; /* w × h, row 0 north: 255 the sea may lie here, 0 dry */
+	uint8_t *closed;	   /* w × h: k + 1 on a cell of the basin of levels[k], else 0 */
+	double level[OPENSEA_MAX_LEVELS]; /* those seas' surfaces, metres from sea_level */
 };
 
 /* Latitude of row y's centre, degrees. */
@@ -49,8 +55,10 @@ static double row_lat(const struct open_sea *s, double y)
 static void os_destroy(struct node *n)
 {
 	struct open_sea *s = n->impl;
-	if (s)
+	if (s) {
 		free(s->m);
+		free(s->closed);
+	}
 	free(s);
 	n->impl = NULL;
 }
@@ -118,8 +126,23 @@ static int basins(const struct open_sea *os, const uint8_t *below, double a, int
 	return count;
 }
 
-/* The mask of the raster's heights hv (w × h, row 0 north). */
-static void build_mask(struct open_sea *s, const float *hv, double sea, double min_km2, double a)
+/* The cell (column, row) whose centre is nearest (lat, lon). */
+static size_t cell_at(const struct open_sea *s, double lat, double lon)
+{
+	double fx = (lon + 180) / 360 * s->w - (s->point ? 0 : 0.5);
+	double fy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
+	int x = (int)lround(fx), y = (int)lround(fy);
+	x = ((x % s->w) + s->w) % s->w;
+	y = y < 0 ? 0 : y > s->h - 1 ? s->h - 1 : y;
+	return (size_t)y * s->w + (size_t)x;
+}
+
+/* The mask of the raster's heights hv (w × h, row 0 north), and the cells of the basins that
+ * hold the points of lv (nlv triples lat, lon, level). Returns 0, or k + 1 when the point of
+ * triple k lies in no closed sea (not below sea level, the ocean, or a basin under
+ * min_area). */
+static int build_mask(struct open_sea *s, const float *hv, double sea, double min_km2, double a,
+		      const double *lv, int nlv)
 {
 	int w = s->w, h = s->h;
 	size_t n = (size_t)w * h;
@@ -136,6 +159,15 @@ static void build_mask(struct open_sea *s, const float *hv, double sea, double m
 	uint8_t *keep = xcalloc((size_t)count + 1, 1);
 	for (int i = 1; i <= count; i++)
 		keep[i] = i == ocean || area[i] >= min_km2;
+	int bad = 0;
+	int32_t own[OPENSEA_MAX_LEVELS];
+	for (int k = 0; k < nlv; k++) {
+		size_t c = cell_at(s, lv[3 * k], lv[3 * k + 1]);
+		own[k] = lab[c];
+		s->level[k] = lv[3 * k + 2];
+		if (!below[c] || !keep[lab[c]] || lab[c] == ocean)
+			bad = bad ? bad : k + 1;
+	}
 	/* The sea's cells and the ground next to them (the coast: the mask's bilinear ramp then
 	 * lies beyond the data's coastline, so detail that dips below sea level at the shore is
 	 * sea); nowhere else: no sea shows inland where detail (dunes, relief) dips below sea
@@ -151,22 +183,36 @@ static void build_mask(struct open_sea *s, const float *hv, double sea, double m
 					by_sea = below[nb[i]] && keep[lab[nb[i]]];
 			}
 			s->m[c] = sea_cell || by_sea ? 255 : 0;
+			s->closed[c] = 0;
+			for (int k = 0; k < nlv && sea_cell; k++)
+				if (lab[c] == own[k] && !s->closed[c])
+					s->closed[c] = (uint8_t)(k + 1);
 		}
 	free(keep);
 	free(area);
 	free(lab);
 	free(below);
+	return bad;
 }
 
 static int os_create(struct node *n, struct node_parse *p)
 {
 	const char *rel;
-	double sea, min_km2;
-	int rc;
+	double sea, min_km2, lv[3 * OPENSEA_MAX_LEVELS];
+	int rc, nlv;
 	if ((rc = np_string(p, "path", NULL, &rel)) ||
 	    (rc = np_double(p, "sea_level", 0, -1e5, 1e5, &sea)) ||
-	    (rc = np_double(p, "min_area", 100000, 0, 1e9, &min_km2)))
+	    (rc = np_double(p, "min_area", 100000, 0, 1e9, &min_km2)) ||
+	    (rc = np_doubles(p, "levels", lv, 3 * OPENSEA_MAX_LEVELS, &nlv)))
 		return rc;
+	if (nlv % 3)
+		return np_error(p, "levels", "expected \"LAT LON LEVEL, …\" (a point in a closed "
+					     "sea and its surface in metres), got %d numbers", nlv);
+	for (int k = 0; k < nlv; k += 3)
+		if (fabs(lv[k]) > 90 || fabs(lv[k + 1]) > 360 || fabs(lv[k + 2]) > 1e4)
+			return np_error(p, "levels", "%g %g %g: expected a latitude, a longitude "
+						     "and metres",
+					lv[k], lv[k + 1], lv[k + 2]);
 	if (!rel || !rel[0])
 		return np_error(p, "path", "missing: a global height raster (e.g. the one the "
 					   "planet's heights come from)");
@@ -218,8 +264,17 @@ static int os_create(struct node *n, struct node_parse *p)
 	s->h = h;
 	s->point = h == w / 2 + 1;
 	s->m = xmalloc((size_t)w * h);
-	build_mask(s, hv, sea, min_km2, n->planet ? n->planet->a : 6371000.0);
+	s->closed = xmalloc((size_t)w * h);
+	int bad = build_mask(s, hv, sea, min_km2, n->planet ? n->planet->a : 6371000.0, lv,
+			     nlv / 3);
 	free(hv);
+	if (bad) {
+		n->impl = s;
+		os_destroy(n);
+		return np_error(p, "levels", "%g %g: no closed sea there (below sea level, apart "
+					     "from the ocean, at least min_area)",
+				lv[3 * (bad - 1)], lv[3 * (bad - 1) + 1]);
+	}
 	n->impl = s;
 	n->out = PIX_HEIGHT;
 	return 0;
@@ -237,6 +292,32 @@ static float mask_at(const struct open_sea *s, double lon, double lat)
 	const uint8_t *a = s->m + (size_t)y0 * s->w, *b = s->m + (size_t)y1 * s->w;
 	double top = a[x0] + (a[x1] - a[x0]) * tx, bot = b[x0] + (b[x1] - b[x0]) * tx;
 	return (float)((top + (bot - top) * ty) / 255);
+}
+
+bool open_sea_level(const struct node *n, double lat, double lon, double reach, double *level)
+{
+	if (!n || n->type != &node_type_open_sea || !n->impl)
+		return false;
+	const struct open_sea *s = n->impl;
+	*level = 0;
+	/* the rows and columns whose centres lie within reach (degrees) of the point */
+	double cy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
+	double ry = reach / 180 * (s->point ? s->h - 1 : s->h);
+	double cx = (lon + 180) / 360 * s->w - (s->point ? 0 : 0.5), rx = reach / 360 * s->w;
+	int y0 = (int)ceil(cy - ry), y1 = (int)floor(cy + ry);
+	int x0 = (int)ceil(cx - rx), x1 = (int)floor(cx + rx);
+	y0 = y0 < 0 ? 0 : y0;
+	y1 = y1 > s->h - 1 ? s->h - 1 : y1;
+	for (int y = y0; y <= y1; y++)
+		for (int x = x0; x <= x1; x++)
+		{
+			uint8_t k = s->closed[(size_t)y * s->w + (size_t)(((x % s->w) + s->w) % s->w)];
+			if (k) {
+				*level = s->level[k - 1];
+				return true;
+			}
+		}
+	return true;
 }
 
 static int os_generate(const struct node *n, struct gen_ctx *gc, const struct tile_key *k,
@@ -264,7 +345,8 @@ static int os_generate(const struct node *n, struct gen_ctx *gc, const struct ti
 
 const struct node_type node_type_open_sea = {
 	.name = "open_sea",
-	.doc = "where a sea may lie: the ocean and large closed basins, not dry depressions",
+	.doc = "where a sea may lie: the ocean and large closed basins, not dry depressions "
+	       "(path, sea_level, min_area km², levels: LAT LON LEVEL of closed seas below it)",
 	.version = 1,
 	.nslots = 0,
 	.costly = true,
