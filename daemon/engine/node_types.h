@@ -46,8 +46,11 @@ extern const struct node_type node_type_geoid;
 extern const struct node_type node_type_open_sea;
 /* The surface of an `open_sea` node's closed seas with a level of their own (its `levels`,
  * metres relative to sea_level) into *level where a cell of one lies within reach degrees (of
- * latitude, and of longitude) of (lat, lon), else 0; false if n is not an open_sea node. */
-bool open_sea_level(const struct node *n, double lat, double lon, double reach, double *level);
+ * latitude, and of longitude) of (lat, lon), else 0; *mixed (if not NULL): whether a sea at
+ * another level (the ocean, a basin at sea level or at another level) lies there too. False
+ * if n is not an open_sea node. */
+bool open_sea_level(const struct node *n, double lat, double lon, double reach, double *level,
+		    bool *mixed);
 /* A `geoid` node's undulation N at (lat, lon) degrees, metres (whatever its sign); false if n
  * is not a geoid node. */
 bool geoid_undulation(const struct node *n, double lat, double lon, double *out);
@@ -57,6 +60,10 @@ extern const struct node_type node_type_craters;
 /* `cells`: a patchwork of seeded Voronoi cells on the sphere, one value each in [0, 1) with
  * optional borders (−1) between them, band-limited per level (node_cells.c). */
 extern const struct node_type node_type_cells;
+/* What a `cells` tile of key k and size T (no input) holds at texel (i, j), evaluated alone,
+ * without the tile's skipping of texels near the last one evaluated: an oracle for tests. */
+float cells_texel(const struct node *n, const struct tile_key *k, uint32_t T, uint32_t i,
+		  uint32_t j);
 /* `vector`: a GDAL/OGR vector source (GeoJSON, GeoPackage, Shapefile, …) rasterized per tile
  * with exact area coverage: RGBA (styled by an attribute) or a 0..1 mask (node_vector.c). */
 extern const struct node_type node_type_vector;

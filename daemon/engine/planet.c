@@ -624,8 +624,8 @@ static int init_nodes(struct loader *L)
  * Caspian's −28 m). The viewer gets the surface as a 1° lattice (common/seagrid.h): 0.42 m RMS
  * from EGM96's own 15′ grid, 13 m at worst (Hawaii's steep flanks), measured over the whole
  * sphere. A node within 1¼ lattice steps of a closed sea's cell takes its level, so the
- * bilinear surface holds it over the whole sea and its coast cells (and a step beyond, where
- * no other sea lies). */
+ * bilinear surface holds it over the whole sea and its coast cells; a node that has another
+ * sea within that reach too is an error (no lattice value could serve both). */
 #define SEA_GRID_STEP 1.0
 static int parse_sea_grid(struct loader *L, struct ini_section *s)
 {
@@ -655,7 +655,7 @@ static int parse_sea_grid(struct loader *L, struct ini_section *s)
 		basins = planet_find_node(p, eb->value);
 		if (!basins)
 			return cfg_error(L, eb->line, "sea_basins", "unknown node \"%s\"", eb->value);
-		if (!open_sea_level(basins, 0, 0, 0, &lev))
+		if (!open_sea_level(basins, 0, 0, 0, &lev, NULL))
 			return cfg_error(L, eb->line, "sea_basins",
 					 "node \"%s\" is of type %s; sea_basins names a node of type "
 					 "open_sea",
@@ -671,8 +671,19 @@ static int parse_sea_grid(struct loader *L, struct ini_section *s)
 			N = lev = 0;
 			if (geoid)
 				geoid_undulation(geoid, lat, lon, &N);
+			bool mixed = false;
 			if (basins)
-				open_sea_level(basins, lat, lon, 1.25 * SEA_GRID_STEP, &lev);
+				open_sea_level(basins, lat, lon, 1.25 * SEA_GRID_STEP, &lev, &mixed);
+			if (mixed) {
+				free(g->dm);
+				*g = (struct sea_grid){ 0 };
+				return cfg_error(L, eb->line, "sea_basins",
+						 "node \"%s\": a sea with a level of its own and "
+						 "a sea at another level both lie within %g° of "
+						 "(%g, %g); the sea's %g° lattice cannot hold both",
+						 eb->value, 1.25 * SEA_GRID_STEP, lat, lon,
+						 SEA_GRID_STEP);
+			}
 			double dm = round((N + lev) * 10);
 			g->dm[(size_t)r * g->cols + c] =
 				(int16_t)(dm > INT16_MAX ? INT16_MAX : dm < -INT16_MAX ? -INT16_MAX : dm);

@@ -8,7 +8,8 @@
  *                   tile_size (power of two, 64..1024), max_level; the look:
  *                   atmosphere = none | earth | mars, atmosphere_density, atmosphere_height,
  *                   atmosphere_color (overriding the preset), sea_level (absent: no sea),
- *                   sea_geoid (a geoid node the sea follows), sea_mask = color_alpha
+ *                   sea_geoid (a geoid node the sea follows), sea_basins (an open_sea
+ *                   node whose closed seas lie at their own levels), sea_mask = color_alpha
  *   [node NAME]     type = <node type>, its input slots naming other nodes, its parameters
  *   [layer NAME]    node = NAME, format = f32 | rgba8 | rg8 (optional; checked)
  *
@@ -53,7 +54,8 @@ struct planet_look {
 	double sea_level;     /* metres above the ellipsoid (0 without a sea) */
 	bool sea_mask;	      /* sea_mask = color_alpha: the colour layers' alpha says where a sea
 			       * may lie (254 of 255: dry land, even below sea level) */
-	/* With `sea_geoid = NODE`: the sea lies on that geoid node's geoid, sea_level above it
+	/* With `sea_geoid = NODE`: the sea lies on that geoid node's geoid, sea_level above it;
+	 * with `sea_basins = NODE`, that open_sea node's levelled closed seas at their levels
 	 * (a 1° lattice of it; owned). 0 × 0: at sea_level everywhere. */
 	struct sea_grid sea_grid;
 };

@@ -46,8 +46,8 @@ static const struct bcase cases[] = {
 	{ "earth detail_noise L9", EARTH_DETAIL, 9 },
 	{ "earth detail_noise L11", EARTH_DETAIL, 11 },
 	{ "earth detail_noise L14", EARTH_DETAIL, 14 },
-	/* earth.ini's fields: cells 450 m with 8 m borders, where they fade in (L12) and at 10 m
-	 * texels (L14) */
+	/* earth.ini's fields: cells 450 m with 8 m borders, 23 texels a cell (L12, 19 m texels:
+	 * the border drawn a texel wide) and 94 (L14, 4.8 m) */
 #define EARTH_FIELDS "type = cells\nseed = 41\nwavelength = 450\njitter = 0.9\nborder = 8\n"
 	{ "earth fields (cells) L12", EARTH_FIELDS, 12 },
 	{ "earth fields (cells) L14", EARTH_FIELDS, 14 },

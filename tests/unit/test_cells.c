@@ -56,7 +56,7 @@ static double texel_m(int ly)
 static void cells_and_values(void **state)
 {
 	(void)state;
-	/* level (15, 14) near 46°N: texels 2.4 m × 1.7 m, cells ~190 texels */
+	/* level (15, 14) near 46°N: texels 4.8 m (north–south) × 3.3 m, cells ~100 texels */
 	int ly = 14, lx = 15;
 	uint32_t y = (uint32_t)((90 - 46.0) / 180 * grid_tiles_y(ly)), x = 12345;
 	float *a = malloc(sizeof(float) * T * T);
@@ -70,8 +70,8 @@ static void cells_and_values(void **state)
 			if (i > 0 && v != a[j * T + i - 1])
 				changes++;
 		}
-	/* chords of cells ~LAMBDA across, lon texels 2.4 · cos 46° = 1.7 m: a row of 256 texels
-	 * (430 m) crosses an edge about once */
+	/* chords of cells ~LAMBDA across, lon texels 4.8 · cos 46° = 3.3 m: a row of 256 texels
+	 * (850 m) crosses an edge about twice */
 	double row_m = T * 2 * M_PI * pl.a / (ldexp(1.0, lx) * T) * cos(46 * M_PI / 180);
 	double per_row = (double)changes / T, expect = row_m / LAMBDA;
 	print_message("edges per row %.2f, %.2f expected for cells of %.0f m\n", per_row, expect,
@@ -146,7 +146,7 @@ static void borders(void **state)
 {
 	(void)state;
 	float *a = malloc(sizeof(float) * T * T), *b = malloc(sizeof(float) * T * T);
-	/* level 16: texels 0.6 m, border 8 m = 13 texels */
+	/* level 16: texels 1.2 m, border 8 m = 7 texels */
 	make("border = 8\n", 17, 16, 40000, 20000, a);
 	make("", 17, 16, 40000, 20000, b);
 	int in_border = 0;
@@ -164,7 +164,7 @@ static void borders(void **state)
 	assert_true(least < -0.8f);
 	/* 8 m strips round cells ~450 m: some 1–6 % of the area */
 	assert_true(in_border > 0.005 * T * T && in_border < 0.1 * T * T);
-	/* level 12: texels 9.8 m (wider than the border): a texel wide, at most 8/9.8 dark */
+	/* level 12: texels 19 m (wider than the border): a texel wide, at most 8/19 dark */
 	make("border = 8\n", 13, 12, 2500, 1250, a);
 	make("", 13, 12, 2500, 1250, b);
 	float most = 0;
@@ -187,11 +187,11 @@ static void band_limit_and_poles(void **state)
 {
 	(void)state;
 	float *a = malloc(sizeof(float) * T * T), *b = malloc(sizeof(float) * T * T);
-	/* level 8: texels 610 m, cells under 2 texels: ½ everywhere */
+	/* level 8: texels 306 m, cells under 2 texels: ½ everywhere */
 	make("border = 8\n", 9, 8, 100, 60, a);
 	for (uint32_t i = 0; i < T * T; i++)
 		assert_true(a[i] == 0.5f);
-	/* level 9: texels 305 m (cells 1.5 texels... fading): between, never beyond [-1, 1) */
+	/* level 9: texels 153 m (cells 3 texels: fading in): between, never beyond [-1, 1) */
 	make("border = 8\n", 10, 9, 200, 120, a);
 	float lo = 1, hi = 0;
 	for (uint32_t i = 0; i < T * T; i++) {
@@ -241,6 +241,53 @@ static void determinism_seed_input(void **state)
 	free(b);
 }
 
+/* The tile skips texels near the last one evaluated (within its slack): every texel as the
+ * node evaluates it alone (cells_texel) instead, at the levels where the cells fade in, are
+ * whole, and are hundreds of texels wide; with borders, without, and next to a pole. */
+static void skipping_is_exact(void **state)
+{
+	(void)state;
+	static const struct {
+		int lx, ly;
+		uint32_t x, y;
+		const char *extra;
+	} cases[] = {
+		{ 10, 9, 300, 130, "border = 8\n" },	  /* fading in: 150 m texels */
+		{ 13, 12, 2500, 1150, "border = 8\n" }, /* 19 m texels */
+		{ 13, 12, 2500, 1150, "" },
+		{ 15, 14, 9000, 4400, "border = 8\n" }, /* 4.8 m */
+		{ 17, 16, 40000, 20000, "border = 8\n" }, /* 1.2 m: the border 7 texels */
+		{ 14, 14, 77, 0, "border = 8\n" },	  /* the north pole's rows */
+	};
+	float *a = malloc(sizeof(float) * T * T);
+	for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
+		make(cases[c].extra, cases[c].lx, cases[c].ly, cases[c].x, cases[c].y, a);
+		char text[256], err[256];
+		snprintf(text, sizeof text, "[node c]\ntype = cells\nseed = 41\nwavelength = %g\n%s",
+			 LAMBDA, cases[c].extra);
+		struct node_ini ni;
+		if (node_ini_init(&ni, &node_type_cells, &pl, text, NULL, 0, err))
+			fail_msg("cells: %s", err);
+		struct tile_key k = { .node = ni.n.hash, .lx = (uint8_t)cases[c].lx,
+				      .ly = (uint8_t)cases[c].ly, .x = cases[c].x, .y = cases[c].y };
+		int differ = 0, values = 0;
+		for (uint32_t j = 0; j < T; j++)
+			for (uint32_t i = 0; i < T; i++) {
+				float v = cells_texel(&ni.n, &k, T, i, j);
+				differ += memcmp(&v, &a[j * T + i], sizeof v) != 0;
+				values += i > 0 && a[j * T + i] != a[j * T + i - 1];
+			}
+		node_ini_fini(&ni);
+		print_message("level (%d, %d) %s: %d of %u texels differ from one evaluated alone "
+			      "(%d changes along rows)\n",
+			      cases[c].lx, cases[c].ly, cases[c].extra[0] ? "borders" : "no borders",
+			      differ, T * T, values);
+		assert_true(values > 0); /* the tile is not one value */
+		assert_int_equal(differ, 0);
+	}
+	free(a);
+}
+
 static void errors(void **state)
 {
 	(void)state;
@@ -273,6 +320,7 @@ int main(void)
 		cmocka_unit_test(borders),
 		cmocka_unit_test(band_limit_and_poles),
 		cmocka_unit_test(determinism_seed_input),
+		cmocka_unit_test(skipping_is_exact),
 		cmocka_unit_test(errors),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);

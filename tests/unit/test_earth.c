@@ -267,11 +267,6 @@ static double detail_spread(int ly, double lat, double lon)
 	return hi - lo;
 }
 
-/* Ice sheets are smooth and mountains rugged: where the Blue Marble is ice-white the detail
- * is the roughness squared (earth.ini, node ice), so Greenland's summit and the Antarctic
- * plateau carry a few metres of it (ridged noise at the plain roughness gave ±50–180 m:
- * a field of cells seen from 100 km), while Everest's and Monte Rosa's snow keep hundreds
- * of metres. Level 9: 150 m texels, every detail octave from 8 km to 300 m in. */
 /* The sea's surface: the Caspian 28 m below the ocean's (earth.ini's sea_basins), the Black
  * Sea (a closed basin of its own at 5′) and the open ocean on the geoid. */
 static void sea_surface(void **state)
@@ -301,6 +296,11 @@ static void sea_surface(void **state)
 	}
 }
 
+/* Ice sheets are smooth and mountains rugged: where the Blue Marble is ice-white the detail
+ * is the roughness squared (earth.ini, node ice), so Greenland's summit and the Antarctic
+ * plateau carry a few metres of it (ridged noise at the plain roughness gave ±50–180 m:
+ * a field of cells seen from 100 km), while Everest's and Monte Rosa's snow keep hundreds
+ * of metres. Level 9: 150 m texels, every detail octave from 8 km to 300 m in. */
 static void ice_sheets(void **state)
 {
 	(void)state;

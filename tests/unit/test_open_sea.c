@@ -13,6 +13,7 @@
 #include <cmocka.h>
 
 #include <errno.h>
+#include <stdbool.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -133,19 +134,23 @@ static void levels(void **state)
 	if (node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err))
 		fail_msg("open_sea: %s", err);
 	double lev = 99;
-	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(35), 0.1, &lev));
-	assert_true(lev == -28); /* in the basin */
-	assert_true(open_sea_level(&ni.n, cell_lat(8), cell_lon(25), 0.1, &lev));
+	bool mixed = true;
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(35), 0.1, &lev, &mixed));
+	assert_true(lev == -28 && !mixed); /* in the basin, and only it */
+	assert_true(open_sea_level(&ni.n, cell_lat(8), cell_lon(25), 0.1, &lev, NULL));
 	assert_true(lev == -28); /* its corner cell */
 	/* a cell beyond its edge: only within reach of it */
-	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(47), 0.1, &lev));
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(47), 0.1, &lev, NULL));
 	assert_true(lev == 0);
-	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(47), 2 * 5.625, &lev));
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(47), 2 * 5.625, &lev, NULL));
 	assert_true(lev == -28);
+	/* a window that holds the basin and the ocean: mixed (no 1° lattice value serves both) */
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(17), 9 * 5.625, &lev, &mixed));
+	assert_true(lev == -28 && mixed);
 	/* the ocean, the small dry basin: sea level */
-	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(5), 0.1, &lev));
+	assert_true(open_sea_level(&ni.n, cell_lat(15), cell_lon(5), 0.1, &lev, NULL));
 	assert_true(lev == 0);
-	assert_true(open_sea_level(&ni.n, cell_lat(9), cell_lon(15), 0.1, &lev));
+	assert_true(open_sea_level(&ni.n, cell_lat(9), cell_lon(15), 0.1, &lev, NULL));
 	assert_true(lev == 0);
 	/* the mask is the same with or without levels */
 	float *m = malloc(sizeof(float) * W * W);
@@ -158,7 +163,7 @@ static void levels(void **state)
 	free(m);
 	node_ini_fini(&ni);
 	/* not an open_sea node */
-	assert_false(open_sea_level(NULL, 0, 0, 1, &lev));
+	assert_false(open_sea_level(NULL, 0, 0, 1, &lev, NULL));
 	/* a point in no closed sea: the ocean, dry land, a basin under min_area; a bad list */
 	double where[][2] = { { cell_lat(15), cell_lon(5) },
 			      { cell_lat(24), cell_lon(50) },
@@ -175,6 +180,20 @@ static void levels(void **state)
 		assert_non_null(strstr(err, "no closed sea there"));
 		node_ini_fini(&ni);
 	}
+	/* two points in one basin */
+	snprintf(text, sizeof text,
+		 "[node s]\ntype = open_sea\npath = %s\nmin_area = 10000000\n"
+		 "levels = %g %g -28, %g %g -20\n",
+		 path, cell_lat(15), cell_lon(35), cell_lat(10), cell_lon(30));
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err), -EINVAL);
+	assert_non_null(strstr(err, "in the same closed sea as a point before it"));
+	node_ini_fini(&ni);
+	/* a level the sea grid cannot hold */
+	snprintf(text, sizeof text, "[node s]\ntype = open_sea\npath = %s\nlevels = 1 2 -5000\n",
+		 path);
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err), -EINVAL);
+	assert_non_null(strstr(err, "within ±3000"));
+	node_ini_fini(&ni);
 	snprintf(text, sizeof text, "[node s]\ntype = open_sea\npath = %s\nlevels = 1 2\n", path);
 	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err), -EINVAL);
 	assert_non_null(strstr(err, "expected \"LAT LON LEVEL"));

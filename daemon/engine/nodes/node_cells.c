@@ -111,7 +111,7 @@ struct cube {
 struct block {
 	int32_t b[3];
 	bool valid;
-	struct cube *cache; /* CUBE_CACHE entries */
+	struct cube *cache; /* CUBE_CACHE entries; NULL: every cube hashed anew */
 	_Alignas(16) float fx[LANES], fy[LANES], fz[LANES];
 	double v[LANES];
 };
@@ -134,8 +134,12 @@ static void block_fill(const struct cells *c, struct block *k, const int32_t b[3
 	for (int dz = -1; dz <= 1; dz++)
 		for (int dy = -1; dy <= 1; dy++)
 			for (int dx = -1; dx <= 1; dx++, i++) {
-				const struct cube *e = cube_get(c, k->cache, b[0] + dx, b[1] + dy,
-								b[2] + dz);
+				struct cube own;
+				const struct cube *e = &own;
+				if (k->cache)
+					e = cube_get(c, k->cache, b[0] + dx, b[1] + dy, b[2] + dz);
+				else
+					cube_point(c, b[0] + dx, b[1] + dy, b[2] + dz, own.fp, &own.v);
 				k->fx[i] = (float)(dx + e->fp[0]);
 				k->fy[i] = (float)(dy + e->fp[1]);
 				k->fz[i] = (float)(dz + e->fp[2]);
@@ -209,13 +213,23 @@ static double cells_at(const struct cells *c, struct block *k, const double q[3]
 	em = _mm_min_ps(em, _mm_shuffle_ps(em, em, _MM_SHUFFLE(2, 3, 0, 1)));
 	em = _mm_min_ps(em, _mm_shuffle_ps(em, em, _MM_SHUFFLE(1, 0, 3, 2)));
 	float edge = _mm_cvtss_f32(em);
+	/* Points beyond the 27 cubes are at least g away (two cubes along an axis, moved in by
+	 * jitter/2 at most): an edge with one of them lies at least (g − d_1) / 2 away, so the
+	 * slack never reaches past what the block can tell (nearly always g − d_1 > 2·edge). */
+	double fr = 1;
+	for (int a = 0; a < 3; a++) {
+		double r = q[a] - b[a];
+		fr = fmin(fr, fmin(r, 1 - r));
+	}
+	double far = (1.5 - c->jitter / 2 + fr - sqrt((double)_mm_cvtss_f32(lo))) / 2;
+	double reach = far < edge ? (far > 0 ? far : 0) : edge; /* what the slack may use */
 	double v = k->v[best];
 	if (faint <= 0) {
-		*slack = edge;
+		*slack = reach;
 		return v;
 	}
 	if (edge >= half) {
-		*slack = edge - half;
+		*slack = reach > half ? reach - half : 0;
 		return v;
 	}
 	*slack = 0;
@@ -255,6 +269,47 @@ static int cells_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
+/* A level's band weight w (1: cells shown whole, 0: their mean), and its borders: half the
+ * drawn width (lattice units) and how faint — at least a texel wide, as faint as they are
+ * narrower than that. */
+static void level_params(const struct node *n, const struct tile_key *k, uint32_t T, double *w,
+			 double *half, double *faint)
+{
+	const struct cells *c = n->impl;
+	double s = noise_texel_size(n->planet->a, k->ly, T);
+	double drawn = fmax(c->border, s);
+	*w = noise_band_weight(c->lambda, s);
+	*half = drawn / 2 / c->lambda;
+	*faint = c->border > 0 ? c->border / drawn : 0;
+}
+
+/* The two texel rows nearest a pole take the pole's own value. */
+static bool pole_row(const struct tile_key *k, uint32_t T, double lat)
+{
+	return noise_pole_texels(lat, k->ly, T) < 2;
+}
+
+float cells_texel(const struct node *n, const struct tile_key *k, uint32_t T, uint32_t i,
+		  uint32_t j)
+{
+	const struct cells *c = n->impl;
+	double w, half, faint, lon, lat, unused, slack;
+	level_params(n, k, T, &w, &half, &faint);
+	float amp = (float)c->amplitude, off = (float)c->offset;
+	if (w <= 0)
+		return off + amp * 0.5f;
+	grid_texel_center(k, T, i, 0, &lon, &unused);
+	grid_texel_center(k, T, 0, j, &unused, &lat);
+	double cp = cos(lat * M_PI / 180), sp = sin(lat * M_PI / 180), q[3];
+	double p[3] = { cp * cos(lon * M_PI / 180), cp * sin(lon * M_PI / 180), sp };
+	if (pole_row(k, T, lat))
+		p[0] = p[1] = 0, p[2] = lat > 0 ? 1 : -1;
+	to_lattice(c, p, q);
+	struct block blk = { .valid = false, .cache = NULL };
+	double v = w * cells_at(c, &blk, q, half, faint, &slack) + (1 - w) * 0.5;
+	return off + amp * (float)v;
+}
+
 static int cells_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
 			  struct tile *const *in, int nin, struct tile *out)
 {
@@ -265,8 +320,8 @@ static int cells_generate(const struct node *n, struct gen_ctx *g, const struct 
 	const struct tile *src;
 	if (node_opt_height_input(n, in, nin, T, &src))
 		return -EINVAL;
-	double s = noise_texel_size(n->planet->a, k->ly, T);
-	double w = noise_band_weight(c->lambda, s);
+	double w, half, faint;
+	level_params(n, k, T, &w, &half, &faint);
 	float amp = (float)c->amplitude, off = (float)c->offset;
 	float *dst = tile_f32(out);
 	const float *base = src ? tile_f32(src) : NULL;
@@ -280,9 +335,6 @@ static int cells_generate(const struct node *n, struct gen_ctx *g, const struct 
 			dst[i] = base[i] + v;
 		return 0;
 	}
-	/* borders: at least a texel wide, as faint as they are narrower than that */
-	double drawn = fmax(c->border, s), half = drawn / 2 / c->lambda;
-	double faint = c->border > 0 ? c->border / drawn : 0;
 	size_t trig = (size_t)T * 2 * sizeof(double);
 	char *scratch = gen_scratch(g, trig + CUBE_CACHE * sizeof(struct cube));
 	double *cl = (double *)scratch, *sl = cl + T;
@@ -300,7 +352,7 @@ static int cells_generate(const struct node *n, struct gen_ctx *g, const struct 
 	for (uint32_t j = 0; j < T; j++) {
 		double lo, lat;
 		grid_texel_center(k, T, 0, j, &lo, &lat);
-		bool pole = noise_pole_texels(lat, k->ly, T) < 2;
+		bool pole = pole_row(k, T, lat);
 		double cp = cos(lat * M_PI / 180), sp = sin(lat * M_PI / 180);
 		float *row = dst + (size_t)j * T;
 		const float *brow = base ? base + (size_t)j * T : NULL;

@@ -42,7 +42,8 @@ struct open_sea {
 	bool point;  /* grid-registered (h = w/2 + 1: cells centred on the poles and on −180°,
 		      * as ETOPO5), else cell-registered (h = w/2: centres half a cell in) */
 	uint8_t *m; /* w × h, row 0 north: 255 the sea may lie here, 0 dry */
-	uint8_t *closed;	   /* w × h: k + 1 on a cell of the basin of levels[k], else 0 */
+	uint8_t *closed;	   /* w × h: k + 1 on a cell of the basin of levels[k], 255 on
+				    * another sea's (the ocean's, or a basin's at sea level), 0 */
 	double level[OPENSEA_MAX_LEVELS]; /* those seas' surfaces, metres from sea_level */
 };
 
@@ -167,6 +168,9 @@ static int build_mask(struct open_sea *s, const float *hv, double sea, double mi
 		s->level[k] = lv[3 * k + 2];
 		if (!below[c] || !keep[lab[c]] || lab[c] == ocean)
 			bad = bad ? bad : k + 1;
+		for (int j = 0; j < k; j++)
+			if (own[j] == own[k] && below[c])
+				bad = bad ? bad : -(k + 1); /* two points in one basin */
 	}
 	/* The sea's cells and the ground next to them (the coast: the mask's bilinear ramp then
 	 * lies beyond the data's coastline, so detail that dips below sea level at the shore is
@@ -183,9 +187,9 @@ static int build_mask(struct open_sea *s, const float *hv, double sea, double mi
 					by_sea = below[nb[i]] && keep[lab[nb[i]]];
 			}
 			s->m[c] = sea_cell || by_sea ? 255 : 0;
-			s->closed[c] = 0;
+			s->closed[c] = sea_cell ? 255 : 0;
 			for (int k = 0; k < nlv && sea_cell; k++)
-				if (lab[c] == own[k] && !s->closed[c])
+				if (lab[c] == own[k] && s->closed[c] == 255)
 					s->closed[c] = (uint8_t)(k + 1);
 		}
 	free(keep);
@@ -209,9 +213,9 @@ static int os_create(struct node *n, struct node_parse *p)
 		return np_error(p, "levels", "expected \"LAT LON LEVEL, …\" (a point in a closed "
 					     "sea and its surface in metres), got %d numbers", nlv);
 	for (int k = 0; k < nlv; k += 3)
-		if (fabs(lv[k]) > 90 || fabs(lv[k + 1]) > 360 || fabs(lv[k + 2]) > 1e4)
+		if (fabs(lv[k]) > 90 || fabs(lv[k + 1]) > 360 || fabs(lv[k + 2]) > 3000)
 			return np_error(p, "levels", "%g %g %g: expected a latitude, a longitude "
-						     "and metres",
+						     "and metres (within ±3000: the sea grid's range)",
 					lv[k], lv[k + 1], lv[k + 2]);
 	if (!rel || !rel[0])
 		return np_error(p, "path", "missing: a global height raster (e.g. the one the "
@@ -271,9 +275,14 @@ static int os_create(struct node *n, struct node_parse *p)
 	if (bad) {
 		n->impl = s;
 		os_destroy(n);
+		int k = bad > 0 ? bad - 1 : -bad - 1;
+		if (bad < 0)
+			return np_error(p, "levels", "%g %g: in the same closed sea as a point before "
+						     "it (one point a sea)",
+					lv[3 * k], lv[3 * k + 1]);
 		return np_error(p, "levels", "%g %g: no closed sea there (below sea level, apart "
 					     "from the ocean, at least min_area)",
-				lv[3 * (bad - 1)], lv[3 * (bad - 1) + 1]);
+				lv[3 * k], lv[3 * k + 1]);
 	}
 	n->impl = s;
 	n->out = PIX_HEIGHT;
@@ -294,12 +303,15 @@ static float mask_at(const struct open_sea *s, double lon, double lat)
 	return (float)((top + (bot - top) * ty) / 255);
 }
 
-bool open_sea_level(const struct node *n, double lat, double lon, double reach, double *level)
+bool open_sea_level(const struct node *n, double lat, double lon, double reach, double *level,
+		    bool *mixed)
 {
 	if (!n || n->type != &node_type_open_sea || !n->impl)
 		return false;
 	const struct open_sea *s = n->impl;
 	*level = 0;
+	if (mixed)
+		*mixed = false;
 	/* the rows and columns whose centres lie within reach (degrees) of the point */
 	double cy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
 	double ry = reach / 180 * (s->point ? s->h - 1 : s->h);
@@ -308,15 +320,23 @@ bool open_sea_level(const struct node *n, double lat, double lon, double reach, 
 	int x0 = (int)ceil(cx - rx), x1 = (int)floor(cx + rx);
 	y0 = y0 < 0 ? 0 : y0;
 	y1 = y1 > s->h - 1 ? s->h - 1 : y1;
-	for (int y = y0; y <= y1; y++)
-		for (int x = x0; x <= x1; x++)
-		{
-			uint8_t k = s->closed[(size_t)y * s->w + (size_t)(((x % s->w) + s->w) % s->w)];
-			if (k) {
-				*level = s->level[k - 1];
-				return true;
-			}
+	int found = 0;
+	bool other = false;
+	for (int y = y0; y <= y1 && !(found && other); y++)
+		for (int x = x0; x <= x1 && !(found && other); x++) {
+			int k = s->closed[(size_t)y * s->w + (size_t)(((x % s->w) + s->w) % s->w)];
+			if (k == 255)
+				other = true;
+			else if (k && !found)
+				found = k;
+			else if (k && s->level[k - 1] != s->level[found - 1])
+				other = true;
 		}
+	if (found) {
+		*level = s->level[found - 1];
+		if (mixed)
+			*mixed = other;
+	}
 	return true;
 }
 
