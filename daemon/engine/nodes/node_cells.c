@@ -56,44 +56,18 @@ static const struct node_slot slots[] = {
 	{ .name = "input", .type = PIX_HEIGHT, .optional = true },
 };
 
-static uint32_t mix32(uint32_t h)
-{
-	h ^= h >> 16;
-	h *= 0x7feb352du;
-	h ^= h >> 15;
-	h *= 0x846ca68bu;
-	h ^= h >> 16;
-	return h;
-}
-
 /* Lattice cube (x, y, z)'s feature point (offset from the cube's corner, each coordinate in
  * 0.5 ± jitter/2) and value (uniform in [0, 1)): hashes of the cube and the seed. */
 static void cube_point(const struct cells *c, int32_t x, int32_t y, int32_t z, double fp[3],
 		       double *v)
 {
-	uint32_t h = mix32(c->seed ^ 0x9e3779b9u);
-	h = mix32(h ^ (uint32_t)x);
-	h = mix32(h ^ (uint32_t)y * 0x85ebca6bu);
-	h = mix32(h ^ (uint32_t)z * 0xc2b2ae35u);
+	uint32_t h = noise_mix32(c->seed ^ 0x9e3779b9u);
+	h = noise_mix32(h ^ (uint32_t)x);
+	h = noise_mix32(h ^ (uint32_t)y * 0x85ebca6bu);
+	h = noise_mix32(h ^ (uint32_t)z * 0xc2b2ae35u);
 	for (int a = 0; a < 3; a++)
-		fp[a] = 0.5 + c->jitter * (mix32(h + 0x27d4eb2fu * (uint32_t)(a + 1)) / 4294967296.0 - 0.5);
-	*v = mix32(h + 0x165667b1u) / 4294967296.0;
-}
-
-/* A uniformly random rotation from the seed (Shoemake's quaternion from three uniforms). */
-static void seed_rotation(uint32_t seed, double r[3][3])
-{
-	double u1 = mix32(seed ^ 0x1b873593u) / 4294967296.0;
-	double u2 = mix32(seed ^ 0xcc9e2d51u) / 4294967296.0 * 2 * M_PI;
-	double u3 = mix32(seed ^ 0xe6546b64u) / 4294967296.0 * 2 * M_PI;
-	double a = sqrt(1 - u1), b = sqrt(u1);
-	double w = a * sin(u2), x = a * cos(u2), y = b * sin(u3), z = b * cos(u3);
-	double m[3][3] = {
-		{ 1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y) },
-		{ 2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x) },
-		{ 2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y) },
-	};
-	memcpy(r, m, sizeof m);
+		fp[a] = 0.5 + c->jitter * (noise_mix32(h + 0x27d4eb2fu * (uint32_t)(a + 1)) / 4294967296.0 - 0.5);
+	*v = noise_mix32(h + 0x165667b1u) / 4294967296.0;
 }
 
 /* A tile's cubes seen so far (direct-mapped by a hash of their coordinates): adjacent rows
@@ -261,7 +235,7 @@ static int cells_create(struct node *n, struct node_parse *p)
 		return np_error(p, "border", "%g m is not narrower than the cells (wavelength %g m)",
 				c.border, c.lambda);
 	c.seed = (uint32_t)seed;
-	seed_rotation(c.seed, c.rot);
+	noise_seed_rotation(c.seed, c.rot);
 	struct cells *im = xmalloc(sizeof *im);
 	*im = c;
 	n->impl = im;

@@ -186,7 +186,9 @@ const char *noise_isa_name(enum noise_isa isa)
 
 /* ---- set-up ---- */
 
-static uint32_t mix32(uint32_t h)
+#define mix32 noise_mix32
+
+uint32_t noise_mix32(uint32_t h)
 {
 	h ^= h >> 16;
 	h *= 0x7feb352du;
@@ -262,8 +264,7 @@ static void ridged_means(struct noise *nz, int k0)
 		nz->oct[k].mean = sum[k] / N;
 }
 
-/* A rotation from three hashed uniforms (Shoemake's uniform random quaternion). */
-static void octave_rotation(uint32_t seed, double r[3][3])
+void noise_seed_rotation(uint32_t seed, double r[3][3])
 {
 	double u1 = mix32(seed ^ 0x1b873593u) / 4294967296.0;
 	double u2 = mix32(seed ^ 0xcc9e2d51u) / 4294967296.0 * 2 * M_PI;
@@ -315,7 +316,7 @@ static void warp_setup(struct noise *nz)
 			o->amp = p->warp * ldexp(1.0, -q) / total / p->radius;
 			o->seed = mix32(p->seed ^ mix32((uint32_t)(q * 3 + c) * 0x85ebca6bu +
 							0x2f1a7c33u));
-			octave_rotation(nz->warp[q][0].seed, o->rot);
+			noise_seed_rotation(nz->warp[q][0].seed, o->rot);
 		}
 }
 
@@ -408,7 +409,7 @@ int noise_init(struct noise *nz, const struct noise_params *p)
 		o->freq = (double)(float)(p->radius / o->lambda);
 		o->amp = pow(p->gain, k) / total * (p->kind == NOISE_RIDGED ? 2.0 : 1.0);
 		o->seed = mix32(p->seed ^ mix32((uint32_t)k * 0x9e3779b9u + 0x632be5abu));
-		octave_rotation(o->seed, o->rot);
+		noise_seed_rotation(o->seed, o->rot);
 		/* Stretch: rotate(S·p) with S scaling z by the factor, folded into the matrix. */
 		double st = p->stretch > 1 ? p->stretch : 1;
 		for (int a = 0; a < 3; a++)

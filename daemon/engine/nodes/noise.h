@@ -156,6 +156,13 @@ double noise_point(const struct noise *nz, double lon, double lat, int ly, uint3
  * hash seed `seed`; roughly in [-1, 1]. The oracle the kernels are checked against. */
 double noise_simplex_ref(double x, double y, double z, uint32_t seed);
 
+/* The 32-bit hash finaliser the noise's lattice hashes use (a bijection). */
+uint32_t noise_mix32(uint32_t h);
+
+/* A uniformly random rotation from three hashed uniforms of seed (Shoemake's quaternion):
+ * each octave's turn of the sphere, and the `cells` node's lattice. */
+void noise_seed_rotation(uint32_t seed, double r[3][3]);
+
 /* Octave weight (0..1) for wavelength lambda at texel size s: 0 below 2s, 1 above 4s. */
 double noise_band_weight(double lambda, double s);
 
