@@ -200,6 +200,55 @@ static void levels(void **state)
 	node_ini_fini(&ni);
 }
 
+/* A grid-registered raster (ETOPO5's layout: one row more, rows and columns centred on the
+ * poles and on −180°): the levels' points and reach in its own cell centres. */
+static void grid_registered(void **state)
+{
+	(void)state;
+	enum { GH = H + 1 };
+	static float h[W * GH];
+	for (int i = 0; i < W * GH; i++)
+		h[i] = -1000;
+	for (int y = 4; y <= 28; y++)
+		for (int x = 10; x <= 53; x++)
+			h[y * W + x] = (x >= 25 && x <= 45 && y >= 8 && y <= 22) ? -50 : 100;
+	char p2[80], text[512], err[256];
+	snprintf(p2, sizeof p2, "%s/grid.tif", dir);
+	assert_int_equal(img_write(p2, W, GH, 1, IMG_F32, h, err), 0);
+	double step = 360.0 / W; /* 5.625° both ways */
+#define GLAT(y) (90 - (y) * step)
+#define GLON(x) (-180 + (x) * step)
+	snprintf(text, sizeof text,
+		 "[node s]\ntype = open_sea\npath = %s\nmin_area = 10000000\nlevels = %g %g -28\n",
+		 p2, GLAT(15), GLON(35));
+	struct node_ini ni;
+	if (node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err))
+		fail_msg("open_sea: %s", err);
+	double lev;
+	bool mixed;
+	assert_true(open_sea_level(&ni.n, GLAT(15), GLON(35), 0.1, &lev, &mixed));
+	assert_true(lev == -28 && !mixed);
+	assert_true(open_sea_level(&ni.n, GLAT(8), GLON(25), 0.1, &lev, NULL));
+	assert_true(lev == -28); /* the basin's corner */
+	assert_true(open_sea_level(&ni.n, GLAT(15), GLON(47), 0.1, &lev, NULL));
+	assert_true(lev == 0); /* two cells beyond its edge */
+	assert_true(open_sea_level(&ni.n, GLAT(15), GLON(47), 2 * step, &lev, NULL));
+	assert_true(lev == -28);
+	assert_true(open_sea_level(&ni.n, GLAT(15), GLON(5), 0.1, &lev, NULL));
+	assert_true(lev == 0); /* the ocean */
+	node_ini_fini(&ni);
+	/* a point one cell off the basin, on its coast: no closed sea there */
+	snprintf(text, sizeof text,
+		 "[node s]\ntype = open_sea\npath = %s\nmin_area = 10000000\nlevels = %g %g -28\n",
+		 p2, GLAT(15), GLON(46));
+	assert_int_equal(node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err), -EINVAL);
+	assert_non_null(strstr(err, "no closed sea there"));
+	node_ini_fini(&ni);
+#undef GLAT
+#undef GLON
+	unlink(p2);
+}
+
 static void errors(void **state)
 {
 	(void)state;
@@ -237,6 +286,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test(basins),
 		cmocka_unit_test(levels),
+		cmocka_unit_test(grid_registered),
 		cmocka_unit_test(errors),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
