@@ -620,8 +620,8 @@ static int init_nodes(struct loader *L)
 }
 
 /* sea_geoid = NODE: the sea lies on the geoid of that `geoid` node, sea_level above it;
- * sea_basins = NODE: the closed seas of that `open_sea` node lie at its `level` instead (the
- * Caspian's −28 m). The viewer gets the surface as a 1° lattice (common/seagrid.h): 0.42 m RMS
+ * sea_basins = NODE: the closed seas of that `open_sea` node lie at their `levels` instead
+ * (the Caspian's −28 m). The viewer gets the surface as a 1° lattice (common/seagrid.h): 0.42 m RMS
  * from EGM96's own 15′ grid, 13 m at worst (Hawaii's steep flanks), measured over the whole
  * sphere. A node within 1¼ lattice steps of a closed sea's cell takes its level, so the
  * bilinear surface holds it over the whole sea and its coast cells; a node that has another

@@ -29,16 +29,22 @@
 
 static struct planet pl = { .a = 6378137 };
 
-/* Tile (lx, ly, x, y) of a cells node with parameters `extra`, into out[T·T]. */
-static void make(const char *extra, int lx, int ly, uint32_t x, uint32_t y, float *out)
+/* A cells node (seed 41 unless `extra` gives one, wavelength LAMBDA, then `extra`) into ni. */
+static void cells_node(const char *extra, struct node_ini *ni)
 {
 	char text[512], err[256];
 	snprintf(text, sizeof text, "[node c]\ntype = cells\n%swavelength = %g\n%s",
 		 strstr(extra, "seed") ? "" : "seed = 41\n", LAMBDA, extra);
-	struct node_ini ni;
-	if (node_ini_init(&ni, &node_type_cells, &pl, text, NULL, 0, err))
+	if (node_ini_init(ni, &node_type_cells, &pl, text, NULL, 0, err))
 		fail_msg("cells: %s", err);
-	assert_int_equal(ni.n.out, PIX_HEIGHT);
+	assert_int_equal(ni->n.out, PIX_HEIGHT);
+}
+
+/* Tile (lx, ly, x, y) of a cells node with parameters `extra`, into out[T·T]. */
+static void make(const char *extra, int lx, int ly, uint32_t x, uint32_t y, float *out)
+{
+	struct node_ini ni;
+	cells_node(extra, &ni);
 	struct tile_key k = { .node = ni.n.hash, .lx = (uint8_t)lx, .ly = (uint8_t)ly, .x = x, .y = y };
 	struct tile *t = tile_create(&k, PIX_HEIGHT, T);
 	assert_int_equal(ni.n.type->generate(&ni.n, &ni.g, &k, NULL, 0, t), 0);
@@ -262,12 +268,8 @@ static void skipping_is_exact(void **state)
 	float *a = malloc(sizeof(float) * T * T);
 	for (size_t c = 0; c < sizeof cases / sizeof cases[0]; c++) {
 		make(cases[c].extra, cases[c].lx, cases[c].ly, cases[c].x, cases[c].y, a);
-		char text[256], err[256];
-		snprintf(text, sizeof text, "[node c]\ntype = cells\nseed = 41\nwavelength = %g\n%s",
-			 LAMBDA, cases[c].extra);
 		struct node_ini ni;
-		if (node_ini_init(&ni, &node_type_cells, &pl, text, NULL, 0, err))
-			fail_msg("cells: %s", err);
+		cells_node(cases[c].extra, &ni);
 		struct tile_key k = { .node = ni.n.hash, .lx = (uint8_t)cases[c].lx,
 				      .ly = (uint8_t)cases[c].ly, .x = cases[c].x, .y = cases[c].y };
 		int differ = 0, values = 0;

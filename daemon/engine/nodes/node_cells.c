@@ -243,18 +243,21 @@ static int cells_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-/* A level's band weight w (1: cells shown whole, 0: their mean), and its borders: half the
- * drawn width (lattice units) and how faint — at least a texel wide, as faint as they are
- * narrower than that. */
-static void level_params(const struct node *n, const struct tile_key *k, uint32_t T, double *w,
-			 double *half, double *faint)
+/* What a level draws: the cells' band weight w (1: shown whole, 0: their mean) and the borders:
+ * half their drawn width (lattice units) and how faint — at least a texel wide, as faint as
+ * they are narrower than that. */
+struct level {
+	double w, half, faint;
+};
+
+static struct level level_of(const struct node *n, const struct tile_key *k, uint32_t T)
 {
 	const struct cells *c = n->impl;
 	double s = noise_texel_size(n->planet->a, k->ly, T);
 	double drawn = fmax(c->border, s);
-	*w = noise_band_weight(c->lambda, s);
-	*half = drawn / 2 / c->lambda;
-	*faint = c->border > 0 ? c->border / drawn : 0;
+	return (struct level){ .w = noise_band_weight(c->lambda, s),
+			       .half = drawn / 2 / c->lambda,
+			       .faint = c->border > 0 ? c->border / drawn : 0 };
 }
 
 /* The two texel rows nearest a pole take the pole's own value. */
@@ -263,25 +266,32 @@ static bool pole_row(const struct tile_key *k, uint32_t T, double lat)
 	return noise_pole_texels(lat, k->ly, T) < 2;
 }
 
+/* The output at unit-sphere point p (before an input is added), and its slack (cells_at). */
+static float value_at(const struct cells *c, const struct level *L, struct block *k,
+		      const double p[3], double *slack)
+{
+	double q[3];
+	to_lattice(c, p, q);
+	double v = L->w * cells_at(c, k, q, L->half, L->faint, slack) + (1 - L->w) * 0.5;
+	return (float)c->offset + (float)c->amplitude * (float)v;
+}
+
 float cells_texel(const struct node *n, const struct tile_key *k, uint32_t T, uint32_t i,
 		  uint32_t j)
 {
 	const struct cells *c = n->impl;
-	double w, half, faint, lon, lat, unused, slack;
-	level_params(n, k, T, &w, &half, &faint);
-	float amp = (float)c->amplitude, off = (float)c->offset;
-	if (w <= 0)
-		return off + amp * 0.5f;
+	struct level L = level_of(n, k, T);
+	if (L.w <= 0)
+		return (float)c->offset + (float)c->amplitude * 0.5f;
+	double lon, lat, unused, slack;
 	grid_texel_center(k, T, i, 0, &lon, &unused);
 	grid_texel_center(k, T, 0, j, &unused, &lat);
-	double cp = cos(lat * M_PI / 180), sp = sin(lat * M_PI / 180), q[3];
+	double cp = cos(lat * M_PI / 180), sp = sin(lat * M_PI / 180);
 	double p[3] = { cp * cos(lon * M_PI / 180), cp * sin(lon * M_PI / 180), sp };
 	if (pole_row(k, T, lat))
 		p[0] = p[1] = 0, p[2] = lat > 0 ? 1 : -1;
-	to_lattice(c, p, q);
 	struct block blk = { .valid = false, .cache = NULL };
-	double v = w * cells_at(c, &blk, q, half, faint, &slack) + (1 - w) * 0.5;
-	return off + amp * (float)v;
+	return value_at(c, &L, &blk, p, &slack);
 }
 
 static int cells_generate(const struct node *n, struct gen_ctx *g, const struct tile_key *k,
@@ -294,13 +304,11 @@ static int cells_generate(const struct node *n, struct gen_ctx *g, const struct 
 	const struct tile *src;
 	if (node_opt_height_input(n, in, nin, T, &src))
 		return -EINVAL;
-	double w, half, faint;
-	level_params(n, k, T, &w, &half, &faint);
-	float amp = (float)c->amplitude, off = (float)c->offset;
+	struct level L = level_of(n, k, T);
 	float *dst = tile_f32(out);
 	const float *base = src ? tile_f32(src) : NULL;
-	if (w <= 0) {
-		float v = off + amp * 0.5f;
+	if (L.w <= 0) {
+		float v = (float)c->offset + (float)c->amplitude * 0.5f;
 		if (!base) {
 			tile_fill_uniform(out, &v);
 			return 0;
@@ -324,35 +332,26 @@ static int cells_generate(const struct node *n, struct gen_ctx *g, const struct 
 	struct block blk = { .valid = false, .cache = cache };
 	double dlon = 2 * M_PI / ((double)grid_tiles_x(k->lx) * T); /* between texels, radians */
 	for (uint32_t j = 0; j < T; j++) {
-		double lo, lat;
+		double lo, lat, slack;
 		grid_texel_center(k, T, 0, j, &lo, &lat);
-		bool pole = pole_row(k, T, lat);
 		double cp = cos(lat * M_PI / 180), sp = sin(lat * M_PI / 180);
 		float *row = dst + (size_t)j * T;
 		const float *brow = base ? base + (size_t)j * T : NULL;
-		double pv = 0, slack;
-		if (pole) {
-			double pp[3] = { 0, 0, lat > 0 ? 1 : -1 }, q[3];
-			to_lattice(c, pp, q);
-			pv = w * cells_at(c, &blk, q, half, faint, &slack) + (1 - w) * 0.5;
+		if (pole_row(k, T, lat)) {
+			double pp[3] = { 0, 0, lat > 0 ? 1 : -1 };
+			float f = value_at(c, &L, &blk, pp, &slack);
+			for (uint32_t i = 0; i < T; i++)
+				row[i] = (brow ? brow[i] : 0) + f;
+			continue;
 		}
 		/* The texels of a row are equally spaced on a circle of latitude, step apart in
 		 * lattice units: after a point evaluated with slack s the next floor(s / step)
 		 * texels have its value (most texels of a level that shows cells). */
 		double step = 2 * cp * sin(dlon / 2) * c->scale * (1 + 1e-6) + 1e-12;
 		for (uint32_t i = 0; i < T;) {
-			double v = pv;
-			uint32_t cnt = 1;
-			if (!pole) {
-				double p[3] = { cp * cl[i], cp * sl[i], sp }, q[3];
-				to_lattice(c, p, q);
-				v = w * cells_at(c, &blk, q, half, faint, &slack) + (1 - w) * 0.5;
-				if (slack > step)
-					cnt += (uint32_t)fmin(slack / step, T);
-			} else {
-				cnt = T;
-			}
-			float f = off + amp * (float)v;
+			double p[3] = { cp * cl[i], cp * sl[i], sp };
+			float f = value_at(c, &L, &blk, p, &slack);
+			uint32_t cnt = 1 + (slack > step ? (uint32_t)fmin(slack / step, T) : 0);
 			for (uint32_t e = i + cnt < T ? i + cnt : T; i < e; i++)
 				row[i] = (brow ? brow[i] : 0) + f;
 		}

@@ -6,12 +6,13 @@
  * (longitude wraps; the first and last rows connect across the pole). The largest is the
  * world ocean; a basin of at least `min_area` km² (default 100 000) is a sea of its own (the
  * Caspian: 371 000 km², its surface 28 m below the ocean's; at 5′ also the Black Sea, whose
- * Bosporus the raster does not resolve); every other basin is dry. `levels` = "LAT LON LEVEL,
- * …" puts the sea of the basin holding each point at its own LEVEL (metres relative to
- * sea_level; the Caspian's −28); the others lie at sea level. The planet's `sea_basins = NODE`
- * lays its sea surface there (open_sea_level). The mask is 1 where the sea may lie (the cells of the ocean and of the
- * large basins, and the ground next to them: the coast) and 0 elsewhere (dry basins, and
- * ground away from the sea, where detail that dips below sea level is no sea either).
+ * Bosporus the raster does not resolve); every other basin is dry. The mask is 1 where the sea
+ * may lie (the cells of the ocean and of the large basins, and the ground next to them: the
+ * coast) and 0 elsewhere (dry basins, and ground away from the sea, where detail that dips
+ * below sea level is no sea either). `levels` = "LAT LON LEVEL, …" puts the sea of the basin
+ * holding each point at its own LEVEL (metres relative to sea_level; the Caspian's −28); the
+ * others lie at sea level. The planet's `sea_basins = NODE` lays its sea surface there
+ * (open_sea_level).
  *
  * Output: a 0..1 mask (a height), bilinear between the raster's cell centres. A colour
  * layer carries it to the viewer in its alpha (color_filter's `alpha` input; the planet key
@@ -127,11 +128,18 @@ static int basins(const struct open_sea *os, const uint8_t *below, double a, int
 	return count;
 }
 
+/* (lon, lat) in cells: the column and row, fractional, whose centre is there. */
+static void cell_coords(const struct open_sea *s, double lon, double lat, double *fx, double *fy)
+{
+	*fx = (lon + 180) / 360 * s->w - (s->point ? 0 : 0.5);
+	*fy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
+}
+
 /* The cell (column, row) whose centre is nearest (lat, lon). */
 static size_t cell_at(const struct open_sea *s, double lat, double lon)
 {
-	double fx = (lon + 180) / 360 * s->w - (s->point ? 0 : 0.5);
-	double fy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
+	double fx, fy;
+	cell_coords(s, lon, lat, &fx, &fy);
 	int x = (int)lround(fx), y = (int)lround(fy);
 	x = ((x % s->w) + s->w) % s->w;
 	y = y < 0 ? 0 : y > s->h - 1 ? s->h - 1 : y;
@@ -292,8 +300,8 @@ static int os_create(struct node *n, struct node_parse *p)
 /* The mask at (lon, lat), 0..1, bilinear between cell centres. */
 static float mask_at(const struct open_sea *s, double lon, double lat)
 {
-	double fx = (lon + 180) / 360 * s->w - (s->point ? 0 : 0.5);
-	double fy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
+	double fx, fy;
+	cell_coords(s, lon, lat, &fx, &fy);
 	fy = fy < 0 ? 0 : fy > s->h - 1 ? s->h - 1 : fy;
 	int y0 = (int)fy, y1 = y0 + 1 < s->h ? y0 + 1 : y0;
 	double x0f = floor(fx), ty = fy - y0, tx = fx - x0f;
@@ -313,9 +321,9 @@ bool open_sea_level(const struct node *n, double lat, double lon, double reach, 
 	if (mixed)
 		*mixed = false;
 	/* the rows and columns whose centres lie within reach (degrees) of the point */
-	double cy = s->point ? (90 - lat) / 180 * (s->h - 1) : (90 - lat) / 180 * s->h - 0.5;
-	double ry = reach / 180 * (s->point ? s->h - 1 : s->h);
-	double cx = (lon + 180) / 360 * s->w - (s->point ? 0 : 0.5), rx = reach / 360 * s->w;
+	double cx, cy;
+	cell_coords(s, lon, lat, &cx, &cy);
+	double ry = reach / 180 * (s->point ? s->h - 1 : s->h), rx = reach / 360 * s->w;
 	int y0 = (int)ceil(cy - ry), y1 = (int)floor(cy + ry);
 	int x0 = (int)ceil(cx - rx), x1 = (int)floor(cx + rx);
 	y0 = y0 < 0 ? 0 : y0;
