@@ -5,6 +5,9 @@
 #include <pthread.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "common/xalloc.h"
 #include "common/xthread.h"
@@ -128,6 +131,25 @@ void tile_summarize(struct tile *t)
 		int nn[16] = { 0 };
 		for (int k = 0; k < 16; k++)
 			l[k] = INFINITY, h[k] = -INFINITY;
+#ifdef __SSE2__
+		/* the loop below in four vectors: minps(v, l) is v < l ? v : l and maxps(v, h)
+		 * v > h ? v : h lane for lane (NaN and ±0 alike), so the lanes end equal */
+		__m128 vl[4], vh[4], vn = _mm_setzero_ps();
+		for (int k = 0; k < 4; k++)
+			vl[k] = _mm_set1_ps(INFINITY), vh[k] = _mm_set1_ps(-INFINITY);
+		for (; i < count; i += 16)
+			for (int k = 0; k < 4; k++) {
+				__m128 v = _mm_loadu_ps(x + i + 4 * k);
+				vl[k] = _mm_min_ps(v, vl[k]);
+				vh[k] = _mm_max_ps(v, vh[k]);
+				vn = _mm_or_ps(vn, _mm_cmpunord_ps(v, v));
+			}
+		for (int k = 0; k < 4; k++) {
+			_mm_storeu_ps(l + 4 * k, vl[k]);
+			_mm_storeu_ps(h + 4 * k, vh[k]);
+		}
+		nn[0] = _mm_movemask_ps(vn) != 0;
+#else
 		for (; i < count; i += 16)
 			for (int k = 0; k < 16; k++) {
 				float v = x[i + k];
@@ -135,6 +157,7 @@ void tile_summarize(struct tile *t)
 				h[k] = v > h[k] ? v : h[k];
 				nn[k] |= v != v;
 			}
+#endif
 		for (int k = 0; k < 16; k++) {
 			lo = l[k] < lo ? l[k] : lo;
 			hi = h[k] > hi ? h[k] : hi;

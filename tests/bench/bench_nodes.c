@@ -49,6 +49,12 @@ static const struct bcase cases[] = {
 	/* earth.ini's fields: cells 450 m with 8 m borders, 23 texels a cell (L12, 19 m texels:
 	 * the border drawn a texel wide) and 94 (L14, 4.8 m) */
 #define EARTH_FIELDS "type = cells\nseed = 41\nwavelength = 450\njitter = 0.9\nborder = 8\n"
+	/* earth.ini's canopy: fBm 90 m down; at L12 one octave fades in, at L14 three */
+#define EARTH_CANOPY "type = noise\nkind = fbm\nseed = 23\noctaves = 4\nwavelength = 90\n" \
+		     "gain = 0.55\namplitude = 14\nmax_wavelength = 90\n"
+	{ "earth canopy_noise L10", EARTH_CANOPY, 10 },
+	{ "earth canopy_noise L12", EARTH_CANOPY, 12 },
+	{ "earth canopy_noise L14", EARTH_CANOPY, 14 },
 	{ "earth fields (cells) L12", EARTH_FIELDS, 12 },
 	{ "earth fields (cells) L14", EARTH_FIELDS, 14 },
 	{ "color_filter LUT", "type = color_filter\ninput = col\ngamma = 1.4\ncontrast = 1.2\n", 8 },
@@ -58,6 +64,11 @@ static const struct bcase cases[] = {
 	{ "ramp", "type = ramp\ninput = src\n", 8 },
 	{ "blend over (colour)", "type = blend\nmode = over\na = col\nb = col\nopacity = 0.5\n", 8 },
 	{ "blend add (height)", "type = blend\nmode = add\na = src\nb = src2\n", 8 },
+	/* earth.ini's masks: b where the mask lets it through (a mask of heights, partly 0) */
+	{ "blend add masked (height)", "type = blend\nmode = add\na = src\nb = src2\nmask = src2\n",
+	  8 },
+	{ "blend over masked (colour)", "type = blend\nmode = over\na = col\nb = col\nmask = src2\n",
+	  8 },
 	{ "normal", "type = normal\ninput = src\n", 8 },
 	{ "slope", "type = slope\ninput = src\n", 8 },
 	{ "slope (scale: 2 levels up)", "type = slope\ninput = src\nscale = 2000\n", 12 },

@@ -750,6 +750,52 @@ static void node_deterministic_and_in_range(void **state)
 	}
 }
 
+/* A level whose texels are wider than every octave (a 90 m canopy noise seen from far away)
+ * holds the offset alone: the node gives the shared uniform tile, summarized, with the
+ * bytes the evaluation gives; on a uniform input too, and not on a varying one. The next
+ * level that evaluates an octave is not uniform. */
+static void node_no_octave_uniform(void **state)
+{
+	(void)state;
+	struct fixture f;
+	assert_int_equal(make_node(&f, "[node n]\ntype = noise\nkind = fbm\nseed = 23\noctaves = 4\n"
+				   "wavelength = 90\nmax_wavelength = 90\namplitude = 14\n"
+				   "offset = 2.5\n", NULL),
+			 0);
+	struct tile *t = node_tile(&f.n, key(10, 9, 400, 200), NULL); /* 610 m texels */
+	assert_true(t->uniform && t->summarized && !t->any_nan);
+	for (size_t i = 0; i < 64 * 64; i++)
+		assert_true(tile_f32(t)[i] == 2.5f);
+	assert_true(t->lo == 2.5f && t->hi == 2.5f);
+	struct tile *fine = node_tile(&f.n, key(16, 15, 700, 300), NULL); /* 9.5 m */
+	assert_false(fine->uniform);
+	/* on an input: uniform only where the input is */
+	free_node(&f);
+	struct node src = { .name = "src", .out = PIX_HEIGHT, .hash = 77 };
+	assert_int_equal(make_node(&f, "[node n]\ntype = noise\ninput = src\nwavelength = 90\n"
+				   "max_wavelength = 90\namplitude = 14\n", &src),
+			 0);
+	struct tile *u = tile_create(&(struct tile_key){ 0 }, PIX_HEIGHT, 64);
+	float h = 812.25f;
+	tile_fill_uniform(u, &h);
+	struct tile *v = tile_create(&(struct tile_key){ 0 }, PIX_HEIGHT, 64);
+	for (size_t i = 0; i < 64 * 64; i++)
+		tile_f32(v)[i] = (float)i;
+	struct tile *ou = node_tile(&f.n, key(10, 9, 400, 200), u);
+	struct tile *ov = node_tile(&f.n, key(10, 9, 400, 200), v);
+	assert_true(ou->uniform && tile_f32(ou)[0] == 812.25f && tile_f32(ou)[4095] == 812.25f);
+	assert_false(ov->uniform);
+	for (size_t i = 0; i < 64 * 64; i++)
+		assert_true(tile_f32(ov)[i] == (float)i);
+	tile_unref(t);
+	tile_unref(fine);
+	tile_unref(u);
+	tile_unref(v);
+	tile_unref(ou);
+	tile_unref(ov);
+	free_node(&f);
+}
+
 static void seeds_differ(void **state)
 {
 	(void)state;
@@ -861,6 +907,7 @@ int main(void)
 		cmocka_unit_test(warped),
 		cmocka_unit_test(pole_fade),
 		cmocka_unit_test(multires_matches_exact),
+		cmocka_unit_test(node_no_octave_uniform),
 		cmocka_unit_test(seamless_east_west),
 		cmocka_unit_test(seamless_across_poles),
 		cmocka_unit_test(no_pole_pinch),

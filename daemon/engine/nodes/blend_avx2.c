@@ -1,29 +1,34 @@
-/* blend_avx2 — node_blend's multiply on colours eight texels at a time. The arithmetic is
- * blend_bytes's step for step (the mask's weight clamped to [0, 1] with NaN as 0, times the
- * opacity; rgb = x + (x·y/255 − x)·w rounded by + 0.5 and truncation; alpha kept), with no
- * fused multiply-add (ISO C mode: no contraction), so the bytes match it.
+/* blend_avx2 — node_blend's modes eight texels at a time. The arithmetic is blend_heights's
+ * and blend_bytes's step for step (the mask's weight clamped to [0, 1] with NaN as 0, times
+ * the opacity; the same products and sums in the same order), with no fused multiply-add (ISO
+ * C mode: no contraction) and branches turned into selects, so the bits match the scalar
+ * path's.
  * Thread-safety: reads its arguments only. */
 #include <immintrin.h>
 
 #include "blend_kernels.h"
 
+/* clamp(mask, 0, 1) · opacity, NaN → 0 (weight_at); opacity without a mask */
+static inline __m256 weight8(const float *mask, size_t i, __m256 op)
+{
+	if (!mask)
+		return op;
+	__m256 m = _mm256_loadu_ps(mask + i);
+	m = _mm256_max_ps(m, _mm256_setzero_ps()); /* m > 0 ? m : 0 (NaN → 0) */
+	m = _mm256_min_ps(m, _mm256_set1_ps(1));    /* m < 1 ? m : 1 */
+	return _mm256_mul_ps(m, op);
+}
+
 void blend_multiply_avx2(const uint8_t *a, const uint8_t *b, const float *mask, float opacity,
 			 uint8_t *o, size_t count)
 {
 	const __m256i lo8 = _mm256_set1_epi32(0xff), alpha = _mm256_set1_epi32((int)0xff000000u);
-	const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1);
 	const __m256 op = _mm256_set1_ps(opacity), k = _mm256_set1_ps(1.0f / 255);
 	const __m256 half = _mm256_set1_ps(0.5f);
 	for (size_t i = 0; i < count; i += 8) {
 		__m256i xa = _mm256_loadu_si256((const __m256i *)(const void *)(a + 4 * i));
 		__m256i yb = _mm256_loadu_si256((const __m256i *)(const void *)(b + 4 * i));
-		__m256 w = op;
-		if (mask) {
-			__m256 m = _mm256_loadu_ps(mask + i);
-			m = _mm256_max_ps(m, zero); /* m > 0 ? m : 0 (NaN → 0) */
-			m = _mm256_min_ps(m, one);  /* m < 1 ? m : 1 */
-			w = _mm256_mul_ps(m, op);
-		}
+		__m256 w = weight8(mask, i, op);
 		__m256i px = _mm256_and_si256(xa, alpha);
 		for (int c = 0; c < 3; c++) {
 			__m256 x = _mm256_cvtepi32_ps(_mm256_and_si256(_mm256_srli_epi32(xa, 8 * c), lo8));
@@ -33,6 +38,81 @@ void blend_multiply_avx2(const uint8_t *a, const uint8_t *b, const float *mask, 
 						 half);
 			__m256i q = _mm256_and_si256(_mm256_cvttps_epi32(v), lo8);
 			px = _mm256_or_si256(px, _mm256_slli_epi32(q, 8 * c));
+		}
+		_mm256_storeu_si256((__m256i *)(void *)(o + 4 * i), px);
+	}
+}
+
+void blend_add_avx2(const float *a, const float *b, const float *mask, float opacity,
+		    float weight, float *o, size_t count)
+{
+	const __m256 op = _mm256_set1_ps(opacity), wt = _mm256_set1_ps(weight);
+	const __m256 zero = _mm256_setzero_ps();
+	for (size_t i = 0; i < count; i += 8) {
+		__m256 x = _mm256_loadu_ps(a + i), y = _mm256_loadu_ps(b + i);
+		__m256 w = weight8(mask, i, op);
+		__m256 sum = _mm256_add_ps(x, _mm256_mul_ps(y, _mm256_mul_ps(wt, w)));
+		__m256 on = _mm256_cmp_ps(w, zero, _CMP_GT_OQ);
+		_mm256_storeu_ps(o + i, _mm256_blendv_ps(x, sum, on));
+	}
+}
+
+void blend_lerp_avx2(const float *a, const float *b, const float *mask, float opacity,
+		     float *o, size_t count)
+{
+	const __m256 op = _mm256_set1_ps(opacity), zero = _mm256_setzero_ps();
+	for (size_t i = 0; i < count; i += 8) {
+		__m256 x = _mm256_loadu_ps(a + i), y = _mm256_loadu_ps(b + i);
+		__m256 w = weight8(mask, i, op);
+		__m256 lerp = _mm256_add_ps(x, _mm256_mul_ps(_mm256_sub_ps(y, x), w));
+		__m256 r = _mm256_blendv_ps(x, lerp, _mm256_cmp_ps(w, zero, _CMP_GT_OQ));
+		r = _mm256_blendv_ps(r, y, _mm256_cmp_ps(x, x, _CMP_UNORD_Q)); /* a NaN: b */
+		r = _mm256_blendv_ps(r, x, _mm256_cmp_ps(y, y, _CMP_UNORD_Q)); /* b NaN: a */
+		_mm256_storeu_ps(o + i, r);
+	}
+}
+
+void blend_over_avx2(const uint8_t *a, const uint8_t *b, const float *mask, float opacity,
+		     uint8_t *o, size_t count)
+{
+	const __m256i lo8 = _mm256_set1_epi32(0xff), alpha = _mm256_set1_epi32((int)0xff000000u);
+	const __m256i full = _mm256_set1_epi32(65536), round = _mm256_set1_epi32(32768);
+	const __m256 op = _mm256_set1_ps(opacity), k = _mm256_set1_ps(65536.0f / 255);
+	const __m256 half = _mm256_set1_ps(0.5f);
+	for (size_t i = 0; i < count; i += 8) {
+		__m256i xa = _mm256_loadu_si256((const __m256i *)(const void *)(a + 4 * i));
+		__m256i yb = _mm256_loadu_si256((const __m256i *)(const void *)(b + 4 * i));
+		__m256 w = weight8(mask, i, op);
+		if (!_mm256_testc_si256(xa, alpha)) { /* some base texel not opaque */
+			float wl[8];
+			_mm256_storeu_ps(wl, w);
+			for (int j = 0; j < 8; j++) {
+				const uint8_t *x = a + 4 * (i + j), *y = b + 4 * (i + j);
+				uint8_t *d = o + 4 * (i + j);
+				if (x[3] != 255) {
+					blend_over_general(x, y, wl[j], d);
+					continue;
+				}
+				uint32_t kb = (uint32_t)(y[3] * wl[j] * (65536.0f / 255) + 0.5f);
+				uint32_t ka = 65536 - kb;
+				for (int c = 0; c < 3; c++)
+					d[c] = (uint8_t)((x[c] * ka + y[c] * kb + 32768) >> 16);
+				d[3] = 255;
+			}
+			continue;
+		}
+		__m256 ya = _mm256_cvtepi32_ps(_mm256_srli_epi32(yb, 24));
+		__m256i kb = _mm256_cvttps_epi32(
+			_mm256_add_ps(_mm256_mul_ps(_mm256_mul_ps(ya, w), k), half));
+		__m256i ka = _mm256_sub_epi32(full, kb);
+		__m256i px = alpha;
+		for (int c = 0; c < 3; c++) {
+			__m256i x = _mm256_and_si256(_mm256_srli_epi32(xa, 8 * c), lo8);
+			__m256i y = _mm256_and_si256(_mm256_srli_epi32(yb, 8 * c), lo8);
+			__m256i v = _mm256_add_epi32(_mm256_add_epi32(_mm256_mullo_epi32(x, ka),
+								      _mm256_mullo_epi32(y, kb)),
+						     round);
+			px = _mm256_or_si256(px, _mm256_slli_epi32(_mm256_srli_epi32(v, 16), 8 * c));
 		}
 		_mm256_storeu_si256((__m256i *)(void *)(o + 4 * i), px);
 	}

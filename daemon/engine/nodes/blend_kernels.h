@@ -1,11 +1,48 @@
-/* node_blend's vector kernels (blend_avx2.c). Not a public interface. */
+/* node_blend's vector kernels (blend_avx2.c) and the scalar step they share with it. Not a
+ * public interface. */
 #ifndef CLIPMAP_BLEND_KERNELS_H
 #define CLIPMAP_BLEND_KERNELS_H
 #include <stddef.h>
 #include <stdint.h>
 
+static inline uint8_t blend_u8(float v)
+{
+	return (uint8_t)(int)(v + 0.5f); /* v ∈ [0, 255] */
+}
+
+/* b over a on one RGBA8 texel, straight alpha, b's alpha scaled by w: the general case (a not
+ * opaque), in node_blend's scalar path and the vector kernel's alike. */
+static inline void blend_over_general(const uint8_t *x, const uint8_t *y, float w, uint8_t *d)
+{
+	float ab = y[3] * (w * (1.0f / 255)), aa = x[3] * (1.0f / 255);
+	float ao = ab + aa * (1 - ab);
+	if (ao <= 0) {
+		d[0] = d[1] = d[2] = d[3] = 0;
+		return;
+	}
+	float ka = aa * (1 - ab) / ao, kb = ab / ao;
+	for (int c = 0; c < 3; c++)
+		d[c] = blend_u8(x[c] * ka + y[c] * kb);
+	d[3] = blend_u8(ao * 255);
+}
+
 /* Mode multiply on count RGBA8 texels (a multiple of 8), mask optional: blend_bytes's bytes. */
 void blend_multiply_avx2(const uint8_t *a, const uint8_t *b, const float *mask, float opacity,
 			 uint8_t *o, size_t count);
+
+/* Heights, count a multiple of 8, mask optional (weight = clamp(mask, 0, 1) · opacity, NaN 0):
+ * add: o = w > 0 ? a + b·(weight·w) : a; lerp (over, mask): o = b NaN ? a : a NaN ? b :
+ * w > 0 ? a + (b − a)·w : a. blend_heights's bits. */
+void blend_add_avx2(const float *a, const float *b, const float *mask, float opacity,
+		    float weight, float *o, size_t count);
+void blend_lerp_avx2(const float *a, const float *b, const float *mask, float opacity,
+		     float *o, size_t count);
+
+/* Mode over on RGBA8 colours, count a multiple of 8, mask optional: where a is opaque, rgb =
+ * (x·(65536 − kb) + y·kb + 32768) >> 16 with kb = y_alpha · w · 65536/255 + 0.5 truncated
+ * (w = clamp(mask) · opacity, or opacity), alpha 255; elsewhere blend_over_general.
+ * blend_bytes's and over_color's bytes. */
+void blend_over_avx2(const uint8_t *a, const uint8_t *b, const float *mask, float opacity,
+		     uint8_t *o, size_t count);
 
 #endif

@@ -84,11 +84,6 @@ static inline float weight_at(const float *mask, size_t i, float opacity)
 	return m * opacity;
 }
 
-static inline uint8_t u8(float v)
-{
-	return (uint8_t)(int)(v + 0.5f); /* v ∈ [0, 255] */
-}
-
 static void blend_heights(const struct blend *bl, const float *a, const float *b,
 			  const float *mask, float *o, size_t count)
 {
@@ -106,21 +101,6 @@ static void blend_heights(const struct blend *bl, const float *a, const float *b
 	}
 }
 
-/* b over a, straight alpha, b's alpha scaled by w. */
-static inline void over_general(const uint8_t *x, const uint8_t *y, float w, uint8_t *d)
-{
-	float ab = y[3] * (w * (1.0f / 255)), aa = x[3] * (1.0f / 255);
-	float ao = ab + aa * (1 - ab);
-	if (ao <= 0) {
-		d[0] = d[1] = d[2] = d[3] = 0;
-		return;
-	}
-	float ka = aa * (1 - ab) / ao, kb = ab / ao;
-	for (int c = 0; c < 3; c++)
-		d[c] = u8(x[c] * ka + y[c] * kb);
-	d[3] = u8(ao * 255);
-}
-
 /* over on colours without a mask: the opaque-base fast path with b's weight from a table. */
 static void over_color(const struct blend *bl, const uint8_t *a, const uint8_t *b, uint8_t *o,
 		       size_t count)
@@ -129,7 +109,7 @@ static void over_color(const struct blend *bl, const uint8_t *a, const uint8_t *
 		const uint8_t *x = a + 4 * i, *y = b + 4 * i;
 		uint8_t *d = o + 4 * i;
 		if (x[3] != 255) {
-			over_general(x, y, bl->opacity, d);
+			blend_over_general(x, y, bl->opacity, d);
 			continue;
 		}
 		uint32_t kb = bl->kb[y[3]], ka = 65536 - kb;
@@ -157,16 +137,16 @@ static void blend_bytes(const struct blend *bl, const uint8_t *a, const uint8_t 
 				d[c] = (uint8_t)((x[c] * ka + y[c] * kb + 32768) >> 16);
 			d[3] = 255;
 		} else if (bl->mode == BLEND_OVER && ch == 4) {
-			over_general(x, y, w, d);
+			blend_over_general(x, y, w, d);
 		} else if (bl->mode == BLEND_MULTIPLY) {
 			for (int c = 0; c < 3; c++) {
 				float prod = x[c] * (float)y[c] * (1.0f / 255);
-				d[c] = u8(x[c] + (prod - x[c]) * w);
+				d[c] = blend_u8(x[c] + (prod - x[c]) * w);
 			}
 			d[3] = x[3];
 		} else { /* mask, or over on normals */
 			for (int c = 0; c < ch; c++)
-				d[c] = u8(x[c] + (float)(y[c] - x[c]) * w);
+				d[c] = blend_u8(x[c] + (float)(y[c] - x[c]) * w);
 		}
 	}
 }
@@ -227,6 +207,20 @@ static bool same_uniform(const struct blend *bl, const struct tile *a, const str
 	return isfinite(v) && !(v == 0 && signbit(v));
 }
 
+/* Whether an add's b is ±0 on every texel and a has no −0 and no NaN texel (a uniform a's one
+ * value, or a's summary all on one side of 0): then a + b·(weight·w) = a + ±0 = a, bit for
+ * bit, whatever the mask (weight·w is finite), and the output is a's bytes. */
+static bool adds_zero(const struct blend *bl, const struct tile *a, const struct tile *b)
+{
+	if (bl->mode != BLEND_ADD || a->type != PIX_HEIGHT || !b->uniform || tile_f32(b)[0] != 0.0f)
+		return false;
+	if (a->uniform) {
+		float v = tile_f32(a)[0];
+		return v == v && !(v == 0 && signbit(v));
+	}
+	return a->summarized && !a->any_nan && (a->lo > 0.0f || a->hi < 0.0f);
+}
+
 static bool blend_needed(const struct node *n, int k, struct tile *const *in, int nin)
 {
 	const struct blend *bl = n->impl;
@@ -265,15 +259,25 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 	bool zero = mask && (in[2]->summarized || bl->lazy_b) && mask_zero(in[2]);
 	if (bl->lazy_b && mask) /* made at once: tell the children whether it was worth it */
 		out->lazy_unneeded = zero;
-	if ((zero && a_decides(bl, in[SLOT_A])) || same_uniform(bl, in[SLOT_A], in[SLOT_B])) {
+	if ((zero && a_decides(bl, in[SLOT_A])) || same_uniform(bl, in[SLOT_A], in[SLOT_B]) ||
+	    adds_zero(bl, in[SLOT_A], in[SLOT_B])) {
 		tile_alias(out, in[SLOT_A]);
 		return 0;
 	}
-	if (out->type == PIX_HEIGHT)
+	bool avx2 = count % 8 == 0 && noise_isa_has_avx2();
+	if (out->type == PIX_HEIGHT && avx2 && bl->mode == BLEND_ADD)
+		blend_add_avx2(tile_f32(in[0]), tile_f32(in[1]), mask, bl->opacity, bl->weight,
+			       tile_f32(out), count);
+	else if (out->type == PIX_HEIGHT && avx2)
+		blend_lerp_avx2(tile_f32(in[0]), tile_f32(in[1]), mask, bl->opacity, tile_f32(out),
+				count);
+	else if (out->type == PIX_HEIGHT)
 		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
+	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && avx2)
+		blend_over_avx2(in[0]->data, in[1]->data, mask, bl->opacity, out->data, count);
 	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && !mask)
 		over_color(bl, in[0]->data, in[1]->data, out->data, count);
-	else if (bl->mode == BLEND_MULTIPLY && count % 8 == 0 && noise_isa_has_avx2())
+	else if (bl->mode == BLEND_MULTIPLY && avx2)
 		blend_multiply_avx2(in[0]->data, in[1]->data, mask, bl->opacity, out->data, count);
 	else
 		blend_bytes(bl, in[0]->data, in[1]->data, mask, out->data, count,

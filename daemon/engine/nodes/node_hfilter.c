@@ -71,6 +71,11 @@ static int hf_generate(const struct node *n, struct gen_ctx *g, const struct til
 	if (nin < 1 || in[0]->type != PIX_HEIGHT || in[0]->size != out->size || out->size % 16)
 		return -EINVAL;
 	const struct tile *src = in[0];
+	if (src->uniform) { /* one height in, one out */
+		float v = hf_one(tile_f32(src)[0], *f);
+		tile_fill_uniform(out, &v);
+		return 0;
+	}
 	bool known = src->summarized && src->lo <= src->hi;
 	float a = 0, b = 0;
 	if (known) {

@@ -194,6 +194,13 @@ static int noise_generate(const struct node *n, struct gen_ctx *g, const struct 
 				   im->amplitude, im->offset, tile_f32(out));
 	if (rc < 0)
 		return rc;
+	/* No octave at this level (all finer than its texels) on no input or a uniform one: every
+	 * texel holds the same value, so the tile is the shared uniform one, summarized, and the
+	 * nodes after it can tell (a blend adding it, a ramp over it). */
+	if (rc == 0 && (!src || src->uniform)) {
+		float v = tile_f32(out)[0];
+		tile_fill_uniform(out, &v);
+	}
 	return 0;
 }
 

@@ -357,6 +357,15 @@ static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct t
 	size_t count = (size_t)out->size * out->size;
 	const float *src = tile_f32(in[0]), *slope = steep ? tile_f32(in[1]) : NULL;
 	uint8_t *dst = out->data;
+	const bool snow = r->snow_equator < NAN_DEFAULT || r->sea_ice_latitude <= 90;
+	if (in[0]->uniform && !steep && !snow) {
+		/* one height everywhere and nothing by place: one colour, the shared uniform tile
+		 * (the scalar and vector ramps give the same bytes) */
+		uint8_t px[4];
+		ramp_base_scalar(&r->base, src, px, 1);
+		tile_fill_uniform(out, px);
+		return 0;
+	}
 	/* The base ramp everywhere, then the steep texels over it, then the snow. */
 	const bool avx2 = count % 8 == 0 && noise_isa_has_avx2();
 	if (avx2)
@@ -370,7 +379,7 @@ static int ramp_generate(const struct node *n, struct gen_ctx *g, const struct t
 		else
 			ramp_steep_scalar(&st, src, slope, dst, count);
 	}
-	if (r->snow_equator < NAN_DEFAULT || r->sea_ice_latitude <= 90) {
+	if (snow) {
 		uint32_t T = out->size;
 		for (uint32_t j = 0; j < T; j++) {
 			double lon, lat;
