@@ -62,6 +62,9 @@ static const struct bcase cases[] = {
 	  "type = color_filter\ninput = col\ngamma = 1.4\nhue = 20\nsaturation = 1.3\n", 8 },
 	{ "height_filter", "type = height_filter\ninput = src\nscale = 2\noffset = 10\n", 8 },
 	{ "ramp", "type = ramp\ninput = src\n", 8 },
+	/* earth.ini's canopy_tint's three stops over a field crossing them every few texels */
+	{ "ramp (3 stops)", "type = ramp\ninput = src2\nstops = -14 120 135 120, 0 205 215 205, "
+			    "14 255 255 255\n", 8 },
 	{ "blend over (colour)", "type = blend\nmode = over\na = col\nb = col\nopacity = 0.5\n", 8 },
 	{ "blend add (height)", "type = blend\nmode = add\na = src\nb = src2\n", 8 },
 	/* earth.ini's masks: b where the mask lets it through (a mask of heights, partly 0) */

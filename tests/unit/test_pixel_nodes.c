@@ -777,25 +777,20 @@ static void hashes_differ(void **state)
 	unmake(&c);
 }
 
-/* The AVX2 base ramp gives the scalar loop's bytes: heights across every stop, on them, just
- * either side of them (one ulp), beyond both ends, ±∞, −0 and NaN. */
-static void ramp_vector_bytes(void **state)
+/* The AVX2 base ramp gives the scalar loop's bytes for one table: random heights across every
+ * stop and beyond both ends, on the stops, just either side of them (one ulp), ±∞, ±0, NaN. */
+static void ramp_vector_table(const char *table)
 {
-	(void)state;
-	if (!noise_isa_supported(NOISE_ISA_AVX2))
-		skip();
 	struct tnode tn;
-	assert_int_equal(make(&tn, &node_type_ramp, &input_height, NULL, NULL,
-			      "stops = -9000 4 10 40, -5000 10 30 90, -1 140 208 222, 0 196 184 140, "
-			      "20 96 130 62, 350 66 108 48, 3700 190 188 184\nsea_level = 3.5"),
-			 0);
+	assert_int_equal(make(&tn, &node_type_ramp, &input_height, NULL, NULL, table), 0);
 	const struct ramp_table *rt = tn.n.impl; /* struct ramp's first member */
 	enum { M = 1 << 16 };
 	float *h = malloc(M * sizeof *h);
 	uint8_t *a = malloc(4 * M), *b = malloc(4 * M);
 	uint32_t seed = 99;
+	float span = rt->h[rt->nstops - 1] - rt->h[0] + 2;
 	for (int i = 0; i < M; i++)
-		h[i] = (float)((int)(rng(&seed) % 2000000) - 1000000) / 80.0f;
+		h[i] = rt->h[0] - 1 + span * (float)(rng(&seed) % 1000000) / 1e6f;
 	int k = 0;
 	for (int s = 0; s < rt->nstops; s++) {
 		h[k++] = rt->h[s];
@@ -809,13 +804,29 @@ static void ramp_vector_bytes(void **state)
 	ramp_base_avx2(rt, h, b, M);
 	for (int i = 0; i < M; i++)
 		if (memcmp(a + 4 * i, b + 4 * i, 4))
-			fail_msg("height %.9g: scalar %d %d %d %d, avx2 %d %d %d %d", (double)h[i],
-				 a[4 * i], a[4 * i + 1], a[4 * i + 2], a[4 * i + 3], b[4 * i],
-				 b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]);
+			fail_msg("%s: height %.9g: scalar %d %d %d %d, avx2 %d %d %d %d", table,
+				 (double)h[i], a[4 * i], a[4 * i + 1], a[4 * i + 2], a[4 * i + 3],
+				 b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]);
 	free(h);
 	free(a);
 	free(b);
 	unmake(&tn);
+}
+
+/* Up to 8 stops the kernel compares and permutes, beyond that it gathers: both kinds of table,
+ * with 2, 3, 7, 8 and 14 stops. */
+static void ramp_vector_bytes(void **state)
+{
+	(void)state;
+	if (!noise_isa_supported(NOISE_ISA_AVX2))
+		skip();
+	ramp_vector_table("stops = -9000 4 10 40, -5000 10 30 90, -1 140 208 222, 0 196 184 140, "
+			  "20 96 130 62, 350 66 108 48, 3700 190 188 184\nsea_level = 3.5");
+	ramp_vector_table("stops = -14 120 135 120, 0 205 215 205, 14 255 255 255");
+	ramp_vector_table("stops = -5 10 20 30, 5 200 100 0");
+	ramp_vector_table("stops = -8 1 2 3, -7 4 5 6, -6 7 8 9, -5 10 11 12, -4 13 14 15, "
+			  "-3 16 17 18, -2 19 20 21, -1 22 23 24");
+	ramp_vector_table("sea_level = -2.5"); /* the default ramp: 14 stops */
 }
 
 /* The steep blend and the snow, eight texels at a time, give the scalar loops' bytes: random
@@ -868,6 +879,21 @@ static void ramp_steep_snow_vector_bytes(void **state)
 				 (double)h[i], (double)sl[i], a[4 * i], a[4 * i + 1], a[4 * i + 2],
 				 a[4 * i + 3], b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]);
 	assert_true(memcmp(a, d0, 4 * M) != 0); /* it did blend */
+	/* a base of more than 16 stops: the kernel's gathers instead of its registers */
+	struct tnode tc;
+	char many[1024] = "stops = ";
+	for (int q = 0; q < 20; q++)
+		snprintf(many + strlen(many), sizeof many - strlen(many), "%s%d %d %d %d",
+			 q ? ", " : "", -9000 + 700 * q, 12 * q, 255 - 11 * q, 40 + 9 * q);
+	assert_int_equal(make(&tc, &node_type_ramp, &input_height, NULL, NULL, many), 0);
+	const struct ramp_steep sm = { tc.n.impl, steep, 0.25f, 4.0f };
+	assert_true(sm.base->nstops == 20);
+	memcpy(a, d0, 4 * M);
+	memcpy(b, d0, 4 * M);
+	ramp_steep_scalar(&sm, h, sl, a, M);
+	ramp_steep_avx2(&sm, h, sl, b, M);
+	assert_memory_equal(a, b, 4 * M);
+	unmake(&tc);
 	struct ramp_snow sn[] = {
 		{ .line = 1033.5f, .inv = 1.0f / 400, .ice = -0.25f, .sea_ice = true,
 		  .snow = { 242, 245, 250, 255 }, .from = 0.25f, .inv_steep = 4.0f },
