@@ -186,6 +186,17 @@ static void put_rgba(uint8_t *o, const float *v, int C)
 	}
 }
 
+/* put_rgba over a row of n RGB texels, without its switch per texel. */
+static void put_rgb_row(uint8_t *restrict o, const float *restrict v, uint32_t n)
+{
+	for (uint32_t i = 0; i < n; i++) {
+		o[4 * i] = to_u8(v[3 * i]);
+		o[4 * i + 1] = to_u8(v[3 * i + 1]);
+		o[4 * i + 2] = to_u8(v[3 * i + 2]);
+		o[4 * i + 3] = 255;
+	}
+}
+
 static void fill_tile(const struct file_source *f, struct tile *out)
 {
 	size_t n = (size_t)out->size * out->size;
@@ -658,6 +669,10 @@ static void vpass(const struct file_plan *q, struct tile *out)
 		wsum(row, rows, wy, Ky, TC, 1, 0);
 		if (f->kind == FILE_KIND_COLOR) {
 			uint8_t *o = out->data + (size_t)j * T * 4;
+			if (q->ax.all && C == 3) { /* the usual RGB file inside its bounds */
+				put_rgb_row(o, row, T);
+				continue;
+			}
 			for (uint32_t i = 0; i < T; i++) {
 				if (q->ax.in[i])
 					put_rgba(o + 4 * i, row + (size_t)i * C, C);
