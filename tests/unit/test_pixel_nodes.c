@@ -476,7 +476,7 @@ static void ramp_stops(void **state)
 	assert_memory_equal(o[1], want[0], 4);
 	assert_memory_equal(o[2], want[3], 4);
 	/* many close stops: every height lands in its own segment */
-	char many[1024] = "stops = ";
+	char many[2048] = "stops = ";
 	for (int s = 0; s < 40; s++) {
 		size_t l = strlen(many);
 		snprintf(many + l, sizeof many - l, "%s%d %d %d %d", s ? ", " : "", s * s,
@@ -813,8 +813,18 @@ static void ramp_vector_table(const char *table)
 	unmake(&tn);
 }
 
-/* Up to 8 stops the kernel compares and permutes, beyond that it gathers: both kinds of table,
- * with 2, 3, 7, 8 and 14 stops. */
+/* ramp_vector_table on a table of n stops 311 m apart. */
+static void ramp_vector_stops(int n)
+{
+	char t[2048] = "stops = ";
+	for (int q = 0; q < n; q++)
+		snprintf(t + strlen(t), sizeof t - strlen(t), "%s%d %d %d %d", q ? ", " : "",
+			 -9000 + 311 * q, (7 * q) % 256, 255 - (13 * q) % 256, (40 + 29 * q) % 256);
+	ramp_vector_table(t);
+}
+
+/* Up to 32 stops the kernel compares and permutes (from one to four registers of eight
+ * segments), beyond that it gathers: tables of 2, 3, 7, 8, 14, 17, 32 and 40 stops. */
 static void ramp_vector_bytes(void **state)
 {
 	(void)state;
@@ -827,6 +837,9 @@ static void ramp_vector_bytes(void **state)
 	ramp_vector_table("stops = -8 1 2 3, -7 4 5 6, -6 7 8 9, -5 10 11 12, -4 13 14 15, "
 			  "-3 16 17 18, -2 19 20 21, -1 22 23 24");
 	ramp_vector_table("sea_level = -2.5"); /* the default ramp: 14 stops */
+	ramp_vector_stops(17);
+	ramp_vector_stops(32);
+	ramp_vector_stops(40);
 }
 
 /* The steep blend and the snow, eight texels at a time, give the scalar loops' bytes: random
@@ -879,15 +892,15 @@ static void ramp_steep_snow_vector_bytes(void **state)
 				 (double)h[i], (double)sl[i], a[4 * i], a[4 * i + 1], a[4 * i + 2],
 				 a[4 * i + 3], b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]);
 	assert_true(memcmp(a, d0, 4 * M) != 0); /* it did blend */
-	/* a base of more than 16 stops: the kernel's gathers instead of its registers */
+	/* a base of more than 32 stops: the kernel's gathers instead of its registers */
 	struct tnode tc;
-	char many[1024] = "stops = ";
-	for (int q = 0; q < 20; q++)
+	char many[2048] = "stops = ";
+	for (int q = 0; q < 40; q++)
 		snprintf(many + strlen(many), sizeof many - strlen(many), "%s%d %d %d %d",
-			 q ? ", " : "", -9000 + 700 * q, 12 * q, 255 - 11 * q, 40 + 9 * q);
+			 q ? ", " : "", -9000 + 350 * q, 6 * q, 255 - 5 * q, 40 + 4 * q);
 	assert_int_equal(make(&tc, &node_type_ramp, &input_height, NULL, NULL, many), 0);
 	const struct ramp_steep sm = { tc.n.impl, steep, 0.25f, 4.0f };
-	assert_true(sm.base->nstops == 20);
+	assert_true(sm.base->nstops == 40);
 	memcpy(a, d0, 4 * M);
 	memcpy(b, d0, 4 * M);
 	ramp_steep_scalar(&sm, h, sl, a, M);

@@ -90,23 +90,25 @@ static inline __m256 clamp8(const struct ramp_table *r, __m256 x, __m256 nan)
 	return _mm256_blendv_ps(hc, _mm256_set1_ps(r->h[0]), nan);
 }
 
-/* A table of at most REG_STOPS stops (all of Earth's ramps but its tint, the Moon's, Mars's, the
- * procedural planet's steep rock) held in registers: a texel's segment by comparisons —
- * s = #{k ≥ 1 : hc ≥ h[k]}, the one s with h[s] ≤ hc < h[s + 1] since the stops increase —
- * and the segment's start, colour and slope by permutes: no gathers and no scalar lookup,
- * whatever segments the eight texels fall in. The same values as seg8 and colour8. */
-#define REG_STOPS 16
+/* A table of at most REG_STOPS stops (every shipped planet's ramps) held in registers: a
+ * texel's segment by comparisons — s = #{k ≥ 1 : hc ≥ h[k]}, the one s with h[s] ≤ hc <
+ * h[s + 1] since the stops increase — and the segment's start, colour and slope by permutes:
+ * no gathers and no scalar lookup, whatever segments the eight texels fall in. The same
+ * values as seg8 and colour8. */
+#define REG_STOPS 32
+#define REG_N (REG_STOPS / 8)
 
 struct regtab {
-	int n;
+	int n, nreg; /* stops; registers of eight segments each */
 	__m256 stop[REG_STOPS];
-	__m256 h[2], c[3][2], dc[3][2]; /* segments 0–7 and 8–15 */
+	__m256 h[REG_N], c[3][REG_N], dc[3][REG_N]; /* segments 8q .. 8q + 7 in [q] */
 };
 
 static void regtab_init(struct regtab *t, const struct ramp_table *r)
 {
 	float hv[REG_STOPS], cv[3][REG_STOPS], dv[3][REG_STOPS];
 	t->n = r->nstops;
+	t->nreg = (r->nstops + 7) / 8;
 	for (int s = 0; s < REG_STOPS; s++) {
 		hv[s] = s < r->nstops ? r->h[s] : 0;
 		for (int ch = 0; ch < 3; ch++) {
@@ -115,7 +117,7 @@ static void regtab_init(struct regtab *t, const struct ramp_table *r)
 		}
 		t->stop[s] = _mm256_set1_ps(r->h[s < r->nstops ? s : 0]);
 	}
-	for (int q = 0; q < 2; q++) {
+	for (int q = 0; q < REG_N; q++) {
 		t->h[q] = _mm256_loadu_ps(hv + 8 * q);
 		for (int ch = 0; ch < 3; ch++) {
 			t->c[ch][q] = _mm256_loadu_ps(cv[ch] + 8 * q);
@@ -124,29 +126,32 @@ static void regtab_init(struct regtab *t, const struct ramp_table *r)
 	}
 }
 
-/* v[s] for segments s (up is s ≥ 8) */
-static inline __m256 pick(const struct regtab *t, const __m256 v[2], __m256i s, __m256 up)
+/* v[s] for segments s: each register's permute (it reads s's low three bits), the one for
+ * s's eight taken */
+static inline __m256 pick(const struct regtab *t, const __m256 v[REG_N], __m256i s)
 {
-	__m256 lo = _mm256_permutevar8x32_ps(v[0], s);
-	return t->n <= 8 ? lo : _mm256_blendv_ps(lo, _mm256_permutevar8x32_ps(v[1], s), up);
+	__m256 r = _mm256_permutevar8x32_ps(v[0], s);
+	for (int q = 1; q < t->nreg; q++)
+		r = _mm256_blendv_ps(r, _mm256_permutevar8x32_ps(v[q], s),
+				     _mm256_castsi256_ps(_mm256_cmpgt_epi32(s, _mm256_set1_epi32(8 * q - 1))));
+	return r;
 }
 
-/* The segments of eight heights hc (within the table's ends, no NaN), *up where they are past
- * the eighth, and in *tt the metres into them. */
-static inline __m256i regseg(const struct regtab *t, __m256 hc, __m256 *tt, __m256 *up)
+/* The segments of eight heights hc (within the table's ends, no NaN), and in *tt the metres
+ * into them. */
+static inline __m256i regseg(const struct regtab *t, __m256 hc, __m256 *tt)
 {
 	__m256i s = _mm256_setzero_si256();
 	for (int k = 1; k < t->n; k++) /* a true compare is −1 */
 		s = _mm256_sub_epi32(s, _mm256_castps_si256(_mm256_cmp_ps(hc, t->stop[k], _CMP_GE_OQ)));
-	*up = _mm256_castsi256_ps(_mm256_cmpgt_epi32(s, _mm256_set1_epi32(7)));
-	*tt = _mm256_sub_ps(hc, pick(t, t->h, s, *up));
+	*tt = _mm256_sub_ps(hc, pick(t, t->h, s));
 	return s;
 }
 
 /* Channel ch at segments s, tt metres in: c + tt·dc (colour8's value). */
-static inline __m256 regcolour(const struct regtab *t, __m256i s, __m256 up, __m256 tt, int ch)
+static inline __m256 regcolour(const struct regtab *t, __m256i s, __m256 tt, int ch)
 {
-	return _mm256_add_ps(pick(t, t->c[ch], s, up), _mm256_mul_ps(tt, pick(t, t->dc[ch], s, up)));
+	return _mm256_add_ps(pick(t, t->c[ch], s), _mm256_mul_ps(tt, pick(t, t->dc[ch], s)));
 }
 
 static void ramp_base_reg(const struct ramp_table *r, const float *h, uint8_t *d, size_t count)
@@ -158,11 +163,11 @@ static void ramp_base_reg(const struct ramp_table *r, const float *h, uint8_t *d
 	for (size_t i = 0; i < count; i += 8) {
 		__m256 x = _mm256_loadu_ps(h + i);
 		__m256 nan = _mm256_cmp_ps(x, x, _CMP_UNORD_Q);
-		__m256 tt, up;
-		__m256i s = regseg(&t, clamp8(r, x, nan), &tt, &up);
+		__m256 tt;
+		__m256i s = regseg(&t, clamp8(r, x, nan), &tt);
 		__m256i px = _mm256_set1_epi32((int)0xff000000u);
 		for (int ch = 0; ch < 3; ch++) {
-			__m256 v = _mm256_add_ps(regcolour(&t, s, up, tt, ch), half);
+			__m256 v = _mm256_add_ps(regcolour(&t, s, tt, ch), half);
 			__m256i q = _mm256_cvttps_epi32(v);
 			q = _mm256_min_epi32(_mm256_max_epi32(q, zero), lo8);
 			px = _mm256_or_si256(px, _mm256_slli_epi32(q, 8 * ch));
@@ -235,19 +240,19 @@ void ramp_steep_avx2(const struct ramp_steep *r, const float *h, const float *sl
 		__m256 on = _mm256_andnot_ps(nan, _mm256_cmp_ps(w, zero, _CMP_GT_OQ));
 		if (_mm256_testz_ps(on, on))
 			continue; /* most of a tile: not steep */
-		__m256 ta, tb, ua, ub;
+		__m256 ta, tb;
 		__m256i sa, sb;
 		if (reg) {
-			sa = regseg(&ra, clamp8(r->base, x, nan), &ta, &ua);
-			sb = regseg(&rb, clamp8(r->steep, x, nan), &tb, &ub);
+			sa = regseg(&ra, clamp8(r->base, x, nan), &ta);
+			sb = regseg(&rb, clamp8(r->steep, x, nan), &tb);
 		} else {
 			sa = seg8(r->base, clamp8(r->base, x, nan), &ta);
 			sb = seg8(r->steep, clamp8(r->steep, x, nan), &tb);
 		}
 		__m256i px = alpha;
 		for (int ch = 0; ch < 3; ch++) {
-			__m256 a = reg ? regcolour(&ra, sa, ua, ta, ch) : colour8(r->base, sa, ta, ch);
-			__m256 b = reg ? regcolour(&rb, sb, ub, tb, ch) : colour8(r->steep, sb, tb, ch);
+			__m256 a = reg ? regcolour(&ra, sa, ta, ch) : colour8(r->base, sa, ta, ch);
+			__m256 b = reg ? regcolour(&rb, sb, tb, ch) : colour8(r->steep, sb, tb, ch);
 			__m256 v = _mm256_add_ps(_mm256_add_ps(a, _mm256_mul_ps(_mm256_sub_ps(b, a), w)),
 						 half);
 			__m256i q = _mm256_and_si256(_mm256_cvttps_epi32(v), lo8);
