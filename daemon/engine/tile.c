@@ -115,6 +115,19 @@ void tile_fill_uniform(struct tile *t, const void *texel)
 	}
 }
 
+void tile_summary_from_lanes(struct tile *t, const float lo[16], const float hi[16], bool nan)
+{
+	float l = INFINITY, h = -INFINITY;
+	for (int k = 0; k < 16; k++) {
+		l = lo[k] < l ? lo[k] : l;
+		h = hi[k] > h ? hi[k] : h;
+	}
+	t->lo = l;
+	t->hi = h;
+	t->any_nan = nan;
+	t->summarized = true;
+}
+
 /* 16-texel blocks so the loop vectorises at -O2 (T is a multiple of 16). NaN fails every
  * comparison, so it neither lowers lo nor raises hi. */
 void tile_summarize(struct tile *t)
@@ -158,11 +171,17 @@ void tile_summarize(struct tile *t)
 				nn[k] |= v != v;
 			}
 #endif
+		for (int k = 1; k < 16; k++)
+			nn[0] |= nn[k];
+		if (i == count) {
+			tile_summary_from_lanes(t, l, h, nn[0] != 0);
+			return;
+		}
 		for (int k = 0; k < 16; k++) {
 			lo = l[k] < lo ? l[k] : lo;
 			hi = h[k] > hi ? h[k] : hi;
-			nan |= nn[k];
 		}
+		nan = nn[0];
 	}
 	for (; i < count; i++) {
 		float v = x[i];

@@ -61,6 +61,12 @@ void tile_fill_uniform(struct tile *t, const void *texel);
 static inline size_t tile_charge(const struct tile *t) { return t->uniform ? 0 : t->nbytes; }
 /* Scans a height tile (not yet shared) for its summary; other types are left unsummarized. */
 void tile_summarize(struct tile *t);
+/* Sets a height tile's summary from 16 lanes, as tile_summarize reduces them for a tile of a
+ * multiple of 16 texels: lane k the least and greatest of the texels i ≡ k (mod 16), each
+ * kept as v < lo ? v : lo and v > hi ? v : hi from ±∞ (so NaN is left out), and whether any
+ * texel is NaN. A kernel that writes the texels can keep the lanes as it goes and save the
+ * scan; the summary is tile_summarize's to the bit. */
+void tile_summary_from_lanes(struct tile *t, const float lo[16], const float hi[16], bool nan);
 /* Adds a reference and returns t. */
 struct tile *tile_ref(struct tile *t);
 /* Drops a reference; NULL is a no-op. */

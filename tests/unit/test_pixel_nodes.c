@@ -1059,6 +1059,7 @@ static void blend_heights_bits(void **state)
 			assert_int_equal(make(&tn, &node_type_blend, &input_height, &input_height2,
 					      masked ? &input_height : NULL, modes[mi]),
 					 0);
+			tn.n.summarize = true; /* as when a node reads it as a mask */
 			for (int rep = 0; rep < 16; rep++) {
 				struct tile *a = tile_create(&key0, PIX_HEIGHT, T);
 				struct tile *b = tile_create(&key0, PIX_HEIGHT, T);
@@ -1088,6 +1089,15 @@ static void blend_heights_bits(void **state)
 							 masked, (double)x, (double)y, (double)w, (double)got,
 							 (double)want);
 				}
+				/* the summary the kernel kept as it wrote: the scan's, to the bit */
+				struct tile *c = tile_create(&key0, PIX_HEIGHT, T);
+				memcpy(c->data, o->data, o->nbytes);
+				tile_summarize(c);
+				assert_true(o->summarized);
+				assert_memory_equal(&o->lo, &c->lo, sizeof c->lo);
+				assert_memory_equal(&o->hi, &c->hi, sizeof c->hi);
+				assert_int_equal(o->any_nan, c->any_nan);
+				tile_unref(c);
 				tile_unref(a);
 				tile_unref(b);
 				tile_unref(m);

@@ -43,24 +43,65 @@ void blend_multiply_avx2(const uint8_t *a, const uint8_t *b, const float *mask, 
 	}
 }
 
+/* Summary lanes of the texels written: group q = (i / 8) mod 2 of each 16 holds lanes 8q ..
+ * 8q + 7; min(v, lo) is v < lo ? v : lo and max(v, hi) v > hi ? v : hi, as tile_summarize. */
+struct lanes8 {
+	__m256 lo[2], hi[2], nan;
+};
+
+static inline void lanes_start(struct lanes8 *z)
+{
+	for (int q = 0; q < 2; q++) {
+		z->lo[q] = _mm256_set1_ps(__builtin_inff());
+		z->hi[q] = _mm256_set1_ps(-__builtin_inff());
+	}
+	z->nan = _mm256_setzero_ps();
+}
+
+static inline void lanes_add(struct lanes8 *z, __m256 v, size_t i)
+{
+	int q = (int)(i >> 3) & 1;
+	z->lo[q] = _mm256_min_ps(v, z->lo[q]);
+	z->hi[q] = _mm256_max_ps(v, z->hi[q]);
+	z->nan = _mm256_or_ps(z->nan, _mm256_cmp_ps(v, v, _CMP_UNORD_Q));
+}
+
+static inline void lanes_end(const struct lanes8 *z, struct blend_lanes *out)
+{
+	for (int q = 0; q < 2; q++) {
+		_mm256_storeu_ps(out->lo + 8 * q, z->lo[q]);
+		_mm256_storeu_ps(out->hi + 8 * q, z->hi[q]);
+	}
+	out->nan = _mm256_movemask_ps(z->nan) != 0;
+}
+
 void blend_add_avx2(const float *a, const float *b, const float *mask, float opacity,
-		    float weight, float *o, size_t count)
+		    float weight, float *o, size_t count, struct blend_lanes *lanes)
 {
 	const __m256 op = _mm256_set1_ps(opacity), wt = _mm256_set1_ps(weight);
 	const __m256 zero = _mm256_setzero_ps();
+	struct lanes8 z;
+	lanes_start(&z);
 	for (size_t i = 0; i < count; i += 8) {
 		__m256 x = _mm256_loadu_ps(a + i), y = _mm256_loadu_ps(b + i);
 		__m256 w = weight8(mask, i, op);
 		__m256 sum = _mm256_add_ps(x, _mm256_mul_ps(y, _mm256_mul_ps(wt, w)));
 		__m256 on = _mm256_cmp_ps(w, zero, _CMP_GT_OQ);
-		_mm256_storeu_ps(o + i, _mm256_blendv_ps(x, sum, on));
+		__m256 r = _mm256_blendv_ps(x, sum, on);
+		_mm256_storeu_ps(o + i, r);
+		if (lanes)
+			lanes_add(&z, r, i);
 	}
+	if (lanes)
+		lanes_end(&z, lanes);
 }
 
 void blend_lerp_avx2(const float *a, const float *b, const float *mask, float opacity,
-		     float *o, size_t count)
+		     float *o, size_t count, struct blend_lanes *lanes)
 {
 	const __m256 op = _mm256_set1_ps(opacity), zero = _mm256_setzero_ps();
+	struct lanes8 z;
+	lanes_start(&z);
 	for (size_t i = 0; i < count; i += 8) {
 		__m256 x = _mm256_loadu_ps(a + i), y = _mm256_loadu_ps(b + i);
 		__m256 w = weight8(mask, i, op);
@@ -69,7 +110,11 @@ void blend_lerp_avx2(const float *a, const float *b, const float *mask, float op
 		r = _mm256_blendv_ps(r, y, _mm256_cmp_ps(x, x, _CMP_UNORD_Q)); /* a NaN: b */
 		r = _mm256_blendv_ps(r, x, _mm256_cmp_ps(y, y, _CMP_UNORD_Q)); /* b NaN: a */
 		_mm256_storeu_ps(o + i, r);
+		if (lanes)
+			lanes_add(&z, r, i);
 	}
+	if (lanes)
+		lanes_end(&z, lanes);
 }
 
 void blend_over_avx2(const uint8_t *a, const uint8_t *b, const float *mask, float opacity,

@@ -2,6 +2,7 @@
  * public interface. */
 #ifndef CLIPMAP_BLEND_KERNELS_H
 #define CLIPMAP_BLEND_KERNELS_H
+#include <stdbool.h>
 #include <stddef.h>
 #include <stdint.h>
 
@@ -30,13 +31,21 @@ static inline void blend_over_general(const uint8_t *x, const uint8_t *y, float 
 void blend_multiply_avx2(const uint8_t *a, const uint8_t *b, const float *mask, float opacity,
 			 uint8_t *o, size_t count);
 
+/* A height kernel's summary, kept as it writes (count a multiple of 16): the lanes
+ * tile_summary_from_lanes takes. */
+struct blend_lanes {
+	float lo[16], hi[16];
+	bool nan;
+};
+
 /* Heights, count a multiple of 8, mask optional (weight = clamp(mask, 0, 1) · opacity, NaN 0):
  * add: o = w > 0 ? a + b·(weight·w) : a; lerp (over, mask): o = b NaN ? a : a NaN ? b :
- * w > 0 ? a + (b − a)·w : a. blend_heights's bits. */
+ * w > 0 ? a + (b − a)·w : a. blend_heights's bits. With lanes (count a multiple of 16), the
+ * output's summary lanes too. */
 void blend_add_avx2(const float *a, const float *b, const float *mask, float opacity,
-		    float weight, float *o, size_t count);
+		    float weight, float *o, size_t count, struct blend_lanes *lanes);
 void blend_lerp_avx2(const float *a, const float *b, const float *mask, float opacity,
-		     float *o, size_t count);
+		     float *o, size_t count, struct blend_lanes *lanes);
 
 /* Mode over on RGBA8 colours, count a multiple of 8, mask optional: where a is opaque, rgb =
  * (x·(65536 − kb) + y·kb + 32768) >> 16 with kb = y_alpha · w · 65536/255 + 0.5 truncated

@@ -265,13 +265,18 @@ static int blend_generate(const struct node *n, struct gen_ctx *g, const struct 
 		return 0;
 	}
 	bool avx2 = count % 8 == 0 && noise_isa_has_avx2();
-	if (out->type == PIX_HEIGHT && avx2 && bl->mode == BLEND_ADD)
-		blend_add_avx2(tile_f32(in[0]), tile_f32(in[1]), mask, bl->opacity, bl->weight,
-			       tile_f32(out), count);
-	else if (out->type == PIX_HEIGHT && avx2)
-		blend_lerp_avx2(tile_f32(in[0]), tile_f32(in[1]), mask, bl->opacity, tile_f32(out),
-				count);
-	else if (out->type == PIX_HEIGHT)
+	/* heights a node reads as a summary: summarized as they are written, not scanned after */
+	struct blend_lanes lanes, *lp = n->summarize && count % 16 == 0 ? &lanes : NULL;
+	if (out->type == PIX_HEIGHT && avx2) {
+		if (bl->mode == BLEND_ADD)
+			blend_add_avx2(tile_f32(in[0]), tile_f32(in[1]), mask, bl->opacity,
+				       bl->weight, tile_f32(out), count, lp);
+		else
+			blend_lerp_avx2(tile_f32(in[0]), tile_f32(in[1]), mask, bl->opacity,
+					tile_f32(out), count, lp);
+		if (lp)
+			tile_summary_from_lanes(out, lanes.lo, lanes.hi, lanes.nan);
+	} else if (out->type == PIX_HEIGHT)
 		blend_heights(bl, tile_f32(in[0]), tile_f32(in[1]), mask, tile_f32(out), count);
 	else if (bl->mode == BLEND_OVER && out->type == PIX_COLOR && avx2)
 		blend_over_avx2(in[0]->data, in[1]->data, mask, bl->opacity, out->data, count);
