@@ -63,7 +63,7 @@ static struct tile *run1(struct tnode *tn, struct tile *in0, struct tile *in1, s
 {
 	struct tile *in[3] = { in0, in1, in2 };
 	int nin = in2 ? 3 : in1 ? 2 : 1;
-	struct tile *out = tile_create(&key0, tn->n.out, T);
+	struct tile *out = tile_create(&key0, tn->n.out, in0->size);
 	struct gen_ctx g = { 0 };
 	assert_int_equal(tn->n.type->generate(&tn->n, &g, &key0, in, nin, out), 0);
 	gen_ctx_fini(&g);
@@ -1061,17 +1061,20 @@ static void blend_heights_bits(void **state)
 					 0);
 			tn.n.summarize = true; /* as when a node reads it as a mask */
 			for (int rep = 0; rep < 16; rep++) {
-				struct tile *a = tile_create(&key0, PIX_HEIGHT, T);
-				struct tile *b = tile_create(&key0, PIX_HEIGHT, T);
-				struct tile *m = tile_create(&key0, PIX_HEIGHT, T);
-				for (int i = 0; i < N; i++) {
+				/* 10×10: 100 texels, not a multiple of 8, take the scalar loop */
+				uint32_t S = rep % 2 ? 10 : T;
+				int NS = (int)(S * S);
+				struct tile *a = tile_create(&key0, PIX_HEIGHT, S);
+				struct tile *b = tile_create(&key0, PIX_HEIGHT, S);
+				struct tile *m = tile_create(&key0, PIX_HEIGHT, S);
+				for (int i = 0; i < NS; i++) {
 					tile_f32(a)[i] = odd_height(&seed, i + rep);
 					tile_f32(b)[i] = odd_height(&seed, i + 2 * rep + 1);
 					float mv = (float)(rng(&seed) % 1000) / 800.0f - 0.1f;
 					tile_f32(m)[i] = i % 11 == 5 ? odd_height(&seed, i) : mv;
 				}
 				struct tile *o = run1(&tn, a, b, masked ? m : NULL);
-				for (int i = 0; i < N; i++) {
+				for (int i = 0; i < NS; i++) {
 					float x = tile_f32(a)[i], y = tile_f32(b)[i], w = op;
 					if (masked) {
 						w = tile_f32(m)[i];
@@ -1089,14 +1092,17 @@ static void blend_heights_bits(void **state)
 							 masked, (double)x, (double)y, (double)w, (double)got,
 							 (double)want);
 				}
-				/* the summary the kernel kept as it wrote: the scan's, to the bit */
-				struct tile *c = tile_create(&key0, PIX_HEIGHT, T);
+				/* the summary the vector kernel kept as it wrote (the scalar loop leaves it
+				 * to the worker's scan): the scan's, to the bit */
+				struct tile *c = tile_create(&key0, PIX_HEIGHT, S);
 				memcpy(c->data, o->data, o->nbytes);
 				tile_summarize(c);
-				assert_true(o->summarized);
-				assert_memory_equal(&o->lo, &c->lo, sizeof c->lo);
-				assert_memory_equal(&o->hi, &c->hi, sizeof c->hi);
-				assert_int_equal(o->any_nan, c->any_nan);
+				assert_int_equal(o->summarized, noise_isa_has_avx2() && S == T);
+				if (o->summarized) {
+					assert_memory_equal(&o->lo, &c->lo, sizeof c->lo);
+					assert_memory_equal(&o->hi, &c->hi, sizeof c->hi);
+					assert_int_equal(o->any_nan, c->any_nan);
+				}
 				tile_unref(c);
 				tile_unref(a);
 				tile_unref(b);
@@ -1125,14 +1131,16 @@ static void blend_over_bytes(void **state)
 					      oi ? "mode = over\nopacity = 0.8" : "mode = over"),
 					 0);
 			for (int rep = 0; rep < 32; rep++) {
-				struct tile *a = tile_create(&key0, PIX_COLOR, T);
-				struct tile *b = tile_create(&key0, PIX_COLOR, T);
-				struct tile *m = tile_create(&key0, PIX_HEIGHT, T);
+				uint32_t S = rep % 2 ? 10 : T; /* 10×10: the scalar loops */
+				int NS = (int)(S * S);
+				struct tile *a = tile_create(&key0, PIX_COLOR, S);
+				struct tile *b = tile_create(&key0, PIX_COLOR, S);
+				struct tile *m = tile_create(&key0, PIX_HEIGHT, S);
 				for (size_t i = 0; i < a->nbytes; i++) {
 					a->data[i] = (uint8_t)rng(&seed);
 					b->data[i] = (uint8_t)rng(&seed);
 				}
-				for (int i = 0; i < N; i++) {
+				for (int i = 0; i < NS; i++) {
 					if (rng(&seed) % 29 != 0) /* opaque, but a few */
 						a->data[4 * i + 3] = 255;
 					if (i % 13 == 0)
@@ -1142,7 +1150,7 @@ static void blend_over_bytes(void **state)
 								    : (float)(rng(&seed) % 1000) / 999.0f;
 				}
 				struct tile *o = run1(&tn, a, b, masked ? m : NULL);
-				for (int i = 0; i < N; i++) {
+				for (int i = 0; i < NS; i++) {
 					const uint8_t *x = a->data + 4 * i, *y = b->data + 4 * i;
 					float w = op;
 					if (masked) {
