@@ -134,15 +134,10 @@ void blend_over_avx2(const uint8_t *a, const uint8_t *b, const float *mask, floa
 			for (int j = 0; j < 8; j++) {
 				const uint8_t *x = a + 4 * (i + j), *y = b + 4 * (i + j);
 				uint8_t *d = o + 4 * (i + j);
-				if (x[3] != 255) {
+				if (x[3] != 255)
 					blend_over_general(x, y, wl[j], d);
-					continue;
-				}
-				uint32_t kb = (uint32_t)(y[3] * wl[j] * (65536.0f / 255) + 0.5f);
-				uint32_t ka = 65536 - kb;
-				for (int c = 0; c < 3; c++)
-					d[c] = (uint8_t)((x[c] * ka + y[c] * kb + 32768) >> 16);
-				d[3] = 255;
+				else
+					blend_over_opaque(x, y, blend_over_kb(y[3], wl[j]), d);
 			}
 			continue;
 		}

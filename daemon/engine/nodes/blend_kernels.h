@@ -27,6 +27,23 @@ static inline void blend_over_general(const uint8_t *x, const uint8_t *y, float 
 	d[3] = blend_u8(ao * 255);
 }
 
+/* b's weight over an opaque base in 1/65536, for b's alpha y3 and weight w (node_blend's
+ * table kb[] holds it for w = the opacity). */
+static inline uint32_t blend_over_kb(uint8_t y3, float w)
+{
+	return (uint32_t)(y3 * w * (65536.0f / 255) + 0.5f);
+}
+
+/* b over an opaque a on one RGBA8 texel with b's weight kb (blend_over_kb): a lerp in 16-bit
+ * fixed point, no division. */
+static inline void blend_over_opaque(const uint8_t *x, const uint8_t *y, uint32_t kb, uint8_t *d)
+{
+	uint32_t ka = 65536 - kb;
+	for (int c = 0; c < 3; c++)
+		d[c] = (uint8_t)((x[c] * ka + y[c] * kb + 32768) >> 16);
+	d[3] = 255;
+}
+
 /* Mode multiply on count RGBA8 texels (a multiple of 8), mask optional: blend_bytes's bytes. */
 void blend_multiply_avx2(const uint8_t *a, const uint8_t *b, const float *mask, float opacity,
 			 uint8_t *o, size_t count);

@@ -62,7 +62,7 @@ static int blend_create(struct node *n, struct node_parse *p)
 	b->opacity = (float)opacity;
 	b->weight = (float)weight;
 	for (int a = 0; a < 256; a++)
-		b->kb[a] = (uint32_t)(a * b->opacity * (65536.0f / 255) + 0.5f);
+		b->kb[a] = blend_over_kb((uint8_t)a, b->opacity);
 	/* Deferring b pays only where skipping it saves costly work that a and the mask do not
 	 * need anyway; elsewhere it would only make b's inputs later, when the cache may have
 	 * let them go (measured: Earth's colour blends over its dunes and canopy made those
@@ -108,15 +108,10 @@ static void over_color(const struct blend *bl, const uint8_t *a, const uint8_t *
 	for (size_t i = 0; i < count; i++) {
 		const uint8_t *x = a + 4 * i, *y = b + 4 * i;
 		uint8_t *d = o + 4 * i;
-		if (x[3] != 255) {
+		if (x[3] != 255)
 			blend_over_general(x, y, bl->opacity, d);
-			continue;
-		}
-		uint32_t kb = bl->kb[y[3]], ka = 65536 - kb;
-		d[0] = (uint8_t)((x[0] * ka + y[0] * kb + 32768) >> 16);
-		d[1] = (uint8_t)((x[1] * ka + y[1] * kb + 32768) >> 16);
-		d[2] = (uint8_t)((x[2] * ka + y[2] * kb + 32768) >> 16);
-		d[3] = 255;
+		else
+			blend_over_opaque(x, y, bl->kb[y[3]], d);
 	}
 }
 
@@ -129,13 +124,8 @@ static void blend_bytes(const struct blend *bl, const uint8_t *a, const uint8_t 
 		uint8_t *d = o + ch * i;
 		float w = weight_at(mask, i, bl->opacity);
 		if (bl->mode == BLEND_OVER && ch == 4 && x[3] == 255) {
-			/* opaque base (the usual case): a lerp in 16-bit fixed point, no division */
-			uint32_t kb = mask ? (uint32_t)(y[3] * w * (65536.0f / 255) + 0.5f)
-					   : bl->kb[y[3]];
-			uint32_t ka = 65536 - kb;
-			for (int c = 0; c < 3; c++)
-				d[c] = (uint8_t)((x[c] * ka + y[c] * kb + 32768) >> 16);
-			d[3] = 255;
+			/* opaque base (the usual case) */
+			blend_over_opaque(x, y, mask ? blend_over_kb(y[3], w) : bl->kb[y[3]], d);
 		} else if (bl->mode == BLEND_OVER && ch == 4) {
 			blend_over_general(x, y, w, d);
 		} else if (bl->mode == BLEND_MULTIPLY) {

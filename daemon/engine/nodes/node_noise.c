@@ -188,20 +188,25 @@ static int noise_generate(const struct node *n, struct gen_ctx *g, const struct 
 					     src ? tile_f32(src) : NULL, im->amplitude, im->offset,
 					     tile_f32(out));
 	}
+	/* No octave at this level (all finer than its texels) on no input or a uniform one: every
+	 * texel holds input + (offset + amplitude · 0), as noise_tile_scaled would write it, so the
+	 * tile is the shared uniform one, summarized, and the nodes after it can tell (a blend
+	 * adding it, a ramp over it). */
+	if ((!src || src->uniform) && grid_key_valid(k) &&
+	    noise_coarse_octaves(&im->nz, k->lx, k->ly, T) +
+			    noise_band_full(&im->nz, k->lx, k->ly, T, 0, INFINITY) ==
+		    0) {
+		float v = im->offset + im->amplitude * 0.0f;
+		if (src)
+			v = tile_f32(src)[0] + v;
+		tile_fill_uniform(out, &v);
+		return 0;
+	}
 	/* out = input + (offset + amplitude · noise), each row while it is in cache */
 	int rc = noise_tile_scaled(&im->nz, k, T, NOISE_ISA_AUTO,
 				   gen_scratch(g, noise_scratch_size(T)), src ? tile_f32(src) : NULL,
 				   im->amplitude, im->offset, tile_f32(out));
-	if (rc < 0)
-		return rc;
-	/* No octave at this level (all finer than its texels) on no input or a uniform one: every
-	 * texel holds the same value, so the tile is the shared uniform one, summarized, and the
-	 * nodes after it can tell (a blend adding it, a ramp over it). */
-	if (rc == 0 && (!src || src->uniform)) {
-		float v = tile_f32(out)[0];
-		tile_fill_uniform(out, &v);
-	}
-	return 0;
+	return rc < 0 ? rc : 0;
 }
 
 /* key k on the input (if any), then the carry at key k */
