@@ -48,7 +48,7 @@
 /* 256² tiles, cheap to make: one octave of noise and a colour ramp (two 256 KiB layers). */
 static const char planet[] =
 	"[planet]\nname = big\nbody = sphere\nradius = 1000000\ntile_size = 256\nmax_level = 12\n"
-	"[node base]\ntype = noise\nseed = 5\noctaves = 1\nwavelength = 300000\namplitude = 500\n"
+	"[node base]\ntype = noise\nseed = 5\noctaves = 3\nwavelength = 300000\namplitude = 500\n"
 	"[node tint]\ntype = ramp\ninput = base\nstops = -500 0 0 255, 500 255 255 255\n"
 	"[layer height]\nnode = base\nformat = f32\n"
 	"[layer color]\nnode = tint\nformat = rgba8\n";
@@ -381,11 +381,11 @@ static void test_paused_session_resumes(void **state)
 	cl_open(obs);
 	struct cl *c = cl_connect(&E, 4096);
 	uint32_t pid = cl_open(c);
-	/* 2 × 576 tiles at level 8 and 2 × 4 at level 6 (coarser, wanted last). Enough that
+	/* 2 × 1024 tiles at level 8 and 2 × 4 at level 6 (coarser, wanted last). Enough that
 	 * making them all takes longer than pausing: on huge pages two workers made 136 such
 	 * tiles within one 100 ms poll, and a session whose tiles are all made has nothing to
-	 * pause for. */
-	enum { W8 = 24, N = 2 * W8 * W8 + 8 };
+	 * pause for (with the ramp twice as fast, 2 × 576 were once all made first, 1 run in 7). */
+	enum { W8 = 32, N = 2 * W8 * W8 + 8 };
 	struct proto_want_entry e[N];
 	uint32_t n = 0;
 	for (int ly = 8; ly >= 6; ly -= 2) {
