@@ -55,6 +55,7 @@ struct victim {
 	float keep;	/* what keeping it is worth: its cost, discounted by its distance */
 	uint32_t size;	/* T */
 	bool layer;
+	bool lineage; /* tile.h: its node's finer tiles are built from it */
 };
 
 struct cache *cache_create(size_t budget_bytes)
@@ -256,8 +257,22 @@ static void rank(struct victim *v, size_t n, const struct cache_focus *foci, siz
 	r->foci = foci;
 	r->nfoci = nf;
 	r->T = T;
+	/* A lineage tile (a from_parent noise node's carry) is worth a layer tile: each finer
+	 * tile of its node below it is built from it, so one evicted near a focus is made again
+	 * for every finer tile made after (its own cost left the chain out). */
+	double layer_ms = 0;
+	size_t nlayer = 0;
 	for (size_t i = 0; i < n; i++)
-		v[i].keep = keep_worth(v[i].cost, v[i].layer, nf ? focus_distance(r, &v[i]) : 0);
+		if (v[i].layer) {
+			layer_ms += v[i].cost;
+			nlayer++;
+		}
+	float lineage_ms = nlayer ? (float)(layer_ms / (double)nlayer) : 0;
+	for (size_t i = 0; i < n; i++) {
+		bool as_layer = v[i].layer || v[i].lineage;
+		float cost = v[i].lineage && lineage_ms > v[i].cost ? lineage_ms : v[i].cost;
+		v[i].keep = keep_worth(cost, as_layer, nf ? focus_distance(r, &v[i]) : 0);
+	}
 	qsort(v, n, sizeof *v, cmp_victim);
 	for (int y = 0; y < NLY; y++)
 		for (int x = 0; x < NLX; x++)
@@ -295,7 +310,8 @@ void cache_prune(struct cache *c, size_t target)
 			for (struct centry *e = c->buckets[b]; e; e = e->next)
 				v[n++] = (struct victim){ .key = e->t->key, .hash = e->hash,
 							  .stamp = e->stamp, .cost = e->t->cost_ms,
-							  .size = e->t->size, .layer = e->t->layer };
+							  .size = e->t->size, .layer = e->t->layer,
+							  .lineage = e->t->lineage };
 		uint64_t hold = clock_now_ns() - t0;
 		xmutex_unlock(&c->mu);
 

@@ -5,7 +5,9 @@
  * against what a tile cost (tile.h cost_ms, layer): intermediate tiles that are cheap to
  * make again go before the layer tiles viewers ask for (cache.c keep_worth), since a rich
  * planet makes ~30 intermediate tiles per layer tile and a fast flight's windows and rings
- * hold more of them than the budget.
+ * hold more of them than the budget. Lineage tiles (a from_parent noise node's carries, from
+ * which every finer tile of the node is built) are kept as layer tiles, at no less than the
+ * cached layer tiles' mean cost.
  *
  * Each entry remembers when it was last used (monotonic time), which listings report as age.
  *

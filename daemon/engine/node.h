@@ -109,6 +109,10 @@ struct node_type {
 	/* Tiles of this type cost far more than a per-texel filter's (noise, craters): worth
 	 * leaving out where a lazy input allows (node_exclusive_costly). */
 	bool costly;
+	/* Its tiles are read by its own tiles one level finer (a from_parent noise node's carry):
+	 * a tile is the start of every finer tile's chain below it, and the cache keeps it as it
+	 * keeps layer tiles (cache.h). */
+	bool lineage;
 };
 
 #define NODE_GEN_BUCKETS 12 /* 0.25, 0.5, 1, … 256 ms, and longer */

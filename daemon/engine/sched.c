@@ -638,6 +638,7 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 			tile_summarize(t); /* no-op when generate() set it */
 		t->cost_ms = chain_cost_ms(j, dt);
 		t->layer = store_keeps(n); /* one walk of the planet's layers, read below */
+		t->lineage = n->type->lineage;
 		bool bulk = cls == SCHED_BULK, stored = false;
 		if (s->store && t->layer)
 			/* Write-behind: never waits; a full queue drops it. */

@@ -39,6 +39,7 @@ struct tile {
 	 * Set once before the tile is shared; the cache evicts cheap tiles first (cache.h). */
 	float cost_ms;
 	bool layer; /* a planet layer's tile (what viewers ask for), not an intermediate one */
+	bool lineage; /* its node's finer tiles are built from it (node_type.lineage) */
 	/* Set by generate(): its node's lazy inputs were not needed for it (a blend's mask 0 on
 	 * the whole tile), whether they were made or not; the scheduler's guess for its children
 	 * (jobtab's skip memory). */

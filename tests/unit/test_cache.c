@@ -346,6 +346,77 @@ static void cheap_intermediates_go_first(void **state)
 	cache_destroy(c);
 }
 
+/* Lineage tiles (tile.h lineage: a from_parent noise node's carry, from which every finer tile
+ * of its node is built) are kept as layer tiles are, at the layer tiles' mean cost when theirs
+ * is less: in a budget that holds the window's layer and carry tiles but not its intermediate
+ * ones nor the ring's layer tiles, the carries stay — though each cost less to make (0.3 ms)
+ * than any intermediate tile (2 ms), and were inserted first — and the others go (at its own
+ * cost a carry in the window would go before a layer tile in the ring). Before 5 December a carry
+ * counted its own 0.3 ms and went first: the procedural planet made its coarse carries up to
+ * 60 times in one 8 s flight (bench_keepup). */
+static void lineage_kept_as_layers(void **state)
+{
+	(void)state;
+	const double lon = -150.0, lat = 0.5;
+	const int lx = 7, ly = 6;
+	struct cache *c = cache_create(0);
+	struct cache_focus f = { lon, lat };
+	cache_set_foci(c, &f, 1, T);
+	struct grid_quad q;
+	window(lx, ly, lon, lat, &q);
+	size_t nwin = 0;
+	for (int pass = 0; pass < 3; pass++) /* carries, then layer tiles, then intermediates */
+		for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+			for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
+				struct tile_key k = key(6 + (uint64_t)pass, lx, ly, x, y);
+				uint32_t d = grid_quad_distance(&q, &k);
+				if (d > (pass == 1 ? 1u : 0u)) /* layer tiles in the ring too */
+					continue;
+				struct tile *t = make_tile(&k);
+				t->cost_ms = pass == 0 ? 0.3f : pass == 1 ? 6.0f : 2.0f;
+				t->lineage = pass == 0;
+				t->layer = pass == 1;
+				cache_insert(c, t);
+				tile_unref(t);
+				nwin += pass == 0;
+			}
+	assert_true(nwin > 0);
+	cache_prune(c, 2 * nwin * TILE_BYTES);
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, 2 * nwin);
+	for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+		for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
+			struct tile_key k = key(6, lx, ly, x, y);
+			if (grid_quad_distance(&q, &k) != 0)
+				continue;
+			assert_true(cache_contains(c, &k)); /* the carry */
+			k.node = 7;
+			assert_true(cache_contains(c, &k)); /* the layer tile */
+			k.node = 8;
+			assert_false(cache_contains(c, &k)); /* the intermediate */
+		}
+	for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
+		for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
+			struct tile_key k = key(7, lx, ly, x, y);
+			if (grid_quad_distance(&q, &k) == 1)
+				assert_false(cache_contains(c, &k)); /* the ring's layer tiles */
+		}
+	/* With no layer tile cached a carry counts its own cost, as a layer tile would (×
+	 * LAYER_WEIGHT): it still stays before intermediates dearer than itself. */
+	cache_drop_node(c, 7);
+	struct tile_key ki = { .node = 8, .lx = lx, .ly = ly, .x = q.tx0, .y = q.ty0 };
+	struct tile *t = make_tile(&ki);
+	t->cost_ms = 2.0f;
+	cache_insert(c, t);
+	tile_unref(t);
+	cache_prune(c, nwin * TILE_BYTES);
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, nwin);
+	assert_false(cache_contains(c, &ki));
+	cache_destroy(c);
+}
+
 static void budget_prune_uses_foci(void **state)
 {
 	(void)state;
@@ -538,6 +609,7 @@ int main(void)
 		cmocka_unit_test(prune_keeps_quad_and_ring),
 		cmocka_unit_test(budget_prune_uses_foci),
 		cmocka_unit_test(cheap_intermediates_go_first),
+		cmocka_unit_test(lineage_kept_as_layers),
 		cmocka_unit_test(evicted_tile_stays_readable),
 		cmocka_unit_test(drop_node_and_foreach),
 		cmocka_unit_test(last_use_reported),

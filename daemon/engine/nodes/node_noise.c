@@ -262,6 +262,7 @@ static const struct node_type node_type_noise_carry = {
 	.destroy = NULL,
 	.deps = carry_deps,
 	.generate = carry_generate,
+	.lineage = true,
 };
 
 const struct node_type node_type_noise = {
