@@ -273,6 +273,16 @@ static void prune_keeps_quad_and_ring(void **state)
 	cache_destroy(c);
 }
 
+/* An unbounded cache with one focus at (lon, lat), and the focus's window at (lx, ly). */
+static struct cache *focused(double lon, double lat, int lx, int ly, struct grid_quad *q)
+{
+	struct cache *c = cache_create(0);
+	struct cache_focus f = { lon, lat };
+	cache_set_foci(c, &f, 1, T);
+	window(lx, ly, lon, lat, q);
+	return c;
+}
+
 /* Costs (tile.h cost_ms, layer): in a budget smaller than the tiles around the focus, the
  * cheap intermediate tiles of the window go before the layer tiles of its ring (what viewers
  * ask for again), a dear intermediate tile stays beside them, and a layer tile far from the
@@ -280,13 +290,9 @@ static void prune_keeps_quad_and_ring(void **state)
 static void cheap_intermediates_go_first(void **state)
 {
 	(void)state;
-	const double lon = 12.5, lat = 41.9;
 	const int lx = 7, ly = 6;
-	struct cache *c = cache_create(0);
-	struct cache_focus f = { lon, lat };
-	cache_set_foci(c, &f, 1, T);
 	struct grid_quad q;
-	window(lx, ly, lon, lat, &q);
+	struct cache *c = focused(12.5, 41.9, lx, ly, &q);
 	size_t nlayer = 0, ncheap = 0;
 	struct tile_key dear = { 0 }, far = { 0 };
 	bool have_dear = false, have_far = false;
@@ -357,13 +363,9 @@ static void cheap_intermediates_go_first(void **state)
 static void lineage_kept_as_layers(void **state)
 {
 	(void)state;
-	const double lon = -150.0, lat = 0.5;
 	const int lx = 7, ly = 6;
-	struct cache *c = cache_create(0);
-	struct cache_focus f = { lon, lat };
-	cache_set_foci(c, &f, 1, T);
 	struct grid_quad q;
-	window(lx, ly, lon, lat, &q);
+	struct cache *c = focused(-150.0, 0.5, lx, ly, &q);
 	size_t nwin = 0;
 	for (int pass = 0; pass < 3; pass++) /* carries, then layer tiles, then intermediates */
 		for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
