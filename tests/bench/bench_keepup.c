@@ -87,7 +87,7 @@ static const struct {
 /* The route: a great circle from (start_lat, start_lon) heading `heading` (KEEPUP_ROUTE, set
  * for each planet by set_route). */
 static double start_lat = 0.0, start_lon = 20.0, heading = 80.0;
-static const char *route_name = "equator";
+static const char *route_name = "equator", *route_where = "";
 
 /* Where each route starts on each planet: over land, where the planet's whole relief and
  * colour stack is made (a flight over open sea gives mostly uniform tiles and flatters the
@@ -113,40 +113,29 @@ static const struct route {
 	{ "pole", NULL, -88.0, 0.0, 180.0, "Antarctica and the south pole" },
 };
 
+/* The route named `name` for planet file `planet` (NULL: the first of that name), or NULL. */
+static const struct route *find_route(const char *name, const char *planet)
+{
+	for (size_t i = 0; i < sizeof routes / sizeof routes[0]; i++)
+		if (strcmp(name, routes[i].name) == 0 &&
+		    (!routes[i].planet || (planet && strstr(planet, routes[i].planet))))
+			return &routes[i];
+	return NULL;
+}
+
 /* KEEPUP_ROUTE's route for planet file `planet` into the globals. Returns false on an
  * unknown name. */
 static bool set_route(const char *name, const char *planet)
 {
-	const struct route *r = NULL;
-	for (size_t i = 0; i < sizeof routes / sizeof routes[0]; i++)
-		if (strcmp(name, routes[i].name) == 0 &&
-		    (!routes[i].planet || (planet && strstr(planet, routes[i].planet)))) {
-			r = &routes[i];
-			break;
-		}
+	const struct route *r = find_route(name, planet);
 	if (!r)
 		return false;
 	start_lat = r->lat;
 	start_lon = r->lon;
 	heading = r->heading;
 	route_name = r->name;
+	route_where = r->where;
 	return true;
-}
-
-/* The route's start as text: "from (0.0°, -150.0°) heading 80° over the western continent". */
-static const char *route_text(const char *planet)
-{
-	static char buf[160];
-	const char *where = "";
-	for (size_t i = 0; i < sizeof routes / sizeof routes[0]; i++)
-		if (strcmp(route_name, routes[i].name) == 0 &&
-		    (!routes[i].planet || (planet && strstr(planet, routes[i].planet)))) {
-			where = routes[i].where;
-			break;
-		}
-	snprintf(buf, sizeof buf, "from (%.1f°, %.1f°) heading %.0f° over %s", start_lat,
-		 start_lon, heading, where);
-	return buf;
 }
 
 static void sleep_until(double t)
@@ -984,10 +973,10 @@ struct config {
 static void print_table(const struct config *cf, double trial_s, int confirm_n, double confirm_s,
 			double ramp_s)
 {
-	printf("keepup/%s: route %s %s, 60 Hz, full detail >= 95%% of %.1f s flights (searched), then "
+	printf("keepup/%s: route %s, 60 Hz, full detail >= 95%% of %.1f s flights (searched), then "
 	       "the median of %d flights of %.1f s at the answer (confirmed), each after %.1f s "
 	       "from rest to its velocity (not counted), 1280x720 levels, %.0f s in all\n",
-	       cf->label, route_name, route_text(cf->planet), trial_s, confirm_n, confirm_s, ramp_s, cf->seconds);
+	       cf->label, cf->route, trial_s, confirm_n, confirm_s, ramp_s, cf->seconds);
 	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s %8s  %s\n", "altitude", "seed", "ours",
 	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "gen", "limiting stage");
 	for (int i = 0; i < NALT; i++) {
@@ -1296,8 +1285,9 @@ int main(int argc, char **argv)
 			search(&x, cf[k].planet, cf[k].mode, i, full, &cf[k].rows[i]);
 		}
 		cf[k].seconds = clock_now_s() - t0;
-		snprintf(cf[k].route, sizeof cf[k].route, "%s %s", route_name,
-			 route_text(cf[k].planet));
+		snprintf(cf[k].route, sizeof cf[k].route,
+			 "%s from (%.1f°, %.1f°) heading %.0f° over %s", route_name, start_lat,
+			 start_lon, heading, route_where);
 		print_table(&cf[k], x.trial_s, x.confirm, x.confirm_s, x.ramp_s);
 		fflush(stdout);
 	}
