@@ -7,7 +7,8 @@
  * planet makes ~30 intermediate tiles per layer tile and a fast flight's windows and rings
  * hold more of them than the budget. Lineage tiles (a from_parent noise node's carries, from
  * which every finer tile of the node is built) are kept as layer tiles, at no less than the
- * cached layer tiles' mean cost.
+ * cached layer tiles' mean cost, within one tile of a focus's window at their level (their
+ * finer consumers' windows lie inside it); farther out, at their own cost.
  *
  * Each entry remembers when it was last used (monotonic time), which listings report as age.
  *
