@@ -12,7 +12,7 @@
 
 #define DEG (M_PI / 180.0)
 
-static const double horizons[] = { 1.0, 2.0, LOOKAHEAD_REACH_S };
+const double lookahead_horizons[LOOKAHEAD_NHORIZONS] = { 1.0, 2.0, LOOKAHEAD_REACH_S };
 
 /* A set of tile addresses (open addressing, linear probing), sized once. */
 struct kset {
@@ -119,9 +119,9 @@ size_t lookahead_wants(const struct lookahead_motion *m, const struct proto_want
 		kset_add(&seen, &w[i]);
 	double v = hypot(m->ve, m->vn);
 	uint32_t T = m->tile_size;
-	for (size_t h = 0; h < sizeof horizons / sizeof horizons[0] && k < cap; h++) {
+	for (size_t h = 0; h < LOOKAHEAD_NHORIZONS && k < cap; h++) {
 		double lon, lat;
-		move(m, v * horizons[h], &lon, &lat);
+		move(m, v * lookahead_horizons[h], &lon, &lat);
 		for (int ly = 0; ly <= GRID_MAX_LEVEL && k < cap; ly++) {
 			if (lv[ly].lx < 0)
 				continue;

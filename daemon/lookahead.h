@@ -47,6 +47,11 @@ size_t lookahead_wants(const struct lookahead_motion *m, const struct proto_want
 /* How many seconds ahead the look-ahead reaches at most (its last horizon). */
 #define LOOKAHEAD_REACH_S 4.0
 
+/* The look-ahead's horizons, seconds ahead, nearest first (the last is LOOKAHEAD_REACH_S):
+ * the places whose windows it asks for, which the cache keeps as foci (server.c). */
+#define LOOKAHEAD_NHORIZONS 3
+extern const double lookahead_horizons[LOOKAHEAD_NHORIZONS];
+
 /* Where m's focus is after t seconds at its velocity, along the great circle it moves on
  * (the place the look-ahead's windows centre on): *lon, *lat in degrees. A still focus stays. */
 void lookahead_point(const struct lookahead_motion *m, double t, double *lon, double *lat);

@@ -302,7 +302,7 @@ static void sess_detach(void *ud, struct session_link *l)
 }
 
 /* Recomputes the cache's pruning foci from every session's focus and velocity: where it is,
- * and where it will be 2 and 4 s on (the look-ahead's reach, lookahead.h), so that the tiles
+ * and where it will be 1, 2 and 4 s on (the look-ahead's horizons, lookahead.h), so that the tiles
  * generated for the path ahead are the last to go and those left behind the first. Every
  * session's own focus comes first; the foci ahead fill what room is left. */
 static void update_foci(void *ud)
@@ -320,10 +320,11 @@ static void update_foci(void *ud)
 			moving[nm++] = (struct lookahead_motion){ .lon = lon, .lat = lat, .ve = v[0],
 								  .vn = v[1], .radius = r };
 	}
-	static const double ahead_s[] = { LOOKAHEAD_REACH_S / 2, LOOKAHEAD_REACH_S };
+	/* where the look-ahead's windows are (every horizon: the tiles it makes for 1 s on are
+	 * kept as those for 2 and 4 s) */
 	for (size_t i = 0; i < nm; i++)
-		for (size_t h = 0; h < sizeof ahead_s / sizeof ahead_s[0] && n < MAX_FOCI; h++) {
-			lookahead_point(&moving[i], ahead_s[h], &f[n].lon, &f[n].lat);
+		for (size_t h = 0; h < LOOKAHEAD_NHORIZONS && n < MAX_FOCI; h++) {
+			lookahead_point(&moving[i], lookahead_horizons[h], &f[n].lon, &f[n].lat);
 			n++;
 		}
 	uint32_t T = srv->planets && srv->planets->n ? srv->planets->planets[0]->tile_size : 256;
