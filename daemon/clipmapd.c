@@ -7,7 +7,10 @@
 #include <errno.h>
 #include <fcntl.h>
 #include <malloc.h>
+#include <pthread.h>
+#include <sched.h>
 #include <signal.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -21,6 +24,7 @@
 #include "common/errbuf.h"
 #include "common/img.h"
 #include "common/log.h"
+#include "common/xthread.h"
 #include "engine/cache.h"
 #include "engine/fault.h"
 #include "engine/planets.h"
@@ -48,6 +52,12 @@ struct daemon {
 	bool store_failing;	       /* its writes fail (logged once) */
 	struct http *http;	       /* the HTTP endpoint, NULL without [http] listen */
 	uint64_t metrics_ns;	       /* when its /metrics text was last gathered */
+	struct prefault {	       /* [engine] prefault: the tile pool faulted in at start */
+		pthread_t th;
+		bool started;
+		_Atomic bool stop;
+		size_t tile_bytes, bytes;
+	} pf;
 };
 
 static void usage(FILE *f)
@@ -97,6 +107,7 @@ static void warn_restart_keys(const struct conf *c, const struct conf *nc)
 		{ c->require_token == nc->require_token, "[listen] require_token" },
 		{ c->workers == nc->workers, "[engine] workers" },
 		{ c->worker_nice == nc->worker_nice, "[engine] worker_nice" },
+		{ c->prefault == nc->prefault, "[engine] prefault" },
 		{ c->cache_bytes == nc->cache_bytes, "[engine] cache_mb" },
 		{ c->image_cache_mb == nc->image_cache_mb, "[engine] image_cache_mb" },
 		{ c->compress == nc->compress, "[session] compress" },
@@ -462,6 +473,46 @@ static void keep_tiles_in_heap(size_t cache_bytes)
 	tilemem_keep(cache_bytes / 4 + ((size_t)64 << 20));
 }
 
+/* The tile pool faulted in up to the cache's budget, at idle priority: the tiles a
+ * restarted daemon loads from its store, or makes, in its first seconds then land in memory
+ * the VM already backs instead of faulting it in on the workers (tilemem_prefault). One class:
+ * the largest planets' four-byte tiles (heights, colour). */
+static void *prefault_main(void *arg)
+{
+	struct prefault *pf = arg;
+	pthread_setname_np(pthread_self(), "prefault"); /* for top -H, perf */
+	struct sched_param sp = { 0 };
+	(void)pthread_setschedparam(pthread_self(), SCHED_IDLE, &sp); /* else it competes at 0 */
+	uint64_t t0 = clock_now_ns();
+	size_t done = tilemem_prefault(pf->tile_bytes, pf->bytes, &pf->stop);
+	log_msg(LOG_DEBUG, "tile pool: %zu MiB faulted in in %.2f s", done >> 20,
+		(double)(clock_now_ns() - t0) / 1e9);
+	return NULL;
+}
+
+static void start_prefault(struct daemon *d, const struct planet_set *ps)
+{
+	uint32_t T = 0;
+	for (size_t i = 0; i < ps->n; i++)
+		if (ps->planets[i]->tile_size > T)
+			T = ps->planets[i]->tile_size;
+	if (!d->conf.prefault || T == 0)
+		return;
+	d->pf.tile_bytes = (size_t)T * T * 4;
+	d->pf.bytes = d->conf.cache_bytes;
+	atomic_store(&d->pf.stop, false);
+	d->pf.started = xthread_create(&d->pf.th, prefault_main, &d->pf) == 0;
+}
+
+static void stop_prefault(struct daemon *d)
+{
+	if (!d->pf.started)
+		return;
+	atomic_store(&d->pf.stop, true); /* it stops after the slab it is on */
+	xthread_join(d->pf.th);
+	d->pf.started = false;
+}
+
 static void log_ready(const struct daemon *d, struct sched *sched)
 {
 	const struct listener *ls;
@@ -603,6 +654,7 @@ static int serve(struct daemon *d, struct planet_set *ps)
 		store_destroy(d->store);
 		return 2;
 	}
+	start_prefault(d, ps);
 	struct cache *cache = cache_create(d->conf.cache_bytes);
 	struct sched *sched = sched_create(&(struct sched_desc){
 		.cache = cache, .store = d->store, .remote = d->remote, .workers = d->conf.workers,
@@ -610,6 +662,7 @@ static int serve(struct daemon *d, struct planet_set *ps)
 	rc = server_create(&d->conf, sched, cache, ps, &d->srv, err);
 	if (rc) {
 		log_msg(LOG_ERROR, "%s", err);
+		stop_prefault(d);
 		planet_set_unref(ps);
 		sched_destroy(sched);
 		cache_destroy(cache);
@@ -637,6 +690,7 @@ out:
 	 * (one madvise and TLB shootdown a buffer) made a full cache's exit take 0.6-0.8 s more
 	 * (14 000-24 000 tiles); the process's exit returns them all at once. */
 	tilemem_keep(SIZE_MAX);
+	stop_prefault(d);
 	http_destroy(d->http); /* before the scheduler its requests use */
 	d->http = NULL;
 	server_destroy(d->srv);

@@ -44,6 +44,7 @@ static const struct row rows[] = {
 	{ "listen", "frame_timeout", K_INT, 1, 3600, NULL },
 	{ "engine", "planets", K_PATH, 0, 0, NULL },
 	{ "engine", "strict_planets", K_BOOL, 0, 1, NULL },
+	{ "engine", "prefault", K_BOOL, 0, 1, NULL },
 	{ "engine", "workers", K_INT, 0, 1024, NULL },
 	{ "engine", "worker_nice", K_INT, 0, 19, NULL },
 	{ "engine", "cache_mb", K_SIZE_MB, 16, 1L << 24, NULL },
@@ -175,6 +176,7 @@ static void defaults(struct conf *c)
 	c->frame_timeout = 30;
 	c->planets_dir = xstrdup("/etc/clipmap/planets");
 	c->worker_nice = 5;
+	c->prefault = true;
 	c->cache_bytes = (size_t)1024 << 20;
 	c->image_cache_mb = 256; /* PLANET_IMAGE_CACHE_MB (test_conf checks they agree) */
 	c->max_want = PROTO_MAX_WANT;
@@ -260,6 +262,7 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 	case K_BOOL: {
 		bool *dst = strcmp(r->key, "open") == 0	 ? &c->http_open
 			    : strcmp(r->key, "bbr") == 0 ? &c->bbr
+			    : strcmp(r->key, "prefault") == 0 ? &c->prefault
 							 : &c->strict_planets;
 		if (strcmp(v, "true") == 0 || strcmp(v, "yes") == 0 || strcmp(v, "1") == 0)
 			*dst = true;

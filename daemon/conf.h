@@ -46,6 +46,7 @@ struct conf {
 	/* [engine] */
 	char *planets_dir;
 	bool strict_planets; /* a bad planet file stops the daemon (else it is skipped) */
+	bool prefault;	     /* fault the tile pool in up to cache_mb at start (clipmapd.c) */
 	int workers;	 /* 0: one per CPU */
 	int worker_nice; /* niceness added to workers */
 	size_t cache_bytes;

@@ -621,6 +621,7 @@ static size_t fill_stats(void *ud, struct proto_stat *items, char (*keys)[128], 
 	stat_u(&b, "memory.pool.in_use", tm.in_use);
 	stat_u(&b, "memory.pool.free_warm", tm.free_warm);
 	stat_u(&b, "memory.pool.released", tm.released);
+	stat_u(&b, "memory.pool.prefault_left", tm.prefault_left);
 	stat_u(&b, "prefetch.jobs", njobs);
 	stat_links(&b, srv);
 	stat_nodes(&b, srv->planets);

@@ -6,6 +6,7 @@
 
 #include <errno.h>
 #include <pthread.h>
+#include <stdatomic.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -56,6 +57,15 @@ static struct cls classes[MAX_CLASSES];
 static struct slab *slabs;
 static size_t nslabs, capslabs;
 static size_t keep_bytes = SIZE_MAX, warm_bytes, cold_bytes, mapped_bytes, used_bytes;
+/* tilemem_prefault's budget: free buffers stay resident while in use + free is within it */
+static size_t floor_bytes;
+static bool prefaulting; /* a tilemem_prefault runs */
+
+/* Whether a free buffer of sz more bytes stays resident. Needs mu. */
+static bool keeps(size_t sz)
+{
+	return warm_bytes + sz <= keep_bytes || used_bytes + warm_bytes + sz <= floor_bytes;
+}
 
 static size_t round_page(size_t n) { return (n + PAGE - 1) & ~(size_t)(PAGE - 1); }
 
@@ -220,7 +230,7 @@ void tilemem_free(void *p, size_t n)
 		struct cls *c = class_of(sz, false);
 		if (c) {
 			used_bytes -= sz;
-			if (warm_bytes + sz <= keep_bytes) {
+			if (keeps(sz)) {
 				push(&c->warm, p);
 				warm_bytes += sz;
 				pthread_mutex_unlock(&mu);
@@ -246,9 +256,10 @@ void tilemem_keep(size_t bytes)
 	pthread_mutex_lock(&mu);
 	keep_bytes = bytes;
 	/* Release warm buffers beyond the new bound now (a cache shrunk by a reload). */
-	for (int i = 0; i < MAX_CLASSES && warm_bytes > keep_bytes; i++) {
+	for (int i = 0; i < MAX_CLASSES && warm_bytes > keep_bytes && used_bytes + warm_bytes > floor_bytes;
+	     i++) {
 		struct cls *c = &classes[i];
-		while (c->warm.n && warm_bytes > keep_bytes) {
+		while (c->warm.n && warm_bytes > keep_bytes && used_bytes + warm_bytes > floor_bytes) {
 			void *p = c->warm.p[--c->warm.n];
 			size_t sb = 0;
 			char *slab = mark_small(p, &sb);
@@ -261,10 +272,48 @@ void tilemem_keep(size_t bytes)
 	pthread_mutex_unlock(&mu);
 }
 
+size_t tilemem_prefault(size_t n, size_t bytes, const _Atomic bool *stop)
+{
+	size_t sz = round_page(n), done = 0;
+	if (!POOLED || n < POOL_MIN)
+		return 0;
+	pthread_mutex_lock(&mu);
+	floor_bytes = bytes;
+	prefaulting = true;
+	pthread_mutex_unlock(&mu);
+	for (;;) {
+		pthread_mutex_lock(&mu);
+		struct cls *c = class_of(sz, true);
+		bool more = c && mapped_bytes < bytes && !(stop && atomic_load(stop));
+		prefaulting = more;
+		pthread_mutex_unlock(&mu);
+		if (!more)
+			return done;
+		size_t sb;
+		char *a = map_slab(sz, &sb);
+		if (!a) {
+			pthread_mutex_lock(&mu);
+			prefaulting = false;
+			pthread_mutex_unlock(&mu);
+			return done;
+		}
+		/* one write per 4 KiB page (a whole huge page faults in on its first) */
+		for (size_t o = 0; o < sb; o += PAGE)
+			((volatile char *)a)[o] = 0;
+		pthread_mutex_lock(&mu);
+		add_slab(c, a, sb);
+		pthread_mutex_unlock(&mu);
+		done += sb;
+	}
+}
+
 void tilemem_stats(struct tilemem_stats *out)
 {
 	pthread_mutex_lock(&mu);
 	*out = (struct tilemem_stats){ .mapped = mapped_bytes, .in_use = used_bytes,
-				       .free_warm = warm_bytes, .released = cold_bytes };
+				       .free_warm = warm_bytes, .released = cold_bytes,
+				       .prefault_left = prefaulting && floor_bytes > mapped_bytes
+							       ? floor_bytes - mapped_bytes
+							       : 0 };
 	pthread_mutex_unlock(&mu);
 }

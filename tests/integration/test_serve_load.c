@@ -9,7 +9,9 @@
  *   promptly (the loop does not wait for the scheduler's manager per closed session);
  * - 100 sessions with want-sets being generated, then SIGTERM: the daemon is gone within the
  *   bound below (the manager is not waited for once per closed session);
- * - the loop-iteration histogram (loop.*) is in STATS.
+ * - the loop-iteration histogram (loop.*) is in STATS;
+ * - [engine] prefault: cache_mb of tile memory resident within seconds of start (RSS, the
+ *   pool's STATS), and nothing mapped at idle with it off.
  * Timing bounds are generous for a loaded machine; the figures are printed.
  */
 #include <stdarg.h>
@@ -616,6 +618,53 @@ static void test_loop_histogram(void **state)
 	cl_free(c);
 }
 
+/* [engine] prefault (on by default): within seconds of start, before any tile is asked for,
+ * the tile pool holds cache_mb of buffers, resident (the daemon's RSS), free for the first
+ * tiles; memory.pool.prefault_left counts down to 0. */
+static void test_prefault_at_start(void **state)
+{
+	(void)state;
+	static const char *const set[] = { "engine.cache_mb = 128", "engine.workers = 1", NULL };
+	start("clipmapd-load-prefault", set);
+	struct cl *c = cl_connect(&E, 0);
+	cl_open(c);
+	double left = -1;
+	for (int i = 0; i < 200 && left != 0; i++) {
+		left = cl_stat(c, "memory.pool.prefault_left");
+		if (left != 0)
+			usleep(100000);
+	}
+	double mapped = cl_stat(c, "memory.pool.mapped"), warm = cl_stat(c, "memory.pool.free_warm");
+	double r = rss(E.daemon);
+	print_message("prefault: %.0f MiB mapped, %.0f MiB free and resident, RSS %.0f MiB\n",
+		      mapped / MIB, warm / MIB, r / MIB);
+	assert_true(left == 0);
+	if (mapped > 0) { /* 0: the pool is bypassed (AddressSanitizer) */
+		assert_true(mapped >= 128 * MIB);
+		assert_true(warm >= 120 * MIB);
+		assert_true(r >= 128 * MIB);
+		assert_int_equal(cl_stat(c, "memory.pool.in_use"), 0);
+	}
+	cl_free(c);
+}
+
+/* prefault = false: nothing is mapped until tiles are made. */
+static void test_prefault_off(void **state)
+{
+	(void)state;
+	static const char *const set[] = { "engine.cache_mb = 128", "engine.workers = 1",
+					   "engine.prefault = false", NULL };
+	start("clipmapd-load-noprefault", set);
+	struct cl *c = cl_connect(&E, 0);
+	cl_open(c);
+	usleep(1000000);
+	print_message("no prefault: %.0f MiB mapped, RSS %.0f MiB\n",
+		      cl_stat(c, "memory.pool.mapped") / MIB, rss(E.daemon) / MIB);
+	assert_true(cl_stat(c, "memory.pool.prefault_left") == 0);
+	assert_true(cl_stat(c, "memory.pool.mapped") == 0);
+	cl_free(c);
+}
+
 /* An argument: run only the tests whose names match it (cmocka's filter). */
 int main(int argc, char **argv)
 {
@@ -624,6 +673,8 @@ int main(int argc, char **argv)
 		cmocka_set_test_filter(argv[1]);
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_teardown(test_loop_histogram, teardown),
+		cmocka_unit_test_teardown(test_prefault_at_start, teardown),
+		cmocka_unit_test_teardown(test_prefault_off, teardown),
 		cmocka_unit_test_teardown(test_slow_readers_memory, teardown),
 		cmocka_unit_test_teardown(test_paused_session_resumes, teardown),
 		cmocka_unit_test_teardown(test_sigterm_hundred, teardown),

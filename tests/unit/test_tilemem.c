@@ -191,6 +191,76 @@ static void slabs_on_huge_pages(void **state)
 	}
 }
 
+/* VmRSS of this process, KiB. */
+static long rss_kb(void)
+{
+	FILE *f = fopen("/proc/self/status", "r");
+	char line[256];
+	long kb = -1;
+	while (f && fgets(line, sizeof line, f))
+		if (sscanf(line, "VmRSS: %ld kB", &kb) == 1)
+			break;
+	if (f)
+		fclose(f);
+	return kb;
+}
+
+/* tilemem_prefault (last: it sets the pool's resident floor for the process): a stop already
+ * asked maps nothing; then the pool maps its bytes, resident (RSS grows by them before any
+ * tile is made), as free buffers the next allocations take without mapping more; freed again
+ * under a keep bound of 0 they stay resident (within the prefaulted bytes), and one beyond them
+ * goes back. */
+static void prefault_resident(void **state)
+{
+	(void)state;
+	if (!pooled()) {
+		assert_int_equal(tilemem_prefault(TILE, 64u << 20, NULL), 0); /* bypassed */
+		skip();
+		return;
+	}
+	struct tilemem_stats st0, st;
+	tilemem_stats(&st0);
+	_Atomic bool stop = true;
+	assert_int_equal(tilemem_prefault(TILE, st0.mapped + (64u << 20), &stop), 0);
+	tilemem_stats(&st);
+	assert_int_equal(st.mapped, st0.mapped);
+	long r0 = rss_kb();
+	size_t want = st0.mapped + (64u << 20);
+	size_t done = tilemem_prefault(TILE, want, NULL);
+	tilemem_stats(&st);
+	long r1 = rss_kb();
+	print_message("prefault: %zu MiB faulted in, RSS %ld -> %ld MiB\n", done >> 20, r0 >> 10,
+		      r1 >> 10);
+	assert_true(done >= (64u << 20));
+	assert_true(st.mapped >= want);
+	assert_true(st.free_warm >= (64u << 20));
+	assert_true(r1 - r0 >= (60 << 10)); /* faulted in, not only mapped */
+	enum { N = 64 << 20 >> 18 }; /* 256 buffers of 256 KiB */
+	void **p = calloc(N + 1, sizeof *p);
+	for (int i = 0; i < N; i++)
+		p[i] = tilemem_alloc(TILE);
+	struct tilemem_stats st2;
+	tilemem_stats(&st2);
+	assert_int_equal(st2.mapped, st.mapped); /* taken from the faulted-in buffers */
+	tilemem_keep(0);
+	for (int i = 0; i < N; i++)
+		tilemem_free(p[i], TILE);
+	tilemem_stats(&st2);
+	assert_int_equal(st2.released, st.released); /* within the floor: all stay resident */
+	/* beyond the prefaulted bytes a freed buffer goes back under keep 0 */
+	size_t m = want / TILE + 2;
+	void **q = calloc(m, sizeof *q);
+	for (size_t i = 0; i < m; i++)
+		q[i] = tilemem_alloc(TILE);
+	for (size_t i = 0; i < m; i++)
+		tilemem_free(q[i], TILE);
+	tilemem_stats(&st2);
+	assert_true(st2.released > st.released);
+	tilemem_keep(SIZE_MAX);
+	free(p);
+	free(q);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -198,6 +268,7 @@ int main(void)
 		cmocka_unit_test(keep_bound_releases),
 		cmocka_unit_test(threads_never_share),
 		cmocka_unit_test(slabs_on_huge_pages),
+		cmocka_unit_test(prefault_resident),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
