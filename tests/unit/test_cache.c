@@ -283,6 +283,15 @@ static struct cache *focused(double lon, double lat, int lx, int ly, struct grid
 	return c;
 }
 
+/* Prunes c to n tiles' bytes and checks that n tiles are left. */
+static void prune_to_tiles(struct cache *c, size_t n)
+{
+	cache_prune(c, n * TILE_BYTES);
+	struct cache_stats st;
+	cache_stats(c, &st);
+	assert_int_equal(st.tiles, n);
+}
+
 /* Costs (tile.h cost_ms, layer): in a budget smaller than the tiles around the focus, the
  * cheap intermediate tiles of the window go before the layer tiles of its ring (what viewers
  * ask for again), a dear intermediate tile stays beside them, and a layer tile far from the
@@ -383,10 +392,7 @@ static void lineage_kept_as_layers(void **state)
 				nwin += pass == 0;
 			}
 	assert_true(nwin > 0);
-	cache_prune(c, 2 * nwin * TILE_BYTES);
-	struct cache_stats st;
-	cache_stats(c, &st);
-	assert_int_equal(st.tiles, 2 * nwin);
+	prune_to_tiles(c, 2 * nwin);
 	for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
 		for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
 			struct tile_key k = key(6, lx, ly, x, y);
@@ -412,9 +418,7 @@ static void lineage_kept_as_layers(void **state)
 	t->cost_ms = 2.0f;
 	cache_insert(c, t);
 	tile_unref(t);
-	cache_prune(c, nwin * TILE_BYTES);
-	cache_stats(c, &st);
-	assert_int_equal(st.tiles, nwin);
+	prune_to_tiles(c, nwin);
 	assert_false(cache_contains(c, &ki));
 	cache_destroy(c);
 }
@@ -449,10 +453,7 @@ static void lineage_beyond_reach_ranked_at_cost(void **state)
 				nwin += pass == 1;
 			}
 	assert_true(nwin > 0 && nfar > 0);
-	cache_prune(c, 3 * nwin * TILE_BYTES);
-	struct cache_stats st;
-	cache_stats(c, &st);
-	assert_int_equal(st.tiles, 3 * nwin);
+	prune_to_tiles(c, 3 * nwin);
 	for (uint32_t y = 0; y < grid_tiles_y(ly); y++)
 		for (uint32_t x = 0; x < grid_tiles_x(lx); x++) {
 			struct tile_key k = key(6, lx, ly, x, y);
