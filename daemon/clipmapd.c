@@ -462,7 +462,8 @@ static int take_signals(struct daemon *d)
  * to the system when the cache frees them), and the kernel zeroes every page on its first
  * touch: a quarter of the daemon's time in the keep-up bench went to those page faults and to
  * munmap. Tile pixels now live in the engine's pool (engine/tilemem.h), which keeps freed
- * buffers resident up to a quarter of the cache's budget beyond what the cache holds (its
+ * buffers resident up to a quarter of the cache's budget beyond what the cache holds (or, with
+ * [engine] prefault, whatever the cache's budget leaves free) (its
  * prune frees a tenth at a time); the heap keeps the rest (encoded tiles, want lists) in the
  * same way, bounded by the cache's budget too. */
 static void keep_tiles_in_heap(size_t cache_bytes)
@@ -501,7 +502,10 @@ static void start_prefault(struct daemon *d, const struct planet_set *ps)
 	d->pf.tile_bytes = (size_t)T * T * 4;
 	d->pf.bytes = d->conf.cache_bytes;
 	atomic_store(&d->pf.stop, false);
+	tilemem_prefault_expect(d->pf.bytes); /* STATS count it before the thread runs */
 	d->pf.started = xthread_create(&d->pf.th, prefault_main, &d->pf) == 0;
+	if (!d->pf.started)
+		tilemem_prefault_expect(0);
 }
 
 static void stop_prefault(struct daemon *d)

@@ -297,14 +297,28 @@ size_t tilemem_prefault(size_t n, size_t bytes, const _Atomic bool *stop)
 			pthread_mutex_unlock(&mu);
 			return done;
 		}
-		/* one write per 4 KiB page (a whole huge page faults in on its first) */
-		for (size_t o = 0; o < sb; o += PAGE)
+		/* one write per 4 KiB page (a whole huge page faults in on its first); a stop asked
+		 * is seen within 2 MiB (the slab joins the pool untouched beyond) */
+		for (size_t o = 0; o < sb; o += PAGE) {
+			if (o % HUGE == 0 && stop && atomic_load(stop))
+				break;
 			((volatile char *)a)[o] = 0;
+		}
 		pthread_mutex_lock(&mu);
 		add_slab(c, a, sb);
 		pthread_mutex_unlock(&mu);
 		done += sb;
 	}
+}
+
+void tilemem_prefault_expect(size_t bytes)
+{
+	if (!POOLED)
+		return;
+	pthread_mutex_lock(&mu);
+	floor_bytes = bytes;
+	prefaulting = bytes > 0;
+	pthread_mutex_unlock(&mu);
 }
 
 void tilemem_stats(struct tilemem_stats *out)

@@ -9,7 +9,7 @@
  * recycled buffer costs nothing.
  *
  * What is kept: every buffer ever carved stays mapped. Free buffers beyond tilemem_keep's
- * bytes give their pages back (MADV_DONTNEED, their slab off huge pages first) and are
+ * bytes (and beyond what tilemem_prefault's bytes leave free) give their pages back (MADV_DONTNEED, their slab off huge pages first) and are
  * populated again (MADV_POPULATE_WRITE) when reused, so a shrunken cache (a reload, a purge)
  * does not keep its peak resident.
  * Under AddressSanitizer the pool is bypassed (plain aligned allocations), so use-after-free
@@ -42,6 +42,10 @@ void tilemem_keep(size_t bytes);
  * Free buffers then stay resident while in use + free is within `bytes` (tilemem_keep).
  * Returns the bytes faulted in. */
 size_t tilemem_prefault(size_t n, size_t bytes, const _Atomic bool *stop);
+/* Announces a tilemem_prefault of `bytes` about to start on another thread, before it is
+ * created: prefault_left (tilemem_stats) counts it from now, not from when the thread first
+ * runs (0 meanwhile would read as done). 0: none after all. */
+void tilemem_prefault_expect(size_t bytes);
 
 struct tilemem_stats {
 	uint64_t mapped;   /* bytes of slabs mapped */

@@ -437,8 +437,10 @@ static void test_paused_session_resumes(void **state)
 	assert_true(made < N); /* it did stop making them */
 	/* it asked for no more than it could hold: tiles made, parked beyond its held budget and
 	 * let go by the 64 MiB cache before it read them, made again, were 2 039 (of 3 754 made)
-	 * when a session asked for its whole want-set at once */
-	assert_true(cl_stat(obs, "tiles.rewanted") <= N / 8);
+	 * when a session asked for its whole want-set at once; now 94-265 (11 runs, 5 December,
+	 * with and without [engine] prefault), so the bound is N / 6 (N / 8 failed one make
+	 * check at 265) */
+	assert_true(cl_stat(obs, "tiles.rewanted") <= N / 6);
 	/* coarse first: the 8 level-6 tiles, wanted last, are among the first sent (what the
 	 * socket held at the pause, ≤ 40 tiles, plus themselves) */
 	assert_true(last_coarse <= 48);
@@ -629,7 +631,7 @@ static void test_prefault_at_start(void **state)
 	struct cl *c = cl_connect(&E, 0);
 	cl_open(c);
 	double left = -1;
-	for (int i = 0; i < 200 && left != 0; i++) {
+	for (int i = 0; i < 600 && left != 0; i++) { /* 60 s: an idle-priority thread */
 		left = cl_stat(c, "memory.pool.prefault_left");
 		if (left != 0)
 			usleep(100000);
