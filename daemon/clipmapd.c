@@ -512,7 +512,7 @@ static void stop_prefault(struct daemon *d)
 {
 	if (!d->pf.started)
 		return;
-	atomic_store(&d->pf.stop, true); /* it stops after the slab it is on */
+	atomic_store(&d->pf.stop, true); /* it stops within 2 MiB */
 	xthread_join(d->pf.th);
 	d->pf.started = false;
 }

@@ -256,10 +256,9 @@ void tilemem_keep(size_t bytes)
 	pthread_mutex_lock(&mu);
 	keep_bytes = bytes;
 	/* Release warm buffers beyond the new bound now (a cache shrunk by a reload). */
-	for (int i = 0; i < MAX_CLASSES && warm_bytes > keep_bytes && used_bytes + warm_bytes > floor_bytes;
-	     i++) {
+	for (int i = 0; i < MAX_CLASSES && !keeps(0); i++) {
 		struct cls *c = &classes[i];
-		while (c->warm.n && warm_bytes > keep_bytes && used_bytes + warm_bytes > floor_bytes) {
+		while (c->warm.n && !keeps(0)) {
 			void *p = c->warm.p[--c->warm.n];
 			size_t sb = 0;
 			char *slab = mark_small(p, &sb);
@@ -277,26 +276,16 @@ size_t tilemem_prefault(size_t n, size_t bytes, const _Atomic bool *stop)
 	size_t sz = round_page(n), done = 0;
 	if (!POOLED || n < POOL_MIN)
 		return 0;
-	pthread_mutex_lock(&mu);
-	floor_bytes = bytes;
-	prefaulting = true;
-	pthread_mutex_unlock(&mu);
+	tilemem_prefault_expect(bytes);
 	for (;;) {
 		pthread_mutex_lock(&mu);
 		struct cls *c = class_of(sz, true);
 		bool more = c && mapped_bytes < bytes && !(stop && atomic_load(stop));
-		prefaulting = more;
 		pthread_mutex_unlock(&mu);
-		if (!more)
-			return done;
-		size_t sb;
-		char *a = map_slab(sz, &sb);
-		if (!a) {
-			pthread_mutex_lock(&mu);
-			prefaulting = false;
-			pthread_mutex_unlock(&mu);
-			return done;
-		}
+		size_t sb = 0;
+		char *a = more ? map_slab(sz, &sb) : NULL;
+		if (!a)
+			break;
 		/* one write per 4 KiB page (a whole huge page faults in on its first); a stop asked
 		 * is seen within 2 MiB (the slab joins the pool untouched beyond) */
 		for (size_t o = 0; o < sb; o += PAGE) {
@@ -309,6 +298,10 @@ size_t tilemem_prefault(size_t n, size_t bytes, const _Atomic bool *stop)
 		pthread_mutex_unlock(&mu);
 		done += sb;
 	}
+	pthread_mutex_lock(&mu);
+	prefaulting = false;
+	pthread_mutex_unlock(&mu);
+	return done;
 }
 
 void tilemem_prefault_expect(size_t bytes)

@@ -36,6 +36,7 @@
 #include "common/clock.h"
 #include "common/proto.h"
 #include "support/daemon_env.h"
+#include "support/proc_rss.h"
 
 #define MIB (1024.0 * 1024.0)
 
@@ -225,17 +226,9 @@ static bool has_stat(struct cl *c, const char *key)
 /* The daemon's resident memory in bytes (VmRSS). */
 static double rss(pid_t pid)
 {
-	char path[64], line[256];
-	snprintf(path, sizeof path, "/proc/%d/status", (int)pid);
-	FILE *f = fopen(path, "r");
-	assert_non_null(f);
-	double kb = -1;
-	while (fgets(line, sizeof line, f))
-		if (sscanf(line, "VmRSS: %lf kB", &kb) == 1)
-			break;
-	fclose(f);
+	uint64_t kb = proc_rss_kb(pid);
 	assert_true(kb > 0);
-	return kb * 1024.0;
+	return (double)kb * 1024.0;
 }
 
 /* Each test's daemon; the teardown stops it even when the test failed. */

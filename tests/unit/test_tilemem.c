@@ -19,6 +19,7 @@
 
 #include "common/xthread.h"
 #include "engine/tilemem.h"
+#include "support/proc_rss.h"
 
 #define TILE ((size_t)256 * 256 * 4)
 
@@ -191,20 +192,6 @@ static void slabs_on_huge_pages(void **state)
 	}
 }
 
-/* VmRSS of this process, KiB. */
-static long rss_kb(void)
-{
-	FILE *f = fopen("/proc/self/status", "r");
-	char line[256];
-	long kb = -1;
-	while (f && fgets(line, sizeof line, f))
-		if (sscanf(line, "VmRSS: %ld kB", &kb) == 1)
-			break;
-	if (f)
-		fclose(f);
-	return kb;
-}
-
 /* tilemem_prefault (last: it sets the pool's resident floor for the process): a stop already
  * asked maps nothing; then the pool maps its bytes, resident (RSS grows by them before any
  * tile is made), as free buffers the next allocations take without mapping more; freed again
@@ -224,11 +211,11 @@ static void prefault_resident(void **state)
 	assert_int_equal(tilemem_prefault(TILE, st0.mapped + (64u << 20), &stop), 0);
 	tilemem_stats(&st);
 	assert_int_equal(st.mapped, st0.mapped);
-	long r0 = rss_kb();
+	long r0 = (long)proc_rss_kb(0);
 	size_t want = st0.mapped + (64u << 20);
 	size_t done = tilemem_prefault(TILE, want, NULL);
 	tilemem_stats(&st);
-	long r1 = rss_kb();
+	long r1 = (long)proc_rss_kb(0);
 	print_message("prefault: %zu MiB faulted in, RSS %ld -> %ld MiB\n", done >> 20, r0 >> 10,
 		      r1 >> 10);
 	assert_true(done >= (64u << 20));
