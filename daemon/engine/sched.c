@@ -632,6 +632,10 @@ static void generate(struct sched *s, struct gen_ctx *g, struct job *j, enum sch
 	struct tile *t = tile_create(&j->key, n->out, n->planet->tile_size);
 	uint64_t t0 = clock_now_ns();
 	int rc = n->type->generate(n, g, &j->key, j->in, j->nin, t);
+	/* A mask that is 0 or 1 over the whole tile (the sea, a land cover absent there) costs
+	 * the cache nothing and its consumers can tell. Counted in the tile's time. */
+	if (rc == 0)
+		tile_share_if_uniform(t);
 	uint64_t dt = clock_now_ns() - t0;
 	if (rc == 0) {
 		if (n->summarize)

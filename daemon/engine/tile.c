@@ -93,26 +93,72 @@ static struct tile *uniform_owner(enum pix_type type, uint32_t size, const void 
 	return found;
 }
 
+/* t's texels become u's (the shared buffer of texel's value): one reference to u held. */
+static void use_uniform(struct tile *t, struct tile *u)
+{
+	tile_ref(u);
+	drop_bytes(t);
+	t->base = u;
+	t->data = u->data;
+	t->uniform = true;
+}
+
+/* A height tile's summary when every texel is *texel. */
+static void summarize_uniform(struct tile *t, const void *texel)
+{
+	if (t->type != PIX_HEIGHT)
+		return;
+	float v;
+	memcpy(&v, texel, sizeof v);
+	t->summarized = true;
+	t->any_nan = v != v;
+	t->lo = v != v ? INFINITY : v;
+	t->hi = v != v ? -INFINITY : v;
+}
+
 void tile_fill_uniform(struct tile *t, const void *texel)
 {
 	struct tile *u = uniform_owner(t->type, t->size, texel);
-	if (u) {
-		tile_ref(u);
-		drop_bytes(t);
-		t->base = u;
-		t->data = u->data;
-		t->uniform = true;
-	} else {
+	if (u)
+		use_uniform(t, u);
+	else
 		fill(t->data, (size_t)t->size * t->size, texel, pix_bytes(t->type));
+	summarize_uniform(t, texel);
+}
+
+/* Whether each of the count 4-byte texels at d equals the first, bit for bit: blocks of 64
+ * texels folded by OR of XORs (vectorised at -O2), leaving at the first block that differs. */
+static bool all_like_first(const uint32_t *d, size_t count)
+{
+	const uint32_t v = d[0];
+	size_t i = 0;
+	for (; i + 64 <= count; i += 64) {
+		uint32_t x = 0;
+		for (int k = 0; k < 64; k++)
+			x |= d[i + k] ^ v;
+		if (x)
+			return false;
 	}
-	if (t->type == PIX_HEIGHT) {
-		float v;
-		memcpy(&v, texel, sizeof v);
-		t->summarized = true;
-		t->any_nan = v != v;
-		t->lo = v != v ? INFINITY : v;
-		t->hi = v != v ? -INFINITY : v;
-	}
+	for (; i < count; i++)
+		if (d[i] != v)
+			return false;
+	return true;
+}
+
+bool tile_share_if_uniform(struct tile *t)
+{
+	if (t->type != PIX_HEIGHT || t->uniform || t->base || pix_bytes(t->type) != 4)
+		return false;
+	size_t count = (size_t)t->size * t->size;
+	const uint32_t *d = (const uint32_t *)(const void *)t->data;
+	if (!count || !all_like_first(d, count))
+		return false;
+	struct tile *u = uniform_owner(t->type, t->size, t->data);
+	if (!u)
+		return false; /* the registry is full: t keeps its own buffer */
+	use_uniform(t, u);
+	summarize_uniform(t, t->data);
+	return true;
 }
 
 void tile_summary_from_lanes(struct tile *t, const float lo[16], const float hi[16], bool nan)

@@ -56,6 +56,12 @@ void tile_alias(struct tile *t, struct tile *src);
  * process-wide buffer shared by every tile of that type, size and value (a few dozen values
  * at most; beyond them t's own buffer is filled). Sets the summary of a height tile. */
 void tile_fill_uniform(struct tile *t, const void *texel);
+/* A height tile (not yet shared) whose texels all hold one value, bit for bit, moves onto
+ * the shared uniform buffer of that value (as tile_fill_uniform, summary set) and returns
+ * true: it costs the cache nothing and the nodes reading it can tell (a filter or blend of
+ * uniform inputs writes nothing). Otherwise, or when the registry of shared values is full,
+ * t is left as it was: false. The scan leaves at the first 64 texels that differ. */
+bool tile_share_if_uniform(struct tile *t);
 /* The bytes t holds memory for, as the cache counts them: none on a shared uniform buffer.
  * (An alias of another tile counts its full size: the bytes it keeps alive once that tile
  * has gone.) */

@@ -20,6 +20,7 @@
 #include <string.h>
 #include <unistd.h>
 
+#include "common/grid.h"
 #include "common/img.h"
 #include "engine/node_types.h"
 #include "engine/planet.h"
@@ -281,6 +282,81 @@ static void errors(void **state)
 	node_ini_fini(&ni);
 }
 
+/* Every tile of finer levels (isotropic and anisotropic, 16² texels) against the mask's
+ * bilinear interpolation between cell centres, computed here from the cells: the world tile
+ * above gives them (its texel rows lie a quarter cell from a cell row, ¾ of the weight on it,
+ * and every cell is 0 or 1). Tiles whose cells all agree come out as the shared uniform tile
+ * (mid-ocean, inland, across the antimeridian, at the poles); the others texel by texel. */
+static void tiles_everywhere(void **state)
+{
+	(void)state;
+	float *m = malloc(sizeof(float) * W * W);
+	world("min_area = 10000000\n", m);
+	static float cell01[H][W];
+	for (int y = 0; y < H; y++)
+		for (int x = 0; x < W; x++)
+			cell01[y][x] = cell(m, x, y) > 0.5f ? 1.0f : 0.0f;
+	free(m);
+	char text[512], err[256];
+	snprintf(text, sizeof text, "[node s]\ntype = open_sea\npath = %s\nmin_area = 10000000\n",
+		 path);
+	struct node_ini ni;
+	if (node_ini_init(&ni, &node_type_open_sea, &pl, text, NULL, 0, err))
+		fail_msg("open_sea: %s", err);
+	enum { T = 16 };
+	static const int lv[][2] = { { 1, 0 }, { 2, 1 }, { 4, 3 }, { 6, 5 }, { 7, 6 }, { 5, 5 },
+				     { 4, 6 } };
+	int uniform_at[4] = { 0 }; /* mid-ocean, inland, the antimeridian, a pole */
+	for (size_t l = 0; l < sizeof lv / sizeof lv[0]; l++) {
+		int nuni = 0, nmixed = 0;
+		for (uint32_t ty = 0; ty < grid_tiles_y(lv[l][1]); ty++)
+			for (uint32_t tx = 0; tx < grid_tiles_x(lv[l][0]); tx++) {
+				struct tile_key k = { .node = ni.n.hash, .x = tx, .y = ty,
+						      .lx = (uint8_t)lv[l][0], .ly = (uint8_t)lv[l][1] };
+				struct tile *t = tile_create(&k, PIX_HEIGHT, T);
+				assert_int_equal(ni.n.type->generate(&ni.n, &ni.g, &k, NULL, 0, t), 0);
+				for (uint32_t j = 0; j < T; j++)
+					for (uint32_t i = 0; i < T; i++) {
+						double lon, lat;
+						grid_texel_center(&k, T, i, j, &lon, &lat);
+						double fx = (lon + 180) / 360 * W - 0.5;
+						double fy = (90 - lat) / 180 * H - 0.5;
+						fy = fy < 0 ? 0 : fy > H - 1 ? H - 1 : fy;
+						int x0 = (int)floor(fx), y0 = (int)fy;
+						int y1 = y0 + 1 < H ? y0 + 1 : y0;
+						double ax = fx - x0, ay = fy - y0;
+						int c0 = (x0 % W + W) % W, c1 = (c0 + 1) % W;
+						double top = cell01[y0][c0] * (1 - ax) + cell01[y0][c1] * ax;
+						double bot = cell01[y1][c0] * (1 - ax) + cell01[y1][c1] * ax;
+						double want = top * (1 - ay) + bot * ay;
+						float got = tile_f32(t)[j * T + i];
+						if (fabs(got - want) > 1e-6)
+							fail_msg("level (%d, %d) tile (%u, %u) texel (%u, %u)"
+								 ": %g, want %g",
+								 lv[l][0], lv[l][1], tx, ty, i, j, got, want);
+					}
+				if (t->uniform) {
+					nuni++;
+					float v = tile_f32(t)[0];
+					uniform_at[0] += v == 1 && tx == grid_tiles_x(lv[l][0]) / 16;
+					uniform_at[1] += v == 0;
+					uniform_at[2] += tx == 0 || tx + 1 == grid_tiles_x(lv[l][0]);
+					uniform_at[3] += ty == 0 || ty + 1 == grid_tiles_y(lv[l][1]);
+				} else
+					nmixed++;
+				tile_unref(t);
+			}
+		/* the whole world in one or two tiles has coasts in each; finer levels have both */
+		if (lv[l][0] >= 4)
+			assert_true(nuni > 0 && nmixed > 0);
+		else
+			assert_int_equal(nuni, 0);
+	}
+	for (int i = 0; i < 4; i++)
+		assert_true(uniform_at[i] > 0);
+	node_ini_fini(&ni);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -288,6 +364,7 @@ int main(void)
 		cmocka_unit_test(levels),
 		cmocka_unit_test(grid_registered),
 		cmocka_unit_test(errors),
+		cmocka_unit_test(tiles_everywhere),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

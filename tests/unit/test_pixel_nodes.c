@@ -1266,6 +1266,61 @@ static void tile_summaries(void **state)
 	tile_unref(c);
 }
 
+/* A generated height tile whose texels are one value, bit for bit, moves onto the shared
+ * buffer (as the scheduler does after every generation); anything else keeps its own. */
+static void share_if_uniform(void **state)
+{
+	(void)state;
+	float one = 1;
+	struct tile *u = tile_create(&key0, PIX_HEIGHT, T);
+	tile_fill_uniform(u, &one);
+	struct tile *t = height_tile(1);
+	assert_false(t->uniform);
+	assert_true(tile_share_if_uniform(t));
+	assert_ptr_equal(t->data, u->data);
+	assert_true(t->uniform && tile_charge(t) == 0 && t->summarized && t->lo == 1 &&
+		    t->hi == 1 && !t->any_nan);
+	assert_false(tile_share_if_uniform(t)); /* already */
+	tile_unref(t);
+	/* one texel off, at either end or in the middle; −0 among +0; NaN among numbers */
+	int at[] = { 0, N / 2 + 3, N - 1 };
+	for (int i = 0; i < 3; i++) {
+		t = height_tile(1);
+		tile_f32(t)[at[i]] = 1.0000001f;
+		assert_false(tile_share_if_uniform(t));
+		assert_false(t->uniform);
+		assert_true(tile_charge(t) == t->nbytes && tile_f32(t)[at[i]] == 1.0000001f);
+		tile_unref(t);
+	}
+	t = height_tile(0);
+	tile_f32(t)[N - 5] = -0.0f;
+	assert_false(tile_share_if_uniform(t));
+	assert_true(signbit(tile_f32(t)[N - 5]));
+	tile_unref(t);
+	t = height_tile(2);
+	tile_f32(t)[7] = NAN;
+	assert_false(tile_share_if_uniform(t));
+	tile_unref(t);
+	/* all NaN is one value too: shared, summary says so */
+	t = height_tile(NAN);
+	assert_true(tile_share_if_uniform(t));
+	assert_true(t->uniform && t->any_nan && t->lo > t->hi);
+	tile_unref(t);
+	/* colour tiles and aliases are left alone */
+	struct tile *c = tile_create(&key0, PIX_COLOR, T);
+	memset(c->data, 7, c->nbytes);
+	assert_false(tile_share_if_uniform(c));
+	assert_false(c->uniform);
+	tile_unref(c);
+	struct tile *f = height_tile(3), *a = tile_create(&key0, PIX_HEIGHT, T);
+	tile_alias(a, f);
+	assert_false(tile_share_if_uniform(a));
+	assert_ptr_equal(a->base, f);
+	tile_unref(a);
+	tile_unref(f);
+	tile_unref(u);
+}
+
 /* A height_filter with a summarized input gives the bytes it gives without one (a shared
  * uniform tile where every texel clamps, strictly), and a summary equal to a scan's. */
 static void height_filter_summary(void **state)
@@ -1453,7 +1508,8 @@ int main(void)
 		cmocka_unit_test(color_reference),   cmocka_unit_test(ramp_reference),
 		cmocka_unit_test(blend_masked_and_normals), cmocka_unit_test(color_mask),
 		cmocka_unit_test(color_alpha_mask),
-		cmocka_unit_test(tile_summaries), cmocka_unit_test(height_filter_summary),
+		cmocka_unit_test(tile_summaries), cmocka_unit_test(share_if_uniform),
+		cmocka_unit_test(height_filter_summary),
 		cmocka_unit_test(blend_shares_a), cmocka_unit_test(uniform_inputs), cmocka_unit_test(ramp_vector_bytes),
 		cmocka_unit_test(ramp_steep_snow_vector_bytes),
 		cmocka_unit_test(color_mask_vector), cmocka_unit_test(blend_multiply_bytes),

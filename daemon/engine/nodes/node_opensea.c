@@ -297,20 +297,6 @@ static int os_create(struct node *n, struct node_parse *p)
 	return 0;
 }
 
-/* The mask at (lon, lat), 0..1, bilinear between cell centres. */
-static float mask_at(const struct open_sea *s, double lon, double lat)
-{
-	double fx, fy;
-	cell_coords(s, lon, lat, &fx, &fy);
-	fy = fy < 0 ? 0 : fy > s->h - 1 ? s->h - 1 : fy;
-	int y0 = (int)fy, y1 = y0 + 1 < s->h ? y0 + 1 : y0;
-	double x0f = floor(fx), ty = fy - y0, tx = fx - x0f;
-	int x0 = (((int)x0f % s->w) + s->w) % s->w, x1 = (x0 + 1) % s->w;
-	const uint8_t *a = s->m + (size_t)y0 * s->w, *b = s->m + (size_t)y1 * s->w;
-	double top = a[x0] + (a[x1] - a[x0]) * tx, bot = b[x0] + (b[x1] - b[x0]) * tx;
-	return (float)((top + (bot - top) * ty) / 255);
-}
-
 bool open_sea_level(const struct node *n, double lat, double lon, double reach, double *level,
 		    bool *mixed)
 {
@@ -348,6 +334,29 @@ bool open_sea_level(const struct node *n, double lat, double lon, double reach, 
 	return true;
 }
 
+/* One axis of the mask's bilinear lookup between cell centres: the two cells (columns wrap,
+ * rows clamp at the poles) and the second one's weight. */
+struct os_tap {
+	int c0, c1;
+	double t;
+};
+
+/* Whether every cell of rows r0..r1 and columns c0, c0 + 1, …, c0 + nc − 1 (mod w) is v. */
+static bool os_cells_all(const struct open_sea *s, int r0, int r1, int c0, int nc, uint8_t v)
+{
+	for (int y = r0; y <= r1; y++) {
+		const uint8_t *row = s->m + (size_t)y * s->w;
+		for (int i = 0, x = c0; i < nc; i++, x = x + 1 == s->w ? 0 : x + 1)
+			if (row[x] != v)
+				return false;
+	}
+	return true;
+}
+
+/* Footprints up to this many cells are checked for a uniform tile (a 256² tile of Earth's
+ * level 6 covers 34 × 17 ETOPO5 cells; every finer one a few): coarser ones are computed. */
+#define OS_UNIFORM_MAX_CELLS 65536
+
 static int os_generate(const struct node *n, struct gen_ctx *gc, const struct tile_key *k,
 		       struct tile *const *in, int nin, struct tile *out)
 {
@@ -355,21 +364,52 @@ static int os_generate(const struct node *n, struct gen_ctx *gc, const struct ti
 	(void)nin;
 	const struct open_sea *s = n->impl;
 	uint32_t T = out->size;
-	double *lon = gen_scratch(gc, (size_t)T * sizeof *lon);
+	/* The lookup is separable (the cell column follows longitude, the row latitude): one
+	 * tap per column and per row, then two lerps a texel. */
+	struct os_tap *cx = gen_scratch(gc, (size_t)2 * T * sizeof *cx), *cy = cx + T;
+	double fx_first = 0, fx_last = 0;
 	for (uint32_t i = 0; i < T; i++) {
-		double la;
-		grid_texel_center(k, T, i, 0, &lon[i], &la);
+		double lon, lat, fx, fy;
+		grid_texel_center(k, T, i, i, &lon, &lat);
+		cell_coords(s, lon, lat, &fx, &fy);
+		fx_first = i ? fx_first : fx;
+		fx_last = fx;
+		double x0f = floor(fx);
+		int x0 = (((int)x0f % s->w) + s->w) % s->w;
+		cx[i] = (struct os_tap){ x0, (x0 + 1) % s->w, fx - x0f };
+		fy = fy < 0 ? 0 : fy > s->h - 1 ? s->h - 1 : fy;
+		int y0 = (int)fy;
+		cy[i] = (struct os_tap){ y0, y0 + 1 < s->h ? y0 + 1 : y0, fy - y0 };
+	}
+	/* Far from every coast (the open ocean, a continent's interior) all the cells the tile
+	 * reads hold one value: the tile is that value throughout, the shared uniform tile (the
+	 * lerps of equal values give it exactly), and the blends after it can tell. Columns
+	 * run east from cx[0].c0 (wrapping) to cx[T − 1].c1; rows are monotonic southwards. */
+	int r0 = cy[0].c0, r1 = cy[T - 1].c1;
+	int nc = cx[T - 1].c1 - cx[0].c0;
+	nc = (nc < 0 ? nc + s->w : nc) + 1;
+	if (fx_last - fx_first + 2 < s->w &&
+	    (size_t)(r1 - r0 + 1) * (size_t)nc <= OS_UNIFORM_MAX_CELLS) {
+		uint8_t v = s->m[(size_t)r0 * s->w + cx[0].c0];
+		if (os_cells_all(s, r0, r1, cx[0].c0, nc, v)) {
+			float f = (float)(v / 255.0);
+			tile_fill_uniform(out, &f);
+			return 0;
+		}
 	}
 	for (uint32_t j = 0; j < T; j++) {
-		double lo, lat;
-		grid_texel_center(k, T, 0, j, &lo, &lat);
+		const uint8_t *a = s->m + (size_t)cy[j].c0 * s->w, *b = s->m + (size_t)cy[j].c1 * s->w;
+		double ty = cy[j].t;
 		float *row = tile_f32(out) + (size_t)j * T;
-		for (uint32_t i = 0; i < T; i++)
-			row[i] = mask_at(s, lon[i], lat);
+		for (uint32_t i = 0; i < T; i++) {
+			int x0 = cx[i].c0, x1 = cx[i].c1;
+			double tx = cx[i].t;
+			double top = a[x0] + (a[x1] - a[x0]) * tx, bot = b[x0] + (b[x1] - b[x0]) * tx;
+			row[i] = (float)((top + (bot - top) * ty) / 255);
+		}
 	}
 	return 0;
 }
-
 
 const struct node_type node_type_open_sea = {
 	.name = "open_sea",
