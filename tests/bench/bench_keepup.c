@@ -406,10 +406,14 @@ struct trial {
 	char top_node[64];
 	double top_share;
 	double fine_lag; /* of the frames short of full detail: those missing only the 2 finest */
-	double load1;	 /* the machine's 1-minute load average at the end (other processes) */
+	double load1;	 /* the 1-minute load average at the end (the bench's own threads count) */
 	/* CPU over the flight: the machine's busy share of all its cores, and the daemon's and
 	 * this process's (the client) time in cores */
 	double cpu_busy, cpu_daemon, cpu_client;
+	/* and the rest of the machine's busy time in cores: other processes (kernel threads,
+	 * another build or bench); the load average cannot tell, it counts the daemon's and the
+	 * client's own threads */
+	double cpu_others;
 	uint64_t tiles_recv;   /* tiles the client took during the flight */
 	double tiles_in_per_s; /* and per second of it */
 };
@@ -465,6 +469,10 @@ static void cpu_shares(const struct cpu_mark *a, const struct cpu_mark *b, doubl
 	tr->cpu_busy = dt > 0 ? (b->busy - a->busy) / dt : 0;
 	tr->cpu_daemon = wall > 0 ? (b->daemon - a->daemon) / hz / wall : 0;
 	tr->cpu_client = wall > 0 ? (b->self - a->self) / hz / wall : 0;
+	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
+	double others = tr->cpu_busy * (double)(ncpu > 0 ? ncpu : 1) - tr->cpu_daemon -
+			tr->cpu_client;
+	tr->cpu_others = others > 0 ? others : 0;
 }
 
 static double loadavg1(void)
@@ -783,8 +791,9 @@ struct row {
  * (workers busy most of the flight); the machine's CPU (over 90 % of all cores busy over the
  * flight: serving stored tiles, the daemon's decoding and the client's copies); synthesis
  * latency (workers with time to spare but the finest levels' new tiles not ready when the
- * quad moves on: look-ahead reach); else delivery. A load average above the core count is
- * appended: other processes shared it. */
+ * quad moves on: look-ahead reach); else delivery. Where other processes took more than
+ * OTHERS_NOTED cores over the flight, that is appended: they shared the machine. */
+#define OTHERS_NOTED 0.25
 static void limiting_stage(struct row *r)
 {
 	const struct trial *t = &r->fail;
@@ -792,10 +801,10 @@ static void limiting_stage(struct row *r)
 		snprintf(r->limit, sizeof r->limit, "none up to the search cap");
 		return;
 	}
-	char load[32] = "";
+	char load[48] = "";
 	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
-	if (t->load1 > (double)(ncpu > 0 ? ncpu : 1))
-		snprintf(load, sizeof load, "; load %.1f", t->load1);
+	if (t->cpu_others > OTHERS_NOTED)
+		snprintf(load, sizeof load, "; other processes %.1f cores", t->cpu_others);
 	if (t->frame_p95_ms > 1e3 / HZ || t->late_frac > 0.2)
 		snprintf(r->limit, sizeof r->limit, "client frame (p95 %.1f ms)%s", t->frame_p95_ms,
 			 load);
@@ -896,13 +905,13 @@ static void search(const struct ctx *x, const char *planet, enum mode mode, int 
 		bool pass = tr.full >= 0.95;
 		fprintf(stderr, "  keepup %s%s %7.0f m  v %9.0f m/s: %5.1f%% full, %5.0f tiles/s, "
 				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, hover %.1f s, fine-lag %.0f%%, "
-				"load %.1f, CPU %.0f%% (daemon %.1f, client %.1f cores), %.0f tiles/s in; "
+				"load %.1f, CPU %.0f%% (daemon %.1f, client %.1f, others %.1f cores), %.0f tiles/s in; "
 				"generated %llu flying, %llu hovering, %llu disk hits%s\n",
 			strrchr(planet, '/') ? strrchr(planet, '/') + 1 : planet,
 			mode == RESTARTED ? " restarted" : prefetch ? " prefetched" : "", seed[i].alt,
 			v, tr.full * 100, tr.gen_per_s, tr.hit_ratio * 100, tr.util * 100,
 			tr.frame_p95_ms, tr.hover_s, tr.fine_lag * 100, tr.load1, tr.cpu_busy * 100,
-			tr.cpu_daemon, tr.cpu_client,
+			tr.cpu_daemon, tr.cpu_client, tr.cpu_others,
 			tr.tiles_in_per_s,
 			(unsigned long long)tr.gen_flight, (unsigned long long)tr.gen_hover,
 			(unsigned long long)tr.disk_hits, prefetch ? "" : "");
@@ -1034,12 +1043,13 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 				   "\"prefetch_s\": %.2f, \"search_velocity_mps\": %.1f, "
 				   "\"confirmed_median_full\": %.3f, \"cpu_busy\": %.3f, "
 				   "\"cpu_daemon_cores\": %.2f, \"cpu_client_cores\": %.2f, "
+				   "\"cpu_other_cores\": %.2f, "
 				   "\"tiles_in_per_s\": %.1f, \"limiting_stage\": \"%s\"}%s\n",
 				r->alt, seed[i].levels, r->lmin, r->lmax, r->seed_v, r->v,
 				r->capped ? "true" : "false", r->v / r->seed_v, t->full, t->gen_per_s,
 				t->hit_ratio, t->util, t->frame_p95_ms, r->trials, r->pass.prefetch_s,
 				r->v_search, r->median_full, t->cpu_busy, t->cpu_daemon, t->cpu_client,
-				t->tiles_in_per_s, r->limit,
+				t->cpu_others, t->tiles_in_per_s, r->limit,
 				i + 1 < NALT ? "," : "");
 		}
 		fprintf(f, "    ]}");
