@@ -462,9 +462,9 @@ static int take_signals(struct daemon *d)
  * to the system when the cache frees them), and the kernel zeroes every page on its first
  * touch: a quarter of the daemon's time in the keep-up bench went to those page faults and to
  * munmap. Tile pixels now live in the engine's pool (engine/tilemem.h), which keeps freed
- * buffers resident up to a quarter of the cache's budget beyond what the cache holds (or, with
- * [engine] prefault, whatever the cache's budget leaves free) (its
- * prune frees a tenth at a time); the heap keeps the rest (encoded tiles, want lists) in the
+ * buffers resident up to a quarter of the cache's budget beyond what the cache holds (its
+ * prune frees a tenth at a time; with [engine] prefault, whatever the budget leaves free);
+ * the heap keeps the rest (encoded tiles, want lists) in the
  * same way, bounded by the cache's budget too. */
 static void keep_tiles_in_heap(size_t cache_bytes)
 {

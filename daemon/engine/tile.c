@@ -147,7 +147,7 @@ static bool all_like_first(const uint32_t *d, size_t count)
 
 bool tile_share_if_uniform(struct tile *t)
 {
-	if (t->type != PIX_HEIGHT || t->uniform || t->base || pix_bytes(t->type) != 4)
+	if (t->type != PIX_HEIGHT || t->uniform || t->base) /* 4-byte texels */
 		return false;
 	size_t count = (size_t)t->size * t->size;
 	const uint32_t *d = (const uint32_t *)(const void *)t->data;

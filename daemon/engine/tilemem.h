@@ -9,9 +9,10 @@
  * recycled buffer costs nothing.
  *
  * What is kept: every buffer ever carved stays mapped. Free buffers beyond tilemem_keep's
- * bytes (and beyond what tilemem_prefault's bytes leave free) give their pages back (MADV_DONTNEED, their slab off huge pages first) and are
- * populated again (MADV_POPULATE_WRITE) when reused, so a shrunken cache (a reload, a purge)
- * does not keep its peak resident.
+ * bytes (and beyond what tilemem_prefault's bytes leave free) give their pages back
+ * (MADV_DONTNEED, their slab off huge pages first) and are populated again
+ * (MADV_POPULATE_WRITE) when reused, so a shrunken cache (a reload, a purge) does not keep
+ * its peak resident.
  * Under AddressSanitizer the pool is bypassed (plain aligned allocations), so use-after-free
  * of tile memory is still caught.
  *

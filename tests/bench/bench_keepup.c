@@ -801,29 +801,29 @@ static void limiting_stage(struct row *r)
 		snprintf(r->limit, sizeof r->limit, "none up to the search cap");
 		return;
 	}
-	char load[48] = "";
+	char shared[48] = "";
 	long ncpu = sysconf(_SC_NPROCESSORS_ONLN);
 	if (t->cpu_others > OTHERS_NOTED)
-		snprintf(load, sizeof load, "; other processes %.1f cores", t->cpu_others);
+		snprintf(shared, sizeof shared, "; other processes %.1f cores", t->cpu_others);
 	if (t->frame_p95_ms > 1e3 / HZ || t->late_frac > 0.2)
 		snprintf(r->limit, sizeof r->limit, "client frame (p95 %.1f ms)%s", t->frame_p95_ms,
-			 load);
+			 shared);
 	else if (t->util > 0.7)
 		snprintf(r->limit, sizeof r->limit, "synthesis: workers %.0f%% busy, %s %.0f%%%s",
-			 t->util * 100, t->top_node, t->top_share * 100, load);
+			 t->util * 100, t->top_node, t->top_share * 100, shared);
 	else if (t->cpu_busy > 0.9)
 		snprintf(r->limit, sizeof r->limit,
 			 "CPU: %ld cores %.0f%% busy (daemon %.1f, client %.1f cores; %.0f tiles/s in)%s",
 			 ncpu, t->cpu_busy * 100, t->cpu_daemon, t->cpu_client,
-			 t->tiles_in_per_s, load);
+			 t->tiles_in_per_s, shared);
 	else if (t->fine_lag > 0.5)
 		snprintf(r->limit, sizeof r->limit,
 			 "latency: 2 finest late in %.0f%% of short frames, workers %.0f%%, CPU %.0f%%%s",
-			 t->fine_lag * 100, t->util * 100, t->cpu_busy * 100, load);
+			 t->fine_lag * 100, t->util * 100, t->cpu_busy * 100, shared);
 	else
 		snprintf(r->limit, sizeof r->limit,
 			 "delivery: workers %.0f%% busy, hits %.0f%%, CPU %.0f%%%s", t->util * 100,
-			 t->hit_ratio * 100, t->cpu_busy * 100, load);
+			 t->hit_ratio * 100, t->cpu_busy * 100, shared);
 }
 
 static int cmp_double(const void *a, const void *b)
