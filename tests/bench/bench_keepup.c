@@ -784,7 +784,7 @@ struct row {
 	double v_search;	 /* the search's answer, before the confirming flights */
 	double median_full;	 /* the confirming flights' median full-detail share (-1: none) */
 	double seconds;
-	char limit[128];
+	char limit[192];
 };
 
 /* What stopped the lowest failing velocity: the client's own frame; synthesis throughput
