@@ -8,7 +8,8 @@
  * - the same bytes whatever the order tiles are generated in and the number of workers;
  * - no seam: the step across tile borders, the antimeridian and the poles matches the direct
  *   evaluation's;
- * - ridged noise is refused with a clear error.
+ * - ridged noise is refused with a clear error;
+ * - the carry and the tile from it give the same bits with every ISA the CPU runs.
  * Runs from the repository root (tests/run.sh does).
  */
 #include <stdarg.h>
@@ -492,6 +493,113 @@ static void ridged_refused(void **state)
 	unlink(path);
 }
 
+/* ---- every ISA the same bits ---- */
+
+/* The carry of k, its parent level's carries computed the same way (recursively, down to the
+ * first level that does not upsample), with isa. */
+static struct tile *carry_of(const struct noise *nz, struct tile_key k, uint32_t T,
+			     enum noise_isa isa)
+{
+	struct tile_key deps[NOISE_CARRY_MAX_DEPS];
+	struct tile *in[NOISE_CARRY_MAX_DEPS];
+	int m = noise_carry_deps(nz, &k, T, 1, deps);
+	for (int i = 0; i < m; i++)
+		in[i] = carry_of(nz, deps[i], T, isa);
+	struct tile *t = tile_create(&k, PIX_HEIGHT, T);
+	size_t sb = (noise_carry_scratch_size(T) + 63) / 64 * 64;
+	void *scratch = aligned_alloc(64, sb);
+	assert_non_null(scratch);
+	assert_int_equal(noise_carry_tile(nz, &k, T, isa, scratch, in, m, tile_f32(t)), 0);
+	free(scratch);
+	for (int i = 0; i < m; i++)
+		tile_unref(in[i]);
+	return t;
+}
+
+/* The carry and the tile from it give the same bits with every ISA this CPU runs (the
+ * upsample's passes and the final sum run at each ISA's width: noise_sums.h), on isotropic
+ * levels (the parent has half the columns), anisotropic ones (the same columns), across the
+ * antimeridian and at both poles; and the tile from the carry is the carry plus the band
+ * under NOISE_CARRY_TEXELS texels, scaled, as the scalar expression gives it. */
+static void same_bits_every_isa(void **state)
+{
+	(void)state;
+	const uint32_t T = 64;
+	struct noise nz;
+	struct noise_params np = { .seed = 67, .kind = NOISE_FBM, .octaves = 14,
+				   .wavelength = 2.5e6, .lacunarity = 2, .gain = 0.6,
+				   .max_wavelength = 2.5e6, .radius = 6378137.0, .stretch = 1,
+				   .pole_amplitude = 1 };
+	assert_int_equal(noise_init(&nz, &np), 0);
+	static const struct {
+		double lon, lat;
+	} pl[] = { { 7.7, 0.3 }, { 7.7, 46 }, { -120, 70 }, { 179.99, 10 }, { 30, 89.9 },
+		   { -60, -89.9 } };
+	static const enum noise_isa isas[] = { NOISE_ISA_AVX2, NOISE_ISA_AVX512 };
+	float *band = malloc((size_t)T * T * sizeof *band);
+	size_t sb = (noise_scratch_size(T) + 63) / 64 * 64;
+	void *scratch = aligned_alloc(64, sb);
+	assert_non_null(band);
+	assert_non_null(scratch);
+	int checked = 0, upsampled = 0, dlx = 0;
+	for (size_t pi = 0; pi < sizeof pl / sizeof *pl; pi++) {
+		for (int ly = 3; ly <= 6; ly++) {
+			int lx = clipmap_level_lx(ly, pl[pi].lat, -1);
+			struct tile_key k = at(lx, ly, pl[pi].lon, pl[pi].lat, T);
+			k.node = 1;
+			if (noise_carry_upsampled(&nz, lx, ly, T)) {
+				int plx, ply;
+				assert_int_equal(noise_carry_parent(&k, T, &plx, &ply), 0);
+				upsampled++;
+				dlx += plx != lx;
+			}
+			struct tile *c0 = carry_of(&nz, k, T, NOISE_ISA_SCALAR);
+			struct tile *t0 = tile_create(&k, PIX_HEIGHT, T);
+			assert_int_equal(noise_tile_from_carry(&nz, &k, T, NOISE_ISA_SCALAR, scratch,
+							       tile_f32(c0), NULL, 300.0f, 5.0f,
+							       tile_f32(t0)),
+					 0);
+			/* the scalar expression, texel by texel (a tile the pole fade evaluates
+			 * directly is not built from its carry: skipped) */
+			double lo = NOISE_CARRY_TEXELS * noise_texel_size(nz.p.radius, ly, T);
+			if (!noise_pole_fades(&nz, &k, T, lo)) {
+				assert_true(noise_tile_band(&nz, &k, T, NOISE_ISA_SCALAR, scratch, 0,
+							    lo, true, band) >= 0);
+				for (size_t i = 0; i < (size_t)T * T; i++) {
+					float v = 5.0f + 300.0f * (band[i] + tile_f32(c0)[i]);
+					assert_memory_equal(&v, &tile_f32(t0)[i], sizeof v);
+				}
+			}
+			for (size_t q = 0; q < sizeof isas / sizeof *isas; q++) {
+				if (!noise_isa_supported(isas[q]))
+					continue;
+				struct tile *c1 = carry_of(&nz, k, T, isas[q]);
+				struct tile *t1 = tile_create(&k, PIX_HEIGHT, T);
+				assert_int_equal(noise_tile_from_carry(&nz, &k, T, isas[q], scratch,
+								       tile_f32(c1), NULL, 300.0f,
+								       5.0f, tile_f32(t1)),
+						 0);
+				if (memcmp(c0->data, c1->data, (size_t)T * T * 4) ||
+				    memcmp(t0->data, t1->data, (size_t)T * T * 4))
+					fail_msg("%s differs from scalar at ly %d lat %g lon %g",
+						 noise_isa_name(isas[q]), ly, pl[pi].lat, pl[pi].lon);
+				checked++;
+				tile_unref(c1);
+				tile_unref(t1);
+			}
+			tile_unref(c0);
+			tile_unref(t0);
+		}
+	}
+	printf("same bits on every ISA: %d tiles checked against scalar, %d upsampled (%d from "
+	       "half the columns)\n",
+	       checked, upsampled, dlx);
+	/* the cases were there: upsampled tiles of both kinds */
+	assert_true(upsampled >= 8 && dlx >= 4 && upsampled - dlx >= 2);
+	free(scratch);
+	free(band);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -500,6 +608,7 @@ int main(void)
 		cmocka_unit_test(same_bytes_any_order),
 		cmocka_unit_test(no_seams),
 		cmocka_unit_test(ridged_refused),
+		cmocka_unit_test(same_bits_every_isa),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

@@ -568,6 +568,8 @@ const struct noise_sums noise_sums_scalar = NOISE_SUMS_INIT;
 
 static const struct noise_sums *sums_for(enum noise_isa isa)
 {
+	if (isa == NOISE_ISA_AUTO)
+		isa = noise_isa_best();
 	switch (isa) {
 	case NOISE_ISA_AVX2:
 		return &noise_sums_avx2;
@@ -576,6 +578,11 @@ static const struct noise_sums *sums_for(enum noise_isa isa)
 	default:
 		return &noise_sums_scalar;
 	}
+}
+
+const struct noise_sums *noise_sums_for(enum noise_isa isa)
+{
+	return sums_for(isa);
 }
 
 /* Cubic Hermite basis at t = q/h, q = 0..h-1 (from double, so the same bits on every path):

@@ -6,7 +6,8 @@
  * Determinism: the carry of a tile depends only on its key, the parameters and the parent
  * level's carry tiles (themselves so defined, down to ly = 0, evaluated directly): the same
  * bits whatever the order tiles are generated in. Every float operation runs in a fixed order
- * in plain C (no contraction in C11 mode), so the ISA changes nothing here either.
+ * (no contraction in C11 mode), the upsample's passes (noise_sums.h) at each ISA's width with
+ * scalar tails of the same expression, so the ISA changes nothing here either.
  * Pure functions over caller-owned memory: thread-safe.
  */
 #include <errno.h>
@@ -14,6 +15,8 @@
 #include <string.h>
 
 #include "noise.h"
+#define NOISE_SUMS_DECL_ONLY /* the struct; the bodies are noise.c's and each ISA's */
+#include "noise_sums.h"
 
 /* The upsample's kernel: the cubic Hermite whose slopes are 4th-order central differences
  * (the in-tile lattice's interpolation, noise.h), as six taps p−2 .. p+3 at t ∈ [0, 1) past p:
@@ -41,13 +44,6 @@ static void kernel(double t, float w[TAPS])
 	}
 	for (int q = 0; q < TAPS; q++)
 		w[q] = (float)v[q];
-}
-
-static inline float apply(const float w[TAPS], const float *f, size_t stride)
-{
-	return ((((w[0] * f[0] + w[1] * f[stride]) + w[2] * f[2 * stride]) + w[3] * f[3 * stride]) +
-		w[4] * f[4 * stride]) +
-	       w[5] * f[5 * stride];
 }
 
 double noise_carry_aspect(const struct tile_key *k, uint32_t T)
@@ -228,24 +224,17 @@ int noise_carry_tile(const struct noise *nz, const struct tile_key *k, uint32_t 
 	float w[2][TAPS];
 	kernel(0.75, w[0]); /* even child rows and columns */
 	kernel(0.25, w[1]); /* odd */
+	const struct noise_sums *ns = noise_sums_for(isa);
 	for (uint32_t j = 0; j < T; j++) {
 		/* child row v = y·T + j sits at parent index v/2 − 1/4, t = 3/4 (j even) or 1/4
 		 * (odd); its first tap, floor − 2, is row j/2 (even) or (j − 1)/2 + 1 (odd) of G,
-		 * whose row 0 is parent row y·T/2 − MARGIN */
+		 * whose row 0 is parent row y·T/2 − MARGIN; column i likewise in col */
 		uint32_t r0 = (j & 1) ? (j - 1) / 2 + 1 : j / 2;
-		const float *g0 = G + (size_t)r0 * g.gw;
-		for (uint32_t c = 0; c < g.gw; c++)
-			col[c] = apply(w[j & 1], g0 + c, g.gw);
-		float *row = out + (size_t)j * T;
-		if (!g.dlx) {
-			for (uint32_t i = 0; i < T; i++)
-				row[i] = row[i] + col[i];
-			continue;
-		}
-		for (uint32_t i = 0; i < T; i++) {
-			uint32_t c0 = (i & 1) ? (i - 1) / 2 + 1 : i / 2;
-			row[i] = row[i] + apply(w[i & 1], col + c0, 1);
-		}
+		ns->carry_cols(w[j & 1], G + (size_t)r0 * g.gw, g.gw, col, g.gw);
+		if (g.dlx)
+			ns->carry_rows(w[0], w[1], col, out + (size_t)j * T, T);
+		else
+			ns->add(out + (size_t)j * T, col, T);
 	}
 	return 0;
 }
@@ -264,9 +253,9 @@ int noise_tile_from_carry(const struct noise *nz, const struct tile_key *k, uint
 	int rc = noise_tile_band(nz, k, T, isa, scratch, 0, lo, true, out);
 	if (rc < 0)
 		return rc;
-	for (size_t i = 0; i < (size_t)T * T; i++) {
-		float v = offset + amplitude * (out[i] + carry[i]);
-		out[i] = base ? base[i] + v : v;
-	}
+	/* out = base + (offset + amplitude · (out + carry)) */
+	const struct noise_sums *ns = noise_sums_for(isa);
+	ns->add(out, carry, (size_t)T * T);
+	ns->finish(out, base, amplitude, offset, T * T);
 	return 0;
 }

@@ -45,13 +45,28 @@ struct noise_sums {
 			      const float *amp, const float *mean, float ro, float rg, float rf);
 	/* row = base + (off + a·row), or off + a·row when base is NULL, over T texels. */
 	void (*finish)(float *row, const float *base, float a, float off, uint32_t T);
+	/* row += b over n texels (a multiple of 8). */
+	void (*add)(float *row, const float *b, size_t n);
+	/* The carry upsample's passes (noise_carry.c), with its six-tap sum
+	 * ((((w0·f0 + w1·f1) + w2·f2) + w3·f3) + w4·f4) + w5·f5 in that order, so every path gives
+	 * the bits of the scalar expression. Down the columns: col[c] = Σ w[q]·g[c + q·stride]
+	 * for c < n (any n). Along a row whose parent has half the columns: row[2m] += Σ
+	 * we[q]·col[m + q], row[2m + 1] += Σ wo[q]·col[m + 1 + q] for 2m < T (T a multiple of 16;
+	 * col holds T/2 + 6 values). */
+	void (*carry_cols)(const float w[6], const float *g, size_t stride, float *col, uint32_t n);
+	void (*carry_rows)(const float we[6], const float wo[6], const float *col, float *row,
+			   uint32_t T);
 };
+
+/* The set for an ISA (NOISE_ISA_AUTO: the best this CPU runs). */
+const struct noise_sums *noise_sums_for(enum noise_isa isa);
 
 #define NOISE_LATTICE_PAD(M) (2 * (M) + 16)
 #define NOISE_ROW_PAD 16
 
 extern const struct noise_sums noise_sums_scalar, noise_sums_avx2, noise_sums_avx512;
 
+#ifndef NOISE_SUMS_DECL_ONLY
 /* ---- the shared bodies (static: one copy per including translation unit) ---- */
 
 /* The baseline build has no 256-bit registers: these vectors live in pairs of SSE registers
@@ -204,8 +219,55 @@ static void ns_finish(float *row, const float *base, float a, float off, uint32_
 			ns_store(row + i, voff + va * ns_load(row + i));
 }
 
+static void ns_add(float *row, const float *b, size_t n)
+{
+	for (size_t i = 0; i < n; i += 8)
+		ns_store(row + i, ns_load(row + i) + ns_load(b + i));
+}
+
+/* The six-tap sum on one value (the tails) and on 8 (stride between taps). */
+NS_INLINE float ns_tap6(const float w[6], const float *f, size_t st)
+{
+	return ((((w[0] * f[0] + w[1] * f[st]) + w[2] * f[2 * st]) + w[3] * f[3 * st]) +
+		w[4] * f[4 * st]) +
+	       w[5] * f[5 * st];
+}
+
+#define ns_tap6v(W, f, st)                                                                       \
+	(((((W[0] * ns_load(f) + W[1] * ns_load((f) + (st))) + W[2] * ns_load((f) + 2 * (st))) +  \
+	   W[3] * ns_load((f) + 3 * (st))) +                                                       \
+	  W[4] * ns_load((f) + 4 * (st))) +                                                        \
+	 W[5] * ns_load((f) + 5 * (st)))
+
+static void ns_carry_cols(const float w[6], const float *g, size_t stride, float *col, uint32_t n)
+{
+	const ns_v8f W[6] = { ns_set1(w[0]), ns_set1(w[1]), ns_set1(w[2]),
+			      ns_set1(w[3]), ns_set1(w[4]), ns_set1(w[5]) };
+	uint32_t c = 0;
+	for (; c + 8 <= n; c += 8)
+		ns_store(col + c, ns_tap6v(W, g + c, stride));
+	for (; c < n; c++)
+		col[c] = ns_tap6(w, g + c, stride);
+}
+
+static void ns_carry_rows(const float we[6], const float wo[6], const float *col, float *row,
+			  uint32_t T)
+{
+	const ns_v8f E[6] = { ns_set1(we[0]), ns_set1(we[1]), ns_set1(we[2]),
+			      ns_set1(we[3]), ns_set1(we[4]), ns_set1(we[5]) };
+	const ns_v8f O[6] = { ns_set1(wo[0]), ns_set1(wo[1]), ns_set1(wo[2]),
+			      ns_set1(wo[3]), ns_set1(wo[4]), ns_set1(wo[5]) };
+	const ns_v8i lo = { 0, 8, 1, 9, 2, 10, 3, 11 }, hi = { 4, 12, 5, 13, 6, 14, 7, 15 };
+	for (uint32_t m = 0; 2 * m < T; m += 8) {
+		ns_v8f e = ns_tap6v(E, col + m, 1), o = ns_tap6v(O, col + m + 1, 1);
+		ns_store(row + 2 * m, ns_load(row + 2 * m) + __builtin_shuffle(e, o, lo));
+		ns_store(row + 2 * m + 8, ns_load(row + 2 * m + 8) + __builtin_shuffle(e, o, hi));
+	}
+}
+
 #define NOISE_SUMS_INIT                                                                          \
 	{ ns_rotate_row, ns_acc_fbm, ns_acc_ridged, ns_interp_cols, ns_interp_slopes, ns_interp_row, \
-	  ns_ridged_coarse, ns_finish }
+	  ns_ridged_coarse, ns_finish, ns_add, ns_carry_cols, ns_carry_rows }
+#endif /* NOISE_SUMS_DECL_ONLY */
 
 #endif
