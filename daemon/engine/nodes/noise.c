@@ -558,12 +558,8 @@ static void octave_row(const struct noise_octave *oc, const double pc0[3], struc
 	r->seed = oc->seed;
 }
 
-/* The fractal sums (noise_sums.h) run at each ISA's width; the per-row set-up below uses
- * GCC vector extensions too (SSE2 in a baseline build): elementwise IEEE operations give the
- * same bits at any width. */
-typedef double v2d __attribute__((vector_size(16)));
-typedef float v2f __attribute__((vector_size(8)));
-
+/* The fractal sums and the rows' set-up (noise_sums.h) run at each ISA's width: elementwise
+ * IEEE operations give the same bits at any width. */
 const struct noise_sums noise_sums_scalar = NOISE_SUMS_INIT;
 
 static const struct noise_sums *sums_for(enum noise_isa isa)
@@ -664,18 +660,7 @@ static void full_res_row(const struct noise *nz, const struct noise_sums *ns, no
 	const bool ridged = nz->p.kind == NOISE_RIDGED;
 	double lat = grid_v_to_lat(k->ly, T, (double)k->y * T + j + 0.5) * (M_PI / 180.0);
 	double cl = cos(lat), sl = sin(lat);
-	const v2d vcl = { cl, cl }, vpx = { pc[0], pc[0] }, vpy = { pc[1], pc[1] };
-	const float fz = (float)(sl - pc[2]);
-	for (uint32_t i = 0; i < T; i += 2) {
-		v2d c2, s2;
-		memcpy(&c2, ccos + i, sizeof c2);
-		memcpy(&s2, csin + i, sizeof s2);
-		v2f x2 = __builtin_convertvector(vcl * c2 - vpx, v2f);
-		v2f y2 = __builtin_convertvector(vcl * s2 - vpy, v2f);
-		memcpy(dx + i, &x2, sizeof x2);
-		memcpy(dy + i, &y2, sizeof y2);
-		dz[i] = dz[i + 1] = fz;
-	}
+	ns->offsets_row(ccos, csin, cl, pc[0], pc[1], (float)(sl - pc[2]), dx, dy, dz, T);
 	if (mc < nwa && we->lattice) {
 		for (int c = 0; c < 3; c++) {
 			ns->interp_cols(we->lw[c], we->M, j, we->hb, we->tc[c]);

@@ -56,6 +56,10 @@ struct noise_sums {
 	void (*carry_cols)(const float w[6], const float *g, size_t stride, float *col, uint32_t n);
 	void (*carry_rows)(const float we[6], const float wo[6], const float *col, float *row,
 			   uint32_t T);
+	/* A texel row's offsets from the tile's centre: dx = (float)(cl·ccos − px), dy =
+	 * (float)(cl·csin − py) (in double, then rounded), dz = fz, over T texels. */
+	void (*offsets_row)(const double *ccos, const double *csin, double cl, double px,
+			    double py, float fz, float *dx, float *dy, float *dz, uint32_t T);
 };
 
 /* The set for an ISA (NOISE_ISA_AUTO: the best this CPU runs). */
@@ -265,9 +269,27 @@ static void ns_carry_rows(const float we[6], const float wo[6], const float *col
 	}
 }
 
+typedef double ns_v8d __attribute__((vector_size(64)));
+
+static void ns_offsets_row(const double *ccos, const double *csin, double cl, double px,
+			   double py, float fz, float *dx, float *dy, float *dz, uint32_t T)
+{
+	const ns_v8d vcl = { cl, cl, cl, cl, cl, cl, cl, cl }, vpx = { px, px, px, px, px, px, px, px },
+		     vpy = { py, py, py, py, py, py, py, py };
+	const ns_v8f vz = ns_set1(fz);
+	for (uint32_t i = 0; i < T; i += 8) {
+		ns_v8d c, s;
+		memcpy(&c, ccos + i, sizeof c);
+		memcpy(&s, csin + i, sizeof s);
+		ns_store(dx + i, __builtin_convertvector(vcl * c - vpx, ns_v8f));
+		ns_store(dy + i, __builtin_convertvector(vcl * s - vpy, ns_v8f));
+		ns_store(dz + i, vz);
+	}
+}
+
 #define NOISE_SUMS_INIT                                                                          \
 	{ ns_rotate_row, ns_acc_fbm, ns_acc_ridged, ns_interp_cols, ns_interp_slopes, ns_interp_row, \
-	  ns_ridged_coarse, ns_finish, ns_add, ns_carry_cols, ns_carry_rows }
+	  ns_ridged_coarse, ns_finish, ns_add, ns_carry_cols, ns_carry_rows, ns_offsets_row }
 #endif /* NOISE_SUMS_DECL_ONLY */
 
 #endif
