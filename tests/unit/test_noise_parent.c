@@ -561,7 +561,8 @@ static void ref_carry(const struct noise *nz, struct tile_key k, uint32_t T, flo
 	for (int64_t r = 0; r < gh; r++)
 		for (int64_t c = 0; c < gw; c++) {
 			int64_t pu = pu0 + c, pv = pv0 + r;
-			int64_t tx = pu / T - ((int64_t)k.x / 2 - 1), ty = pv / T - ((int64_t)k.y / 2 - 1);
+			int64_t tx = pu / T - ((int64_t)k.x / 2 - 1);
+			int64_t ty = pv / T - ((int64_t)k.y / 2 - 1);
 			assert_true(pu >= 0 && pv >= 0 && tx >= 0 && tx < 3 && ty >= 0 && ty < 3);
 			if (!pt[ty][tx]) {
 				struct tile_key pk = { .node = 1, .lx = (uint8_t)(k.lx - 1),
@@ -583,7 +584,8 @@ static void ref_carry(const struct noise *nz, struct tile_key k, uint32_t T, flo
 			col[c] = ref_tap6(w[j & 1], G + r0 * gw + c, (size_t)gw);
 		for (uint32_t i = 0; i < T; i++) {
 			int64_t c0 = (int64_t)floor((k.x * (double)T + i) / 2 - 0.25) - 2 - pu0;
-			out[(size_t)j * T + i] = out[(size_t)j * T + i] + ref_tap6(w[i & 1], col + c0, 1);
+			float *o = out + (size_t)j * T + i;
+			*o = *o + ref_tap6(w[i & 1], col + c0, 1);
 		}
 	}
 	for (int a = 0; a < 3; a++)

@@ -274,8 +274,8 @@ typedef double ns_v8d __attribute__((vector_size(64)));
 static void ns_offsets_row(const double *ccos, const double *csin, double cl, double px,
 			   double py, float fz, float *dx, float *dy, float *dz, uint32_t T)
 {
-	const ns_v8d vcl = { cl, cl, cl, cl, cl, cl, cl, cl }, vpx = { px, px, px, px, px, px, px, px },
-		     vpy = { py, py, py, py, py, py, py, py };
+	const ns_v8d vcl = { cl, cl, cl, cl, cl, cl, cl, cl };
+	const ns_v8d vpx = { px, px, px, px, px, px, px, px }, vpy = { py, py, py, py, py, py, py, py };
 	const ns_v8f vz = ns_set1(fz);
 	for (uint32_t i = 0; i < T; i += 8) {
 		ns_v8d c, s;
