@@ -1,6 +1,6 @@
 /* view_source_net — see view_source_net.h. The frame loop holds several polled tiles at once
  * (until it uploads them), so each decoded tile has its own buffer: the tile's handle, freed
- * by release (a few spare buffers are kept for reuse).
+ * by release (up to SPARE_BYTES of released buffers are kept for reuse).
  *
  * The link is a small state machine advanced by poll and wait, never blocking:
  *   UP ──(read/send error, BYE, ERROR other than limit)──▶ WAIT (backoff)
@@ -41,6 +41,10 @@ struct got {
 	uint64_t hi, lo;
 };
 
+/* The spare buffers' bounds: 256 tiles of 256² RGBA. */
+#define SPARE_MAX 256
+#define SPARE_BYTES ((size_t)64 << 20)
+
 struct net_source {
 	struct view_source base; /* first: the frame loop holds &base */
 	struct net_conn *c;	 /* NULL while waiting to reconnect */
@@ -71,13 +75,16 @@ struct net_source {
 	uint32_t ping_req;		  /* the LIST_PLANETS awaited (0: none) */
 	double ping_ms, next_ping_ms;	  /* sent at; the next one due */
 	double rtt_min_ms, rtt_last_ms;	  /* 0: none yet on this connection */
-	/* Released buffers of spare_len bytes, for the next tiles: a burst of tiles is held until
-	 * uploaded, and buffers given back to malloc come back as fresh pages (glibc maps or
-	 * trims them), whose first write costs 20-30x a warm one under this project's VMs
-	 * (bench_machine's last line). 64 of 256² RGBA: 16 MiB. */
-	void *spare[64];
+	/* Released tile buffers, any size, for the next tiles: tiles are held until their
+	 * level's window moves past them, a fast flight releases hundreds in a burst, and buffers
+	 * given back to malloc come back as fresh pages (glibc maps or trims them), whose first
+	 * write costs 20-30x a warm one under this project's VMs (bench_machine's last line). */
+	struct spare {
+		void *p;
+		size_t len;
+	} spare[SPARE_MAX];
 	int nspare;
-	size_t spare_len;
+	size_t spare_bytes;
 	char err[256];
 };
 
@@ -338,9 +345,16 @@ static void take_tile(struct net_source *ns, struct proto_msg *m, struct view_ti
 {
 	size_t need = m->tile.enc.raw_len;
 	void *buf;
-	if (need == ns->spare_len && ns->nspare > 0)
-		buf = ns->spare[--ns->nspare];
-	else
+	buf = NULL;
+	for (int i = ns->nspare - 1; i >= 0 && need; i--) {
+		if (ns->spare[i].len == need) {
+			buf = ns->spare[i].p;
+			ns->spare[i] = ns->spare[--ns->nspare];
+			ns->spare_bytes -= need;
+			break;
+		}
+	}
+	if (!buf)
 		buf = xaligned_alloc(64, need ? need : 64);
 	int rc = net_tile_decode(ns->c, &m->tile, buf, need, ns->err);
 	if (rc) {
@@ -453,10 +467,9 @@ static void ns_release(struct view_source *s, struct view_tile *t)
 	struct net_source *ns = ns_of(s);
 	if (t->handle) {
 		size_t len = (size_t)t->size * t->size * pix_bytes(t->format);
-		if (len && ns->nspare < (int)(sizeof ns->spare / sizeof ns->spare[0]) &&
-		    (ns->nspare == 0 || len == ns->spare_len)) {
-			ns->spare_len = len;
-			ns->spare[ns->nspare++] = t->handle;
+		if (len && ns->nspare < SPARE_MAX && ns->spare_bytes + len <= SPARE_BYTES) {
+			ns->spare[ns->nspare++] = (struct spare){ t->handle, len };
+			ns->spare_bytes += len;
 		} else {
 			free(t->handle);
 		}
@@ -472,7 +485,7 @@ static void ns_destroy(struct view_source *s)
 	free(ns->entries);
 	free(ns->got);
 	for (int i = 0; i < ns->nspare; i++)
-		free(ns->spare[i]);
+		free(ns->spare[i].p);
 	free(ns->target);
 	free(ns->token_file);
 	free(ns->client_name);
