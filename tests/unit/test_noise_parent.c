@@ -516,27 +516,6 @@ static struct tile *carry_of(const struct noise *nz, struct tile_key k, uint32_t
 	return t;
 }
 
-/* The upsample's weights at t past a parent texel, written out here from noise_carry.c's
- * definition (the cubic Hermite whose slopes are 4th-order central differences, six taps
- * p−2 … p+3), for the reference below. */
-static void ref_kernel(double t, float w[6])
-{
-	double t2 = t * t, t3 = t2 * t;
-	double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + t, h01 = 3 * t2 - 2 * t3,
-	       h11 = t3 - t2;
-	double v[6] = { 0 };
-	static const double d[4] = { 1.0 / 12, -8.0 / 12, 8.0 / 12, -1.0 / 12 };
-	static const int off[4] = { -2, -1, 1, 2 };
-	v[2] += h00;
-	v[3] += h01;
-	for (int q = 0; q < 4; q++) {
-		v[2 + off[q]] += h10 * d[q];
-		v[3 + off[q]] += h11 * d[q];
-	}
-	for (int q = 0; q < 6; q++)
-		w[q] = (float)v[q];
-}
-
 static float ref_tap6(const float w[6], const float *f, size_t st)
 {
 	return ((((w[0] * f[0] + w[1] * f[st]) + w[2] * f[2 * st]) + w[3] * f[3 * st]) +
@@ -546,7 +525,7 @@ static float ref_tap6(const float w[6], const float *f, size_t st)
 
 /* The carry of an isotropic tile away from the poles and the antimeridian, texel by texel in
  * scalar C: the band [lo, 2·lo) plus the parent level's carry (tiles from carry_of, scalar)
- * upsampled down the columns, then along the rows. Child texel u's centre sits at parent
+ * upsampled (noise_carry_kernel's weights) down the columns, then along the rows. Child texel u's centre sits at parent
  * index u/2 − 1/4: its first tap is parent texel floor(u/2 − 1/4) − 2. */
 static void ref_carry(const struct noise *nz, struct tile_key k, uint32_t T, float *out)
 {
@@ -576,8 +555,8 @@ static void ref_carry(const struct noise *nz, struct tile_key k, uint32_t T, flo
 	assert_true(noise_tile_band(nz, &k, T, NOISE_ISA_SCALAR, scratch, lo, 2 * lo, false, out) >=
 		    0);
 	float w[2][6];
-	ref_kernel(0.75, w[0]);
-	ref_kernel(0.25, w[1]);
+	noise_carry_kernel(0.75, w[0]);
+	noise_carry_kernel(0.25, w[1]);
 	for (uint32_t j = 0; j < T; j++) {
 		int64_t r0 = (int64_t)floor((k.y * (double)T + j) / 2 - 0.25) - 2 - pv0;
 		for (int64_t c = 0; c < gw; c++)

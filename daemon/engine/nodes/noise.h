@@ -231,6 +231,9 @@ int noise_tile_from_carry(const struct noise *nz, const struct tile_key *k, uint
 			  enum noise_isa isa, void *scratch, const float *carry, const float *base,
 			  float amplitude, float offset, float *out);
 
+/* The carry upsample's six weights (taps p−2 … p+3) at t ∈ [0, 1) past parent texel p. */
+void noise_carry_kernel(double t, float w[6]);
+
 /* Internal to noise.c and noise_carry.c: noise_tile restricted to the octaves whose shortest
  * wavelength is in [lo, hi) metres (fade: with the pole fade); whether tile k fades any octave
  * of at least lo metres at its pole rows. */

@@ -27,7 +27,7 @@
 #define TAPS 6
 #define MARGIN 3 /* parent texels read beyond the footprint on each side */
 
-static void kernel(double t, float w[TAPS])
+void noise_carry_kernel(double t, float w[TAPS])
 {
 	double t2 = t * t, t3 = t2 * t;
 	double h00 = 2 * t3 - 3 * t2 + 1, h10 = t3 - 2 * t2 + t, h01 = 3 * t2 - 2 * t3,
@@ -222,8 +222,8 @@ int noise_carry_tile(const struct noise *nz, const struct tile_key *k, uint32_t 
 	if (gather(&g, T, in, nin, G))
 		return -EINVAL;
 	float w[2][TAPS];
-	kernel(0.75, w[0]); /* even child rows and columns */
-	kernel(0.25, w[1]); /* odd */
+	noise_carry_kernel(0.75, w[0]); /* even child rows and columns */
+	noise_carry_kernel(0.25, w[1]); /* odd */
 	const struct noise_sums *ns = noise_sums_for(isa);
 	for (uint32_t j = 0; j < T; j++) {
 		/* child row v = y·T + j sits at parent index v/2 − 1/4, t = 3/4 (j even) or 1/4
