@@ -344,8 +344,7 @@ static int ns_want(struct view_source *s, const struct view_want *w, size_t n,
 static void take_tile(struct net_source *ns, struct proto_msg *m, struct view_tile *out)
 {
 	size_t need = m->tile.enc.raw_len;
-	void *buf;
-	buf = NULL;
+	void *buf = NULL;
 	for (int i = ns->nspare - 1; i >= 0 && need; i--) {
 		if (ns->spare[i].len == need) {
 			buf = ns->spare[i].p;

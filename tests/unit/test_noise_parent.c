@@ -525,8 +525,9 @@ static float ref_tap6(const float w[6], const float *f, size_t st)
 
 /* The carry of an isotropic tile away from the poles and the antimeridian, texel by texel in
  * scalar C: the band [lo, 2·lo) plus the parent level's carry (tiles from carry_of, scalar)
- * upsampled (noise_carry_kernel's weights) down the columns, then along the rows. Child texel u's centre sits at parent
- * index u/2 − 1/4: its first tap is parent texel floor(u/2 − 1/4) − 2. */
+ * upsampled with noise_carry_kernel's weights down the columns, then along the rows. Child
+ * texel u's centre sits at parent index u/2 − 1/4: its first tap is parent texel
+ * floor(u/2 − 1/4) − 2. */
 static void ref_carry(const struct noise *nz, struct tile_key k, uint32_t T, float *out)
 {
 	const int64_t M = 3; /* parent texels read beyond the footprint on each side */
@@ -577,8 +578,8 @@ static void ref_carry(const struct noise *nz, struct tile_key k, uint32_t T, flo
 
 /* The carry and the tile from it give the same bits with every ISA this CPU runs (the
  * upsample's passes and the final sum run at each ISA's width: noise_sums.h), and the scalar
- * carry of interior isotropic tiles those of the upsample written out in ref_carry, on isotropic
- * levels (the parent has half the columns), anisotropic ones (the same columns), across the
+ * carry of interior isotropic tiles those of the upsample written out in ref_carry, on
+ * isotropic levels (the parent has half the columns), anisotropic ones (the same columns), across the
  * antimeridian and at both poles; and the tile from the carry is the carry plus the band
  * under NOISE_CARRY_TEXELS texels, scaled, as the scalar expression gives it. */
 static void same_bits_every_isa(void **state)
@@ -607,17 +608,15 @@ static void same_bits_every_isa(void **state)
 			int lx = clipmap_level_lx(ly, pl[pi].lat, -1);
 			struct tile_key k = at(lx, ly, pl[pi].lon, pl[pi].lat, T);
 			k.node = 1;
-			if (noise_carry_upsampled(&nz, lx, ly, T)) {
-				int plx, ply;
+			bool up = noise_carry_upsampled(&nz, lx, ly, T);
+			int plx = lx, ply = ly;
+			if (up) {
 				assert_int_equal(noise_carry_parent(&k, T, &plx, &ply), 0);
 				upsampled++;
 				dlx += plx != lx;
 			}
 			struct tile *c0 = carry_of(&nz, k, T, NOISE_ISA_SCALAR);
-			int plx, ply;
-			if (noise_carry_upsampled(&nz, lx, ly, T) && fabs(pl[pi].lat) < 60 &&
-			    fabs(pl[pi].lon) < 170 && !noise_carry_parent(&k, T, &plx, &ply) &&
-			    plx == lx - 1) {
+			if (up && plx == lx - 1 && fabs(pl[pi].lat) < 60 && fabs(pl[pi].lon) < 170) {
 				/* the upsample itself, against the reference written out above */
 				ref_carry(&nz, k, T, band);
 				assert_memory_equal(band, c0->data, (size_t)T * T * sizeof *band);

@@ -562,7 +562,7 @@ static void octave_row(const struct noise_octave *oc, const double pc0[3], struc
  * IEEE operations give the same bits at any width. */
 const struct noise_sums noise_sums_scalar = NOISE_SUMS_INIT;
 
-static const struct noise_sums *sums_for(enum noise_isa isa)
+const struct noise_sums *noise_sums_for(enum noise_isa isa)
 {
 	if (isa == NOISE_ISA_AUTO)
 		isa = noise_isa_best();
@@ -574,11 +574,6 @@ static const struct noise_sums *sums_for(enum noise_isa isa)
 	default:
 		return &noise_sums_scalar;
 	}
-}
-
-const struct noise_sums *noise_sums_for(enum noise_isa isa)
-{
-	return sums_for(isa);
 }
 
 /* Cubic Hermite basis at t = q/h, q = 0..h-1 (from double, so the same bits on every path):
@@ -885,7 +880,8 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 		return -ENOTSUP;
 	struct tile_eval t = {
 		.nz = nz, .k = k, .T = T, .M = lattice_m(T), .P = (uint32_t)lattice_p(T),
-		.MP = (uint32_t)lattice_row(T), .row_fn = kernel_for(isa), .ns = sums_for(isa),
+		.MP = (uint32_t)lattice_row(T), .row_fn = kernel_for(isa),
+		.ns = noise_sums_for(isa),
 		.ridged = nz->p.kind == NOISE_RIDGED, .ro = (float)nz->p.ridge_offset,
 		.rg = (float)nz->p.ridge_gain, .rf = (float)nz->p.ridge_floor,
 	};
