@@ -274,11 +274,21 @@ static void kill9_of_either(void **state)
 	NEED_DAEMON(e);
 	uint32_t pid;
 	struct net_conn *c = conn(e, &pid);
-	pid_t r = render_start(e, 10, "-30,100", "64", "big"); /* 4096 tiles: still running */
-	usleep(1000 * 1000);
+	uint64_t before = stat_of(c, "store.disk.tiles");
+	pid_t r = render_start(e, 10, "-30,100", "64", "big"); /* 4096 tiles: ~0.9 s here */
+	/* as soon as its first tiles are in the store (not after a fixed delay, which a fast
+	 * machine's render outran): the daemon writes too, then the render dies mid-block */
+	uint64_t end = clock_now_ms() + 30000;
+	int st;
+	while (stat_of(c, "store.disk.tiles") == before) {
+		if (waitpid(r, &st, WNOHANG) == r)
+			fail_msg("the render exited (status %d) before it wrote a tile", st);
+		if (clock_now_ms() > end)
+			fail_msg("the render wrote no tile in 30 s");
+		usleep(5000);
+	}
 	assert_int_equal(fetch_block(c, pid, 3, 7, 60, 50, 8, 4), 64); /* daemon writes too */
 	assert_int_equal(kill(r, SIGKILL), 0);
-	int st;
 	assert_int_equal(waitpid(r, &st, 0), r);
 	assert_true(WIFSIGNALED(st));
 	assert_int_equal(fetch_block(c, pid, 4, 7, 80, 50, 8, 4), 64);
@@ -299,7 +309,7 @@ static void kill9_of_either(void **state)
 	usleep(800 * 1000);
 	assert_int_equal(daemon_env_stop(&e->d, SIGKILL, NULL), 0);
 	net_close(c);
-	uint64_t end = clock_now_ms() + 120000;
+	end = clock_now_ms() + 120000;
 	while (waitpid(r, &st, WNOHANG) == 0 && clock_now_ms() < end)
 		usleep(50000);
 	if (clock_now_ms() >= end) {
