@@ -72,7 +72,8 @@ static const struct cmd_usage {
 	  "  clipmapctl render PLANET LAYER --level L --world -o FILE\n"
 	  "                                                     a whole level (lx = L+1, ly = L)\n"
 	  "  clipmapctl render PLANET LAYER --level L --at LAT,LON [--tiles N] -o FILE\n"
-	  "                                                     N×N tiles around a place (N = 3)\n"
+	  "                                                     N×N tiles around a place (N = 3),\n"
+	  "                                                     texels about square there\n"
 	  "      options: --workers N  --cache-mb N  --shade (colour × hillshade)  --quiet\n"
 	  "               --store PATH [--store-mb N]  read and fill an LMDB tile store (the\n"
 	  "               one a running clipmapd uses too)\n"
@@ -380,11 +381,12 @@ static int render_region_of(const struct render_args *ra, int npos, char **pos,
 				"--at LAT,LON (tiles around a place)\n");
 			return 2;
 		}
-		int lx = (int)ra->level + 1, ly = (int)ra->level;
+		int ly = (int)ra->level;
 		if (ra->world)
-			render_region_level(lx, ly, rg);
+			render_region_level(ly + 1, ly, rg);
 		else
-			render_region_around(lx, ly, ra->lat, ra->lon, ra->ntiles, rg);
+			render_region_around(render_lx_at(ly, ra->lat), ly, ra->lat, ra->lon,
+					     ra->ntiles, rg);
 		return 0;
 	}
 	if (ra->world || ra->at) {
@@ -450,7 +452,8 @@ static int render_to_file(const struct render_args *ra, const char *planet, cons
 	if (rc) {
 		fprintf(stderr, "clipmapctl render: %s\n", err);
 	} else if (!ra->quiet) {
-		printf("wrote %s (%dx%d) in %.2f s\n", ra->outpath, im.width, im.height,
+		printf("wrote %s (%dx%d: %u x %u tiles of level lx %d ly %d) in %.2f s\n",
+		       ra->outpath, im.width, im.height, rg->cols, rg->rows, rg->lx, rg->ly,
 		       clock_now_s() - t0);
 		if (note[0])
 			printf("%s\n", note);

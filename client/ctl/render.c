@@ -100,6 +100,15 @@ void render_region_level(int lx, int ly, struct render_region *r)
 				     .rows = grid_tiles_y(ly) };
 }
 
+int render_lx_at(int ly, double lat)
+{
+	/* a texel of level (ly + 1, ly) is as wide as tall at the equator; its width shrinks
+	 * with cos(lat), so halve the columns once per halving of that */
+	double c = cos(fmin(fabs(lat), 90.0) * (M_PI / 180.0));
+	int lx = ly + 1 + (c > 1e-9 ? (int)lround(log2(c)) : -(ly + 1));
+	return lx < 0 ? 0 : lx;
+}
+
 void render_region_around(int lx, int ly, double lat, double lon, uint32_t n,
 			  struct render_region *r)
 {

@@ -41,6 +41,10 @@ struct render_region {
 
 /* The whole level (lx, ly). */
 void render_region_level(int lx, int ly, struct render_region *r);
+/* The longitude level of a block of tiles of level ly around latitude lat whose texels are
+ * about as wide as tall there (within √2): ly + 1 at the equator, one less per halving of
+ * cos(lat), so a block near a pole is not a few metres wide and stretched into streaks. */
+int render_lx_at(int ly, double lat);
 /* n × n tiles of level (lx, ly) centred on the tile holding (lat, lon), clamped at the poles. */
 void render_region_around(int lx, int ly, double lat, double lon, uint32_t n,
 			  struct render_region *r);

@@ -14,6 +14,7 @@
 #include <unistd.h>
 #include <cmocka.h>
 
+#include "common/grid.h"
 #include "common/img.h"
 #include "engine/cache.h"
 #include "engine/planet.h"
@@ -168,6 +169,52 @@ static void whole_level_assembles_tiles(void **state)
 	free(px);
 }
 
+/* --at renders a block whose texels are about as wide as tall at the place: lx = ly + 1 at
+ * the equator, coarser towards the poles (at 89.5° the level-11 columns would be 0.4 m wide
+ * and 76 m tall: every feature a horizontal streak). The block's tiles are the engine's. */
+static void block_at_a_place_has_square_texels(void **state)
+{
+	struct env *e = *state;
+	static const struct {
+		double lat, lon;
+		int lx;
+	} at[] = { { 0.5, 10, 11 }, { 46.5, 9.9, 10 }, { -70, -150, 9 }, { 89.5, 0, 4 },
+		   { -89.5, 179.9, 4 }, { 90, 0, 0 } };
+	for (size_t i = 0; i < sizeof at / sizeof *at; i++) {
+		char out[4096], path[256], want[64], err[256];
+		snprintf(path, sizeof path, "%s/at%zu.tif", e->dir, i);
+		assert_int_equal(run(e, out, sizeof out, "render %s height --level 10 --at %.2f,%.2f "
+				     "--tiles 2 -o %s", PLANET, at[i].lat, at[i].lon, path), 0);
+		snprintf(want, sizeof want, "lx %d ly 10", at[i].lx);
+		if (!strstr(out, want))
+			fail_msg("--at %.2f,%.2f: expected %s in: %s", at[i].lat, at[i].lon, want, out);
+		uint32_t cols = at[i].lx == 0 ? 1 : 2;
+		void *px;
+		struct img_info info;
+		assert_int_equal(img_read(path, IMG_F32, &px, &info, err), 0);
+		assert_int_equal(info.width, cols * 256);
+		assert_int_equal(info.height, 2 * 256);
+		/* a texel's width over its height, in metres, at the place */
+		double aspect = 360.0 / ldexp(256.0, at[i].lx) * cos(at[i].lat * M_PI / 180.0) /
+				(180.0 / ldexp(256.0, 10));
+		if (fabs(at[i].lat) < 90)
+			assert_true(aspect > 0.5 && aspect < 2.0);
+		/* the block's top-left tile: the one holding the place, less (n − 1) / 2 = 0 */
+		uint32_t x = (uint32_t)floor(grid_lon_to_u(at[i].lx, 1, at[i].lon));
+		uint32_t y = (uint32_t)floor(grid_lat_to_v(10, 1, at[i].lat));
+		if (y > (1u << 10) - 2)
+			y = (1u << 10) - 2; /* clamped at the south pole */
+		if (at[i].lx == 0)
+			x = 0;
+		struct tile *t = fetch(e, "height", at[i].lx, 10, x, y);
+		for (uint32_t j = 0; j < 256; j++)
+			assert_memory_equal((float *)px + (size_t)j * info.width,
+					    (const float *)t->data + (size_t)j * 256, 256 * sizeof(float));
+		tile_unref(t);
+		free(px);
+	}
+}
+
 static void graph_is_dot(void **state)
 {
 	struct env *e = *state;
@@ -219,6 +266,7 @@ int main(void)
 		cmocka_unit_test(colour_tile_png),
 		cmocka_unit_test(height_tile_tiff_and_png16),
 		cmocka_unit_test(whole_level_assembles_tiles),
+		cmocka_unit_test(block_at_a_place_has_square_texels),
 		cmocka_unit_test(graph_is_dot),
 		cmocka_unit_test(errors),
 	};
