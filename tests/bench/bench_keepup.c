@@ -533,6 +533,10 @@ static void levels_at(const struct view_source *src, double agl, int *lmin, int 
 	view_level_range(&b, &cam, agl, N_PHI, ml, lmin, lmax);
 }
 
+/* The route prefetched as an operator would: a path (16 points) at each level up to lmax,
+ * 8 tile heights wide (4 until 5 December: the viewer's look-ahead lines span its window and
+ * ring, three tiles each side of the route, and at 40× the seed its 6 lines ahead reached out
+ * of that corridor — 66 layer tiles made in an 8 s restarted flight, 4 at 8). */
 static int prefetch_route(struct net_conn *c, const char *planet, double a, double len, int lmax,
 			  uint64_t *tiles, char err[256])
 {
@@ -545,7 +549,7 @@ static int prefetch_route(struct net_conn *c, const char *planet, double a, doub
 		double tile_m = M_PI * a / (double)(1u << l); /* a tile's height at level l */
 		struct ctl_prefetch_opts o = { .planet = planet, .shape = PROTO_SHAPE_PATH,
 					       .points = pts, .npoints = NP,
-					       .width_m = fmin(4 * tile_m, PROTO_MAX_WIDTH),
+					       .width_m = fmin(8 * tile_m, PROTO_MAX_WIDTH),
 					       .lmin = (uint8_t)l,
 					       .lmax = (uint8_t)l };
 		struct ctl_prefetch_ui ui = { .stop_fd = -1, .stall_ms = 120000 };
