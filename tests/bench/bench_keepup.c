@@ -275,7 +275,9 @@ static int wait_pool(struct net_conn *c, struct dstats *out, double *waited, cha
 	double t0 = clock_now_s();
 	for (;;) {
 		int rc = get_stats(c, out, err);
-		if (rc || out->prefault_left == 0)
+		if (rc)
+			return rc;
+		if (out->prefault_left == 0)
 			break;
 		if (clock_now_s() - t0 > 120) {
 			err_set(err, "the daemon's tile pool was not faulted in after 120 s (%llu "
