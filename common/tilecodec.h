@@ -115,6 +115,12 @@ ssize_t tilecodec_encode_lossy(struct tilecodec *tc, enum pix_type format, uint3
  * decompressed length) or -EILSEQ (checksum mismatch), with err filled (may be NULL). */
 int tilecodec_decode(struct tilecodec *tc, const struct tilecodec_hdr *h, const void *payload,
 		     size_t n, void *texels, size_t cap, char err[256]);
+/* The same for a payload whose integrity the caller has just checked itself (the store's
+ * value checksum covers the header, the key and the payload): a lossless payload's texel
+ * checksum is not computed again (an XXH3 pass over the raw texels, 128–256 KiB a tile).
+ * A lossy payload is checked as by tilecodec_decode. */
+int tilecodec_decode_trusted(struct tilecodec *tc, const struct tilecodec_hdr *h,
+			     const void *payload, size_t n, void *texels, size_t cap, char err[256]);
 
 /* The filter alone (exposed for tests and benchmarks): filtered[] ← filter(texels[]) and its
  * inverse. Both buffers hold T·T·texel bytes and must not overlap. Return 0 or -EINVAL. */

@@ -6,8 +6,7 @@
  * position (struct tile_key), so a planet change misses naturally and stale entries are only
  * garbage to collect. A value is the tile encoded with the tile codec (zstd at rest) behind a
  * 40-byte header carrying an XXH3-64 checksum of the header, the key and the payload; every
- * read verifies it (and the codec verifies the texels' own checksum), so a damaged entry is
- * reported as corrupt, never served.
+ * read verifies it, so a damaged entry is reported as corrupt, never served.
  *
  * Threads: every operation is thread-safe. get decodes with the caller's tilecodec (one per
  * thread). put and delete are write-behind: they queue and return at once; flush waits until
@@ -82,7 +81,10 @@ struct store_ops {
 	 * -errno. A hit also refreshes the entry's recency (write-behind). */
 	int (*get)(struct store *s, const struct tile_key *k, enum pix_type type, uint32_t size,
 		   struct tilecodec *tc, struct tile **out);
-	/* Whether k is present (no checksum, no decode; a miss is counted). */
+	/* Whether k is present (no checksum, no decode; a miss is counted). The caller is
+	 * about to get it: a backend may start reading the value in the background (the disk
+	 * tier asks the kernel to read the value's pages in, so loads queued one after another
+	 * overlap their I/O instead of faulting a page at a time). */
 	bool (*contains)(struct store *s, const struct tile_key *k);
 	/* Queues t for writing with its eviction class (an entry once prefetched stays so);
 	 * returns 0, or -EAGAIN when the queue is full (counted: the tile is simply not

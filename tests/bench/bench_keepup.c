@@ -39,15 +39,26 @@
  * ([store] path in the daemon's temporary directory), stop the daemon (SIGTERM, its write
  * queue drained first), start a fresh one on the same store (a cold memory cache), and fly:
  * each trial line and the table give the tiles generated during the flight (goal 0) and
- * while hovering at the start, besides the keep-up ratio (ours/seed).
+ * while hovering at the start, besides the keep-up ratio (ours/seed). Between the stop and the
+ * start the store file is put in a stated condition, KEEPUP_STORE_PAGES: cold (default: its
+ * pages dropped from the page cache, as after a reboot, and as on this machine kind, whose
+ * kernel pages out file pages idle for 60 s: the route's first tiles, prefetched a minute or
+ * two before the flight, were read from the disk while its last ones were not), warm (read
+ * through once) or as-is (as the prefetch left it: what the flight finds then depends on how
+ * long the prefetch took); each trial line gives the share in the page cache at the restart
+ * and after the hover.
  * Single-threaded (the daemon is a separate process); owns everything it creates.
  */
+#include <errno.h>
 #include <math.h>
+#include <signal.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -165,17 +176,24 @@ static void route_point(double a, double s, double *lat, double *lon)
  * its memory as a running daemon's does); prefetched ones with a cache that holds the whole
  * route, as an operator who prefetches a route would size it. Call daemon_env_fini after,
  * also on failure. */
+/* The restarted trials' store file, in the daemon's temporary directory. */
+static void store_file(const struct daemon_env *d, char *out, size_t n)
+{
+	snprintf(out, n, "%s/tiles.lmdb", d->dir);
+}
+
 static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, bool store,
 			char *name, size_t nname, char err[256])
 {
-	char cache[64], path[200];
+	char cache[64], path[300], file[256];
 	snprintf(cache, sizeof cache, "engine.cache_mb = %d", cache_mb);
 	int rc = daemon_env_init(d, "bench_keepup");
 	if (rc) {
 		err_set(err, "temporary directory: %s", strerror(-rc));
 		return rc;
 	}
-	snprintf(path, sizeof path, "store.path = %s/tiles.lmdb", d->dir);
+	store_file(d, file, sizeof file);
+	snprintf(path, sizeof path, "store.path = %s", file);
 	const char *const set[] = { "engine.workers = 0", cache, "session.max_rate = 0",
 				    store ? path : NULL, "store.disk_mb = 16384", NULL };
 	rc = daemon_env_planet_copy(d, planet, name, nname);
@@ -422,6 +440,7 @@ struct ctx {
 	double ramp_s;	   /* seconds from rest to full velocity, not counted (0: a jump to it) */
 	int confirm;	   /* flights that confirm a row's velocity (0: the search's answer) */
 	double confirm_s;  /* their length */
+	enum store_pages { PAGES_COLD, PAGES_WARM, PAGES_ASIS } pages; /* restarted: the store file */
 };
 
 struct trial {
@@ -434,6 +453,9 @@ struct trial {
 	uint64_t prefetch_tiles;
 	uint64_t gen_hover, gen_flight; /* tiles generated while hovering at the start, flying */
 	uint64_t disk_hits;		/* disk-tier hits, hover and flight */
+	/* restarted: the store file's size and the share of it in the page cache when the
+	 * daemon restarts and when the flight starts (after the hover) */
+	double store_mb, resident_restart, resident_flight;
 	char top_node[64];
 	double top_share;
 	double fine_lag; /* of the frames short of full detail: those missing only the 2 finest */
@@ -574,10 +596,71 @@ static int open_source(const struct net_opts *no, const char *name, struct view_
 	return view_source_net_create(no, name, out, err);
 }
 
-/* After a prefetch into the store: waits until its write queue is empty, then restarts the
- * daemon on the same store (a cold memory cache) and connects again. */
-static int restart_daemon(struct daemon_env *d, struct net_conn **sc, const struct net_opts *no,
-			  char err[256])
+/* The share of a file's pages in the page cache (mincore over a read-only mapping), or -1. */
+static double file_resident(const char *path, double *mb)
+{
+	int fd = open(path, O_RDONLY | O_CLOEXEC);
+	struct stat st;
+	if (fd < 0 || fstat(fd, &st) || st.st_size == 0) {
+		if (fd >= 0)
+			close(fd);
+		return -1;
+	}
+	size_t len = (size_t)st.st_size, pg = (size_t)sysconf(_SC_PAGESIZE), np = (len + pg - 1) / pg;
+	void *m = mmap(NULL, len, PROT_READ, MAP_SHARED, fd, 0);
+	close(fd);
+	if (m == MAP_FAILED)
+		return -1;
+	unsigned char *v = xmalloc(np);
+	double r = -1;
+	if (mincore(m, len, v) == 0) {
+		size_t in = 0;
+		for (size_t i = 0; i < np; i++)
+			in += v[i] & 1;
+		r = (double)in / (double)np;
+	}
+	free(v);
+	munmap(m, len);
+	if (mb)
+		*mb = (double)len / (1 << 20);
+	return r;
+}
+
+/* Puts the stopped daemon's store file in the condition asked for: cold (its pages dropped
+ * from the page cache, as after a reboot — and as on this machine kind a minute after the
+ * file was last touched: its kernel pages out what stays idle for 60 s, so a route
+ * prefetched a while before a restart is read from the disk) or warm (read through once). */
+static int store_pages(const char *path, enum store_pages how, char err[256])
+{
+	if (how == PAGES_ASIS)
+		return 0;
+	int fd = open(path, O_RDONLY | O_CLOEXEC);
+	if (fd < 0) {
+		err_set(err, "%s: %s", path, strerror(errno));
+		return -errno;
+	}
+	int rc = 0;
+	if (how == PAGES_COLD) {
+		/* clean pages only: the stopped daemon committed (fsync) every batch */
+		rc = -posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+	} else {
+		static char buf[1 << 20];
+		ssize_t n;
+		while ((n = read(fd, buf, sizeof buf)) > 0)
+			;
+		rc = n < 0 ? -errno : 0;
+	}
+	close(fd);
+	if (rc)
+		err_set(err, "%s: %s", path, strerror(-rc));
+	return rc;
+}
+
+/* After a prefetch into the store: waits until its write queue is empty, stops the daemon,
+ * puts its store file in the condition asked for, starts it again on the same store (a cold
+ * memory cache) and connects again. */
+static int restart_daemon(const struct ctx *x, struct daemon_env *d, struct net_conn **sc,
+			  const struct net_opts *no, struct trial *tr, char err[256])
 {
 	double t0 = clock_now_s();
 	for (;;) {
@@ -595,7 +678,18 @@ static int restart_daemon(struct daemon_env *d, struct net_conn **sc, const stru
 	}
 	net_close(*sc);
 	*sc = NULL;
-	int rc = daemon_env_restart(d, err);
+	int rc = daemon_env_stop(d, SIGTERM, NULL);
+	if (rc) {
+		err_set(err, "stopping clipmapd: %s", strerror(-rc));
+		return rc;
+	}
+	char path[256];
+	store_file(d, path, sizeof path);
+	rc = store_pages(path, x->pages, err);
+	if (rc)
+		return rc;
+	tr->resident_restart = file_resident(path, &tr->store_mb);
+	rc = daemon_env_restart(d, err);
 	return rc ? rc : net_connect(no, sc, err);
 }
 
@@ -644,7 +738,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	if (mode == RESTARTED) {
 		view_source_destroy(c.src);
 		c.src = NULL;
-		rc = restart_daemon(&d, &sc, &no, err);
+		rc = restart_daemon(x, &d, &sc, &no, tr, err);
 		if (rc)
 			goto out;
 		rc = open_source(&no, name, &c.src, err);
@@ -694,6 +788,11 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		idle_until(&c, t0 + (k + 1) / HZ, x->drain);
 	}
 	tr->hover_s = clock_now_s() - t0;
+	if (mode == RESTARTED) {
+		char path[256];
+		store_file(&d, path, sizeof path);
+		tr->resident_flight = file_resident(path, NULL);
+	}
 	struct dstats s0, s1;
 	rc = get_stats(sc, &s0, err);
 	if (rc)
@@ -938,6 +1037,12 @@ static void search(const struct ctx *x, const char *planet, enum mode mode, int 
 		r->lmin = tr.lmin;
 		r->lmax = tr.lmax;
 		bool pass = tr.full >= 0.95;
+		char pages[96] = "";
+		if (mode == RESTARTED)
+			snprintf(pages, sizeof pages,
+				 "; store %.0f MB, %.0f%% in the page cache at the restart, %.0f%% "
+				 "after the hover", tr.store_mb, tr.resident_restart * 100,
+				 tr.resident_flight * 100);
 		fprintf(stderr, "  keepup %s%s %7.0f m  v %9.0f m/s: %5.1f%% full, %5.0f tiles/s, "
 				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, pool %.1f s, hover %.1f s, fine-lag %.0f%%, "
 				"load %.1f, CPU %.0f%% (daemon %.1f, client %.1f, others %.1f cores), %.0f tiles/s in; "
@@ -949,7 +1054,7 @@ static void search(const struct ctx *x, const char *planet, enum mode mode, int 
 			tr.cpu_daemon, tr.cpu_client, tr.cpu_others,
 			tr.tiles_in_per_s,
 			(unsigned long long)tr.gen_flight, (unsigned long long)tr.gen_hover,
-			(unsigned long long)tr.disk_hits, prefetch ? "" : "");
+			(unsigned long long)tr.disk_hits, pages);
 		if (pass) {
 			lo = v;
 			r->pass = tr;
@@ -1014,13 +1119,25 @@ struct config {
 	char route[200]; /* its route, as print_table gives it */
 };
 
+static const char *const pages_name[] = { "cold", "warm", "as-is" };
+
+/* The restarted trials' condition, in words. */
+static const char *pages_text(enum store_pages p)
+{
+	return p == PAGES_COLD	 ? "the store file dropped from the page cache before the restart"
+	       : p == PAGES_WARM ? "the store file read into the page cache before the restart"
+				 : "the store file's pages left as the prefetch left them";
+}
+
 static void print_table(const struct config *cf, double trial_s, int confirm_n, double confirm_s,
-			double ramp_s)
+			double ramp_s, enum store_pages pages)
 {
 	printf("keepup/%s: route %s, 60 Hz, full detail >= 95%% of %.1f s flights (searched), then "
 	       "the median of %d flights of %.1f s at the answer (confirmed), each after %.1f s "
-	       "from rest to its velocity (not counted), 1280x720 levels, %.0f s in all\n",
-	       cf->label, cf->route, trial_s, confirm_n, confirm_s, ramp_s, cf->seconds);
+	       "from rest to its velocity (not counted), 1280x720 levels%s%s, %.0f s in all\n",
+	       cf->label, cf->route, trial_s, confirm_n, confirm_s, ramp_s,
+	       cf->mode == RESTARTED ? ", " : "", cf->mode == RESTARTED ? pages_text(pages) : "",
+	       cf->seconds);
 	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s %8s  %s\n", "altitude", "seed", "ours",
 	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "gen", "limiting stage");
 	for (int i = 0; i < NALT; i++) {
@@ -1049,7 +1166,8 @@ static void print_table(const struct config *cf, double trial_s, int confirm_n, 
 				     : "issue 12's goal: >= 25x at every altitude");
 }
 
-static void write_json(const char *path, struct config *cf, int ncf, double trial_s, double ramp_s)
+static void write_json(const char *path, struct config *cf, int ncf, double trial_s, double ramp_s,
+		       enum store_pages pages)
 {
 	FILE *f = fopen(path, "w");
 	if (!f) {
@@ -1063,9 +1181,11 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 		if (!cf[c].run)
 			continue;
 		fprintf(f, "%s    {\"label\": \"%s\", \"planet\": \"%s\", \"route\": \"%s\", "
-			   "\"prefetched\": %s, \"seconds\": %.1f, \"rows\": [\n",
+			   "\"prefetched\": %s, \"store_pages\": \"%s\", \"seconds\": %.1f, "
+			   "\"rows\": [\n",
 			firstc ? "" : ",\n", cf[c].label, cf[c].planet, cf[c].route,
-			cf[c].prefetch ? "true" : "false", cf[c].seconds);
+			cf[c].prefetch ? "true" : "false",
+			cf[c].mode == RESTARTED ? pages_name[pages] : "none", cf[c].seconds);
 		firstc = false;
 		for (int i = 0; i < NALT; i++) {
 			const struct row *r = &cf[c].rows[i];
@@ -1078,13 +1198,13 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 				   "\"prefetch_s\": %.2f, \"search_velocity_mps\": %.1f, "
 				   "\"confirmed_median_full\": %.3f, \"cpu_busy\": %.3f, "
 				   "\"cpu_daemon_cores\": %.2f, \"cpu_client_cores\": %.2f, "
-				   "\"cpu_other_cores\": %.2f, "
+				   "\"cpu_other_cores\": %.2f, \"store_resident_at_flight\": %.3f, "
 				   "\"tiles_in_per_s\": %.1f, \"limiting_stage\": \"%s\"}%s\n",
 				r->alt, seed[i].levels, r->lmin, r->lmax, r->seed_v, r->v,
 				r->capped ? "true" : "false", r->v / r->seed_v, t->full, t->gen_per_s,
 				t->hit_ratio, t->util, t->frame_p95_ms, r->trials, r->pass.prefetch_s,
 				r->v_search, r->median_full, t->cpu_busy, t->cpu_daemon, t->cpu_client,
-				t->cpu_others, t->tiles_in_per_s, r->limit,
+				t->cpu_others, t->resident_flight, t->tiles_in_per_s, r->limit,
 				i + 1 < NALT ? "," : "");
 		}
 		fprintf(f, "    ]}");
@@ -1269,6 +1389,19 @@ int main(int argc, char **argv)
 	x.drain = !getenv("KEEPUP_DRAIN") || atoi(getenv("KEEPUP_DRAIN")) > 0;
 	x.ahead = !getenv("KEEPUP_AHEAD") || atoi(getenv("KEEPUP_AHEAD")) > 0;
 	x.ramp_s = getenv("KEEPUP_RAMP_S") ? atof(getenv("KEEPUP_RAMP_S")) : 1;
+	const char *pg = getenv("KEEPUP_STORE_PAGES");
+	x.pages = PAGES_COLD;
+	if (pg) {
+		int k = 0;
+		while (k < 3 && strcmp(pg, pages_name[k]) != 0)
+			k++;
+		if (k == 3) {
+			fprintf(stderr, "bench_keepup: KEEPUP_STORE_PAGES=%s: want cold, warm or as-is\n",
+				pg);
+			return 2;
+		}
+		x.pages = (enum store_pages)k;
+	}
 	if (x.ramp_s < 0)
 		x.ramp_s = 0;
 	const char *only = getenv("KEEPUP_ONLY"); /* a label substring, for quick runs */
@@ -1333,12 +1466,12 @@ int main(int argc, char **argv)
 		snprintf(cf[k].route, sizeof cf[k].route,
 			 "%s from (%.1f°, %.1f°) heading %.0f° over %s", route_name, start_lat,
 			 start_lon, heading, route_where);
-		print_table(&cf[k], x.trial_s, x.confirm, x.confirm_s, x.ramp_s);
+		print_table(&cf[k], x.trial_s, x.confirm, x.confirm_s, x.ramp_s, x.pages);
 		fflush(stdout);
 	}
 	mkdir("out", 0755);
 	mkdir("out/bench", 0755);
-	write_json("out/bench/keepup.json", cf, NCF, x.trial_s, x.ramp_s);
+	write_json("out/bench/keepup.json", cf, NCF, x.trial_s, x.ramp_s, x.pages);
 	write_png("out/bench/keepup.png", cf, NCF);
 	printf("keepup: wrote out/bench/keepup.json, out/bench/keepup.png\n");
 	gl_context_destroy(glc);

@@ -3,8 +3,9 @@
  * value damaged inside the file (detected, counted, dropped — never returned), a value moved
  * under another key, the byte budget (least recently used evicted first, prefetched tiles
  * after every incidental one), the write queue's
- * accounting (every put is either written or counted as dropped), and a file that is not
- * LMDB (moved aside, a fresh store created). */
+ * accounting (every put is either written or counted as dropped), a file that is not
+ * LMDB (moved aside, a fresh store created), and contains starting to read a value whose
+ * pages are not in the page cache (the file's pages counted with mincore). */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -12,10 +13,12 @@
 #include <cmocka.h>
 
 #include <errno.h>
+#include <fcntl.h>
 #include <lmdb.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -390,6 +393,94 @@ static void foreign_file_moved_aside(void **state)
 	store_destroy(s);
 }
 
+/* Pages of the file at path in the page cache (mincore over a read-only mapping). */
+static size_t resident_pages(const char *path)
+{
+	int fd = open(path, O_RDONLY);
+	assert_true(fd >= 0);
+	struct stat st;
+	assert_int_equal(fstat(fd, &st), 0);
+	size_t len = (size_t)st.st_size, pg = (size_t)sysconf(_SC_PAGESIZE), np = (len + pg - 1) / pg;
+	void *m = mmap(NULL, len, PROT_READ, MAP_SHARED, fd, 0);
+	assert_true(m != MAP_FAILED);
+	unsigned char *v = malloc(np);
+	assert_int_equal(mincore(m, len, v), 0);
+	size_t n = 0;
+	for (size_t i = 0; i < np; i++)
+		n += v[i] & 1;
+	free(v);
+	munmap(m, len);
+	close(fd);
+	return n;
+}
+
+static void drop_pages(const char *path)
+{
+	int fd = open(path, O_RDONLY);
+	assert_true(fd >= 0);
+	assert_int_equal(posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED), 0);
+	close(fd);
+}
+
+static int value_len(void *ud, const struct store_entry *en)
+{
+	*(uint32_t *)ud = en->bytes;
+	return 1;
+}
+
+/* A value out of the page cache (as after a reboot, or pages the kernel reclaimed) is read in
+ * when contains finds it, not a page at a time by the get that follows: with the pages
+ * faulted one by one, a restarted daemon's two workers waited on one 4 KiB read after
+ * another (50 MB/s, the CPU a third idle, 0.2 % full-detail frames at 47.6x the seed). */
+static void contains_starts_reading_the_value(void **state)
+{
+	struct env *e = *state;
+	struct store *s = open_store(e, 0, 0);
+	struct tile *t[4];
+	uint32_t r = 12345;
+	for (int k = 0; k < 4; k++) {
+		struct tile_key a = key(9, (uint32_t)k, 1);
+		t[k] = tile_create(&a, PIX_HEIGHT, 256);
+		for (int i = 0; i < 256 * 256; i++) {
+			r = r * 1664525u + 1013904223u;
+			tile_f32(t[k])[i] = (float)(r >> 8);
+		}
+		assert_int_equal(store_put(s, t[k], STORE_KEEP_INCIDENTAL), 0);
+	}
+	assert_int_equal(store_flush(s), 0);
+	uint32_t vlen = 0;
+	store_iterate(s, value_len, &vlen);
+	size_t pg = (size_t)sysconf(_SC_PAGESIZE), vpages = vlen / pg;
+	assert_true(vpages >= 32); /* noise: the value stays large */
+	/* Closed, the file's clean pages can all be dropped (mapped ones could not). */
+	store_destroy(s);
+	drop_pages(e->path);
+	s = open_store(e, 0, 0);
+	size_t before = resident_pages(e->path);
+	if (before >= vpages) {
+		store_destroy(s);
+		for (int k = 0; k < 4; k++)
+			tile_unref(t[k]);
+		skip(); /* the file system keeps its pages (tmpfs): nothing to read in */
+	}
+	assert_true(store_contains(s, &t[2]->key));
+	/* The read is asynchronous: mincore counts a page once it has been read. Nothing else
+	 * reads the file here, so without the hint the value's pages never come. */
+	size_t after = resident_pages(e->path);
+	for (int i = 0; i < 500 && after < before + vpages * 9 / 10; i++) {
+		usleep(10000);
+		after = resident_pages(e->path);
+	}
+	assert_true(after >= before + vpages * 9 / 10);
+	struct tile *got = NULL;
+	assert_int_equal(store_get(s, &t[2]->key, PIX_HEIGHT, 256, e->tc, &got), 0);
+	assert_same(t[2], got);
+	tile_unref(got);
+	for (int k = 0; k < 4; k++)
+		tile_unref(t[k]);
+	store_destroy(s);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -399,6 +490,7 @@ int main(void)
 		cmocka_unit_test_setup_teardown(prefetched_kept_ahead, setup, teardown),
 		cmocka_unit_test_setup_teardown(queue_accounting, setup, teardown),
 		cmocka_unit_test_setup_teardown(foreign_file_moved_aside, setup, teardown),
+		cmocka_unit_test_setup_teardown(contains_starts_reading_the_value, setup, teardown),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
