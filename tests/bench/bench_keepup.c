@@ -29,7 +29,8 @@
  * level whose window is not yet its target, "stale", the tiles taken in the frame and while
  * waiting after it, the want-set entries sent) and each node's tiles and worker time over the
  * flight, and the daemon's memory, cache and store counters at its end; KEEPUP_CACHE_MB=N the cold trials' memory cache (default 1024, the
- * shipped size); KEEPUP_AHEAD=0 no look-ahead along the
+ * shipped size); KEEPUP_CONF="section.key = value" one more line of the daemon's
+ * configuration (A/B runs of a setting); KEEPUP_AHEAD=0 no look-ahead along the
  * motion (view_clipmap_motion); KEEPUP_DRAIN=0 no reading between frames.
  * KEEPUP_ROUTE=equator|46n|70n|pole: where the route runs (default equator, where lx = ly + 1
  * at every level; 46n, where viewers use lx = ly; 70n; pole, over a pole), each starting over
@@ -194,8 +195,15 @@ static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, 
 	}
 	store_file(d, file, sizeof file);
 	snprintf(path, sizeof path, "store.path = %s", file);
-	const char *const set[] = { "engine.workers = 0", cache, "session.max_rate = 0",
-				    store ? path : NULL, "store.disk_mb = 16384", NULL };
+	/* KEEPUP_CONF: one more clipmapd.conf line ("section.key = value"), for A/B runs */
+	const char *more = getenv("KEEPUP_CONF");
+	const char *set[8] = { "engine.workers = 0", cache, "session.max_rate = 0",
+			       "store.disk_mb = 16384" };
+	int ns = 4;
+	if (store)
+		set[ns++] = path;
+	if (more && *more)
+		set[ns++] = more;
 	rc = daemon_env_planet_copy(d, planet, name, nname);
 	if (rc) {
 		err_set(err, "cannot prepare %s from %s", d->planets, planet);
