@@ -6,9 +6,14 @@
  *     writer thread, zstd-3, batched transactions with fsync);
  *   - bytes per tile at rest per layer type (the value, and what the accounting charges);
  *   - hit latency per 256² tile, p50/p99, with the file in the page cache (read txn, checksum,
- *     zstd decode, unfilter), and the memory cache's lookup for comparison.
+ *     zstd decode, unfilter), and the memory cache's lookup for comparison;
+ *   - hits with the file out of the page cache (as after a reboot; on this machine kind also a
+ *     minute after the file was last touched): a get alone (its value faulted in a page at a
+ *     time), contains then get (the scheduler's order: contains asks for the value's pages),
+ *     and 16 contains then their 16 gets (jobs queued together), as tiles per second.
  * One run, one line per figure. The store file lives in a temporary directory under /tmp.
  */
+#include <fcntl.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -32,6 +37,50 @@ static int cmp_u64(const void *a, const void *b)
 {
 	uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
 	return x < y ? -1 : x > y;
+}
+
+enum cold_way { COLD_GET, COLD_CONTAINS_GET, COLD_QUEUED };
+
+/* Closes the store, drops its file from the page cache (clean pages no process maps), opens
+ * it again and reads every tile the way asked, in a scattered order; per-tile latencies in
+ * lat (n of them), the whole in *secs. Returns the tiles that came back wrong or not at all,
+ * or -1 when the file's pages cannot be dropped (a file system that keeps them: tmpfs). */
+static long cold_reads(struct store **st, const char *file, struct tilecodec *tc,
+		       struct tile *const *t, size_t n, enum cold_way way, uint64_t *lat,
+		       double *secs)
+{
+	char err[256];
+	store_destroy(*st);
+	int fd = open(file, O_RDONLY);
+	if (fd < 0 || posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED) != 0) {
+		if (fd >= 0)
+			close(fd);
+		return -1;
+	}
+	close(fd);
+	if (store_lmdb_open(&(struct store_lmdb_desc){ .path = file }, st, err)) {
+		fprintf(stderr, "bench_store: %s\n", err);
+		exit(1);
+	}
+	long bad = 0;
+	size_t batch = way == COLD_QUEUED ? 16 : 1;
+	uint64_t t0 = clock_now_ns();
+	for (size_t i = 0; i < n; i += batch) {
+		uint64_t a = clock_now_ns();
+		size_t m = i + batch <= n ? batch : n - i;
+		for (size_t q = 0; q < m && way != COLD_GET; q++)
+			bad += !store_contains(*st, &t[(i + q) * 37 % n]->key);
+		for (size_t q = 0; q < m; q++) {
+			const struct tile *x = t[(i + q) * 37 % n];
+			struct tile *g = NULL;
+			int e = store_get(*st, &x->key, x->type, x->size, tc, &g);
+			bad += e != 0 || memcmp(g->data, x->data, g->nbytes) != 0;
+			tile_unref(g);
+			lat[i + q] = (clock_now_ns() - a) / m;
+		}
+	}
+	*secs = (double)(clock_now_ns() - t0) * 1e-9;
+	return bad;
 }
 
 struct at_rest {
@@ -178,6 +227,26 @@ int main(void)
 	qsort(lat, k, sizeof *lat, cmp_u64);
 	printf("store/memory hit (cache_lookup, for comparison): p50 %.4f ms, p99 %.4f ms\n",
 	       (double)lat[k / 2] * 1e-6, (double)lat[k * 99 / 100] * 1e-6);
+
+	/* 37 is prime: i·37 mod n visits every tile while n is not a multiple of it */
+	static const char *const way_name[] = { "get alone (faulted a page at a time)",
+						"contains then get (the value read ahead)",
+						"16 contains then 16 gets (queued jobs)" };
+	for (int way = COLD_GET; way <= COLD_QUEUED && n % 37 != 0; way++) {
+		double secs;
+		long b = cold_reads(&st, file, tc, t, n, (enum cold_way)way, lat, &secs);
+		if (b < 0) {
+			printf("store/disk hit, file not in the page cache: skipped (its pages cannot be "
+			       "dropped here)\n");
+			break;
+		}
+		bad += (size_t)b;
+		qsort(lat, n, sizeof *lat, cmp_u64);
+		printf("store/disk hit, file not in the page cache, %s: p50 %.3f ms, p99 %.3f ms, "
+		       "%.0f tiles/s, %ld wrong\n",
+		       way_name[way], (double)lat[n / 2] * 1e-6, (double)lat[n * 99 / 100] * 1e-6,
+		       (double)n / secs, b);
+	}
 
 	tilecodec_destroy(tc);
 	store_destroy(st);
