@@ -59,7 +59,6 @@
 #include <stdlib.h>
 #include <string.h>
 #include <fcntl.h>
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
@@ -75,6 +74,7 @@
 #include "common/img.h"
 #include "common/xalloc.h"
 #include "support/daemon_env.h"
+#include "support/pagecache.h"
 
 #define DEG (M_PI / 180.0)
 #define HZ 60.0
@@ -172,17 +172,17 @@ static void route_point(double a, double s, double *lat, double *lon)
 
 /* ---- the daemon ------------------------------------------------------------------------ */
 
-/* A fresh daemon (tests/support/daemon_env) serving a copy of `planet`; name receives the
- * planet's name. cache_mb: cold trials run with the shipped size (1 GiB: a full cache recycles
- * its memory as a running daemon's does); prefetched ones with a cache that holds the whole
- * route, as an operator who prefetches a route would size it. Call daemon_env_fini after,
- * also on failure. */
 /* The restarted trials' store file, in the daemon's temporary directory. */
 static void store_file(const struct daemon_env *d, char *out, size_t n)
 {
 	snprintf(out, n, "%s/tiles.lmdb", d->dir);
 }
 
+/* A fresh daemon (tests/support/daemon_env) serving a copy of `planet`; name receives the
+ * planet's name. cache_mb: cold trials run with the shipped size (1 GiB: a full cache recycles
+ * its memory as a running daemon's does); prefetched ones with a cache that holds the whole
+ * route, as an operator who prefetches a route would size it. Call daemon_env_fini after,
+ * also on failure. */
 static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, bool store,
 			char *name, size_t nname, char err[256])
 {
@@ -604,34 +604,15 @@ static int open_source(const struct net_opts *no, const char *name, struct view_
 	return view_source_net_create(no, name, out, err);
 }
 
-/* The share of a file's pages in the page cache (mincore over a read-only mapping), or -1. */
+/* The share of a file's pages in the page cache, or -1; its size in *mb (may be NULL). */
 static double file_resident(const char *path, double *mb)
 {
-	int fd = open(path, O_RDONLY | O_CLOEXEC);
-	struct stat st;
-	if (fd < 0 || fstat(fd, &st) || st.st_size == 0) {
-		if (fd >= 0)
-			close(fd);
+	size_t in, np;
+	if (pagecache_count(path, &in, &np) || np == 0)
 		return -1;
-	}
-	size_t len = (size_t)st.st_size, pg = (size_t)sysconf(_SC_PAGESIZE), np = (len + pg - 1) / pg;
-	void *m = mmap(NULL, len, PROT_READ, MAP_SHARED, fd, 0);
-	close(fd);
-	if (m == MAP_FAILED)
-		return -1;
-	unsigned char *v = xmalloc(np);
-	double r = -1;
-	if (mincore(m, len, v) == 0) {
-		size_t in = 0;
-		for (size_t i = 0; i < np; i++)
-			in += v[i] & 1;
-		r = (double)in / (double)np;
-	}
-	free(v);
-	munmap(m, len);
 	if (mb)
-		*mb = (double)len / (1 << 20);
-	return r;
+		*mb = (double)np * (double)sysconf(_SC_PAGESIZE) / (1 << 20);
+	return (double)in / (double)np;
 }
 
 /* Puts the stopped daemon's store file in the condition asked for: cold (its pages dropped
@@ -640,25 +621,20 @@ static double file_resident(const char *path, double *mb)
  * prefetched a while before a restart is read from the disk) or warm (read through once). */
 static int store_pages(const char *path, enum store_pages how, char err[256])
 {
-	if (how == PAGES_ASIS)
-		return 0;
-	int fd = open(path, O_RDONLY | O_CLOEXEC);
-	if (fd < 0) {
-		err_set(err, "%s: %s", path, strerror(errno));
-		return -errno;
-	}
 	int rc = 0;
 	if (how == PAGES_COLD) {
 		/* clean pages only: the stopped daemon committed (fsync) every batch */
-		rc = -posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
-	} else {
+		rc = pagecache_drop(path);
+	} else if (how == PAGES_WARM) {
+		int fd = open(path, O_RDONLY | O_CLOEXEC);
 		static char buf[1 << 20];
-		ssize_t n;
-		while ((n = read(fd, buf, sizeof buf)) > 0)
+		ssize_t n = fd < 0 ? -1 : 0;
+		while (fd >= 0 && (n = read(fd, buf, sizeof buf)) > 0)
 			;
 		rc = n < 0 ? -errno : 0;
+		if (fd >= 0)
+			close(fd);
 	}
-	close(fd);
 	if (rc)
 		err_set(err, "%s: %s", path, strerror(-rc));
 	return rc;

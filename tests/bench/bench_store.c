@@ -13,7 +13,6 @@
  *     and 16 contains then their 16 gets (jobs queued together), as tiles per second.
  * One run, one line per figure. The store file lives in a temporary directory under /tmp.
  */
-#include <fcntl.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -28,6 +27,7 @@
 #include "engine/sched.h"
 #include "engine/store.h"
 #include "support/daemon_env.h"
+#include "support/pagecache.h"
 
 #define SIDE 6 /* SIDE × SIDE tiles per layer */
 #define LEVEL 9
@@ -51,13 +51,8 @@ static long cold_reads(struct store **st, const char *file, struct tilecodec *tc
 {
 	char err[256];
 	store_destroy(*st);
-	int fd = open(file, O_RDONLY);
-	if (fd < 0 || posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED) != 0) {
-		if (fd >= 0)
-			close(fd);
+	if (pagecache_drop(file) != 0)
 		return -1;
-	}
-	close(fd);
 	if (store_lmdb_open(&(struct store_lmdb_desc){ .path = file }, st, err)) {
 		fprintf(stderr, "bench_store: %s\n", err);
 		exit(1);

@@ -13,18 +13,17 @@
 #include <cmocka.h>
 
 #include <errno.h>
-#include <fcntl.h>
 #include <lmdb.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include "common/tilecodec.h"
 #include "engine/store.h"
 #include "engine/tile.h"
+#include "support/pagecache.h"
 
 #define T 64
 
@@ -393,33 +392,11 @@ static void foreign_file_moved_aside(void **state)
 	store_destroy(s);
 }
 
-/* Pages of the file at path in the page cache (mincore over a read-only mapping). */
 static size_t resident_pages(const char *path)
 {
-	int fd = open(path, O_RDONLY);
-	assert_true(fd >= 0);
-	struct stat st;
-	assert_int_equal(fstat(fd, &st), 0);
-	size_t len = (size_t)st.st_size, pg = (size_t)sysconf(_SC_PAGESIZE), np = (len + pg - 1) / pg;
-	void *m = mmap(NULL, len, PROT_READ, MAP_SHARED, fd, 0);
-	assert_true(m != MAP_FAILED);
-	unsigned char *v = malloc(np);
-	assert_int_equal(mincore(m, len, v), 0);
-	size_t n = 0;
-	for (size_t i = 0; i < np; i++)
-		n += v[i] & 1;
-	free(v);
-	munmap(m, len);
-	close(fd);
-	return n;
-}
-
-static void drop_pages(const char *path)
-{
-	int fd = open(path, O_RDONLY);
-	assert_true(fd >= 0);
-	assert_int_equal(posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED), 0);
-	close(fd);
+	size_t in, np;
+	assert_int_equal(pagecache_count(path, &in, &np), 0);
+	return in;
 }
 
 static int value_len(void *ud, const struct store_entry *en)
@@ -454,7 +431,7 @@ static void contains_starts_reading_the_value(void **state)
 	assert_true(vpages >= 32); /* noise: the value stays large */
 	/* Closed, the file's clean pages can all be dropped (mapped ones could not). */
 	store_destroy(s);
-	drop_pages(e->path);
+	assert_int_equal(pagecache_drop(e->path), 0);
 	s = open_store(e, 0, 0);
 	size_t before = resident_pages(e->path);
 	if (before >= vpages) {
