@@ -50,6 +50,8 @@ struct daemon {
 	struct remote *remote; /* the fleet's Redis tier, NULL without [store] redis */
 	struct store_stats store_seen; /* its counters at the last tick */
 	bool store_failing;	       /* its writes fail (logged once) */
+	uint64_t store_pf_evicting;    /* evicting prefetched tiles: the count when it began + 1 */
+	uint64_t store_pf_last_ns;     /* when the count last grew */
 	struct http *http;	       /* the HTTP endpoint, NULL without [http] listen */
 	uint64_t metrics_ns;	       /* when its /metrics text was last gathered */
 	struct prefault {	       /* [engine] prefault: the tile pool faulted in at start */
@@ -261,7 +263,10 @@ static void on_signal(void *ud)
 
 /* Says what went wrong in the store (the engine only counts): damaged entries once per tick
  * in which some were found; a damaged file replaced; failing writes (disk full, I/O) once when they start and once
- * when a batch commits again; a full write queue the first time. */
+ * when a batch commits again; a full write queue the first time; prefetched tiles evicted to
+ * stay within the budget once when it starts and once, with the count, when none were for
+ * STORE_QUIET_NS (a job's batches come in bursts: one episode, not a line per burst). */
+#define STORE_QUIET_NS 10000000000ull
 static void store_watch(struct daemon *d)
 {
 	struct store_stats st, *old = &d->store_seen;
@@ -284,6 +289,22 @@ static void store_watch(struct daemon *d)
 		log_msg(LOG_WARN, "store %s: the file was damaged (LMDB could not read it): moved "
 			"aside as %s.corrupt-TIME and started empty; its tiles will be generated "
 			"again", d->conf.store_path, d->conf.store_path);
+	uint64_t now = clock_now_ns();
+	if (st.evictions_prefetched > old->evictions_prefetched) {
+		if (!d->store_pf_evicting)
+			log_msg(LOG_WARN, "store %s: full ([store] disk_mb = %llu): evicting "
+				"prefetched tiles to make room; what was prefetched is no longer "
+				"all on disk", d->conf.store_path,
+				(unsigned long long)(st.budget >> 20));
+		if (!d->store_pf_evicting)
+			d->store_pf_evicting = old->evictions_prefetched + 1;
+		d->store_pf_last_ns = now;
+	} else if (d->store_pf_evicting && now - d->store_pf_last_ns > STORE_QUIET_NS) {
+		log_msg(LOG_INFO, "store %s: %llu prefetched tiles evicted (store.disk."
+			"evictions_prefetched)", d->conf.store_path,
+			(unsigned long long)(st.evictions_prefetched - (d->store_pf_evicting - 1)));
+		d->store_pf_evicting = 0;
+	}
 	if (st.write_drops > 0 && old->write_drops == 0)
 		log_msg(LOG_WARN, "store %s: write queue full, tiles left unstored (counted as "
 			"store.disk.write_drops)", d->conf.store_path);

@@ -419,6 +419,7 @@ static void stat_store(struct statb *b, struct store *st)
 	stat_u(b, "store.disk.misses", s.misses);
 	stat_u(b, "store.disk.puts", s.puts);
 	stat_u(b, "store.disk.evictions", s.evictions);
+	stat_u(b, "store.disk.evictions_prefetched", s.evictions_prefetched);
 	stat_u(b, "store.disk.corrupt", s.corrupt);
 	stat_u(b, "store.disk.write_drops", s.write_drops);
 	stat_u(b, "store.disk.write_errors", s.write_errors);

@@ -991,8 +991,28 @@ static int prefetch(const struct ctl_target *t, const struct ctl_prefetch_opts *
 				      .summary = stdout, .stop_fd = sfd,
 				      .timeout_ms = t->timeout_ms };
 	struct proto_prefetch_progress fin;
-	char err[256];
+	char err[256], serr[256];
+	/* A job that fits the disk tier's budget alone may still push out what earlier jobs
+	 * prefetched (or its own first tiles): the daemon counts those evictions, and the
+	 * operator is told here rather than finding out from a viewer's waits. */
+	static const char pf_key[] = "store.disk.evictions_prefetched";
+	uint64_t ev0 = 0, ev1 = 0;
+	bool counted = ctl_stat_u64(conn, pf_key, timeout_of(t), &ev0, serr) == 0;
 	int rc = ctl_prefetch_run(conn, o, &ui, &fin, err);
+	/* the job's last tiles are written behind it: their batches evict too (3 s at most) */
+	uint64_t queued = 0;
+	for (int k = 0; counted && (rc == 0 || rc == -ECANCELED) && k < 60 &&
+			ctl_stat_u64(conn, "store.disk.queued", timeout_of(t), &queued, serr) == 0 &&
+			queued > 0;
+	     k++)
+		usleep(50 * 1000);
+	if (counted && (rc == 0 || rc == -ECANCELED) &&
+	    ctl_stat_u64(conn, pf_key, timeout_of(t), &ev1, serr) == 0 && ev1 > ev0)
+		fprintf(stderr, "clipmapctl prefetch: warning: the disk tier evicted %llu "
+			"prefetched tiles while this job ran (%s): it is full, and what was "
+			"prefetched (by earlier jobs, or this one's first tiles) is no longer all "
+			"on disk; raise [store] disk_mb or prefetch less\n",
+			(unsigned long long)(ev1 - ev0), pf_key);
 	net_close(conn);
 	close(sfd);
 	if (rc == -ECANCELED) {

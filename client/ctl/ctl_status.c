@@ -315,6 +315,26 @@ int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, cha
 	return rc;
 }
 
+int ctl_stat_u64(struct net_conn *c, const char *key, int timeout_ms, uint64_t *v, char err[256])
+{
+	struct proto_msg req = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
+	int rc = net_send(c, &req, err);
+	if (rc)
+		return rc;
+	struct proto_msg m = { 0 };
+	rc = net_expect(c, PROTO_STATS, &m, timeout_ms, NULL, NULL, err);
+	if (rc)
+		return rc;
+	const struct proto_stat *s = find(&m.stats, key);
+	if (s && s->kind == PROTO_STAT_U64)
+		*v = s->u;
+	else
+		err_set(err, "%s: no figure \"%s\"", net_peer(c), key);
+	rc = s && s->kind == PROTO_STAT_U64 ? 0 : -ENOENT;
+	proto_msg_fini(&m);
+	return rc;
+}
+
 int ctl_status_planets(struct net_conn *c, int timeout_ms, FILE *out, char err[256])
 {
 	struct proto_msg req = { .type = PROTO_LIST_PLANETS,

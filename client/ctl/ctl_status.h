@@ -7,6 +7,7 @@
 #ifndef CLIPMAP_CTL_STATUS_H
 #define CLIPMAP_CTL_STATUS_H
 #include <stdbool.h>
+#include <stdint.h>
 #include <stdio.h>
 
 #include "client/net.h"
@@ -17,6 +18,9 @@
 int ctl_status_print(const struct proto_stats *st, const char *peer, bool json, FILE *out);
 /* Sends STATS_REQ, waits for STATS and prints it. Returns 0 or -errno with err filled. */
 int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, char err[256]);
+/* Sends STATS_REQ and reads one u64 figure (`key`) from the STATS. Returns 0, -ENOENT (the
+ * daemon has no such figure) or -errno, with err filled. */
+int ctl_stat_u64(struct net_conn *c, const char *key, int timeout_ms, uint64_t *v, char err[256]);
 /* Sends LIST_PLANETS, waits for PLANETS and prints the planets served, one line each (name,
  * layers, levels, radius). Returns 0 or -errno with err filled. */
 int ctl_status_planets(struct net_conn *c, int timeout_ms, FILE *out, char err[256]);

@@ -41,6 +41,8 @@ struct store_stats {
 	uint64_t misses;      /* gets and contains that found nothing */
 	uint64_t puts;	      /* tiles written (committed) */
 	uint64_t evictions;   /* entries dropped to stay under the budget */
+	uint64_t evictions_prefetched; /* of them, entries kept for prefetch (STORE_KEEP_PREFETCHED):
+					* what operators prefetched no longer all on disk */
 	uint64_t corrupt;     /* entries that failed their checksum (dropped) */
 	uint64_t write_drops; /* puts dropped because the write queue was full */
 	uint64_t write_errors; /* batches that failed to commit (disk full, I/O error) */

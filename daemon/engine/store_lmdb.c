@@ -104,6 +104,7 @@ struct lstore {
 
 	atomic_uint_fast64_t bytes, ntiles, stamp;
 	atomic_uint_fast64_t hits, misses, puts, evictions, corrupt, drops, werrs, queued;
+	atomic_uint_fast64_t evictions_pf; /* of them, entries kept for prefetch */
 	atomic_int last_write; /* store_stats.last_write */
 	atomic_uint_fast64_t recovered;
 };
@@ -354,9 +355,14 @@ static int touch_entry(struct lstore *s, MDB_txn *txn, const uint8_t kb[STORE_KE
 	return stamp_entry(s, txn, kb, &md);
 }
 
+/* Entries a transaction evicted: all, and those kept for prefetch. */
+struct evicted {
+	uint64_t n, pf;
+};
+
 /* Evicts the least recent entries until *nb ≤ target. */
 static int evict_to(struct lstore *s, MDB_txn *txn, uint64_t target, uint64_t *nb, uint64_t *nt,
-		    uint64_t *evicted)
+		    struct evicted *evicted)
 {
 	int rc = 0;
 	while (*nb > target && *nt > 0) {
@@ -392,7 +398,8 @@ static int evict_to(struct lstore *s, MDB_txn *txn, uint64_t target, uint64_t *n
 			if ((rc = mdb_del(txn, s->lru, &lv, NULL)) && rc != MDB_NOTFOUND)
 				return rc;
 		}
-		(*evicted)++;
+		evicted->n++;
+		evicted->pf += lk[0] == STORE_KEEP_PREFETCHED;
 	}
 	return 0;
 }
@@ -405,7 +412,8 @@ static int apply(struct lstore *s, struct wop *ops, size_t n, uint64_t extra_evi
 	if (rc)
 		return rc;
 	uint64_t nb = atomic_load(&s->bytes), nt = atomic_load(&s->ntiles);
-	uint64_t stamp = atomic_load(&s->stamp), evicted = 0, written = 0;
+	uint64_t stamp = atomic_load(&s->stamp), written = 0;
+	struct evicted evicted = { 0 };
 	/* what the file holds now: other processes may have written since our last batch */
 	uint64_t fb, ft, fs;
 	if ((rc = totals_get(s, txn, &fb, &ft, &fs)) == 0) {
@@ -457,7 +465,8 @@ static int apply(struct lstore *s, struct wop *ops, size_t n, uint64_t extra_evi
 		atomic_store(&s->bytes, nb);
 		atomic_store(&s->ntiles, nt);
 		atomic_store(&s->stamp, stamp);
-		atomic_fetch_add(&s->evictions, evicted);
+		atomic_fetch_add(&s->evictions, evicted.n);
+		atomic_fetch_add(&s->evictions_pf, evicted.pf);
 		atomic_fetch_add(&s->puts, written);
 	}
 	return rc;
@@ -794,7 +803,8 @@ static void l_stat(struct store *base, struct store_stats *o)
 		.tiles = atomic_load(&s->ntiles), .bytes = atomic_load(&s->bytes),
 		.budget = s->budget, .hits = atomic_load(&s->hits),
 		.misses = atomic_load(&s->misses), .puts = atomic_load(&s->puts),
-		.evictions = atomic_load(&s->evictions), .corrupt = atomic_load(&s->corrupt),
+		.evictions = atomic_load(&s->evictions),
+		.evictions_prefetched = atomic_load(&s->evictions_pf), .corrupt = atomic_load(&s->corrupt),
 		.write_drops = atomic_load(&s->drops), .write_errors = atomic_load(&s->werrs),
 		.last_write = atomic_load(&s->last_write),
 		.queued = atomic_load(&s->queued), .recovered = atomic_load(&s->recovered),

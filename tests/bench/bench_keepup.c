@@ -60,6 +60,7 @@
 #include <string.h>
 #include <fcntl.h>
 #include <sys/stat.h>
+#include <sys/statvfs.h>
 #include <time.h>
 #include <unistd.h>
 
@@ -178,6 +179,23 @@ static void store_file(const struct daemon_env *d, char *out, size_t n)
 	snprintf(out, n, "%s/tiles.lmdb", d->dir);
 }
 
+/* The store's budget for a prefetched route: KEEPUP_DISK_MB, else three quarters of the free
+ * space where the store lives, at most 64 GiB. A route that does not fit is not flown (the
+ * prefetch would evict its own first tiles and the flight would measure their synthesis: an
+ * 8 s flight at 56.6x the seed along 46N stores ~16.9 GB, past the 16 GiB this bench gave the
+ * store until 5 December, and flew 0 % full detail with 55 000 tiles generated). */
+static int disk_budget_mb(const char *dir)
+{
+	const char *e = getenv("KEEPUP_DISK_MB");
+	if (e && atoi(e) > 0)
+		return atoi(e);
+	struct statvfs sv;
+	if (statvfs(dir, &sv) != 0)
+		return 16384;
+	double mb = (double)sv.f_bavail * (double)sv.f_frsize / (1 << 20) * 0.75;
+	return (int)fmin(mb, 65536);
+}
+
 /* A fresh daemon (tests/support/daemon_env) serving a copy of `planet`; name receives the
  * planet's name. cache_mb: cold trials run with the shipped size (1 GiB: a full cache recycles
  * its memory as a running daemon's does); prefetched ones with a cache that holds the whole
@@ -197,8 +215,9 @@ static int daemon_start(struct daemon_env *d, const char *planet, int cache_mb, 
 	snprintf(path, sizeof path, "store.path = %s", file);
 	/* KEEPUP_CONF: one more clipmapd.conf line ("section.key = value"), for A/B runs */
 	const char *more = getenv("KEEPUP_CONF");
-	const char *set[8] = { "engine.workers = 0", cache, "session.max_rate = 0",
-			       "store.disk_mb = 16384" };
+	char disk[64];
+	snprintf(disk, sizeof disk, "store.disk_mb = %d", disk_budget_mb(d->dir));
+	const char *set[8] = { "engine.workers = 0", cache, "session.max_rate = 0", disk };
 	int ns = 4;
 	if (store)
 		set[ns++] = path;
@@ -224,6 +243,7 @@ static int cold_cache_mb(void)
 
 struct dstats {
 	uint64_t generated, hits, misses, workers, disk_hits, queued;
+	uint64_t disk_evictions, disk_tiles, disk_budget; /* the store's */
 	uint64_t prefault_left; /* bytes of the tile pool not faulted in yet */
 	int nnodes;
 	struct {
@@ -262,6 +282,12 @@ static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
 			out->disk_hits = s->u;
 		else if (strcmp(s->key, "store.disk.queued") == 0)
 			out->queued = s->u;
+		else if (strcmp(s->key, "store.disk.evictions") == 0)
+			out->disk_evictions = s->u;
+		else if (strcmp(s->key, "store.disk.tiles") == 0)
+			out->disk_tiles = s->u;
+		else if (strcmp(s->key, "store.disk.budget") == 0)
+			out->disk_budget = s->u;
 		else if (strcmp(s->key, "memory.pool.prefault_left") == 0)
 			out->prefault_left = s->u;
 		if (dump_stats && s->kind == PROTO_STAT_U64 &&
@@ -453,6 +479,7 @@ struct ctx {
 
 struct trial {
 	bool ok;	 /* it ran (the daemon started, the start view loaded) */
+	char why[256];	 /* when it did not: what stopped it */
 	double full;	 /* fraction of full-detail frames */
 	int frames, lmin, lmax;
 	double gen_per_s, hit_ratio, util, frame_p95_ms, late_frac;
@@ -464,6 +491,7 @@ struct trial {
 	/* restarted: the store file's size and the share of it in the page cache when the
 	 * daemon restarts and when the flight starts (after the hover) */
 	double store_mb, resident_restart, resident_flight;
+	double budget_mb; /* the store's budget */
 	char top_node[64];
 	double top_share;
 	double fine_lag; /* of the frames short of full detail: those missing only the 2 finest */
@@ -652,8 +680,19 @@ static int restart_daemon(const struct ctx *x, struct daemon_env *d, struct net_
 		int rc = get_stats(*sc, &st, err);
 		if (rc)
 			return rc;
-		if (st.queued == 0)
+		if (st.queued == 0) {
+			tr->budget_mb = (double)st.disk_budget / (1 << 20);
+			if (st.disk_evictions) {
+				err_set(err, "the route's prefetch evicted %llu of its own %llu tiles: "
+					"it does not fit the store's budget of %.0f MB (KEEPUP_DISK_MB, "
+					"else 3/4 of the free disk): not flown",
+					(unsigned long long)st.disk_evictions,
+					(unsigned long long)(st.disk_tiles + st.disk_evictions),
+					(double)st.disk_budget / (1 << 20));
+				return -ENOSPC;
+			}
 			break;
+		}
 		if (clock_now_s() - t0 > 120) {
 			err_set(err, "the store's write queue did not drain in 120 s");
 			return -ETIMEDOUT;
@@ -880,9 +919,11 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 	tr->top_share = busy > 0 ? top / busy : 0;
 	tr->ok = true;
 out:
-	if (rc)
+	if (rc) {
 		fprintf(stderr, "bench_keepup: %s at %.0f m, %.0f m/s: %s (%s)\n", planet_ini, agl, v,
 			err, strerror(-rc));
+		snprintf(tr->why, sizeof tr->why, "%s", err);
+	}
 	free(fr);
 	free(c.wants);
 	view_clipmap_destroy(c.cm);
@@ -902,7 +943,8 @@ struct row {
 	double v_search;	 /* the search's answer, before the confirming flights */
 	double median_full;	 /* the confirming flights' median full-detail share (-1: none) */
 	double seconds;
-	char limit[192];
+	char limit[320];
+	char stopped[300]; /* a trial that could not run stopped the search: why */
 };
 
 /* What stopped the lowest failing velocity: the client's own frame; synthesis throughput
@@ -915,6 +957,10 @@ struct row {
 static void limiting_stage(struct row *r)
 {
 	const struct trial *t = &r->fail;
+	if (r->stopped[0] && !t->ok) {
+		snprintf(r->limit, sizeof r->limit, "not measured %s", r->stopped);
+		return;
+	}
 	if (r->capped || !t->ok) {
 		snprintf(r->limit, sizeof r->limit, "none up to the search cap");
 		return;
@@ -1016,16 +1062,20 @@ static void search(const struct ctx *x, const char *planet, enum mode mode, int 
 		struct trial tr;
 		int rc = run_trial(x, planet, seed[i].alt, v, mode, &tr);
 		r->trials++;
-		if (rc || !tr.ok)
+		if (rc || !tr.ok) {
+			snprintf(r->stopped, sizeof r->stopped, "at %.1fx: %s", v / seed[i].vel,
+				 tr.why[0] ? tr.why : "the trial did not run");
 			break;
+		}
 		r->lmin = tr.lmin;
 		r->lmax = tr.lmax;
 		bool pass = tr.full >= 0.95;
-		char pages[96] = "";
+		char pages[128] = "";
 		if (mode == RESTARTED)
 			snprintf(pages, sizeof pages,
-				 "; store %.0f MB, %.0f%% in the page cache at the restart, %.0f%% "
-				 "after the hover", tr.store_mb, tr.resident_restart * 100,
+				 "; store %.0f MB (budget %.0f), %.0f%% in the page cache at the "
+				 "restart, %.0f%% after the hover", tr.store_mb, tr.budget_mb,
+				 tr.resident_restart * 100,
 				 tr.resident_flight * 100);
 		fprintf(stderr, "  keepup %s%s %7.0f m  v %9.0f m/s: %5.1f%% full, %5.0f tiles/s, "
 				"hits %3.0f%%, workers %3.0f%%, frame p95 %.1f ms, pool %.1f s, hover %.1f s, fine-lag %.0f%%, "

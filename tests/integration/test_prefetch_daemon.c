@@ -14,7 +14,9 @@
  *   - a job that runs ends with done = total (the total made exact as its levels are built);
  *   - a region prefetched at 46°N, the daemon restarted: a viewer there generates 0 tiles;
  *   - prefetched tiles are written through to the disk tier: no memory-cache insert or
- *     eviction, a viewer's tiles still served from memory; a second run generates nothing.
+ *     eviction, a viewer's tiles still served from memory; a second run generates nothing;
+ *   - jobs that each fit the store's budget but not together: the last succeeds and
+ *     clipmapctl, the log and status say the store evicted prefetched tiles.
  * Skipped when build/clipmapd was not built. */
 #include <stdarg.h>
 #include <stddef.h>
@@ -41,6 +43,16 @@
 #include "support/proc_rss.h"
 
 #define TOKEN "pf-token-123"
+/* overflowing_prefetches_say_so: jobs that each fit a 10 MiB store, not all together. The
+ * first is estimated at its raw size (~20 KiB a 64² tile: nothing is stored yet), so it is
+ * small (436 tiles); the next ones at what stored tiles take (~2.4 KiB): 3160 and 3254 tiles,
+ * ~7.5 MiB each. */
+#define PF_FULL_MB "10"
+#define PF_FULL_A "10,10,10.4,10.4"
+#define PF_FULL_A_LEVELS "8-9"
+#define PF_FULL_B "20,10,21,11"
+#define PF_FULL_C "30,10,31,11"
+#define PF_FULL_BC_LEVELS "4-11"
 
 static const char planet_text[] =
 	"[planet]\nname = test\nbody = sphere\nradius = 6371000\ntile_size = 64\nmax_level = 22\n"
@@ -597,19 +609,35 @@ static void restart_then_viewer_generates_nothing(void **state)
 }
 
 /* Runs clipmapctl -s SOCKET with the arguments; returns its exit status, output in out. */
-static int ctl(struct env *e, char *out, size_t n, const char *a0, ...)
+static int ctl_va(const struct daemon_env *d, char *out, size_t n, const char *a0, va_list ap)
 {
 	char exe[600];
-	snprintf(exe, sizeof exe, "%s/clipmapctl", e->d.bindir);
-	char *argv[32] = { exe, "-s", e->d.sock };
+	snprintf(exe, sizeof exe, "%s/clipmapctl", d->bindir);
+	char *argv[32] = { exe, "-s", (char *)d->sock };
 	int argc = 3;
-	va_list ap;
-	va_start(ap, a0);
 	for (const char *a = a0; a && argc < 31; a = va_arg(ap, const char *))
 		argv[argc++] = (char *)a;
-	va_end(ap);
 	argv[argc] = NULL;
 	return daemon_env_run(argv, out, n);
+}
+
+static int ctl(struct env *e, char *out, size_t n, const char *a0, ...)
+{
+	va_list ap;
+	va_start(ap, a0);
+	int rc = ctl_va(&e->d, out, n, a0, ap);
+	va_end(ap);
+	return rc;
+}
+
+/* clipmapctl against another daemon. */
+static int ctl_at(const struct daemon_env *d, char *out, size_t n, const char *a0, ...)
+{
+	va_list ap;
+	va_start(ap, a0);
+	int rc = ctl_va(d, out, n, a0, ap);
+	va_end(ap);
+	return rc;
 }
 
 /* Sum of "key": N after every occurrence of `after` in a JSON text. */
@@ -903,6 +931,63 @@ static void coverage_prefetch_and_purge(void **state)
 			     "1,1,2,2", "--levels", "1-2", NULL), 2);
 }
 
+/* Issue 13: jobs that each fit the disk tier's budget but not together. The last still
+ * succeeds (exit 0), and the operator is told: clipmapctl prints how many prefetched tiles
+ * the store evicted while it ran, the daemon logs it, status counts it; the first job, alone,
+ * warns of nothing. A daemon of its own with a 10 MiB store. */
+static void overflowing_prefetches_say_so(void **state)
+{
+	struct env *e = *state;
+	NEED_DAEMON(e);
+	if (!daemon_env_built(&e->d, "clipmapctl"))
+		skip();
+	struct daemon_env d;
+	char store[200], err[256];
+	assert_int_equal(daemon_env_init(&d, "test_pf_full"), 0);
+	assert_int_equal(daemon_env_planet_text(&d, "test.ini", planet_text, NULL), 0);
+	snprintf(store, sizeof store, "store.path = %s/tiles.lmdb", d.dir);
+	const char *const set[] = { store, "store.disk_mb = " PF_FULL_MB, "engine.workers = 1",
+				    "session.max_rate = 0", "log.level = info", NULL };
+	if (daemon_env_start(&d, &(struct daemon_env_conf){ .set = set }, err))
+		fail_msg("%s", err);
+	static char out[1 << 16];
+	int rc = ctl_at(&d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_A, "--levels",
+			PF_FULL_A_LEVELS, NULL);
+	printf("first job: %s", out);
+	assert_int_equal(rc, 0);
+	assert_null(strstr(out, "warning"));
+	struct net_conn *c = NULL;
+	if (net_connect(&(struct net_opts){ .socket_path = d.sock, .name = "test_prefetch" }, &c,
+			err))
+		fail_msg("%s", err);
+	wait_written(c);
+	uint64_t first = stat_of(c, "store.disk.tiles");
+	assert_int_equal(stat_of(c, "store.disk.evictions_prefetched"), 0);
+	rc = ctl_at(&d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_B, "--levels",
+		    PF_FULL_BC_LEVELS, NULL);
+	printf("second job: %s", out);
+	assert_int_equal(rc, 0);
+	wait_written(c);
+	rc = ctl_at(&d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_C, "--levels",
+		    PF_FULL_BC_LEVELS, NULL);
+	printf("third job: %s", out);
+	assert_int_equal(rc, 0);
+	wait_written(c);
+	uint64_t ev = stat_of(c, "store.disk.evictions_prefetched");
+	printf("the store held %llu tiles after the first job; the others evicted %llu; "
+	       "%llu bytes held of a %llu budget\n", (unsigned long long)first,
+	       (unsigned long long)ev, (unsigned long long)stat_of(c, "store.disk.bytes"),
+	       (unsigned long long)stat_of(c, "store.disk.budget"));
+	assert_true(ev > 0);
+	assert_true(stat_of(c, "store.disk.bytes") <= stat_of(c, "store.disk.budget"));
+	assert_non_null(strstr(out, "warning: the disk tier evicted"));
+	assert_non_null(strstr(out, "prefetched tiles while this job ran"));
+	assert_true(daemon_env_log_wait(&d, "evicting prefetched tiles", 1, 3000));
+	net_close(c);
+	daemon_env_stop(&d, SIGTERM, NULL);
+	daemon_env_fini(&d);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -914,6 +999,7 @@ int main(void)
 		cmocka_unit_test(restart_then_viewer_generates_nothing),
 		cmocka_unit_test(cache_maintenance),
 		cmocka_unit_test(coverage_prefetch_and_purge),
+		cmocka_unit_test(overflowing_prefetches_say_so),
 		cmocka_unit_test(damaged_file_replaced_at_run_time),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
