@@ -652,8 +652,11 @@ static int serve(struct daemon *d, struct planet_set *ps)
 	int rc;
 	if (d->conf.store_path) {
 		err[0] = '\0';
+		bool lz4 = d->conf.disk_codec == CONF_DISK_LZ4;
 		rc = store_lmdb_open(&(struct store_lmdb_desc){ .path = d->conf.store_path,
-								.budget = d->conf.store_bytes },
+								.budget = d->conf.store_bytes,
+								.codec = lz4 ? TCODEC_LZ4
+									     : TCODEC_ZSTD },
 				     &d->store, err);
 		if (rc) {
 			log_msg(LOG_ERROR, "store: %s", err);
@@ -663,10 +666,10 @@ static int serve(struct daemon *d, struct planet_set *ps)
 		if (err[0])
 			log_msg(LOG_WARN, "store: %s", err);
 		store_stat(d->store, &d->store_seen);
-		log_msg(LOG_INFO, "store %s: %llu tiles, %llu of %llu MiB", d->conf.store_path,
+		log_msg(LOG_INFO, "store %s: %llu tiles, %llu of %llu MiB; writes %s", d->conf.store_path,
 			(unsigned long long)d->store_seen.tiles,
 			(unsigned long long)(d->store_seen.bytes >> 20),
-			(unsigned long long)(d->store_seen.budget >> 20));
+			(unsigned long long)(d->store_seen.budget >> 20), lz4 ? "lz4" : "zstd");
 	}
 	if (d->conf.store_redis &&
 	    (rc = store_redis_open(&(struct store_redis_desc){

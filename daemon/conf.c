@@ -30,6 +30,7 @@ struct row {
 
 static const char *const token_names[] = { "auto", "tcp", "all", NULL };
 static const char *const compress_names[] = { "auto", "never", "always", NULL };
+static const char *const disk_codec_names[] = { "zstd", "lz4", NULL };
 
 static const struct row rows[] = {
 	{ "listen", "unix", K_PATH, 0, 0, NULL },
@@ -68,6 +69,7 @@ static const struct row rows[] = {
 	{ "log", "level", K_LOG, 0, 0, NULL },
 	{ "store", "path", K_PATH, 0, 0, NULL },
 	{ "store", "disk_mb", K_SIZE_MB, 1, 1L << 26, NULL },
+	{ "store", "disk_codec", K_ENUM, 0, 0, disk_codec_names },
 	{ "store", "redis", K_REDIS, 0, 0, NULL },
 	{ "store", "redis_password", K_STR, 0, 0, NULL },
 	{ "store", "redis_lease_ms", K_INT, 50, 600000, NULL },
@@ -320,13 +322,20 @@ static int apply(struct conf *c, const char *path, const struct row *r, const st
 			if (strcmp(v, r->names[i]) == 0) {
 				if (strcmp(r->key, "require_token") == 0)
 					c->require_token = (enum conf_token_policy)i;
+				else if (strcmp(r->key, "disk_codec") == 0)
+					c->disk_codec = (enum conf_disk_codec)i;
 				else
 					c->compress = (enum conf_compress)i;
 				return 0;
 			}
 		}
-		return cerr(err, path, e->line, e->key, "\"%s\": expected %s, %s or %s", v,
-			    r->names[0], r->names[1], r->names[2]);
+		{
+			char names[128] = "";
+			for (int i = 0; r->names[i]; i++)
+				snprintf(names + strlen(names), sizeof names - strlen(names), "%s%s",
+					 i == 0 ? "" : r->names[i + 1] ? ", " : " or ", r->names[i]);
+			return cerr(err, path, e->line, e->key, "\"%s\": expected %s", v, names);
+		}
 	case K_MODE:
 		if (parse_long(v, 8, &n) || n < r->lo || n > r->hi)
 			return cerr(err, path, e->line, e->key, "\"%s\": expected an octal mode like 0660",

@@ -27,6 +27,12 @@ enum conf_compress {
 	CONF_COMPRESS_ALWAYS, /* zstd-1 (else lz4) on every listener when the client decodes it */
 };
 
+/* The disk tier's codec at rest (the texels after the format's filter). */
+enum conf_disk_codec {
+	CONF_DISK_ZSTD = 0, /* zstd-1: the smaller file */
+	CONF_DISK_LZ4,	    /* lz4: 2-3x faster to decode, a larger file (README, bench_store) */
+};
+
 #define CONF_MAX_TCP 8
 
 struct conf {
@@ -69,6 +75,7 @@ struct conf {
 	/* [store] */
 	char *store_path;     /* the disk tier's LMDB file; NULL: no disk tier */
 	uint64_t store_bytes; /* its budget at rest (disk_mb) */
+	enum conf_disk_codec disk_codec; /* what it writes (it reads either) */
 	char *store_redis;    /* the shared tier: "unix:/abs/path" or "host:port"; NULL: none */
 	char *store_redis_password; /* AUTH; NULL: none */
 	uint32_t store_redis_lease_ms; /* a generation lease's lifetime (default 2000) */

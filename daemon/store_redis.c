@@ -385,7 +385,7 @@ static uint64_t write_batch(struct rds *r, redisContext **c, struct tilecodec *t
 			void *v;
 			size_t vn;
 			store_key_encode(&b[i].key, kb);
-			store_value_encode(tc, b[i].t, r->zstd_level, &v, &vn);
+			store_value_encode(tc, b[i].t, TCODEC_ZSTD, r->zstd_level, &v, &vn);
 			if (b[i].leased)
 				redisAppendCommand(*c, "EVAL %s 2 %s %s %s %b", PUT_LUA, val, lease,
 						   r->owner, v, vn);

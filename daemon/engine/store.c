@@ -135,13 +135,15 @@ static uint64_t value_sum(const uint8_t *hdr, const uint8_t kb[STORE_KEY_LEN],
 	return XXH3_64bits_digest(&st);
 }
 
-void store_value_encode(struct tilecodec *tc, const struct tile *t, int level, void **out,
-			size_t *n)
+void store_value_encode(struct tilecodec *tc, const struct tile *t, enum tcodec codec, int level,
+			void **out, size_t *n)
 {
-	size_t cap = STORE_HDR_LEN + tilecodec_bound(TCODEC_ZSTD, t->nbytes);
+	if (codec != TCODEC_LZ4)
+		codec = TCODEC_ZSTD;
+	size_t cap = STORE_HDR_LEN + tilecodec_bound(codec, t->nbytes);
 	uint8_t *v = xmalloc(cap);
 	struct tilecodec_hdr h;
-	ssize_t len = tilecodec_encode(tc, t->type, t->size, TCODEC_ZSTD,
+	ssize_t len = tilecodec_encode(tc, t->type, t->size, codec,
 				       tilecodec_default_filter(t->type), level ? level : 3, t->data,
 				       &h, v + STORE_HDR_LEN, cap - STORE_HDR_LEN);
 	/* Only programmer errors make encoding fail: a published tile is always valid. */

@@ -23,6 +23,7 @@
 
 #include "common/grid.h"
 #include "common/pixfmt.h"
+#include "common/tilecodec.h"
 #include "tile.h"
 
 struct tilecodec;
@@ -155,6 +156,7 @@ struct store_lmdb_desc {
 	size_t queue_max;     /* writes queued before puts are dropped; 0: 1024 */
 	uint64_t queue_bytes; /* raw tile bytes queued before puts are dropped; 0: 256 MiB */
 	int zstd_level;	      /* 0: 1 */
+	enum tcodec codec;    /* what is written: TCODEC_LZ4, else (0 too) zstd; either is read */
 };
 
 /* Opens (creating) the store file. Returns 0 with *out owned, or -errno with err filled. A
@@ -185,9 +187,10 @@ void store_key_encode(const struct tile_key *k, uint8_t out[STORE_KEY_LEN]);
 /* Returns 0 or -EINVAL (wrong length). */
 int store_key_decode(const void *p, size_t n, struct tile_key *k);
 /* Encodes tile t under key kb into a new buffer (*out, owned by the caller: free) of *n bytes:
- * header + tile codec payload (codec zstd at `level`, the format's default filter). */
-void store_value_encode(struct tilecodec *tc, const struct tile *t, int level, void **out,
-			size_t *n);
+ * header + tile codec payload (the format's default filter, then codec: TCODEC_LZ4, else zstd
+ * at `level`). Decoding reads the codec from the value: a store may hold both. */
+void store_value_encode(struct tilecodec *tc, const struct tile *t, enum tcodec codec, int level,
+			void **out, size_t *n);
 /* Whether value v (n bytes) stored under kb has a sound header and checksum (the payload is
  * not decoded). Returns 0 or -EBADMSG. */
 int store_value_check(const uint8_t kb[STORE_KEY_LEN], const void *v, size_t n);

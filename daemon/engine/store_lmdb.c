@@ -80,6 +80,7 @@ struct lstore {
 	uint64_t budget, mapsize;
 	size_t psize;
 	int level;
+	enum tcodec codec;
 	size_t qmax;
 	uint64_t qbytes_max;
 
@@ -524,7 +525,8 @@ static void *writer_main(void *arg)
 		for (size_t i = 0; i < n; i++) {
 			struct wop *op = &s->batch[i];
 			if (op->kind == W_PUT)
-				store_value_encode(s->tc, op->t, s->level, &op->val, &op->vlen);
+				store_value_encode(s->tc, op->t, s->codec, s->level, &op->val,
+						   &op->vlen);
 		}
 		rdlock(s);
 		int rc = s->env ? apply(s, s->batch, n, 0) : EIO;
@@ -959,6 +961,7 @@ int store_lmdb_open(const struct store_lmdb_desc *d, struct store **out, char er
 	s->budget = d->budget ? d->budget : (uint64_t)1 << 30;
 	s->mapsize = s->budget + s->budget / 2 + ((uint64_t)32 << 20);
 	s->level = d->zstd_level ? d->zstd_level : 1;
+	s->codec = d->codec == TCODEC_LZ4 ? TCODEC_LZ4 : TCODEC_ZSTD;
 	s->qmax = d->queue_max ? d->queue_max : 1024;
 	s->qbytes_max = d->queue_bytes ? d->queue_bytes : (uint64_t)256 << 20;
 	int rc = open_env(s, err);

@@ -60,6 +60,7 @@ static void test_shipped_file(void **state)
 	assert_int_equal(c.http_cache_mb, 64);
 	assert_null(c.store_path); /* no disk tier unless a path is set */
 	assert_int_equal(c.store_bytes, (uint64_t)1024 << 20);
+	assert_int_equal(c.disk_codec, CONF_DISK_ZSTD); /* what issue 13 asked: zstd at rest */
 	conf_fini(&c);
 }
 
@@ -71,7 +72,7 @@ static void test_values(void **state)
 			"[engine]\nplanets = p\nworkers = 3\ncache_mb = 64\nimage_cache_mb = 48\n"
 			"[session]\nmax_pending_kb = 128\nmax_rate = 0\ncompress = never\n"
 			"send_queue_ms = 0\nbbr = no\nraw_above_mbit = 0\n"
-			"[log]\nlevel = debug\n[store]\npath = tiles.lmdb\ndisk_mb = 512\n"
+			"[log]\nlevel = debug\n[store]\npath = tiles.lmdb\ndisk_mb = 512\ndisk_codec = lz4\n"
 			"[http]\ncache_mb = 32\n";
 	struct conf c;
 	char err[256] = "";
@@ -97,6 +98,7 @@ static void test_values(void **state)
 	assert_int_equal(c.log_level, LOG_DEBUG);
 	assert_string_equal(c.store_path, "/etc/x/tiles.lmdb");
 	assert_int_equal(c.store_bytes, (uint64_t)512 << 20);
+	assert_int_equal(c.disk_codec, CONF_DISK_LZ4);
 	conf_fini(&c);
 }
 
@@ -132,6 +134,10 @@ static void test_errors(void **state)
 	parse_fails("[engine]\ncache_mb = 1\n", "d.conf:2: cache_mb:");
 	parse_fails("[store]\ndisk_mb = 0\n", "d.conf:2: disk_mb: \"0\": expected an integer in [1, ");
 	parse_fails("[store]\nsize = 1\n", "d.conf:2: size: unknown key in [store]");
+	parse_fails("[store]\ndisk_codec = gzip\n",
+		    "d.conf:2: disk_codec: \"gzip\": expected zstd or lz4");
+	parse_fails("[session]\ncompress = yes\n",
+		    "d.conf:2: compress: \"yes\": expected auto, never or always");
 	parse_fails("[store]\nredis = localhost\n",
 		    "d.conf:2: redis: \"localhost\" is not unix:/path or host:port");
 	parse_fails("[store]\nredis = unix:\n", "d.conf:2: redis: unix: needs a socket path");

@@ -57,16 +57,22 @@ static int teardown(void **state)
 	return 0;
 }
 
-static struct store *open_store(struct env *e, uint64_t budget, size_t qmax)
+static struct store *open_store_as(struct env *e, uint64_t budget, size_t qmax,
+				   enum tcodec codec)
 {
 	struct store *s = NULL;
 	char err[256] = "";
 	int rc = store_lmdb_open(&(struct store_lmdb_desc){ .path = e->path, .budget = budget,
-							    .queue_max = qmax },
+							    .queue_max = qmax, .codec = codec },
 				 &s, err);
 	if (rc)
 		fail_msg("open: %s", err);
 	return s;
+}
+
+static struct store *open_store(struct env *e, uint64_t budget, size_t qmax)
+{
+	return open_store_as(e, budget, qmax, TCODEC_ZSTD);
 }
 
 static struct tile_key key(uint64_t node, uint32_t x, uint32_t y)
@@ -213,6 +219,50 @@ static void flip_payload(uint8_t *v, size_t n)
 	v[n - 1] ^= 0x01;
 }
 
+/* The codec byte of the value edit_value last saw. */
+static int seen_codec = -1;
+static void see_codec(uint8_t *v, size_t n)
+{
+	seen_codec = n > 6 ? v[6] : -1;
+}
+
+/* [store] disk_codec = lz4: values are written with lz4 and read back exact; a store opened
+ * to write zstd reads them as well, and writes zstd beside them (a changed setting needs no
+ * conversion). Noisy tiles: lz4's output must differ from zstd's in size. */
+static void lz4_at_rest_read_by_either(void **state)
+{
+	struct env *e = *state;
+	struct tile_key a = key(21, 1, 1), b = key(21, 2, 1);
+	struct tile *ta = make_tile(&a, true), *tb = make_tile(&b, true), *got = NULL;
+	struct store *s = open_store_as(e, 0, 0, TCODEC_LZ4);
+	assert_int_equal(store_put(s, ta, STORE_KEEP_INCIDENTAL), 0);
+	assert_int_equal(store_flush(s), 0);
+	assert_int_equal(store_get(s, &a, PIX_HEIGHT, T, e->tc, &got), 0);
+	assert_same(ta, got);
+	tile_unref(got);
+	store_destroy(s);
+	edit_value(e, &a, &a, see_codec);
+	assert_int_equal(seen_codec, TCODEC_LZ4);
+
+	s = open_store(e, 0, 0);
+	assert_int_equal(store_get(s, &a, PIX_HEIGHT, T, e->tc, &got), 0);
+	assert_same(ta, got);
+	tile_unref(got);
+	assert_int_equal(store_put(s, tb, STORE_KEEP_INCIDENTAL), 0);
+	assert_int_equal(store_flush(s), 0);
+	assert_int_equal(store_get(s, &b, PIX_HEIGHT, T, e->tc, &got), 0);
+	assert_same(tb, got);
+	tile_unref(got);
+	struct store_stats st;
+	store_stat(s, &st);
+	assert_int_equal(st.corrupt, 0);
+	store_destroy(s);
+	edit_value(e, &b, &b, see_codec);
+	assert_int_equal(seen_codec, TCODEC_ZSTD);
+	tile_unref(ta);
+	tile_unref(tb);
+}
+
 static void corrupt_value_detected(void **state)
 {
 	struct env *e = *state;
@@ -329,6 +379,7 @@ static void prefetched_kept_ahead(void **state)
 	struct store_stats st;
 	store_stat(s, &st);
 	assert_true(st.evictions > 0);
+	assert_int_equal(st.evictions_prefetched, 0); /* incidental ones went */
 	assert_true(st.bytes <= budget);
 	for (uint32_t i = 0; i < 20; i++) {
 		struct tile_key k = key(14, i, 0);
@@ -349,6 +400,19 @@ static void prefetched_kept_ahead(void **state)
 	struct keep_scan after = { .probe = fresh, .probe_keep = -1 };
 	assert_int_equal(store_iterate(s, keep_fn, &after), 0);
 	assert_int_equal(after.max_stamp, ks.max_stamp + 1);
+	/* Prefetching past the budget: the oldest prefetched tiles go, and are counted so
+	 * (what clipmapctl prefetch warns of). */
+	for (uint32_t i = 0; i < 200; i++) {
+		struct tile_key k = key(14, i, 3);
+		struct tile *t = make_tile(&k, true);
+		assert_int_equal(store_put(s, t, STORE_KEEP_PREFETCHED), 0);
+		tile_unref(t);
+	}
+	assert_int_equal(store_flush(s), 0);
+	store_stat(s, &st);
+	assert_true(st.evictions_prefetched > 0);
+	assert_true(st.evictions_prefetched <= st.evictions);
+	assert_false(store_contains(s, &k0));
 	store_destroy(s);
 }
 
@@ -463,6 +527,7 @@ int main(void)
 	const struct CMUnitTest tests[] = {
 		cmocka_unit_test_setup_teardown(put_get_delete_iterate, setup, teardown),
 		cmocka_unit_test_setup_teardown(corrupt_value_detected, setup, teardown),
+		cmocka_unit_test_setup_teardown(lz4_at_rest_read_by_either, setup, teardown),
 		cmocka_unit_test_setup_teardown(budget_evicts_least_recent, setup, teardown),
 		cmocka_unit_test_setup_teardown(prefetched_kept_ahead, setup, teardown),
 		cmocka_unit_test_setup_teardown(queue_accounting, setup, teardown),
