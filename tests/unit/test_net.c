@@ -753,9 +753,23 @@ static void prefetch_done(void **state)
 	free(sbufp);
 }
 
+/* Answers a STATS_REQ with no figures: a daemon without a disk tier (the real clipmapctl
+ * asks for store.disk.evictions_prefetched before a prefetch, and then asks nothing more). */
+static int stats_reply_empty(struct srv *s)
+{
+	struct proto_msg m = { 0 };
+	if (srv_recv(s, &m) || m.type != PROTO_STATS_REQ) {
+		proto_msg_fini(&m);
+		return -1;
+	}
+	struct proto_msg r = { .type = PROTO_STATS, .stats = { .req = m.stats_req.req } };
+	proto_msg_fini(&m);
+	return srv_send(s, &r);
+}
+
 static int script_prefetch_cancel(struct srv *s)
 {
-	if (srv_handshake(s) || open_reply(s))
+	if (srv_handshake(s) || (s->kill_pid > 0 && stats_reply_empty(s)) || open_reply(s))
 		return -1;
 	struct proto_msg m = { 0 };
 	if (srv_recv(s, &m) || m.type != PROTO_PREFETCH) {
