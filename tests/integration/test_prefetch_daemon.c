@@ -935,40 +935,72 @@ static void coverage_prefetch_and_purge(void **state)
  * succeeds (exit 0), and the operator is told: clipmapctl prints how many prefetched tiles
  * the store evicted while it ran, the daemon logs it, status counts it; the first job, alone,
  * warns of nothing. A daemon of its own with a 10 MiB store. */
-static void overflowing_prefetches_say_so(void **state)
-{
-	struct env *e = *state;
-	NEED_DAEMON(e);
-	if (!daemon_env_built(&e->d, "clipmapctl"))
-		skip();
+struct full_env {
+	struct env *e; /* the group's */
 	struct daemon_env d;
+};
+
+/* Its daemon, stopped by the teardown whatever the test's assertions did. */
+static int setup_full(void **state)
+{
+	struct full_env *f = calloc(1, sizeof *f);
+	if (!f)
+		return -1;
+	f->e = *state;
+	*state = f;
 	char store[200], err[256];
-	assert_int_equal(daemon_env_init(&d, "test_pf_full"), 0);
-	assert_int_equal(daemon_env_planet_text(&d, "test.ini", planet_text, NULL), 0);
-	snprintf(store, sizeof store, "store.path = %s/tiles.lmdb", d.dir);
+	if (daemon_env_init(&f->d, "test_pf_full") ||
+	    daemon_env_planet_text(&f->d, "test.ini", planet_text, NULL))
+		return -1;
+	if (f->e->d.daemon <= 0 || !daemon_env_built(&f->d, "clipmapctl"))
+		return 0; /* the test skips */
+	snprintf(store, sizeof store, "store.path = %s/tiles.lmdb", f->d.dir);
 	const char *const set[] = { store, "store.disk_mb = " PF_FULL_MB, "engine.workers = 1",
 				    "session.max_rate = 0", "log.level = info", NULL };
-	if (daemon_env_start(&d, &(struct daemon_env_conf){ .set = set }, err))
-		fail_msg("%s", err);
+	if (daemon_env_start(&f->d, &(struct daemon_env_conf){ .set = set }, err)) {
+		fprintf(stderr, "test_prefetch_daemon: %s\n", err);
+		return -1;
+	}
+	return 0;
+}
+
+static int teardown_full(void **state)
+{
+	struct full_env *f = *state;
+	if (f->d.daemon > 0)
+		daemon_env_stop(&f->d, SIGKILL, NULL);
+	daemon_env_fini(&f->d);
+	*state = f->e;
+	free(f);
+	return 0;
+}
+
+static void overflowing_prefetches_say_so(void **state)
+{
+	struct full_env *f = *state;
+	const struct daemon_env *d = &f->d;
+	if (d->daemon <= 0)
+		skip();
+	char err[256];
 	static char out[1 << 16];
-	int rc = ctl_at(&d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_A, "--levels",
+	int rc = ctl_at(d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_A, "--levels",
 			PF_FULL_A_LEVELS, NULL);
 	printf("first job: %s", out);
 	assert_int_equal(rc, 0);
 	assert_null(strstr(out, "warning"));
 	struct net_conn *c = NULL;
-	if (net_connect(&(struct net_opts){ .socket_path = d.sock, .name = "test_prefetch" }, &c,
+	if (net_connect(&(struct net_opts){ .socket_path = d->sock, .name = "test_prefetch" }, &c,
 			err))
 		fail_msg("%s", err);
 	wait_written(c);
 	uint64_t first = stat_of(c, "store.disk.tiles");
 	assert_int_equal(stat_of(c, "store.disk.evictions_prefetched"), 0);
-	rc = ctl_at(&d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_B, "--levels",
+	rc = ctl_at(d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_B, "--levels",
 		    PF_FULL_BC_LEVELS, NULL);
 	printf("second job: %s", out);
 	assert_int_equal(rc, 0);
 	wait_written(c);
-	rc = ctl_at(&d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_C, "--levels",
+	rc = ctl_at(d, out, sizeof out, "prefetch", "test", "--bbox", PF_FULL_C, "--levels",
 		    PF_FULL_BC_LEVELS, NULL);
 	printf("third job: %s", out);
 	assert_int_equal(rc, 0);
@@ -982,10 +1014,8 @@ static void overflowing_prefetches_say_so(void **state)
 	assert_true(stat_of(c, "store.disk.bytes") <= stat_of(c, "store.disk.budget"));
 	assert_non_null(strstr(out, "warning: the disk tier evicted"));
 	assert_non_null(strstr(out, "prefetched tiles while this job ran"));
-	assert_true(daemon_env_log_wait(&d, "evicting prefetched tiles", 1, 3000));
+	assert_true(daemon_env_log_wait(d, "evicting prefetched tiles", 1, 3000));
 	net_close(c);
-	daemon_env_stop(&d, SIGTERM, NULL);
-	daemon_env_fini(&d);
 }
 
 int main(void)
@@ -999,7 +1029,8 @@ int main(void)
 		cmocka_unit_test(restart_then_viewer_generates_nothing),
 		cmocka_unit_test(cache_maintenance),
 		cmocka_unit_test(coverage_prefetch_and_purge),
-		cmocka_unit_test(overflowing_prefetches_say_so),
+		cmocka_unit_test_setup_teardown(overflowing_prefetches_say_so, setup_full,
+						teardown_full),
 		cmocka_unit_test(damaged_file_replaced_at_run_time),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
