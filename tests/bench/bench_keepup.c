@@ -179,8 +179,8 @@ static void store_file(const struct daemon_env *d, char *out, size_t n)
 	snprintf(out, n, "%s/tiles.lmdb", d->dir);
 }
 
-/* The store's budget for a prefetched route: KEEPUP_DISK_MB, else three quarters of the free
- * space where the store lives, at most 64 GiB. A route that does not fit is not flown (the
+/* The store's budget for a prefetched route: KEEPUP_DISK_MB, else half the free space where
+ * the store lives (the file grows past its budget by LMDB's free pages), at most 64 GiB. A route that does not fit is not flown (the
  * prefetch would evict its own first tiles and the flight would measure their synthesis: an
  * 8 s flight at 56.6x the seed along 46N stores ~16.9 GB, past the 16 GiB this bench gave the
  * store until 5 December, and flew 0 % full detail with 55 000 tiles generated). */
@@ -192,7 +192,7 @@ static int disk_budget_mb(const char *dir)
 	struct statvfs sv;
 	if (statvfs(dir, &sv) != 0)
 		return 16384;
-	double mb = (double)sv.f_bavail * (double)sv.f_frsize / (1 << 20) * 0.75;
+	double mb = (double)sv.f_bavail * (double)sv.f_frsize / (1 << 20) * 0.5;
 	return (int)fmin(mb, 65536);
 }
 
@@ -244,6 +244,7 @@ static int cold_cache_mb(void)
 struct dstats {
 	uint64_t generated, hits, misses, workers, disk_hits, queued;
 	uint64_t disk_evictions, disk_tiles, disk_budget; /* the store's */
+	uint64_t disk_lost; /* writes the store dropped (queue full) or failed to commit */
 	uint64_t prefault_left; /* bytes of the tile pool not faulted in yet */
 	int nnodes;
 	struct {
@@ -288,6 +289,9 @@ static int get_stats(struct net_conn *c, struct dstats *out, char err[256])
 			out->disk_tiles = s->u;
 		else if (strcmp(s->key, "store.disk.budget") == 0)
 			out->disk_budget = s->u;
+		else if (strcmp(s->key, "store.disk.write_drops") == 0 ||
+			 strcmp(s->key, "store.disk.write_errors") == 0)
+			out->disk_lost += s->u;
 		else if (strcmp(s->key, "memory.pool.prefault_left") == 0)
 			out->prefault_left = s->u;
 		if (dump_stats && s->kind == PROTO_STAT_U64 &&
@@ -685,11 +689,17 @@ static int restart_daemon(const struct ctx *x, struct daemon_env *d, struct net_
 			if (st.disk_evictions) {
 				err_set(err, "the route's prefetch evicted %llu of its own %llu tiles: "
 					"it does not fit the store's budget of %.0f MB (KEEPUP_DISK_MB, "
-					"else 3/4 of the free disk): not flown",
+					"else half the free disk): not flown",
 					(unsigned long long)st.disk_evictions,
 					(unsigned long long)(st.disk_tiles + st.disk_evictions),
 					(double)st.disk_budget / (1 << 20));
 				return -ENOSPC;
+			}
+			if (st.disk_lost) {
+				err_set(err, "the store dropped or failed %llu writes of the route's "
+					"prefetch (write queue full, disk full?): not flown",
+					(unsigned long long)st.disk_lost);
+				return -EIO;
 			}
 			break;
 		}
