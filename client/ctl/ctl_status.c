@@ -298,14 +298,18 @@ int ctl_status_print(const struct proto_stats *st, const char *peer, bool json, 
 	return ferror(out) ? -EIO : 0;
 }
 
-int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, char err[256])
+/* Sends STATS_REQ and receives the STATS into m (finied by the caller on success). */
+static int fetch_stats(struct net_conn *c, int timeout_ms, struct proto_msg *m, char err[256])
 {
 	struct proto_msg req = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
 	int rc = net_send(c, &req, err);
-	if (rc)
-		return rc;
+	return rc ? rc : net_expect(c, PROTO_STATS, m, timeout_ms, NULL, NULL, err);
+}
+
+int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, char err[256])
+{
 	struct proto_msg m = { 0 };
-	rc = net_expect(c, PROTO_STATS, &m, timeout_ms, NULL, NULL, err);
+	int rc = fetch_stats(c, timeout_ms, &m, err);
 	if (rc)
 		return rc;
 	rc = ctl_status_print(&m.stats, net_peer(c), json, out);
@@ -317,12 +321,8 @@ int ctl_status_run(struct net_conn *c, bool json, int timeout_ms, FILE *out, cha
 
 int ctl_stat_u64(struct net_conn *c, const char *key, int timeout_ms, uint64_t *v, char err[256])
 {
-	struct proto_msg req = { .type = PROTO_STATS_REQ, .stats_req = { .req = net_next_req(c) } };
-	int rc = net_send(c, &req, err);
-	if (rc)
-		return rc;
 	struct proto_msg m = { 0 };
-	rc = net_expect(c, PROTO_STATS, &m, timeout_ms, NULL, NULL, err);
+	int rc = fetch_stats(c, timeout_ms, &m, err);
 	if (rc)
 		return rc;
 	const struct proto_stat *s = find(&m.stats, key);
