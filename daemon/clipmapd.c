@@ -291,13 +291,13 @@ static void store_watch(struct daemon *d)
 			"again", d->conf.store_path, d->conf.store_path);
 	uint64_t now = clock_now_ns();
 	if (st.evictions_prefetched > old->evictions_prefetched) {
-		if (!d->store_pf_evicting)
+		if (!d->store_pf_evicting) {
 			log_msg(LOG_WARN, "store %s: full ([store] disk_mb = %llu): evicting "
 				"prefetched tiles to make room; what was prefetched is no longer "
 				"all on disk", d->conf.store_path,
 				(unsigned long long)(st.budget >> 20));
-		if (!d->store_pf_evicting)
 			d->store_pf_evicting = old->evictions_prefetched + 1;
+		}
 		d->store_pf_last_ns = now;
 	} else if (d->store_pf_evicting && now - d->store_pf_last_ns > STORE_QUIET_NS) {
 		log_msg(LOG_INFO, "store %s: %llu prefetched tiles evicted (store.disk."
@@ -666,8 +666,8 @@ static int serve(struct daemon *d, struct planet_set *ps)
 		if (err[0])
 			log_msg(LOG_WARN, "store: %s", err);
 		store_stat(d->store, &d->store_seen);
-		log_msg(LOG_INFO, "store %s: %llu tiles, %llu of %llu MiB; writes %s", d->conf.store_path,
-			(unsigned long long)d->store_seen.tiles,
+		log_msg(LOG_INFO, "store %s: %llu tiles, %llu of %llu MiB; writes %s",
+			d->conf.store_path, (unsigned long long)d->store_seen.tiles,
 			(unsigned long long)(d->store_seen.bytes >> 20),
 			(unsigned long long)(d->store_seen.budget >> 20), lz4 ? "lz4" : "zstd");
 	}

@@ -999,9 +999,10 @@ static int prefetch(const struct ctl_target *t, const struct ctl_prefetch_opts *
 	uint64_t ev0 = 0, ev1 = 0;
 	bool counted = ctl_stat_u64(conn, pf_key, timeout_of(t), &ev0, serr) == 0;
 	int rc = ctl_prefetch_run(conn, o, &ui, &fin, err);
-	/* the job's last tiles are written behind it: their batches evict too (3 s at most) */
+	/* the job's last tiles are written behind it: their batches evict too (3 s at most; not
+	 * after a Ctrl-C, which is answered at once) */
 	uint64_t queued = 0;
-	for (int k = 0; counted && (rc == 0 || rc == -ECANCELED) && k < 60 &&
+	for (int k = 0; counted && rc == 0 && k < 60 &&
 			ctl_stat_u64(conn, "store.disk.queued", timeout_of(t), &queued, serr) == 0 &&
 			queued > 0;
 	     k++)
