@@ -50,7 +50,8 @@ struct daemon {
 	struct remote *remote; /* the fleet's Redis tier, NULL without [store] redis */
 	struct store_stats store_seen; /* its counters at the last tick */
 	bool store_failing;	       /* its writes fail (logged once) */
-	uint64_t store_pf_evicting;    /* evicting prefetched tiles: the count when it began + 1 */
+	bool store_pf_evicting;	       /* evicting prefetched tiles (logged when it starts) */
+	uint64_t store_pf_from;	       /* the count when it started */
 	uint64_t store_pf_last_ns;     /* when the count last grew */
 	struct http *http;	       /* the HTTP endpoint, NULL without [http] listen */
 	uint64_t metrics_ns;	       /* when its /metrics text was last gathered */
@@ -296,14 +297,15 @@ static void store_watch(struct daemon *d)
 				"prefetched tiles to make room; what was prefetched is no longer "
 				"all on disk", d->conf.store_path,
 				(unsigned long long)(st.budget >> 20));
-			d->store_pf_evicting = old->evictions_prefetched + 1;
+			d->store_pf_evicting = true;
+			d->store_pf_from = old->evictions_prefetched;
 		}
 		d->store_pf_last_ns = now;
 	} else if (d->store_pf_evicting && now - d->store_pf_last_ns > STORE_QUIET_NS) {
 		log_msg(LOG_INFO, "store %s: %llu prefetched tiles evicted (store.disk."
 			"evictions_prefetched)", d->conf.store_path,
-			(unsigned long long)(st.evictions_prefetched - (d->store_pf_evicting - 1)));
-		d->store_pf_evicting = 0;
+			(unsigned long long)(st.evictions_prefetched - d->store_pf_from));
+		d->store_pf_evicting = false;
 	}
 	if (st.write_drops > 0 && old->write_drops == 0)
 		log_msg(LOG_WARN, "store %s: write queue full, tiles left unstored (counted as "

@@ -60,7 +60,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <fcntl.h>
 #include <sys/stat.h>
 #include <sys/statvfs.h>
 #include <time.h>
@@ -182,20 +181,21 @@ static void store_file(const struct daemon_env *d, char *out, size_t n)
 }
 
 /* The store's budget for a prefetched route: KEEPUP_DISK_MB, else half the free space where
- * the store lives (the file grows past its budget by LMDB's free pages), at most 64 GiB. A route that does not fit is not flown (the
- * prefetch would evict its own first tiles and the flight would measure their synthesis: an
- * 8 s flight at 56.6x the seed along 46N stores ~16.9 GB, past the 16 GiB this bench gave the
- * store until 5 December, and flew 0 % full detail with 55 000 tiles generated). */
+ * the store lives (the file grows past its budget by LMDB's free pages), at most 64 GiB. A
+ * route that does not fit is not flown (the prefetch would evict its own first tiles and the
+ * flight would measure their synthesis: an 8 s flight at 56.6x the seed along 46N stores
+ * ~16.9 GB, past the 16 GiB this bench gave the store until 5 December, and flew 0 % full
+ * detail with 55 000 tiles generated). */
 static int disk_budget_mb(const char *dir)
 {
 	const char *e = getenv("KEEPUP_DISK_MB");
-	if (e && atoi(e) > 0)
-		return atoi(e);
+	int mb = e ? atoi(e) : 0;
+	if (mb > 0)
+		return mb;
 	struct statvfs sv;
 	if (statvfs(dir, &sv) != 0)
 		return 16384;
-	double mb = (double)sv.f_bavail * (double)sv.f_frsize / (1 << 20) * 0.5;
-	return (int)fmin(mb, 65536);
+	return (int)fmin((double)sv.f_bavail * (double)sv.f_frsize / (1 << 20) * 0.5, 65536);
 }
 
 /* A fresh daemon (tests/support/daemon_env) serving a copy of `planet`; name receives the
@@ -658,20 +658,10 @@ static double file_resident(const char *path, double *mb)
  * prefetched a while before a restart is read from the disk) or warm (read through once). */
 static int store_pages(const char *path, enum store_pages how, char err[256])
 {
-	int rc = 0;
-	if (how == PAGES_COLD) {
-		/* clean pages only: the stopped daemon committed (fsync) every batch */
-		rc = pagecache_drop(path);
-	} else if (how == PAGES_WARM) {
-		int fd = open(path, O_RDONLY | O_CLOEXEC);
-		static char buf[1 << 20];
-		ssize_t n = fd < 0 ? -1 : 0;
-		while (fd >= 0 && (n = read(fd, buf, sizeof buf)) > 0)
-			;
-		rc = n < 0 ? -errno : 0;
-		if (fd >= 0)
-			close(fd);
-	}
+	/* cold: clean pages only, and the stopped daemon committed (fsync) every batch */
+	int rc = how == PAGES_COLD ? pagecache_drop(path)
+		 : how == PAGES_WARM ? pagecache_fill(path)
+				     : 0;
 	if (rc)
 		err_set(err, "%s: %s", path, strerror(-rc));
 	return rc;
@@ -697,7 +687,7 @@ static int restart_daemon(const struct ctx *x, struct daemon_env *d, struct net_
 					"else half the free disk): not flown",
 					(unsigned long long)st.disk_evictions,
 					(unsigned long long)(st.disk_tiles + st.disk_evictions),
-					(double)st.disk_budget / (1 << 20));
+					tr->budget_mb);
 				return -ENOSPC;
 			}
 			if (st.disk_lost) {

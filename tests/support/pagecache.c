@@ -45,6 +45,20 @@ int pagecache_count(const char *path, size_t *resident, size_t *total)
 	return e;
 }
 
+int pagecache_fill(const char *path)
+{
+	int fd = open(path, O_RDONLY | O_CLOEXEC);
+	if (fd < 0)
+		return -errno;
+	static char buf[1 << 20];
+	ssize_t n;
+	while ((n = read(fd, buf, sizeof buf)) > 0)
+		;
+	int e = n < 0 ? -errno : 0;
+	close(fd);
+	return e;
+}
+
 int pagecache_drop(const char *path)
 {
 	int fd = open(path, O_RDONLY | O_CLOEXEC);

@@ -11,5 +11,7 @@
 int pagecache_count(const char *path, size_t *resident, size_t *total);
 /* Drops the file's clean, unmapped pages from the page cache; 0 or -errno. */
 int pagecache_drop(const char *path);
+/* Reads the file through once (its pages in the page cache, as memory allows); 0 or -errno. */
+int pagecache_fill(const char *path);
 
 #endif

@@ -100,6 +100,17 @@ static void assert_same(const struct tile *a, const struct tile *b)
 	assert_memory_equal(a->data, b->data, a->nbytes);
 }
 
+/* Noisy tiles (14, 0..n-1, row) stored as prefetched. */
+static void put_prefetched_row(struct store *s, uint32_t row, uint32_t n)
+{
+	for (uint32_t i = 0; i < n; i++) {
+		struct tile_key k = key(14, i, row);
+		struct tile *t = make_tile(&k, true);
+		assert_int_equal(store_put(s, t, STORE_KEEP_PREFETCHED), 0);
+		tile_unref(t);
+	}
+}
+
 static void put_new(struct store *s, const struct tile_key *k, bool noisy)
 {
 	struct tile *t = make_tile(k, noisy);
@@ -228,7 +239,7 @@ static void see_codec(uint8_t *v, size_t n)
 
 /* [store] disk_codec = lz4: values are written with lz4 and read back exact; a store opened
  * to write zstd reads them as well, and writes zstd beside them (a changed setting needs no
- * conversion). Noisy tiles: lz4's output must differ from zstd's in size. */
+ * conversion). */
 static void lz4_at_rest_read_by_either(void **state)
 {
 	struct env *e = *state;
@@ -362,12 +373,7 @@ static void prefetched_kept_ahead(void **state)
 	struct env *e = *state;
 	const uint64_t budget = (uint64_t)1 << 20;
 	struct store *s = open_store(e, budget, 0);
-	for (uint32_t i = 0; i < 20; i++) {
-		struct tile_key k = key(14, i, 0);
-		struct tile *t = make_tile(&k, true);
-		assert_int_equal(store_put(s, t, STORE_KEEP_PREFETCHED), 0);
-		tile_unref(t);
-	}
+	put_prefetched_row(s, 0, 20);
 	assert_int_equal(store_flush(s), 0);
 	struct tile_key k0 = key(14, 0, 0);
 	put_new(s, &k0, true); /* incidental rewrite of a prefetched tile */
@@ -402,12 +408,7 @@ static void prefetched_kept_ahead(void **state)
 	assert_int_equal(after.max_stamp, ks.max_stamp + 1);
 	/* Prefetching past the budget: the oldest prefetched tiles go, and are counted so
 	 * (what clipmapctl prefetch warns of). */
-	for (uint32_t i = 0; i < 200; i++) {
-		struct tile_key k = key(14, i, 3);
-		struct tile *t = make_tile(&k, true);
-		assert_int_equal(store_put(s, t, STORE_KEEP_PREFETCHED), 0);
-		tile_unref(t);
-	}
+	put_prefetched_row(s, 3, 200);
 	assert_int_equal(store_flush(s), 0);
 	store_stat(s, &st);
 	assert_true(st.evictions_prefetched > 0);
