@@ -130,6 +130,22 @@ static void pump_add(struct session *s)
 
 static void submit_wants(struct session *s, uint16_t ref_type, uint32_t ref_id);
 
+/* Pauses a session whose output is full while some of its ready tiles are parked (held tiles
+ * full too): its wants leave the scheduler until the output drains (resume_if_drained).
+ * Checked when a tile arrives and after each pump: a tile parked while an encode was still
+ * settling its frame's size left the output just under max_pending, the pump then filled it
+ * from the held tiles, nothing more arrived, and the session sat stalled by its credit without
+ * counting as paused. */
+static void pause_if_full(struct session *s)
+{
+	if (!s->paused && !s->closing && !s->dead && wantset_nparked(&s->ws) &&
+	    conn_pending(&s->c) >= s->env->limits->max_pending) {
+		s->paused = true;
+		s->env->counters->pauses++;
+		(void)sched_req_want(s->req, NULL, 0);
+	}
+}
+
 /* A paused session's wants go back in once its output drained to half of max_pending. */
 static void resume_if_drained(struct session *s)
 {
@@ -366,6 +382,7 @@ bool session_pump(struct session *s, size_t *budget)
 	if (rewant)
 		submit_wants(s, 0, 0); /* when paused: resume_if_drained does it */
 	resume_if_drained(s);
+	pause_if_full(s);
 	uint64_t made = conn_pending(&s->c) > start ? conn_pending(&s->c) - start : 0;
 	*budget = made < *budget ? *budget - (size_t)made : 0;
 	if (made && flush(s))
@@ -396,12 +413,7 @@ void session_on_ready(struct session *s, struct ready_item *it)
 	uint64_t max = s->env->limits->max_pending;
 	if (wantset_ready(&s->ws, &it->key, it->t, it->err, it->parked, max, &parked)) {
 		s->env->counters->tiles_parked += parked;
-		if (parked && !s->paused && conn_pending(&s->c) >= max) {
-			/* held tiles and output both full: make nothing more for it for now */
-			s->paused = true;
-			s->env->counters->pauses++;
-			(void)sched_req_want(s->req, NULL, 0);
-		}
+		pause_if_full(s); /* held tiles and output both full: make nothing more for now */
 		pump_add(s);
 	}
 }

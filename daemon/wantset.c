@@ -131,12 +131,14 @@ static void install(struct wantset *ws, struct wantset nw)
 	*ws = nw;
 	ws->nheap = 0;
 	ws->held = 0;
+	ws->parked = 0;
 	for (size_t i = 0; i < ws->n; i++) {
 		if (ws->e[i].state != WS_READY)
 			continue;
 		heap_push(ws, (uint32_t)i);
 		if (ws->e[i].t)
 			ws->held += ws->e[i].t->nbytes;
+		ws->parked += wantset_parked(&ws->e[i]);
 	}
 }
 
@@ -289,18 +291,21 @@ bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t,
 	e->t = t;
 	if (t)
 		ws->held += t->nbytes;
+	ws->parked += wantset_parked(e);
 	heap_push(ws, (uint32_t)i);
 	return true;
 }
 
 void wantset_unpark(struct wantset *ws, struct wantset_entry *e, struct tile *t)
 {
+	ws->parked -= wantset_parked(e);
 	e->t = t;
 	ws->held += t->nbytes;
 }
 
 void wantset_rewant(struct wantset *ws, struct wantset_entry *e)
 {
+	ws->parked -= wantset_parked(e);
 	if (e->t)
 		ws->held -= e->t->nbytes;
 	tile_unref(e->t);
@@ -326,6 +331,7 @@ struct wantset_entry *wantset_pop(struct wantset *ws)
 
 void wantset_sent(struct wantset *ws, struct wantset_entry *e)
 {
+	ws->parked -= wantset_parked(e);
 	if (e->t)
 		ws->held -= e->t->nbytes;
 	e->state = WS_SENT;

@@ -41,6 +41,7 @@ struct wantset {
 	uint32_t *heap; /* READY entries' indices, by wantset_prio */
 	size_t nheap, capheap;
 	uint64_t held; /* bytes of the tiles READY entries hold */
+	size_t parked; /* READY entries parked (their tile not carried) */
 };
 
 /* What a replace or rebind let go: entries that left unsent (`dropped`) and generated tiles
@@ -90,6 +91,11 @@ bool wantset_ready(struct wantset *ws, const struct tile_key *k, struct tile *t,
 static inline bool wantset_parked(const struct wantset_entry *e)
 {
 	return e->state == WS_READY && !e->t && e->err == 0;
+}
+/* How many READY entries are parked. */
+static inline size_t wantset_nparked(const struct wantset *ws)
+{
+	return ws->parked;
 }
 /* Gives a popped parked entry its tile back (t taken). */
 void wantset_unpark(struct wantset *ws, struct wantset_entry *e, struct tile *t);

@@ -296,12 +296,14 @@ static void test_held_budget(void **state)
 	assert_true(parked);
 	assert_int_equal(wantset_held(&ws), 2 * one);
 	assert_int_equal(wantset_nready(&ws), 4);
+	assert_int_equal(wantset_nparked(&ws), 2);
 	/* Coarse first all the same: order 1 (parked), 2 (parked), 0, 3. */
 	struct wantset_entry *e = wantset_pop(&ws);
 	assert_int_equal(e->order, 1);
 	assert_true(wantset_parked(e));
 	wantset_unpark(&ws, e, tile_ref(t[1])); /* found in the cache */
 	assert_int_equal(wantset_held(&ws), 3 * one);
+	assert_int_equal(wantset_nparked(&ws), 1);
 	wantset_sent(&ws, e);
 	assert_int_equal(wantset_held(&ws), 2 * one);
 	assert_int_equal(refs(t[1]), 1);
@@ -310,6 +312,7 @@ static void test_held_budget(void **state)
 	assert_true(wantset_parked(e));
 	wantset_rewant(&ws, e); /* not in the cache any more */
 	assert_int_equal(nwanted(&ws), 1);
+	assert_int_equal(wantset_nparked(&ws), 0);
 	assert_true(wantset_ready(&ws, &add[2].key, tile_ref(t[2]), 0, false, ALL, &parked));
 	assert_false(parked);
 	assert_int_equal(wantset_held(&ws), 3 * one);
@@ -326,6 +329,21 @@ static void test_held_budget(void **state)
 	e = wantset_pop(&ws);
 	assert_false(wantset_parked(e));
 	assert_int_equal(e->err, -5);
+	wantset_fini(&ws);
+	/* The parked count (what pauses a session) follows replaces and sends: a key that stays
+	 * keeps its parked entry, one that leaves takes it along, a parked entry sent as it is
+	 * (popped, looked up, sent) counts no more. */
+	wantset_init(&ws);
+	wantset_replace(&ws, 1, add, 4, &d);
+	assert_true(wantset_ready(&ws, &add[0].key, NULL, 0, true, ALL, &parked));
+	assert_true(wantset_ready(&ws, &add[3].key, NULL, 0, true, ALL, &parked));
+	assert_int_equal(wantset_nparked(&ws), 2);
+	wantset_replace(&ws, 1, add, 3, &d); /* add[3] leaves */
+	assert_int_equal(wantset_nparked(&ws), 1);
+	e = wantset_pop(&ws);
+	assert_true(wantset_parked(e));
+	wantset_sent(&ws, e);
+	assert_int_equal(wantset_nparked(&ws), 0);
 	wantset_fini(&ws);
 }
 
