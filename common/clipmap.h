@@ -31,7 +31,8 @@ double clipmap_lon_extent(double lat_deg, double r);
  * whose window spans the longitude extent of the widest ring it is drawn on, ring
  * ly − CLIPMAP_DETAIL (a window as wide as the whole level when that ring holds a pole).
  * cur_lx (or -1) adds hysteresis: a coarser current lx is kept unless the finer one fits
- * with room to spare. */
+ * with room to spare — one step coarser than the fit at most (lx − 1 where cur_lx is
+ * coarser still), so the result is always in clipmap_level_lx_range. */
 int clipmap_level_lx(int ly, double lat_deg, int cur_lx);
 /* Every lx a viewer whose focus is anywhere in latitudes [lat_lo, lat_hi] may use at level ly
  * (hysteresis included): *lx_lo .. *lx_hi. */

@@ -126,10 +126,9 @@ size_t lookahead_wants(const struct lookahead_motion *m, const struct proto_want
 			if (lv[ly].lx < 0)
 				continue;
 			/* The lx a viewer arriving there uses: the fresh one, or one coarser where
-			 * the hysteresis keeps it (it passed through that one on the way). */
-			int fresh = clipmap_level_lx(ly, lat, -1);
-			int cur = lv[ly].lx < fresh - 1 ? fresh - 1 : lv[ly].lx;
-			int lx = clipmap_level_lx(ly, lat, cur);
+			 * the hysteresis keeps it (it passed through that one on the way; never
+			 * more than one coarser: clipmap_level_lx). */
+			int lx = clipmap_level_lx(ly, lat, lv[ly].lx);
 			struct grid_quad q;
 			grid_window(lx, ly, T, CLIPMAP_WINDOW_TILES * T, lon, lat, &q);
 			struct tile_key keys[GRID_WINDOW_MAX_KEYS];

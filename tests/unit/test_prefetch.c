@@ -82,6 +82,28 @@ static int viewer_lx(int ly, double lat, int out[2])
 	return n;
 }
 
+/* A viewer keeps no lx other than the two viewer_lx names, whatever lx it comes with: one
+ * that crossed several lx bands between two frames (fast, near a pole) or came from the pole
+ * itself. Until 6 December clipmap_level_lx kept the current lx however coarse (a viewer from
+ * the pole held lx 2 at level 7 as far as 77°N, where prefetch warms 5 and 6). */
+static void any_current_lx_is_warmed(void **state)
+{
+	(void)state;
+	int checked = 0;
+	for (int ly = 1; ly <= 16; ly++)
+		for (double lat = -89.9; lat < 90; lat += 0.37) {
+			int lxs[2], n = viewer_lx(ly, lat, lxs);
+			for (int cur = 0; cur <= ly + 1; cur++) {
+				int lx = clipmap_level_lx(ly, lat, cur);
+				if (lx != lxs[0] && !(n > 1 && lx == lxs[1]))
+					fail_msg("level %d at %.2f° from lx %d: lx %d, prefetch warms %d%s",
+						 ly, lat, cur, lx, lxs[0], n > 1 ? " and one coarser" : "");
+				checked++;
+			}
+		}
+	assert_true(checked > 10000);
+}
+
 static struct planet *load(void)
 {
 	struct planet *p = NULL;
@@ -291,6 +313,7 @@ static void hostile_sizes(void **state)
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
+		cmocka_unit_test(any_current_lx_is_warmed),
 		cmocka_unit_test(bbox_covers_viewers),
 		cmocka_unit_test(corridor_keeps_width),
 		cmocka_unit_test(estimate_near_count),
