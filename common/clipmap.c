@@ -45,8 +45,8 @@ int clipmap_level_lx(int ly, double lat_deg, int cur_lx)
 		 * (a camera that crossed several lx bands between two calls, fast near a pole,
 		 * or a path walked ahead) moves to lx − 1, which always fits with room (its
 		 * half-width is twice lx's). Until 6 December the current lx itself was kept,
-		 * however coarse: a viewer from a pole held lx 2 at level 7 as far as 77°N where
-		 * the fit is 5, and so did the look-ahead's walk along its path. */
+		 * however coarse: a viewer from a pole held lx 2 at level 7 at 77°N, where the
+		 * fit is 6, and so did the look-ahead's walk along its path. */
 		double half = n * M_PI / ldexp(1.0, lx);
 		if (ext > K_LON_BACK * half)
 			return cur_lx > lx - 1 ? cur_lx : lx - 1;
