@@ -20,7 +20,8 @@
 #include "view_levels.h"
 
 /* Per role: the window's tiles and their ring ((n+3)², a line of the ring n+3 long), the
- * look-ahead (≤ 2 × AHEAD_MAX lines) and the window of the next lx with its ring ((n+3)²).
+ * look-ahead (≤ 2 × AHEAD_MAX lines) and the windows of the next lx's (NEXT_MAX of them, each
+ * counted with its ring: (n+3)² a window).
  * AHEAD_MAX 2 until 5 December: a flight at 40× the seed over a warm store (46°N, 6000 m)
  * crosses ~110 tiles a second of its finest level, and 2 lines beyond the ring asked for them
  * ~27 ms before they were due, less than a tile's round trip: 89.5 and 90.6 % of its frames
@@ -49,8 +50,8 @@
  * a pole, where levels switch often, 1.2 s measured the same as 0.4 and 2.5 s worse
  * (bench_keepup, routes 70n and pole). */
 #define NEXT_LEAD_S 1.2
-/* The lead is walked in this many steps for the first lx change (then bisected): at 800 km
- * and 2.5× the seed over a pole a step is ~0.3°, under the narrowest lx band of a level there. */
+/* The lead is walked in this many steps for the lx changes (each then bisected): at 800 km and
+ * 2.5× the seed over a pole a step is ~0.3°, under the narrowest lx band of a level there. */
 #define NEXT_STEPS 48
 #define AHEAD_CAP 160	    /* look-ahead tiles per want-set, all levels and roles together */
 
@@ -579,12 +580,13 @@ size_t view_clipmap_wants(const struct view_clipmap *cm, bool prefetch, struct v
 				continue;
 			struct tile_key k[SLOTS];
 			/* look-ahead: the next lx's window and its ring on the side the camera
-			 * moves to first (not counted against AHEAD_CAP: at most (n+3)² a level,
-			 * and only near where a level's lx changes), then the rows ahead */
+			 * moves to first, then the windows of the changes after it (none counted
+			 * against AHEAD_CAP: at most (n+3)² + 2 (n+1)² a level, and only near
+			 * where a level's lx changes), then the rows ahead */
 			int nnext = 0;
 			for (int i = 0; pass == 2 && i < L->nnext; i++) {
-				/* each window with its ring; a tile an earlier one has (over a pole
-				 * an lx comes back, and windows overlap) once */
+				/* the first window with its ring, the others alone; a tile an
+				 * earlier one has (over a pole an lx comes back) once */
 				struct tile_key w[LINE * LINE];
 				int m = grid_quad_tiles(&L->next[i], 0, w);
 				if (i == 0)
