@@ -30,12 +30,12 @@
 #define LAT 0.3
 #define MAX_WANTS 2048
 
-/* A planet of zeros, every wanted tile delivered at once. */
-static struct view_source *src_create(void)
+/* A planet of zeros, every wanted tile delivered at once (fill: told of each, or NULL). */
+static struct view_source *src_create(synth_fill_fn fill)
 {
 	static const char *const names[] = { "height", "normal", "color" };
 	static const enum pix_type formats[] = { PIX_HEIGHT, PIX_NORMAL, PIX_COLOR };
-	return synth_source_create(T, NLEVELS - 1, 3, names, formats, NULL, NULL);
+	return synth_source_create(T, NLEVELS - 1, 3, names, formats, fill, NULL);
 }
 
 /* Targets at (lon, LAT) on every level; returns whether any changed. */
@@ -84,7 +84,7 @@ struct rig {
 	struct view_want *w;
 };
 
-static struct rig rig_open(void)
+static struct rig rig_open(synth_fill_fn fill)
 {
 	struct rig g = { 0 };
 	char err[256];
@@ -92,7 +92,7 @@ static struct rig rig_open(void)
 		printf("view_ahead: skipped (no GL: %s)\n", err);
 		skip();
 	}
-	g.s = src_create();
+	g.s = src_create(fill);
 	assert_int_equal(view_clipmap_create(gl_context_api(g.ctx), g.s, NLEVELS, &g.cm, err), 0);
 	g.w = xmalloc(MAX_WANTS * sizeof *g.w);
 	return g;
@@ -109,7 +109,7 @@ static void rig_close(struct rig *g)
 static void look_ahead(void **state)
 {
 	(void)state;
-	struct rig g = rig_open();
+	struct rig g = rig_open(NULL);
 	struct view_clipmap *cm = g.cm;
 	struct view_source *s = g.s;
 	struct view_want *w = g.w;
@@ -230,7 +230,7 @@ static void next_lx_window(void **state)
 		thr += 0.01;
 	assert_true(thr < 89 && thr_lx < lx0);
 
-	struct rig g = rig_open();
+	struct rig g = rig_open(NULL);
 	struct view_clipmap *cm = g.cm;
 	struct view_source *s = g.s;
 	struct view_want *w = g.w;
@@ -275,11 +275,6 @@ static struct delivery {
 static size_t ndeliveries;
 static double sim_now;
 
-static bool same_key(const struct tile_key *a, const struct tile_key *b)
-{
-	return a->x == b->x && a->y == b->y && a->lx == b->lx && a->ly == b->ly;
-}
-
 static void record_delivery(void *ctx, const struct view_want *w, uint32_t size, enum pix_type f,
 			    void *data)
 {
@@ -288,7 +283,7 @@ static void record_delivery(void *ctx, const struct view_want *w, uint32_t size,
 	if (f != PIX_HEIGHT || size != T)
 		return;
 	for (size_t i = 0; i < ndeliveries; i++)
-		if (same_key(&deliveries[i].k, &w->key)) {
+		if (grid_key_equal(&deliveries[i].k, &w->key)) {
 			deliveries[i].t = sim_now;
 			return;
 		}
@@ -299,7 +294,7 @@ static void record_delivery(void *ctx, const struct view_want *w, uint32_t size,
 static double delivered_at(const struct tile_key *k)
 {
 	for (size_t i = 0; i < ndeliveries; i++)
-		if (same_key(&deliveries[i].k, k))
+		if (grid_key_equal(&deliveries[i].k, k))
 			return deliveries[i].t;
 	return INFINITY;
 }
@@ -321,21 +316,11 @@ static double delivered_at(const struct tile_key *k)
 static void over_the_pole(void **state)
 {
 	(void)state;
-	struct rig g = { 0 };
-	char err[256];
-	if (gl_context_create(GL_BACKEND_AUTO, &g.ctx, err) < 0) {
-		printf("view_ahead: skipped (no GL: %s)\n", err);
-		skip();
-	}
-	static const char *const names[] = { "height", "normal", "color" };
-	static const enum pix_type formats[] = { PIX_HEIGHT, PIX_NORMAL, PIX_COLOR };
-	g.s = synth_source_create(T, NLEVELS - 1, 3, names, formats, record_delivery, NULL);
-	assert_int_equal(view_clipmap_create(gl_context_api(g.ctx), g.s, NLEVELS, &g.cm, err), 0);
-	g.w = xmalloc(MAX_WANTS * sizeof *g.w);
 	ndeliveries = 0;
+	struct rig g = rig_open(record_delivery);
 
 	const double v = 10.0, dt = 1.0 / 60;
-	int lx_was[NLEVELS], switches = 0, moves = 0;
+	int switches = 0, moves = 0;
 	struct grid_quad was[NLEVELS];
 	double min_switch = INFINITY, min_move = INFINITY;
 	for (int f = 0; f * dt < 3.0; f++) {
@@ -348,7 +333,7 @@ static void over_the_pole(void **state)
 			bool moved = f > 0 && (q->tx0 != was[l].tx0 || q->ty0 != was[l].ty0 ||
 					       q->ntx != was[l].ntx || q->nty != was[l].nty ||
 					       q->lx != was[l].lx);
-			bool switched = f > 0 && q->lx != lx_was[l];
+			bool switched = f > 0 && q->lx != was[l].lx;
 			if (f > 20 && moved) { /* after the first third of a second (the motion's estimate) */
 				struct tile_key k[GRID_WINDOW_MAX_KEYS];
 				int nk = grid_quad_tiles(q, 0, k);
@@ -364,7 +349,6 @@ static void over_the_pole(void **state)
 				else
 					min_move = fmin(min_move, lead), moves++;
 			}
-			lx_was[l] = q->lx;
 			was[l] = *q;
 		}
 		view_clipmap_motion(g.cm, lon, lat, sim_now);
