@@ -24,6 +24,7 @@
 #include "common/clock.h"
 #include "common/errbuf.h"
 #include "common/xalloc.h"
+#include "streaks.h"
 
 #define IMPORT_MAX_PIXELS ((int64_t)1 << 34) /* 16 Gpx: more would not fit OIIO's int sizes */
 
@@ -523,8 +524,9 @@ static int read_rows(struct job *j, int64_t y0, int n, unsigned char *buf, size_
 }
 
 /* Stream: bands of whole tile rows read in output order and handed to the tiled writer,
- * which builds the MIP levels as the rows pass. Returns 0 or -errno with err filled (then
- * neither dst nor dst.tmp is left). */
+ * which builds the MIP levels as the rows pass. With the streak repair each band is read
+ * with a row of context on either side. Returns 0 or -errno with err filled (then neither
+ * dst nor dst.tmp is left). */
 static int write_tiled(struct job *j, const struct import_opts *o, const char *dst,
 		       char *err)
 {
@@ -533,7 +535,12 @@ static int write_tiled(struct job *j, const struct import_opts *o, const char *d
 	size_t sz = img_type_bytes(j->type), row = sz * (size_t)j->nch * (size_t)j->w;
 	int tile = o->tile ? o->tile : 256;
 	int band = band_height(j, o, row, tile);
-	unsigned char *buf = xmalloc(row * (size_t)band);
+	int pad = o->repair_rows > 0;
+	struct streaks sk;
+	if (pad)
+		streaks_init(&sk, o->repair_rows, o->repair_len ? o->repair_len : STREAKS_LEN,
+			     j->w, j->nch, j->type, j->r.has_nodata, j->r.nodata);
+	unsigned char *buf = xmalloc(row * (size_t)(band + 2 * pad));
 	struct img_tiled_out *tw = NULL;
 	int rc = img_tiled_open(&tw, dst, (int)j->w, (int)j->h, j->nch, j->type, tile,
 				!o->no_mip, desc, err);
@@ -541,13 +548,18 @@ static int write_tiled(struct job *j, const struct import_opts *o, const char *d
 		img_tiled_set_nodata(tw, j->r.nodata);
 	for (int64_t y0 = 0; rc == 0 && y0 < j->h; y0 += band) {
 		int n = (int)(j->h - y0 < band ? j->h - y0 : band);
-		if ((rc = read_rows(j, y0, n, buf, sz, err)))
+		int64_t ys = y0 > 0 ? y0 - pad : 0, ye = y0 + n + pad < j->h ? y0 + n + pad : j->h;
+		if ((rc = read_rows(j, ys, (int)(ye - ys), buf, sz, err)))
 			break;
+		if (pad)
+			j->r.repaired += streaks_repair(&sk, buf, (int)(ye - ys), (int)(y0 - ys), n);
 		double t0 = clock_now_s();
-		rc = img_tiled_rows(tw, buf, n, err);
+		rc = img_tiled_rows(tw, buf + (size_t)(y0 - ys) * row, n, err);
 		j->r.write_s += clock_now_s() - t0;
 	}
 	free(buf);
+	if (pad)
+		streaks_free(&sk);
 	if (rc) {
 		img_tiled_abort(tw);
 		return rc;

@@ -32,6 +32,9 @@ struct import_opts {
 	const char *resample; /* how a projected source is resampled onto the geographic grid
 			       * (GDAL's warper): near, bilinear, cubic, cubicspline, lanczos,
 			       * average, mode; NULL: bilinear */
+	double repair_rows;   /* > 0: repair row streaks departing more than this from both
+			       * neighbouring rows (streaks.h); 0: off */
+	int repair_len;	      /* the shortest streak, in pixels; 0: STREAKS_LEN */
 };
 
 struct import_result {
@@ -44,6 +47,7 @@ struct import_result {
 	int shifted_cols;		/* columns rotated to start at −180° (global rasters) */
 	bool has_nodata;
 	double nodata;			/* integer outputs: the recorded nodata value */
+	int64_t repaired;		/* samples replaced by the streak repair */
 	double read_s, write_s;		/* seconds spent reading (GDAL) and writing (OIIO,
 					 * including the MIP levels) */
 };

@@ -1,15 +1,17 @@
 /* import_cli — `clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N] [--tile N]
- * [--resample ALG] [--no-mip] [--quiet]`. Argument handling and output only; see import.h. */
+ * [--resample ALG] [--repair-rows UNITS[,PIXELS]] [--no-mip] [--quiet]`. Argument handling and output only; see import.h. */
 #include "import_cli.h"
 
 #include <errno.h>
 #include <getopt.h>
+#include <math.h>
 #include <stdbool.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "import.h"
+#include "streaks.h"
 
 static const char *type_name(enum img_type t)
 {
@@ -24,7 +26,8 @@ static const char *type_name(enum img_type t)
 
 #define USAGE                                                                                \
 	"usage: clipmapctl import SRC -o DST.tif [--bounds W,S,E,N] [--band N] [--tile N] "    \
-	"[--resample near|bilinear|cubic|cubicspline|lanczos|average|mode] [--no-mip] [--quiet]\n"
+	"[--resample near|bilinear|cubic|cubicspline|lanczos|average|mode] "                    \
+	"[--repair-rows UNITS[,PIXELS]] [--no-mip] [--quiet]\n"
 
 /* `import`'s command line. */
 struct import_args {
@@ -50,6 +53,31 @@ static bool parse_band_or_tile(int which, const char *s, int *n)
 	return true;
 }
 
+/* --repair-rows UNITS[,PIXELS] into o. Returns false on a bad one (after saying so). */
+static bool parse_repair(const char *s, struct import_opts *o)
+{
+	char *end;
+	errno = 0;
+	double t = strtod(s, &end);
+	long len = 0;
+	bool ok = end != s && errno == 0 && isfinite(t) && t > 0;
+	if (ok && *end == ',') {
+		const char *p = end + 1;
+		len = strtol(p, &end, 10);
+		ok = end != p && errno == 0 && len >= 2 && len <= 1 << 20;
+	}
+	if (!ok || *end) {
+		fprintf(stderr, "clipmapctl import: --repair-rows wants UNITS[,PIXELS]: how far a "
+			"row's streak sits beyond both rows beside it (> 0, the samples' unit) and "
+			"its shortest run (2..1048576 pixels, default %d), got \"%s\"\n",
+			STREAKS_LEN, s);
+		return false;
+	}
+	o->repair_rows = t;
+	o->repair_len = (int)len;
+	return true;
+}
+
 /* The command line into a. Returns -1 to go on, else the exit status (0: --help). */
 static int parse_import_args(int argc, char **argv, struct import_args *a)
 {
@@ -58,6 +86,7 @@ static int parse_import_args(int argc, char **argv, struct import_args *a)
 		{ "band", required_argument, NULL, 'n' },   { "tile", required_argument, NULL, 't' },
 		{ "no-mip", no_argument, NULL, 'm' },	    { "quiet", no_argument, NULL, 'q' },
 		{ "help", no_argument, NULL, 'h' },	    { "resample", required_argument, NULL, 'r' },
+		{ "repair-rows", required_argument, NULL, 'R' },
 		{ 0, 0, 0, 0 },
 	};
 	*a = (struct import_args){ 0 };
@@ -92,6 +121,10 @@ static int parse_import_args(int argc, char **argv, struct import_args *a)
 			}
 			a->o.resample = optarg;
 			break;
+		case 'R':
+			if (!parse_repair(optarg, &a->o))
+				return 2;
+			break;
 		case 'q': a->quiet = true; break;
 		case 'h': printf(USAGE); return 0;
 		default: return 2;
@@ -118,6 +151,9 @@ static void report(const struct import_args *a, const struct import_result *r)
 	       r->flipped_rows ? ", rows flipped north-up" : "");
 	if (r->shifted_cols)
 		printf(", columns shifted by %d", r->shifted_cols);
+	if (a->o.repair_rows > 0)
+		printf(", %lld sample%s in row streaks repaired", (long long)r->repaired,
+		       r->repaired == 1 ? "" : "s");
 	printf("; read %.2f s, write %.2f s\n", r->read_s, r->write_s);
 }
 

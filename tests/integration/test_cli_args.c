@@ -141,6 +141,10 @@ static const struct bad bads[] = {
 	{ CTL, "LX", { "tile", "earth", "height", "x", "0", "0", "0", "-o", "/tmp/x.png", NULL } },
 	{ CTL, "--band", { "import", "/dev/null", "-o", "/tmp/x.tif", "--band", "0", NULL } },
 	{ CTL, "--bounds", { "import", "/dev/null", "-o", "/tmp/x.tif", "--bounds", "5,0,1,1", NULL } },
+	{ CTL, "--repair-rows", { "import", "/dev/null", "-o", "/tmp/x.tif", "--repair-rows", "0",
+				  NULL } },
+	{ CTL, "--repair-rows", { "import", "/dev/null", "-o", "/tmp/x.tif", "--repair-rows",
+				  "500,x", NULL } },
 	{ CTL, "--bogus", { "status", "--bogus", NULL } },
 	{ CTL, "frobnicate", { "frobnicate", NULL } },
 };

@@ -3,7 +3,10 @@
  * against ETOPO5 read independently from the source NetCDF with GDAL (bilinear at the same
  * point), at the data's resolution (no detail octaves: within 1 m) and finer (detail added:
  * within its amplitude); the colour of the Sahara, the Amazon and Antarctica in plausible
- * ranges (sea ice at the North Pole); the detail smooth on ice sheets and rugged on snowy mountains. Tiles go through render_layer: the same cache and scheduler the daemon uses. */
+ * ranges (sea ice at the North Pole); the detail smooth on ice sheets and rugged on snowy
+ * mountains; ETOPO5's two row streaks near 81.2°S repaired at import; the ice shelves tinted as
+ * land whatever height ETOPO5 gives them. Tiles go through
+ * render_layer: the same cache and scheduler the daemon uses. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -325,6 +328,72 @@ static void ice_sheets(void **state)
 	}
 }
 
+/* ETOPO5's two streaks near 81.2°S (scripts/data.sh, client/ctl/streaks.h) are gone from the
+ * planet: along 81.17°S from 60°W to 5°W (a 1.7 km wall on the Filchner–Ronne ice shelf, then
+ * a 2 km trench) and 81.25°S from 0° to 39°E (a trench, 122 m between 2 700 m on either
+ * side), every degree, the height at level 3 (ETOPO5's own bilinear value, as in `heights`)
+ * lies within 300 m of the source's rows at 81°S and 81.5°S there. On the source as shipped
+ * the same check finds the trench and the wall (asserted too, so the test looks where the
+ * defect is). */
+static void antarctic_streaks(void **state)
+{
+	(void)state;
+	static const struct {
+		double lat, lon0, lon1;
+	} rows[] = { { -81.1667, -60, -5 }, { -81.25, 0, 39 } };
+	int raw_bad = 0, n = 0;
+	for (size_t k = 0; k < sizeof rows / sizeof rows[0]; k++)
+		for (double lon = rows[k].lon0; lon <= rows[k].lon1; lon += 1, n++) {
+			float h;
+			double clat, clon;
+			texel("height", 3, rows[k].lat, lon + 0.5, &h, &clat, &clon);
+			double a = etopo_bilinear(-81.0, clon), b = etopo_bilinear(-81.5, clon);
+			double lo = (a < b ? a : b) - 300, hi = (a < b ? b : a) + 300;
+			double g = egm96(clat, clon), raw = etopo_bilinear(clat, clon);
+			raw_bad += !(raw >= lo && raw <= hi);
+			if (!(h - g >= lo && h - g <= hi))
+				fail_msg("(%.4f, %.4f): %.0f m above the geoid, the rows at 81°S and "
+					 "81.5°S say %.0f and %.0f m (ETOPO5 as shipped: %.0f m)",
+					 clat, clon, h - g, a, b, raw);
+		}
+	print_message("%d of %d places along the streaks off by > 300 m in the source, none in "
+		      "the planet\n", raw_bad, n);
+	assert_true(raw_bad > n / 2);
+}
+
+/* The Filchner–Ronne ice shelf takes the land's tint whole: ETOPO5 has it at 0 m with
+ * rectangles of 50–150 m from its coarse sources, and a tint masked by ETOPO5's heights above
+ * sea level (earth.ini's `land` until 6 December) shaded those rectangles and left the rest
+ * light — seen from orbit, a patchwork on the shelf. Down a column of a level-5 tile across
+ * the rectangles' edges (80.9°S, 56.25°W) the colour changes by at most 3 between rows (1
+ * measured; the old mask: 5). */
+static void ice_shelf_tint(void **state)
+{
+	(void)state;
+	struct render_region rg;
+	render_region_around(3, 5, -80.9, -56.25, 1, &rg);
+	struct render_opts o = { .workers = 1, .cache_mb = 64 };
+	struct render_image im;
+	char err[256];
+	if (render_layer(pl, "color", &rg, &o, &im, err))
+		fail_msg("render color: %s", err);
+	uint32_t T = pl->tile_size, col = T / 2;
+	int worst = 0;
+	uint32_t at = 0;
+	for (uint32_t j = 80; j < 120; j++) {
+		const uint8_t *a = (const uint8_t *)im.pixels + ((size_t)j * T + col) * 4;
+		const uint8_t *b = a + (size_t)T * 4;
+		for (int c = 0; c < 3; c++)
+			if (abs(a[c] - b[c]) > worst)
+				worst = abs(a[c] - b[c]), at = j;
+	}
+	render_image_free(&im);
+	print_message("ice shelf: colour steps at most %d between rows (row %u)\n", worst, at);
+	if (worst > 3)
+		fail_msg("the colour steps by %d between rows %u and %u on the ice shelf", worst,
+			 at, at + 1);
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -332,6 +401,8 @@ int main(void)
 		cmocka_unit_test(colours),
 		cmocka_unit_test(sea_surface),
 		cmocka_unit_test(ice_sheets),
+		cmocka_unit_test(antarctic_streaks),
+		cmocka_unit_test(ice_shelf_tint),
 	};
 	return cmocka_run_group_tests(tests, setup, teardown);
 }

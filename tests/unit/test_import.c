@@ -6,7 +6,9 @@
  * read in several bands (rows not a multiple of the band) give the same pixels, the same MIP
  * levels as OpenImageIO's make_texture of the whole image (the old in-memory path) and as a
  * box/bilinear reference computed here; a truncated source fails clearly and leaves neither
- * the destination nor its .tmp behind (an older destination stays as it was). */
+ * the destination nor its .tmp behind (an older destination stays as it was). The row streak
+ * repair mends a scan-line defect across a band's edge and leaves short, shallow, void-cut
+ * and edge rows as they are. */
 #include <stdarg.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -67,9 +69,10 @@ static int16_t pix(int x, int y)
 	return (int16_t)(x * 100 - y * 7 + 3 + (x * x + 3 * y * y) % 97); /* not linear */
 }
 
-/* A w×h int16 GeoTIFF with geotransform gt in EPSG:epsg (pixel (x, y) = pix(x, y)). */
-static void write_geotiff(const char *path, int w, int h, const double gt[6], int epsg,
-			  const double *nodata)
+/* A w×h int16 GeoTIFF of the pixels px (rows as GDAL stores them) with geotransform gt in
+ * EPSG:epsg. */
+static void write_geotiff_px(const char *path, int w, int h, const double gt[6], int epsg,
+			     const double *nodata, const int16_t *px)
 {
 	GDALDriverH drv = GDALGetDriverByName("GTiff");
 	assert_non_null(drv);
@@ -80,17 +83,25 @@ static void write_geotiff(const char *path, int w, int h, const double gt[6], in
 	assert_int_equal(OSRImportFromEPSG(srs, epsg), OGRERR_NONE);
 	assert_int_equal(GDALSetSpatialRef(ds, srs), CE_None);
 	OSRDestroySpatialReference(srs);
+	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
+	if (nodata)
+		assert_int_equal(GDALSetRasterNoDataValue(b, *nodata), CE_None);
+	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, (void *)px, w, h, GDT_Int16, 0,
+				      0),
+			 CE_None);
+	GDALClose(ds);
+}
+
+/* A w×h int16 GeoTIFF with geotransform gt in EPSG:epsg (pixel (x, y) = pix(x, y)). */
+static void write_geotiff(const char *path, int w, int h, const double gt[6], int epsg,
+			  const double *nodata)
+{
 	int16_t *buf = malloc(sizeof *buf * (size_t)w * h);
 	for (int y = 0; y < h; y++)
 		for (int x = 0; x < w; x++)
 			buf[(size_t)y * w + x] = pix(x, y);
-	GDALRasterBandH b = GDALGetRasterBand(ds, 1);
-	if (nodata)
-		assert_int_equal(GDALSetRasterNoDataValue(b, *nodata), CE_None);
-	assert_int_equal(GDALRasterIO(b, GF_Write, 0, 0, w, h, buf, w, h, GDT_Int16, 0, 0),
-			 CE_None);
+	write_geotiff_px(path, w, h, gt, epsg, nodata, buf);
 	free(buf);
-	GDALClose(ds);
 }
 
 static void read_back(const char *path, int w, int h, int16_t **px, char desc[256])
@@ -384,6 +395,82 @@ static void streaming_bands(void **state)
 		free(lv[m]);
 	}
 	free(want);
+}
+
+/* --repair-rows (client/ctl/streaks.h) on a source laid out as ETOPO5 is (0..360°, rows
+ * south→north, so the repair sees rows after the flip and the column rotation), read in
+ * bands of 16 rows so that the two streaks sit on either side of a band's edge, side by side
+ * in columns as ETOPO5's do. Output pixel (x, y) is clean(x, y) = 1000 + 10x + 5y wherever
+ * the repair should leave or make it so. */
+static int16_t clean(int x, int y)
+{
+	return (int16_t)(1000 + 10 * x + 5 * y);
+}
+
+static void row_streaks(void **state)
+{
+	(void)state;
+	enum { W = 96, H = 64, ND = -32768 };
+	static int16_t out[H][W], src[H * W];
+	for (int y = 0; y < H; y++)
+		for (int x = 0; x < W; x++)
+			out[y][x] = clean(x, y);
+	for (int x = 10; x < 70; x++) /* a trench: 60 pixels, 2 km deep, last row of band 0 */
+		out[15][x] -= 2000;
+	out[15][8] -= 300, out[15][9] -= 300; /* its ends continue it beyond 500 / 8 ... */
+	out[15][7] -= 50;		      /* ... and end where it no longer does */
+	for (int x = 70; x < 94; x++)	      /* a wall: 24 pixels, first row of band 1 */
+		out[16][x] += 1500;
+	for (int x = 20; x < 30; x++) /* kept: a narrow valley 10 pixels long */
+		out[40][x] -= 3000;
+	for (int x = 0; x < W; x++) /* kept: a whole row 400 below, under the threshold */
+		out[45][x] -= 400;
+	for (int x = 10; x < 50; x++) /* kept: a nodata void cuts it into runs of 20 and 19 */
+		out[50][x] += 1000;
+	out[50][30] = ND;
+	for (int x = 0; x < W; x++) /* kept: the first row has no row north of it */
+		out[0][x] += 1000;
+	/* output (x, y) is source column (x + 48) mod 96 at source row H - 1 - y */
+	for (int y = 0; y < H; y++)
+		for (int x = 0; x < W; x++)
+			src[(H - 1 - y) * W + (x + 48) % W] = out[y][x];
+	const double gt[6] = { 0, 3.75, 0, -90, 0, 180.0 / H };
+	double nd = ND;
+	write_geotiff_px(tpath("k.tif"), W, H, gt, 4326, &nd, src);
+
+	for (int pass = 0; pass < 2; pass++) {
+		struct import_opts o = { .tile = 16, .band_rows = pass ? 0 : 16,
+					 .repair_rows = 500, .repair_len = 24 };
+		struct import_result r;
+		char err[256] = "", desc[256];
+		if (import_raster(tpath("k.tif"), tpath("k_out.tif"), &o, &r, err))
+			fail_msg("%s", err);
+		assert_true(r.flipped_rows);
+		assert_int_equal(r.shifted_cols, 48);
+		assert_int_equal(r.repaired, 62 + 24);
+		int16_t *px;
+		read_back(tpath("k_out.tif"), W, H, &px, desc);
+		for (int y = 0; y < H; y++)
+			for (int x = 0; x < W; x++) {
+				bool fixed = (y == 15 && x >= 8 && x < 70) ||
+					     (y == 16 && x >= 70 && x < 94);
+				int16_t want = fixed ? clean(x, y) : out[y][x];
+				if (px[y * W + x] != want)
+					fail_msg("band rows %d: pixel %d,%d = %d, want %d (read %d)",
+						 o.band_rows, x, y, px[y * W + x], want, out[y][x]);
+			}
+		free(px);
+	}
+	/* Off by default: the same pixels as read. */
+	struct import_result r;
+	char err[256] = "", desc[256];
+	if (import_raster(tpath("k.tif"), tpath("k_raw.tif"), NULL, &r, err))
+		fail_msg("%s", err);
+	assert_int_equal(r.repaired, 0);
+	int16_t *px;
+	read_back(tpath("k_raw.tif"), W, H, &px, desc);
+	assert_memory_equal(px, out, sizeof out);
+	free(px);
 }
 
 static void truncated_source(void **state)
@@ -704,6 +791,7 @@ int main(void)
 		cmocka_unit_test(global_shift_and_flip),
 		cmocka_unit_test(errors),
 		cmocka_unit_test(streaming_bands),
+		cmocka_unit_test(row_streaks),
 		cmocka_unit_test(truncated_source),
 		cmocka_unit_test(utm_reprojected),
 		cmocka_unit_test(reimport_keeps_bounds),
