@@ -71,8 +71,14 @@ static bool pole_taps(struct file_axis *a, double s, int64_t t[4], double w[4])
 /* The taps (a->taps of them) of a sample at s (pixel i's centre at s = i): bilinear (2);
  * Catmull-Rom (4) on a magnified axis of heights, so the surface has no crease along the
  * source's rows and columns (bilinear's slope jumps there: shaded, every 9 km cell edge of
- * ETOPO5 was a straight line across the terrain, one under the camera's track a seam); the
- * polar caps' three (pole_taps) where they are in reach. Unused taps have weight 0. */
+ * ETOPO5 was a straight line across the terrain, one under the camera's track a seam), or
+ * with `magnify = bspline` a cubic B-spline (4): C2 and not through the samples, it keeps
+ * almost nothing of the source's pixel grid (its response has fourth-order zeros at every
+ * multiple of the sampling rate, Catmull-Rom's and bilinear's second order), so the ½
+ * contour of a 0/1 mask — earth.ini's water, GSHHG rasterised on a 2′ grid — runs smoothly
+ * along a coast where Catmull-Rom's drew the pixels' staircase (steps of 3.7 km along the
+ * IJsselmeer seen from 30 km); it narrows a one-pixel channel to a peak of ⅔. The polar
+ * caps' three (pole_taps) where they are in reach. Unused taps have weight 0. */
 static void sample_taps(struct file_axis *a, double s, int size, bool wrap, int64_t t[4],
 			double w[4])
 {
@@ -89,16 +95,25 @@ static void sample_taps(struct file_axis *a, double s, int size, bool wrap, int6
 	/* Catmull-Rom where its four pixels exist (at an edge of a bounded axis, bilinear: a
 	 * clamped tap would bend the curve towards the edge pixel, 0.5 m in 1000 at a pole). */
 	if (a->taps == 4 && (wrap || (i0 >= 1 && i0 + 2 < size))) {
-		double f2 = fr * fr, f3 = f2 * fr;
-		w[0] = 0.5 * (-f3 + 2 * f2 - fr);
-		w[1] = 0.5 * (3 * f3 - 5 * f2 + 2);
-		w[2] = 0.5 * (-3 * f3 + 4 * f2 + fr);
-		w[3] = 0.5 * (f3 - f2);
+		double f2 = fr * fr, f3 = f2 * fr, g = 1 - fr;
+		if (a->bspline) {
+			w[0] = g * g * g / 6;
+			w[1] = (3 * f3 - 6 * f2 + 4) / 6;
+			w[2] = (-3 * f3 + 3 * f2 + 3 * fr + 1) / 6;
+			w[3] = f3 / 6;
+		} else {
+			w[0] = 0.5 * (-f3 + 2 * f2 - fr);
+			w[1] = 0.5 * (3 * f3 - 5 * f2 + 2);
+			w[2] = 0.5 * (-3 * f3 + 4 * f2 + fr);
+			w[3] = 0.5 * (f3 - f2);
+		}
 		for (int k = 0; k < 4; k++) {
 			int64_t i = i0 - 1 + k;
 			t[k] = wrap ? i : i < 0 ? 0 : i >= size ? size - 1 : i;
 		}
-		if (fr == 0) /* on a pixel: that pixel alone (no taps past the edges) */
+		/* on a pixel: that pixel alone (no taps past the edges); a B-spline still
+		 * weighs its neighbours there */
+		if (fr == 0 && !a->bspline)
 			t[0] = t[2] = t[3] = t[1], w[0] = w[2] = w[3] = 0;
 		return;
 	}
@@ -343,9 +358,9 @@ int file_plan_init(struct file_plan *q, const struct file_source *f, const struc
 	/* Heights magnified (texels finer than the level's pixels): Catmull-Rom (sample_taps). */
 	bool cubic = f->kind == FILE_KIND_HEIGHT;
 	q->ax = (struct file_axis){ .n = subtaps(q->rx), .taps = cubic && q->rx < 1 ? 4 : 2,
-				    .cap_n = NAN, .cap_s = NAN };
+				    .bspline = f->bspline, .cap_n = NAN, .cap_s = NAN };
 	q->ay = (struct file_axis){ .n = subtaps(q->ry), .taps = cubic && q->ry < 1 ? 4 : 2,
-				    .cap_n = NAN, .cap_s = NAN };
+				    .bspline = f->bspline, .cap_n = NAN, .cap_s = NAN };
 	if (spanx == 360) /* exact: parse_bounds snaps near-360 spans */
 		plan_caps(q, spany);
 	q->ax.K = q->ax.taps * q->ax.n;

@@ -27,6 +27,7 @@ enum { VROW_MEAN_N, VROW_MEAN_S, VROW_HARM_N, VROW_HARM_S, VROWS };
  * 3 (with the polar caps in reach), 4 (Catmull-Rom: heights magnified). */
 struct file_axis {
 	int n, K, taps;
+	bool bspline; /* 4 taps: a cubic B-spline's weights, not Catmull-Rom's */
 	int32_t *idx;
 	float *w;
 	uint8_t *in; /* texel centre inside the bounds */

@@ -133,6 +133,7 @@ struct file_source {
 	float fill_h;
 	uint8_t fill_c[4];
 	bool isotropic; /* box-filter rows east–west to their spacing on the ground (above) */
+	bool bspline;	/* magnified heights: a cubic B-spline instead of Catmull-Rom */
 	struct file_poles *poles; /* owned by the node */
 };
 

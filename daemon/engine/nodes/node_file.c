@@ -23,6 +23,10 @@
  *             where data is missing
  *   lon_wrap  true | false: bilinear wraps across the east/west edges (default true when the
  *             bounds span 360°; only allowed then)
+ *   magnify   (height) cubic | bspline: heights finer than the data are Catmull-Rom
+ *             (`cubic`, the default: passes through every sample) or a cubic B-spline
+ *             (`bspline`: smooth, not through the samples; a 0/1 mask's ½ contour then
+ *             follows a coast instead of the pixels' staircase: file_plan.c)
  *   isotropic true | false: east–west detail no finer on the ground than the rows are apart
  *             (default true: global products near the poles; file_resample.h); false keeps
  *             every column (a regional survey whose columns are genuine)
@@ -224,12 +228,19 @@ static int parse_height(struct node_parse *p, struct file_source *f, const struc
 	if ((rc = np_double(p, "fill", 0, -1e30, 1e30, &v)))
 		return rc;
 	f->fill_h = (float)v;
+	if (ini_find(p->sec, "magnify")) { /* hashed only when given: older hashes stand */
+		static const char *const magnify_names[] = { "cubic", "bspline", NULL };
+		int m;
+		if ((rc = np_enum(p, "magnify", magnify_names, 0, &m)))
+			return rc;
+		f->bspline = m == 1;
+	}
 	return 0;
 }
 
 static int parse_color(struct node_parse *p, struct file_source *f)
 {
-	static const char *const only_h[] = { "channel", "scale", "offset", "nodata" };
+	static const char *const only_h[] = { "channel", "scale", "offset", "nodata", "magnify" };
 	static const uint8_t clear[4] = { 0, 0, 0, 0 };
 	for (size_t i = 0; i < sizeof only_h / sizeof only_h[0]; i++) {
 		int rc = height_only(p, only_h[i]);
