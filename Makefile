@@ -96,7 +96,7 @@ $(BUILD)/gen/version.txt: FORCE
 	@if cmp -s $@.tmp $@; then rm -f $@.tmp; else mv $@.tmp $@; fi
 FORCE:
 
-.PHONY: all check test layers asan tsan bench bench-keepup deps clean demo data shader-check fuzz install fleet-demo
+.PHONY: all check test layers asan tsan bench bench-keepup deps clean demo data shader-check fuzz install fleet-demo FORCE
 .SECONDARY:
 all: $(PROGS) $(UNIT_BIN) $(BENCH_BIN)
 

@@ -177,9 +177,26 @@ static void test_bad_values(void **state)
 	assert_int_equal(failed, 0);
 }
 
+/* `git describe --always --dirty` of the checkout the tests run in, or "" outside one. */
+static void checkout_version(char *out, size_t n)
+{
+	out[0] = '\0';
+	FILE *f = popen("git describe --always --dirty 2>/dev/null", "r");
+	if (!f)
+		return;
+	if (!fgets(out, (int)n, f))
+		out[0] = '\0';
+	pclose(f);
+	out[strcspn(out, "\n")] = '\0';
+}
+
+/* Each program prints its name and version; in a git checkout, the checkout's own (the
+ * build's version.txt once stayed at an old commit: make never remade it). */
 static void test_version(void **state)
 {
 	struct env *e = *state;
+	char want[128];
+	checkout_version(want, sizeof want);
 	for (int p = 0; p < 3; p++) {
 		need(e, p);
 		const char *flags[] = { "--version", "-V" };
@@ -192,6 +209,10 @@ static void test_version(void **state)
 			assert_int_equal(out[l], ' ');
 			assert_true(strlen(out) > l + 2); /* a version, then a newline */
 			assert_non_null(strchr(out, '\n'));
+			size_t wl = strlen(want);
+			if (wl && (strncmp(out + l + 1, want, wl) != 0 || out[l + 1 + wl] != '\n'))
+				fail_msg("%s prints \"%s\", the checkout is %s: rebuild (make)",
+					 names[p], out, want);
 		}
 	}
 }
