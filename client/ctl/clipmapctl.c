@@ -686,7 +686,7 @@ static int cache_option(int c, const char *s, struct ctl_cache_opts *o)
 		o->near = true;
 		return 0;
 	case 'r':
-		if (ctl_parse_km(s, "--radius", &o->radius_m, err))
+		if (ctl_parse_km(s, "--radius", 1e9, &o->radius_m, err))
 			return fail("cache ls", -EINVAL, err);
 		return 0;
 	case 'l':
@@ -893,7 +893,7 @@ static int prefetch_option(int c, const char *s, struct prefetch_args *pa)
 		o->shape = c == 'b' ? PROTO_SHAPE_BBOX : PROTO_SHAPE_PATH;
 		return 0;
 	case 'w':
-		if (ctl_parse_km(s, "--width", &o->width_m, err))
+		if (ctl_parse_km(s, "--width", PROTO_MAX_WIDTH / 1000, &o->width_m, err))
 			return fail("prefetch", -EINVAL, err);
 		pa->width = true;
 		return 0;

@@ -134,12 +134,14 @@ int ctl_parse_path(const char *s, struct proto_lonlat **pts, uint32_t *n, char e
 	return 0;
 }
 
-int ctl_parse_km(const char *s, const char *what, double *metres, char err[256])
+int ctl_parse_km(const char *s, const char *what, double max_km, double *metres,
+		 char err[256])
 {
 	const char *p = s;
 	double v;
-	if (num(&p, "", &v) || *p || v < 0 || v > 1e9)
-		return err_inval(err, "%s wants a distance in km (>= 0), got \"%s\"", what, s);
+	if (num(&p, "", &v) || *p || !(v >= 0 && v <= max_km))
+		return err_inval(err, "%s wants a distance in km (0..%g), got \"%s\"", what,
+				 max_km, s);
 	*metres = v * 1000.0;
 	return 0;
 }

@@ -24,8 +24,9 @@ int ctl_parse_bbox(const char *s, struct geo_rect *r, char err[256]);
 int ctl_parse_latlon(const char *s, double *lat, double *lon, char err[256]);
 /* "LAT,LON:LAT,LON[:…]" (2 … PROTO_MAX_PATH points). *pts is returned owned (free()). */
 int ctl_parse_path(const char *s, struct proto_lonlat **pts, uint32_t *n, char err[256]);
-/* A non-negative distance in kilometres ("12", "0.5"), returned in metres. */
-int ctl_parse_km(const char *s, const char *what, double *metres, char err[256]);
+/* A distance in kilometres from 0 to max_km ("12", "0.5"), returned in metres. */
+int ctl_parse_km(const char *s, const char *what, double max_km, double *metres,
+		 char err[256]);
 /* "a,b": layer names of planet p → bit mask of their indices. NULL or "" → 0 (every layer). */
 int ctl_parse_layers(const char *s, const struct proto_planet *p, uint64_t *mask, char err[256]);
 /* Index of the layer named s in p, or -ENOENT with err listing the planet's layers. */

@@ -122,6 +122,8 @@ static const struct bad bads[] = {
 	{ CTL, "--levels", { "prefetch", "earth", "--bbox", "0,0,1,1", "--levels", "5-2", NULL } },
 	{ CTL, "--width", { "prefetch", "earth", "--path", "0,0:1,1", "--width", "-1", "--levels",
 			    "1-2", NULL } },
+	{ CTL, "--width", { "prefetch", "earth", "--path", "0,0:1,1", "--width", "200000", "--levels",
+			    "1-2", NULL } },
 	{ CTL, "--path", { "prefetch", "earth", "--path", "0,0", "--width", "1", "--levels", "1-2",
 			   NULL } },
 	{ CTL, "--near", { "cache", "ls", "earth", "--near", "91,0", NULL } },

@@ -1028,10 +1028,14 @@ static void parse_bbox_path_levels(void **state)
 	assert_int_equal(ctl_parse_latlon("-33.9,18.4", &lat, &lon, err), 0);
 	assert_true(lat == -33.9 && lon == 18.4);
 	assert_int_equal(ctl_parse_latlon("18.4", &lat, &lon, err), -EINVAL);
-	assert_int_equal(ctl_parse_km("2.5", "--width", &m, err), 0);
+	assert_int_equal(ctl_parse_km("2.5", "--width", 20000, &m, err), 0);
 	assert_true(m == 2500);
-	assert_int_equal(ctl_parse_km("-1", "--width", &m, err), -EINVAL);
+	assert_int_equal(ctl_parse_km("-1", "--width", 20000, &m, err), -EINVAL);
 	assert_non_null(strstr(err, "--width"));
+	assert_int_equal(ctl_parse_km("20000", "--width", 20000, &m, err), 0);
+	assert_int_equal(ctl_parse_km("20001", "--width", 20000, &m, err), -EINVAL);
+	assert_non_null(strstr(err, "0..20000"));
+	assert_int_equal(ctl_parse_km("nan", "--width", 20000, &m, err), -EINVAL);
 
 	uint64_t mask;
 	assert_int_equal(ctl_parse_layers("color", &test_planet, &mask, err), 0);
