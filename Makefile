@@ -162,10 +162,10 @@ data:
 check: deps
 	@$(MAKE) --no-print-directory all
 	@$(MAKE) --no-print-directory shader-check layers
-	@sh tests/run.sh $(BUILD)
+	@CLIPMAP_BUILD_VERSION='$(VERSION)' sh tests/run.sh $(BUILD)
 
 test: all shader-check layers
-	@sh tests/run.sh $(BUILD)
+	@CLIPMAP_BUILD_VERSION='$(VERSION)' sh tests/run.sh $(BUILD)
 
 # The wings' include rule (docs/ARCHITECTURE.md).
 layers:

@@ -50,7 +50,7 @@ void streaks_free(struct streaks *s)
 
 static bool valid(const struct streaks *s, double v)
 {
-	return !isnan(v) && !(s->has_nd && v == s->nd);
+	return isfinite(v) && !(s->has_nd && v == s->nd);
 }
 
 /* Whether column i sits beyond both neighbours by more than lim, on the side sign gives. */
@@ -92,9 +92,13 @@ static int64_t repair_channel(struct streaks *s, unsigned char *cur, const unsig
 			a--;
 		while (b < w && beyond(s, b, s->thresh / 8, up))
 			b++;
-		for (int64_t x = a; x < b; x++)
-			set(s->type, cur, x * k + c,
-			    (get(s->type, N, x * k + c) + get(s->type, S, x * k + c)) / 2);
+		for (int64_t x = a; x < b; x++) {
+			double m = (get(s->type, N, x * k + c) + get(s->type, S, x * k + c)) / 2;
+			/* an integer mean may round onto nodata: never make a void */
+			if (s->has_nd && (double)lround(m) == s->nd)
+				m += m < s->nd ? -1 : 1;
+			set(s->type, cur, x * k + c, m);
+		}
 		fixed += b - a;
 		i = b;
 	}

@@ -7,13 +7,14 @@
  *
  * ETOPO5 as ferret-datasets ships it has two: at 81.17°S from 66.7°W to 0° (up to 1.7 km
  * above the Filchner–Ronne ice shelf, then ~2 km below the plateau) and at 81.25°S from
- * 0° to 40°E (122 m between 2 713 m and 2 682 m) — a trench one row wide across Queen Maud
- * Land that the viewer drew as a dark arc. No other row of it has a run of more than 18
+ * 0° to 40°E (samples of ~122 m where the rows either side hold 2 713 m and 2 682 m) — a
+ * trench one row wide across Queen Maud Land that the viewer drew as a dark arc. No other row of it has a run of more than 18
  * samples beyond 500 m (scanned); real relief a row wide is short.
  *
  * Runs do not wrap from the last column to the first. The first and last rows of the raster
- * have one neighbour and are left as they are. Channels are repaired independently; a NaN
- * or the integer nodata value in a row or its neighbours ends a run there.
+ * have one neighbour and are left as they are. Channels are repaired independently; a NaN,
+ * an infinity or the integer nodata value in a row or its neighbours ends a run there, and a
+ * mean that would round onto the nodata value is moved one unit off it.
  * Not thread-safe per struct streaks.
  */
 #ifndef CLIPMAP_STREAKS_H

@@ -1369,6 +1369,50 @@ static void bspline_mask_contour(void **state)
 	}
 }
 
+/* A one-pixel line of 1 in a 0/1 mask, 16 × 16 pixels over exactly one tile of level (5, 4)
+ * (0..11.25°E, 0..11.25°N: 16 texels a pixel), magnified with `magnify = bspline`: along
+ * every texel row the B-spline's hump, peaking at ⅔ and changing by under 0.1 from texel to
+ * texel — beside a bounded image's edge (the line in the second column, where Catmull-Rom
+ * turns bilinear and a B-spline that did the same stepped by ⅓ to the pixel's 1), and in a
+ * tile with a void in it (NaN at pixel 12, 12: Catmull-Rom's tile turns bilinear, a B-spline
+ * that did the same would draw the line at 1 here and ⅔ in the tiles around). */
+static void bspline_edges_and_voids(void **state)
+{
+	(void)state;
+	enum { N = 16, T = 256 };
+	for (int c = 0; c < 2; c++) {
+		int col = c ? 8 : 1;
+		float px[N * N];
+		for (int i = 0; i < N * N; i++)
+			px[i] = i % N == col ? 1.0f : 0.0f;
+		if (c)
+			px[12 * N + 12] = NAN;
+		char err[256];
+		assert_int_equal(img_write(tpath("line.tif"), N, N, 1, IMG_F32, px, err), 0);
+		struct fnode f;
+		fnode_ok(&f, "[node x]\ntype = file\npath = line.tif\nbounds = 0,0,11.25,11.25\n"
+			 "isotropic = false\nmagnify = bspline\n");
+		struct tile *t = gen(&f, 5, 4, 16, 7, T);
+		const float *v = tile_f32(t);
+		double lo = 1, hi = 0, jump = 0;
+		for (uint32_t j = 0; j < 9 * 16; j++) { /* rows clear of the void's reach */
+			double peak = 0;
+			for (uint32_t i = 0; i < T; i++) {
+				peak = fmax(peak, v[j * T + i]);
+				if (i)
+					jump = fmax(jump, fabs(v[j * T + i] - v[j * T + i - 1]));
+			}
+			lo = fmin(lo, peak), hi = fmax(hi, peak);
+		}
+		print_message("line in column %d%s: peaks %.3f..%.3f, largest step %.3f\n", col,
+			      c ? " (a void in the tile)" : "", lo, hi, jump);
+		assert_true(lo > 0.6 && hi < 0.7);
+		assert_true(jump < 0.1);
+		tile_unref(t);
+		fnode_fini(&f);
+	}
+}
+
 int main(void)
 {
 	const struct CMUnitTest tests[] = {
@@ -1381,6 +1425,7 @@ int main(void)
 		cmocka_unit_test(isotropic_rows),
 		cmocka_unit_test(magnified_no_creases),
 		cmocka_unit_test(bspline_mask_contour),
+		cmocka_unit_test(bspline_edges_and_voids),
 		cmocka_unit_test(bad_params),
 		cmocka_unit_test(content_hash),
 		cmocka_unit_test(content_hash_copies),

@@ -74,7 +74,7 @@ static bool pole_taps(struct file_axis *a, double s, int64_t t[4], double w[4])
  * ETOPO5 was a straight line across the terrain, one under the camera's track a seam), or
  * with `magnify = bspline` a cubic B-spline (4): C2 and not through the samples, it keeps
  * almost nothing of the source's pixel grid (its response has fourth-order zeros at every
- * multiple of the sampling rate, Catmull-Rom's and bilinear's second order), so the ½
+ * multiple of the sampling rate, Catmull-Rom's third order, bilinear's second), so the ½
  * contour of a 0/1 mask — earth.ini's water, GSHHG rasterised on a 2′ grid — runs smoothly
  * along a coast where Catmull-Rom's drew the pixels' staircase (steps of 3.7 km along the
  * IJsselmeer seen from 30 km); it narrows a one-pixel channel to a peak of ⅔. The polar
@@ -93,8 +93,10 @@ static void sample_taps(struct file_axis *a, double s, int size, bool wrap, int6
 	}
 	int64_t i0 = (int64_t)fl;
 	/* Catmull-Rom where its four pixels exist (at an edge of a bounded axis, bilinear: a
-	 * clamped tap would bend the curve towards the edge pixel, 0.5 m in 1000 at a pole). */
-	if (a->taps == 4 && (wrap || (i0 >= 1 && i0 + 2 < size))) {
+	 * clamped tap would bend the curve towards the edge pixel, 0.5 m in 1000 at a pole).
+	 * A B-spline takes its clamped taps there too: it does not pass through the pixels, so
+	 * switching to bilinear would step by (p0 − 2p1 + p2)/6 where it switched. */
+	if (a->taps == 4 && (wrap || a->bspline || (i0 >= 1 && i0 + 2 < size))) {
 		double f2 = fr * fr, f3 = f2 * fr, g = 1 - fr;
 		if (a->bspline) {
 			w[0] = g * g * g / 6;
@@ -355,7 +357,8 @@ int file_plan_init(struct file_plan *q, const struct file_source *f, const struc
 	double spanx = f->east - f->west, spany = f->north - f->south;
 	q->rx = q->dlon * q->wm / spanx;
 	q->ry = q->dlat * q->hm / spany;
-	/* Heights magnified (texels finer than the level's pixels): Catmull-Rom (sample_taps). */
+	/* Heights magnified (texels finer than the level's pixels): Catmull-Rom, or with
+	 * `magnify = bspline` a cubic B-spline (sample_taps). */
 	bool cubic = f->kind == FILE_KIND_HEIGHT;
 	q->ax = (struct file_axis){ .n = subtaps(q->rx), .taps = cubic && q->rx < 1 ? 4 : 2,
 				    .bspline = f->bspline, .cap_n = NAN, .cap_s = NAN };
@@ -479,7 +482,7 @@ void file_plan_bilinear(struct file_plan *q)
 	int64_t xl = ax->lo, xh = ax->hi, yl = ay->lo, yh = ay->hi;
 	for (int k = 0; k < 2; k++) {
 		struct file_axis *a = k ? ay : ax;
-		if (a->taps == 4)
+		if (a->taps == 4 && !a->bspline) /* a B-spline's weights are never negative */
 			a->taps = a->caps ? 3 : 2;
 		a->K = a->taps * a->n;
 	}

@@ -24,7 +24,8 @@ enum { VROW_MEAN_N, VROW_MEAN_S, VROW_HARM_N, VROW_HARM_S, VROWS };
 
 /* The per-axis resampling table: output texel i reads taps idx[i·K + k] (relative to the
  * buffer's first source pixel `lo`) with weights w[i·K + k], K = taps·n: taps 2 (bilinear),
- * 3 (with the polar caps in reach), 4 (Catmull-Rom: heights magnified). */
+ * 3 (with the polar caps in reach), 4 (heights magnified: Catmull-Rom, or a cubic B-spline
+ * with `magnify = bspline`). */
 struct file_axis {
 	int n, K, taps;
 	bool bspline; /* 4 taps: a cubic B-spline's weights, not Catmull-Rom's */
@@ -97,7 +98,8 @@ void file_plan_tables(struct file_plan *q);
 
 /* The tables again, bilinear where they were Catmull-Rom, over the region already read
  * (its bounds kept): for a tile whose samples turned out to have missing ones (a cubic's
- * negative weights would extrapolate past the valid data). After file_plan_tables. */
+ * negative weights would extrapolate past the valid data; a B-spline's are never negative and
+ * stay). After file_plan_tables. */
 void file_plan_bilinear(struct file_plan *q);
 
 #endif

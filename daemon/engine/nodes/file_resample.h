@@ -18,7 +18,8 @@
  * and bilinear suffices (heights magnified, r < 1: Catmull-Rom, C1 across the source's
  * rows and columns where bilinear facets crease; bilinear at a bounded axis's edge pixels and
  * for a tile whose samples include missing ones, whose renormalised negative weights would
- * extrapolate). The wider axis (anisotropic levels, lx < ly + 1: texels up to 2^20
+ * extrapolate; or with `magnify = bspline` a cubic B-spline everywhere, edges and missing
+ * samples included: its weights are never negative). The wider axis (anisotropic levels, lx < ly + 1: texels up to 2^20
  * times wider in longitude than tall) is averaged by n = ceil(r) bilinear sub-taps spread
  * across the texel (a box of bilinears) at that same level; m rises only when n would pass
  * FILE_MAX_SUBTAPS or the region FILE_REGION_BUDGET pixels.
