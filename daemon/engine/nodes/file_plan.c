@@ -482,7 +482,7 @@ void file_plan_bilinear(struct file_plan *q)
 	int64_t xl = ax->lo, xh = ax->hi, yl = ay->lo, yh = ay->hi;
 	for (int k = 0; k < 2; k++) {
 		struct file_axis *a = k ? ay : ax;
-		if (a->taps == 4 && !a->bspline) /* a B-spline's weights are never negative */
+		if (file_axis_catmull_rom(a)) /* a B-spline's weights are never negative */
 			a->taps = a->caps ? 3 : 2;
 		a->K = a->taps * a->n;
 	}

@@ -96,6 +96,13 @@ bool file_plan_aligned(struct file_plan *q);
  * use_n, use_s). After file_plan_coords. */
 void file_plan_tables(struct file_plan *q);
 
+/* Whether axis a is Catmull-Rom (four taps, some weights negative): what a tile with missing
+ * samples cannot use (file_plan_bilinear). */
+static inline bool file_axis_catmull_rom(const struct file_axis *a)
+{
+	return a->taps == 4 && !a->bspline;
+}
+
 /* The tables again, bilinear where they were Catmull-Rom, over the region already read
  * (its bounds kept): for a tile whose samples turned out to have missing ones (a cubic's
  * negative weights would extrapolate past the valid data; a B-spline's are never negative and

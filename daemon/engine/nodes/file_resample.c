@@ -710,7 +710,7 @@ int file_resample(const struct file_source *f, struct gen_ctx *g, const struct t
 	}
 	if ((rc = read_source(&q)))
 		return rc;
-	if (q.missing && ((q.ax.taps == 4 && !q.ax.bspline) || (q.ay.taps == 4 && !q.ay.bspline)))
+	if (q.missing && (file_axis_catmull_rom(&q.ax) || file_axis_catmull_rom(&q.ay)))
 		file_plan_bilinear(&q);
 	if ((rc = iso_rows(&q)))
 		return rc;
