@@ -511,6 +511,7 @@ struct trial {
 	double cpu_others;
 	uint64_t tiles_recv;   /* tiles the client took during the flight */
 	double tiles_in_per_s; /* and per second of it */
+	double v;	       /* the velocity flown, m/s */
 };
 
 /* CPU time so far (/proc, clock ticks): the machine's busy and total (all cores), the
@@ -734,6 +735,7 @@ static int run_trial(const struct ctx *x, const char *planet_ini, double agl, do
 		     enum mode mode, struct trial *tr)
 {
 	memset(tr, 0, sizeof *tr);
+	tr->v = v;
 	bool prefetch = mode != COLD;
 	char err[256] = "", name[64];
 	struct daemon_env d;
@@ -943,6 +945,7 @@ out:
 struct row {
 	double alt, seed_v, v; /* v: highest velocity that kept up (0: none tried did) */
 	bool capped;	       /* the search stopped at its cap without a failure */
+	bool fixed;	       /* one trial at KEEPUP_V, not a search */
 	int lmin, lmax, trials;
 	struct trial pass, fail; /* the best passing and the lowest failing trial */
 	double v_search;	 /* the search's answer, before the confirming flights */
@@ -968,6 +971,10 @@ static void limiting_stage(struct row *r)
 		char msg[sizeof r->limit];
 		snprintf(msg, sizeof msg, "not measured %s", r->stopped);
 		memcpy(r->limit, msg, sizeof msg);
+		return;
+	}
+	if (r->fixed && !t->ok) {
+		snprintf(r->limit, sizeof r->limit, "not searched (one flight at KEEPUP_V passed)");
 		return;
 	}
 	if (r->capped || !t->ok) {
@@ -1105,8 +1112,10 @@ static void search(const struct ctx *x, const char *planet, enum mode mode, int 
 			hi = v;
 			r->fail = tr;
 		}
-		if (fixed && atof(fixed) > 0)
+		if (fixed && atof(fixed) > 0) {
+			r->fixed = true;
 			break;
+		}
 		if (pass && isinf(hi)) {
 			if (v * 2 > cap * 1.001) {
 				r->capped = true;
@@ -1152,6 +1161,25 @@ static void fmt_alt(double a, char *out, size_t n)
 		snprintf(out, n, "%.0f m", a);
 }
 
+/* The trial a row's figures come from: its passing one, else its failing one. */
+static const struct trial *row_trial(const struct row *r) { return r->v > 0 ? &r->pass : &r->fail; }
+
+/* The issue's goal for a mode, in multiples of the seed's velocity. */
+static double goal_ratio(enum mode m) { return m == COLD ? 25 : 100; }
+
+/* What the goal would take of the daemon: its CPU over the flight (cores, from /proc: time
+ * on a CPU, not wall time, so the client's share of the cores does not count), per metre
+ * flown, times the goal's velocity — the cores the daemon would keep busy at the goal if its
+ * work per kilometre stayed what it was. From the row's passing trial, where every tile the
+ * route needed was made; from its failing one where none passed (some were not made: at
+ * least that). 0: no trial. */
+static double cores_at_goal(const struct row *r, enum mode m, bool *at_least)
+{
+	const struct trial *t = row_trial(r);
+	*at_least = !(r->v > 0);
+	return t->v > 0 ? t->cpu_daemon * goal_ratio(m) * r->seed_v / t->v : 0;
+}
+
 struct config {
 	const char *label, *planet;
 	bool prefetch;
@@ -1181,8 +1209,11 @@ static void print_table(const struct config *cf, double trial_s, int confirm_n, 
 	       cf->label, cf->route, trial_s, confirm_n, confirm_s, ramp_s,
 	       cf->mode == RESTARTED ? ", " : "", cf->mode == RESTARTED ? pages_text(pages) : "",
 	       cf->seconds);
-	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s %8s  %s\n", "altitude", "seed", "ours",
-	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "gen", "limiting stage");
+	char goal_hdr[16];
+	snprintf(goal_hdr, sizeof goal_hdr, "cores@%.0fx", goal_ratio(cf->mode));
+	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s %8s %9s  %s\n", "altitude", "seed", "ours",
+	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "gen", goal_hdr,
+	       "limiting stage");
 	for (int i = 0; i < NALT; i++) {
 		const struct row *r = &cf->rows[i];
 		char a[32], sv[32], ov[48], lv[16];
@@ -1195,10 +1226,15 @@ static void print_table(const struct config *cf, double trial_s, int confirm_n, 
 			snprintf(ov, sizeof ov, "%s", t);
 		}
 		snprintf(lv, sizeof lv, "%d-%d", r->lmin, r->lmax);
-		const struct trial *t = r->v > 0 ? &r->pass : &r->fail;
-		printf("  %-8s %-6s %-6s %11s %11s %6.1fx %9.0f %5.0f%% %8llu  %s\n", a,
+		const struct trial *t = row_trial(r);
+		bool least;
+		double cores = cores_at_goal(r, cf->mode, &least);
+		char cg[24] = "-";
+		if (cores > 0)
+			snprintf(cg, sizeof cg, "%s%.1f", least ? ">=" : "", cores);
+		printf("  %-8s %-6s %-6s %11s %11s %6.1fx %9.0f %5.0f%% %8llu %9s  %s\n", a,
 		       seed[i].levels, lv, sv, ov, r->v / r->seed_v, t->gen_per_s,
-		       t->hit_ratio * 100, (unsigned long long)t->gen_flight, r->limit);
+		       t->hit_ratio * 100, (unsigned long long)t->gen_flight, cg, r->limit);
 	}
 	double worst = INFINITY;
 	for (int i = 0; i < NALT; i++)
@@ -1207,6 +1243,21 @@ static void print_table(const struct config *cf, double trial_s, int confirm_n, 
 	printf("keepup/%s: lowest ours/seed %.1fx (%s)\n", cf->label, worst,
 	       cf->mode == RESTARTED ? "issue 13's goal: >= 100x at every altitude"
 				     : "issue 12's goal: >= 25x at every altitude");
+	double most = 0;
+	int at = -1;
+	for (int i = 0; i < NALT; i++) {
+		bool least;
+		double c = cores_at_goal(&cf->rows[i], cf->mode, &least);
+		if (c > most)
+			most = c, at = i;
+	}
+	if (at >= 0) {
+		char a[32];
+		fmt_alt(cf->rows[at].alt, a, sizeof a);
+		printf("keepup/%s: at %.0fx the daemon's work per km of this route would keep %.1f "
+		       "cores busy (%s; this machine has %ld, shared with the client)\n",
+		       cf->label, goal_ratio(cf->mode), most, a, sysconf(_SC_NPROCESSORS_ONLN));
+	}
 }
 
 static void write_json(const char *path, struct config *cf, int ncf, double trial_s, double ramp_s,
@@ -1232,7 +1283,8 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 		firstc = false;
 		for (int i = 0; i < NALT; i++) {
 			const struct row *r = &cf[c].rows[i];
-			const struct trial *t = r->v > 0 ? &r->pass : &r->fail;
+			const struct trial *t = row_trial(r);
+			bool least;
 			fprintf(f, "      {\"altitude_m\": %.0f, \"seed_levels\": \"%s\", "
 				   "\"levels\": [%d, %d], \"seed_velocity_mps\": %.0f, "
 				   "\"velocity_mps\": %.1f, \"at_search_cap\": %s, \"ratio\": %.2f, "
@@ -1242,12 +1294,14 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 				   "\"confirmed_median_full\": %.3f, \"cpu_busy\": %.3f, "
 				   "\"cpu_daemon_cores\": %.2f, \"cpu_client_cores\": %.2f, "
 				   "\"cpu_other_cores\": %.2f, \"store_resident_at_flight\": %.3f, "
-				   "\"tiles_in_per_s\": %.1f, \"limiting_stage\": \"%s\"}%s\n",
+				   "\"tiles_in_per_s\": %.1f, \"daemon_cores_at_goal\": %.2f, "
+				   "\"limiting_stage\": \"%s\"}%s\n",
 				r->alt, seed[i].levels, r->lmin, r->lmax, r->seed_v, r->v,
 				r->capped ? "true" : "false", r->v / r->seed_v, t->full, t->gen_per_s,
 				t->hit_ratio, t->util, t->frame_p95_ms, r->trials, r->pass.prefetch_s,
 				r->v_search, r->median_full, t->cpu_busy, t->cpu_daemon, t->cpu_client,
-				t->cpu_others, t->resident_flight, t->tiles_in_per_s, r->limit,
+				t->cpu_others, t->resident_flight, t->tiles_in_per_s,
+				cores_at_goal(r, cf[c].mode, &least), r->limit,
 				i + 1 < NALT ? "," : "");
 		}
 		fprintf(f, "    ]}");
