@@ -255,7 +255,7 @@ static int carry_generate(const struct node *n, struct gen_ctx *g, const struct 
 static const struct node_type node_type_noise_carry = {
 	.name = "noise~carry",
 	.doc = "internal: a from_parent noise node's octaves of at least NOISE_CARRY_TEXELS texels",
-	.version = 1,
+	.version = 2, /* 2: the lattice of its directly evaluated levels as noise version 6's */
 	.slots = NULL,
 	.nslots = 0,
 	.create = NULL,
@@ -273,9 +273,10 @@ const struct node_type node_type_noise = {
 	       "max_wavelength m, stretch, warp m, warp_wavelength m, warp_octaves, warp_depth), "
 	       "band-limited per level; optional input height gets the octaves with wavelength <= "
 	       "max_wavelength added",
-	.version = 5, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice;
+	.version = 6, /* 2: per-octave rotation; 3: low octaves interpolated from a lattice;
 		       * 4: octaves that bend over a texel fade out at the poles; 5: from_parent
-		       * (warp: new keys, hashed; without them the same bytes) */
+		       * (warp: new keys, hashed; without them the same bytes); 6: a tile's
+		       * lattice takes the octaves its own texels allow (more off the equator) */
 	.slots = slots,
 	.nslots = 1,
 	.costly = true,

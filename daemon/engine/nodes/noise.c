@@ -477,29 +477,52 @@ size_t noise_scratch_size(uint32_t T)
 	       lattice_row(T) * (2 * NOISE_MAX_OCTAVES + 6) * sizeof(float) + 64;
 }
 
-/* Active octaves 0..mc-1 have a wavelength of at least NOISE_MR_MIN_TEXELS texels of the
- * level, measured along the equator in longitude (the larger texel side anywhere). The
- * sphere itself (the map from texels to points) varies on the scale of its circumference, so
- * a level whose circumference is shorter than that many texels gets no lattice at all. */
-static int coarse_count(const struct noise *nz, int lx, uint32_t T, const int idx[], int m)
+/* The metres a lattice step's wavelength is measured against: the larger texel side of a tile
+ * of level (lx, ly) whose texels lie at most at latitude acos(cos_eq) from the equator — its
+ * width there (the widest in the tile) or its height. cos_eq = 1: the level's widest texel
+ * anywhere (along the equator, ≥ the height for every level the grid has). 0: none (a level
+ * whose circumference is under NOISE_MR_MIN_TEXELS texels: the map from texels to points
+ * varies on that scale, so the lattice would not follow it). */
+static double lattice_texel(const struct noise *nz, int lx, int ly, uint32_t T, double cos_eq)
 {
-	if (nz->p.exact)
-		return 0;
 	double circ = 2.0 * M_PI * nz->p.radius, su = circ / (ldexp(1.0, lx) * T);
+	if (circ < NOISE_MR_MIN_TEXELS * su)
+		return 0;
+	return fmax(su * cos_eq, noise_texel_size(nz->p.radius, ly, T));
+}
+
+/* Active octaves 0..mc-1 have a wavelength of at least NOISE_MR_MIN_TEXELS texels, texels
+ * as lattice_texel measures them. */
+static int coarse_count(const struct noise *nz, int lx, int ly, uint32_t T, double cos_eq,
+			const int idx[], int m)
+{
+	double s = lattice_texel(nz, lx, ly, T, cos_eq);
+	if (nz->p.exact || !(s > 0))
+		return 0;
 	int mc = 0;
-	while (mc < m && fmin(nz->oct[idx[mc]].lmin, circ) >= NOISE_MR_MIN_TEXELS * su)
+	while (mc < m && nz->oct[idx[mc]].lmin >= NOISE_MR_MIN_TEXELS * s)
 		mc++;
 	return mc;
 }
 
-/* Whether a tile of level lx interpolates the warp from its lattice: the warp's shortest
- * octave passes coarse_count's test (so it is as precise as the coarse octaves). */
-static bool warp_on_lattice(const struct noise *nz, int lx, uint32_t T)
+/* Whether a tile interpolates the warp from its lattice: the warp's shortest octave passes
+ * coarse_count's test (so it is as precise as the coarse octaves). */
+static bool warp_on_lattice(const struct noise *nz, int lx, int ly, uint32_t T, double cos_eq)
 {
-	if (nz->nwarp == 0 || nz->p.exact)
+	double s = lattice_texel(nz, lx, ly, T, cos_eq);
+	if (nz->nwarp == 0 || nz->p.exact || !(s > 0))
 		return false;
-	double circ = 2.0 * M_PI * nz->p.radius, su = circ / (ldexp(1.0, lx) * T);
-	return fmin(nz->warp[nz->nwarp - 1][0].lambda, circ) >= NOISE_MR_MIN_TEXELS * su;
+	return nz->warp[nz->nwarp - 1][0].lambda >= NOISE_MR_MIN_TEXELS * s;
+}
+
+/* cos of the latitude of tile k's texels nearest the equator (its edge or centre row's: 1 for
+ * a tile across the equator). */
+static double tile_cos_eq(const struct tile_key *k, uint32_t T)
+{
+	double n = grid_v_to_lat(k->ly, T, (double)k->y * T);
+	double s = grid_v_to_lat(k->ly, T, (double)(k->y + 1) * T);
+	double lat = n >= 0 && s <= 0 ? 0 : fmin(fabs(n), fabs(s));
+	return cos(lat * (M_PI / 180.0));
 }
 
 int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T)
@@ -507,7 +530,17 @@ int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T)
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
 	int m = active_octaves(nz, ly, T, 0, INFINITY, idx, w);
-	return coarse_count(nz, lx, T, idx, m);
+	return coarse_count(nz, lx, ly, T, 1, idx, m);
+}
+
+int noise_tile_coarse_octaves(const struct noise *nz, const struct tile_key *k, uint32_t T)
+{
+	int idx[NOISE_MAX_OCTAVES];
+	float w[NOISE_MAX_OCTAVES];
+	if (!grid_key_valid(k))
+		return -EINVAL;
+	int m = active_octaves(nz, k->ly, T, 0, INFINITY, idx, w);
+	return coarse_count(nz, k->lx, k->ly, T, tile_cos_eq(k, T), idx, m);
 }
 
 static noise_row_fn *kernel_for(enum noise_isa isa)
@@ -889,7 +922,8 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
 	t.m = active_octaves(nz, k->ly, T, lo, hi, idx, w);
-	t.mc = coarse_count(nz, k->lx, T, idx, t.m);
+	const double cos_eq = tile_cos_eq(k, T);
+	t.mc = coarse_count(nz, k->lx, k->ly, T, cos_eq, idx, t.m);
 	scratch_layout(&t, scratch);
 	if (t.m == 0) {
 		memset(out, 0, (size_t)T * T * sizeof *out);
@@ -917,7 +951,7 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 	while (t.nwa < t.m && noise_warped(nz, idx[t.nwa]))
 		t.nwa++;
 	/* the lattice carries the displacement where the full-resolution rows need it */
-	t.we.lattice = t.mc < t.nwa && warp_on_lattice(nz, k->lx, T);
+	t.we.lattice = t.mc < t.nwa && warp_on_lattice(nz, k->lx, k->ly, T, cos_eq);
 	if (t.we.lattice) {
 		t.we.M = t.M;
 		t.we.hb = (const float(*)[NOISE_MR_STRIDE])t.hb;
@@ -1041,5 +1075,5 @@ int noise_band_full(const struct noise *nz, int lx, int ly, uint32_t T, double l
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
 	int m = active_octaves(nz, ly, T, lo, hi, idx, w);
-	return m - coarse_count(nz, lx, T, idx, m);
+	return m - coarse_count(nz, lx, ly, T, 1, idx, m);
 }

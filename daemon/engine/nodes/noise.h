@@ -109,8 +109,9 @@ struct noise {
 int noise_init(struct noise *nz, const struct noise_params *p);
 
 /* Multi-resolution evaluation. The leading octaves whose wavelength is at least
- * NOISE_MR_MIN_TEXELS texels (the level's longitudinal texel size at the equator, ≥ the
- * latitudinal one; one decision per level, so neighbours agree) are evaluated only at lattice
+ * NOISE_MR_MIN_TEXELS texels (the tile's larger texel side: its width at its latitude nearest
+ * the equator, or its height; one decision per tile row, so east–west neighbours agree and a
+ * north–south neighbour differs by at most the interpolation error) are evaluated only at lattice
  * points: the centres of the level texels (u, v) with u and v multiples of NOISE_MR_STRIDE —
  * a grid global to the level, so neighbouring tiles share it — over the tile and 2 lattice
  * points beyond each edge (across a pole those are the real sphere points beyond it). Their
@@ -127,8 +128,16 @@ int noise_init(struct noise *nz, const struct noise_params *p);
 #define NOISE_MR_STRIDE 8
 #define NOISE_MR_MIN_TEXELS 512.0
 
-/* How many of the octaves a tile of level (lx, ly) evaluates go through the lattice. */
+/* How many of the octaves a tile of level (lx, ly) evaluates go through the lattice wherever
+ * it lies (its texels measured at the equator). */
 int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T);
+/* How many go through tile k's lattice: at least noise_coarse_octaves of its level, more off
+ * the equator, where a texel is cos(latitude) as wide — the wavelength test takes the tile's
+ * texels as they are, their width at its latitude nearest the equator or their height,
+ * whichever is larger (so the interpolation's error bound is the same everywhere; near a pole
+ * the viewer's levels of few columns would otherwise evaluate every octave at every texel).
+ * Before the pole fade, which keeps the octaves it touches off the lattice in a pole tile. */
+int noise_tile_coarse_octaves(const struct noise *nz, const struct tile_key *k, uint32_t T);
 
 /* Bytes of scratch noise_tile needs for tile size T. */
 size_t noise_scratch_size(uint32_t T);
