@@ -157,12 +157,15 @@ static void window_cols(const struct prefetch_iter *it, int lx, double lon, doub
 	*n = (uint32_t)(last - first + 1);
 }
 
-/* Adds the window and ring of a viewer focused at (lat, lon), on every lx it may use there. */
+/* Adds the window and ring of a viewer focused at (lat, lon), on every lx a viewer may use
+ * within dlat degrees north or south of it (the foci are a step apart: a viewer between two
+ * that holds an lx neither holds — just past the latitude where it becomes possible — has a
+ * window and ring reaching rows the farther focus's do not). */
 static void add_focus(struct prefetch_iter *it, size_t *cap, size_t *compacted, int ly,
-		      double lat, double lon)
+		      double lat, double lon, double dlat)
 {
 	int lxa, lxb;
-	clipmap_level_lx_range(ly, lat, lat, &lxa, &lxb);
+	clipmap_level_lx_range(ly, fmax(lat - dlat, -90.0), fmin(lat + dlat, 90.0), &lxa, &lxb);
 	uint32_t y0, y1;
 	window_rows(it, ly, lat, &y0, &y1);
 	for (int lx = lxa; lx <= lxb; lx++) {
@@ -198,28 +201,42 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 			double lat = lat1, lon = lon1, azi = azi1;
 			if (s > 0)
 				geo_direct_azi(body, lat1, lon1, azi1, s, &lat, &lon, &azi);
-			/* across: a tile of longitude is cos(lat) shorter */
-			double c = fmax(cos(lat * M_PI / 180.0), 0.02);
-			double step = tile_m * c;
+			/* A step of half a tile of the finest lx a viewer uses here, and half a
+			 * tile north–south at most: no column or row falls between two foci, nor
+			 * the corner of a ring between four (near a pole the grid of foci along
+			 * and across the route lies askew on the columns; a step of a whole tile
+			 * left ring corners out there, test_prefetch). Until 6 December the step was tile_m · cos(lat), a tile of lx
+			 * ly + 1, which no viewer near a pole uses: there the corridor was sampled
+			 * ~50 times a tile of the lx viewers hold, and the keep-up bench's pole
+			 * corridor at level 10 (156 km wide) stopped on the job's limit with 1 308
+			 * tiles to make. The foci across reach half the width north or south:
+			 * the finest lx and the widest cos over that band (floored as before, for
+			 * the pole itself). */
+			double dlat = it->width * 0.5 / geo_body_a(body) * (180.0 / M_PI);
+			double band_s = fmax(lat - dlat, -90.0), band_n = fmin(lat + dlat, 90.0);
+			double eq = band_s <= 0 && band_n >= 0 ? 0 : fmin(fabs(band_s), fabs(band_n));
+			int lxa, lxb;
+			clipmap_level_lx_range(ly, band_s, band_n, &lxa, &lxb);
+			double c = fmax(cos(eq * M_PI / 180.0), 0.02);
+			double step = 0.5 * fmin(tile_m, 2 * M_PI * geo_body_a(body) * c /
+								 (double)grid_tiles_x(lxb));
 			double kd = ceil(it->width * 0.5 / step); /* no int conversion: huge */
 			if (kd > (double)it->max_tiles + 4096.0)
 				return -E2BIG;
 			uint64_t kmax = (uint64_t)kd;
 			/* Samples are geometry, made once whatever the layers: bounded by the
-			 * job's limit itself, not its share per layer. Near a pole they are ~50 a
-			 * tile (the step shrinks with cos(lat)), and with the share per layer a
-			 * corridor over the pole at level 9 (the keep-up bench's at 80 km) stopped
-			 * on its samples with 747 tiles to make. */
+			 * job's limit itself, not its share per layer. */
 			samples += 1 + 2 * kmax;
 			if (samples > it->max_tiles + 4096)
 				return -E2BIG;
-			add_focus(it, &cap, &compacted, ly, lat, lon);
+			double half = 1.5 * step / geo_body_a(body) * (180.0 / M_PI);
+			add_focus(it, &cap, &compacted, ly, lat, lon, half);
 			for (uint64_t k = 1; k <= kmax; k++) {
 				double off = fmin((double)k * step, it->width * 0.5), la, lo;
 				geo_direct(body, lat, lon, azi + 90.0, off, &la, &lo);
-				add_focus(it, &cap, &compacted, ly, la, lo);
+				add_focus(it, &cap, &compacted, ly, la, lo, half);
 				geo_direct(body, lat, lon, azi - 90.0, off, &la, &lo);
-				add_focus(it, &cap, &compacted, ly, la, lo);
+				add_focus(it, &cap, &compacted, ly, la, lo, half);
 			}
 			if (it->nlist > 4 * (it->max_tiles / it->nlayers) + 65536)
 				return -E2BIG;
@@ -695,8 +712,14 @@ static double piece_tiles(struct lx_memo *mm, double a, int ly, double lat, doub
 {
 	const double K = CLIPMAP_WINDOW_TILES + 2; /* window and ring, in tiles */
 	double th = M_PI * a / (double)grid_tiles_y(ly);
-	int lxa, lxb;
-	lx_range(mm, ly, lat, &lxa, &lxb);
+	/* the lx of viewers anywhere across the corridor, half its width north and south (near
+	 * a pole the equatorward edge's are finer) */
+	double dlat = 0.5 * w / a * (180.0 / M_PI);
+	int lxa, lxb, lxa2, lxb2;
+	lx_range(mm, ly, fmax(lat - dlat, -90.0), &lxa, &lxb);
+	lx_range(mm, ly, fmin(lat + dlat, 90.0), &lxa2, &lxb2);
+	lxa = lxa2 < lxa ? lxa2 : lxa;
+	lxb = lxb2 > lxb ? lxb2 : lxb;
 	double sum = 0;
 	for (int lx = lxa; lx <= lxb; lx++) {
 		double cols = (double)grid_tiles_x(lx);

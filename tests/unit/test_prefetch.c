@@ -261,6 +261,68 @@ static void pole_corridor_within_limit(void **state)
 	planet_unref(p);
 }
 
+/* The keep-up bench's pole corridors (its routes at 80, 50 and 20 km: levels 9-11, 8 tile
+ * heights wide, from 88°N over the pole to 86.4°N beyond it) run within the daemon's limit of
+ * 250 000 tiles and hold every tile of every viewer in them: viewers every quarter tile along
+ * the route (through the pole itself) and across it out to 0.95 of the half-width, on each lx
+ * they may hold. Until 6 December the corridor was sampled at a step of cos(lat) of a tile,
+ * some 50 times the tiles viewers hold near the pole, and at level 10 the job stopped on its
+ * samples (more than 250 000) with 1 308 tiles to make. */
+static void pole_corridors_cover_viewers(void **state)
+{
+	(void)state;
+	struct planet *p = load();
+	struct geo_body *body = p->body;
+	struct proto_lonlat pts[3] = { { 0.0, 88.0 }, { 0.0, 90.0 }, { 180.0, 86.4 } };
+	for (int ly = 9; ly <= 11; ly++) {
+		double tile_m = M_PI * geo_body_a(body) / (double)grid_tiles_y(ly);
+		double width = 8 * tile_m;
+		struct proto_prefetch m = { .id = 7, .layers = 0, .shape = PROTO_SHAPE_PATH,
+					    .lmin = (uint8_t)ly, .lmax = (uint8_t)ly,
+					    .width_m = width, .npoints = 3, .points = pts };
+		struct prefetch_iter *it;
+		char err[256];
+		assert_int_equal(prefetch_iter_create(p, &m, 250000, &it, err), 0);
+		struct want w[512];
+		size_t all = 0, got;
+		while ((got = prefetch_iter_next(it, w, 512)) > 0)
+			all += got;
+		if (prefetch_iter_error(it, err))
+			fail_msg("level %d: %s", ly, err);
+		prefetch_iter_destroy(it);
+		m.layers = 1;
+		struct keyset ks;
+		job_keys(p, &m, &ks);
+		size_t missing = 0, viewers = 0;
+		for (uint32_t i = 0; i + 1 < 3; i++) {
+			double s12, azi1, azi2;
+			geo_inverse(body, pts[i].lat, pts[i].lon, pts[i + 1].lat, pts[i + 1].lon, &s12,
+				    &azi1, &azi2);
+			for (double s = 0; s <= s12; s += tile_m / 4) {
+				double lat, lon, azi;
+				geo_direct_azi(body, pts[i].lat, pts[i].lon, azi1, s, &lat, &lon, &azi);
+				for (double off = -0.95 * width / 2; off <= 0.95 * width / 2 + 1;
+				     off += tile_m / 4) {
+					double la = lat, lo = lon;
+					if (fabs(off) > 1)
+						geo_direct(body, lat, lon, azi + 90.0, off, &la, &lo);
+					int lxs[2], n = viewer_lx(ly, la, lxs);
+					for (int q = 0; q < n; q++)
+						check_viewer(p, &ks, ly, lxs[q], la, lo, &missing, NULL);
+					viewers++;
+				}
+			}
+		}
+		printf("pole corridor at level %d, %.0f km wide: %zu tiles (every layer), %zu of one "
+		       "layer, %zu viewers, %zu tiles missing\n",
+		       ly, width / 1e3, all, ks.n, viewers, missing);
+		assert_int_equal(missing, 0);
+		assert_true(all > 0 && all < 20000);
+		free(ks.k);
+	}
+	planet_unref(p);
+}
+
 /* Hostile sizes (issue 14) are seen by the estimate, which enumerates nothing: the 67-byte
  * corridor 9.55e6 m wide at level 22 and the whole planet at level 11 (25 M tiles); an
  * iterator whose level passes its limit stops with -E2BIG. */
@@ -319,6 +381,7 @@ int main(void)
 		cmocka_unit_test(estimate_near_count),
 		cmocka_unit_test(hostile_sizes),
 		cmocka_unit_test(pole_corridor_within_limit),
+		cmocka_unit_test(pole_corridors_cover_viewers),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }
