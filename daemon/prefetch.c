@@ -3,9 +3,9 @@
  * centred on the focus and the ring around it, on every lx a viewer at that latitude may use.
  * A bbox level is a list of row segments (one per row and lx: a run of columns, wrapping at the
  * antimeridian), enumerated arithmetically. A path level is materialised as a sorted,
- * deduplicated list of keys: focus points every tile along each geodesic (GeographicLib) and
- * across the corridor (perpendicular to the geodesic's bearing at that point), each adding its
- * window and ring. Levels are built one at a time, so a job holds one level at most, and a
+ * deduplicated list of keys: focus points every half tile (of the finest lx viewers use there)
+ * along each geodesic (GeographicLib) and across the corridor (perpendicular to the geodesic's
+ * bearing at that point), each adding its window and ring on the lx of viewers near it. Levels are built one at a time, so a job holds one level at most, and a
  * level larger than the iterator's limit stops the job (-E2BIG) as soon as it is seen.
  *
  * The estimate (prefetch_estimate) is analytic and touches nothing per tile: a bbox level's
@@ -20,6 +20,7 @@
 #include "prefetch.h"
 
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdatomic.h>
@@ -180,6 +181,9 @@ static void add_focus(struct prefetch_iter *it, size_t *cap, size_t *compacted, 
 	}
 }
 
+/* Foci a tile of the finest lx may hold (build_path_level's sample bound). */
+#define PATH_FOCI_PER_TILE 8
+
 /* Builds the corridor's tile list for level ly. Returns 0 or -E2BIG (too many samples). */
 static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *body)
 {
@@ -187,8 +191,7 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 	it->list = NULL;
 	it->nlist = 0;
 	size_t cap = 0, compacted = 0;
-	/* a tile north-south: the focus points are a tile apart (a window reaches two tiles and
-	 * its ring a third from its focus, so nothing between two points is missed) */
+	/* a tile north-south (the foci are half of one apart at most, below) */
 	double tile_m = M_PI * geo_body_a(body) / (double)grid_tiles_y(ly);
 	uint64_t samples = 0;
 	for (uint32_t i = 0; i < it->npts; i++) {
@@ -201,17 +204,17 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 			double lat = lat1, lon = lon1, azi = azi1;
 			if (s > 0)
 				geo_direct_azi(body, lat1, lon1, azi1, s, &lat, &lon, &azi);
-			/* A step of half a tile of the finest lx a viewer uses here, and half a
-			 * tile north–south at most: no column or row falls between two foci, nor
-			 * the corner of a ring between four (near a pole the grid of foci along
-			 * and across the route lies askew on the columns; a step of a whole tile
-			 * left ring corners out there, test_prefetch). Until 6 December the step was tile_m · cos(lat), a tile of lx
-			 * ly + 1, which no viewer near a pole uses: there the corridor was sampled
-			 * ~50 times a tile of the lx viewers hold, and the keep-up bench's pole
-			 * corridor at level 10 (156 km wide) stopped on the job's limit with 1 308
-			 * tiles to make. The foci across reach half the width north or south:
-			 * the finest lx and the widest cos over that band (floored as before, for
-			 * the pole itself). */
+			/* A step of half a tile of the finest lx a viewer uses across the corridor
+			 * here (half its width north or south: the finest lx and the widest cos
+			 * over that band, cos floored for the pole itself), and half a tile
+			 * north–south at most: no column or row falls between two foci, nor the
+			 * corner of a ring between four (near a pole the grid of foci along and
+			 * across the route lies askew on the columns; whole-tile steps left ring
+			 * corners out there, test_prefetch). Until 6 December the step was
+			 * tile_m · cos(lat), a tile of lx ly + 1, which no viewer near a pole
+			 * uses: the corridor was sampled ~50 times a tile of the lx viewers hold
+			 * there, and the keep-up bench's pole corridor at level 10 (157 km wide)
+			 * stopped on the job's limit with 1 308 tiles to make. */
 			double dlat = it->width * 0.5 / geo_body_a(body) * (180.0 / M_PI);
 			double band_s = fmax(lat - dlat, -90.0), band_n = fmin(lat + dlat, 90.0);
 			double eq = band_s <= 0 && band_n >= 0 ? 0 : fmin(fabs(band_s), fabs(band_n));
@@ -225,9 +228,12 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 				return -E2BIG;
 			uint64_t kmax = (uint64_t)kd;
 			/* Samples are geometry, made once whatever the layers: bounded by the
-			 * job's limit itself, not its share per layer. */
+			 * job's limit itself, not its share per layer, times the foci a tile of
+			 * the finest lx can hold (4 on the half-tile grid, up to ~7 where the
+			 * viewers' tiles are wider than tall) — so the tile count, not the
+			 * sampling, is what stops a corridor the estimate let through. */
 			samples += 1 + 2 * kmax;
-			if (samples > it->max_tiles + 4096)
+			if (samples > PATH_FOCI_PER_TILE * (uint64_t)it->max_tiles + 4096)
 				return -E2BIG;
 			double half = 1.5 * step / geo_body_a(body) * (180.0 / M_PI);
 			add_focus(it, &cap, &compacted, ly, lat, lon, half);
@@ -715,11 +721,15 @@ static double piece_tiles(struct lx_memo *mm, double a, int ly, double lat, doub
 	/* the lx of viewers anywhere across the corridor, half its width north and south (near
 	 * a pole the equatorward edge's are finer) */
 	double dlat = 0.5 * w / a * (180.0 / M_PI);
-	int lxa, lxb, lxa2, lxb2;
-	lx_range(mm, ly, fmax(lat - dlat, -90.0), &lxa, &lxb);
-	lx_range(mm, ly, fmin(lat + dlat, 90.0), &lxa2, &lxb2);
-	lxa = lxa2 < lxa ? lxa2 : lxa;
-	lxb = lxb2 > lxb ? lxb2 : lxb;
+	double band_s = fmax(lat - dlat, -90.0), band_n = fmin(lat + dlat, 90.0);
+	const double at[4] = { lat, band_s, band_n, 0 }; /* the equator if the band holds it */
+	int lxa = INT_MAX, lxb = -1;
+	for (int q = 0; q < (band_s <= 0 && band_n >= 0 ? 4 : 3); q++) {
+		int lo, hi;
+		lx_range(mm, ly, at[q], &lo, &hi);
+		lxa = lo < lxa ? lo : lxa;
+		lxb = hi > lxb ? hi : lxb;
+	}
 	double sum = 0;
 	for (int lx = lxa; lx <= lxb; lx++) {
 		double cols = (double)grid_tiles_x(lx);

@@ -1211,7 +1211,7 @@ static void print_table(const struct config *cf, double trial_s, int confirm_n, 
 	       cf->seconds);
 	char goal_hdr[16];
 	snprintf(goal_hdr, sizeof goal_hdr, "cores@%.0fx", goal_ratio(cf->mode));
-	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s %8s %9s  %s\n", "altitude", "seed", "ours",
+	printf("  %-8s %-6s %-6s %11s %11s %7s %9s %6s %8s %10s  %s\n", "altitude", "seed", "ours",
 	       "seed v", "our v", "ours/seed", "tiles/s", "hits", "gen", goal_hdr,
 	       "limiting stage");
 	for (int i = 0; i < NALT; i++) {
@@ -1232,7 +1232,7 @@ static void print_table(const struct config *cf, double trial_s, int confirm_n, 
 		char cg[24] = "-";
 		if (cores > 0)
 			snprintf(cg, sizeof cg, "%s%.1f", least ? ">=" : "", cores);
-		printf("  %-8s %-6s %-6s %11s %11s %6.1fx %9.0f %5.0f%% %8llu %9s  %s\n", a,
+		printf("  %-8s %-6s %-6s %11s %11s %6.1fx %9.0f %5.0f%% %8llu %10s  %s\n", a,
 		       seed[i].levels, lv, sv, ov, r->v / r->seed_v, t->gen_per_s,
 		       t->hit_ratio * 100, (unsigned long long)t->gen_flight, cg, r->limit);
 	}
@@ -1241,22 +1241,24 @@ static void print_table(const struct config *cf, double trial_s, int confirm_n, 
 		if (strcmp(cf->rows[i].limit, "not run") != 0) /* KEEPUP_ALTS left it out */
 			worst = fmin(worst, cf->rows[i].v / cf->rows[i].seed_v);
 	printf("keepup/%s: lowest ours/seed %.1fx (%s)\n", cf->label, worst,
-	       cf->mode == RESTARTED ? "issue 13's goal: >= 100x at every altitude"
-				     : "issue 12's goal: >= 25x at every altitude");
+	       cf->mode != COLD ? "issue 13's goal: >= 100x at every altitude"
+				: "issue 12's goal: >= 25x at every altitude");
 	double most = 0;
 	int at = -1;
+	bool most_least = false;
 	for (int i = 0; i < NALT; i++) {
 		bool least;
 		double c = cores_at_goal(&cf->rows[i], cf->mode, &least);
 		if (c > most)
-			most = c, at = i;
+			most = c, at = i, most_least = least;
 	}
 	if (at >= 0) {
 		char a[32];
 		fmt_alt(cf->rows[at].alt, a, sizeof a);
-		printf("keepup/%s: at %.0fx the daemon's work per km of this route would keep %.1f "
+		printf("keepup/%s: at %.0fx the daemon's work per km of this route would keep %s%.1f "
 		       "cores busy (%s; this machine has %ld, shared with the client)\n",
-		       cf->label, goal_ratio(cf->mode), most, a, sysconf(_SC_NPROCESSORS_ONLN));
+		       cf->label, goal_ratio(cf->mode), most_least ? "at least " : "", most, a,
+		       sysconf(_SC_NPROCESSORS_ONLN));
 	}
 }
 
@@ -1285,6 +1287,10 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 			const struct row *r = &cf[c].rows[i];
 			const struct trial *t = row_trial(r);
 			bool least;
+			char cores[32] = "null"; /* no trial */
+			double cg = cores_at_goal(r, cf[c].mode, &least);
+			if (cg > 0)
+				snprintf(cores, sizeof cores, "%.2f", cg);
 			fprintf(f, "      {\"altitude_m\": %.0f, \"seed_levels\": \"%s\", "
 				   "\"levels\": [%d, %d], \"seed_velocity_mps\": %.0f, "
 				   "\"velocity_mps\": %.1f, \"at_search_cap\": %s, \"ratio\": %.2f, "
@@ -1294,14 +1300,15 @@ static void write_json(const char *path, struct config *cf, int ncf, double tria
 				   "\"confirmed_median_full\": %.3f, \"cpu_busy\": %.3f, "
 				   "\"cpu_daemon_cores\": %.2f, \"cpu_client_cores\": %.2f, "
 				   "\"cpu_other_cores\": %.2f, \"store_resident_at_flight\": %.3f, "
-				   "\"tiles_in_per_s\": %.1f, \"daemon_cores_at_goal\": %.2f, "
+				   "\"tiles_in_per_s\": %.1f, \"daemon_cores_at_goal\": %s, "
+				   "\"daemon_cores_at_least\": %s, \"fixed_velocity\": %s, "
 				   "\"limiting_stage\": \"%s\"}%s\n",
 				r->alt, seed[i].levels, r->lmin, r->lmax, r->seed_v, r->v,
 				r->capped ? "true" : "false", r->v / r->seed_v, t->full, t->gen_per_s,
 				t->hit_ratio, t->util, t->frame_p95_ms, r->trials, r->pass.prefetch_s,
 				r->v_search, r->median_full, t->cpu_busy, t->cpu_daemon, t->cpu_client,
-				t->cpu_others, t->resident_flight, t->tiles_in_per_s,
-				cores_at_goal(r, cf[c].mode, &least), r->limit,
+				t->cpu_others, t->resident_flight, t->tiles_in_per_s, cores,
+				least ? "true" : "false", r->fixed ? "true" : "false", r->limit,
 				i + 1 < NALT ? "," : "");
 		}
 		fprintf(f, "    ]}");

@@ -99,7 +99,7 @@ static void ridge_carry_error(void)
 	float w[2][6];
 	noise_carry_kernel(0.25, w[0]);
 	noise_carry_kernel(0.75, w[1]);
-	for (int spw = 4; spw <= 32; spw *= 2) {
+	for (int spw = 4; spw <= 64; spw *= 2) {
 		double h = 1.0 / spw, maxc = 0, sumc = 0, maxr = 0, sumr = 0;
 		long n = 0;
 		int N = 40 * spw;

@@ -323,6 +323,41 @@ static void pole_corridors_cover_viewers(void **state)
 	planet_unref(p);
 }
 
+/* The job's limit counts tiles, not the corridor's samples: a one-layer corridor along the
+ * equator (level 11, 6 700 km long, 200 km wide, ~4 foci a tile on the half-tile grid) runs
+ * under a limit just above its tile count and stops only under one below it. */
+static void limit_counts_tiles(void **state)
+{
+	(void)state;
+	struct planet *p = load();
+	struct proto_lonlat pts[2] = { { -10.0, 0.2 }, { 50.0, 0.2 } };
+	struct proto_prefetch m = { .id = 8, .layers = 1, .shape = PROTO_SHAPE_PATH, .lmin = 11,
+				    .lmax = 11, .width_m = 200e3, .npoints = 2, .points = pts };
+	struct keyset ks;
+	job_keys(p, &m, &ks);
+	size_t n = ks.n;
+	free(ks.k);
+	for (int under = 0; under <= 1; under++) {
+		uint64_t limit = under ? n - n / 4 : n + n / 16;
+		struct prefetch_iter *it;
+		char err[256];
+		assert_int_equal(prefetch_iter_create(p, &m, limit, &it, err), 0);
+		struct want w[512];
+		size_t got, all = 0;
+		while ((got = prefetch_iter_next(it, w, 512)) > 0)
+			all += got;
+		int rc = prefetch_iter_error(it, err);
+		printf("equator corridor, %zu tiles, limit %llu: %zu made, %s\n", n,
+		       (unsigned long long)limit, all, rc ? err : "done");
+		if (under)
+			assert_int_not_equal(rc, 0);
+		else
+			assert_true(rc == 0 && all == n);
+		prefetch_iter_destroy(it);
+	}
+	planet_unref(p);
+}
+
 /* Hostile sizes (issue 14) are seen by the estimate, which enumerates nothing: the 67-byte
  * corridor 9.55e6 m wide at level 22 and the whole planet at level 11 (25 M tiles); an
  * iterator whose level passes its limit stops with -E2BIG. */
@@ -382,6 +417,7 @@ int main(void)
 		cmocka_unit_test(hostile_sizes),
 		cmocka_unit_test(pole_corridor_within_limit),
 		cmocka_unit_test(pole_corridors_cover_viewers),
+		cmocka_unit_test(limit_counts_tiles),
 	};
 	return cmocka_run_group_tests(tests, NULL, NULL);
 }

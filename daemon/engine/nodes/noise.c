@@ -515,7 +515,7 @@ static bool warp_on_lattice(const struct noise *nz, int lx, int ly, uint32_t T, 
 	return nz->warp[nz->nwarp - 1][0].lambda >= NOISE_MR_MIN_TEXELS * s;
 }
 
-/* cos of the latitude of tile k's texels nearest the equator (its edge or centre row's: 1 for
+/* cos of the latitude of tile k's texels nearest the equator (its equatorward edge's: 1 for
  * a tile across the equator). */
 static double tile_cos_eq(const struct tile_key *k, uint32_t T)
 {

@@ -120,7 +120,8 @@ int noise_init(struct noise *nz, const struct noise_params *p);
  * at lattice points, error O((stride/wavelength)^4), and the same formula on the same lattice
  * points on either side of a tile border. Ridged noise interpolates each coarse octave's raw
  * simplex value instead (smooth, unlike the creased ridge signal, whose kinks a cubic would
- * round off by ~4e-3) and runs the ridge/weight recurrence per texel on the interpolated
+ * round off by several hundredths of the octave's amplitude even at the lattice's 64 points per
+ * wavelength: bench_noise_parent's last lines) and runs the ridge/weight recurrence per texel on the interpolated
  * values, so the finer octaves get the same weights as in an exact evaluation up to the
  * interpolation error. Measured max |multires − exact| ≤ 4e-7 (fBm) and 1.1e-6 (ridged) of
  * the amplitude (test_noise). Levels whose circumference is under NOISE_MR_MIN_TEXELS texels
@@ -258,7 +259,10 @@ int noise_tile_band(const struct noise *nz, const struct tile_key *k, uint32_t T
 		    enum noise_isa isa, void *scratch, double lo, double hi, bool fade, float *out);
 bool noise_pole_fades(const struct noise *nz, const struct tile_key *k, uint32_t T, double lo);
 /* How many octaves with a shortest wavelength in [lo, hi) metres a tile of level (lx, ly)
- * evaluates at every texel (the others of the band go through the lattice). */
+ * evaluates at every texel at most (the others of the band go through the lattice), counting
+ * as at the equator: a tile off it may put more on its lattice (noise_tile_coarse_octaves).
+ * The per-level decisions (noise_carry_upsampled) use this count, so they hold for every tile
+ * of the level; off the equator the direct path is cheaper than they assume. */
 int noise_band_full(const struct noise *nz, int lx, int ly, uint32_t T, double lo, double hi);
 
 /* Near a pole a texel row is a ring around it, and content that is not planar over a texel
