@@ -235,6 +235,23 @@ static void estimate_near_count(void **state)
 	planet_unref(p);
 }
 
+/* Runs job m to its end under the iterator limit `limit`: the wants it yielded (every layer)
+ * into *made; returns prefetch_iter_error's code (0: done), its message in err. */
+static int run_job(const struct planet *p, const struct proto_prefetch *m, uint64_t limit,
+		   size_t *made, char err[256])
+{
+	struct prefetch_iter *it;
+	assert_int_equal(prefetch_iter_create(p, m, limit, &it, err), 0);
+	struct want w[512];
+	size_t got;
+	*made = 0;
+	while ((got = prefetch_iter_next(it, w, 512)) > 0)
+		*made += got;
+	int rc = prefetch_iter_error(it, err);
+	prefetch_iter_destroy(it);
+	return rc;
+}
+
 /* A corridor over the pole (the keep-up bench's pole route at 80 km: 156.5 km wide at level 9,
  * every layer) runs within the daemon's default limit of 250 000 tiles. Its path was once
  * sampled some 50 times a tile near the pole (a step of cos(lat), not of the viewers' tiles
@@ -246,18 +263,12 @@ static void pole_corridor_within_limit(void **state)
 	struct proto_lonlat pts[2] = { { 0.0, 88.0 }, { 180.0, 87.11 } };
 	struct proto_prefetch m = { .id = 6, .layers = 0, .shape = PROTO_SHAPE_PATH, .lmin = 9,
 				    .lmax = 9, .width_m = 156.5e3, .npoints = 2, .points = pts };
-	struct prefetch_iter *it;
 	char err[256];
-	assert_int_equal(prefetch_iter_create(p, &m, 250000, &it, err), 0);
-	struct want w[512];
-	size_t n = 0, got;
-	while ((got = prefetch_iter_next(it, w, 512)) > 0)
-		n += got;
-	if (prefetch_iter_error(it, err))
+	size_t n;
+	if (run_job(p, &m, 250000, &n, err))
 		fail_msg("%s", err);
 	printf("pole corridor at level 9: %zu tiles (every layer)\n", n);
 	assert_true(n > 0 && n < 10000);
-	prefetch_iter_destroy(it);
 	planet_unref(p);
 }
 
@@ -280,16 +291,10 @@ static void pole_corridors_cover_viewers(void **state)
 		struct proto_prefetch m = { .id = 7, .layers = 0, .shape = PROTO_SHAPE_PATH,
 					    .lmin = (uint8_t)ly, .lmax = (uint8_t)ly,
 					    .width_m = width, .npoints = 3, .points = pts };
-		struct prefetch_iter *it;
 		char err[256];
-		assert_int_equal(prefetch_iter_create(p, &m, 250000, &it, err), 0);
-		struct want w[512];
-		size_t all = 0, got;
-		while ((got = prefetch_iter_next(it, w, 512)) > 0)
-			all += got;
-		if (prefetch_iter_error(it, err))
+		size_t all;
+		if (run_job(p, &m, 250000, &all, err))
 			fail_msg("level %d: %s", ly, err);
-		prefetch_iter_destroy(it);
 		m.layers = 1;
 		struct keyset ks;
 		job_keys(p, &m, &ks);
@@ -339,21 +344,15 @@ static void limit_counts_tiles(void **state)
 	free(ks.k);
 	for (int under = 0; under <= 1; under++) {
 		uint64_t limit = under ? n - n / 4 : n + n / 16;
-		struct prefetch_iter *it;
 		char err[256];
-		assert_int_equal(prefetch_iter_create(p, &m, limit, &it, err), 0);
-		struct want w[512];
-		size_t got, all = 0;
-		while ((got = prefetch_iter_next(it, w, 512)) > 0)
-			all += got;
-		int rc = prefetch_iter_error(it, err);
+		size_t all;
+		int rc = run_job(p, &m, limit, &all, err);
 		printf("equator corridor, %zu tiles, limit %llu: %zu made, %s\n", n,
 		       (unsigned long long)limit, all, rc ? err : "done");
 		if (under)
 			assert_int_not_equal(rc, 0);
 		else
 			assert_true(rc == 0 && all == n);
-		prefetch_iter_destroy(it);
 	}
 	planet_unref(p);
 }
