@@ -59,7 +59,7 @@ void clipmap_level_lx_range(int ly, double lat_lo, double lat_hi, int *lx_lo, in
 	/* The ring's longitude extent grows with |lat|: the finest lx is the one nearest the
 	 * equator, the coarsest the one nearest a pole — or the next coarser one where hysteresis
 	 * keeps it for a viewer that came from higher latitudes. */
-	double amin = lat_lo <= 0 && lat_hi >= 0 ? 0 : fmin(fabs(lat_lo), fabs(lat_hi));
+	double amin = grid_band_equator_lat(lat_lo, lat_hi);
 	double amax = fmax(fabs(lat_lo), fabs(lat_hi));
 	*lx_hi = clipmap_level_lx(ly, amin, -1);
 	int lo = clipmap_level_lx(ly, amax, -1);

@@ -331,3 +331,8 @@ uint32_t grid_quad_distance(const struct grid_quad *q, const struct tile_key *k)
 		dy = k->y - y1;
 	return (uint32_t)(dx > dy ? dx : dy);
 }
+
+double grid_band_equator_lat(double a, double b)
+{
+	return fmin(a, b) <= 0 && fmax(a, b) >= 0 ? 0 : fmin(fabs(a), fabs(b));
+}

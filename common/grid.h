@@ -54,6 +54,9 @@ void grid_tile_rect(const struct tile_key *k, struct geo_rect *r);
 /* Level texel coordinate (edges at integers, centres at +0.5) ↔ degrees. */
 double grid_u_to_lon(int lx, uint32_t T, double u);
 double grid_v_to_lat(int ly, uint32_t T, double v);
+/* |latitude| of the point of the band between latitudes a and b (either order, degrees)
+ * nearest the equator: 0 for a band across it. Where a band's texels are widest. */
+double grid_band_equator_lat(double a, double b);
 double grid_lon_to_u(int lx, uint32_t T, double lon);
 double grid_lat_to_v(int ly, uint32_t T, double lat);
 /* Centre of texel (i, j) of a tile, in degrees. */

@@ -193,6 +193,8 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 	size_t cap = 0, compacted = 0;
 	/* a tile north-south (the foci are half of one apart at most, below) */
 	double tile_m = M_PI * geo_body_a(body) / (double)grid_tiles_y(ly);
+	/* the corridor's half width in degrees of latitude */
+	double dlat = it->width * 0.5 / geo_body_a(body) * (180.0 / M_PI);
 	uint64_t samples = 0;
 	for (uint32_t i = 0; i < it->npts; i++) {
 		double lat1 = it->pts[i].lat, lon1 = it->pts[i].lon;
@@ -215,9 +217,8 @@ static int build_path_level(struct prefetch_iter *it, int ly, struct geo_body *b
 			 * uses: the corridor was sampled ~50 times a tile of the lx viewers hold
 			 * there, and the keep-up bench's pole corridor at level 10 (157 km wide)
 			 * stopped on the job's limit with 1 308 tiles to make. */
-			double dlat = it->width * 0.5 / geo_body_a(body) * (180.0 / M_PI);
 			double band_s = fmax(lat - dlat, -90.0), band_n = fmin(lat + dlat, 90.0);
-			double eq = band_s <= 0 && band_n >= 0 ? 0 : fmin(fabs(band_s), fabs(band_n));
+			double eq = grid_band_equator_lat(band_s, band_n);
 			int lxa, lxb;
 			clipmap_level_lx_range(ly, band_s, band_n, &lxa, &lxb);
 			double c = fmax(cos(eq * M_PI / 180.0), 0.02);
@@ -722,9 +723,11 @@ static double piece_tiles(struct lx_memo *mm, double a, int ly, double lat, doub
 	 * a pole the equatorward edge's are finer) */
 	double dlat = 0.5 * w / a * (180.0 / M_PI);
 	double band_s = fmax(lat - dlat, -90.0), band_n = fmin(lat + dlat, 90.0);
-	const double at[4] = { lat, band_s, band_n, 0 }; /* the equator if the band holds it */
+	/* the range grows with |lat|: its ends are at the band's edges, and at the equator if
+	 * the band holds it (as clipmap_level_lx_range over the band; memoised per latitude) */
+	const double at[3] = { band_s, band_n, 0 };
 	int lxa = INT_MAX, lxb = -1;
-	for (int q = 0; q < (band_s <= 0 && band_n >= 0 ? 4 : 3); q++) {
+	for (int q = 0; q < (grid_band_equator_lat(band_s, band_n) == 0 ? 3 : 2); q++) {
 		int lo, hi;
 		lx_range(mm, ly, at[q], &lo, &hi);
 		lxa = lo < lxa ? lo : lxa;

@@ -515,13 +515,10 @@ static bool warp_on_lattice(const struct noise *nz, int lx, int ly, uint32_t T, 
 	return nz->warp[nz->nwarp - 1][0].lambda >= NOISE_MR_MIN_TEXELS * s;
 }
 
-/* cos of the latitude of tile k's texels nearest the equator (its equatorward edge's: 1 for
- * a tile across the equator). */
-static double tile_cos_eq(const struct tile_key *k, uint32_t T)
+double noise_tile_cos_eq(const struct tile_key *k, uint32_t T)
 {
-	double n = grid_v_to_lat(k->ly, T, (double)k->y * T);
-	double s = grid_v_to_lat(k->ly, T, (double)(k->y + 1) * T);
-	double lat = n >= 0 && s <= 0 ? 0 : fmin(fabs(n), fabs(s));
+	double lat = grid_band_equator_lat(grid_v_to_lat(k->ly, T, (double)k->y * T),
+					   grid_v_to_lat(k->ly, T, (double)(k->y + 1) * T));
 	return cos(lat * (M_PI / 180.0));
 }
 
@@ -540,7 +537,7 @@ int noise_tile_coarse_octaves(const struct noise *nz, const struct tile_key *k, 
 	if (!grid_key_valid(k))
 		return -EINVAL;
 	int m = active_octaves(nz, k->ly, T, 0, INFINITY, idx, w);
-	return coarse_count(nz, k->lx, k->ly, T, tile_cos_eq(k, T), idx, m);
+	return coarse_count(nz, k->lx, k->ly, T, noise_tile_cos_eq(k, T), idx, m);
 }
 
 static noise_row_fn *kernel_for(enum noise_isa isa)
@@ -922,7 +919,7 @@ static int tile_sum(const struct noise *nz, const struct tile_key *k, uint32_t T
 	int idx[NOISE_MAX_OCTAVES];
 	float w[NOISE_MAX_OCTAVES];
 	t.m = active_octaves(nz, k->ly, T, lo, hi, idx, w);
-	const double cos_eq = tile_cos_eq(k, T);
+	const double cos_eq = noise_tile_cos_eq(k, T);
 	t.mc = coarse_count(nz, k->lx, k->ly, T, cos_eq, idx, t.m);
 	scratch_layout(&t, scratch);
 	if (t.m == 0) {

@@ -139,6 +139,9 @@ int noise_coarse_octaves(const struct noise *nz, int lx, int ly, uint32_t T);
  * the viewer's levels of few columns would otherwise evaluate every octave at every texel).
  * Before the pole fade, which keeps the octaves it touches off the lattice in a pole tile. */
 int noise_tile_coarse_octaves(const struct noise *nz, const struct tile_key *k, uint32_t T);
+/* cos of the latitude of tile k's texels nearest the equator (its equatorward edge's: 1 for a
+ * tile across the equator): its widest texels' share of the level's width at the equator. */
+double noise_tile_cos_eq(const struct tile_key *k, uint32_t T);
 
 /* Bytes of scratch noise_tile needs for tile size T. */
 size_t noise_scratch_size(uint32_t T);

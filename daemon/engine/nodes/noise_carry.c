@@ -48,10 +48,7 @@ void noise_carry_kernel(double t, float w[TAPS])
 
 double noise_carry_aspect(const struct tile_key *k, uint32_t T)
 {
-	double n = grid_v_to_lat(k->ly, T, (double)k->y * T);
-	double s = grid_v_to_lat(k->ly, T, (double)(k->y + 1) * T);
-	double lat = n >= 0 && s <= 0 ? 0 : fmin(fabs(n), fabs(s));
-	return cos(lat * (M_PI / 180.0)) * ldexp(1.0, k->ly + 1 - k->lx);
+	return noise_tile_cos_eq(k, T) * ldexp(1.0, k->ly + 1 - k->lx);
 }
 
 int noise_carry_parent(const struct tile_key *k, uint32_t T, int *plx, int *ply)
